@@ -1,0 +1,212 @@
+"""BRDF protocol, microfacet BRDF (thesis Ch. 2, 3.2) and Lambertian BRDF (Eq. 1.9).
+
+Every BRDF-like object answers ``eval``, ``eval_cos``, ``sample`` and ``pdf`` over
+arrays of directions: ``wi`` is the light (emitter) direction, ``wo`` the view
+(receiver) direction, both ``(..., 3)`` in the local frame (z = macro normal).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import fresnel as _fresnel
+from .distributions.base import SlopeDistribution
+from .geometry import (cosine_hemisphere_pdf, dot, half_vector, reflect,
+                       square_to_cosine_hemisphere)
+
+__all__ = ["BRDF", "MicrofacetBRDF", "Lambertian", "GAFS"]
+
+GAFS = ("smith", "vgroove", "normal_map")
+
+
+def _dirs(w, name: str) -> np.ndarray:
+    w = np.asarray(w, dtype=np.float64)
+    if w.shape[-1:] != (3,):
+        raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
+    return w
+
+
+class BRDF:
+    """The BRDF protocol (Listing 1.2). Subclasses implement ``eval_cos``, ``sample``
+    and ``pdf``; ``eval`` divides by ``cos theta_i``."""
+
+    def eval_cos(self, wi, wo) -> np.ndarray:  # pragma: no cover - interface
+        """Projected BRDF ``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (``evalp``)."""
+        raise NotImplementedError
+
+    def eval(self, wi, wo) -> np.ndarray:
+        """BRDF value ``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
+        wi = _dirs(wi, "wi")
+        zi = wi[..., 2:3]
+        fc = self.eval_cos(wi, wo)
+        return np.divide(fc, zi, out=np.zeros(np.broadcast_shapes(fc.shape, zi.shape)), where=zi > 0)
+
+    def sample(self, u, wo):  # pragma: no cover - interface
+        """Importance-sample ``f_r cos theta_i``: ``(wi, weight, pdf)`` from uniforms
+        ``u`` in ``[0,1)^2``, with ``weight = eval_cos / pdf`` (``evalp_is``)."""
+        raise NotImplementedError
+
+    def pdf(self, wi, wo) -> np.ndarray:  # pragma: no cover - interface
+        """Solid-angle density of ``sample`` producing ``wi`` from ``wo``."""
+        raise NotImplementedError
+
+
+class Lambertian(BRDF):
+    """Ideal diffuse BRDF ``f_r = k_d / pi`` (Eq. 1.9), sampled by the cosine warp."""
+
+    def __init__(self, reflectance=1.0):
+        r = np.broadcast_to(np.asarray(reflectance, dtype=np.float64), (3,)).copy()
+        if not np.all(np.isfinite(r)) or np.any(r < 0):
+            raise ValueError(f"reflectance must be finite and >= 0, got {reflectance!r}")
+        self.reflectance = r
+
+    def __repr__(self) -> str:
+        return f"Lambertian(reflectance={self.reflectance.tolist()})"
+
+    def eval_cos(self, wi, wo) -> np.ndarray:
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        zi, zo = wi[..., 2], wo[..., 2]
+        return np.where((zi > 0) & (zo > 0), zi / np.pi, 0.0)[..., None] * self.reflectance
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        return np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0)
+
+    def sample(self, u, wo):
+        wo = _dirs(wo, "wo")
+        u = np.asarray(u, dtype=np.float64)
+        shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
+        wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
+        ok = (wo[..., 2] > 0) & (wi[..., 2] > 0)
+        pdf = np.where(ok, cosine_hemisphere_pdf(wi), 0.0)
+        return wi, np.where(ok[..., None], self.reflectance, 0.0), pdf
+
+
+class MicrofacetBRDF(BRDF):
+    """Microfacet BRDF ``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1).
+
+    Parameters
+    ----------
+    distribution : SlopeDistribution
+        ``mf.Beckmann(...)`` or ``mf.GGX(...)`` with any roughness, correlation and shear.
+    fresnel : Fresnel
+        Microfacet Fresnel term of ``cos theta_d`` (default: ideal mirrors, ``F = 1``).
+    gaf : {"smith", "vgroove", "normal_map"}
+        Geometric attenuation factor (Table 2.IV).
+    shadowing : bool
+        If False, the GAF accounts for masking (of ``wo``) only.
+    """
+
+    def __init__(self, distribution: SlopeDistribution, fresnel: _fresnel.Fresnel | None = None,
+                 gaf: str = "smith", shadowing: bool = True):
+        if not isinstance(distribution, SlopeDistribution):
+            raise ValueError(f"distribution must be a SlopeDistribution, got {type(distribution).__name__}")
+        if gaf not in GAFS:
+            raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
+        self.distribution = distribution
+        self.fresnel = _fresnel.Ideal() if fresnel is None else fresnel
+        self.gaf_model = gaf
+        self.shadowing = bool(shadowing)
+
+    def __repr__(self) -> str:
+        return (f"MicrofacetBRDF({self.distribution!r}, fresnel={self.fresnel!r}, "
+                f"gaf={self.gaf_model!r}, shadowing={self.shadowing})")
+
+    # ------------------------------------------------------------------- terms
+    def ndf(self, h) -> np.ndarray:
+        """Microfacet NDF ``D(h)`` (Eq. 2.11, 3.2)."""
+        return self.distribution.ndf(h)
+
+    def g1(self, k) -> np.ndarray:
+        """Smith masking ``G1(k)`` (Eq. 2.14, 3.3)."""
+        return self.distribution.g1(k)
+
+    def vndf(self, h, k) -> np.ndarray:
+        """Distribution of visible normals ``D_k(h)`` (Eq. 2.17)."""
+        return self.distribution.vndf(h, k)
+
+    def gaf(self, wi, wo, h=None) -> np.ndarray:
+        """Geometric attenuation ``G(i, o)`` (Table 2.IV; ``h`` defaults to the half vector).
+
+        Smith: height-correlated, ``G = (z_o / c_o) / (1 + Lambda(i) + Lambda(o))`` with
+        ``c_k = z_k - x_k x~n - y_k y~n`` and ``Lambda(k) = A(k) / c_k - 1`` (Eq. 3.3). With a
+        zero mean slope this is Eq. 2.13. For sheared surfaces it is the projected-area
+        normalization of the LEADR supplemental (Sec. 1.5 and its point-light formula,
+        Sec. 3.3: ``f cos theta_i = F D / (4 c_o (1 + Lambda_i + Lambda_o))``), which keeps
+        a tilted mirror's albedo at exactly 1; the macro-frame BRDF is then reciprocal in
+        the form ``f(i, o) z_i c_o = f(o, i) z_o c_i``. Without shadowing: ``G1(o)``.
+        V-groove: ``min(1, 2 z_i z_h / ih, 2 z_o z_h / oh)``. Normal map: ``z_o z_h / oh``.
+        Without shadowing only the ``o`` factors remain.
+        """
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        h = half_vector(wi, wo) if h is None else np.asarray(h, dtype=np.float64)
+        ih, oh = dot(wi, h), dot(wo, h)
+        zi, zo, zh = wi[..., 2], wo[..., 2], h[..., 2]
+        ok = (zi > 0) & (zo > 0) & (ih > 0) & (oh > 0) & (zh > 0)
+        if self.gaf_model == "smith":
+            if not self.shadowing:
+                return np.where(ok, self.distribution.g1(wo), 0.0)
+            d = self.distribution
+            ci, co = d._warp(wi)[2], d._warp(wo)[2]
+            ok &= (ci > 0) & (co > 0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                g = zo / (co * (1.0 + d.lambda_(wi) + d.lambda_(wo)))
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                go = zo * zh / oh
+                if self.gaf_model == "vgroove":
+                    go = 2.0 * go
+                    g = np.minimum(1.0, go if not self.shadowing else np.minimum(go, 2.0 * zi * zh / ih))
+                else:
+                    g = go
+        return np.where(ok, g, 0.0)
+
+    # ---------------------------------------------------------------- protocol
+    def eval_cos(self, wi, wo) -> np.ndarray:
+        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        h = half_vector(wi, wo)
+        zo = wo[..., 2]
+        g = self.gaf(wi, wo, h)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(g > 0, self.ndf(h) * g / (4.0 * zo), 0.0)
+        return self.fresnel(dot(wo, h)) * s[..., None]
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Density of ``sample``: ``D_o(h) / (4 oh)`` with Smith (visible normals, Eq. 2.17),
+        ``D(h) z_h / (4 oh)`` otherwise (slopes drawn from ``P``)."""
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        h = half_vector(wi, wo)
+        oh = dot(wo, h)
+        ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0)
+        if self.gaf_model == "smith":
+            p_h = self.distribution.vndf(h, wo)
+        else:
+            p_h = self.distribution.ndf(h) * h[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(ok, p_h / (4.0 * oh), 0.0)
+
+    def sample(self, u, wo):
+        """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2),
+        slopes of ``P`` for the other GAFs. Returns ``(wi, weight, pdf)``; with Smith the
+        weight is ``F G / G1(o)`` (Eq. 2.23). Failed samples have weight 0 and pdf 0."""
+        wo = _dirs(wo, "wo")
+        u = np.asarray(u, dtype=np.float64)
+        if self.gaf_model == "smith":
+            h = self.distribution.sample_visible(u, wo)
+        else:
+            h = self.distribution.sample_p22(u)
+        wi = reflect(wo, h)
+        zi, zo, zh, oh = wi[..., 2], wo[..., 2], h[..., 2], dot(wo, h)
+        ok = (zi > 0) & (zo > 0) & (oh > 0)
+        g = self.gaf(wi, wo, h)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if self.gaf_model == "smith":
+                p_h = self.distribution.vndf(h, wo)
+                ratio = g / self.distribution.g1(wo)             # G / G1(o), Eq. 2.23
+            else:
+                p_h = self.distribution.ndf(h) * zh
+                ratio = g * oh / (zo * zh)                       # F D G / (4 z_o) / (D z_h / (4 oh))
+            pdf = np.where(ok, p_h / (4.0 * oh), 0.0)
+            ok &= pdf > 0
+            weight = np.where(ok, ratio, 0.0)[..., None] * self.fresnel(oh)
+        return wi, weight, np.where(ok, pdf, 0.0)

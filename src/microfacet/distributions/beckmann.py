@@ -1,0 +1,164 @@
+"""Beckmann slope distribution (thesis Tables 2.II, 2.III, 2.V)."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import erfc, erfcx, erfinv
+
+from .base import SlopeDistribution
+
+__all__ = ["Beckmann", "visible_slope_cdf", "visible_slope_quantile"]
+
+_SQRT_PI = np.sqrt(np.pi)
+_U_MIN = 2.0**-53  # uniforms are clamped to [_U_MIN, 1 - _U_MIN]
+
+
+_GL_T, _GL_W = np.polynomial.legendre.leggauss(12)
+_GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1]
+
+
+def _cdf_terms(x, t, a):
+    """Unnormalized CDF, complementary CDF and PDF of the standard visible x-slope.
+
+    With ``a = cot theta``, ``t = tan theta``: ``P2 ∝ 2 t (a - x) exp(-x^2) / sqrt(pi)``,
+    ``cdf = erfc(-x) + t exp(-x^2) / sqrt(pi)`` and, to keep relative precision where
+    ``x -> a``, ``ccdf = 2 t / sqrt(pi) int_0^{a-x} s exp(-(a-s)^2) ds`` by a 12-point
+    Gauss-Legendre rule when ``a - x < 1`` (exact to double precision there).
+    """
+    ex = np.exp(-x * x)
+    cdf = erfc(-x) + t * ex / _SQRT_PI
+    delta = a - x
+    near = delta < 1.0
+    dn = np.where(near, delta, 0.0)[..., None]
+    s = dn * _GL_T
+    quad = 2.0 * t / _SQRT_PI * dn[..., 0] * np.sum(_GL_W * s * np.exp(-(a[..., None] - s) ** 2), axis=-1)
+    with np.errstate(invalid="ignore"):
+        far = (erfc(x) - erfc(a)) + t * (np.exp(-a * a) - ex) / _SQRT_PI
+    ccdf = np.where(near, quad, np.where(np.isinf(a), erfc(x), far))
+    return cdf, ccdf, 2.0 * ex * (1.0 - x * t) / _SQRT_PI
+
+
+def _view(cos_theta):
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 1e-12, 1.0)
+    s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
+    with np.errstate(divide="ignore"):
+        a = c / s
+    t = s / c
+    return t, a, erfc(-a) + t * np.exp(-a * a) / _SQRT_PI
+
+
+def visible_slope_cdf(x, cos_theta, complement: bool = False):
+    """CDF ``F2(x~)`` (or ``1 - F2`` with ``complement``) of the standard visible x-slope
+    seen from ``theta`` in the xz plane (Sec. 2.2, Table 2.V).
+
+    ``P2(x~) ∝ (cot theta - x~) exp(-x~^2)`` on ``x~ < cot theta``, so
+    ``F2(x~) = (erfc(-x~) + t exp(-x~^2)/sqrt(pi)) / (erfc(-a) + t exp(-a^2)/sqrt(pi))``
+    with ``a = cot theta``, ``t = tan theta``.
+    """
+    x, cos_theta = np.broadcast_arrays(np.asarray(x, float), np.asarray(cos_theta, float))
+    t, a, z = _view(cos_theta)
+    cdf, ccdf, _ = _cdf_terms(np.minimum(x, a), t, a)
+    inside = (ccdf if complement else cdf) / z
+    return np.where(x >= a, 0.0 if complement else 1.0, inside)
+
+
+def visible_slope_quantile(u, cos_theta, max_iter: int = 64):
+    """Quantile ``Q2(u) = F2^{-1}(u)`` of :func:`visible_slope_cdf`, to double precision.
+
+    Safeguarded Newton-bisection on ``F2 - u`` for ``u < 1/2`` and on
+    ``(1 - u) - (1 - F2)`` otherwise, so both tails keep full relative precision.
+    """
+    u = np.clip(np.asarray(u, dtype=np.float64), _U_MIN, 1.0 - _U_MIN)
+    u, cos_theta = np.broadcast_arrays(u, np.asarray(cos_theta, dtype=np.float64))
+    t, a, z = _view(cos_theta)
+    shape = u.shape
+    u, t, a, z = (v.ravel() for v in (u, t, a, z))
+    upper = u >= 0.5
+    target = np.where(upper, 1.0 - u, u) * z
+    lo = np.full_like(u, -8.0)
+    hi = np.minimum(a, 8.0)
+    x = np.clip(erfinv(2.0 * u - 1.0), lo, hi)
+    out = x.copy()
+    idx = np.arange(u.size)
+    for _ in range(max_iter):
+        cdf, ccdf, pdf = _cdf_terms(x, t, a)
+        r = np.where(upper, target - ccdf, cdf - target)      # increasing in x
+        lo = np.where(r < 0, x, lo)
+        hi = np.where(r > 0, x, hi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xn = x - r / pdf
+        bad = ~((xn > lo) & (xn < hi))
+        xn = np.where(bad, 0.5 * (lo + hi), xn)
+        done = (np.abs(xn - x) <= 4e-16 * np.maximum(1.0, np.abs(x))) | (r == 0) | (hi - lo <= 4e-16 * np.maximum(1.0, np.abs(x)))
+        out[idx] = xn
+        keep = ~done
+        if not keep.any():
+            break
+        idx, x, t, a, target, upper, lo, hi = (v[keep] for v in (idx, xn, t, a, target, upper, lo, hi))
+    return out.reshape(shape)
+
+
+class Beckmann(SlopeDistribution):
+    """Beckmann (Gaussian) slopes: ``P_std(x~, y~) = exp(-x~^2 - y~^2) / pi`` (Table 2.II).
+
+    Slope standard deviation per axis is ``alpha / sqrt(2)`` (the thesis's, Mitsuba's and
+    pbrt's convention).
+    """
+
+    second_moment_std = 0.5  # E[x~^2] of the standard surface (Eq. 3.17)
+
+    @classmethod
+    def from_moments(cls, e1, e2, e3, e4, e5) -> "Beckmann":
+        """Beckmann surface of linear slope moments ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~y~]``
+        (Eq. 3.5-3.9): ``alpha_x^2 = 2 (E3 - E1^2)``, ``alpha_y^2 = 2 (E4 - E2^2)``,
+        ``rho = 2 (E5 - E1 E2) / (alpha_x alpha_y)``."""
+        e1, e2, e3, e4, e5 = (np.asarray(e, dtype=np.float64) for e in (e1, e2, e3, e4, e5))
+        vx, vy = e3 - e1 * e1, e4 - e2 * e2
+        if np.any(vx <= 0) or np.any(vy <= 0):
+            raise ValueError("slope moments need E[x~^2] > E[x~]^2 and E[y~^2] > E[y~]^2")
+        ax, ay = np.sqrt(2.0 * vx), np.sqrt(2.0 * vy)
+        return cls(alpha_x=ax, alpha_y=ay, rho=2.0 * (e5 - e1 * e2) / (ax * ay),
+                   mean_slope=np.stack(np.broadcast_arrays(e1, e2), axis=-1))
+
+    @staticmethod
+    def p22_std(x, y):
+        return np.exp(-x * x - y * y) / np.pi
+
+    @staticmethod
+    def p22_std_over_z4(x, y, z):
+        with np.errstate(over="ignore", divide="ignore"):
+            return np.exp(-(x * x + y * y) / (z * z) - 4.0 * np.log(z)) / np.pi
+
+    @staticmethod
+    def p1_std(x):
+        """Marginal ``P1(x~) = exp(-x~^2) / sqrt(pi)`` (Eq. 2.39)."""
+        return np.exp(-np.asarray(x, float) ** 2) / _SQRT_PI
+
+    @staticmethod
+    def lambda_std(cot_theta):
+        """``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2``, ``v = cot theta`` (Table 2.III),
+        written with ``erfcx`` so that it stays accurate for large ``v``."""
+        v = np.asarray(cot_theta, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            lam = 0.5 * np.exp(-v * v) * (1.0 / (v * _SQRT_PI) - erfcx(v))
+        return np.where(np.isinf(v), 0.0, np.where(v <= 0, np.inf, np.maximum(lam, 0.0)))
+
+    @staticmethod
+    def sample_visible_std(u, cos_theta):
+        """Standard visible normal for a view at ``theta`` in the xz plane: ``x~ = Q2(u1)``
+        (numerically inverted, :func:`visible_slope_quantile`), ``y~ = erfinv(2 u2 - 1)``
+        (Table 2.V)."""
+        u = np.asarray(u, dtype=np.float64)
+        x = visible_slope_quantile(u[..., 0], cos_theta)
+        y = erfinv(2.0 * np.clip(u[..., 1], _U_MIN, 1.0 - _U_MIN) - 1.0)
+        return _slope_normal(x, y)
+
+    @staticmethod
+    def sample_p22_std(u):
+        """Standard normal with Gaussian slopes ``x~, y~ = erfinv(2u - 1)``."""
+        s = erfinv(2.0 * np.clip(np.asarray(u, float), _U_MIN, 1.0 - _U_MIN) - 1.0)
+        return _slope_normal(s[..., 0], s[..., 1])
+
+
+def _slope_normal(x, y):
+    inv = 1.0 / np.sqrt(1.0 + x * x + y * y)
+    return np.stack([-x * inv, -y * inv, inv], axis=-1)

@@ -1,0 +1,71 @@
+"""GGX (Trowbridge-Reitz) slope distribution (thesis Tables 2.II, 2.III, 2.V)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import square_to_concentric_disk
+from .base import SlopeDistribution
+
+__all__ = ["GGX"]
+
+
+class GGX(SlopeDistribution):
+    """GGX slopes: ``P_std(x~, y~) = 1 / (pi (1 + x~^2 + y~^2)^2)`` (Table 2.II).
+
+    Its first slope moments are finite, its second ones are not.
+    """
+
+    second_moment_std = np.inf
+
+    @staticmethod
+    def p22_std(x, y):
+        r = 1.0 + x * x + y * y
+        return 1.0 / (np.pi * r * r)
+
+    @staticmethod
+    def p22_std_over_z4(x, y, z):
+        r = z * z + x * x + y * y
+        return 1.0 / (np.pi * r * r)
+
+    @staticmethod
+    def p1_std(x):
+        """Marginal ``P1(x~) = 1 / (2 (1 + x~^2)^(3/2))`` (Eq. 2.39)."""
+        return 0.5 * (1.0 + np.asarray(x, float) ** 2) ** -1.5
+
+    @staticmethod
+    def lambda_std(cot_theta):
+        """``Lambda(v) = (sqrt(1 + 1/v^2) - 1) / 2`` (Table 2.III), in the cancellation- and
+        overflow-free form ``q^2 / (2 (1 + sqrt(1 + q^2)))`` with ``q = 1/v = tan theta``."""
+        v = np.asarray(cot_theta, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = 1.0 / v
+            lam = 0.5 * q * (q / (1.0 + np.hypot(1.0, q)))
+        return np.where(v <= 0, np.inf, lam)
+
+    @staticmethod
+    def sample_visible_std(u, cos_theta):
+        """Standard visible normal for a view at ``theta`` in the xz plane, in closed form.
+
+        A uniform point of the unit disk, warped onto the projection of the visible
+        hemisphere of the (unit) ellipsoid, lifted onto it (Heitz, "Sampling the GGX
+        distribution of visible normals", JCGT 2018). This is an exact transform of the
+        visible-slope PDF of Eq. 2.15, equivalent to the quantiles of Table 2.V.
+        """
+        c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+        s = np.sqrt(1.0 - c * c)
+        p = square_to_concentric_disk(u)
+        t1, t2 = p[..., 0], p[..., 1]
+        w = 0.5 * (1.0 + c)
+        t2 = (1.0 - w) * np.sqrt(np.maximum(0.0, 1.0 - t1 * t1)) + w * t2
+        tz = np.sqrt(np.maximum(0.0, 1.0 - t1 * t1 - t2 * t2))
+        # basis T1 = (0, 1, 0), T2 = V x T1 = (-c, 0, s), V = (s, 0, c)
+        return np.stack([s * tz - c * t2, t1, c * tz + s * t2], axis=-1)
+
+    @staticmethod
+    def sample_p22_std(u):
+        """Standard normal with GGX slopes: ``tan^2 theta = u1 / (1 - u1)``, ``phi = 2 pi u2``."""
+        u = np.asarray(u, dtype=np.float64)
+        cos_t = np.sqrt(1.0 - u[..., 0])
+        sin_t = np.sqrt(u[..., 0])
+        phi = 2.0 * np.pi * u[..., 1]
+        return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)

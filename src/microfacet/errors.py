@@ -1,0 +1,5 @@
+"""Errors raised by microfacet for bad files and bad input."""
+
+
+class MicrofacetError(Exception):
+    """A file, a parameter or an argument is unusable; the message says which and why."""

@@ -1,0 +1,146 @@
+"""Microfacet Fresnel terms ``F(theta_d)`` (thesis Sec. 2.1, Table 2.I).
+
+Every term maps ``cos(theta_d)`` of shape ``(...)`` to RGB reflectance ``(..., 3)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Fresnel", "Ideal", "Dielectric", "Schlick", "Conductor", "Tabulated"]
+
+
+def _rgb(value, name: str) -> np.ndarray:
+    """A scalar or an RGB triple as a ``(3,)`` float64 array, validated finite."""
+    v = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return v
+
+
+def _cos(cos_theta_d) -> np.ndarray:
+    return np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)[..., None]
+
+
+class Fresnel:
+    """A Fresnel term: ``F(cos theta_d) -> RGB`` (Listing 2.3)."""
+
+    def __call__(self, cos_theta_d) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={np.round(v, 4).tolist()}" for k, v in vars(self).items())
+        return f"{type(self).__name__}({args})"
+
+
+class Ideal(Fresnel):
+    """Ideal mirror microfacets, ``F = 1`` (Eq. 2.3)."""
+
+    def __call__(self, cos_theta_d) -> np.ndarray:
+        return np.ones(np.shape(cos_theta_d) + (3,))
+
+
+class Dielectric(Fresnel):
+    """Unpolarized Fresnel reflectance of a dielectric of real index ``eta`` (Table 2.I).
+
+    ``F = 1/2 (g-c)^2/(g+c)^2 [1 + (c(g+c)-1)^2/(c(g-c)+1)^2]`` with
+    ``c = cos theta_d`` and ``g^2 = eta^2 + c^2 - 1``; total internal reflection
+    (``g^2 < 0``, possible for ``eta < 1``) gives ``F = 1``.
+    """
+
+    def __init__(self, eta=1.5):
+        self.eta = _rgb(eta, "eta")
+        if np.any(self.eta <= 0):
+            raise ValueError(f"eta must be > 0, got {eta!r}")
+
+    def __call__(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        g2 = self.eta**2 + c * c - 1.0
+        g = np.sqrt(np.maximum(g2, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = (g - c) / (g + c)
+            b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+            f = 0.5 * a * a * (1.0 + b * b)
+        return np.where(g2 < 0.0, 1.0, np.where(np.isfinite(f), f, 1.0))
+
+
+class Schlick(Fresnel):
+    """Schlick's approximation ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I)."""
+
+    def __init__(self, f0=0.04):
+        self.f0 = _rgb(f0, "f0")
+        if np.any((self.f0 < 0) | (self.f0 > 1)):
+            raise ValueError(f"f0 must lie in [0, 1], got {f0!r}")
+
+    @classmethod
+    def from_eta(cls, eta) -> "Schlick":
+        """Schlick term with ``F0 = (eta - 1)^2 / (eta + 1)^2`` (Table 2.I)."""
+        eta = _rgb(eta, "eta")
+        return cls(((eta - 1.0) / (eta + 1.0)) ** 2)
+
+    def __call__(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        return self.f0 + (1.0 - self.f0) * (1.0 - c) ** 5
+
+
+class Conductor(Fresnel):
+    """Unpolarized Fresnel reflectance of a conductor of complex index ``eta + i k``.
+
+    Per RGB channel, ``F = (|r_s|^2 + |r_p|^2) / 2`` with the complex Fresnel
+    amplitudes ``r_s = (c - n t)/(c + n t)`` and ``r_p = (n c - t)/(n c + t)``,
+    ``n = eta + i k``, ``t = sqrt(1 - (1 - c^2)/n^2)``; ``k = 0`` reduces to
+    :class:`Dielectric`.
+    """
+
+    #: Approximate RGB complex indices (R ~ 650 nm, G ~ 550 nm, B ~ 450 nm) of common metals.
+    METALS = {
+        "Au": ((0.143, 0.374, 1.442), (3.983, 2.385, 1.603)),
+        "Ag": ((0.155, 0.117, 0.138), (4.828, 3.122, 2.147)),
+        "Cu": ((0.200, 0.924, 1.102), (3.912, 2.452, 2.142)),
+        "Al": ((1.657, 0.880, 0.521), (9.224, 6.270, 4.837)),
+    }
+
+    def __init__(self, eta=(0.143, 0.374, 1.442), k=(3.983, 2.385, 1.603)):
+        self.eta = _rgb(eta, "eta")
+        self.k = _rgb(k, "k")
+        if np.any(self.eta <= 0) or np.any(self.k < 0):
+            raise ValueError(f"need eta > 0 and k >= 0, got eta={eta!r}, k={k!r}")
+
+    @classmethod
+    def metal(cls, name: str) -> "Conductor":
+        """Conductor from :attr:`METALS` (``"Au"``, ``"Ag"``, ``"Cu"``, ``"Al"``)."""
+        try:
+            return cls(*cls.METALS[name])
+        except KeyError:
+            raise ValueError(f"unknown metal {name!r}; known: {sorted(cls.METALS)}") from None
+
+    def __call__(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        n = self.eta + 1j * self.k
+        t = np.sqrt(1.0 - (1.0 - c * c) / (n * n))
+        rs = (c - n * t) / (c + n * t)
+        rp = (n * c - t) / (n * c + t)
+        return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+
+
+class Tabulated(Fresnel):
+    """Piecewise-linear ``cos theta_d -> RGB`` table, clamped at its ends.
+
+    ``cos_theta_d`` is an increasing ``(N,)`` grid and ``values`` its ``(N, 3)`` RGB
+    samples (e.g. the Fresnel term extracted by the fitting of Ch. 4, Eq. 4.11).
+    """
+
+    def __init__(self, cos_theta_d, values):
+        self.cos_theta_d = np.asarray(cos_theta_d, dtype=np.float64).ravel()
+        self.values = np.asarray(values, dtype=np.float64).reshape(len(self.cos_theta_d), -1)
+        if self.values.shape[1] == 1:
+            self.values = np.repeat(self.values, 3, axis=1)
+        if self.values.shape[1] != 3 or len(self.cos_theta_d) < 2:
+            raise ValueError("Tabulated needs >= 2 samples and values of shape (N,) or (N, 3)")
+        if np.any(np.diff(self.cos_theta_d) <= 0):
+            raise ValueError("Tabulated cos_theta_d must be strictly increasing")
+        if not (np.all(np.isfinite(self.values)) and np.all(np.isfinite(self.cos_theta_d))):
+            raise ValueError("Tabulated samples must be finite")
+
+    def __call__(self, cos_theta_d) -> np.ndarray:
+        c = np.asarray(cos_theta_d, dtype=np.float64)
+        return np.stack([np.interp(c, self.cos_theta_d, v) for v in self.values.T], axis=-1)

@@ -1,0 +1,148 @@
+"""Directions, frames, slopes and sampling warps (thesis Ch. 1.3-1.4, 2.1).
+
+Conventions: the local shading frame has z along the macro normal; directions are
+unit vectors pointing away from the surface, stored as ``(..., 3)`` float64 arrays.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "dot", "normalize", "spherical_to_cartesian", "cartesian_to_spherical",
+    "slope_to_normal", "normal_to_slope", "half_vector", "reflect",
+    "io_to_hd", "hd_to_io", "rot_z", "rot_y", "orthonormal_basis",
+    "to_local", "to_world", "square_to_concentric_disk",
+    "square_to_cosine_hemisphere", "cosine_hemisphere_pdf",
+]
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot product over the last axis, broadcasting leading axes."""
+    return np.einsum("...i,...i->...", *np.broadcast_arrays(a, b))
+
+
+def normalize(v: np.ndarray) -> np.ndarray:
+    """``v / |v|`` over the last axis (zero vectors stay zero)."""
+    v = np.asarray(v, dtype=np.float64)
+    n = np.sqrt(dot(v, v))[..., None]
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def spherical_to_cartesian(theta, phi) -> np.ndarray:
+    """Unit direction of elevation ``theta`` and azimuth ``phi`` (Eq. 1.2)."""
+    theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
+    s = np.sin(theta)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+def cartesian_to_spherical(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(theta, phi)`` of unit directions, inverse of Eq. 1.2; ``phi`` in (-pi, pi]."""
+    w = np.asarray(w, dtype=np.float64)
+    theta = np.arctan2(np.hypot(w[..., 0], w[..., 1]), w[..., 2])
+    return theta, np.arctan2(w[..., 1], w[..., 0])
+
+
+def slope_to_normal(x, y) -> np.ndarray:
+    """Normal of slope ``(x~, y~)``: ``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)`` (Eq. 2.10)."""
+    x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+    return normalize(np.stack([-x, -y, np.ones_like(x)], axis=-1))
+
+
+def normal_to_slope(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Slope ``(x~, y~) = (-x_h / z_h, -y_h / z_h)`` of an upper normal (Eq. 2.9)."""
+    h = np.asarray(h, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return -h[..., 0] / h[..., 2], -h[..., 1] / h[..., 2]
+
+
+def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """Halfway vector ``h = (i + o) / |i + o|`` (Eq. 2.5)."""
+    return normalize(np.asarray(wi, float) + np.asarray(wo, float))
+
+
+def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror direction ``2 (w.n) n - w`` (Eq. 2.4)."""
+    return 2.0 * dot(w, n)[..., None] * n - w
+
+
+def rot_z(v: np.ndarray, angle) -> np.ndarray:
+    """Rotate ``v`` by ``angle`` about z (right-handed)."""
+    c, s = np.cos(angle), np.sin(angle)
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([c * x - s * y, s * x + c * y, np.broadcast_to(z, np.shape(c * x))], -1)
+
+
+def rot_y(v: np.ndarray, angle) -> np.ndarray:
+    """Rotate ``v`` by ``angle`` about y (right-handed)."""
+    c, s = np.cos(angle), np.sin(angle)
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([c * x + s * z, np.broadcast_to(y, np.shape(c * x)), c * z - s * x], -1)
+
+
+def io_to_hd(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rusinkiewicz halfway and difference vectors of ``(i, o)`` (Eq. 1.8, left).
+
+    ``h = (i + o)/|i + o|`` and ``d = Rot_y(-theta_h) Rot_z(-phi_h) i``.
+    """
+    h = half_vector(wi, wo)
+    theta_h, phi_h = cartesian_to_spherical(h)
+    return h, rot_y(rot_z(np.asarray(wi, float), -phi_h), -theta_h)
+
+
+def hd_to_io(h: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse Rusinkiewicz map (Eq. 1.8, right): ``i = Rot_z(phi_h) Rot_y(theta_h) d``,
+    ``o = 2 (i.h) h - i``."""
+    h = np.asarray(h, dtype=np.float64)
+    theta_h, phi_h = cartesian_to_spherical(h)
+    wi = rot_z(rot_y(np.asarray(d, float), theta_h), phi_h)
+    return wi, reflect(wi, h)
+
+
+def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tangents ``(s, t)`` with ``(s, t, n)`` right-handed and orthonormal.
+
+    Branchless construction of Duff et al., "Building an Orthonormal Basis, Revisited"
+    (JCGT 2017), vectorized.
+    """
+    n = np.asarray(n, dtype=np.float64)
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    sign = np.where(z >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + z)
+    b = x * y * a
+    s = np.stack([1.0 + sign * x * x * a, sign * b, -sign * x], axis=-1)
+    t = np.stack([b, sign + y * y * a, -y], axis=-1)
+    return s, t
+
+
+def to_local(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """World vector ``v`` expressed in the frame ``(s, t, n)``."""
+    return np.stack([dot(v, s), dot(v, t), dot(v, n)], axis=-1)
+
+
+def to_world(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Local vector ``v`` of the frame ``(s, t, n)`` in world coordinates."""
+    return v[..., 0:1] * s + v[..., 1:2] * t + v[..., 2:3] * n
+
+
+def square_to_concentric_disk(u: np.ndarray) -> np.ndarray:
+    """Shirley-Chiu concentric map of ``[0,1)^2`` onto the unit disk, ``(..., 2)``."""
+    u = 2.0 * np.asarray(u, dtype=np.float64) - 1.0
+    a, b = u[..., 0], u[..., 1]
+    first = np.abs(a) > np.abs(b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(first, a, b)
+        phi = np.where(first, (np.pi / 4) * (b / a), np.pi / 2 - (np.pi / 4) * (a / b))
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=-1)
+
+
+def square_to_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
+    """Cosine-weighted upper-hemisphere direction (Malley's method, Listing 1.3)."""
+    p = square_to_concentric_disk(u)
+    z = np.sqrt(np.maximum(0.0, 1.0 - dot(p, p)))
+    return np.concatenate([p, z[..., None]], axis=-1)
+
+
+def cosine_hemisphere_pdf(w: np.ndarray) -> np.ndarray:
+    """Solid-angle density ``max(0, cos theta) / pi`` of the cosine warp."""
+    return np.maximum(0.0, np.asarray(w, float)[..., 2]) / np.pi
