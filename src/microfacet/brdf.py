@@ -139,19 +139,19 @@ class MicrofacetBRDF(BRDF):
         """
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo) if h is None else np.asarray(h, dtype=np.float64)
-        ih, oh = dot(wi, h), dot(wo, h)
+        return self._gaf(wi, wo, h, dot(wi, h), dot(wo, h))
+
+    def _gaf(self, wi, wo, h, ih, oh) -> np.ndarray:
         zi, zo, zh = wi[..., 2], wo[..., 2], h[..., 2]
         ok = (zi > 0) & (zo > 0) & (ih > 0) & (oh > 0) & (zh > 0)
-        if self.gaf_model == "smith":
-            if not self.shadowing:
-                return np.where(ok, self.distribution.g1(wo), 0.0)
-            d = self.distribution
-            ci, co = d._warp(wi)[2], d._warp(wo)[2]
-            ok &= (ci > 0) & (co > 0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                g = zo / (co * (1.0 + d.lambda_(wi) + d.lambda_(wo)))
-        else:
-            with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if self.gaf_model == "smith":
+                d = self.distribution
+                lam_o, co = d._lambda_c(wo)
+                ok &= co > 0
+                lam_i = d._lambda_c(wi)[0] if self.shadowing else 0.0
+                g = zo / (co * (1.0 + lam_i + lam_o))
+            else:
                 go = zo * zh / oh
                 if self.gaf_model == "vgroove":
                     go = 2.0 * go
@@ -161,15 +161,27 @@ class MicrofacetBRDF(BRDF):
         return np.where(ok, g, 0.0)
 
     # ---------------------------------------------------------------- protocol
-    def eval_cos(self, wi, wo) -> np.ndarray:
-        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
+    def _projected(self, wi, wo):
+        """``(o.h, D G / (4 z_o))`` at the half vector, 0 where invalid."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo)
-        zo = wo[..., 2]
-        g = self.gaf(wi, wo, h)
+        oh = dot(wo, h)
+        g = self._gaf(wi, wo, h, oh, oh)
         with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(g > 0, self.ndf(h) * g / (4.0 * zo), 0.0)
-        return self.fresnel(dot(wo, h)) * s[..., None]
+            return oh, np.where(g > 0, self.ndf(h) * g / (4.0 * wo[..., 2]), 0.0)
+
+    def eval_cos(self, wi, wo) -> np.ndarray:
+        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
+        oh, s = self._projected(wi, wo)
+        return self.fresnel(oh) * s[..., None]
+
+    def eval(self, wi, wo) -> np.ndarray:
+        """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1)."""
+        oh, s = self._projected(wi, wo)
+        zi = np.asarray(wi, dtype=np.float64)[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.where(s > 0, s / zi, 0.0)
+        return self.fresnel(oh) * s[..., None]
 
     def pdf(self, wi, wo) -> np.ndarray:
         """Density of ``sample``: ``D_o(h) / (4 oh)`` with Smith (visible normals, Eq. 2.17),
@@ -198,7 +210,7 @@ class MicrofacetBRDF(BRDF):
         wi = reflect(wo, h)
         zi, zo, zh, oh = wi[..., 2], wo[..., 2], h[..., 2], dot(wo, h)
         ok = (zi > 0) & (zo > 0) & (oh > 0)
-        g = self.gaf(wi, wo, h)
+        g = self._gaf(wi, wo, h, oh, oh)
         with np.errstate(divide="ignore", invalid="ignore"):
             if self.gaf_model == "smith":
                 p_h = self.distribution.vndf(h, wo)

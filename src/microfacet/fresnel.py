@@ -78,17 +78,21 @@ class Schlick(Fresnel):
         return cls(((eta - 1.0) / (eta + 1.0)) ** 2)
 
     def __call__(self, cos_theta_d) -> np.ndarray:
-        c = _cos(cos_theta_d)
-        return self.f0 + (1.0 - self.f0) * (1.0 - c) ** 5
+        m = 1.0 - _cos(cos_theta_d)
+        m2 = m * m
+        return self.f0 + (1.0 - self.f0) * (m2 * m2 * m)
 
 
 class Conductor(Fresnel):
     """Unpolarized Fresnel reflectance of a conductor of complex index ``eta + i k``.
 
-    Per RGB channel, ``F = (|r_s|^2 + |r_p|^2) / 2`` with the complex Fresnel
-    amplitudes ``r_s = (c - n t)/(c + n t)`` and ``r_p = (n c - t)/(n c + t)``,
-    ``n = eta + i k``, ``t = sqrt(1 - (1 - c^2)/n^2)``; ``k = 0`` reduces to
-    :class:`Dielectric`.
+    Per RGB channel, ``F = (|r_s|^2 + |r_p|^2) / 2`` for the complex Fresnel amplitudes
+    ``r_s = (c - n t)/(c + n t)``, ``r_p = (n c - t)/(n c + t)``, ``n = eta + i k``,
+    ``t = sqrt(1 - (1 - c^2)/n^2)``, evaluated in real arithmetic:
+    ``a^2 + b^2 = sqrt((eta^2 - k^2 - s^2)^2 + 4 eta^2 k^2)``, ``a^2 = (a^2 + b^2 + eta^2 - k^2 - s^2)/2``,
+    ``R_s = (a^2 + b^2 + c^2 - 2ac)/(a^2 + b^2 + c^2 + 2ac)`` and
+    ``R_p = R_s ((a^2 + b^2) c^2 + s^4 - 2 a c s^2)/((a^2 + b^2) c^2 + s^4 + 2 a c s^2)``,
+    ``s^2 = 1 - c^2``. With ``k = 0`` it is :class:`Dielectric`.
     """
 
     #: Approximate RGB complex indices (R ~ 650 nm, G ~ 550 nm, B ~ 450 nm) of common metals.
@@ -114,12 +118,18 @@ class Conductor(Fresnel):
             raise ValueError(f"unknown metal {name!r}; known: {sorted(cls.METALS)}") from None
 
     def __call__(self, cos_theta_d) -> np.ndarray:
-        c = _cos(cos_theta_d)
-        n = self.eta + 1j * self.k
-        t = np.sqrt(1.0 - (1.0 - c * c) / (n * n))
-        rs = (c - n * t) / (c + n * t)
-        rp = (n * c - t) / (n * c + t)
-        return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+        c = np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)
+        c2 = c * c
+        s2 = 1.0 - c2
+        out = np.empty(c.shape + (3,))
+        for ch, (eta, k) in enumerate(zip(self.eta, self.k)):   # three 1-D passes
+            t1 = eta * eta - k * k - s2
+            a2b2 = np.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
+            ac2 = 2.0 * c * np.sqrt(np.maximum(0.5 * (a2b2 + t1), 0.0))
+            rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
+            t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
+            out[..., ch] = 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
+        return out
 
 
 class Tabulated(Fresnel):
@@ -131,11 +141,12 @@ class Tabulated(Fresnel):
 
     def __init__(self, cos_theta_d, values):
         self.cos_theta_d = np.asarray(cos_theta_d, dtype=np.float64).ravel()
-        self.values = np.asarray(values, dtype=np.float64).reshape(len(self.cos_theta_d), -1)
-        if self.values.shape[1] == 1:
-            self.values = np.repeat(self.values, 3, axis=1)
-        if self.values.shape[1] != 3 or len(self.cos_theta_d) < 2:
-            raise ValueError("Tabulated needs >= 2 samples and values of shape (N,) or (N, 3)")
+        values = np.asarray(values, dtype=np.float64)
+        n = len(self.cos_theta_d)
+        if n < 2 or values.shape not in ((n,), (n, 1), (n, 3)):
+            raise ValueError(f"Tabulated needs >= 2 samples and values of shape ({n},) or ({n}, 3), "
+                             f"got {values.shape}")
+        self.values = np.repeat(values.reshape(n, -1), 3 // values.reshape(n, -1).shape[1], axis=1)
         if np.any(np.diff(self.cos_theta_d) <= 0):
             raise ValueError("Tabulated cos_theta_d must be strictly increasing")
         if not (np.all(np.isfinite(self.values)) and np.all(np.isfinite(self.cos_theta_d))):

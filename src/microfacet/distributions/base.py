@@ -183,11 +183,14 @@ class SlopeDistribution:
     # -------------------------------------------------------------- Smith masking
     def lambda_(self, k) -> np.ndarray:
         """Smith ``Lambda(k) = A(k) / c_k - 1 = Lambda_std(k')``; ``inf`` where ``c_k <= 0``."""
-        a, b, c = self._warp(np.asarray(k, dtype=np.float64))
+        return self._lambda_c(np.asarray(k, dtype=np.float64))[0]
+
+    def _lambda_c(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(Lambda(k), c_k)`` with ``cot theta_k' = c / sqrt(a^2 + b^2)`` (Eq. 3.3)."""
+        a, b, c = self._warp(k)
         with np.errstate(divide="ignore", invalid="ignore"):
-            cot = c / np.sqrt(a * a + b * b)
-            lam = self.lambda_std(np.where(c > 0, cot, 0.0))
-        return np.where(c > 0, lam, np.inf)
+            cot = np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0)
+        return self.lambda_std(cot), c
 
     def projected_area(self, k) -> np.ndarray:
         """Projected area of the microsurface toward ``k``, ``A(k) = int <k,h>+ D(h) dw_h``.
@@ -195,10 +198,9 @@ class SlopeDistribution:
         Equals ``c_k (1 + Lambda(k))`` with ``c_k = z_k - x_k x~n - y_k y~n`` (Eq. 3.3);
         0 where ``c_k <= 0``.
         """
-        k = np.asarray(k, dtype=np.float64)
-        c = self._warp(k)[2]
+        lam, c = self._lambda_c(np.asarray(k, dtype=np.float64))
         with np.errstate(invalid="ignore"):
-            return np.where(c > 0, c * (1.0 + self.lambda_(k)), 0.0)
+            return np.where(c > 0, c * (1.0 + lam), 0.0)
 
     def g1(self, k) -> np.ndarray:
         """Smith masking ``G1(k) = z_k / A(k) = (z_k / c_k) G1_std(k')`` (Eq. 2.14, 3.3).
@@ -206,11 +208,10 @@ class SlopeDistribution:
         May exceed 1 for sheared surfaces; 0 for ``z_k <= 0`` or ``c_k <= 0``.
         """
         k = np.asarray(k, dtype=np.float64)
-        a, b, c = self._warp(k)
-        ok = (k[..., 2] > 0) & (c > 0)
+        area = self.projected_area(k)
+        ok = (k[..., 2] > 0) & (area > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            g = k[..., 2] / (np.where(ok, c, 1.0) * (1.0 + self.lambda_(k)))
-        return np.where(ok, g, 0.0)
+            return np.where(ok, k[..., 2] / area, 0.0)
 
     # ----------------------------------------------------------- visible normals
     def vndf(self, h, k) -> np.ndarray:

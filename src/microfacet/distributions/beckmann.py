@@ -16,25 +16,33 @@ _GL_T, _GL_W = np.polynomial.legendre.leggauss(12)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1]
 
 
-def _cdf_terms(x, t, a):
-    """Unnormalized CDF, complementary CDF and PDF of the standard visible x-slope.
+def _cdf(x, t):
+    """Unnormalized CDF of the standard visible x-slope, ``erfc(-x) + t exp(-x^2)/sqrt(pi)``."""
+    return erfc(-x) + t * np.exp(-x * x) / _SQRT_PI
 
-    With ``a = cot theta``, ``t = tan theta``: ``P2 ∝ 2 t (a - x) exp(-x^2) / sqrt(pi)``,
-    ``cdf = erfc(-x) + t exp(-x^2) / sqrt(pi)`` and, to keep relative precision where
-    ``x -> a``, ``ccdf = 2 t / sqrt(pi) int_0^{a-x} s exp(-(a-s)^2) ds`` by a 12-point
-    Gauss-Legendre rule when ``a - x < 1`` (exact to double precision there).
+
+def _ccdf(x, t, a, erfc_a=None, exp_a=None):
+    """Unnormalized complementary CDF, ``2 t / sqrt(pi) int_x^a (a - s) exp(-s^2) ds``.
+
+    Closed form ``erfc(x) - erfc(a) + t (exp(-a^2) - exp(-x^2)) / sqrt(pi)`` far from
+    ``a``; where ``a - x < 1`` it cancels, so a 12-point Gauss-Legendre rule of
+    ``int_0^{a-x} s exp(-(a-s)^2) ds`` (exact to double precision there) is used instead.
     """
-    ex = np.exp(-x * x)
-    cdf = erfc(-x) + t * ex / _SQRT_PI
-    delta = a - x
-    near = delta < 1.0
-    dn = np.where(near, delta, 0.0)[..., None]
-    s = dn * _GL_T
-    quad = 2.0 * t / _SQRT_PI * dn[..., 0] * np.sum(_GL_W * s * np.exp(-(a[..., None] - s) ** 2), axis=-1)
-    with np.errstate(invalid="ignore"):
-        far = (erfc(x) - erfc(a)) + t * (np.exp(-a * a) - ex) / _SQRT_PI
-    ccdf = np.where(near, quad, np.where(np.isinf(a), erfc(x), far))
-    return cdf, ccdf, 2.0 * ex * (1.0 - x * t) / _SQRT_PI
+    erfc_a = erfc(a) if erfc_a is None else erfc_a
+    exp_a = np.exp(-a * a) if exp_a is None else exp_a
+    out = erfc(x) - erfc_a + t * (exp_a - np.exp(-x * x)) / _SQRT_PI
+    near = a - x < 1.0
+    if np.any(near):
+        an, tn = a[near], t[near]
+        dn = (an - x[near])[:, None]
+        s = dn * _GL_T
+        out[near] = 2.0 * tn / _SQRT_PI * dn[:, 0] * np.sum(_GL_W * s * np.exp(-(an[:, None] - s) ** 2), axis=-1)
+    return out
+
+
+def _pdf(x, t):
+    """Unnormalized PDF ``2 exp(-x^2) (1 - x t) / sqrt(pi)`` = derivative of :func:`_cdf`."""
+    return 2.0 * np.exp(-x * x) * (1.0 - x * t) / _SQRT_PI
 
 
 def _view(cos_theta):
@@ -56,8 +64,8 @@ def visible_slope_cdf(x, cos_theta, complement: bool = False):
     """
     x, cos_theta = np.broadcast_arrays(np.asarray(x, float), np.asarray(cos_theta, float))
     t, a, z = _view(cos_theta)
-    cdf, ccdf, _ = _cdf_terms(np.minimum(x, a), t, a)
-    inside = (ccdf if complement else cdf) / z
+    xa = np.minimum(x, a)
+    inside = (_ccdf(xa, t, a) if complement else _cdf(xa, t)) / z
     return np.where(x >= a, 0.0 if complement else 1.0, inside)
 
 
@@ -77,23 +85,30 @@ def visible_slope_quantile(u, cos_theta, max_iter: int = 64):
     lo = np.full_like(u, -8.0)
     hi = np.minimum(a, 8.0)
     x = np.clip(erfinv(2.0 * u - 1.0), lo, hi)
+    erfc_a, exp_a = erfc(a), np.exp(-a * a)
     out = x.copy()
     idx = np.arange(u.size)
     for _ in range(max_iter):
-        cdf, ccdf, pdf = _cdf_terms(x, t, a)
-        r = np.where(upper, target - ccdf, cdf - target)      # increasing in x
+        r = np.empty_like(x)                                   # increasing in x
+        r[~upper] = _cdf(x[~upper], t[~upper]) - target[~upper]
+        r[upper] = target[upper] - _ccdf(x[upper], t[upper], a[upper], erfc_a[upper], exp_a[upper])
         lo = np.where(r < 0, x, lo)
         hi = np.where(r > 0, x, hi)
+        pdf = _pdf(x, t)
         with np.errstate(divide="ignore", invalid="ignore"):
-            xn = x - r / pdf
-        bad = ~((xn > lo) & (xn < hi))
+            step = r / pdf
+        xn = x - step
+        # Newton converges quadratically: a step this small leaves an error ~ step^2
+        converged = (np.abs(step) <= 1e-12 * np.maximum(1.0, np.abs(x))) | (r == 0)
+        bad = ~converged & ~((xn > lo) & (xn < hi))
         xn = np.where(bad, 0.5 * (lo + hi), xn)
-        done = (np.abs(xn - x) <= 4e-16 * np.maximum(1.0, np.abs(x))) | (r == 0) | (hi - lo <= 4e-16 * np.maximum(1.0, np.abs(x)))
+        done = converged | (hi - lo <= 4e-16 * np.maximum(1.0, np.abs(x)))
         out[idx] = xn
         keep = ~done
         if not keep.any():
             break
-        idx, x, t, a, target, upper, lo, hi = (v[keep] for v in (idx, xn, t, a, target, upper, lo, hi))
+        idx, x, t, a, target, upper, lo, hi, erfc_a, exp_a = (
+            v[keep] for v in (idx, xn, t, a, target, upper, lo, hi, erfc_a, exp_a))
     return out.reshape(shape)
 
 

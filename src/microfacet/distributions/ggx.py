@@ -34,13 +34,14 @@ class GGX(SlopeDistribution):
 
     @staticmethod
     def lambda_std(cot_theta):
-        """``Lambda(v) = (sqrt(1 + 1/v^2) - 1) / 2`` (Table 2.III), in the cancellation- and
-        overflow-free form ``q^2 / (2 (1 + sqrt(1 + q^2)))`` with ``q = 1/v = tan theta``."""
+        """``Lambda(v) = (sqrt(1 + 1/v^2) - 1) / 2`` (Table 2.III), in the cancellation-free
+        form ``w / (2 (1 + sqrt(1 + w)))``, ``w = 1/v^2``, where ``w <= 1``."""
         v = np.asarray(cot_theta, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            q = 1.0 / v
-            lam = 0.5 * q * (q / (1.0 + np.hypot(1.0, q)))
-        return np.where(v <= 0, np.inf, lam)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            w = 1.0 / (v * v)
+            r = np.sqrt(1.0 + w)
+            lam = np.where(w > 1.0, 0.5 * (r - 1.0), 0.5 * w / (1.0 + r))
+        return np.where(v > 0, lam, np.inf)
 
     @staticmethod
     def sample_visible_std(u, cos_theta):
