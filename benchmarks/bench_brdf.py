@@ -1,0 +1,322 @@
+#!/usr/bin/env python3
+"""Throughput of ``MicrofacetBRDF.eval``, ``pdf`` and ``sample`` against Mitsuba 3.
+
+For ``--n`` fixed-seed random direction pairs (uniform in the upper hemisphere) this
+times our NumPy (float64, single-threaded) BRDF for anisotropic GGX and Beckmann, with
+and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
+same directions with the same parameters (rho = 0, zero mean slope: the only case both
+models share) and the same conductor Fresnel term. Each timing is the best and the
+median of ``--repeats`` runs after one warm-up run (time.perf_counter).
+
+Mitsuba runs in ``llvm_ad_rgb`` (vectorized float32 JIT on all cores) when that works,
+which needs a system libLLVM >= 16 (e.g. Debian's ``libllvm19``; set
+``DRJIT_LIBLLVM_PATH`` if it is not found). The variant is probed in a subprocess, since
+an unusable LLVM aborts the process. Otherwise it falls back to ``scalar_rgb``: one
+Python call per direction, timed on ``--scalar-n`` directions and extrapolated to
+``--n`` (the output says so). The first Mitsuba call, which traces and compiles (or
+loads from Dr.Jit's kernel cache) its kernel, is reported separately and is not part of
+the figures.
+
+Usage::
+
+    python benchmarks/bench_brdf.py [--n 1000000] [--repeats 5] [--json results.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Callable
+
+import numpy as np
+
+import microfacet as mf
+
+EVAL_GOAL_S = 0.1  # goal: eval on 1e6 directions in under 0.1 s
+ALPHA_X, ALPHA_Y = 0.2, 0.5
+RHO, MEAN_SLOPE = 0.3, (0.1, -0.2)
+METAL = "Cu"  # conductor Fresnel term used on both sides
+
+
+# ------------------------------------------------------------------------- timing
+def time_it(fn: Callable[[], object], repeats: int) -> dict:
+    """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run."""
+    t0 = time.perf_counter()
+    fn()
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return {"best_s": min(times), "median_s": statistics.median(times), "first_s": first,
+            "times_s": times}
+
+
+# --------------------------------------------------------------------------- inputs
+def upper_hemisphere(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``n`` directions uniform in solid angle over the upper hemisphere, ``(n, 3)``."""
+    z = rng.random(n)
+    phi = 2.0 * np.pi * rng.random(n)
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def make_inputs(n: int, seed: int = 0) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return {"wi": upper_hemisphere(rng, n), "wo": upper_hemisphere(rng, n), "u": rng.random((n, 2))}
+
+
+# ------------------------------------------------------------------------ our BRDF
+def our_configs() -> dict[str, mf.MicrofacetBRDF]:
+    fresnel = mf.fresnel.Conductor.metal(METAL)
+    aniso = {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y}
+    sheared = dict(aniso, rho=RHO, mean_slope=MEAN_SLOPE)
+    return {
+        "ggx": mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel),
+        "beckmann": mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel),
+        "ggx sheared": mf.MicrofacetBRDF(mf.GGX(**sheared), fresnel=fresnel),
+        "beckmann sheared": mf.MicrofacetBRDF(mf.Beckmann(**sheared), fresnel=fresnel),
+    }
+
+
+def bench_ours(inputs, repeats: int) -> list[dict]:
+    wi, wo, u = inputs["wi"], inputs["wo"], inputs["u"]
+    rows = []
+    for name, brdf in our_configs().items():
+        ops = {"eval": lambda b=brdf: b.eval(wi, wo),
+               "pdf": lambda b=brdf: b.pdf(wi, wo),
+               "sample": lambda b=brdf: b.sample(u, wo)}
+        for op, fn in ops.items():
+            rows.append({"impl": "microfacet", "op": op, "distribution": name, "n": len(wi),
+                         "extrapolated": False, **time_it(fn, repeats)})
+    return rows
+
+
+# ------------------------------------------------------------------------- Mitsuba
+LLVM_PROBE = """
+import drjit as dr, mitsuba as mi
+mi.set_variant('llvm_ad_rgb')
+b = mi.load_dict({'type': 'roughconductor', 'distribution': 'ggx', 'alpha_u': 0.2, 'alpha_v': 0.5})
+si = dr.zeros(mi.SurfaceInteraction3f, 16)
+si.wi = dr.normalize(mi.Vector3f(0.3, 0.1, 0.8))
+v = b.eval(mi.BSDFContext(), si, dr.normalize(mi.Vector3f(-0.2, 0.3, 0.7)))
+dr.eval(v)
+print('.'.join(map(str, dr.detail.llvm_version())) if hasattr(dr.detail, 'llvm_version') else '?')
+"""
+
+
+def pick_variant(requested: str) -> tuple[str | None, str]:
+    """The Mitsuba variant to use and a line that says why."""
+    try:
+        import mitsuba as mi  # noqa: F401
+    except ImportError as exc:
+        return None, f"mitsuba not importable ({exc}); pip install 'microfacet[mitsuba]'"
+    if requested in ("auto", "llvm_ad_rgb"):
+        try:
+            p = subprocess.run([sys.executable, "-c", LLVM_PROBE], capture_output=True,
+                               text=True, timeout=300)
+        except subprocess.TimeoutExpired:
+            p = None
+        if p is not None and p.returncode == 0:
+            return "llvm_ad_rgb", f"llvm_ad_rgb works (LLVM {p.stdout.strip() or '?'})"
+        lines = [] if p is None else p.stderr.strip().splitlines()
+        errors = [ln for ln in lines if "error" in ln.lower()]
+        err = "timeout" if p is None else ((errors or lines or ["?"])[0 if errors else -1].strip()[:200])
+        why = (f"llvm_ad_rgb unusable ({err}); it needs libLLVM >= 16 "
+               "(apt-get install libllvm19, or set DRJIT_LIBLLVM_PATH)")
+        if requested == "llvm_ad_rgb":
+            return None, why
+        return "scalar_rgb", why + "; falling back to scalar_rgb"
+    return requested, f"{requested} requested"
+
+
+def mitsuba_bsdf(mi, kind: str):
+    eta, k = mf.fresnel.Conductor.METALS[METAL]
+    return mi.load_dict({
+        "type": "roughconductor", "distribution": kind, "alpha_u": ALPHA_X, "alpha_v": ALPHA_Y,
+        "eta": {"type": "rgb", "value": list(eta)}, "k": {"type": "rgb", "value": list(k)}})
+
+
+def bench_mitsuba_llvm(inputs, repeats: int, threads: int | None) -> list[dict]:
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    if threads:
+        dr.set_thread_count(threads)
+    n = len(inputs["wi"])
+    f32 = lambda a: np.ascontiguousarray(a.T, dtype=np.float32)  # noqa: E731  (3, n) SoA
+    # our wo (view) is Mitsuba's si.wi; our wi (light) is the argument of eval/pdf
+    view, light = mi.Vector3f(f32(inputs["wo"])), mi.Vector3f(f32(inputs["wi"]))
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = view
+    s1, s2 = dr.zeros(mi.Float, n), mi.Point2f(f32(inputs["u"]))
+    dr.eval(si, light, s1, s2)
+    dr.sync_thread()
+    ctx = mi.BSDFContext()
+
+    def run(fn):
+        def go():
+            dr.eval(fn())
+            dr.sync_thread()
+        return go
+
+    rows = []
+    for kind in ("ggx", "beckmann"):
+        bsdf = mitsuba_bsdf(mi, kind)
+        ops = {"eval": lambda b=bsdf: b.eval(ctx, si, light),
+               "pdf": lambda b=bsdf: b.pdf(ctx, si, light),
+               "sample": lambda b=bsdf: b.sample(ctx, si, s1, s2)}
+        for op, fn in ops.items():
+            rows.append({"impl": "mitsuba llvm_ad_rgb", "op": op, "distribution": kind, "n": n,
+                         "extrapolated": False, **time_it(run(fn), repeats)})
+    return rows
+
+
+def bench_mitsuba_scalar(inputs, repeats: int, n_scalar: int) -> list[dict]:
+    import mitsuba as mi
+
+    mi.set_variant("scalar_rgb")
+    n = len(inputs["wi"])
+    m = min(n, n_scalar)
+    view = [mi.Vector3f(*map(float, v)) for v in inputs["wo"][:m]]
+    light = [mi.Vector3f(*map(float, v)) for v in inputs["wi"][:m]]
+    s2 = [mi.Point2f(*map(float, s)) for s in inputs["u"][:m]]
+    ctx = mi.BSDFContext()
+    si = mi.SurfaceInteraction3f()
+    rows = []
+    for kind in ("ggx", "beckmann"):
+        bsdf = mitsuba_bsdf(mi, kind)
+
+        def loop(method, args):
+            def go():
+                for v, a in zip(view, args):
+                    si.wi = v
+                    method(ctx, si, *a)
+            return go
+
+        ops = {"eval": loop(bsdf.eval, [(w,) for w in light]),
+               "pdf": loop(bsdf.pdf, [(w,) for w in light]),
+               "sample": loop(bsdf.sample, [(0.5, s) for s in s2])}
+        for op, fn in ops.items():
+            t = time_it(fn, repeats)
+            scale = n / m  # per-call cost extrapolated to n directions
+            rows.append({"impl": "mitsuba scalar_rgb", "op": op, "distribution": kind, "n": n,
+                         "extrapolated": m < n, "measured_n": m,
+                         **{k: (v * scale if k != "times_s" else [x * scale for x in v])
+                            for k, v in t.items()}})
+    return rows
+
+
+# -------------------------------------------------------------------------- report
+def print_table(rows: list[dict]) -> None:
+    print(f"{'implementation':22s} {'op':7s} {'distribution':17s} {'N':>9s} "
+          f"{'best ms':>10s} {'median ms':>10s} {'Mevals/s':>9s}")
+    for r in rows:
+        note = f"  (extrapolated from N={r['measured_n']})" if r.get("extrapolated") else ""
+        print(f"{r['impl']:22s} {r['op']:7s} {r['distribution']:17s} {r['n']:9d} "
+              f"{r['best_s'] * 1e3:10.3f} {r['median_s'] * 1e3:10.3f} {r['n'] / r['best_s'] / 1e6:9.2f}{note}")
+
+
+def ratios(rows: list[dict]) -> list[dict]:
+    """Our best time / Mitsuba's best time for each (op, distribution) both measured."""
+    ours = {(r["op"], r["distribution"]): r for r in rows if r["impl"] == "microfacet"}
+    out = []
+    for r in rows:
+        if r["impl"].startswith("mitsuba") and (r["op"], r["distribution"]) in ours:
+            o = ours[r["op"], r["distribution"]]
+            out.append({"op": r["op"], "distribution": r["distribution"], "mitsuba": r["impl"],
+                        "ours_s": o["best_s"], "mitsuba_s": r["best_s"],
+                        "ratio": o["best_s"] / r["best_s"],
+                        "mitsuba_first_call_s": r["first_s"]})
+    return out
+
+
+def write_json(path: str, payload: dict) -> None:
+    """Write ``payload`` to ``path`` atomically (temporary file in the same folder + os.replace)."""
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".bench-", suffix=".json", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(payload, f, indent=2)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=1_000_000, help="directions per call (default 1e6)")
+    ap.add_argument("--repeats", type=int, default=5, help="timed runs after a warm-up (default 5)")
+    ap.add_argument("--json", metavar="PATH", help="also write the results to this JSON file")
+    ap.add_argument("--mitsuba", default="auto", choices=["auto", "llvm_ad_rgb", "scalar_rgb", "none"],
+                    help="Mitsuba variant to compare with (default: llvm_ad_rgb if it works)")
+    ap.add_argument("--scalar-n", type=int, default=20_000,
+                    help="directions actually timed with scalar_rgb, extrapolated to --n")
+    ap.add_argument("--mitsuba-threads", type=int, default=None,
+                    help="Dr.Jit CPU threads for llvm_ad_rgb (default: all cores; 1 for a per-core ratio)")
+    args = ap.parse_args(argv)
+    if args.n < 1 or args.repeats < 1 or args.scalar_n < 1 or (args.mitsuba_threads or 1) < 1:
+        ap.error("--n, --repeats, --scalar-n and --mitsuba-threads must be >= 1")
+
+    print(f"microfacet {mf.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
+          f"{platform.machine()}, {os.cpu_count()} CPUs; N = {args.n}, repeats = {args.repeats}")
+    print(f"parameters: alpha_x = {ALPHA_X}, alpha_y = {ALPHA_Y}; 'sheared': rho = {RHO}, "
+          f"mean slope = {MEAN_SLOPE}; conductor Fresnel ({METAL}) on both sides")
+    variant, why = (None, "skipped (--mitsuba none)") if args.mitsuba == "none" else pick_variant(args.mitsuba)
+    print(f"mitsuba: {why}")
+    if variant is None and args.mitsuba not in ("auto", "none"):
+        return 2  # the requested Mitsuba variant does not run here
+    inputs = make_inputs(args.n)
+    rows = bench_ours(inputs, args.repeats)
+    threads = None
+    if variant == "llvm_ad_rgb":
+        rows += bench_mitsuba_llvm(inputs, args.repeats, args.mitsuba_threads)
+        import drjit as dr
+        threads = dr.thread_count()
+    elif variant == "scalar_rgb":
+        rows += bench_mitsuba_scalar(inputs, args.repeats, args.scalar_n)
+
+    print()
+    print_table(rows)
+    rat = ratios(rows)
+    if rat:
+        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: NumPy "
+              f"float64, 1 thread. Mitsuba {variant}: float32"
+              + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
+        for r in rat:
+            first = (f"   (Mitsuba's first call, tracing + kernel compile or cache load, not counted: "
+                     f"{r['mitsuba_first_call_s']:.3f} s)" if variant == "llvm_ad_rgb" else "")
+            print(f"  {r['op']:7s} {r['distribution']:9s} {r['ours_s'] * 1e3:9.3f} ms / "
+                  f"{r['mitsuba_s'] * 1e3:9.3f} ms = {r['ratio']:7.1f}{first}")
+    goal = [(r["distribution"], r["best_s"] * 1e6 / r["n"]) for r in rows
+            if r["impl"] == "microfacet" and r["op"] == "eval"]
+    scaled = "" if args.n == 1_000_000 else f", measured at N = {args.n} and scaled to 1e6"
+    print(f"\ngoal: eval of 1e6 directions in < {EVAL_GOAL_S} s (best time{scaled}):")
+    for name, t in goal:
+        print(f"  {name:17s} {t:7.3f} s  {'met' if t < EVAL_GOAL_S else 'NOT met'}")
+
+    if args.json:
+        write_json(args.json, {
+            "n": args.n, "repeats": args.repeats, "mitsuba_variant": variant, "mitsuba_note": why,
+            "mitsuba_threads": threads, "numpy": np.__version__, "python": platform.python_version(),
+            "machine": platform.machine(), "cpus": os.cpu_count(),
+            "parameters": {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y, "rho": RHO,
+                           "mean_slope": MEAN_SLOPE, "fresnel": f"conductor {METAL}"},
+            "results": rows, "ratios": rat, "eval_goal_s": EVAL_GOAL_S})
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
