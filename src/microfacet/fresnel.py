@@ -78,9 +78,9 @@ class Schlick(Fresnel):
         return cls(((eta - 1.0) / (eta + 1.0)) ** 2)
 
     def __call__(self, cos_theta_d) -> np.ndarray:
-        m = 1.0 - _cos(cos_theta_d)
+        m = 1.0 - np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)
         m2 = m * m
-        return self.f0 + (1.0 - self.f0) * (m2 * m2 * m)
+        return self.f0 + (1.0 - self.f0) * (m2 * m2 * m)[..., None]
 
 
 class Conductor(Fresnel):

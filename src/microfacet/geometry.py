@@ -56,8 +56,13 @@ def normal_to_slope(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """Halfway vector ``h = (i + o) / |i + o|`` (Eq. 2.5)."""
-    return normalize(np.asarray(wi, float) + np.asarray(wo, float))
+    """Halfway vector ``h = (i + o) / |i + o|`` (Eq. 2.5); zero where ``i = -o``."""
+    h = np.asarray(wi, float) + np.asarray(wo, float)
+    n2 = dot(h, h)
+    with np.errstate(divide="ignore"):
+        inv = np.where(n2 > 0, 1.0 / np.sqrt(n2), 0.0)
+    h *= inv[..., None]
+    return h
 
 
 def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:

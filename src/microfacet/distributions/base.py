@@ -186,11 +186,16 @@ class SlopeDistribution:
         return self._lambda_c(np.asarray(k, dtype=np.float64))[0]
 
     def _lambda_c(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(Lambda(k), c_k)`` with ``cot theta_k' = c / sqrt(a^2 + b^2)`` (Eq. 3.3)."""
+        """``(Lambda(k), c_k)`` from the warped direction ``k' = (a, b, c)`` (Eq. 3.3)."""
         a, b, c = self._warp(k)
+        return self.lambda_warped(a * a + b * b, c), c
+
+    @classmethod
+    def lambda_warped(cls, r2, c):
+        """``Lambda_std`` of the unnormalized direction with ``x^2 + y^2 = r2`` and ``z = c``,
+        i.e. at ``cot theta = c / sqrt(r2)``; ``inf`` where ``c <= 0``."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            cot = np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0)
-        return self.lambda_std(cot), c
+            return cls.lambda_std(np.where(c > 0, c / np.sqrt(r2), 0.0))
 
     def projected_area(self, k) -> np.ndarray:
         """Projected area of the microsurface toward ``k``, ``A(k) = int <k,h>+ D(h) dw_h``.

@@ -151,11 +151,14 @@ class Beckmann(SlopeDistribution):
     @staticmethod
     def lambda_std(cot_theta):
         """``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2``, ``v = cot theta`` (Table 2.III),
-        written with ``erfcx`` so that it stays accurate for large ``v``."""
+        written with ``erfcx`` so that it stays accurate for large ``v``; ``inf`` for ``v <= 0``."""
         v = np.asarray(cot_theta, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            lam = 0.5 * np.exp(-v * v) * (1.0 / (v * _SQRT_PI) - erfcx(v))
-        return np.where(np.isinf(v), 0.0, np.where(v <= 0, np.inf, np.maximum(lam, 0.0)))
+        return np.where(v > 0, _lambda(np.maximum(v, 0.0)), np.inf)
+
+    @classmethod
+    def lambda_warped(cls, r2, c):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return _lambda(np.where(c > 0, c / np.sqrt(r2), 0.0))
 
     @staticmethod
     def sample_visible_std(u, cos_theta):
@@ -172,6 +175,12 @@ class Beckmann(SlopeDistribution):
         """Standard normal with Gaussian slopes ``x~, y~ = erfinv(2u - 1)``."""
         s = erfinv(2.0 * np.clip(np.asarray(u, float), _U_MIN, 1.0 - _U_MIN) - 1.0)
         return _slope_normal(s[..., 0], s[..., 1])
+
+
+def _lambda(v):
+    """Beckmann Lambda for ``v >= 0`` (``inf`` at 0, 0 at ``inf``)."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.maximum(0.5 * np.exp(-v * v) * (1.0 / (v * _SQRT_PI) - erfcx(v)), 0.0)
 
 
 def _slope_normal(x, y):

@@ -43,6 +43,14 @@ class GGX(SlopeDistribution):
             lam = np.where(w > 1.0, 0.5 * (r - 1.0), 0.5 * w / (1.0 + r))
         return np.where(v > 0, lam, np.inf)
 
+    @classmethod
+    def lambda_warped(cls, r2, c):
+        """``Lambda = (sqrt(r2 + c^2) - c) / (2c) = r2 / (2c (sqrt(r2 + c^2) + c))``: Table 2.III
+        at ``cot theta = c / sqrt(r2)``, without cancellation or overflow."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = r2 / (2.0 * c * (np.sqrt(r2 + c * c) + c))
+        return np.where(c > 0, lam, np.inf)
+
     @staticmethod
     def sample_visible_std(u, cos_theta):
         """Standard visible normal for a view at ``theta`` in the xz plane, in closed form.

@@ -1,0 +1,111 @@
+"""The ``microfacet`` command line.
+
+``microfacet demo -o DIR`` renders the demo report (thesis Figs. 2.2-2.6) into ``DIR``
+and prints the path of its ``index.html``. Bad input prints one line on stderr and exits
+with a non-zero status, without a traceback; long work shows a progress bar when stderr
+is a terminal and stays quiet otherwise (pipes, CI).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from collections.abc import Sequence
+
+from . import __version__
+from .errors import MicrofacetError
+
+__all__ = ["main", "build_parser"]
+
+PROG = "microfacet"
+EXIT_ERROR, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors are one line: ``microfacet: error: ...``."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _int_at_least(lo: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < lo:
+            raise argparse.ArgumentTypeError(f"must be >= {lo}, got {value}")
+        return value
+    return parse
+
+
+def _add_demo(sub) -> None:
+    from .demo import DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SPP, default_workers
+    p = sub.add_parser(
+        "demo", help="render the thesis Figs. 2.2-2.6 demo report (HTML, PNG, EXR)",
+        description="Render spheres and polar lobe plots showing the Fresnel term, the GAF, "
+                    "isotropic and anisotropic roughness and its orientation (thesis Figs. "
+                    "2.2-2.6) under a directional light and an environment, into DIR/index.html.")
+    p.add_argument("-o", "--output", metavar="DIR", required=True, help="output folder (created if needed)")
+    p.add_argument("--size", type=_int_at_least(8), default=DEFAULT_SIZE, metavar="PX",
+                   help=f"sphere image side in pixels (default {DEFAULT_SIZE})")
+    p.add_argument("--spp", type=_int_at_least(1), default=DEFAULT_SPP, metavar="N",
+                   help=f"environment samples per pixel (default {DEFAULT_SPP})")
+    p.add_argument("--seed", type=_int_at_least(0), default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
+    p.add_argument("-j", "--jobs", type=_int_at_least(1), default=default_workers(), metavar="N",
+                   help="worker processes (default: usable CPUs, at most 4); results do not depend on it")
+    p.set_defaults(run=_run_demo)
+
+
+def _run_demo(args) -> int:
+    from .demo import run_demo
+    index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
+                     workers=args.jobs, progress=sys.stderr.isatty())
+    print(index)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``microfacet`` command."""
+    parser = _Parser(prog=PROG, description="Multiscale microfacet rendering: BRDFs in slope space, "
+                                            "fitting, LEAN/LEADR prefiltering and glints.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND", required=True)
+    _add_demo(sub)
+    return parser
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+
+def _one_line(e: Exception) -> str:
+    """``path: reason`` for OS errors, the message otherwise, on one line."""
+    if isinstance(e, OSError) and e.strerror and e.filename:
+        text = f"{e.filename}: {e.strerror}"
+    else:
+        text = str(e) or type(e).__name__
+    return " ".join(text.split())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:          # --help, --version, usage errors (already printed)
+        return e.code if isinstance(e.code, int) else EXIT_USAGE
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return args.run(args)
+    except (MicrofacetError, ValueError, OSError) as e:
+        print(f"{PROG}: error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

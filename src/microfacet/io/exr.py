@@ -1,0 +1,101 @@
+"""OpenEXR images through the ``OpenEXR`` package (never imageio, which misreads EXR).
+
+Images are ``(H, W)`` or ``(H, W, C)`` arrays, row 0 at the top, with ``C`` = 1 (``Y``),
+3 (``R, G, B``) or 4 (``R, G, B, A``) channels of linear values.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+
+from ..errors import MicrofacetError
+from .atomic import atomic_path
+
+__all__ = ["read_exr", "write_exr", "EXR_MAGIC"]
+
+#: First four bytes of every OpenEXR file (``20000630`` little-endian).
+EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+_NAMES = {1: ("Y",), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
+
+
+def _as_channels(image) -> np.ndarray:
+    """``image`` as a float ``(H, W, C)`` array, ``C`` in {1, 3, 4}."""
+    a = np.asarray(image)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or a.shape[2] not in _NAMES or a.shape[0] == 0 or a.shape[1] == 0:
+        raise ValueError(f"an EXR image must be (H, W) or (H, W, 1|3|4), got shape {a.shape}")
+    if not np.issubdtype(a.dtype, np.number):
+        raise ValueError(f"an EXR image must be numeric, got dtype {a.dtype}")
+    return a
+
+
+def write_exr(path: str | os.PathLike, image, half: bool = False) -> Path:
+    """Write a linear image as a ZIP-compressed scanline EXR, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        Destination ``.exr`` file; its folder must exist.
+    image : array_like
+        ``(H, W)`` or ``(H, W, C)`` with ``C`` = 1, 3 or 4 (Y, RGB, RGBA).
+    half : bool
+        Store 16-bit half floats instead of 32-bit floats.
+    """
+    a = _as_channels(image).astype(np.float16 if half else np.float32)
+    channels = {name: np.ascontiguousarray(a[..., c]) for c, name in enumerate(_NAMES[a.shape[2]])}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as tmp:
+        OpenEXR.File(header, channels).write(str(tmp))
+    return Path(path)
+
+
+def _check_magic(path: Path) -> None:
+    try:
+        with open(path, "rb") as f:
+            magic = f.read(4)
+    except FileNotFoundError:
+        raise MicrofacetError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise MicrofacetError(f"{path}: is a directory, not an EXR file") from None
+    except OSError as e:
+        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    if magic != EXR_MAGIC:
+        raise MicrofacetError(f"{path}: not an OpenEXR file (bad magic number {magic.hex() or 'empty'})")
+
+
+def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarray:
+    """Read the first part of an EXR file as a float64 ``(H, W, C)`` array.
+
+    ``C`` is 1 for a luminance (``Y``) image, 3 for ``R, G, B`` and 4 when an ``A``
+    channel is present as well.
+
+    Raises
+    ------
+    MicrofacetError
+        If the file is missing, not an EXR (magic number), unreadable or truncated, has
+        neither ``R, G, B`` nor ``Y`` channels, or holds NaN/inf (unless ``allow_nonfinite``).
+        The message names the file and the problem.
+    """
+    path = Path(path)
+    _check_magic(path)
+    try:
+        channels = OpenEXR.File(str(path), separate_channels=True).channels()
+        pixels = {name: np.asarray(ch.pixels) for name, ch in channels.items()}
+    except Exception as e:  # OpenEXR raises RuntimeError/others for corrupt files
+        raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({e})") from None
+    names = next((n for n in (_NAMES[4], _NAMES[3], _NAMES[1]) if set(n) <= set(pixels)), None)
+    if names is None:
+        raise MicrofacetError(f"{path}: needs R, G, B or Y channels, found {sorted(pixels) or 'none'}")
+    shapes = {pixels[n].shape for n in names}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 2:
+        raise MicrofacetError(f"{path}: channels {names} have unusable shapes {sorted(shapes)} (subsampled?)")
+    image = np.stack([pixels[n].astype(np.float64) for n in names], axis=-1)
+    bad = ~np.isfinite(image)
+    if bad.any() and not allow_nonfinite:
+        raise MicrofacetError(f"{path}: {int(bad.sum())} NaN or infinite values")
+    return image

@@ -1,0 +1,12 @@
+"""Shading harness: an orthographic sphere shaded by any BRDF of the protocol under a
+directional light or an environment map (integrated by the BRDF's own importance
+sampling), and polar lobe plots.
+"""
+from .integrate import shade_directional, shade_environment, shifted_sobol, sobol_02
+from .lights import DirectionalLight, Environment, procedural_sky
+from .lobes import plot_lobes, save_lobe_figure
+from .sphere import Sphere, tangent_frame
+
+__all__ = ["Sphere", "tangent_frame", "DirectionalLight", "Environment", "procedural_sky",
+           "sobol_02", "shifted_sobol", "shade_directional", "shade_environment",
+           "plot_lobes", "save_lobe_figure"]

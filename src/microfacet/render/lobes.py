@@ -1,0 +1,85 @@
+"""Polar plots of BRDF lobes ``f_r(wi, wo) cos theta_i`` in a plane of incidence.
+
+The view ``wo`` lies at ``-theta_o`` in the plane of azimuth ``phi`` (left of the
+normal), ``wi`` sweeps the same plane from -90 to 90 deg, so a mirror-like lobe peaks at
+``theta_i = +theta_o`` (right). Colour BRDFs are plotted as luminance (Rec. 709 weights).
+Figures use Matplotlib's object API on the Agg canvas (no pyplot state, no display);
+Matplotlib is imported on first use, so importing this module stays cheap.
+"""
+from __future__ import annotations
+
+import io
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from ..geometry import spherical_to_cartesian
+from ..io import write_bytes
+
+__all__ = ["lobe_curve", "plot_lobes", "save_lobe_figure", "LUMINANCE"]
+
+#: Rec. 709 / sRGB luminance weights.
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+_COLOURS = ("#1f77b4", "#2ca02c", "#ff7f0e", "#d62728", "#9467bd")
+_STYLES = ("-", "--", ":")
+
+
+def lobe_curve(brdf, theta_o: float, phi: float = 0.0, n: int = 721) -> tuple[np.ndarray, np.ndarray]:
+    """Signed ``theta_i`` in ``[-pi/2, pi/2]`` ``(n,)`` and the luminance of
+    ``f_r(wi, wo) cos theta_i`` along the plane of azimuth ``phi`` (module docstring)."""
+    theta_i = np.linspace(-np.pi / 2, np.pi / 2, n)
+    wi = spherical_to_cartesian(np.abs(theta_i), np.where(theta_i < 0, phi + np.pi, phi))
+    wo = spherical_to_cartesian(theta_o, phi + np.pi)
+    return theta_i, brdf.eval_cos(wi, np.broadcast_to(wo, wi.shape)) @ LUMINANCE
+
+
+def plot_lobes(ax, brdf, theta_o_deg: Sequence[float] = (0, 30, 60, 80),
+               planes_deg: Sequence[float] = (0,), title: str = "") -> None:
+    """Draw the lobes of ``brdf`` for each view angle (colour) and plane azimuth (line
+    style) on a polar ``ax``; view directions are drawn as thin lines from the origin."""
+    from matplotlib.ticker import FormatStrFormatter, MaxNLocator
+    ax.set_theta_zero_location("N")
+    ax.set_theta_direction(-1)
+    ax.set_thetalim(-np.pi / 2, np.pi / 2)
+    top = 0.0
+    for j, plane in enumerate(planes_deg):
+        for k, to in enumerate(theta_o_deg):
+            th, f = lobe_curve(brdf, np.radians(to), np.radians(plane))
+            label = f"θo = {to:g}°" + (f", plane {plane:g}°" if len(planes_deg) > 1 else "")
+            ax.plot(th, f, _STYLES[j % len(_STYLES)], color=_COLOURS[k % len(_COLOURS)], lw=1.2, label=label)
+            top = max(top, float(np.max(f)))
+    top = top * 1.05 if top > 0 else 1.0
+    for k, to in enumerate(theta_o_deg):
+        ax.plot([-np.radians(to)] * 2, [0, top], color=_COLOURS[k % len(_COLOURS)], lw=0.6, alpha=0.6)
+    ax.set_ylim(0, top)
+    ax.yaxis.set_major_locator(MaxNLocator(3, prune="lower"))
+    ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    ax.set_rlabel_position(-90 + 8)
+    ax.tick_params(labelsize=6)
+    ax.set_title(title, fontsize=8)
+
+
+def save_lobe_figure(path: str | os.PathLike, brdfs: Sequence, labels: Sequence[str],
+                     theta_o_deg: Sequence[float] = (0, 30, 60, 80),
+                     planes_deg: Sequence[float] = (0,), ncols: int | None = None,
+                     dpi: int = 110) -> Path:
+    """One polar panel per BRDF, shared legend, written atomically as a PNG."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    ncols = ncols or len(brdfs)
+    nrows = -(-len(brdfs) // ncols)
+    row_h, legend_h = 1.4, 0.4
+    fig = Figure(figsize=(2.3 * ncols, row_h * nrows + legend_h))
+    FigureCanvasAgg(fig)
+    axes = [fig.add_subplot(nrows, ncols, i + 1, projection="polar") for i in range(len(brdfs))]
+    for ax, brdf, label in zip(axes, brdfs, labels, strict=True):
+        plot_lobes(ax, brdf, theta_o_deg, planes_deg, label)
+    handles, names = axes[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="lower center", ncol=len(names), fontsize=7, frameon=False)
+    height = row_h * nrows + legend_h
+    fig.subplots_adjust(left=0.02, right=0.98, top=1 - 0.25 / height, bottom=(legend_h + 0.05) / height,
+                        wspace=0.25, hspace=0.35)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return write_bytes(path, buf.getvalue())

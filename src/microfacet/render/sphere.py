@@ -1,0 +1,104 @@
+"""An orthographic view of the unit sphere: per-pixel normals, tangent frames, coverage.
+
+World frame: x to the right of the image, y up, z toward the viewer; the camera looks
+down ``-z``, so the view direction (toward the viewer) is ``+z`` at every pixel. Image
+row 0 is the top (``y = +1``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import dot, normalize, orthonormal_basis, to_local, to_world
+
+__all__ = ["Sphere", "tangent_frame", "VIEW"]
+
+#: World direction toward the (orthographic) viewer.
+VIEW = np.array([0.0, 0.0, 1.0])
+
+
+def tangent_frame(n: np.ndarray, tangent=(1.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Shading tangents ``(s, t)`` of normals ``n``: ``s`` is ``tangent`` projected on the
+    tangent plane, ``s = normalize(a - (a.n) n)``, and ``t = n x s``.
+
+    ``(s, t, n)`` is right-handed and orthonormal, and the local x axis (``alpha_x``,
+    ``phi = 0`` of :meth:`SlopeDistribution.from_ellipse`) follows the world direction
+    ``tangent`` wherever it can. Where ``n`` is parallel to ``tangent`` the projection
+    vanishes and the frame falls back to :func:`~microfacet.geometry.orthonormal_basis`.
+    """
+    n = np.asarray(n, dtype=np.float64)
+    a = np.broadcast_to(np.asarray(tangent, dtype=np.float64), n.shape)
+    s_proj = a - dot(a, n)[..., None] * n
+    degenerate = (dot(s_proj, s_proj) < 1e-18)[..., None]
+    s_fallback, _ = orthonormal_basis(n)
+    s = np.where(degenerate, s_fallback, normalize(s_proj))
+    return s, np.cross(n, s)
+
+
+def _pixel_centres(size: int, sub: int) -> tuple[np.ndarray, np.ndarray]:
+    """Image-plane ``(x, y)`` in ``[-1, 1]`` of a ``sub x sub`` grid in every pixel,
+    shaped ``(size, size, sub*sub)``."""
+    k = (np.arange(size * sub) + 0.5) / (size * sub) * 2.0 - 1.0
+    x = k.reshape(1, size, 1, sub)
+    y = -k.reshape(size, 1, sub, 1)
+    x, y = np.broadcast_arrays(x, y)
+    return x.reshape(size, size, sub * sub), y.reshape(size, size, sub * sub)
+
+
+class Sphere:
+    """Unit sphere filling a ``size x size`` orthographic image.
+
+    Each pixel touched by the sphere is shaded once, at the centroid of its covered
+    ``supersample x supersample`` subpixels (the pixel centre inside the disk), and
+    composited over the background with its coverage, so silhouettes are antialiased
+    without extra shading work.
+
+    Attributes
+    ----------
+    mask : (size, size) bool
+        Pixels with nonzero coverage; shaded values are ``(N, ...)`` arrays over them.
+    coverage : (N,) float
+        Covered fraction of each such pixel.
+    n, s, t : (N, 3) float
+        World normal and tangents (:func:`tangent_frame`) of each shaded pixel.
+    wo : (N, 3) float
+        View direction :data:`VIEW` in each local frame ``(s, t, n)``.
+    """
+
+    def __init__(self, size: int, supersample: int = 4, tangent=(1.0, 0.0, 0.0)):
+        if int(size) != size or size < 1:
+            raise ValueError(f"size must be a positive integer, got {size!r}")
+        self.size = int(size)
+        x, y = _pixel_centres(self.size, supersample)
+        inside = x * x + y * y < 1.0
+        covered = inside.sum(axis=-1)
+        self.mask = covered > 0
+        self.coverage = covered[self.mask] / inside.shape[-1]
+        cx = (x * inside).sum(-1)[self.mask] / covered[self.mask]   # centroid of covered subpixels
+        cy = (y * inside).sum(-1)[self.mask] / covered[self.mask]
+        cz = np.sqrt(np.maximum(0.0, 1.0 - cx * cx - cy * cy))
+        self.n = normalize(np.stack([cx, cy, cz], axis=-1))
+        self.s, self.t = tangent_frame(self.n, tangent)
+        self.wo = self.to_local(VIEW)
+
+    @property
+    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The per-pixel local frames ``(s, t, n)``."""
+        return self.s, self.t, self.n
+
+    def to_local(self, w_world) -> np.ndarray:
+        """World directions (``(3,)`` or ``(N, 3)``) in each pixel's local frame."""
+        return to_local(np.asarray(w_world, dtype=np.float64), self.s, self.t, self.n)
+
+    def to_world(self, w_local) -> np.ndarray:
+        """Local directions ``(N, 3)`` in world coordinates."""
+        return to_world(np.asarray(w_local, dtype=np.float64), self.s, self.t, self.n)
+
+    def image(self, values, background=0.0) -> np.ndarray:
+        """Scatter per-pixel ``values`` ``(N, C)`` into a ``(size, size, C)`` image,
+        blended with ``background`` by coverage: ``c v + (1 - c) bg``."""
+        values = np.asarray(values, dtype=np.float64)
+        c = self.coverage.reshape((-1,) + (1,) * (values.ndim - 1))
+        out = np.empty((self.size, self.size) + values.shape[1:])
+        out[...] = background
+        out[self.mask] = c * values + (1.0 - c) * out[self.mask]
+        return out

@@ -1,0 +1,114 @@
+"""The ``microfacet`` command line: the demo report and one-line errors."""
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from microfacet.cli import main
+from microfacet.demo import thesis_figures
+from microfacet.io import read_exr
+
+SMALL = ["--size", "16", "--spp", "2"]
+
+
+def run_cli(*args):
+    """Run ``python -m microfacet`` in a subprocess (stdout/stderr are pipes, not a TTY)."""
+    return subprocess.run([sys.executable, "-m", "microfacet", *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def files(folder):
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def demo_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo") / "nested" / "out"
+    assert main(["demo", "-o", str(out), *SMALL, "-j", "1"]) == 0
+    return out
+
+
+def test_demo_writes_a_complete_report(demo_dir, capsys):
+    index = demo_dir / "index.html"
+    html = index.read_text(encoding="utf-8")
+    srcs = re.findall(r'<img src="([^"]+)"', html)
+    figures = thesis_figures()
+    n_panels = sum(len(f.panels) for f in figures)
+    assert len(srcs) == 1 + 2 * n_panels + len(figures)        # environment, 2 renders per panel, lobes
+    for src in srcs:
+        with Image.open(demo_dir / src) as im:
+            assert im.format == "PNG"
+    for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05"):
+        assert key in html
+    exrs = sorted(demo_dir.rglob("*.exr"))
+    assert len(exrs) == 1 + 2 * n_panels
+    for path in exrs:
+        img = read_exr(path)
+        assert img.shape in {(16, 16, 3), (64, 128, 3)} and img.min() >= 0
+    assert not [p for p in demo_dir.rglob("*") if p.name.startswith(".") or p.name.endswith(".tmp")]
+
+
+def test_demo_is_deterministic_independent_of_workers_and_quiet_in_pipes(demo_dir, tmp_path):
+    out = tmp_path / "again"
+    proc = run_cli("demo", "-o", str(out), *SMALL, "-j", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == str(out / "index.html")
+    assert proc.stderr == ""                       # no progress bar when stderr is not a TTY
+    assert files(out) == files(demo_dir)
+
+
+def test_demo_prints_index_path(tmp_path, capsys):
+    assert main(["demo", "-o", str(tmp_path), "--size", "8", "--spp", "1", "-j", "1"]) == 0
+    assert capsys.readouterr().out.strip() == str(tmp_path / "index.html")
+
+
+@pytest.mark.parametrize("argv, message", [
+    ([], "required: COMMAND"),
+    (["bogus"], "invalid choice: 'bogus'"),
+    (["demo"], "required: -o/--output"),
+    (["demo", "-o", "x", "--spp", "0"], "--spp: must be >= 1, got 0"),
+    (["demo", "-o", "x", "--size", "big"], "--size: expected an integer, got 'big'"),
+    (["demo", "-o", "x", "--size", "4"], "--size: must be >= 8"),
+    (["demo", "-o", "x", "--jobs", "-1"], "--jobs: must be >= 1"),
+])
+def test_bad_arguments_give_one_line_and_usage_status(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("microfacet: error: ") and message in err
+
+
+def test_unusable_output_folder_is_one_line(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    for out, message in ((blocker, "exists and is not a folder"), (blocker / "sub", "Not a directory")):
+        assert main(["demo", "-o", str(out), "--size", "8", "--spp", "1", "-j", "1"]) == 1
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(blocker) in err and message in err
+    assert blocker.read_text() == "x"
+
+
+def test_console_errors_have_no_traceback(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    for args, status in ((["demo", "-o", str(blocker / "sub")], 1), (["demo", "--spp", "x"], 2)):
+        proc = run_cli(*args)
+        assert proc.returncode == status
+        assert "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
+
+
+def test_help_and_version(capsys):
+    assert main(["--version"]) == 0
+    assert re.match(r"microfacet \d", capsys.readouterr().out)
+    assert main(["demo", "--help"]) == 0
+    assert "--spp" in capsys.readouterr().out
+
+
+def test_demo_images_are_finite_and_lit(demo_dir):
+    for fig in thesis_figures():
+        for p in fig.panels:
+            for light in ("directional", "environment"):
+                img = read_exr(demo_dir / fig.key / f"{p.key}-{light}.exr")
+                assert np.isfinite(img).all() and img.max() > 0, (fig.key, p.key, light)

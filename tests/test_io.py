@@ -1,0 +1,193 @@
+"""microfacet.io: EXR/PNG round trips, tone map, atomic writes, reader errors."""
+import os
+import stat
+
+import numpy as np
+import OpenEXR
+import pytest
+from PIL import Image
+
+import microfacet as mf
+from microfacet.io import (atomic_path, html_figure, html_grid, html_page, read_exr, srgb_encode,
+                           to_srgb8, write_exr, write_png, write_text)
+
+
+def leftovers(folder):
+    """Temporary files an atomic write could have left behind."""
+    return [p.name for p in folder.iterdir() if p.name.endswith(".tmp") or p.name.startswith(".")]
+
+
+@pytest.fixture
+def rgb():
+    rng = np.random.default_rng(7)
+    return rng.random((5, 7, 3)) * 10.0
+
+
+# ------------------------------------------------------------------------- EXR
+def test_exr_round_trip_rgb_is_float32_exact(tmp_path, rgb):
+    path = write_exr(tmp_path / "a.exr", rgb)
+    back = read_exr(path)
+    assert back.dtype == np.float64 and back.shape == (5, 7, 3)
+    np.testing.assert_array_equal(back, rgb.astype(np.float32))
+    assert leftovers(tmp_path) == []
+
+
+def test_exr_keeps_orientation_and_channels(tmp_path):
+    img = np.zeros((4, 6, 3))
+    img[0, 0] = (1.0, 2.0, 3.0)          # top-left pixel, distinct channels
+    back = read_exr(write_exr(tmp_path / "o.exr", img))
+    np.testing.assert_array_equal(back[0, 0], (1.0, 2.0, 3.0))
+    assert np.count_nonzero(back) == 3
+
+
+@pytest.mark.parametrize("shape, channels", [((3, 4), 1), ((3, 4, 1), 1), ((3, 4, 4), 4)])
+def test_exr_round_trip_y_and_rgba(tmp_path, shape, channels):
+    img = np.arange(np.prod(shape), dtype=np.float64).reshape(shape) / 7.0
+    back = read_exr(write_exr(tmp_path / "c.exr", img))
+    assert back.shape == (3, 4, channels)
+    np.testing.assert_array_equal(back.reshape(shape), img.astype(np.float32))
+
+
+def test_exr_half(tmp_path, rgb):
+    back = read_exr(write_exr(tmp_path / "h.exr", rgb, half=True))
+    np.testing.assert_allclose(back, rgb, rtol=1e-3)
+
+
+@pytest.mark.parametrize("bad", [np.zeros((3, 4, 2)), np.zeros((0, 4, 3)), np.zeros(5), np.array([["a"]])])
+def test_exr_writer_rejects_bad_shapes(tmp_path, bad):
+    with pytest.raises(ValueError):
+        write_exr(tmp_path / "bad.exr", bad)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_exr_reader_missing_file_names_it(tmp_path):
+    path = tmp_path / "nope.exr"
+    with pytest.raises(mf.MicrofacetError, match="nope.exr.*no such file"):
+        read_exr(path)
+
+
+def test_exr_reader_rejects_non_exr(tmp_path):
+    path = tmp_path / "fake.exr"
+    Image.new("RGB", (2, 2)).save(path, format="PNG")
+    with pytest.raises(mf.MicrofacetError, match=r"fake\.exr: not an OpenEXR file"):
+        read_exr(path)
+    empty = tmp_path / "empty.exr"
+    empty.write_bytes(b"")
+    with pytest.raises(mf.MicrofacetError, match="empty.exr"):
+        read_exr(empty)
+
+
+def test_exr_reader_rejects_truncated_file(tmp_path, rgb):
+    path = write_exr(tmp_path / "t.exr", np.random.default_rng(0).random((64, 64, 3)))
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(mf.MicrofacetError, match=r"t\.exr: unreadable or corrupt EXR"):
+        read_exr(path)
+
+
+def test_exr_reader_rejects_directory(tmp_path):
+    with pytest.raises(mf.MicrofacetError, match="is a directory"):
+        read_exr(tmp_path)
+
+
+def test_exr_reader_needs_colour_channels(tmp_path):
+    path = tmp_path / "depth.exr"
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    OpenEXR.File(header, {"Z": np.ones((2, 3), np.float32)}).write(str(path))
+    with pytest.raises(mf.MicrofacetError, match=r"depth\.exr: needs R, G, B or Y channels, found \['Z'\]"):
+        read_exr(path)
+
+
+def test_exr_reader_rejects_nonfinite_unless_allowed(tmp_path, rgb):
+    rgb[1, 2, 0] = np.nan
+    rgb[0, 0, 1] = np.inf
+    path = write_exr(tmp_path / "nan.exr", rgb)
+    with pytest.raises(mf.MicrofacetError, match=r"nan\.exr: 2 NaN or infinite values"):
+        read_exr(path)
+    assert np.isnan(read_exr(path, allow_nonfinite=True)[1, 2, 0])
+
+
+# ------------------------------------------------------------------------- PNG
+def test_srgb_encode_reference_values():
+    v = np.array([0.0, 0.0031308, 0.18, 0.5, 1.0])
+    expected = [0.0, 12.92 * 0.0031308, 0.4613561, 0.7353570, 1.0]   # IEC 61966-2-1
+    np.testing.assert_allclose(srgb_encode(v), expected, atol=2e-7)
+
+
+def test_to_srgb8_exposure_clip_and_nan():
+    lin = np.array([[[0.25, 0.0, 4.0], [np.nan, -1.0, 0.5]]])
+    out = to_srgb8(lin, exposure=1.0)           # x 2: 0.5, 0, 8 -> clip 1
+    assert out.dtype == np.uint8
+    np.testing.assert_array_equal(out[0, 0], [188, 0, 255])
+    np.testing.assert_array_equal(out[0, 1], [0, 0, 255])
+
+
+def test_png_round_trip(tmp_path):
+    lin = np.linspace(0.0, 1.0, 4 * 6 * 3).reshape(4, 6, 3)
+    path = write_png(tmp_path / "p.png", lin)
+    with Image.open(path) as im:
+        assert im.format == "PNG" and im.mode == "RGB" and im.size == (6, 4)
+        back = np.asarray(im)
+    np.testing.assert_array_equal(back, to_srgb8(lin))
+    gray = write_png(tmp_path / "g.png", lin[..., 0])
+    with Image.open(gray) as im:
+        assert im.mode == "L"
+    assert leftovers(tmp_path) == []
+
+
+def test_png_rejects_bad_shape(tmp_path):
+    with pytest.raises(ValueError, match="PNG image"):
+        write_png(tmp_path / "x.png", np.zeros((2, 2, 2)))
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------- atomic
+def test_atomic_write_replaces_and_respects_umask(tmp_path):
+    target = tmp_path / "out.txt"
+    write_text(target, "old")
+    write_text(target, "new ✓")
+    assert target.read_text(encoding="utf-8") == "new ✓"
+    mask = os.umask(0o022)
+    os.umask(mask)
+    assert stat.S_IMODE(target.stat().st_mode) == 0o666 & ~mask
+    assert leftovers(tmp_path) == []
+
+
+def test_interrupted_write_keeps_old_file_and_leaves_no_temp(tmp_path):
+    target = tmp_path / "keep.txt"
+    write_text(target, "complete")
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise KeyboardInterrupt
+    assert target.read_text() == "complete"
+    assert leftovers(tmp_path) == []
+
+
+def test_failing_exr_writer_leaves_old_file(tmp_path, rgb, monkeypatch):
+    target = write_exr(tmp_path / "img.exr", rgb)
+    before = target.read_bytes()
+
+    def broken_write(self, path):
+        with open(path, "wb") as f:
+            f.write(b"\x76\x2f\x31\x01 partial")
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(OpenEXR.File, "write", broken_write)
+    with pytest.raises(RuntimeError, match="disk full"):
+        write_exr(target, rgb * 2)
+    assert target.read_bytes() == before
+    assert leftovers(tmp_path) == []
+
+
+def test_writer_into_missing_folder_raises_oserror(tmp_path):
+    with pytest.raises(OSError):
+        write_text(tmp_path / "missing" / "a.txt", "x")
+
+
+# ------------------------------------------------------------------------ HTML
+def test_html_escapes_text():
+    page = html_page("a < b", html_figure("x.png", 'cap "q" & <b>') + html_grid([("row", [("y.png", "α = 1")])]))
+    assert page.startswith("<!DOCTYPE html>") and "<title>a &lt; b</title>" in page
+    assert "cap &quot;q&quot; &amp; &lt;b&gt;" in page and "<b>" not in page
+    assert '<img src="y.png"' in page and "α = 1" in page

@@ -1,0 +1,261 @@
+"""microfacet.render: sphere frames, directional and environment shading, QMC, lobes."""
+import numpy as np
+import pytest
+
+import microfacet as mf
+from microfacet.geometry import dot, normalize
+from microfacet.io import write_exr
+from microfacet.render import (DirectionalLight, Environment, Sphere, procedural_sky, save_lobe_figure,
+                               shade_directional, shade_environment, shifted_sobol, sobol_02,
+                               tangent_frame)
+from microfacet.render.lights import latlong_directions
+from microfacet.render.lobes import lobe_curve
+from microfacet.render.sphere import VIEW
+
+
+def render_directional(brdf, sphere, light):
+    return sphere.image(shade_directional(brdf, sphere.wo, sphere.to_local(light.w), light.rgb))
+
+
+class Constant:
+    """Environment of constant radiance."""
+
+    def __init__(self, value):
+        self.value = np.asarray(value, dtype=np.float64)
+
+    def radiance(self, w):
+        return np.broadcast_to(self.value, np.shape(w)[:-1] + (3,))
+
+
+class Linear:
+    """Environment ``L(w) = 1 + a.w``: a Lambertian reflects ``rho (1 + 2/3 a.n)``."""
+
+    a = np.array([0.3, -0.4, 0.2])
+
+    def radiance(self, w):
+        return (1.0 + w @ self.a)[..., None] * np.ones(3)
+
+
+# ---------------------------------------------------------------------- frames
+def test_tangent_frame_is_orthonormal_right_handed_and_follows_x():
+    rng = np.random.default_rng(0)
+    n = normalize(rng.normal(size=(1000, 3)))
+    n[0] = (1.0, 0.0, 0.0)          # degenerate: normal along the tangent direction
+    n[1] = (-1.0, 0.0, 0.0)
+    s, t = tangent_frame(n)
+    for a, b in ((s, s), (t, t), (n, n)):
+        np.testing.assert_allclose(dot(a, b), 1.0, atol=1e-12)
+    for a, b in ((s, t), (s, n), (t, n)):
+        np.testing.assert_allclose(dot(a, b), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.cross(s, t), n, atol=1e-12)
+    # s lies in the plane of x and n, on the side of x
+    x = np.array([1.0, 0.0, 0.0])
+    regular = np.abs(n[:, 0]) < 0.999
+    np.testing.assert_allclose(dot(np.cross(x, n), s)[regular], 0.0, atol=1e-12)
+    assert np.all(dot(s, x)[regular] > 0)
+
+
+def test_sphere_geometry():
+    sp = Sphere(33)
+    assert sp.mask.sum() == sp.n.shape[0] == sp.wo.shape[0]
+    np.testing.assert_allclose(dot(sp.n, sp.n), 1.0, atol=1e-12)
+    np.testing.assert_allclose(sp.wo[:, 2], sp.n[:, 2], atol=1e-12)          # cos theta_o = n.view
+    np.testing.assert_allclose(sp.to_world(sp.wo), np.broadcast_to(VIEW, sp.n.shape), atol=1e-12)
+    # the centre pixel sees the pole, with local x = world x and y = world y
+    mid = np.argmax(sp.n[:, 2])
+    np.testing.assert_allclose(sp.n[mid], VIEW, atol=1e-12)
+    np.testing.assert_allclose(sp.s[mid], (1, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(sp.t[mid], (0, 1, 0), atol=1e-12)
+    # coverage: 1 inside, fractional at the silhouette, corners empty
+    assert sp.coverage.max() == 1.0 and 0.0 < sp.coverage.min() < 1.0
+    assert not sp.mask[0, 0] and sp.mask[16, 16]
+    # area of the disk in pixels
+    assert abs(sp.coverage.sum() - np.pi * 33**2 / 4) < 0.01 * np.pi * 33**2 / 4
+    # image orientation: top rows have n_y > 0, right columns n_x > 0
+    ny = sp.image(sp.n[:, 1:2])[..., 0]
+    nx = sp.image(sp.n[:, 0:1])[..., 0]
+    assert ny[2, 16] > 0.5 and ny[-3, 16] < -0.5 and nx[16, -3] > 0.5 and nx[16, 2] < -0.5
+
+
+def test_image_blends_background_by_coverage():
+    sp = Sphere(16)
+    img = sp.image(np.ones((sp.n.shape[0], 3)), background=0.25)
+    assert img.shape == (16, 16, 3)
+    assert np.all(img[~sp.mask] == 0.25)
+    np.testing.assert_allclose(img[sp.mask][:, 0], sp.coverage + (1 - sp.coverage) * 0.25)
+
+
+# ---------------------------------------------------------------- directional
+def test_white_lambertian_under_directional_light_is_cos_over_pi_times_e():
+    sp = Sphere(64)
+    light = DirectionalLight(direction=(-0.3, 0.6, 0.8), irradiance=2.5)
+    img = render_directional(mf.Lambertian(1.0), sp, light)
+    full = sp.coverage == 1.0
+    expected = 2.5 * np.maximum(0.0, sp.n @ light.w) / np.pi
+    got = img[sp.mask][full]
+    np.testing.assert_allclose(got, np.repeat(expected[full, None], 3, 1), rtol=1e-13, atol=1e-15)
+    assert np.all(img[~sp.mask] == 0.0)
+    assert np.any(expected[full] == 0.0)         # the terminator is on the sphere
+
+
+def test_glossy_highlight_sits_at_the_half_vector():
+    sp = Sphere(96)
+    light = DirectionalLight(direction=(-0.5, 0.5, 1.0))
+    radiance = shade_directional(mf.MicrofacetBRDF(mf.GGX(alpha=0.05)), sp.wo, sp.to_local(light.w), light.rgb)
+    h = normalize(light.w + VIEW)
+    assert dot(sp.n[np.argmax(radiance[:, 0])], h) > np.cos(np.radians(2.0))
+
+
+def _highlight_covariance(dist):
+    """Image-plane covariance of the core (> 1/4 of the peak) of the highlight of ``dist``
+    lit from the view direction (the long tails bend along the sphere)."""
+    sp = Sphere(96)
+    f = shade_directional(mf.MicrofacetBRDF(dist), sp.wo, sp.wo, 1.0)[:, 0]
+    core = f > 0.25 * f.max()
+    xy, f = sp.n[core, :2], f[core]
+    w = f / f.sum()
+    mean = w @ xy
+    d = xy - mean
+    return (d * w[:, None]).T @ d, mean
+
+
+@pytest.mark.parametrize("ax, ay", [(0.3, 0.05), (0.05, 0.3)])
+def test_anisotropic_highlight_stretches_along_the_rougher_axis(ax, ay):
+    cov, mean = _highlight_covariance(mf.GGX(alpha_x=ax, alpha_y=ay))
+    np.testing.assert_allclose(mean, 0.0, atol=1e-9)
+    wide, narrow = (cov[0, 0], cov[1, 1]) if ax > ay else (cov[1, 1], cov[0, 0])
+    assert wide > 4.0 * narrow
+
+
+@pytest.mark.parametrize("phi, sign", [(np.pi / 4, 1.0), (3 * np.pi / 4, -1.0)])
+def test_anisotropy_orientation_turns_the_highlight(phi, sign):
+    cov, _ = _highlight_covariance(mf.GGX.from_ellipse(0.3, 0.05, phi))
+    evals, evecs = np.linalg.eigh(cov)
+    major = evecs[:, 1] * np.sign(evecs[0, 1])
+    assert evals[1] > 4.0 * evals[0]
+    np.testing.assert_allclose(major, [np.sqrt(0.5), sign * np.sqrt(0.5)], atol=0.05)
+
+
+# ---------------------------------------------------------------- environment
+def test_lambertian_under_constant_environment_is_reflectance_times_l():
+    sp = Sphere(24)
+    est = shade_environment(mf.Lambertian((0.2, 0.5, 0.9)), sp.wo, sp.frame, Constant((1.0, 2.0, 3.0)),
+                            8, np.random.default_rng(1))
+    np.testing.assert_allclose(est, np.broadcast_to([0.2, 1.0, 2.7], est.shape), rtol=1e-12)
+
+
+def test_lambertian_under_linear_environment_matches_closed_form():
+    sp = Sphere(32)
+    rho, spp = 0.7, 64
+    est = shade_environment(mf.Lambertian(rho), sp.wo, sp.frame, Linear(), spp, np.random.default_rng(3))
+    exact = rho * (1.0 + 2.0 / 3.0 * sp.n @ Linear.a)
+    err = est[:, 0] - exact
+    sigma = rho * np.linalg.norm(Linear.a)          # bounds the std of one sample
+    n = err.size
+    assert abs(err.mean()) < 4.0 * sigma / np.sqrt(n * spp)
+    assert np.sqrt(np.mean(err**2)) < sigma / np.sqrt(spp)
+
+
+@pytest.mark.parametrize("brdf", [
+    mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)),
+    mf.MicrofacetBRDF(mf.Beckmann(alpha_x=0.2, alpha_y=0.6), gaf="vgroove"),
+], ids=["ggx", "beckmann-vgroove"])
+def test_environment_estimate_matches_quadrature_of_eval_cos(brdf):
+    """Constant environment: L_o = L int f_r cos dwi, checked against a midpoint rule in
+    (cos theta, phi) that never calls ``sample``."""
+    theta_o = np.radians([0.0, 40.0, 70.0])
+    wo = np.stack([np.sin(theta_o), np.zeros(3), np.cos(theta_o)], -1)
+    frame = (np.tile([1.0, 0, 0], (3, 1)), np.tile([0, 1.0, 0], (3, 1)), np.tile([0, 0, 1.0], (3, 1)))
+    est = shade_environment(brdf, wo, frame, Constant(1.0), 4096, np.random.default_rng(5))
+    m = 600
+    mu = (np.arange(m) + 0.5) / m                      # cos theta_i, uniform: dw = dmu dphi
+    phi = (np.arange(2 * m) + 0.5) / (2 * m) * 2 * np.pi
+    mu_, phi_ = np.meshgrid(mu, phi, indexing="ij")
+    sin_ = np.sqrt(1 - mu_**2)
+    wi = np.stack([sin_ * np.cos(phi_), sin_ * np.sin(phi_), mu_], -1).reshape(-1, 3)
+    for k in range(3):
+        quad = brdf.eval_cos(wi, wo[k]).sum(0) * (1.0 / m) * (2 * np.pi / (2 * m))
+        np.testing.assert_allclose(est[k], quad, rtol=0.01)
+
+
+def test_environment_estimate_is_deterministic_and_finite():
+    sp = Sphere(24)
+    env = Environment(procedural_sky(16, 32))
+    b = mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3), fresnel=mf.fresnel.Conductor.metal("Au"))
+    a = shade_environment(b, sp.wo, sp.frame, env, 8, np.random.default_rng(2))
+    c = shade_environment(b, sp.wo, sp.frame, env, 8, np.random.default_rng(2))
+    np.testing.assert_array_equal(a, c)
+    assert np.all(np.isfinite(a)) and np.all(a >= 0)
+
+
+def test_shade_environment_rejects_bad_spp():
+    sp = Sphere(8)
+    with pytest.raises(ValueError, match="spp"):
+        shade_environment(mf.Lambertian(), sp.wo, sp.frame, Constant(1.0), 0, np.random.default_rng())
+
+
+# ----------------------------------------------------------------- QMC points
+@pytest.mark.parametrize("m", [0, 3, 6])
+def test_sobol_points_form_a_0m2_net_also_after_digital_shift(m):
+    n = 2**m
+    pts = [sobol_02(n) * 2.0**-32, shifted_sobol(np.random.default_rng(4), 3, n)[2]]
+    for p in pts:
+        assert np.all((p >= 0) & (p < 1))
+        for a in range(m + 1):     # every dyadic box of area 2^-m holds exactly one point
+            cell = np.floor(p[:, 0] * 2**a) * 2 ** (m - a) + np.floor(p[:, 1] * 2 ** (m - a))
+            assert np.unique(cell).size == n
+
+
+def test_shifted_sobol_is_uniform_per_pixel():
+    u = shifted_sobol(np.random.default_rng(0), 20000, 1)[:, 0]
+    np.testing.assert_allclose(u.mean(0), 0.5, atol=0.01)
+    np.testing.assert_allclose(u.var(0), 1 / 12, atol=0.003)
+
+
+# ---------------------------------------------------------------- environment map
+def test_environment_layout_and_bilinear_lookup():
+    h, w = 8, 16
+    env = Environment(np.arange(h * w * 3, dtype=float).reshape(h, w, 3))
+    dirs = latlong_directions(h, w)
+    np.testing.assert_allclose(env.radiance(dirs), env.map, atol=1e-9)          # texel centres
+    m = env.map
+    # toward the viewer (+z): theta = pi/2, phi = 0, the corner of the 4 central texels
+    np.testing.assert_allclose(env.radiance(np.array([0.0, 0.0, 1.0])), m[3:5, 7:9].mean((0, 1)))
+    # zenith: row 0 (clamped), phi = atan2(0, 0) = 0 between the two central columns
+    np.testing.assert_allclose(env.radiance(np.array([0.0, 1.0, 0.0])), m[0, 7:9].mean(0))
+    # +x (image right) is a quarter turn from the centre: phi = pi/2 -> column 3/4 of the width
+    np.testing.assert_allclose(env.radiance(np.array([1.0, 0.0, 0.0])), m[3:5, 11:13].mean((0, 1)))
+    # phi wraps around behind the sphere (-z): between the last and first columns
+    np.testing.assert_allclose(env.radiance(np.array([1e-12, 0.0, -1.0])), 0.5 * (m[3:5, 0] + m[3:5, -1]).mean(0))
+    const = Environment(np.full((4, 8, 3), 0.5))
+    w_rand = normalize(np.random.default_rng(1).normal(size=(100, 3)))
+    np.testing.assert_allclose(const.radiance(w_rand), 0.5)
+
+
+def test_environment_from_exr(tmp_path):
+    sky = procedural_sky(8, 16)
+    env = Environment.from_exr(write_exr(tmp_path / "sky.exr", sky))
+    np.testing.assert_allclose(env.map, sky, rtol=1e-6)
+    with pytest.raises(mf.MicrofacetError, match="missing.exr"):
+        Environment.from_exr(tmp_path / "missing.exr")
+    with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
+        Environment(np.zeros((4, 4)))
+
+
+def test_procedural_sky_is_small_finite_and_has_bright_lights():
+    sky = procedural_sky()
+    assert sky.shape == (64, 128, 3) and np.all(np.isfinite(sky)) and sky.min() > 0
+    assert sky.max() > 2.0 and np.median(sky) < 1.0
+
+
+# ----------------------------------------------------------------------- lobes
+def test_lobe_peaks_near_mirror_direction_and_figure_is_written(tmp_path):
+    brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.1))
+    theta_i, f = lobe_curve(brdf, np.radians(30.0))
+    assert abs(np.degrees(theta_i[np.argmax(f)]) - 30.0) < 3.0
+    assert np.all(f[theta_i < np.radians(-20.0)] < 0.01 * f.max())     # no backscattering lobe
+    assert abs(f[0]) < 1e-12 and abs(f[-1]) < 1e-12                      # grazing wi
+    path = save_lobe_figure(tmp_path / "lobes.png", [brdf, mf.Lambertian(0.5)], ["a", "b"],
+                            planes_deg=(0, 90))
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lobes.png"]
