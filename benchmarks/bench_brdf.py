@@ -45,6 +45,14 @@ METAL = "Cu"  # conductor Fresnel term used on both sides
 
 
 # ------------------------------------------------------------------------- timing
+def _numba_threads() -> int:
+    try:
+        import numba
+        return numba.get_num_threads()
+    except ImportError:
+        return 0
+
+
 def time_it(fn: Callable[[], object], repeats: int) -> dict:
     """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run."""
     t0 = time.perf_counter()
@@ -291,8 +299,9 @@ def main(argv: list[str] | None = None) -> int:
     print_table(rows)
     rat = ratios(rows)
     if rat:
-        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: NumPy "
-              f"float64, 1 thread. Mitsuba {variant}: float32"
+        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64; "
+              f"Smith eval by the fused Numba kernel ({_numba_threads()} threads), pdf and sample NumPy "
+              f"(1 thread). Mitsuba {variant}: float32"
               + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
         for r in rat:
             first = (f"   (Mitsuba's first call, tracing + kernel compile or cache load, not counted: "

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import fresnel as _fresnel
+from . import kernels
 from .distributions.base import SlopeDistribution
 from .geometry import (cosine_hemisphere_pdf, dot, half_vector, reflect,
                        square_to_cosine_hemisphere)
@@ -161,14 +162,28 @@ class MicrofacetBRDF(BRDF):
         return np.where(ok, g, 0.0)
 
     # ---------------------------------------------------------------- protocol
-    def _projected(self, wi, wo):
-        """``(o.h, D G / (4 z_o))`` at the half vector, 0 where invalid."""
+    def _projected(self, wi, wo, divide_cos_i: bool = False):
+        """``(o.h, D G / (4 z_o))`` at the half vector (``/ z_i`` if asked), 0 where invalid.
+
+        Smith BRDFs with scalar parameters use the fused compiled kernel
+        (:mod:`microfacet.kernels`); :meth:`_projected_numpy` is the reference.
+        """
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        if self.gaf_model == "smith":
+            fast = kernels.smith_projected(self.distribution, self.shadowing, wi, wo, divide_cos_i)
+            if fast is not None:
+                return fast
+        return self._projected_numpy(wi, wo, divide_cos_i)
+
+    def _projected_numpy(self, wi, wo, divide_cos_i: bool = False):
         h = half_vector(wi, wo)
         oh = dot(wo, h)
         g = self._gaf(wi, wo, h, oh, oh)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return oh, np.where(g > 0, self.ndf(h) * g / (4.0 * wo[..., 2]), 0.0)
+            s = np.where(g > 0, self.ndf(h) * g / (4.0 * wo[..., 2]), 0.0)
+            if divide_cos_i:
+                s = np.where(s > 0, s / wi[..., 2], 0.0)
+        return oh, s
 
     def eval_cos(self, wi, wo) -> np.ndarray:
         """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
@@ -177,10 +192,7 @@ class MicrofacetBRDF(BRDF):
 
     def eval(self, wi, wo) -> np.ndarray:
         """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1)."""
-        oh, s = self._projected(wi, wo)
-        zi = np.asarray(wi, dtype=np.float64)[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(s > 0, s / zi, 0.0)
+        oh, s = self._projected(wi, wo, divide_cos_i=True)
         return self.fresnel(oh) * s[..., None]
 
     def pdf(self, wi, wo) -> np.ndarray:
