@@ -196,26 +196,30 @@ class MicrofacetBRDF(BRDF):
         return self.fresnel(oh) * s[..., None]
 
     def pdf(self, wi, wo) -> np.ndarray:
-        """Density of ``sample``: ``D_o(h) / (4 oh)`` with Smith (visible normals, Eq. 2.17),
-        ``D(h) z_h / (4 oh)`` otherwise (slopes drawn from ``P``)."""
+        """Density of ``sample``: ``D_o(h) / (4 oh)`` when visible normals are sampled (Smith,
+        Eq. 2.17), ``D(h) z_h / (4 oh)`` otherwise (slopes drawn from ``P``)."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo)
         oh = dot(wo, h)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0)
-        if self.gaf_model == "smith":
+        if self._samples_visible:
             p_h = self.distribution.vndf(h, wo)
         else:
             p_h = self.distribution.ndf(h) * h[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(ok, p_h / (4.0 * oh), 0.0)
 
+    @property
+    def _samples_visible(self) -> bool:
+        return self.gaf_model == "smith" and self.distribution.supports_visible_sampling
+
     def sample(self, u, wo):
-        """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2),
-        slopes of ``P`` for the other GAFs. Returns ``(wi, weight, pdf)``; with Smith the
+        """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2) when
+        the distribution supports it, slopes of ``P`` otherwise (and for the other GAFs). Returns ``(wi, weight, pdf)``; with Smith the
         weight is ``F G / G1(o)`` (Eq. 2.23). Failed samples have weight 0 and pdf 0."""
         wo = _dirs(wo, "wo")
         u = np.asarray(u, dtype=np.float64)
-        if self.gaf_model == "smith":
+        if self._samples_visible:
             h = self.distribution.sample_visible(u, wo)
         else:
             h = self.distribution.sample_p22(u)
@@ -224,7 +228,7 @@ class MicrofacetBRDF(BRDF):
         ok = (zi > 0) & (zo > 0) & (oh > 0)
         g = self._gaf(wi, wo, h, oh, oh)
         with np.errstate(divide="ignore", invalid="ignore"):
-            if self.gaf_model == "smith":
+            if self._samples_visible:
                 p_h = self.distribution.vndf(h, wo)
                 ratio = g / self.distribution.g1(wo)             # G / G1(o), Eq. 2.23
             else:

@@ -188,14 +188,15 @@ class SlopeDistribution:
     def _lambda_c(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Lambda(k), c_k)`` from the warped direction ``k' = (a, b, c)`` (Eq. 3.3)."""
         a, b, c = self._warp(k)
-        return self.lambda_warped(a * a + b * b, c), c
+        return self.lambda_warped(a, b, c), c
 
     @classmethod
-    def lambda_warped(cls, r2, c):
-        """``Lambda_std`` of the unnormalized direction with ``x^2 + y^2 = r2`` and ``z = c``,
-        i.e. at ``cot theta = c / sqrt(r2)``; ``inf`` where ``c <= 0``."""
+    def lambda_warped(cls, a, b, c):
+        """Standard ``Lambda`` of the unnormalized direction ``k' = (a, b, c)`` (Eq. 3.3);
+        ``inf`` where ``c <= 0``. Radial distributions depend on ``cot theta' = c / sqrt(a^2 + b^2)``
+        only (Sec. 2.4); a non-radial (e.g. tabulated anisotropic) one overrides this."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            return cls.lambda_std(np.where(c > 0, c / np.sqrt(r2), 0.0))
+            return cls.lambda_std(np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0))
 
     def projected_area(self, k) -> np.ndarray:
         """Projected area of the microsurface toward ``k``, ``A(k) = int <k,h>+ D(h) dw_h``.
@@ -262,6 +263,9 @@ class SlopeDistribution:
 
     # --------------------------------------------------------- standard form API
     second_moment_std: float = np.nan
+    #: Whether ``sample_visible`` exists; Smith BRDFs then sample visible normals,
+    #: otherwise slopes of ``P`` (``supports_smith_vndf_sampling``, Listing 2.1).
+    supports_visible_sampling: bool = True
 
     @staticmethod
     def p22_std(x, y):  # pragma: no cover - interface

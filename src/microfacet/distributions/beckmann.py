@@ -156,7 +156,8 @@ class Beckmann(SlopeDistribution):
         return np.where(v > 0, _lambda(np.maximum(v, 0.0)), np.inf)
 
     @classmethod
-    def lambda_warped(cls, r2, c):
+    def lambda_warped(cls, a, b, c):
+        r2 = a * a + b * b
         with np.errstate(divide="ignore", invalid="ignore"):
             return _lambda(np.where(c > 0, c / np.sqrt(r2), 0.0))
 

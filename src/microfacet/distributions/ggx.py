@@ -44,9 +44,10 @@ class GGX(SlopeDistribution):
         return np.where(v > 0, lam, np.inf)
 
     @classmethod
-    def lambda_warped(cls, r2, c):
-        """``Lambda = (sqrt(r2 + c^2) - c) / (2c) = r2 / (2c (sqrt(r2 + c^2) + c))``: Table 2.III
+    def lambda_warped(cls, a, b, c):
+        """``Lambda = (|k'| - c) / (2c) = r2 / (2c (|k'| + c))``, ``r2 = a^2 + b^2``: Table 2.III
         at ``cot theta = c / sqrt(r2)``, without cancellation or overflow."""
+        r2 = a * a + b * b
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = r2 / (2.0 * c * (np.sqrt(r2 + c * c) + c))
         return np.where(c > 0, lam, np.inf)
