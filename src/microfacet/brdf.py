@@ -196,27 +196,30 @@ class MicrofacetBRDF(BRDF):
         return self.fresnel(oh) * s[..., None]
 
     def pdf(self, wi, wo) -> np.ndarray:
-        """Density of ``sample``: ``D_o(h) / (4 oh)`` when visible normals are sampled (Smith,
-        Eq. 2.17), ``D(h) z_h / (4 oh)`` otherwise (slopes drawn from ``P``)."""
+        """Density of ``sample``: the density of the sampled normal over ``4 oh``."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo)
         oh = dot(wo, h)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0)
-        if self._samples_visible:
-            p_h = self.distribution.vndf(h, wo)
-        else:
-            p_h = self.distribution.ndf(h) * h[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(ok, p_h / (4.0 * oh), 0.0)
+            return np.where(ok, self._normal_pdf(h, wo) / (4.0 * oh), 0.0)
 
     @property
     def _samples_visible(self) -> bool:
         return self.gaf_model == "smith" and self.distribution.supports_visible_sampling
 
+    def _normal_pdf(self, h, wo) -> np.ndarray:
+        """Density of the sampled normals: ``D_o(h)`` for visible normals (Smith, Eq. 2.17),
+        ``D(h) z_h`` for slopes drawn from ``P``."""
+        if self._samples_visible:
+            return self.distribution.vndf(h, wo)
+        return self.distribution.ndf(h) * h[..., 2]
+
     def sample(self, u, wo):
-        """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2) when
-        the distribution supports it, slopes of ``P`` otherwise (and for the other GAFs). Returns ``(wi, weight, pdf)``; with Smith the
-        weight is ``F G / G1(o)`` (Eq. 2.23). Failed samples have weight 0 and pdf 0."""
+        """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2)
+        when the distribution supports it, slopes of ``P`` otherwise. Returns
+        ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
+        samples have weight 0 and pdf 0."""
         wo = _dirs(wo, "wo")
         u = np.asarray(u, dtype=np.float64)
         if self._samples_visible:
@@ -228,13 +231,11 @@ class MicrofacetBRDF(BRDF):
         ok = (zi > 0) & (zo > 0) & (oh > 0)
         g = self._gaf(wi, wo, h, oh, oh)
         with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = np.where(ok, self._normal_pdf(h, wo) / (4.0 * oh), 0.0)
             if self._samples_visible:
-                p_h = self.distribution.vndf(h, wo)
                 ratio = g / self.distribution.g1(wo)             # G / G1(o), Eq. 2.23
             else:
-                p_h = self.distribution.ndf(h) * zh
                 ratio = g * oh / (zo * zh)                       # F D G / (4 z_o) / (D z_h / (4 oh))
-            pdf = np.where(ok, p_h / (4.0 * oh), 0.0)
             ok &= pdf > 0
             weight = np.where(ok, ratio, 0.0)[..., None] * self.fresnel(oh)
         return wi, weight, np.where(ok, pdf, 0.0)

@@ -247,13 +247,13 @@ class SlopeDistribution:
         k = np.asarray(k, dtype=np.float64)
         a, b, c = self._warp(k)
         a, b, c = np.broadcast_arrays(a, b, np.maximum(c, 0.0))
-        r = np.hypot(a, b)
-        norm = np.hypot(r, c)
-        cos_t = np.where(norm > 0, c / np.where(norm > 0, norm, 1.0), 1.0)
-        phi = np.arctan2(b, a)
+        r2 = a * a + b * b
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos_t = np.where(r2 > 0, c / np.sqrt(r2 + c * c), 1.0)      # of k'
+            inv_r = np.where(r2 > 0, 1.0 / np.sqrt(r2), 0.0)
+        cp, sp = np.where(r2 > 0, a * inv_r, 1.0), b * inv_r            # azimuth of k'
         shape = np.broadcast_shapes(u.shape[:-1], cos_t.shape)
         m = self.sample_visible_std(np.broadcast_to(u, shape + (2,)), np.broadcast_to(cos_t, shape))
-        cp, sp = np.cos(phi), np.sin(phi)
         m = np.stack([cp * m[..., 0] - sp * m[..., 1], sp * m[..., 0] + cp * m[..., 1], m[..., 2]], -1)
         return self._normal_from_standard(m)
 
