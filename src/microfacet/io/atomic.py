@@ -34,7 +34,10 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     any exception it is removed and the exception propagates, leaving ``path`` as it was.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+    except OSError as e:        # name the destination, not the temporary file
+        raise OSError(e.errno, f"cannot write here: {e.strerror}", str(path)) from None
     os.close(fd)
     tmp = Path(tmp)
     try:
