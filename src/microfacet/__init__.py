@@ -3,11 +3,11 @@
 Microfacet BRDFs with roughness, correlation and mean slope (Dupuy 2015, Ch. 2-3),
 BRDF fitting by power iterations (Ch. 4), LEAN/LEADR prefiltering (Ch. 3, 5) and glints.
 """
-from . import fresnel, geometry
+from . import fresnel, geometry, measured
 from .brdf import BRDF, Lambertian, MicrofacetBRDF
 from .distributions import GGX, Beckmann, SlopeDistribution
 from .errors import MicrofacetError
 
 __version__ = "0.1.0"
 __all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError",
-           "SlopeDistribution", "fresnel", "geometry"]
+           "SlopeDistribution", "fresnel", "geometry", "measured"]

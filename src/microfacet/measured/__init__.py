@@ -1,0 +1,91 @@
+"""Measured BRDFs: MERL ``.binary(.gz)``, RGL ``.bsdf`` and UTIA ``.bin`` readers.
+
+``load(path)`` recognises the format by content, not by file name:
+
+* gzip magic ``1f 8b`` → decompressed, then recognised as below;
+* ``b"tensor_file\\0"`` → RGL material database file (:mod:`.rgl`);
+* MERL header ``int32 (90, 90, 180)`` → MERL file (:mod:`.merl`);
+* exactly 1,990,656 bytes (headerless float64 ``3 x 6 x 48 x 6 x 48``) → UTIA (:mod:`.utia`).
+
+Every reader returns a :class:`microfacet.BRDF` (``eval``, ``eval_cos``, ``sample``,
+``pdf``; cosine-weighted sampling) and raises :class:`microfacet.MicrofacetError`
+naming the file and what is wrong with it. Files are only read.
+"""
+from __future__ import annotations
+
+import os
+import zlib
+
+from .base import MeasuredBRDF, file_error, read_bytes
+from .merl import MERLBRDF, is_merl, read_merl
+from .rgl import RGLBRDF, read_rgl
+from .tensor_file import is_tensor_file, read_tensor_file, write_tensor_file
+from .utia import N_BYTES as UTIA_BYTES
+from .utia import UTIABRDF, is_utia, read_utia
+
+__all__ = ["load", "detect", "MeasuredBRDF", "MERLBRDF", "RGLBRDF", "UTIABRDF",
+           "read_tensor_file", "write_tensor_file"]
+
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def gunzip(data: bytes, path) -> bytes:
+    """Decompress gzip ``data`` (all members); a corrupt or truncated stream is an error."""
+    try:
+        d = zlib.decompressobj(wbits=31)
+        out = d.decompress(data)
+        while d.eof and d.unused_data[:2] == GZIP_MAGIC:        # concatenated members
+            rest = d.unused_data
+            d = zlib.decompressobj(wbits=31)
+            out += d.decompress(rest)
+    except zlib.error as e:
+        raise file_error(path, f"corrupt gzip stream ({e})") from e
+    if not d.eof:
+        raise file_error(path, "truncated gzip stream")
+    return out
+
+
+def detect(data: bytes) -> str:
+    """Format of uncompressed file bytes: ``"rgl"``, ``"merl"``, ``"utia"`` or ``""``."""
+    if is_tensor_file(data):
+        return "rgl"
+    if is_merl(data):
+        return "merl"
+    if is_utia(data):
+        return "utia"
+    return ""
+
+
+def load(path: str | os.PathLike) -> MeasuredBRDF:
+    """Read a measured BRDF, recognising its format by content.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        A MERL ``.binary`` (plain or gzip-compressed), RGL ``.bsdf`` or UTIA ``.bin`` file.
+
+    Returns
+    -------
+    MERLBRDF, RGLBRDF or UTIABRDF
+
+    Raises
+    ------
+    MicrofacetError
+        Unreadable or unknown file, bad header or size, truncated data, NaN/inf values.
+    """
+    data = read_bytes(path)
+    if data[:2] == GZIP_MAGIC:
+        data = gunzip(data, path)
+    kind = detect(data)
+    if kind == "rgl":
+        return RGLBRDF(read_rgl(data, path), path)
+    if kind == "merl":
+        return MERLBRDF(*read_merl(data, path), path)
+    if kind == "utia":
+        return UTIABRDF(read_utia(data, path), path)
+    raise file_error(path, f"unknown measured-BRDF format ({len(data)} bytes; expected a MERL "
+                           ".binary(.gz) with header (90, 90, 180), an RGL tensor_file .bsdf, "
+                           f"or a {UTIA_BYTES}-byte UTIA .bin)")
+
+
+
