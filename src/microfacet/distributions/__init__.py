@@ -2,5 +2,6 @@
 from .base import SlopeDistribution
 from .beckmann import Beckmann
 from .ggx import GGX
+from .tabulated import TabulatedAnisotropic, TabulatedIsotropic
 
-__all__ = ["SlopeDistribution", "Beckmann", "GGX"]
+__all__ = ["SlopeDistribution", "Beckmann", "GGX", "TabulatedIsotropic", "TabulatedAnisotropic"]

@@ -1,0 +1,94 @@
+#!/usr/bin/env python3
+"""Fitting time of ``mf.fit.fit`` (thesis Ch. 4, Fig. 4.5; goals from the issue).
+
+* isotropic, ``N = 90`` (Algorithm 3): goal <= 0.1 s;
+* anisotropic, ``90 x 90`` (Algorithm 1): goal <= 2 s.
+
+Each time covers everything ``fit`` does: backscattering evaluations of the input, the
+kernel, the power iterations, the normalized tables (NDF, Smith Lambda, the visible-slope
+sampling tables or the anisotropic projected-area and cell tables) and the Fresnel term
+(Algorithm 2). The input is an analytic height-correlated Smith GGX BRDF with a copper
+conductor Fresnel term (``mf.MicrofacetBRDF(mf.GGX(...), mf.fresnel.Conductor.metal("Cu"))``;
+isotropic ``alpha = 0.3``, anisotropic ``alpha_x = 0.2, alpha_y = 0.4, rho = 0.3``), whose
+``eval`` runs the Numba kernel. Reported: best and median of ``--repeats`` runs after one
+warm-up run (``time.perf_counter``), and a per-stage breakdown of one isotropic fit.
+
+Usage::
+
+    python benchmarks/bench_fit.py [--repeats 7] [--aniso-repeats 3]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+
+import numpy as np
+
+import microfacet as mf
+from microfacet.distributions.tabulated import TabulatedIsotropic, theta_grid
+from microfacet.fit import extract
+
+GOALS = {"isotropic N=90": 0.1, "anisotropic 90x90": 2.0}
+
+
+def _times(fn, repeats: int) -> list[float]:
+    fn()                                              # warm-up (imports, JIT, caches)
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def _stages(brdf, n: int = 90) -> dict:
+    """Per-stage times of one isotropic Smith fit (the steps of ``fit``)."""
+    t = {}
+    t0 = time.perf_counter()
+    theta = theta_grid(n)
+    f_back = extract.backscattering(brdf, theta[:-1])
+    t["backscattering f(o,o)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    k = extract.smith_kernel_isotropic(f_back, theta)
+    t["kernel K' (Eq. 4.14)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    d, _, its = extract.power_iteration(k)
+    t[f"power iterations ({its})"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    dist = TabulatedIsotropic(np.append(d, d[-1]))
+    t["tables (D, Lambda, sampling)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    extract.extract_fresnel(brdf, mf.MicrofacetBRDF(dist), n)
+    t["Fresnel (Algorithm 2)"] = time.perf_counter() - t0
+    return t
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--aniso-repeats", type=int, default=3)
+    args = p.parse_args(argv)
+    cu = mf.fresnel.Conductor.metal("Cu")
+    iso = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=cu)
+    aniso = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.4, rho=0.3), fresnel=cu)
+    print(f"# bench_fit ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"Python {platform.python_version()}, NumPy {np.__version__})")
+    results = {
+        "isotropic N=90": _times(lambda: mf.fit.fit(iso, 90), args.repeats),
+        "anisotropic 90x90": _times(lambda: mf.fit.fit(aniso, 90, anisotropic=True), args.aniso_repeats),
+    }
+    print("\n| fit | best (s) | median (s) | goal (s) | met |\n|---|---|---|---|---|")
+    for name, ts in results.items():
+        best, goal = min(ts), GOALS[name]
+        print(f"| {name} | {best:.4f} | {statistics.median(ts):.4f} | {goal} | {'yes' if best <= goal else 'NO'} |")
+    print("\nOne isotropic N=90 fit by stage:\n\n| stage | time (s) |\n|---|---|")
+    for stage, s in _stages(iso).items():
+        print(f"| {stage} | {s:.4f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,576 @@
+"""Tabulated slope distributions (thesis Ch. 4.2, 4.4; Dupuy et al. 2015, Sec. 5, App. A).
+
+The standard surface (alpha = 1, rho = 0, zero mean; roughness, correlation and shear
+come from :class:`SlopeDistribution`) is given by its NDF ``D`` at the nodes of the
+elevation grid ``theta_j = (j / (n - 1))^2 pi / 2`` of Listing 4.1 (dense near the
+normal, where sharp lobes live), and, for anisotropic tables, at the azimuths
+``phi_k = 2 pi k / m`` of the normal. ``D`` is interpolated log-linearly in ``theta``
+(exact for Gaussian-like tails to second order, where linear interpolation of a sharp
+Beckmann lobe errs by tens of percent between nodes) and periodically linearly in
+``phi``; the slope PDF is ``P(h~) = D(h) cos^4 theta_h`` (Eq. 2.11), normalized so that
+``int P dh~ = int D cos theta_h dw_h = 1`` (Eq. 2.12, 2.8) exactly (closed form) for the
+interpolant. Every other table (Smith ``Lambda``, the marginal and
+conditional CDFs used for sampling) is derived from that interpolant.
+
+- :class:`TabulatedIsotropic`: radial ``P`` (Eq. 4.12). ``Lambda`` is a 1D function of
+  ``cot theta`` (Sec. 2.4) obtained from the cumulative moments of the marginal ``P1``,
+  ``Lambda(a) = int_a^inf (s - a) P1(s) ds / a`` (Eq. 2.14); visible slopes are sampled
+  as in Sec. 2.2 / 4.4: the visible x-slope by inverting its CDF
+  ``(int_{-inf}^x (a - s) P1(s) ds) / (a (1 + Lambda(a)))``, which the same two 1D
+  tables give for every view ``a = cot theta``, then ``y~`` from the tabulated
+  conditional CDF of ``P(x~, .)``.
+- :class:`TabulatedAnisotropic`: ``P`` over ``(theta, phi)``; ``Lambda`` from a 2D
+  table of the projected area ``A(k) = int <k,h>+ D(h) dw_h`` over ``(theta_k, phi_k)``
+  (Eq. 2.14, ``Lambda = A / cos theta_k - 1``); slopes are sampled exactly from the
+  interpolated ``D cos theta`` (cell, then ``theta``, then ``phi``; App. A).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import SlopeDistribution
+
+__all__ = ["TabulatedIsotropic", "TabulatedAnisotropic", "theta_grid"]
+
+HALF_PI = 0.5 * np.pi
+_U_MIN = 2.0**-53
+_GL_T, _GL_W = np.polynomial.legendre.leggauss(8)
+_GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W          # on [0, 1]
+_GL4_T, _GL4_W = np.polynomial.legendre.leggauss(4)
+_GL4_T, _GL4_W = 0.5 * (_GL4_T + 1.0), 0.5 * _GL4_W
+_Y_SPLIT = 4
+#: Largest elevation of the fine sampling grids: slopes up to 1e7 (the mass beyond is
+#: below 1e-13 for any table, as ``P <= D_max / r^4``).
+_THETA_CAP = np.arctan(1e7)
+
+
+def theta_grid(n: int) -> np.ndarray:
+    """Elevation nodes ``theta_j = (j / (n - 1))^2 pi / 2`` (Listing 4.1)."""
+    u = np.linspace(0.0, 1.0, n)
+    return u * u * HALF_PI
+
+
+def locate(theta, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Interval ``i`` and weight ``t`` of ``theta`` in :func:`theta_grid` ``(n)``:
+    ``theta = (1 - t) theta_i + t theta_{i+1}``."""
+    theta = np.clip(np.asarray(theta, dtype=np.float64), 0.0, HALF_PI)
+    i = np.minimum((np.sqrt(theta / HALF_PI) * (n - 1)).astype(np.intp), n - 2)
+    ta = (i / (n - 1)) ** 2 * HALF_PI
+    tb = ((i + 1) / (n - 1)) ** 2 * HALF_PI
+    return i, np.clip((theta - ta) / (tb - ta), 0.0, 1.0)
+
+
+def hat_weights(theta: np.ndarray, weight) -> np.ndarray:
+    """``int hat_j(theta) weight(theta) dtheta`` for the piecewise-linear hats of the
+    nodes ``theta`` (8-point Gauss-Legendre per interval: exact to rounding for the
+    smooth weights used here)."""
+    a, b = theta[:-1, None], theta[1:, None]
+    t = a + (b - a) * _GL_T
+    w = (b - a) * _GL_W * weight(t)
+    out = np.zeros(len(theta))
+    out[:-1] += np.sum(w * (1.0 - _GL_T), axis=1)
+    out[1:] += np.sum(w * _GL_T, axis=1)
+    return out
+
+
+def _cos_sin(t):
+    return 0.5 * np.sin(2.0 * t)
+
+
+def log_table(d: np.ndarray) -> np.ndarray:
+    """``ln D`` with zeros floored at ``1e-280 max D``, so that they interpolate to 0."""
+    return np.log(np.maximum(d, 1e-280 * np.max(d)))
+
+
+def interval_integral(la, lb, ta, tb, theta):
+    """``int_{ta}^{theta} D(s) cos s sin s ds`` for ``D = exp(la + (s - ta) beta)``,
+    ``beta = (lb - la) / (tb - ta)`` (log-linear interpolation of the nodes), in closed
+    form: ``e^la [ (2 beta cos(theta + ta) + 4 sin(theta + ta)) sin(theta - ta)
+    + (e^(beta (theta - ta)) - 1)(beta sin 2 theta - 2 cos 2 theta) ] / (2 (beta^2 + 4))``,
+    written without cancellation for small intervals."""
+    beta = (lb - la) / (tb - ta)
+    dt = theta - ta
+    bd = beta * dt
+    da = np.exp(la)
+    grow = np.where(bd < 50.0, da * np.expm1(np.minimum(bd, 50.0)), np.exp(la + bd) - da)
+    st = theta + ta
+    out = (da * (2.0 * beta * np.cos(st) + 4.0 * np.sin(st)) * np.sin(dt)
+           + grow * (beta * np.sin(2.0 * theta) - 2.0 * np.cos(2.0 * theta)))
+    return np.maximum(out / (2.0 * (beta * beta + 4.0)), 0.0)
+
+
+def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
+    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c(theta) cos theta sin theta``,
+    each ``D_c`` log-linear from ``exp(las[c])`` to ``exp(lbs[c])``, from the uniform ``v``:
+    safeguarded Newton on the closed-form CDF (:func:`interval_integral`)."""
+    cdf = lambda x: sum(interval_integral(la, lb, ta, tb, x) for la, lb in zip(las, lbs))   # noqa: E731
+    total = cdf(tb)
+    target = v * total
+    lo, hi = ta.copy(), tb.copy()
+    x = ta + v * (tb - ta)
+    w = (x - ta) / (tb - ta)
+    for _ in range(iterations):
+        f = cdf(x) - target
+        done = np.abs(f) <= 1e-13 * total
+        if np.all(done):
+            break
+        lo = np.where(f < 0, x, lo)
+        hi = np.where(f > 0, x, hi)
+        w = (x - ta) / (tb - ta)
+        p = sum(np.exp(la + w * (lb - la)) for la, lb in zip(las, lbs)) * _cos_sin(x)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            xn = x - f / p
+        bad = ~((xn > lo) & (xn < hi))
+        xn = np.where(bad, 0.5 * (lo + hi), xn)
+        x = np.where(done, x, xn)
+    return x
+
+
+def _linear_quantile(v, d0, d1):
+    """``t`` in ``[0, 1]`` with density ``∝ (1 - t) d0 + t d1`` (closed-form quadratic)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = v * (d0 + d1) / (d0 + np.sqrt(d0 * d0 + v * (d1 * d1 - d0 * d0)))
+    return np.where(np.isfinite(t), np.clip(t, 0.0, 1.0), v)
+
+
+def _normal(theta, phi):
+    s = np.sin(theta)
+    return np.stack(np.broadcast_arrays(s * np.cos(phi), s * np.sin(phi), np.cos(theta)), axis=-1)
+
+
+def _check_ndf(values, ndim: int) -> np.ndarray:
+    d = np.array(values, dtype=np.float64)
+    if d.ndim != ndim or d.shape[0] < 3 or (ndim == 2 and d.shape[1] < 3):
+        raise ValueError(f"ndf table must be {ndim}D with >= 3 nodes per axis, got shape {d.shape}")
+    if not np.all(np.isfinite(d)) or np.any(d < 0):
+        raise ValueError("ndf table must be finite and >= 0")
+    return d
+
+
+class _Tabulated(SlopeDistribution):
+    """Shared parts: the elevation grid, interval masses and the moment quadrature."""
+
+    def _theta_setup(self, n: int) -> None:
+        self.theta = theta_grid(n)
+        self.n_theta = n
+
+    def _interval_masses(self, log_d: np.ndarray) -> np.ndarray:
+        """``int D cos sin dtheta`` over each elevation interval (per azimuth column)."""
+        ta, tb = self.theta[:-1], self.theta[1:]
+        if log_d.ndim == 2:
+            ta, tb = ta[:, None], tb[:, None]
+        return interval_integral(log_d[:-1], log_d[1:], ta, tb, tb)
+
+    def _d_interp(self, theta, phi=None) -> np.ndarray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    # ------------------------------------------------------------- moments
+    def _theta_quadrature(self):
+        """Gauss-Legendre nodes and ``dtheta cos sin`` weights, 8 per elevation interval."""
+        a, b = self.theta[:-1, None], self.theta[1:, None]
+        th = (a + (b - a) * _GL_T).ravel()
+        return th, ((b - a) * _GL_W).ravel() * _cos_sin(th)
+
+    def standard_quadrature(self, n_phi: int = 256):
+        """Nodes ``(x~, y~)`` of the standard slope plane and weights (summing to 1) for
+        ``E[g(h~)] = int g P dh~ = int g(h~(h)) D cos theta dw`` (Gauss-Legendre per
+        elevation interval; per azimuth interval for anisotropic tables, periodic
+        trapezoid for radial ones)."""
+        th, wt = self._theta_quadrature()
+        phi, wp = self._phi_quadrature(n_phi)
+        TH, PH = np.meshgrid(th, phi, indexing="ij")
+        w = wt[:, None] * wp[None, :] * self._d_interp(TH, PH)
+        r = np.tan(TH)
+        # slope of the normal (sin t cos p, sin t sin p, cos t) is -tan t (cos p, sin p)
+        x, y = -r * np.cos(PH), -r * np.sin(PH)
+        w = w / w.sum()
+        return x.ravel(), y.ravel(), w.ravel()
+
+
+class TabulatedIsotropic(_Tabulated):
+    """Radial tabulated slope distribution (Eq. 4.12), sampled by visible slopes.
+
+    Parameters
+    ----------
+    ndf : (n,) array_like
+        ``D`` of the standard surface at :func:`theta_grid` ``(n)``, ``>= 0``; it is
+        normalized here (Eq. 2.8), so any positive scale may be given.
+    alpha, alpha_x, alpha_y, rho, mean_slope
+        Roughness map applied to the table (:class:`SlopeDistribution`); 1, 0, 0 keep it.
+    """
+
+    def __init__(self, ndf, alpha=None, *, alpha_x=None, alpha_y=None, rho=0.0,
+                 mean_slope=(0.0, 0.0), oversampling: int = 4):
+        if alpha is None and alpha_x is None and alpha_y is None:
+            alpha = 1.0
+        super().__init__(alpha, alpha_x=alpha_x, alpha_y=alpha_y, rho=rho, mean_slope=mean_slope)
+        d = _check_ndf(ndf, 1)
+        if not np.max(d) > 0:
+            raise ValueError("ndf table is zero")
+        self._theta_setup(len(d))
+        mass = self._interval_masses(log_table(d))
+        self.ndf_table = d / (2.0 * np.pi * mass.sum())
+        self.log_ndf = log_table(self.ndf_table)
+        self._mass_cdf = np.concatenate([[0.0], np.cumsum(mass / mass.sum())])
+        self._build_sampling_tables(max(int(oversampling), 1) * (len(d) - 1) + 1)
+        th, w = self._theta_quadrature()
+        w = w * self._d_interp(th)
+        self.second_moment_std = float(0.5 * np.sum(w * np.tan(th) ** 2) / np.sum(w))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(n={self.n_theta}, " + super().__repr__().split("(", 1)[1]
+
+    # -------------------------------------------------------------- the NDF
+    def _d_interp(self, theta, phi=None) -> np.ndarray:
+        """``D`` interpolated log-linearly in ``theta`` (exact for exponentials in theta,
+        second-order accurate for lobes whose logarithm is smooth: Beckmann tails)."""
+        i, t = locate(theta, self.n_theta)
+        ld = self.log_ndf
+        return np.exp(ld[i] + t * (ld[i + 1] - ld[i]))
+
+    def _phi_quadrature(self, n_phi: int):
+        return (np.arange(n_phi) + 0.5) * (2 * np.pi / n_phi), np.full(n_phi, 2 * np.pi / n_phi)
+
+    def p22_std(self, x, y):
+        """``P(x~, y~) = D(theta) cos^4 theta``, ``tan theta = |h~|`` (Eq. 2.11)."""
+        r2 = np.asarray(x, float) ** 2 + np.asarray(y, float) ** 2
+        return self._d_interp(np.arctan(np.sqrt(r2))) / (1.0 + r2) ** 2
+
+    def p22_std_over_z4(self, x, y, z):
+        r2 = x * x + y * y
+        return self._d_interp(np.arctan2(np.sqrt(r2), z)) / (z * z + r2) ** 2
+
+    def p1_std(self, x):
+        """Marginal ``P1(x~) = int P(x~, y~) dy~`` (Abel transform, tabulated and
+        interpolated linearly on the fine sampling grid)."""
+        xi = np.abs(np.asarray(x, dtype=np.float64))
+        return np.interp(self._fine_s(xi), self.s_fine, self.p1_fine)
+
+    # ---------------------------------------------------------- fine tables
+    @staticmethod
+    def _fine_s(xi):
+        """Fine-grid coordinate ``s`` of the slope magnitude ``xi = tan(s^2 theta_cap)``."""
+        return np.sqrt(np.minimum(np.arctan(xi), _THETA_CAP) / _THETA_CAP)
+
+    def _build_sampling_tables(self, m: int) -> None:
+        """Marginal ``P1``, tail mass ``L0(xi) = int_xi^inf P1`` and first tail moment
+        ``L1(xi) = int_xi^inf (s - xi) P1(s) ds`` on ``xi_k = tan(s_k^2 theta_cap)``, and
+        the conditional CDFs of ``|y~| = tan eta`` given ``|x~| = xi_k`` on a refined
+        elevation grid, linear in ``eta`` between its nodes (Sec. 4.4, App. A)."""
+        self.s_fine = np.linspace(0.0, 1.0, m)
+        th = self.s_fine**2 * _THETA_CAP
+        self.xi = np.tan(th)
+        # y = tan(eta) on the elevation grid of the table refined _Y_SPLIT times (dense
+        # at y = 0 where sharp lobes live); P(xi, y) sec^2 eta stays smooth up to grazing
+        eta = np.minimum(theta_grid(_Y_SPLIT * (self.n_theta - 1) + 1), _THETA_CAP)
+        eta = np.broadcast_to(eta, (m, len(eta)))
+        ea, eb = eta[:, :-1, None], eta[:, 1:, None]
+        es = ea + (eb - ea) * _GL4_T                                                  # (m, q(n-1), 4)
+        xs = self.xi[:, None, None]
+        vals = self.p22_std(xs, np.tan(es)) / np.cos(es) ** 2
+        mass = np.sum((eb - ea)[..., 0, None] * _GL4_W * vals, axis=-1)
+        cdf = np.concatenate([np.zeros((m, 1)), np.cumsum(mass, axis=1)], axis=1)
+        half = cdf[:, -1].copy()
+        self.p1_fine = 2.0 * half
+        self.eta_nodes = eta
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self.y_cdf = np.where(half[:, None] > 0, cdf / half[:, None], np.linspace(0, 1, cdf.shape[1]))
+        # tails, integrated from xi = inf inward (trapezoid in s; dxi/ds = 2 s cap sec^2)
+        dxi_ds = 2.0 * self.s_fine * _THETA_CAP / np.cos(th) ** 2
+        self.dxi_ds = dxi_ds
+        self.L0 = self._tail_integral(self.p1_fine * dxi_ds)
+        self.L1 = self._tail_integral(self.L0 * dxi_ds)
+
+    def _tail_integral(self, f_ds):
+        h = self.s_fine[1] - self.s_fine[0]
+        seg = 0.5 * h * (f_ds[:-1] + f_ds[1:])
+        return np.append(np.cumsum(seg[::-1])[::-1], 0.0)
+
+    def _L1(self, xi) -> np.ndarray:
+        """``L1`` at any ``xi >= 0``: cubic Hermite in ``s`` with ``dL1/ds = -L0 dxi/ds``."""
+        s = self._fine_s(xi)
+        m = len(self.s_fine)
+        k = np.minimum((s * (m - 1)).astype(np.intp), m - 2)
+        h = self.s_fine[1] - self.s_fine[0]
+        t = np.clip(s / h - k, 0.0, 1.0)
+        y0, y1 = self.L1[k], self.L1[k + 1]
+        d0, d1 = -self.L0[k] * self.dxi_ds[k] * h, -self.L0[k + 1] * self.dxi_ds[k + 1] * h
+        t2, t3 = t * t, t * t * t
+        val = (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * d0 + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * d1
+        return np.maximum(val, 0.0)
+
+    # ------------------------------------------------------------- masking
+    def lambda_std(self, cot_theta):
+        """``Lambda(a) = L1(a) / a``, ``a = cot theta`` (Eq. 2.14 for radial P, Sec. 2.4):
+        the projected area of the standard surface toward ``theta`` is
+        ``int (a - x~)+ P1(x~) dx~ / a = 1 + L1(a) / a`` (in units of ``cos theta``)."""
+        a = np.asarray(cot_theta, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = self._L1(np.where(a > 0, a, 0.0)) / a
+        return np.where(a > 0, np.where(np.isfinite(a), lam, 0.0), np.inf)
+
+    def lambda_warped(self, a, b, c):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.lambda_std(np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0))
+
+    def g1_std(self, cot_theta):
+        return 1.0 / (1.0 + self.lambda_std(cot_theta))
+
+    # ------------------------------------------------------------ sampling
+    def sample_p22_std(self, u):
+        """Standard normal with slopes distributed as ``P``: ``theta`` from the marginal
+        ``2 pi D cos sin`` (interval by its mass, then exact inversion), ``phi = 2 pi u2``."""
+        u = np.asarray(u, dtype=np.float64)
+        cdf = self._mass_cdf
+        v = np.clip(u[..., 0], _U_MIN, 1.0 - _U_MIN)
+        i = np.clip(np.searchsorted(cdf, v, side="right") - 1, 0, self.n_theta - 2)
+        mass = cdf[i + 1] - cdf[i]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.clip(np.where(mass > 0, (v - cdf[i]) / mass, 0.5), 0.0, 1.0)
+        ld = self.log_ndf
+        th = sample_interval(r, self.theta[i], self.theta[i + 1], (ld[i],), (ld[i + 1],))
+        return _normal(th, 2.0 * np.pi * u[..., 1])
+
+    def sample_visible_std(self, u, cos_theta):
+        """Standard visible normal for a view at ``theta`` in the xz plane (Sec. 2.2, 4.4).
+
+        ``x~`` inverts ``F(x~) = int_{-inf}^{x~} (a - s) P1(s) ds / (a + L1(a))``, written
+        with the tail tables as ``(a + xi) L0(xi) + L1(xi)`` for ``x~ = -xi <= 0`` and
+        ``Z - ((a - xi) L0(xi) - L1(xi) + L1(a))`` for ``0 < x~ = xi <= a`` (bisection on
+        the fine nodes, linear in ``s`` inside a cell); ``y~`` inverts the conditional CDF
+        of ``P(x~, .)`` (tabulated per fine node, rows mixed linearly in ``s``).
+        """
+        u = np.asarray(u, dtype=np.float64)
+        c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+        sn = np.sqrt(np.maximum(1.0 - c * c, 0.0))
+        a = np.minimum(c / np.maximum(sn, 1e-300), 1e8)
+        a, u1, u2 = np.broadcast_arrays(a, u[..., 0], u[..., 1])
+        shape = a.shape
+        a, u1, u2 = (np.clip(v.ravel(), 0, None) for v in (a, u1, u2))
+        u1 = np.clip(u1, _U_MIN, 1.0 - _U_MIN)
+        x = self._visible_x(a, u1)
+        y = self._conditional_y(np.abs(x), np.clip(u2, 0.0, 1.0))
+        inv = 1.0 / np.sqrt(1.0 + x * x + y * y)
+        return np.stack([-x * inv, -y * inv, inv], axis=-1).reshape(shape + (3,))
+
+    def _visible_x(self, a, u1):
+        L1a = self._L1(a)
+        z = a + L1a
+        h0 = 0.5 * a + self.L1[0]                       # F(0) * Z
+        target = u1 * z
+        left = target <= h0
+        x = np.empty_like(a)
+        m = len(self.s_fine)
+        # x~ = -xi <= 0: H(xi) = (a + xi) L0 + L1 decreases from h0 to 0
+        al, tl = a[left], target[left]
+        H = lambda k, al=al: (al + self.xi[k]) * self.L0[k] + self.L1[k]   # noqa: E731
+        k = self._bisect(H, tl, np.zeros(al.shape, np.intp), np.full(al.shape, m - 1, np.intp))
+        k = np.minimum(k, m - 2)
+        x[left] = -self._cell_root(k, H(k), H(k + 1), tl, self.s_fine[k + 1])
+        # 0 < x~ = xi <= a: R(xi) = (a - xi) L0 - L1 + L1(a) decreases from R(0) to R(a) = 0
+        right = ~left
+        ar, tr, l1r = a[right], (1.0 - u1[right]) * z[right], L1a[right]
+        R = lambda k, ar=ar, l1r=l1r: (ar - self.xi[k]) * self.L0[k] - self.L1[k] + l1r   # noqa: E731
+        s_a = self._fine_s(ar)
+        kmax = np.minimum((s_a * (m - 1)).astype(np.intp), m - 1)
+        kmax = np.where(self.s_fine[kmax] > s_a, kmax - 1, kmax)
+        k = self._bisect(R, tr, np.zeros(ar.shape, np.intp), kmax + 1)
+        at_end = k + 1 > kmax
+        kn = np.minimum(k + 1, m - 1)
+        r_end = np.where(at_end, 0.0, R(kn))
+        s_end = np.where(at_end, s_a, self.s_fine[kn])
+        x[right] = np.minimum(self._cell_root(k, R(k), r_end, tr, s_end), ar)
+        return x
+
+    @staticmethod
+    def _bisect(f, target, lo, hi):
+        """Largest ``k`` in ``[lo, hi)`` with ``f(k) >= target`` for decreasing ``f``
+        (``f(lo) >= target`` assumed; ``hi`` is an exclusive sentinel)."""
+        for _ in range(64):
+            if not np.any(hi - lo > 1):
+                break
+            mid = (lo + hi) // 2
+            fm = f(mid)
+            go = (hi - lo > 1) & (fm >= target)
+            stay = (hi - lo > 1) & ~(fm >= target)
+            lo = np.where(go, mid, lo)
+            hi = np.where(stay, mid, hi)
+        return lo
+
+    def _cell_root(self, k, f0, f1, target, s_end):
+        """Slope magnitude at ``target`` inside the cell ``[s_k, s_end]``, linear in ``s``."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(f0 > f1, (f0 - target) / (f0 - f1), 0.5)
+        s = self.s_fine[k] + np.clip(t, 0.0, 1.0) * (s_end - self.s_fine[k])
+        return np.tan(s * s * _THETA_CAP)
+
+    def _conditional_y(self, xi, u2):
+        """``y~`` from the conditional CDF of ``|y~|`` given ``|x~| = xi`` (sign from ``u2``)."""
+        sign = np.where(u2 >= 0.5, 1.0, -1.0)
+        v = np.clip(np.abs(2.0 * u2 - 1.0), 0.0, 1.0 - _U_MIN)
+        m = len(self.s_fine)
+        f = self._fine_s(xi) * (m - 1)
+        k = np.minimum(f.astype(np.intp), m - 2)
+        w = np.clip(f - k, 0.0, 1.0)
+        y0 = self._row_quantile(k, v)
+        y1 = self._row_quantile(k + 1, v)
+        return sign * ((1.0 - w) * y0 + w * y1)
+
+    def _row_quantile(self, k, v):
+        cdf, ys = self.y_cdf, self.eta_nodes
+        n = cdf.shape[1]
+        lo = np.zeros(k.shape, np.intp)
+        hi = np.full(k.shape, n - 1, np.intp)
+        while np.any(hi - lo > 1):
+            mid = (lo + hi) // 2
+            le = cdf[k, mid] <= v
+            lo = np.where(le, mid, lo)
+            hi = np.where(le, hi, mid)
+        c0, c1 = cdf[k, lo], cdf[k, lo + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(c1 > c0, (v - c0) / (c1 - c0), 0.0)
+        return np.tan(ys[k, lo] + np.clip(t, 0.0, 1.0) * (ys[k, lo + 1] - ys[k, lo]))
+
+
+class TabulatedAnisotropic(_Tabulated):
+    """Tabulated slope distribution over ``(theta, phi)`` of the normal (Eq. 4.5-4.9).
+
+    Parameters
+    ----------
+    ndf : (n_theta, n_phi) array_like
+        ``D`` of the standard surface at ``theta_grid(n_theta)`` x ``2 pi k / n_phi``.
+    n_lambda : int, optional
+        Elevation resolution of the projected-area table (default ``n_theta``); its nodes
+        ``theta = pi/2 sin^2(pi s / 2)`` are dense at the normal and at grazing angles.
+    """
+
+    supports_visible_sampling = False
+
+    def __init__(self, ndf, alpha=None, *, alpha_x=None, alpha_y=None, rho=0.0,
+                 mean_slope=(0.0, 0.0), n_lambda: int | None = None, projected_area=None):
+        if alpha is None and alpha_x is None and alpha_y is None:
+            alpha = 1.0
+        super().__init__(alpha, alpha_x=alpha_x, alpha_y=alpha_y, rho=rho, mean_slope=mean_slope)
+        d = _check_ndf(ndf, 2)
+        self._theta_setup(d.shape[0])
+        self.n_phi = d.shape[1]
+        self.dphi = 2.0 * np.pi / self.n_phi
+        self.phi = np.arange(self.n_phi) * self.dphi
+        if not np.max(d) > 0:
+            raise ValueError("ndf table is zero")
+        mass = self._interval_masses(log_table(d))                  # (n_theta - 1, n_phi)
+        self.ndf_table = d / (self.dphi * mass.sum())
+        self.log_ndf = log_table(self.ndf_table)
+        n_lambda = self.n_theta if n_lambda is None else int(n_lambda)
+        s = np.linspace(0.0, 1.0, n_lambda)
+        self.theta_k = HALF_PI * np.sin(HALF_PI * s) ** 2
+        self.area_table = (self.projected_area_nodes(_normal(self.theta_k[:, None], self.phi[None, :]))
+                           if projected_area is None else np.asarray(projected_area, float))
+        # cell (theta interval x phi interval) masses: mean of the two log-linear columns
+        cell = 0.5 * (mass + np.roll(mass, -1, axis=1)) / mass.sum()
+        self._cell_cdf = np.concatenate([[0.0], np.cumsum(cell.ravel())])
+        x, y, w = self.standard_quadrature()
+        self.second_moment_std = float(np.sum(w * x * x))
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(n_theta={self.n_theta}, n_phi={self.n_phi}, "
+                + super().__repr__().split("(", 1)[1])
+
+    def _phi_quadrature(self, n_phi: int):
+        t, w = np.polynomial.legendre.leggauss(4)
+        phi = ((np.arange(self.n_phi)[:, None] + 0.5 * (t + 1)) * self.dphi).ravel()
+        return phi, np.tile(0.5 * w * self.dphi, self.n_phi)
+
+    # -------------------------------------------------------------- the NDF
+    def _d_interp(self, theta, phi=None) -> np.ndarray:
+        """``D`` log-linear in ``theta`` along each node azimuth, linear in ``phi`` between."""
+        i, t = locate(theta, self.n_theta)
+        f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi
+        j = np.minimum(f.astype(np.intp), self.n_phi - 1)
+        w = np.clip(f - j, 0.0, 1.0)
+        return (1 - w) * self._column(i, j, t) + w * self._column(i, (j + 1) % self.n_phi, t)
+
+    def _column(self, i, j, t):
+        ld = self.log_ndf
+        return np.exp(ld[i, j] + t * (ld[i + 1, j] - ld[i, j]))
+
+    def p22_std(self, x, y):
+        """``P(x~, y~) = D(h) cos^4 theta_h`` with ``h ∝ (-x~, -y~, 1)`` (Eq. 2.11)."""
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        r2 = x * x + y * y
+        return self._d_interp(np.arctan(np.sqrt(r2)), np.arctan2(-y, -x)) / (1.0 + r2) ** 2
+
+    def p22_std_over_z4(self, x, y, z):
+        r2 = x * x + y * y
+        return self._d_interp(np.arctan2(np.sqrt(r2), z), np.arctan2(-y, -x)) / (z * z + r2) ** 2
+
+    def p1_std(self, x):
+        raise NotImplementedError("the marginal of an anisotropic table is not tabulated")
+
+    # ------------------------------------------------------------- masking
+    def projected_area_nodes(self, k, chunk: int = 2048) -> np.ndarray:
+        """``A(k) = int <k,h>+ D(h) dw_h`` (Eq. 2.14) by the node rule of the table:
+        ``sum_n w_n <k, h_n>+ D_n`` with ``w_n ∝ int int hat_n sin theta dtheta dphi``,
+        scaled so that ``A(z) = 1`` (Eq. 2.8)."""
+        k = np.asarray(k, dtype=np.float64)
+        h = _normal(self.theta[:, None], self.phi[None, :]).reshape(-1, 3)
+        wd = (hat_weights(self.theta, np.sin)[:, None] * self.dphi * self.ndf_table).ravel()
+        # rescaled so that A(z) = int cos D dw = 1 holds as for the exactly normalized
+        # interpolant: removes the rule's leading (lobe-wide) error
+        wd /= np.dot(wd, h[:, 2])
+        flat = k.reshape(-1, 3)
+        out = np.empty(len(flat))
+        for s in range(0, len(flat), chunk):
+            dots = flat[s:s + chunk] @ h.T
+            np.maximum(dots, 0.0, out=dots)
+            out[s:s + chunk] = dots @ wd
+        return out.reshape(k.shape[:-1])
+
+    def lambda_warped(self, a, b, c):
+        """``Lambda = A(k') / cos theta_k' - 1`` from the bilinear projected-area table."""
+        a, b, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (a, b, c)))
+        r = np.hypot(a, b)
+        th = np.arctan2(r, np.maximum(c, 0.0))
+        ph = np.arctan2(b, a)
+        area = self._area_interp(th, ph)
+        norm = np.hypot(r, c)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = np.maximum(area * norm / c - 1.0, 0.0)
+        return np.where(c > 0, lam, np.inf)
+
+    def _area_interp(self, theta, phi):
+        n = len(self.theta_k)
+        s = np.arcsin(np.sqrt(np.clip(theta, 0.0, HALF_PI) / HALF_PI)) / HALF_PI * (n - 1)
+        i = np.minimum(s.astype(np.intp), n - 2)
+        t = np.clip((theta - self.theta_k[i]) / (self.theta_k[i + 1] - self.theta_k[i]), 0.0, 1.0)
+        f = np.mod(phi, 2.0 * np.pi) / self.dphi
+        j = np.minimum(f.astype(np.intp), self.n_phi - 1)
+        w = np.clip(f - j, 0.0, 1.0)
+        j1 = (j + 1) % self.n_phi
+        A = self.area_table
+        return (1 - t) * ((1 - w) * A[i, j] + w * A[i, j1]) + t * ((1 - w) * A[i + 1, j] + w * A[i + 1, j1])
+
+    # ------------------------------------------------------------ sampling
+    def sample_p22_std(self, u):
+        """Normal whose slope is distributed as the interpolated ``P`` (App. A): a cell by
+        its exact mass, ``theta`` from the cell's marginal (the mean of its two log-linear
+        columns times ``cos sin``, Newton on the closed-form CDF), then ``phi`` from the
+        linear ``D(theta, .)`` (closed-form quadratic)."""
+        u = np.asarray(u, dtype=np.float64)
+        cdf = self._cell_cdf
+        v = np.clip(u[..., 0], _U_MIN, 1.0 - _U_MIN) * cdf[-1]
+        c = np.clip(np.searchsorted(cdf, v, side="right") - 1, 0, len(cdf) - 2)
+        mass = cdf[c + 1] - cdf[c]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = np.clip(np.where(mass > 0, (v - cdf[c]) / mass, 0.5), 0.0, 1.0)
+        i, j = np.divmod(c, self.n_phi)
+        j1 = (j + 1) % self.n_phi
+        ld = self.log_ndf
+        th = sample_interval(r, self.theta[i], self.theta[i + 1], (ld[i, j], ld[i, j1]), (ld[i + 1, j], ld[i + 1, j1]))
+        t = np.clip((th - self.theta[i]) / (self.theta[i + 1] - self.theta[i]), 0.0, 1.0)
+        d0, d1 = self._column(i, j, t), self._column(i, j1, t)
+        w = _linear_quantile(np.clip(u[..., 1], 0.0, 1.0), d0, d1)
+        return _normal(th, (j + w) * self.dphi)
+
+    def sample_visible_std(self, u, cos_theta):  # pragma: no cover - not supported
+        raise NotImplementedError("anisotropic tables sample slopes of P (supports_visible_sampling = False)")

@@ -1,0 +1,10 @@
+"""BRDF fitting by power iterations (thesis Ch. 4; Dupuy et al., EGSR 2015).
+
+``fit(brdf)`` extracts a tabulated slope distribution from the backscattering of any
+BRDF and a tabulated Fresnel term, and returns a :class:`FittedBRDF` (a
+:class:`~microfacet.MicrofacetBRDF`) that converts to Beckmann or GGX and saves to a
+versioned ``.npz`` file read back by ``load``.
+"""
+from .fitted import FORMAT, VERSION, FittedBRDF, fit, load
+
+__all__ = ["FORMAT", "VERSION", "FittedBRDF", "fit", "load"]

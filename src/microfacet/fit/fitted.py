@@ -1,0 +1,258 @@
+"""Fitting an arbitrary BRDF with a tabulated microfacet BRDF (thesis Ch. 4; Dupuy et al.
+2015), its conversion to Beckmann / GGX (App. C) and its file format."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .. import fresnel as _fresnel
+from ..brdf import GAFS, MicrofacetBRDF
+from ..distributions import GGX, Beckmann
+from ..distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic, theta_grid
+from ..errors import MicrofacetError
+from ..io.atomic import atomic_path
+from . import extract
+
+__all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION"]
+
+FORMAT = "microfacet.fit"
+VERSION = 1
+
+
+class FittedBRDF(MicrofacetBRDF):
+    """A microfacet BRDF over a tabulated slope distribution with a tabulated Fresnel term,
+    as returned by :func:`fit` (Ch. 4). It answers the BRDF protocol of
+    :class:`MicrofacetBRDF`; ``f0`` is the Perron eigenvalue (luminance of ``F(0)``
+    estimated from backscattering, Eq. 4.9) and ``iterations`` the power iterations used.
+    """
+
+    def __init__(self, distribution, fresnel, gaf="smith", shadowing=True, f0=np.nan, iterations=0):
+        if not isinstance(distribution, (TabulatedIsotropic, TabulatedAnisotropic)):
+            raise ValueError("FittedBRDF needs a TabulatedIsotropic or TabulatedAnisotropic distribution")
+        super().__init__(distribution, fresnel=fresnel, gaf=gaf, shadowing=shadowing)
+        self.f0 = float(f0)
+        self.iterations = int(iterations)
+
+    @property
+    def anisotropic(self) -> bool:
+        return isinstance(self.distribution, TabulatedAnisotropic)
+
+    def __repr__(self) -> str:
+        return f"FittedBRDF({self.distribution!r}, gaf={self.gaf_model!r}, f0={self.f0:.4g})"
+
+    # ------------------------------------------------------------ backscattering
+    def backscatter(self, k) -> np.ndarray:
+        """The model of the fit, ``F(1) D(k) G(k, k) / (4 cos^2 theta_k)`` with the monostatic
+        ``G(k, k) = G1(k)`` for Smith (Eq. 4.2-4.3), ``min(1, 2 cos^2)`` for V-grooves and
+        ``cos^2`` for normal maps; RGB ``(..., 3)``."""
+        k = np.asarray(k, dtype=np.float64)
+        z = k[..., 2]
+        zs = np.where(z > 0, z, 1.0)
+        if self.gaf_model == "smith":
+            g = self.distribution.g1(k)
+        elif self.gaf_model == "vgroove":
+            g = np.minimum(1.0, 2.0 * z * z)
+        else:
+            g = z * z
+        val = np.where(z > 0, self.distribution.ndf(k) * g / (4.0 * zs * zs), 0.0)
+        return val[..., None] * self.fresnel(np.ones_like(z))
+
+    # --------------------------------------------------------------- conversion
+    def slope_moments(self) -> dict:
+        """Slope moments of the fitted distribution (with its alpha, rho, mean slope):
+        ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~y~]`` and, about the mean, ``E|x~|, E|y~|``,
+        ``beta1 = E[x~y~/(x~^2+y~^2)]``, ``beta2 = E[y~^2/(x~^2+y~^2)]`` (App. C)."""
+        d = self.distribution
+        x, y, w = d.standard_quadrature()
+        if any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
+            raise ValueError("slope moments need scalar alpha_x, alpha_y, rho and mean_slope")
+        X, Y = d.from_standard(x, y)
+        e1, e2 = np.sum(w * X), np.sum(w * Y)
+        dx, dy = X - e1, Y - e2
+        r2 = dx * dx + dy * dy
+        inv = np.divide(1.0, r2, out=np.zeros_like(r2), where=r2 > 0)
+        return dict(e1=e1, e2=e2, e3=np.sum(w * X * X), e4=np.sum(w * Y * Y), e5=np.sum(w * X * Y),
+                    abs_x=np.sum(w * np.abs(dx)), abs_y=np.sum(w * np.abs(dy)),
+                    beta1=np.sum(w * dx * dy * inv), beta2=np.sum(w * dy * dy * inv))
+
+    def _analytic(self, distribution) -> MicrofacetBRDF:
+        return MicrofacetBRDF(distribution, fresnel=self.fresnel, gaf=self.gaf_model, shadowing=self.shadowing)
+
+    def to_beckmann(self) -> MicrofacetBRDF:
+        """Beckmann BRDF of the same second slope moments (App. C, as LEAN/LEADR:
+        ``alpha_x^2 = 2 Var[x~]``, ``alpha_y^2 = 2 Var[y~]``, ``rho alpha_x alpha_y =
+        2 Cov[x~, y~]``, mean slope kept) with the fitted Fresnel term. Exact (up to the
+        fit's quadrature) when the fitted BRDF is a Beckmann one."""
+        m = self.slope_moments()
+        return self._analytic(Beckmann.from_moments(m["e1"], m["e2"], m["e3"], m["e4"], m["e5"]))
+
+    def to_ggx(self) -> MicrofacetBRDF:
+        """GGX BRDF from first absolute moments (App. C): ``alpha_x = E|x~|``,
+        ``alpha_y = E|y~|`` (about the mean, which is kept) and ``rho`` from the angular
+        moments ``beta1, beta2``. Since ``[[1 - beta2, beta1], [beta1, beta2]] =
+        S / tr S`` with ``S = Sigma^(1/2)`` for any elliptic distribution,
+        ``rho = beta1 / sqrt(((1 - beta2)^2 + beta1^2) (beta1^2 + beta2^2))`` (the paper's
+        ``(alpha_y / alpha_x) beta1 / (beta1^2 + beta2^2)`` when both hold exactly).
+        Exact (up to the fit's quadrature) when the fitted BRDF is a GGX one."""
+        m = self.slope_moments()
+        b1, b2 = m["beta1"], m["beta2"]
+        rho = b1 / np.sqrt(((1.0 - b2) ** 2 + b1 * b1) * (b1 * b1 + b2 * b2))
+        rho = float(np.clip(rho, -1.0 + 1e-9, 1.0 - 1e-9))
+        return self._analytic(GGX(alpha_x=m["abs_x"], alpha_y=m["abs_y"], rho=rho,
+                                  mean_slope=(m["e1"], m["e2"])))
+
+    # ------------------------------------------------------------------- files
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the fit to ``path`` (``.npz``, format :data:`FORMAT` version :data:`VERSION`)
+        atomically (:mod:`microfacet.io.atomic`); returns ``path``.
+
+        Fields: ``format``, ``version``, ``kind`` (``isotropic`` | ``anisotropic``), ``gaf``,
+        ``shadowing``, ``ndf`` (the normalized standard ``D`` at the nodes), ``fresnel_cos``
+        and ``fresnel_rgb`` (a non-tabulated Fresnel term is sampled at 91 points), ``f0``,
+        ``iterations``, ``alpha_x``, ``alpha_y``, ``rho``, ``mean_slope`` and, anisotropic,
+        ``projected_area`` (the Lambda table)."""
+        d = self.distribution
+        fresnel = self.fresnel
+        if not isinstance(fresnel, _fresnel.Tabulated):          # e.g. a user-set analytic term
+            c = np.linspace(0.0, 1.0, 91)
+            fresnel = _fresnel.Tabulated(c, fresnel(c))
+        arrays = dict(format=np.array(FORMAT), version=np.array(VERSION),
+                      kind=np.array("anisotropic" if self.anisotropic else "isotropic"),
+                      gaf=np.array(self.gaf_model), shadowing=np.array(self.shadowing),
+                      ndf=d.ndf_table, fresnel_cos=fresnel.cos_theta_d, fresnel_rgb=fresnel.values,
+                      f0=np.array(self.f0), iterations=np.array(self.iterations),
+                      alpha_x=np.asarray(d.alpha_x), alpha_y=np.asarray(d.alpha_y), rho=np.asarray(d.rho),
+                      mean_slope=np.asarray(d.mean_slope))
+        if self.anisotropic:
+            arrays["projected_area"] = d.area_table
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as f:
+                np.savez(f, **arrays)
+        return Path(path)
+
+
+# ------------------------------------------------------------------------ fitting
+def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith", *,
+        resolution_phi: int | None = None, shadowing: bool = True, tol: float = 1e-10,
+        max_iter: int = 1000) -> FittedBRDF:
+    """Fit ``brdf`` (anything with ``eval(wi, wo) -> RGB``) with a tabulated microfacet BRDF.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Input material; evaluated at backscattering ``f(o, o)`` for the NDF (luminance, as
+        the paper's ``intensity()``), then everywhere for the Fresnel term.
+    resolution : int
+        Elevation nodes ``N`` (Listing 4.1's ``theta = u^2 pi/2``), ``>= 4``.
+    anisotropic : bool
+        Fit ``D(theta, phi)`` (Algorithm 1, ``resolution x resolution_phi`` backscattering
+        samples) instead of a radial ``D(theta)`` (Algorithm 3).
+    gaf : {"smith", "vgroove", "normal_map"}
+        GAF of the fitted model: power iterations for Smith (Eq. 4.9, 4.15), closed forms
+        otherwise (Eq. 4.16-4.18).
+    shadowing : bool
+        Shadowing of the returned BRDF (the Fresnel term is extracted against it).
+    tol, max_iter
+        Stopping rule of the power iterations (relative change of the eigenvector).
+
+    Returns
+    -------
+    FittedBRDF
+    """
+    if gaf not in GAFS:
+        raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
+    n = int(resolution)
+    if n < 4:
+        raise ValueError(f"resolution must be >= 4, got {resolution!r}")
+    m = n if resolution_phi is None else int(resolution_phi)
+    if anisotropic and m < 4:
+        raise ValueError(f"resolution_phi must be >= 4, got {resolution_phi!r}")
+    theta = theta_grid(n)
+    if anisotropic:
+        phi = np.arange(m) * (2.0 * np.pi / m)
+        f_back = extract.backscattering(brdf, theta[:-1, None], phi[None, :])
+        if gaf == "smith":
+            k = extract.smith_kernel_anisotropic(f_back, theta, phi)
+            d, f0, its = extract.power_iteration(k, tol=max(tol, 1e-6), max_iter=max_iter)
+            d = d.reshape(n - 1, m)
+        else:
+            d, f0, its = extract.ndf_closed_form(f_back, theta[:-1, None], gaf), np.nan, 0
+        d = np.concatenate([d, d[-1:]], axis=0)
+        d[0] = d[0].mean()                                   # the pole is one direction
+        dist = TabulatedAnisotropic(d)
+    else:
+        f_back = extract.backscattering(brdf, theta[:-1])
+        if gaf == "smith":
+            d, f0, its = extract.power_iteration(extract.smith_kernel_isotropic(f_back, theta),
+                                                 tol=tol, max_iter=max_iter)
+        else:
+            d, f0, its = extract.ndf_closed_form(f_back, theta[:-1], gaf), np.nan, 0
+        dist = TabulatedIsotropic(np.append(d, d[-1]))
+    if not np.any(dist.ndf_table > 0):
+        raise MicrofacetError("fit: the backscattering of the BRDF is zero")
+    if gaf == "smith":     # eigenvalue of the discrete rule -> F0 of the exactly normalized D
+        f0 /= extract.rule_area_at_normal(dist)
+    ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
+    cos_d, rgb = extract.extract_fresnel(brdf, ideal, n, n_phi_h=(8 if anisotropic else 1))
+    if gaf != "smith":
+        f0 = float(extract.luminance(rgb[-1]))
+    return FittedBRDF(dist, _fresnel.Tabulated(cos_d, rgb), gaf=gaf, shadowing=shadowing, f0=f0,
+                      iterations=its)
+
+
+# ------------------------------------------------------------------------- files
+_KEYS = ("format", "version", "kind", "gaf", "shadowing", "ndf", "fresnel_cos", "fresnel_rgb", "f0",
+         "iterations", "alpha_x", "alpha_y", "rho", "mean_slope")
+
+
+def load(path: str | os.PathLike) -> FittedBRDF:
+    """Read a fit written by :meth:`FittedBRDF.save`; raises :class:`MicrofacetError`
+    naming the file when it is not a valid fit file of a supported version."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise MicrofacetError(f"{path}: no such file") from None
+    except Exception as e:   # zipfile/pickle/format errors of np.load
+        raise MicrofacetError(f"{path}: not a microfacet fit file ({type(e).__name__}: {e})") from None
+    try:
+        return _from_arrays(data)
+    except (KeyError, ValueError, TypeError, IndexError) as e:
+        raise MicrofacetError(f"{path}: invalid microfacet fit file: {e}") from None
+
+
+def _from_arrays(data: dict) -> FittedBRDF:
+    missing = [k for k in _KEYS if k not in data]
+    if missing:
+        raise KeyError(f"missing fields {missing}")
+    if str(data["format"]) != FORMAT:
+        raise ValueError(f"format is {str(data['format'])!r}, expected {FORMAT!r}")
+    version = int(data["version"])
+    if version != VERSION:
+        raise ValueError(f"unsupported version {version} (this library reads version {VERSION})")
+    kind, gaf = str(data["kind"]), str(data["gaf"])
+    if gaf not in GAFS:
+        raise ValueError(f"gaf is {gaf!r}")
+    ndf = np.asarray(data["ndf"], dtype=np.float64)
+    params = dict(alpha_x=data["alpha_x"], alpha_y=data["alpha_y"], rho=data["rho"], mean_slope=data["mean_slope"])
+    if kind == "isotropic":
+        if ndf.ndim != 1:
+            raise ValueError(f"isotropic ndf must be 1D, got shape {ndf.shape}")
+        dist = TabulatedIsotropic(ndf, **params)
+    elif kind == "anisotropic":
+        if ndf.ndim != 2:
+            raise ValueError(f"anisotropic ndf must be 2D, got shape {ndf.shape}")
+        area = np.asarray(data["projected_area"], dtype=np.float64) if "projected_area" in data else None
+        if area is not None and (area.shape[1:] != ndf.shape[1:] or area.shape[0] < 2
+                                 or not np.all(np.isfinite(area)) or np.any(area < 0)):
+            raise ValueError(f"projected_area of shape {area.shape} does not match ndf {ndf.shape}")
+        dist = TabulatedAnisotropic(ndf, n_lambda=None if area is None else area.shape[0],
+                                    projected_area=area, **params)
+    else:
+        raise ValueError(f"kind is {kind!r}")
+    fresnel = _fresnel.Tabulated(data["fresnel_cos"], data["fresnel_rgb"])
+    return FittedBRDF(dist, fresnel, gaf=gaf, shadowing=bool(data["shadowing"]), f0=float(data["f0"]),
+                      iterations=int(data["iterations"]))

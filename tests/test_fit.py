@@ -1,0 +1,417 @@
+"""Validation of the tabulated distributions and of BRDF fitting (thesis Ch. 4; DESIGN.md).
+
+Inputs are analytic BRDFs. ``shadowing=False`` inputs obey the backscattering model of
+the fit exactly (``G(o, o) = G1(o)``, Eq. 4.2-4.3), so their fits must reproduce them to
+the accuracy of the tables; default (height-correlated) inputs differ from it by the
+hotspot factor ``(1 + Lambda) / (1 + 2 Lambda)`` at grazing angles only.
+"""
+import numpy as np
+import pytest
+
+import microfacet as mf
+from microfacet.distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic, theta_grid
+from microfacet.errors import MicrofacetError
+from microfacet.fit import extract
+from microfacet.geometry import dot, normalize, reflect, spherical_to_cartesian
+from chi2 import chi2_test
+from quadrature import integrate_slopes
+
+P_MIN = 1e-3
+SCHLICK = mf.fresnel.Schlick([0.9, 0.6, 0.3])
+
+
+def _input(D, shadowing=False, fresnel=SCHLICK, gaf="smith", **params):
+    return mf.MicrofacetBRDF(D(**params), fresnel=fresnel, gaf=gaf, shadowing=shadowing)
+
+
+@pytest.fixture(scope="module")
+def fits():
+    """A few fits shared by the tests (N = 90 isotropic, 40 x 40 anisotropic)."""
+    return {
+        "iso_ggx": mf.fit.fit(_input(mf.GGX, alpha=0.3), 90, shadowing=False),
+        "iso_beckmann": mf.fit.fit(_input(mf.Beckmann, alpha=0.2), 90, shadowing=False),
+        "aniso_beckmann": mf.fit.fit(_input(mf.Beckmann, alpha_x=0.2, alpha_y=0.4, rho=0.3), 40,
+                                     anisotropic=True, shadowing=False),
+        "aniso_ggx": mf.fit.fit(_input(mf.GGX, alpha_x=0.3, alpha_y=0.15, rho=-0.4), 40,
+                                anisotropic=True, shadowing=False),
+        "iso_sharp": mf.fit.fit(_input(mf.Beckmann, shadowing=True, alpha=0.02), 90),
+        "aniso_sharp": mf.fit.fit(_input(mf.GGX, shadowing=True, alpha_x=0.02, alpha_y=0.04, rho=0.5), 32,
+                                  anisotropic=True),
+    }
+
+
+def _upper(rng, n):
+    w = normalize(rng.normal(size=(n, 3)))
+    w[..., 2] = np.abs(w[..., 2])
+    return w
+
+
+def _slope_integral(d, g, n=(400, 400)):
+    """``int g(x~, y~) P(x~, y~) dx~ dy~`` by the independent slope-plane quadrature, on
+    the lobe's own scale (``E|x~|`` of the standard table times the roughness map)."""
+    s = float(np.sum(np.abs(d.standard_quadrature()[0]) * d.standard_quadrature()[2]))
+    ax, ay, rho = float(d.alpha_x) * s, float(d.alpha_y) * s, float(d.rho)
+    sigma = np.array([[ax * ax, rho * ax * ay], [rho * ax * ay, ay * ay]])
+    return integrate_slopes(lambda x, y: g(x, y) * d.p22(x, y), np.array(d.mean_slope, float), sigma, n=n)
+
+
+# ------------------------------------------------------------ tabulated distributions
+ROUGHNESS = [dict(), dict(alpha_x=0.5, alpha_y=1.5, rho=0.6), dict(alpha=0.8, mean_slope=(0.3, -0.2))]
+
+
+@pytest.mark.parametrize("kind", ["iso_ggx", "aniso_ggx"])
+@pytest.mark.parametrize("rough", ROUGHNESS, ids=["std", "corr", "shear"])
+def test_normalization_and_masking_against_quadrature(fits, kind, rough):
+    """Eq. 2.12 / 2.8 (P integrates to 1), vndf normalization (Eq. 2.17) and G1 against
+    Eq. 2.14 integrated numerically, for the table under roughness maps (Eq. 2.26, 3.2)."""
+    table = fits[kind].distribution
+    cls = type(table)
+    d = cls(table.ndf_table, **rough)
+    assert abs(_slope_integral(d, lambda x, y: 1.0) - 1.0) < 2e-5
+    tol = 2e-3 if cls is TabulatedIsotropic else 5e-3
+    for theta, phi in [(0.3, 0.5), (1.0, 2.0), (1.4, -1.0)]:
+        k = spherical_to_cartesian(theta, phi)
+        if d._warp(k)[2] <= 0:
+            continue
+        # projected area toward k, Eq. 2.14: int <k, h>+ D dw = int (z - x x~ - y y~)+ P dh~
+        area = _slope_integral(d, lambda x, y: np.maximum(k[2] - k[0] * x - k[1] * y, 0.0))
+        assert abs(d.projected_area(k) / area - 1.0) < tol, (theta, d.projected_area(k), area)
+        vis = _slope_integral(d, lambda x, y: d.vp22(x, y, k) / d.p22(x, y).clip(1e-300))
+        assert abs(vis - 1.0) < tol
+
+
+def test_roughness_invariance_of_a_tabulated_beckmann():
+    """A table of the standard Beckmann NDF with alpha = 0.3 is Beckmann(0.3) (Eq. 2.26)."""
+    th = theta_grid(200)
+    d = TabulatedIsotropic(mf.Beckmann(alpha=1.0).ndf(spherical_to_cartesian(th, 0.0)), alpha_x=0.3,
+                           alpha_y=0.5, rho=0.4)
+    ref = mf.Beckmann(alpha_x=0.3, alpha_y=0.5, rho=0.4)
+    h = spherical_to_cartesian(np.linspace(0, 1.2, 25), 0.7)
+    # (linear interpolation of D: relative accuracy in the lobe, absolute in its tails)
+    np.testing.assert_allclose(d.ndf(h), ref.ndf(h), rtol=2e-3, atol=1e-4 * ref.ndf(h).max())
+    k = spherical_to_cartesian(np.linspace(0, 1.5, 25), 2.0)
+    np.testing.assert_allclose(d.g1(k), ref.g1(k), rtol=2e-3)
+    assert abs(d.second_moment_std - 0.5) < 2e-3
+
+
+def test_isotropic_marginal_is_the_abel_transform(fits):
+    d = fits["iso_ggx"].distribution
+    x = np.array([0.0, 0.05, 0.3, 1.0, 4.0])
+    t, w = np.polynomial.legendre.leggauss(400)
+    th = np.pi / 2 * (t + 1) / 2
+    y = np.tan(th)
+    marg = 2 * np.sum(d.p22_std(x[:, None], y[None, :]) * (np.pi / 4 * w / np.cos(th) ** 2), axis=1)
+    np.testing.assert_allclose(d.p1_std(x), marg, rtol=1e-3)
+
+
+def test_bad_tables():
+    for bad in ([1.0, np.nan, 0.0], [1.0, -1.0, 0.0], [[1.0, 2.0]], np.zeros(5)):
+        with pytest.raises(ValueError):
+            TabulatedIsotropic(bad)
+    with pytest.raises(ValueError):
+        TabulatedAnisotropic(np.ones(5))
+
+
+# ----------------------------------------------------------------- BRDF protocol
+CHI2_CASES = [("iso_ggx", {}, "smith", 0), ("iso_ggx", {}, "smith", 60), ("iso_ggx", {}, "smith", 87),
+              ("iso_beckmann", dict(alpha_x=0.7, alpha_y=2.0, rho=0.5), "smith", 70),
+              ("iso_ggx", dict(alpha=1.5, mean_slope=(0.2, -0.1)), "smith", 40),
+              ("iso_ggx", {}, "vgroove", 80),
+              ("aniso_beckmann", {}, "smith", 30), ("aniso_ggx", {}, "smith", 85),
+              ("aniso_ggx", dict(alpha_x=2.0, alpha_y=1.0, rho=0.3), "normal_map", 50),
+              # sharp fits, widened by their roughness map so that the histogram resolves them
+              ("iso_sharp", dict(alpha=15.0), "smith", 0), ("iso_sharp", dict(alpha=15.0), "smith", 85),
+              ("aniso_sharp", dict(alpha=10.0), "smith", 60)]
+
+
+@pytest.mark.parametrize("kind, rough, gaf, theta_o", CHI2_CASES)
+def test_chi2_sampling(fits, kind, rough, gaf, theta_o):
+    """Visible-slope sampling of isotropic tables (Sec. 4.4) and slope sampling of
+    anisotropic ones (App. A) against the pdf: Pearson chi-square. (The histogram's
+    32 x 64 cells and 6 x 6 rule cannot integrate lobes sharper than alpha ~ 0.1, for
+    analytic BRDFs as well, so sharp fits are tested through a widening roughness map,
+    which exercises the same tables.)"""
+    f = fits[kind]
+    d = type(f.distribution)(f.distribution.ndf_table, **rough)
+    brdf = mf.MicrofacetBRDF(d, fresnel=f.fresnel, gaf=gaf)
+    wo = spherical_to_cartesian(np.radians(theta_o), 0.7)
+    p, stat, dof, total = chi2_test(brdf, wo, n=200_000, seed=theta_o)
+    assert p > P_MIN, f"chi2={stat:.1f} dof={dof} p={p:.2g} (pdf mass {total:.5f})"
+
+
+@pytest.mark.parametrize("kind", ["iso_ggx", "aniso_beckmann"])
+@pytest.mark.parametrize("gaf", mf.brdf.GAFS)
+def test_weight_is_eval_cos_over_pdf(fits, kind, gaf):
+    rng = np.random.default_rng(4)
+    f = fits[kind]
+    brdf = mf.MicrofacetBRDF(f.distribution, fresnel=f.fresnel, gaf=gaf)
+    wo = _upper(rng, 20000)
+    wi, weight, pdf = brdf.sample(rng.random((20000, 2)), wo)
+    ok = pdf > 0
+    assert ok.mean() > 0.5
+    np.testing.assert_allclose(weight[ok], brdf.eval_cos(wi[ok], wo[ok]) / pdf[ok, None], rtol=1e-10)
+    # (the pdf at the sampled normal vs at the recomputed half vector: rounding of h moves
+    # theta_h, which the slope of the interpolated D amplifies near grazing)
+    np.testing.assert_allclose(pdf[ok], brdf.pdf(wi[ok], wo[ok]), rtol=1e-9)
+    assert np.all(weight[~ok] == 0)
+
+
+@pytest.mark.parametrize("kind", ["iso_ggx", "aniso_ggx"])
+def test_reciprocity(fits, kind):
+    """With shadowing (height-correlated Smith G) the fitted BRDF is reciprocal."""
+    rng = np.random.default_rng(5)
+    f = mf.fit.FittedBRDF(fits[kind].distribution, fits[kind].fresnel, shadowing=True)
+    wi, wo = _upper(rng, 5000), _upper(rng, 5000)
+    a, b = f.eval(wi, wo), f.eval(wo, wi)
+    assert np.any(a > 0)
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-300)
+
+
+@pytest.mark.parametrize("kind", ["iso_beckmann", "aniso_ggx"])
+def test_white_furnace(fits, kind):
+    """With F = 1 the albedo (quadrature over h) is <= 1, and the sampling weights
+    average to it."""
+    rng = np.random.default_rng(8)
+    brdf = mf.MicrofacetBRDF(fits[kind].distribution)
+    t, w = np.polynomial.legendre.leggauss(160)
+    for theta in (0.0, 1.0, 1.45):
+        wo = spherical_to_cartesian(theta, 0.4)
+        # int f cos dw_i = int f cos 4 (o.h) dw_h over normals h = (theta_h, phi_h)
+        th = np.pi / 4 * (t + 1)
+        ph = np.pi * (t + 1)
+        h = spherical_to_cartesian(th[:, None], ph[None, :])
+        wi = reflect(np.broadcast_to(wo, h.shape), h)
+        g = brdf.eval_cos(wi, np.broadcast_to(wo, h.shape))[..., 0] * 4 * np.maximum(dot(wo, h), 0)
+        albedo = np.sum(g * np.sin(th)[:, None] * (np.pi / 4 * w)[:, None] * (np.pi * w)[None, :])
+        assert 0.5 < albedo <= 1 + 1e-3, (theta, albedo)
+        _, wt, _ = brdf.sample(rng.random((200_000, 2)), wo)
+        mc, sd = wt[:, 0].mean(), wt[:, 0].std() / np.sqrt(len(wt))
+        assert abs(mc - albedo) < 5 * sd + 2e-3, (theta, mc, sd, albedo)
+
+
+def test_finite_at_grazing_and_extreme_uniforms(fits):
+    rng = np.random.default_rng(9)
+    for f in fits.values():  # includes the sharp fits
+        for gaf in mf.brdf.GAFS:
+            brdf = mf.MicrofacetBRDF(f.distribution, fresnel=f.fresnel, gaf=gaf)
+            wo = normalize(np.concatenate([_upper(rng, 200), [[0, 0, 1.0], [1, 0, 0], [1, 0, 1e-12]]]))
+            wi = np.concatenate([_upper(rng, 200), wo[-3:]])
+            for v in (brdf.eval(wi, wo), brdf.pdf(wi, wo)):
+                assert np.all(np.isfinite(v)) and np.all(v >= 0)
+            u = rng.random((len(wo), 2))
+            u[:3] = [[0, 0], [1 - 2**-53, 0.5], [0.5, 1 - 2**-53]]
+            for v in brdf.sample(u, wo):
+                assert np.all(np.isfinite(v))
+
+
+# ------------------------------------------------------------------------- fitting
+def _backscatter_error(fitted, ref, theta, phi=0.0, rel_floor=1e-3):
+    """Max relative error of the fit's backscattering where the input's is above
+    ``rel_floor`` of its peak."""
+    o = spherical_to_cartesian(np.asarray(theta)[:, None], np.atleast_1d(phi)[None, :]).reshape(-1, 3)
+    a, b = fitted.eval(o, o)[:, 1], ref.eval(o, o)[:, 1]
+    keep = b >= rel_floor * b.max()
+    return np.max(np.abs(a[keep] / b[keep] - 1.0))
+
+
+def _nodes(n, theta_max_deg):
+    th = theta_grid(n)
+    return th[th <= np.radians(theta_max_deg)]
+
+
+def _between(theta_max_deg):
+    return np.radians(np.linspace(0.0, theta_max_deg, 397))
+
+
+@pytest.mark.parametrize("D, alpha", [(mf.Beckmann, 0.05), (mf.Beckmann, 0.5), (mf.GGX, 0.1), (mf.GGX, 0.6)])
+def test_isotropic_fit_reproduces_backscattering(D, alpha):
+    """Eq. 4.3 is reproduced at the fit's directions to the accuracy of the quadrature,
+    and between them to that of the (log-linear) interpolation of D."""
+    ref = _input(D, alpha=alpha)
+    f = mf.fit.fit(ref, 90, shadowing=False)
+    assert _backscatter_error(f, ref, _nodes(90, 89.0)) < 2e-3
+    assert _backscatter_error(f, ref, _between(89.0)) < 3e-2
+    assert abs(f.f0 - extract.luminance(SCHLICK(1.0))) < 5e-3
+
+
+@pytest.mark.parametrize("kind, ref, tol_between", [
+    ("aniso_beckmann", _input(mf.Beckmann, alpha_x=0.2, alpha_y=0.4, rho=0.3), 0.3),
+    ("aniso_ggx", _input(mf.GGX, alpha_x=0.3, alpha_y=0.15, rho=-0.4), 0.1)])
+def test_anisotropic_fit_reproduces_backscattering(fits, kind, ref, tol_between):
+    """Algorithm 1 at 40 x 40: at the node directions to the accuracy of the quadrature;
+    everywhere to that of the interpolation, whose linear azimuthal part is coarse in the
+    steep tails of a Beckmann lobe (down to 1e-2 of the peak) at 40 azimuths."""
+    node_phi = np.arange(40) * (2 * np.pi / 40)
+    assert _backscatter_error(fits[kind], ref, _nodes(40, 80.0), node_phi[::3], rel_floor=1e-2) < 3e-3
+    assert abs(fits[kind].f0 - extract.luminance(SCHLICK(1.0))) < 5e-3
+    assert _backscatter_error(fits[kind], ref, _between(80.0), np.linspace(0, 2 * np.pi, 17),
+                              rel_floor=1e-2) < tol_between
+
+
+def test_power_iteration_finds_the_perron_vector():
+    ref = _input(mf.GGX, alpha=0.4)
+    theta = theta_grid(40)
+    k = extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta)
+    p, lam, its = extract.power_iteration(k)
+    vals, vecs = np.linalg.eig(k)
+    i = np.argmax(vals.real)
+    v = np.abs(vecs[:, i].real)
+    np.testing.assert_allclose(p, v / v.sum(), rtol=1e-8, atol=1e-14)
+    assert abs(lam / vals[i].real - 1) < 1e-8 and its < 100
+
+
+@pytest.mark.parametrize("gaf", ["vgroove", "normal_map"])
+@pytest.mark.parametrize("anisotropic", [False, True])
+def test_closed_form_gaf_fits(gaf, anisotropic):
+    """Eq. 4.16-4.18: the NDF at the nodes is the input's, exactly (up to normalization)."""
+    ref = _input(mf.Beckmann, gaf=gaf, shadowing=True, alpha_x=0.3, alpha_y=0.3 if not anisotropic else 0.5)
+    f = mf.fit.fit(ref, 48, anisotropic=anisotropic, gaf=gaf)
+    phi = np.array([0.0, 2 * np.pi * 5 / 48]) if anisotropic else np.zeros(1)
+    h = spherical_to_cartesian(theta_grid(48)[:-1, None], phi)
+    ratio = f.distribution.ndf(h) / ref.distribution.ndf(h).clip(1e-300)
+    keep = ref.distribution.ndf(h) > 1e-3 * ref.distribution.ndf(h).max()
+    np.testing.assert_allclose(ratio[keep], 1.0, rtol=3e-3)
+    assert _backscatter_error(f, ref, _nodes(48, 80.0), phi, rel_floor=1e-3) < 3e-3
+
+
+@pytest.mark.parametrize("D", [mf.Beckmann, mf.GGX])
+def test_to_beckmann_and_to_ggx_recover_the_input(D, fits):
+    """App. C: exact conversions for the matching distribution, isotropic and anisotropic
+    with correlation; the roughness map of the table is carried through."""
+    name = D.__name__
+    iso = fits["iso_beckmann" if D is mf.Beckmann else "iso_ggx"]
+    alpha = 0.2 if D is mf.Beckmann else 0.3
+    conv = (lambda f: f.to_beckmann()) if D is mf.Beckmann else (lambda f: f.to_ggx())
+    out = conv(iso)
+    assert isinstance(out, mf.MicrofacetBRDF) and type(out.distribution) is D, name
+    assert out.fresnel is iso.fresnel
+    np.testing.assert_allclose([out.distribution.alpha_x, out.distribution.alpha_y], alpha, rtol=3e-3)
+    assert abs(out.distribution.rho) < 1e-6
+    # roughness map of the fitted table (scaled, correlated, sheared) maps the parameters
+    mapped = mf.fit.FittedBRDF(TabulatedIsotropic(iso.distribution.ndf_table, alpha_x=0.5, alpha_y=2.0,
+                                                  rho=0.6, mean_slope=(0.1, -0.2)), iso.fresnel)
+    d = conv(mapped).distribution
+    np.testing.assert_allclose([d.alpha_x, d.alpha_y, d.rho], [0.5 * alpha, 2.0 * alpha, 0.6], rtol=5e-3)
+    np.testing.assert_allclose(d.mean_slope, [0.1, -0.2], atol=1e-9)
+    # anisotropic correlated inputs
+    aniso = fits["aniso_beckmann" if D is mf.Beckmann else "aniso_ggx"]
+    expect = [0.2, 0.4, 0.3] if D is mf.Beckmann else [0.3, 0.15, -0.4]
+    d = conv(aniso).distribution
+    np.testing.assert_allclose([d.alpha_x, d.alpha_y, d.rho], expect, rtol=1.5e-2)
+
+
+def test_ggx_rho_formula_is_exact_for_elliptic_distributions():
+    """rho from beta1, beta2 (App. C) of a tabulated standard GGX under correlated maps."""
+    th = theta_grid(150)
+    table = TabulatedIsotropic(mf.GGX(alpha=1.0).ndf(spherical_to_cartesian(th, 0.0)))
+    for rho in (-0.8, 0.0, 0.5):
+        f = mf.fit.FittedBRDF(TabulatedIsotropic(table.ndf_table, alpha_x=0.4, alpha_y=0.9, rho=rho),
+                              mf.fresnel.Tabulated([0, 1], [1, 1]))
+        assert abs(f.to_ggx().distribution.rho - rho) < 2e-3
+
+
+@pytest.mark.parametrize("fresnel", [mf.fresnel.Schlick([0.95, 0.64, 0.54]), mf.fresnel.Conductor.metal("Cu"),
+                                     mf.fresnel.Dielectric(1.5)], ids=["schlick", "Cu", "dielectric"])
+def test_fresnel_extraction_recovers_the_input(fresnel):
+    """Algorithm 2 / Eq. 4.11, per channel."""
+    ref = _input(mf.GGX, fresnel=fresnel, alpha=0.3)
+    f = mf.fit.fit(ref, 90, shadowing=False)
+    c = np.linspace(0.05, 1.0, 40)
+    np.testing.assert_allclose(f.fresnel(c), fresnel(c), rtol=5e-3, atol=2e-4)
+
+
+def test_default_shadowing_input_fits_within_the_hotspot_factor():
+    """Height-correlated inputs: the fit (Eq. 4.2) over-estimates backscattering
+    occlusion by at most 1/(2 - G1) and stays exact where masking is negligible."""
+    ref = _input(mf.Beckmann, shadowing=True, alpha=0.2)
+    f = mf.fit.fit(ref, 90)
+    assert _backscatter_error(f, ref, _nodes(90, 60.0)) < 3e-3
+    c = np.linspace(0.2, 1.0, 20)
+    np.testing.assert_allclose(f.fresnel(c), SCHLICK(c), rtol=1e-2)
+
+
+def test_fit_is_robust_to_garbage_at_grazing():
+    ref = _input(mf.GGX, alpha=0.3)
+
+    class Garbage(mf.BRDF):
+        def eval(self, wi, wo):
+            v = ref.eval(wi, wo)
+            graze = (np.minimum(wi[..., 2], wo[..., 2]) < 0.05)[..., None]
+            return np.where(graze, np.where(wi[..., :1] > 0, np.nan, -np.inf), v)
+
+    f = mf.fit.fit(Garbage(), 90, shadowing=False)
+    clean = mf.fit.fit(ref, 90, shadowing=False)
+    assert np.all(np.isfinite(f.distribution.ndf_table))
+    assert _backscatter_error(f, ref, _nodes(90, 70.0)) < 0.01
+    np.testing.assert_allclose(f.to_ggx().distribution.alpha_x, clean.to_ggx().distribution.alpha_x, rtol=0.05)
+
+
+def test_fit_argument_errors():
+    ref = _input(mf.GGX, alpha=0.3)
+    with pytest.raises(ValueError, match="gaf"):
+        mf.fit.fit(ref, gaf="nope")
+    with pytest.raises(ValueError, match="resolution"):
+        mf.fit.fit(ref, 2)
+    with pytest.raises(MicrofacetError, match="zero"):
+        mf.fit.fit(mf.Lambertian(0.0), 16)
+
+
+# --------------------------------------------------------------------------- files
+@pytest.mark.parametrize("kind", ["iso_ggx", "aniso_beckmann"])
+def test_save_load_round_trip(fits, kind, tmp_path):
+    f = fits[kind]
+    path = f.save(tmp_path / "fit.npz")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.npz"]       # no temporary left
+    g = mf.fit.load(path)
+    assert type(g.distribution) is type(f.distribution) and g.gaf_model == f.gaf_model
+    rng = np.random.default_rng(3)
+    wi, wo = _upper(rng, 500), _upper(rng, 500)
+    np.testing.assert_allclose(g.eval(wi, wo), f.eval(wi, wo), rtol=1e-12)
+    np.testing.assert_allclose(g.pdf(wi, wo), f.pdf(wi, wo), rtol=1e-12)
+    assert g.f0 == f.f0 and g.shadowing == f.shadowing
+
+
+def _rewrite(src, dst, **changes):
+    with np.load(src) as z:
+        data = {k: z[k] for k in z.files}
+    for k, v in changes.items():
+        if v is None:
+            data.pop(k)
+        else:
+            data[k] = v
+    np.savez(dst, **data)
+    return dst
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(version=np.array(99)), "version 99"),
+    (dict(format=np.array("something.else")), "format"),
+    (dict(ndf=None), "missing"),
+    (dict(ndf=np.ones((3, 3))), "1D"),
+    (dict(ndf=np.array([1.0, np.nan, 0.0])), "finite"),
+    (dict(kind=np.array("spherical")), "kind"),
+    (dict(fresnel_rgb=np.ones((2, 3))), "Tabulated"),
+])
+def test_load_rejects_bad_files(fits, tmp_path, change, message):
+    good = fits["iso_ggx"].save(tmp_path / "good.npz")
+    bad = _rewrite(good, tmp_path / "bad.npz", **change)
+    with pytest.raises(MicrofacetError, match=message) as e:
+        mf.fit.load(bad)
+    assert "bad.npz" in str(e.value)
+
+
+def test_load_rejects_non_npz_and_missing(tmp_path):
+    p = tmp_path / "junk.npz"
+    p.write_bytes(b"not a zip file at all")
+    with pytest.raises(MicrofacetError, match="junk.npz"):
+        mf.fit.load(p)
+    with pytest.raises(MicrofacetError, match="no such file"):
+        mf.fit.load(tmp_path / "absent.npz")
+
+
+def test_save_samples_a_non_tabulated_fresnel(fits, tmp_path):
+    f = mf.fit.FittedBRDF(fits["iso_ggx"].distribution, SCHLICK)
+    g = mf.fit.load(f.save(tmp_path / "schlick.npz"))
+    c = np.linspace(0.0, 1.0, 33)
+    np.testing.assert_allclose(g.fresnel(c), SCHLICK(c), rtol=2e-3)
+    assert isinstance(mf.distributions.TabulatedIsotropic, type) and g.distribution.n_theta == 90
