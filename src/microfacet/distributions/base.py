@@ -175,10 +175,9 @@ class SlopeDistribution:
         xm, ym = self._unscale(-h[..., 0] - self.xn * zs, -h[..., 1] - self.yn * zs)
         return np.where(z > 0, self.p22_std_over_z4(xm, ym, zs) / self._det, 0.0)
 
-    @classmethod
-    def p22_std_over_z4(cls, x, y, z):
+    def p22_std_over_z4(self, x, y, z):
         """``P_std(x / z, y / z) / z^4`` for ``z > 0`` (overridden where a stabler form exists)."""
-        return cls.p22_std(x / z, y / z) / (z * z) ** 2
+        return self.p22_std(x / z, y / z) / (z * z) ** 2
 
     # -------------------------------------------------------------- Smith masking
     def lambda_(self, k) -> np.ndarray:
@@ -190,13 +189,12 @@ class SlopeDistribution:
         a, b, c = self._warp(k)
         return self.lambda_warped(a, b, c), c
 
-    @classmethod
-    def lambda_warped(cls, a, b, c):
+    def lambda_warped(self, a, b, c):
         """Standard ``Lambda`` of the unnormalized direction ``k' = (a, b, c)`` (Eq. 3.3);
         ``inf`` where ``c <= 0``. Radial distributions depend on ``cot theta' = c / sqrt(a^2 + b^2)``
         only (Sec. 2.4); a non-radial (e.g. tabulated anisotropic) one overrides this."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            return cls.lambda_std(np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0))
+            return self.lambda_std(np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0))
 
     def projected_area(self, k) -> np.ndarray:
         """Projected area of the microsurface toward ``k``, ``A(k) = int <k,h>+ D(h) dw_h``.
@@ -279,10 +277,9 @@ class SlopeDistribution:
     def lambda_std(cot_theta):  # pragma: no cover - interface
         raise NotImplementedError
 
-    @classmethod
-    def g1_std(cls, cot_theta):
+    def g1_std(self, cot_theta):
         """Standard Smith masking ``G1 = 1 / (1 + Lambda)`` (Table 2.III)."""
-        return 1.0 / (1.0 + cls.lambda_std(cot_theta))
+        return 1.0 / (1.0 + self.lambda_std(cot_theta))
 
     @staticmethod
     def sample_visible_std(u, cos_theta):  # pragma: no cover - interface

@@ -309,13 +309,6 @@ class TabulatedIsotropic(_Tabulated):
             lam = self._L1(np.where(a > 0, a, 0.0)) / a
         return np.where(a > 0, np.where(np.isfinite(a), lam, 0.0), np.inf)
 
-    def lambda_warped(self, a, b, c):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return self.lambda_std(np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0))
-
-    def g1_std(self, cot_theta):
-        return 1.0 / (1.0 + self.lambda_std(cot_theta))
-
     # ------------------------------------------------------------ sampling
     def sample_p22_std(self, u):
         """Standard normal with slopes distributed as ``P``: ``theta`` from the marginal
