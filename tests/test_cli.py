@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 
 from microfacet.cli import main
-from microfacet.demo import thesis_figures
+from microfacet.demo import fit_examples, thesis_figures
 from microfacet.io import read_exr
 
 SMALL = ["--size", "16", "--spp", "2"]
@@ -37,11 +37,13 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
     srcs = re.findall(r'<img src="([^"]+)"', html)
     figures = thesis_figures()
     n_panels = sum(len(f.panels) for f in figures)
-    assert len(srcs) == 1 + 2 * n_panels + len(figures)        # environment, 2 renders per panel, lobes
+    # environment, 2 renders per panel, lobes per figure, a comparison picture per fitted material
+    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_examples())
     for src in srcs:
         with Image.open(demo_dir / src) as im:
             assert im.format == "PNG"
-    for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05"):
+    for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05",
+                "Fitting by power iterations", "GGX α = 0.2, gold"):
         assert key in html
     exrs = sorted(demo_dir.rglob("*.exr"))
     assert len(exrs) == 1 + 2 * n_panels

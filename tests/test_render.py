@@ -259,3 +259,22 @@ def test_lobe_peaks_near_mirror_direction_and_figure_is_written(tmp_path):
                             planes_deg=(0, 90))
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["lobes.png"]
+
+
+def test_fit_comparison_picture_is_written(tmp_path):
+    from PIL import Image
+
+    from microfacet.render import render_sphere, save_fit_comparison
+    from microfacet.render.compare import backscattering_curve
+    f = mf.fresnel.Conductor.metal("Cu")
+    data = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=f)
+    theta, back = backscattering_curve(data, n=50)
+    assert back[0] == pytest.approx(float(data.eval([0, 0, 1.0], [0, 0, 1.0]) @ [0.2126, 0.7152, 0.0722]))
+    assert np.all(np.diff(back[theta < 0.8]) < 0)                       # falls off the normal
+    image = render_sphere(data, 24)
+    assert image.shape == (24, 24, 3) and np.all(np.isfinite(image)) and image.max() > 0
+    path = save_fit_comparison(tmp_path / "cmp.png", {"data": data, "Beckmann": mf.MicrofacetBRDF(
+        mf.Beckmann(alpha=0.2), fresnel=f)}, title="t", size=24, planes_deg=(0, 90))
+    with Image.open(path) as im:
+        assert im.format == "PNG" and im.size == (800, 620)
+    assert [p.name for p in tmp_path.iterdir()] == ["cmp.png"]

@@ -2,7 +2,9 @@
 
 ``microfacet demo -o DIR`` renders the demo report (thesis Figs. 2.2-2.6) into ``DIR``
 and prints the path of its ``index.html``; ``microfacet validate`` checks the core models
-numerically and prints their largest errors. Bad input prints one line on stderr and exits
+numerically and prints their largest errors; ``microfacet fit INPUT -o OUT`` fits a
+measured BRDF (or every one in a folder) and writes the fits, their parameters and
+comparison pictures. Bad input prints one line on stderr and exits
 with a non-zero status, without a traceback; long work shows a progress bar when stderr
 is a terminal and stays quiet otherwise (pipes, CI).
 """
@@ -44,10 +46,11 @@ def _int_at_least(lo: int):
 def _add_demo(sub) -> None:
     from .demo import DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SPP, default_workers
     p = sub.add_parser(
-        "demo", help="render the thesis Figs. 2.2-2.6 demo report (HTML, PNG, EXR)",
+        "demo", help="render the thesis Figs. 2.2-2.6 demo report and a fitting section (HTML, PNG, EXR)",
         description="Render spheres and polar lobe plots showing the Fresnel term, the GAF, "
                     "isotropic and anisotropic roughness and its orientation (thesis Figs. "
-                    "2.2-2.6) under a directional light and an environment, into DIR/index.html.")
+                    "2.2-2.6) under a directional light and an environment, and fits of built-in "
+                    "analytic materials by power iterations (Ch. 4), into DIR/index.html.")
     p.add_argument("-o", "--output", metavar="DIR", required=True, help="output folder (created if needed)")
     p.add_argument("--size", type=_int_at_least(8), default=DEFAULT_SIZE, metavar="PX",
                    help=f"sphere image side in pixels (default {DEFAULT_SIZE})")
@@ -93,6 +96,69 @@ def _run_validate(args) -> int:
     return 0 if all(r["ok"] for r in rows) else EXIT_ERROR
 
 
+def _add_fit(sub) -> None:
+    from .brdf import GAFS
+    p = sub.add_parser(
+        "fit", help="fit measured BRDFs by power iterations (tabulated, GGX and Beckmann fits)",
+        description="Fit a measured BRDF (MERL .binary(.gz), RGL .bsdf, UTIA .bin; recognised by "
+                    "content) by power iterations (thesis Ch. 4). For a file: writes OUT.npz (the "
+                    "tabulated fit, loadable by microfacet.fit.load), OUT.json (GGX and Beckmann "
+                    "parameters, Fresnel term, fit time, fit errors) and OUT.png (comparison "
+                    "picture). For a folder: the same for every file in it, into the folder OUT, "
+                    "with summary.csv and summary.md. Prints the summary table.")
+    p.add_argument("input", metavar="INPUT", help="measured BRDF file, or a folder of them")
+    p.add_argument("-o", "--output", metavar="OUT", required=True,
+                   help="OUT.npz for a file (.npz added if missing; an existing folder takes "
+                        "INPUT's name), output folder for a folder")
+    p.add_argument("--resolution", type=_int_at_least(8), default=90, metavar="N",
+                   help="elevation samples of the tabulated NDF (default 90)")
+    p.add_argument("--anisotropic", action="store_true", help="fit an anisotropic NDF (slower)")
+    p.add_argument("--gaf", choices=GAFS, default="smith",
+                   help="geometric attenuation factor of the fit (default smith)")
+    p.set_defaults(run=_run_fit)
+
+
+def _fit_target(input_path, output: str):
+    """The ``.npz`` path of a single-file fit."""
+    from pathlib import Path
+
+    from .fit_outputs import material_name
+    out = Path(output)
+    if out.is_dir():
+        return out / f"{material_name(input_path)}.npz"
+    return out if out.suffix.lower() == ".npz" else out.with_name(out.name + ".npz")
+
+
+def _run_fit(args) -> int:
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from .fit_outputs import (fit_folder, fit_material, format_summary_markdown, material_name,
+                              summary_row)
+    from .measured import load
+    source = Path(args.input)
+    options = dict(resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf)
+    if source.is_dir():
+        def progress(files):
+            return tqdm(files, disable=not sys.stderr.isatty(), unit="material", desc="microfacet fit",
+                        leave=False)
+        rows = fit_folder(source, args.output, progress=progress, **options)
+        print(format_summary_markdown(rows), end="")
+        failed = sum(r["status"] != "ok" for r in rows)
+        if failed:
+            print(f"{PROG}: error: {failed} of {len(rows)} files not fitted (see the warnings "
+                  f"and {Path(args.output) / 'summary.md'})", file=sys.stderr)
+            return EXIT_ERROR
+        return 0
+    brdf = load(source)
+    target = _fit_target(source, args.output)
+    name = material_name(source)
+    summary = fit_material(brdf, target, title=name, **options)
+    print(format_summary_markdown([summary_row(name, source, getattr(brdf, "format", ""), summary)]), end="")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``microfacet`` command."""
     parser = _Parser(prog=PROG, description="Multiscale microfacet rendering: BRDFs in slope space, "
@@ -101,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND", required=True)
     _add_demo(sub)
     _add_validate(sub)
+    _add_fit(sub)
     return parser
 
 
@@ -129,6 +196,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return args.run(args)
     except (MicrofacetError, ValueError, OSError) as e:
         print(f"{PROG}: error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+    except MemoryError:
+        print(f"{PROG}: error: out of memory (try a smaller size or resolution)", file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

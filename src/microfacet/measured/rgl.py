@@ -154,19 +154,20 @@ class RGLBRDF(MeasuredBRDF):
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         wi, wo = np.broadcast_arrays(wi, wo)
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        wi, wo = self._mirror(wi, wo)
-        m = wi + wo
-        m = m / np.linalg.norm(m, axis=-1, keepdims=True).clip(1e-300)
-        theta_v, phi_v = elevation(wo), np.arctan2(wo[..., 1], wo[..., 0])
-        theta_m, phi_m = elevation(m), np.arctan2(m[..., 1], m[..., 0])
-        um_x = theta2u(theta_m)
-        um_y = phi2u(phi_m - phi_v if self.isotropic else phi_m)
-        um_y = um_y - np.floor(um_y)
-        s1, s2, _ = self._vndf.invert(um_x, um_y, (phi_v, theta_v))
-        rgb = self._rgb.eval(s1, s2, (phi_v, theta_v))
-        if self.clip_negative:
-            rgb = np.maximum(rgb, 0.0)                   # out-of-gamut RGB
-        if self.jacobian:
-            scale = self._ndf.eval(um_x, um_y) / (4.0 * self._sigma.eval(theta2u(theta_v), phi2u(phi_v)))
-            rgb = rgb * scale[..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):     # masked by `up` below
+            wi, wo = self._mirror(wi, wo)
+            m = wi + wo
+            m = m / np.linalg.norm(m, axis=-1, keepdims=True).clip(1e-300)
+            theta_v, phi_v = elevation(wo), np.arctan2(wo[..., 1], wo[..., 0])
+            theta_m, phi_m = elevation(m), np.arctan2(m[..., 1], m[..., 0])
+            um_x = theta2u(theta_m)
+            um_y = phi2u(phi_m - phi_v if self.isotropic else phi_m)
+            um_y = um_y - np.floor(um_y)
+            s1, s2, _ = self._vndf.invert(um_x, um_y, (phi_v, theta_v))
+            rgb = self._rgb.eval(s1, s2, (phi_v, theta_v))
+            if self.clip_negative:
+                rgb = np.maximum(rgb, 0.0)                   # out-of-gamut RGB
+            if self.jacobian:
+                scale = self._ndf.eval(um_x, um_y) / (4.0 * self._sigma.eval(theta2u(theta_v), phi2u(phi_v)))
+                rgb = rgb * scale[..., None]
         return np.where(up[..., None], rgb, 0.0)

@@ -1,0 +1,132 @@
+"""``microfacet fit``: files written, JSON keys, round trip through ``mf.fit.load``,
+folder mode with its summary, and one-line errors.
+
+The input is an analytic GGX conductor written on the MERL grid as a plain ``.binary``
+file (the measured module's format), so the fitted parameters have a known answer.
+"""
+import csv
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import microfacet as mf
+from microfacet.cli import main
+from microfacet.geometry import hd_to_io, spherical_to_cartesian
+from microfacet.measured import merl
+
+ALPHA = 0.25
+RESOLUTION = "32"
+TRUTH = mf.MicrofacetBRDF(mf.GGX(alpha=ALPHA), fresnel=mf.fresnel.Conductor.metal("Au"))
+
+
+def merl_file_bytes(brdf) -> bytes:
+    """``brdf`` sampled on the MERL grid, as the bytes of a ``.binary`` file."""
+    th = (np.arange(90) / 90) ** 2 * np.pi / 2
+    td = np.arange(90) / 90 * np.pi / 2
+    pd = np.arange(180) / 180 * np.pi
+    th, td, pd = np.meshgrid(th, td, pd, indexing="ij")
+    wi, wo = hd_to_io(spherical_to_cartesian(th, np.zeros_like(th)), spherical_to_cartesian(td, pd))
+    raw = brdf.eval(wi, wo) / merl.SCALE                # 0 below the horizon, as MERL files hold
+    planar = np.moveaxis(raw, -1, 0)
+    return merl.HEADER + np.ascontiguousarray(planar, "<f8").tobytes()
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("materials")
+    (folder / "gold-ggx.binary").write_bytes(merl_file_bytes(TRUTH))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def single(inputs, tmp_path_factory):
+    out = tmp_path_factory.mktemp("single") / "gold"         # .npz is added
+    status = main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(out), "--resolution", RESOLUTION])
+    return status, out.with_name("gold.npz")
+
+
+def test_fit_writes_npz_json_png(single):
+    status, npz = single
+    assert status == 0
+    summary = json.loads(npz.with_suffix(".json").read_text())
+    for kind in ("beckmann", "ggx"):
+        assert set(summary[kind]) >= {"alpha_x", "alpha_y", "rho"}
+    assert {"fresnel", "seconds", "errors"} <= set(summary)
+    assert summary["seconds"] > 0
+    assert summary["ggx"]["alpha_x"] == pytest.approx(ALPHA, rel=0.1)      # known answer
+    assert summary["ggx"]["alpha_y"] == pytest.approx(summary["ggx"]["alpha_x"], rel=1e-6)
+    assert abs(summary["ggx"]["rho"]) < 1e-6
+    assert summary["errors"]["ggx"] < 0.1 and summary["errors"]["tabulated"] < 0.1
+    with Image.open(npz.with_suffix(".png")) as im:
+        assert im.format == "PNG" and im.size[0] >= 600
+    assert not [p for p in npz.parent.iterdir() if p.name.startswith(".") or p.name.endswith(".tmp")]
+
+
+def test_fit_round_trips_through_load(single):
+    _, npz = single
+    fit = mf.fit.load(npz)
+    summary = json.loads(npz.with_suffix(".json").read_text())
+    for kind, brdf in (("ggx", fit.to_ggx()), ("beckmann", fit.to_beckmann())):
+        d = brdf.distribution
+        assert float(d.alpha_x) == pytest.approx(summary[kind]["alpha_x"], rel=1e-9)
+        assert float(d.rho) == pytest.approx(summary[kind]["rho"], abs=1e-12)
+    rng = np.random.default_rng(1)
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0.2, 1, 200)), rng.uniform(0, 2 * np.pi, 200))
+    wo = spherical_to_cartesian(np.arccos(rng.uniform(0.2, 1, 200)), rng.uniform(0, 2 * np.pi, 200))
+    f, ref = fit.eval_cos(wi, wo), TRUTH.eval_cos(wi, wo)
+    assert np.all(np.isfinite(f))
+    assert np.linalg.norm(f - ref) < 0.1 * np.linalg.norm(ref)
+
+
+def test_fit_folder_writes_summary_and_reports_bad_files(inputs, tmp_path, capsys):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "gold-ggx.binary").symlink_to(inputs / "gold-ggx.binary")
+    (folder / "notes.txt").write_text("not a BRDF\n")
+    out = tmp_path / "out"
+    assert main(["fit", str(folder), "-o", str(out), "--resolution", RESOLUTION]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.splitlines()
+    assert len(err) == 2 and "notes.txt: not fitted" in err[0] and "1 of 2 files not fitted" in err[1]
+    assert "Traceback" not in captured.err and "\r" not in captured.err     # no progress bar in pipes
+    assert "| gold-ggx |" in captured.out
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [r["material"] for r in rows] == ["gold-ggx", "notes.txt"]
+    assert rows[0]["status"] == "ok" and rows[1]["status"].startswith("error: ")
+    assert float(rows[0]["ggx_alpha_x"]) == pytest.approx(ALPHA, rel=0.1)
+    assert "| gold-ggx |" in (out / "summary.md").read_text()
+    for suffix in (".npz", ".json", ".png"):
+        assert (out / f"gold-ggx{suffix}").is_file()
+    assert not (out / "notes.txt.npz").exists()
+
+
+def test_fit_into_an_existing_folder_names_files_after_the_input(inputs, tmp_path, capsys):
+    assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(tmp_path), "--resolution", "16",
+                 "--gaf", "vgroove"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gold-ggx.json", "gold-ggx.npz", "gold-ggx.png"]
+    assert json.loads((tmp_path / "gold-ggx.json").read_text())["gaf"] == "vgroove"
+    assert mf.fit.load(tmp_path / "gold-ggx.npz").gaf_model == "vgroove"
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "missing.binary", "No such file or directory"),
+    (lambda d: (d / "bad.binary").write_bytes(b"\0" * 100) and d / "bad.binary", "unknown measured-BRDF format"),
+    (lambda d: d / "empty", "no files to fit"),
+])
+def test_fit_bad_input_gives_one_line(make, message, tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    status = main(["fit", str(make(tmp_path)), "-o", str(tmp_path / "out.npz")])
+    err = capsys.readouterr().err
+    assert status == 1
+    assert err.count("\n") == 1 and err.startswith("microfacet: error: ") and message in err
+    assert not (tmp_path / "out.npz").exists()
+
+
+def test_fit_bad_arguments_give_usage_status(capsys):
+    assert main(["fit", "x", "-o", "y", "--gaf", "bogus"]) == 2
+    assert main(["fit", "x", "-o", "y", "--resolution", "2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 2 and "invalid choice: 'bogus'" in err and "must be >= 8" in err

@@ -1,0 +1,84 @@
+"""microfacet.metrics: fit errors over MERL-grid direction pairs and NDF differences."""
+import numpy as np
+import pytest
+
+import microfacet as mf
+from microfacet.geometry import spherical_to_cartesian
+from microfacet.measured.merl import hd_coordinates
+from microfacet.metrics import GRAZING_COS, fit_error, hemisphere_grid, measurement_directions, ndf_error
+
+GOLD = mf.MicrofacetBRDF(mf.GGX(alpha=0.15), fresnel=mf.fresnel.Conductor.metal("Au"))
+
+
+class Scaled(mf.BRDF):
+    """``s * brdf``, optionally only where ``where(wi, wo)`` holds."""
+
+    def __init__(self, brdf, s, where=None):
+        self.brdf, self.s, self.where = brdf, s, where
+
+    def eval_cos(self, wi, wo):
+        f = self.brdf.eval_cos(wi, wo)
+        mask = np.ones(f.shape[:-1], bool) if self.where is None else self.where(wi, wo)
+        return np.where(mask[..., None], self.s * f, f)
+
+
+class PartlyMeasured(Scaled):
+    """Like MERL data: ``coverage`` is 0 where ``where`` holds."""
+
+    def coverage(self, wi, wo):
+        return np.where(self.where(wi, wo), 0.0, 1.0)
+
+
+def test_measurement_directions_lie_on_merl_cell_centres_above_the_grazing_limit():
+    n = 8
+    wi, wo = measurement_directions(n)
+    assert wi.shape == wo.shape and 0 < len(wi) < n**3
+    assert wi[:, 2].min() >= GRAZING_COS and wo[:, 2].min() >= GRAZING_COS
+    th, td, pd = hd_coordinates(wi, wo)
+    u_h, u_d, u_p = np.sqrt(th / (np.pi / 2)) * n, td / (np.pi / 2) * n, pd / np.pi * n
+    for u in (u_h, u_d, u_p):
+        np.testing.assert_allclose(np.mod(u, 1.0), 0.5, atol=1e-6)
+    w2 = measurement_directions(n)
+    assert np.array_equal(wi, w2[0]) and np.array_equal(wo, w2[1])
+
+
+def test_fit_error_is_zero_for_the_reference_and_the_scale_error_for_a_scaled_copy():
+    e = fit_error(GOLD, {"same": GOLD, "scaled": Scaled(GOLD, 1.03), "beckmann": mf.MicrofacetBRDF(
+        mf.Beckmann(alpha=0.15), fresnel=mf.fresnel.Conductor.metal("Au"))}, n=12)
+    assert e["same"] == 0.0
+    assert e["scaled"] == pytest.approx(0.03, rel=1e-9)
+    assert 0.05 < e["beckmann"] < 2.0 and e["n_pairs"] > 500
+
+
+def test_fit_error_excludes_grazing_and_unmeasured_pairs():
+    grazing = lambda wi, wo: (wi[..., 2] < GRAZING_COS) | (wo[..., 2] < GRAZING_COS)  # noqa: E731
+    rng = np.random.default_rng(3)
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, 4000)), rng.uniform(0, 2 * np.pi, 4000))
+    wo = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, 4000)), rng.uniform(0, 2 * np.pi, 4000))
+    assert np.mean(grazing(wi, wo)) > 0.1
+    e = fit_error(Scaled(GOLD, 1e6, grazing), GOLD, directions=(wi, wo))
+    assert e["fit"] == 0.0 and e["n_pairs"] == np.count_nonzero(~grazing(wi, wo))
+    far = lambda wi, wo: wi[..., 0] > 0.3                                             # noqa: E731
+    e = fit_error(PartlyMeasured(GOLD, 50.0, far), GOLD, n=10)
+    assert e["fit"] == 0.0
+    assert e["n_pairs"] == np.count_nonzero(~far(*measurement_directions(10)))
+    with pytest.raises(ValueError, match="no measured"):
+        fit_error(PartlyMeasured(GOLD, 1.0, lambda wi, wo: wi[..., 2] > -1), GOLD, n=4)
+
+
+@pytest.mark.parametrize("dist", [mf.Beckmann(alpha=0.03), mf.Beckmann(alpha=0.5), mf.GGX(alpha=0.1),
+                                  mf.GGX(alpha_x=0.1, alpha_y=0.4, rho=0.3)])
+def test_hemisphere_grid_integrates_projected_ndf_to_one(dist):
+    h, w = hemisphere_grid()
+    assert np.sum(w) == pytest.approx(2 * np.pi, rel=1e-4)
+    assert np.sum(w * dist.ndf(h) * h[:, 2]) == pytest.approx(1.0, abs=2e-3)
+
+
+def test_ndf_error_compares_shapes_not_scales():
+    b = mf.Beckmann(alpha=0.2)
+    assert ndf_error(b.ndf, lambda h: 3.0 * b.ndf(h))["l2"] == pytest.approx(0.0, abs=1e-12)
+    near = ndf_error(b.ndf, mf.Beckmann(alpha=0.21).ndf)["l2"]
+    far = ndf_error(b.ndf, mf.Beckmann(alpha=0.4).ndf)["l2"]
+    assert 0.0 < near < far
+    with pytest.raises(ValueError, match="positive finite"):
+        ndf_error(b.ndf, lambda h: np.zeros(len(h)))
