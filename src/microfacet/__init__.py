@@ -8,7 +8,8 @@ from .brdf import BRDF, Lambertian, MicrofacetBRDF
 from .distributions import GGX, Beckmann, SlopeDistribution
 from .errors import MicrofacetError
 from . import fit  # noqa: E402  (after the core it builds on)
+from . import leadr  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError",
-           "SlopeDistribution", "fit", "fresnel", "geometry", "measured"]
+           "SlopeDistribution", "fit", "fresnel", "geometry", "leadr", "measured"]

@@ -1,0 +1,156 @@
+"""LEAN/LEADR files: moment pyramids as multi-part EXR, height and normal maps in.
+
+Pyramid file: one OpenEXR multi-part file, one part per MIP level named ``mip0``,
+``mip1``, ..., each a ZIP-compressed scanline image with float32 channels
+``E1 E2 E3 E4 E5`` (moments of the unit uv square's slopes at every level). Every part
+shares level 0's display window (OpenEXR requires it); the data window of part ``k`` is
+its own ``W_k x H_k``.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+
+from ..errors import MicrofacetError
+from ..io.atomic import atomic_path
+from ..io.exr import EXR_MAGIC, read_exr, write_exr
+from ..io.pngdata import PNG_MAGIC, read_png_data, write_png_data
+from .mip import mip_sizes
+
+__all__ = ["write_pyramid", "read_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
+           "CHANNELS"]
+
+CHANNELS = ("E1", "E2", "E3", "E4", "E5")
+
+
+def write_pyramid(path: str | os.PathLike, pyramid) -> Path:
+    """Write a moment pyramid (list of ``(H_k, W_k, 5)``, level 0 first) as a multi-part
+    float32 EXR (module docstring), atomically; returns ``path``."""
+    levels = [np.asarray(level) for level in pyramid]
+    if not levels:
+        raise ValueError("empty pyramid")
+    for k, level in enumerate(levels):
+        if level.ndim != 3 or level.shape[2] != 5 or 0 in level.shape:
+            raise ValueError(f"pyramid level {k} must be (H, W, 5), got shape {level.shape}")
+    h0, w0 = levels[0].shape[:2]
+    window = (np.array([0, 0], np.int32), np.array([w0 - 1, h0 - 1], np.int32))
+    parts = []
+    for k, level in enumerate(levels):
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+                  "displayWindow": window}
+        channels = {name: np.ascontiguousarray(level[..., c], dtype=np.float32)
+                    for c, name in enumerate(CHANNELS)}
+        parts.append(OpenEXR.Part(header, channels, f"mip{k}"))
+    with atomic_path(path) as tmp:
+        OpenEXR.File(parts).write(str(tmp))
+    return Path(path)
+
+
+def _check_magic(path: Path, magic: bytes, kind: str) -> None:
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(magic))
+    except FileNotFoundError:
+        raise MicrofacetError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise MicrofacetError(f"{path}: is a directory, not {kind}") from None
+    except OSError as e:
+        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    if head != magic:
+        raise MicrofacetError(f"{path}: not {kind} (bad magic number {head.hex() or 'empty'})")
+
+
+def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
+    """Read a pyramid written by :func:`write_pyramid`: a list of ``(H_k, W_k, 5)`` float32.
+
+    Raises :class:`MicrofacetError` naming the file when it is not an EXR, is corrupt, or
+    its parts are not ``mip0, mip1, ...`` with channels ``E1..E5``, the MIP sizes of
+    level 0 and finite values.
+    """
+    path = Path(path)
+    _check_magic(path, EXR_MAGIC, "an OpenEXR file")
+    try:
+        parts = [(p.name(), {n: np.asarray(c.pixels) for n, c in p.channels.items()})
+                 for p in OpenEXR.File(str(path), separate_channels=True).parts]
+    except Exception as e:  # OpenEXR raises RuntimeError/others for corrupt files
+        raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({e})") from None
+    names = [name for name, _ in parts]
+    if not parts or names != [f"mip{k}" for k in range(len(parts))]:
+        raise MicrofacetError(f"{path}: not a moment pyramid (parts {names[:4]}, expected mip0, mip1, ...)")
+    levels = []
+    for name, channels in parts:
+        missing = [c for c in CHANNELS if c not in channels]
+        if missing:
+            raise MicrofacetError(f"{path}: part {name} lacks channels {' '.join(missing)}")
+        levels.append(np.stack([channels[c].astype(np.float32) for c in CHANNELS], axis=-1))
+    expected = mip_sizes(*levels[0].shape[:2])
+    found = [level.shape[:2] for level in levels]
+    if found != expected:
+        raise MicrofacetError(f"{path}: MIP level sizes {found} do not match level 0's {expected}")
+    for name, level in zip(names, levels):
+        if not np.all(np.isfinite(level)):
+            raise MicrofacetError(f"{path}: part {name} holds NaN or infinite moments")
+    return levels
+
+
+def _read_image(path: Path) -> np.ndarray:
+    """Samples of a PNG (``uint8``/``uint16``) or EXR (float64), chosen by content."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except FileNotFoundError:
+        raise MicrofacetError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise MicrofacetError(f"{path}: is a directory, not an image") from None
+    except OSError as e:
+        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    if head.startswith(PNG_MAGIC):
+        return read_png_data(path)
+    if head.startswith(EXR_MAGIC):
+        return read_exr(path)
+    raise MicrofacetError(f"{path}: not a PNG or OpenEXR image")
+
+
+def load_height_map(path: str | os.PathLike) -> np.ndarray:
+    """Heights ``(H, W)`` float64 of a PNG (8/16-bit gray or RGB(A), scaled to ``[0, 1]``)
+    or EXR (``Y``, or the mean of ``R, G, B``) image. Colour PNGs use the mean of R, G, B
+    (equal in a gray image); alpha is ignored."""
+    path = Path(path)
+    a = _read_image(path)
+    if a.dtype in (np.uint8, np.uint16):
+        a = a.astype(np.float64) / np.iinfo(a.dtype).max
+    if a.ndim == 3:
+        a = a[..., :1] if a.shape[2] in (1, 2) else a[..., :3]
+        a = a.mean(axis=2)
+    if min(a.shape) < 1:
+        raise MicrofacetError(f"{path}: empty image")
+    return a
+
+
+def load_normal_map(path: str | os.PathLike) -> np.ndarray:
+    """A normal map as stored: ``(H, W, 3|4)`` ``uint8``/``uint16`` from a PNG, float64
+    (normal components) from an EXR; decode with :func:`microfacet.leadr.decode_normal_map`."""
+    path = Path(path)
+    a = _read_image(path)
+    if a.ndim != 3 or a.shape[2] not in (3, 4):
+        raise MicrofacetError(f"{path}: a normal map needs R, G, B channels, got shape {a.shape}")
+    if a.dtype.kind == "f" and np.any(np.abs(a[..., :2]) > 1 + 1e-3):
+        raise MicrofacetError(f"{path}: an EXR normal map must hold unit normals (components in [-1, 1])")
+    return a
+
+
+def write_normal_map(path: str | os.PathLike, nmap) -> Path:
+    """Write a normal map from :func:`microfacet.leadr.encode_normal_map`, atomically: a
+    ``uint8``/``uint16`` one as an exact 8/16-bit RGB PNG, a float one as a float32 RGB
+    EXR (normal components, not offset)."""
+    a = np.asarray(nmap)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"a normal map must be (H, W, 3), got shape {a.shape}")
+    if a.dtype in (np.uint8, np.uint16):
+        return write_png_data(path, a)
+    if a.dtype.kind == "f":
+        return write_exr(path, a)
+    raise ValueError(f"normal maps are uint8, uint16 or float, got {a.dtype}")

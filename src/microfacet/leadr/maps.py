@@ -1,0 +1,209 @@
+"""Height maps, normal maps and LEAN/LEADR moment maps (thesis Sec. 3.4, Listings 3.6-3.7).
+
+Conventions (Listing 3.6): a ``W x H`` map covers the unit uv square; ``i`` is the column
+and ``j`` the row, row 0 at the top, and ``y`` points to the top row. Slopes of the unit
+uv square are central differences in texel units scaled by the resolution,
+
+    x~ = W scale (xi(i+1, j) - xi(i-1, j)) / 2,    y~ = H scale (xi(i, j-1) - xi(i, j+1)) / 2,
+
+with the map wrapped (``border="wrap"``, tileable maps) or clamped to its edge
+(``"clamp"``, where the outer texels see a one-sided half difference). A normal is
+``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)``. Normal maps store ``(n + 1) / 2`` per channel
+in 8 or 16 bits (rounded), or ``n`` itself as floats; on reading, ``z`` is recomputed as
+``sqrt(1 - x^2 - y^2)`` from the two tangent channels, so the blue channel's encoding
+(``n_z`` in Listing 3.6, ``(n_z + 1) / 2`` in most tools) does not matter.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from ..distributions import Beckmann
+from .mip import mip_pyramid
+from .moments import convolve, to_moments
+
+__all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode_normal_map",
+           "decode_normal_map", "slopes_to_moments", "normal_map_to_moments", "base_moments",
+           "bake", "bake_reference", "merge_material", "BORDERS"]
+
+BORDERS = ("wrap", "clamp")
+_MIN_NZ = 1e-4          # decoded normals are kept above the horizon (slopes <= 1e4)
+
+
+def _check_height(height) -> np.ndarray:
+    h = np.asarray(height)
+    if h.ndim != 2 or 0 in h.shape:
+        raise ValueError(f"a height map must be a non-empty (H, W) array, got shape {h.shape}")
+    if not np.issubdtype(h.dtype, np.number) or np.issubdtype(h.dtype, np.complexfloating):
+        raise ValueError(f"a height map must be real, got dtype {h.dtype}")
+    if not np.all(np.isfinite(h)):
+        raise ValueError("a height map must be finite (found NaN or inf)")
+    return h
+
+
+def _check_border(border: str) -> None:
+    if border not in BORDERS:
+        raise ValueError(f"border must be one of {BORDERS}, got {border!r}")
+
+
+def height_to_slopes(height, scale: float = 1.0, border: str = "wrap") -> np.ndarray:
+    """Slopes ``(H, W, 2)`` (float64) of a height map ``(H, W)`` in units of the unit uv
+    square (module docstring; Sec. 3.4 central differences, Listing 3.6)."""
+    xi = _check_height(height).astype(np.float64)
+    _check_border(border)
+    h, w = xi.shape
+    mode = "wrap" if border == "wrap" else "edge"
+    p = np.pad(xi, 1, mode=mode)
+    sx = 0.5 * w * scale * (p[1:-1, 2:] - p[1:-1, :-2])
+    sy = 0.5 * h * scale * (p[:-2, 1:-1] - p[2:, 1:-1])
+    return np.stack([sx, sy], axis=-1)
+
+
+def slopes_to_normals(slopes) -> np.ndarray:
+    """Unit normals ``(..., 3)`` ``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)``."""
+    s = np.asarray(slopes, dtype=np.float64)
+    inv = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
+    return np.stack([-s[..., 0] * inv, -s[..., 1] * inv, inv], axis=-1)
+
+
+def normals_to_slopes(normals) -> np.ndarray:
+    """Slopes ``(-n_x / n_z, -n_y / n_z)`` of normals ``(..., 3)``, ``n_z`` recomputed from
+    ``n_x, n_y`` (unit length) and kept ``>= 1e-4``."""
+    n = np.asarray(normals, dtype=np.float64)
+    x, y = n[..., 0], n[..., 1]
+    z = np.sqrt(np.maximum(1.0 - x * x - y * y, _MIN_NZ**2))
+    return np.stack([-x / z, -y / z], axis=-1)
+
+
+def encode_normal_map(slopes, dtype=np.uint8) -> np.ndarray:
+    """Normal map ``(H, W, 3)`` of slopes: ``round((n + 1) / 2 * max)`` for ``uint8`` and
+    ``uint16``, ``n`` itself for float dtypes."""
+    n = slopes_to_normals(slopes)
+    dtype = np.dtype(dtype)
+    if dtype.kind == "f":
+        return n.astype(dtype)
+    if dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"normal maps are uint8, uint16 or float, got {dtype}")
+    top = np.iinfo(dtype).max
+    return np.rint((0.5 * n + 0.5) * top).astype(dtype)
+
+
+def decode_normal_map(nmap) -> np.ndarray:
+    """Slopes ``(H, W, 2)`` of a normal map (``uint8``, ``uint16`` or float, 3 or 4
+    channels; the inverse of :func:`encode_normal_map`, Listing 3.7)."""
+    a = np.asarray(nmap)
+    if a.ndim != 3 or a.shape[2] not in (3, 4) or 0 in a.shape:
+        raise ValueError(f"a normal map must be (H, W, 3|4), got shape {a.shape}")
+    if a.dtype in (np.uint8, np.uint16):
+        n = a[..., :2].astype(np.float64) * (2.0 / np.iinfo(a.dtype).max) - 1.0
+    elif a.dtype.kind == "f":
+        n = a[..., :2].astype(np.float64)
+        if not np.all(np.isfinite(n)):
+            raise ValueError("a normal map must be finite (found NaN or inf)")
+        if np.any(np.abs(n) > 1 + 1e-3):
+            raise ValueError("a float normal map must hold unit normals (components in [-1, 1])")
+    else:
+        raise ValueError(f"normal maps are uint8, uint16 or float, got {a.dtype}")
+    return normals_to_slopes(n)
+
+
+def slopes_to_moments(slopes, base=None) -> np.ndarray:
+    """Level-0 moments ``(H, W, 5)`` (float64) of slope texels (Listing 3.7): each texel is a
+    single facet ``(x~, y~, x~^2, y~^2, x~ y~)``, convolved with the base lobe's moments
+    ``base (5,)`` when given (Listing 5.1)."""
+    s = np.asarray(slopes, dtype=np.float64)
+    x, y = s[..., 0], s[..., 1]
+    E = np.stack([x, y, x * x, y * y, x * y], axis=-1)
+    return E if base is None else convolve(E, base)
+
+
+def base_moments(roughness) -> np.ndarray | None:
+    """Moments ``(5,)`` of a base roughness: ``None``, an isotropic ``alpha``, ``(alpha_x,
+    alpha_y)``, a :class:`~microfacet.Beckmann` or a BRDF whose ``distribution`` is one."""
+    if roughness is None:
+        return None
+    d = getattr(roughness, "distribution", roughness)
+    if isinstance(d, Beckmann):
+        E = np.stack(np.broadcast_arrays(*d.moments()), axis=-1)
+        if E.shape != (5,):
+            raise ValueError("the base roughness must be a single Beckmann lobe")
+        return E
+    if hasattr(d, "moments"):
+        raise ValueError(f"the base roughness must be Beckmann (LEAN moments), got {type(d).__name__}")
+    a = np.asarray(roughness, dtype=np.float64)
+    if a.shape not in ((), (2,)) or not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise ValueError(f"roughness must be alpha >= 0 or (alpha_x, alpha_y), got {roughness!r}")
+    ax, ay = (a, a) if a.shape == () else a
+    return to_moments(ax, ay)
+
+
+def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0) -> np.ndarray:
+    """Level-0 LEAN moments ``(H, W, 5)`` float32 of a normal map with a base roughness
+    (Listing 3.7; ``roughness`` as in :func:`base_moments`). ``scale`` multiplies the
+    map's slopes before the base lobe is added (height scaling ``beta``, Sec. 3.4)."""
+    if not np.isfinite(scale):
+        raise ValueError(f"scale must be finite, got {scale!r}")
+    slopes = decode_normal_map(nmap) * float(scale)
+    return slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
+
+
+@numba.njit(parallel=True, cache=True)
+def _height_moments(xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
+    h, w = xi.shape
+    b1, b2, b3, b4, b5 = base[0], base[1], base[2], base[3], base[4]
+    for j in numba.prange(h):
+        jt = j - 1 if j > 0 else (h - 1 if wrap else 0)
+        jb = j + 1 if j < h - 1 else (0 if wrap else h - 1)
+        for i in range(w):
+            il = i - 1 if i > 0 else (w - 1 if wrap else 0)
+            ir = i + 1 if i < w - 1 else (0 if wrap else w - 1)
+            x = sx_scale * (np.float64(xi[j, ir]) - np.float64(xi[j, il]))
+            y = sy_scale * (np.float64(xi[jt, i]) - np.float64(xi[jb, i]))
+            out[j, i, 0] = x + b1
+            out[j, i, 1] = y + b2
+            out[j, i, 2] = x * x + b3 + 2.0 * x * b1
+            out[j, i, 3] = y * y + b4 + 2.0 * y * b2
+            out[j, i, 4] = x * y + b5 + x * b2 + y * b1
+
+
+def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
+    """LEAN/LEADR MIP pyramid of a height map: a list of ``(H_k, W_k, 5)`` float32 moment
+    maps ``E1..E5``, level 0 first, down to ``1 x 1``.
+
+    Level 0 holds the moments of the central-difference slopes of ``scale * height`` in
+    units of the unit uv square (Sec. 3.4, Listing 3.6), convolved with the base
+    ``roughness`` (Listing 5.1; ``None``, ``alpha``, ``(alpha_x, alpha_y)`` or a Beckmann
+    lobe); the other levels are exact averages (:func:`microfacet.leadr.mip_pyramid`).
+    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage).
+    """
+    xi = _check_height(height)
+    _check_border(border)
+    if not np.isfinite(scale):
+        raise ValueError(f"scale must be finite, got {scale!r}")
+    if xi.dtype not in (np.float32, np.float64):
+        xi = xi.astype(np.float64)
+    base = base_moments(roughness)
+    base = np.zeros(5) if base is None else base
+    h, w = xi.shape
+    level0 = np.empty((h, w, 5), dtype=np.float32)
+    _height_moments(np.ascontiguousarray(xi), 0.5 * w * float(scale), 0.5 * h * float(scale),
+                    border == "wrap", base, level0)
+    return mip_pyramid(level0)
+
+
+def bake_reference(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
+    """:func:`bake` written with plain NumPy (float64 throughout): the reference it is
+    tested against."""
+    E = slopes_to_moments(height_to_slopes(height, scale, border), base_moments(roughness))
+    return mip_pyramid(E)
+
+
+def merge_material(pyramid, roughness) -> list[np.ndarray]:
+    """Every level of ``pyramid`` convolved with a base lobe (Ch. 5 downsampling operator:
+    moment addition, Listing 5.1), e.g. ``fit.to_beckmann()`` of a fitted material.
+    Convolution with a fixed lobe is affine in the moments, so it commutes with MIP
+    averaging: merging the pyramid equals baking with that base roughness."""
+    base = base_moments(roughness)
+    if base is None:
+        return [np.array(level) for level in pyramid]
+    return [convolve(level, base).astype(level.dtype) for level in pyramid]
