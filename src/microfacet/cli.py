@@ -217,6 +217,7 @@ def _run_bake(args) -> int:
         pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(load_normal_map(args.map), base, args.scale))
     else:
         pyramid = leadr.bake(load_height_map(args.map), args.scale, base, border=args.border)
+    out.parent.mkdir(parents=True, exist_ok=True)
     leadr.write_pyramid(out, pyramid)
     png = write_png(out.with_suffix(".png"), preview_image(pyramid))
     top = leadr.from_moments(pyramid[-1][0, 0])
