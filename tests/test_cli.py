@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 
 from microfacet.cli import main
-from microfacet.demo import fit_examples, thesis_figures
+from microfacet.demo import LEADR_STEPS, fit_examples, thesis_figures
 from microfacet.io import read_exr
 
 SMALL = ["--size", "16", "--spp", "2"]
@@ -37,16 +37,20 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
     srcs = re.findall(r'<img src="([^"]+)"', html)
     figures = thesis_figures()
     n_panels = sum(len(f.panels) for f in figures)
-    # environment, 2 renders per panel, lobes per figure, a comparison picture per fitted material
-    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_examples())
+    # environment, 2 renders per panel, lobes per figure, a comparison picture per fitted
+    # material, and the LEADR section's images (3 per light and level)
+    leadr_srcs = [s for s in srcs if s.startswith("leadr/")]
+    assert len(leadr_srcs) == LEADR_STEPS
+    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_examples()) + LEADR_STEPS
     for src in srcs:
         with Image.open(demo_dir / src) as im:
             assert im.format == "PNG"
     for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05",
-                "Fitting by power iterations", "GGX α = 0.2, gold"):
+                "Fitting by power iterations", "GGX α = 0.2, gold", "LEADR"):
         assert key in html
-    exrs = sorted(demo_dir.rglob("*.exr"))
+    exrs = sorted(p for p in demo_dir.rglob("*.exr") if p.parent.name != "leadr")
     assert len(exrs) == 1 + 2 * n_panels
+    assert len(list((demo_dir / "leadr").glob("*.exr"))) == LEADR_STEPS
     for path in exrs:
         img = read_exr(path)
         assert img.shape in {(16, 16, 3), (64, 128, 3)} and img.min() >= 0

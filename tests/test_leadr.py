@@ -505,7 +505,7 @@ def test_cli_bake_normal_map_and_material(tmp_path, capsys):
     (["bake", "{d}/junk.png", "-o", "{d}/o.exr"], "junk.png: not a PNG or OpenEXR image"),
     (["bake", "{h}", "-o", "{d}/o.exr", "--roughness", "-1"], "--roughness must be >= 0"),
     (["bake", "{h}", "-o", "{d}/o.exr", "--normal-map"], "a normal map needs R, G, B channels"),
-    (["bake", "{h}", "-o", "{d}/no/such/dir/o.exr"], "no/such/dir"),
+    (["bake", "{h}", "-o", "{d}/junk.png/o.exr"], "junk.png"),        # a file where a folder should be
     (["bake", "{d}/o.png", "-o", "{d}/o.exr"], "would overwrite the input"),
 ])
 def test_cli_bake_bad_input_is_one_line_and_exit_1(argv, message, height_png, tmp_path, capsys):

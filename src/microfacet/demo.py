@@ -359,10 +359,14 @@ def default_workers() -> int:
     return max(1, min(4, cpus))
 
 
+LEADR_LEVELS = (1, 2, 3, 4, 5)
+LEADR_STEPS = 2 * 3 * len(LEADR_LEVELS)   # progress steps of leadr_section (lights x images x levels)
+
+
 def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED,
              workers: int = 1, progress: bool = False,
              figures: Sequence[DemoFigure] | None = None,
-             fits: Sequence[FitExample] | None = None) -> Path:
+             fits: Sequence[FitExample] | None = None, leadr: bool = True) -> Path:
     """Render every figure into ``out_dir`` and write ``out_dir/index.html`` (last).
 
     Parameters
@@ -380,6 +384,9 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     fits : sequence of FitExample, optional
         Materials of the fitting section (:func:`fit_section`); defaults to
         :func:`fit_examples`, an empty sequence leaves the section out.
+    leadr : bool
+        Include the LEADR section (Fig. 5.3: naive MIP vs LEADR against a supersampled
+        reference, :func:`microfacet.leadr.figures.leadr_section`).
 
     The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
     environment samples of panel ``j`` of figure ``i`` come from
@@ -397,7 +404,7 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     figures = thesis_figures() if figures is None else list(figures)
     env_map = procedural_sky()
     examples = fit_examples() if fits is None else list(fits)
-    total = sum(len(f.panels) + 1 for f in figures) + 1 + len(examples)
+    total = sum(len(f.panels) + 1 for f in figures) + 1 + len(examples) + (LEADR_STEPS if leadr else 0)
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
         tasks = [[pool.submit(render_panel, p.brdf, f.light, size, env_map, spp, (seed, i, j))
@@ -421,5 +428,10 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
             sections.append(_figure_html(fig, cells, "lobes.png", spp))
         if examples:
             sections.append(fit_section(out, size, examples, progress=bar.update))
-    title = "microfacet demo — thesis Figs. 2.2–2.6 and fitting (Ch. 4)"
+        if leadr:
+            from .leadr.figures import leadr_section
+            fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
+            sections.append(leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
+                                          progress=bar.update))
+    title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4) and LEADR (Fig. 5.3)"
     return write_text(out / "index.html", html_page(title, "\n".join(sections)))

@@ -13,6 +13,11 @@ from .maps import (base_moments, bake, bake_reference, decode_normal_map, encode
 from .mip import downsample_weights, lookup, mip_pyramid, mip_sizes
 from .moments import (clean_moments, clean_to_moments, convolve, covariance, from_moments,
                       scale_height, to_moments, transform)
+from . import shading
+from .downsample import FilteredSurface, base_lobe, downsample_operator, naive_pyramid
+from .shading import (MipEnvironment, artificial_micronormal, diffuse_directional, diffuse_sh,
+                      env_specular, point_light, sample_grid, sh_add_directional, sh_irradiance,
+                      sh_project)
 
 __all__ = ["to_moments", "from_moments", "convolve", "scale_height", "transform", "covariance",
            "clean_moments", "clean_to_moments",
@@ -21,4 +26,8 @@ __all__ = ["to_moments", "from_moments", "convolve", "scale_height", "transform"
            "bake", "bake_reference", "merge_material",
            "mip_pyramid", "mip_sizes", "downsample_weights", "lookup",
            "read_pyramid", "write_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
-           "gaussian_heightfield"]
+           "gaussian_heightfield",
+           "shading", "point_light", "env_specular", "MipEnvironment", "sample_grid",
+           "artificial_micronormal", "sh_project", "sh_add_directional", "sh_irradiance",
+           "diffuse_sh", "diffuse_directional",
+           "downsample_operator", "base_lobe", "naive_pyramid", "FilteredSurface"]

@@ -1,0 +1,129 @@
+"""The downsampling operator of displaced surfaces of arbitrary reflectance (thesis Ch. 5.1).
+
+A displaced surface is the sum of two independent random slope processes: the
+displacement map's (its LEADR MIP pyramid) and the base material's microfacets (a
+Beckmann lobe: analytic roughness, or any material fitted by power iterations and
+converted with ``fit.to_beckmann()``, Ch. 4). The slope PDF of the sum is the
+convolution of the two PDFs (Eq. 5.1-5.3); for Beckmann lobes it is Beckmann again and
+its linear moments are the sum of the two (Listing 5.1). Adding the base to every MIP
+level gives a pyramid whose texels are the microfacet BRDFs of the displaced surface at
+that resolution, so the surface shades at any resolution with one lookup per pixel.
+
+Also here: the *naive* MIP mapping that Fig. 5.3 compares against (unit normals
+averaged and renormalized, shaded with the base lobe only) and box supersampling of
+per-texel shading (the reference of the comparisons).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..brdf import MicrofacetBRDF
+from .maps import base_moments, slopes_to_moments
+from .moments import convolve, from_moments
+
+__all__ = ["base_lobe", "downsample_operator", "naive_slopes", "naive_pyramid", "box_average",
+           "FilteredSurface"]
+
+
+def base_lobe(base) -> np.ndarray:
+    """Moments ``(5,)`` of a base material: ``None`` (a mirror: zeros), an isotropic
+    ``alpha``, ``(alpha_x, alpha_y)``, a :class:`~microfacet.Beckmann`, a BRDF whose
+    ``distribution`` is Beckmann, any object with ``to_beckmann()`` (a fit of
+    :mod:`microfacet.fit`, converted by equal second slope moments, App. C), or the
+    moments ``(5,)`` themselves."""
+    if base is not None and hasattr(base, "to_beckmann"):
+        base = base.to_beckmann()
+    if isinstance(base, (np.ndarray, list, tuple)) and np.shape(base) == (5,):
+        return np.asarray(base, dtype=np.float64)
+    E = base_moments(base)
+    return np.zeros(5) if E is None else E
+
+
+def downsample_operator(pyramid, base) -> list[np.ndarray]:
+    """Every level of a LEADR ``pyramid`` (``mf.leadr.bake``) merged with the ``base``
+    material (:func:`base_lobe`) by moment addition (Ch. 5, Listing 5.1). The result's
+    levels are the displaced surface's Beckmann BRDFs at each resolution (same dtype as
+    the input levels). Merging is affine in the moments, so it commutes with the MIP
+    averaging: ``downsample_operator(bake(h), b) == bake(h, roughness=b)`` up to rounding."""
+    b = base_lobe(base)
+    return [convolve(level, b).astype(np.asarray(level).dtype) for level in pyramid]
+
+
+def box_average(values, factor: int, weights=None) -> np.ndarray:
+    """Average of ``values (H, W, ...)`` over ``factor x factor`` blocks, optionally
+    weighted by ``weights (H, W)`` (e.g. projected areas); ``H`` and ``W`` must be
+    multiples of ``factor``."""
+    v = np.asarray(values, dtype=np.float64)
+    f = int(factor)
+    h, w = v.shape[:2]
+    if f < 1 or h % f or w % f:
+        raise ValueError(f"map {h}x{w} is not made of {f}x{f} blocks")
+    extra = v.shape[2:]
+    if weights is None:
+        return v.reshape(h // f, f, w // f, f, *extra).mean(axis=(1, 3))
+    wt = np.asarray(weights, dtype=np.float64).reshape((h, w) + (1,) * len(extra))
+    num = (v * wt).reshape(h // f, f, w // f, f, *extra).sum(axis=(1, 3))
+    den = np.broadcast_to(wt, v.shape).reshape(h // f, f, w // f, f, *extra).sum(axis=(1, 3))
+    return np.divide(num, den, out=np.zeros_like(num), where=den > 0)
+
+
+def naive_slopes(level0, factor: int) -> np.ndarray:
+    """Slopes ``(H / f, W / f, 2)`` of naive MIP mapping of a normal map: the unit normals
+    of the texels' mean slopes (``level0[..., :2]``) averaged over ``f x f`` blocks and
+    renormalized (the "naive MIP mapping" of Fig. 5.3, which loses the roughness that
+    the normals' spread should become)."""
+    E = np.asarray(level0, dtype=np.float64)
+    n = np.stack([-E[..., 0], -E[..., 1], np.ones(E.shape[:2])], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    m = box_average(n, factor)
+    return np.stack([-m[..., 0] / m[..., 2], -m[..., 1] / m[..., 2]], axis=-1)
+
+
+def naive_pyramid(level0, base=None, levels: int | None = None) -> list[np.ndarray]:
+    """Moment pyramid ``(H_k, W_k, 5)`` of naive MIP mapping: each level a single facet
+    of the averaged normal (:func:`naive_slopes`, factor ``2^k``) with the ``base`` lobe
+    only. Stops at the first level whose size is not a whole number of blocks."""
+    E = np.asarray(level0, dtype=np.float64)
+    h, w = E.shape[:2]
+    b = base_lobe(base)
+    out, k = [], 0
+    while (levels is None or k < levels) and h % (1 << k) == 0 and w % (1 << k) == 0 \
+            and (1 << k) <= min(h, w):
+        out.append(slopes_to_moments(naive_slopes(E, 1 << k), b))
+        k += 1
+    return out
+
+
+class FilteredSurface:
+    """A displaced surface ready to shade at any resolution (Ch. 5, Fig. 5.2).
+
+    Parameters
+    ----------
+    pyramid : list of (H_k, W_k, 5)
+        LEADR pyramid of the displacement (``mf.leadr.bake(height, scale)``).
+    base : see :func:`base_lobe`
+        The base material's microfacet lobe, merged into every level.
+    fresnel : Fresnel, optional
+        Fresnel term of the BRDFs :meth:`brdf` returns (a fit's ``to_beckmann().fresnel``
+        when ``base`` is a fit and ``fresnel`` is not given).
+    """
+
+    def __init__(self, pyramid, base=None, fresnel=None):
+        if fresnel is None and base is not None and hasattr(base, "to_beckmann"):
+            fresnel = base.to_beckmann().fresnel
+        if fresnel is None and isinstance(base, MicrofacetBRDF):
+            fresnel = base.fresnel
+        self.base = base_lobe(base)
+        self.fresnel = fresnel
+        self.levels = downsample_operator(pyramid, self.base)
+
+    def moments(self, uv, footprint=0.0) -> np.ndarray:
+        """Filtered moments ``(..., 5)`` at ``uv`` over ``footprint`` (``mf.leadr.lookup``)."""
+        from .mip import lookup
+        return lookup(self.levels, uv, footprint)
+
+    def brdf(self, uv, footprint=0.0, shadowing: bool = True) -> MicrofacetBRDF:
+        """Per-pixel :class:`~microfacet.MicrofacetBRDF` (Beckmann parameters as arrays
+        over ``uv``'s leading shape) of the filtered surface."""
+        return MicrofacetBRDF(from_moments(self.moments(uv, footprint)), self.fresnel,
+                              shadowing=shadowing)
