@@ -5,7 +5,9 @@ and prints the path of its ``index.html``; ``microfacet validate`` checks the co
 numerically and prints their largest errors; ``microfacet fit INPUT -o OUT`` fits a
 measured BRDF (or every one in a folder) and writes the fits, their parameters and
 comparison pictures; ``microfacet bake MAP -o OUT.exr`` prefilters a height (or normal) map
-into a LEAN/LEADR moment MIP pyramid (multi-part EXR) with a PNG preview. Bad input prints one line on stderr and exits
+into a LEAN/LEADR moment MIP pyramid (multi-part EXR) with a PNG preview; ``microfacet
+glints NORMAL_MAP -o OUT.npz`` builds a normal map's Beckmann lobe mixture (glints) and
+``microfacet glints render OUT.npz -o IMG.png`` renders it. Bad input prints one line on stderr and exits
 with a non-zero status, without a traceback; long work shows a progress bar when stderr
 is a terminal and stays quiet otherwise (pipes, CI).
 """
@@ -15,6 +17,8 @@ import argparse
 import sys
 import warnings
 from collections.abc import Sequence
+
+import numpy as np
 
 from . import __version__
 from .errors import MicrofacetError
@@ -229,6 +233,70 @@ def _run_bake(args) -> int:
     return 0
 
 
+def _add_glints(sub) -> None:
+    p = sub.add_parser(
+        "glints", help="build a normal map's Beckmann lobe mixture for glints (.npz); "
+                       "'glints render' renders one",
+        description="Build the microsurface of a normal map (Chermain et al. 2019, Sec. 3): one "
+                    "noncentred Beckmann lobe per h x h texels, with slope moments E1..E5 of the "
+                    "bilinearly interpolated map under Gaussian kernels (Eq. 3-6), their MIP levels "
+                    "(Sec. 4.2.2) and the acceleration hierarchy (Sec. 5), written as a versioned "
+                    "OUT.npz. The map is an 8/16-bit PNG or an EXR, (n + 1) / 2 encoded (floats may "
+                    "hold n itself), 2 to 4 channels; n_z is reconstructed. "
+                    "Second form: 'microfacet glints render OUT.npz -o IMG.png'.")
+    p.add_argument("map", metavar="NORMAL_MAP", help="normal map, PNG or EXR")
+    p.add_argument("-o", "--output", metavar="OUT.npz", required=True, help="output microsurface (.npz added if missing)")
+    p.add_argument("--spacing", type=_finite_float, default=1.0, metavar="H",
+                   help="seed spacing h in texels (default 1: one lobe per texel)")
+    p.add_argument("--sigma-eps", type=_finite_float, default=0.01, metavar="S",
+                   help="floor of the lobes' slope standard deviations (default 0.01)")
+    p.add_argument("--encoding", choices=("auto", "offset", "signed"), default="auto",
+                   help="float (EXR) maps: (n + 1) / 2 ('offset'), n ('signed') or by content (default)")
+    p.set_defaults(run=_run_glints)
+
+
+def _run_glints(args) -> int:
+    from pathlib import Path
+
+    from .glints import Microsurface
+    out = Path(args.output)
+    out = out if out.suffix.lower() == ".npz" else out.with_name(out.name + ".npz")
+    source = Path(args.map)
+    if source.exists() and out.exists() and out.samefile(source):
+        raise MicrofacetError(f"{out}: output would overwrite the input {source}; choose another -o")
+    if args.spacing <= 0 or args.sigma_eps <= 0:
+        raise ValueError("--spacing and --sigma-eps must be > 0")
+    ms = Microsurface.from_normal_map(source, h=args.spacing, sigma_eps=args.sigma_eps, encoding=args.encoding)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    ms.save(out)
+    alpha = np.sqrt(2.0 * (ms.lobe_moments[:, 2:4] - ms.lobe_moments[:, :2] ** 2))
+    print(f"{out}: {ms.n_lobes} lobes ({ms.grid[1]} x {ms.grid[0]}) from a {ms.resolution[1]} x "
+          f"{ms.resolution[0]} map, {len(ms.mip)} MIP levels; lobe alpha median "
+          f"{float(np.median(alpha)):.4g}, max {float(alpha.max()):.4g}")
+    return 0
+
+
+# ---- hook for 'microfacet glints render OUT.npz -o IMG.png' (owned by the P-BRDF/figures work)
+def _add_glints_render(sub) -> None:
+    p = sub.add_parser("render", help="render a microsurface built by 'microfacet glints'")
+    p.add_argument("microsurface", metavar="OUT.npz", help="microsurface from 'microfacet glints'")
+    p.add_argument("-o", "--output", metavar="IMG.png", required=True, help="output image")
+    p.set_defaults(run=_run_glints_render)
+
+
+def _run_glints_render(args) -> int:
+    """HOOK: 'microfacet glints render' (to be filled by the glints rendering work)."""
+    raise MicrofacetError("glints render: not available")
+
+
+def _glints_render_parser() -> argparse.ArgumentParser:
+    """Parser of the second form ``microfacet glints render ...``."""
+    parser = _Parser(prog=f"{PROG} glints")
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    _add_glints_render(sub)
+    return parser
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``microfacet`` command."""
     parser = _Parser(prog=PROG, description="Multiscale microfacet rendering: BRDFs in slope space, "
@@ -239,6 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_validate(sub)
     _add_fit(sub)
     _add_bake(sub)
+    _add_glints(sub)
     return parser
 
 
@@ -257,8 +326,12 @@ def _one_line(e: Exception) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        args = build_parser().parse_args(argv)
+        if argv[:2] == ["glints", "render"]:        # second form of 'glints'
+            args = _glints_render_parser().parse_args(argv[1:])
+        else:
+            args = build_parser().parse_args(argv)
     except SystemExit as e:          # --help, --version, usage errors (already printed)
         return e.code if isinstance(e.code, int) else EXIT_USAGE
     try:

@@ -1,0 +1,11 @@
+"""Glints: high-definition specular normal maps as mixtures of Beckmann lobes, their
+patch NDF (P-NDF) and patch BRDF (Chermain, Claux and Mérillou 2019).
+
+``ms = Microsurface.from_normal_map(path)`` builds one Beckmann lobe per texel (Sec. 3,
+Eq. 1-6); ``ms.pndf(h, center, cov)`` evaluates the P-NDF of a Gaussian footprint (Eq. 9)
+through an acceleration hierarchy (Sec. 5); ``ms.pbrdf(center, cov)`` gives the patch
+BRDF (Eq. 7) with exact or approximate (MIP, Sec. 4.2.2) patch masking.
+"""
+from .microsurface import FORMAT_VERSION, Microsurface, interpolate_slopes, load_slopes
+
+__all__ = ["Microsurface", "load_slopes", "interpolate_slopes", "FORMAT_VERSION"]

@@ -1,0 +1,715 @@
+"""A normal map as a mixture of Beckmann lobes and its patch NDF (Chermain, Claux and
+Mérillou 2019, Sec. 3, 4.1, 4.2.2 and 5).
+
+Conventions
+-----------
+- The map covers the unit uv square: ``u`` along columns, ``v`` along rows, ``v = 0`` is
+  row 0 (the top row), texel ``(row, col)`` is centred at ``((col + 1/2) / W, (row + 1/2) / H)``
+  as in :mod:`microfacet.leadr.mip`. The map repeats (wrap) in both directions.
+- The *interpolated normal map* is the bilinear interpolation of the texels' slopes
+  ``(x~, y~) = (-n_x / n_z, -n_y / n_z)`` (the quantity whose moments the lobes carry).
+- Seeds ``u_i`` lie on a regular grid of ``nx x ny`` points spaced ``h`` texels apart
+  (``nx = round(W / h)``, so the spacing is ``W / nx`` texels), at the centres of the grid
+  cells. Lobe ``i = iy * nx + ix``. The kernel ``k_i`` is an isotropic (in texels) Gaussian
+  whose half maximum lies midway between seeds (FWHM = spacing) and whose integral is the
+  cell area (Sec. 3.1).
+- Lobe ``i`` is the Beckmann lobe of the five slope moments of the interpolated map under
+  ``k_i / h^2`` (Eq. 3-6), with slope standard deviations floored at ``sigma_eps`` and the
+  correlation clamped to ``|rho| <= 0.99``.
+- The P-NDF of a Gaussian footprint ``k_P`` (centre in uv, covariance in uv^2) is
+  ``D_P(h) = sum_i W_i D_i(h)`` with ``W_i = int k_i k_P du`` in closed form (Eq. 9):
+  ``W_i = A N(u_i; c, Sigma_P + sigma_k^2 I)`` with ``A`` the cell area. By default the
+  weights are normalized to sum to 1 (Sec. 4.1, "the sum of all weights is normalized");
+  ``normalize=False`` gives the raw closed form, whose sum is 1 up to the ripple of the sum
+  of the kernels (a few percent for footprints of about one texel) and the truncation.
+- Acceleration (Sec. 5): lobes whose footprint weight is beyond ``cutoff`` standard
+  deviations of ``Sigma_P + sigma_k^2 I`` (per axis) are dropped, which, the seeds being
+  a regular grid, is a rectangle of lobe indices; inside it a min/max quadtree of the
+  lobes' slope boxes (``mean +- slope_cutoff`` standard deviations; default 4, where
+  Sec. 5 uses the 99 % box, about 3: the 4-sigma box drops 1.3e-4 of each lobe's mass,
+  the 3-sigma one 5.4e-3) prunes, per half vector, the lobes whose slope box does not
+  contain the half vector's slope. The cost follows the number of contributing lobes,
+  not texels. The traversal is compiled (Numba, depth-first per half vector); a NumPy
+  breadth-first version is its reference, and footprints of at most 16 lobes are summed
+  directly (faster than any traversal).
+- Sum of the kernels: with FWHM = spacing, ``sum_i k_i(u)`` ripples between 0.889 (between
+  seeds) and 1.115 (on a seed), so the raw weights of footprints of about a texel do not
+  sum to 1; the default normalization removes this.
+"""
+from __future__ import annotations
+
+import os
+import zipfile
+from pathlib import Path
+
+import numba
+import numpy as np
+
+from ..errors import MicrofacetError
+from ..io.atomic import atomic_path
+from ..leadr.maps import normals_to_slopes
+from ..leadr.mip import mip_pyramid
+from ..leadr.moments import from_moments
+
+__all__ = ["Microsurface", "load_slopes", "interpolate_slopes", "lobe_moments_reference",
+           "FORMAT_VERSION", "FWHM_PER_SIGMA"]
+
+FORMAT_VERSION = 1
+#: Full width at half maximum of a Gaussian in units of its standard deviation.
+FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
+MAX_RHO = 0.99
+_MAGIC = "microfacet.glints.Microsurface"
+
+
+# --------------------------------------------------------------------------- normal maps
+def _float_encoding(a: np.ndarray) -> str:
+    """'signed' (n stored) or 'offset' ((n + 1) / 2 stored) for a float map, by content."""
+    if np.any(a[..., :2] < -1e-6):
+        return "signed"
+    if a.shape[2] >= 3:
+        signed = np.median(np.abs(np.sum(a[..., :3] ** 2, axis=-1) - 1.0))
+        offset = np.median(np.abs(np.sum((2.0 * a[..., :3] - 1.0) ** 2, axis=-1) - 1.0))
+        return "signed" if signed < offset else "offset"
+    return "offset"
+
+
+def load_slopes(path_or_array, encoding: str = "auto", z: str = "auto") -> np.ndarray:
+    """Texel slopes ``(H, W, 2)`` float64 of a normal map (a file or an array).
+
+    Files: 8/16-bit PNG ((n + 1) / 2 encoded) or EXR (float). Arrays: ``(H, W, C)`` with
+    ``C`` = 2, 3 or 4, ``uint8``/``uint16`` ((n + 1) / 2 encoded) or float. Only the first
+    ``z``: ``"reconstruct"`` recomputes ``n_z = sqrt(1 - n_x^2 - n_y^2)`` from the first two
+    channels (2-channel maps, maps with a constant blue channel); ``"stored"`` uses the
+    third channel, slopes ``(-n_x / n_z, -n_y / n_z)`` (maps whose normals are not unit
+    length, e.g. glitterman_scratches.png, lengths 0.49-1.46); ``"auto"`` uses the stored
+    ``n_z`` when there is a third channel that varies and is positive, else reconstructs.
+    ``encoding`` for float data: ``"signed"`` (n stored),
+    ``"offset"`` ((n + 1) / 2 stored) or ``"auto"`` (by content: negative values mean
+    signed; otherwise the reading whose 3-channel normals are closer to unit length).
+    """
+    if encoding not in ("auto", "signed", "offset"):
+        raise ValueError(f"encoding must be 'auto', 'signed' or 'offset', got {encoding!r}")
+    if z not in ("auto", "reconstruct", "stored"):
+        raise ValueError(f"z must be 'auto', 'reconstruct' or 'stored', got {z!r}")
+    name = None
+    if isinstance(path_or_array, (str, os.PathLike)):
+        from ..leadr.files import _read_image
+        name = Path(path_or_array)
+        a = _read_image(name)
+    else:
+        a = np.asarray(path_or_array)
+    where = f"{name}: " if name is not None else ""
+    if a.ndim != 3 or a.shape[2] not in (2, 3, 4) or 0 in a.shape:
+        raise MicrofacetError(f"{where}a normal map must be (H, W, 2|3|4), got shape {a.shape}")
+    nc = min(a.shape[2], 3)
+    if a.dtype in (np.uint8, np.uint16):
+        n = a[..., :nc].astype(np.float64) * (2.0 / np.iinfo(a.dtype).max) - 1.0
+    elif a.dtype.kind == "f":
+        if not np.all(np.isfinite(a[..., :nc])):
+            raise MicrofacetError(f"{where}a normal map must be finite (found NaN or inf)")
+        enc = _float_encoding(a) if encoding == "auto" else encoding
+        n = a[..., :nc].astype(np.float64)
+        if enc == "offset":
+            n = 2.0 * n - 1.0
+        if z != "stored" and np.any(np.abs(n[..., :2]) > 1 + 1e-3) and not (
+                z == "auto" and nc == 3 and n[..., 2].min() > 0):
+            raise MicrofacetError(f"{where}normal components must lie in [-1, 1] "
+                                  f"({enc} encoding); is the encoding right?")
+    else:
+        raise MicrofacetError(f"{where}normal maps are uint8, uint16 or float, got {a.dtype}")
+    if z == "stored" and nc < 3:
+        raise MicrofacetError(f"{where}z='stored' needs a third channel")
+    if z == "auto":
+        z = "stored" if nc == 3 and np.ptp(n[..., 2]) > 1e-3 and n[..., 2].min() > 0 else "reconstruct"
+    if z == "reconstruct":
+        if np.any(np.abs(n[..., :2]) > 1 + 1e-3):
+            raise MicrofacetError(f"{where}normal components must lie in [-1, 1] to reconstruct n_z; "
+                                  f"is the encoding right?")
+        return normals_to_slopes(n[..., :2])
+    nz = n[..., 2]
+    if np.any(nz <= 0):
+        raise MicrofacetError(f"{where}stored n_z must be > 0 (normals above the horizon)")
+    return np.stack([-n[..., 0] / nz, -n[..., 1] / nz], -1)
+
+
+def interpolate_slopes(slopes, uv) -> np.ndarray:
+    """Slopes ``(..., 2)`` of the bilinearly interpolated (wrapped) map at ``uv (..., 2)``."""
+    s = np.asarray(slopes, dtype=np.float64)
+    uv = np.asarray(uv, dtype=np.float64)
+    hgt, wid = s.shape[:2]
+    x, y = uv[..., 0] * wid - 0.5, uv[..., 1] * hgt - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    x0, y0 = x0.astype(np.int64) % wid, y0.astype(np.int64) % hgt
+    x1, y1 = (x0 + 1) % wid, (y0 + 1) % hgt
+    top = s[y0, x0] * (1 - fx) + s[y0, x1] * fx
+    bottom = s[y1, x0] * (1 - fx) + s[y1, x1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def _quadrature(sigma: float, samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """1D offsets (texels) and normalized Gaussian weights: a uniform grid of ``samples``
+    points per texel over ``+-3.5 sigma``."""
+    k = int(np.ceil(3.5 * sigma * samples))
+    o = np.arange(-k, k + 1) / samples
+    g = np.exp(-0.5 * (o / sigma) ** 2)
+    return o, g / g.sum()
+
+
+def lobe_moments_reference(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
+    """Raw moments ``(ny, nx, 5)`` of the interpolated map under each seed's normalized
+    kernel (Eq. 3-6) by tensor quadrature, vectorized over seeds (NumPy reference of the
+    compiled :func:`_lobe_moments`)."""
+    s = np.asarray(slopes, dtype=np.float64)
+    hgt, wid = s.shape[:2]
+    hx, hy = wid / nx, hgt / ny
+    sigma = hx / FWHM_PER_SIGMA        # texels (isotropic in texels; hx ~ hy)
+    o, g = _quadrature(sigma, samples)
+    tx = (np.arange(nx) + 0.5) * hx
+    ty = (np.arange(ny) + 0.5) * hy
+    out = np.zeros((ny, nx, 5))
+    for a, ga in zip(o, g):
+        for b, gb in zip(o, g):
+            uv = np.stack(np.broadcast_arrays(((tx + a) / wid)[None, :], ((ty + b) / hgt)[:, None]), -1)
+            m = interpolate_slopes(s, uv)
+            x, y = m[..., 0], m[..., 1]
+            out += (ga * gb) * np.stack([x, y, x * x, y * y, x * y], -1)
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
+    hgt, wid = s.shape[0], s.shape[1]
+    hx, hy = wid / nx, hgt / ny
+    out = np.zeros((ny, nx, 5))
+    for iy in numba.prange(ny):
+        for ix in range(nx):
+            acc = np.zeros(5)
+            for b in range(o.size):
+                y = (iy + 0.5) * hy + o[b] - 0.5
+                y0f = np.floor(y)
+                fy = y - y0f
+                y0 = int(y0f) % hgt
+                y1 = (y0 + 1) % hgt
+                for a in range(o.size):
+                    x = (ix + 0.5) * hx + o[a] - 0.5
+                    x0f = np.floor(x)
+                    fx = x - x0f
+                    x0 = int(x0f) % wid
+                    x1 = (x0 + 1) % wid
+                    w = g[a] * g[b]
+                    sx = ((s[y0, x0, 0] * (1 - fx) + s[y0, x1, 0] * fx) * (1 - fy)
+                          + (s[y1, x0, 0] * (1 - fx) + s[y1, x1, 0] * fx) * fy)
+                    sy = ((s[y0, x0, 1] * (1 - fx) + s[y0, x1, 1] * fx) * (1 - fy)
+                          + (s[y1, x0, 1] * (1 - fx) + s[y1, x1, 1] * fx) * fy)
+                    acc[0] += w * sx
+                    acc[1] += w * sy
+                    acc[2] += w * sx * sx
+                    acc[3] += w * sy * sy
+                    acc[4] += w * sx * sy
+            for c in range(5):
+                out[iy, ix, c] = acc[c]
+    return out
+
+
+def _floor_moments(E: np.ndarray, sigma_eps: float) -> np.ndarray:
+    """Moments with slope variances floored at ``sigma_eps^2`` and ``|rho| <= 0.99``."""
+    E = np.array(E, dtype=np.float64)
+    e1, e2 = E[..., 0], E[..., 1]
+    vx = np.maximum(E[..., 2] - e1 * e1, sigma_eps**2)
+    vy = np.maximum(E[..., 3] - e2 * e2, sigma_eps**2)
+    lim = MAX_RHO * np.sqrt(vx * vy)
+    cxy = np.clip(E[..., 4] - e1 * e2, -lim, lim)
+    E[..., 2], E[..., 3], E[..., 4] = vx + e1 * e1, vy + e2 * e2, cxy + e1 * e2
+    return E
+
+
+# --------------------------------------------------------------------------- lobes
+def _lobe_params(E: np.ndarray) -> np.ndarray:
+    """Per-lobe evaluation parameters ``(..., 6)``: mean (2), inverse covariance
+    ``(ixx, iyy, ixy)`` and ``-log(2 pi sqrt(det))``."""
+    e1, e2 = E[..., 0], E[..., 1]
+    vx, vy, cxy = E[..., 2] - e1 * e1, E[..., 3] - e2 * e2, E[..., 4] - e1 * e2
+    det = vx * vy - cxy * cxy
+    return np.stack([e1, e2, vy / det, vx / det, -cxy / det,
+                     -np.log(2.0 * np.pi * np.sqrt(det))], -1)
+
+
+def _p22(params: np.ndarray, x, y) -> np.ndarray:
+    """Gaussian slope PDF (Eq. 4) of lobes ``params (..., 6)`` at slopes ``x, y``."""
+    dx, dy = x - params[..., 0], y - params[..., 1]
+    q = params[..., 2] * dx * dx + params[..., 3] * dy * dy + 2.0 * params[..., 4] * dx * dy
+    return np.exp(params[..., 5] - 0.5 * q)
+
+
+def _half_slopes(h) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slopes of unit normals ``h (..., 3)`` and ``1 / cos^4`` (0 below the horizon)."""
+    h = np.asarray(h, dtype=np.float64)
+    if h.shape[-1:] != (3,):
+        raise ValueError(f"h must have a last axis of size 3, got shape {h.shape}")
+    z = h[..., 2]
+    up = z > 0
+    zs = np.where(up, z, 1.0)
+    inv4 = np.where(up, 1.0 / zs**4, 0.0)
+    return -h[..., 0] / zs, -h[..., 1] / zs, inv4
+
+
+def _check_footprint(center, cov) -> tuple[np.ndarray, np.ndarray]:
+    c = np.asarray(center, dtype=np.float64)
+    s = np.asarray(cov, dtype=np.float64)
+    if c.shape != (2,) or not np.all(np.isfinite(c)):
+        raise ValueError(f"center must be a finite uv pair (2,), got {center!r}")
+    if s.shape != (2, 2) or not np.all(np.isfinite(s)):
+        raise ValueError(f"cov must be a finite (2, 2) covariance in uv^2, got shape {s.shape}")
+    if abs(s[0, 1] - s[1, 0]) > 1e-12 * max(1.0, abs(s).max()) or s[0, 0] < 0 or s[1, 1] < 0 \
+            or s[0, 0] * s[1, 1] - s[0, 1] ** 2 < -1e-15 * max(1.0, abs(s).max()) ** 2:
+        raise ValueError("cov must be symmetric positive semi-definite")
+    return c, 0.5 * (s + s.T)
+
+
+# --------------------------------------------------------------------------- hierarchy
+def _box_pyramid(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Min/max pyramid of slope boxes ``(ny, nx, 2)``: node ``(l, y, x)`` bounds the lobes
+    ``[y 2^l, (y+1) 2^l) x [x 2^l, (x+1) 2^l)``; the top level is 1 x 1."""
+    levels = [(lo, hi)]
+    while levels[-1][0].shape[0] > 1 or levels[-1][0].shape[1] > 1:
+        a, b = levels[-1]
+        ny, nx = a.shape[:2]
+        py, px = ny % 2, nx % 2
+        if py or px:
+            a = np.pad(a, ((0, py), (0, px), (0, 0)), constant_values=np.inf)
+            b = np.pad(b, ((0, py), (0, px), (0, 0)), constant_values=-np.inf)
+        m, n = a.shape[0] // 2, a.shape[1] // 2
+        levels.append((a.reshape(m, 2, n, 2, 2).min(axis=(1, 3)),
+                       b.reshape(m, 2, n, 2, 2).max(axis=(1, 3))))
+    return levels
+
+
+def _traverse(levels, block, xq, yq):
+    """Breadth-first traversal of the box pyramid for the lobe rectangle ``block =
+    (x0, x1, y0, y1)`` (inclusive) and query slopes ``xq, yq (M,)``: the pairs (query,
+    lobe ``(y, x)``) whose slope box contains the query's slope."""
+    x0, x1, y0, y1 = block
+    span = max(x1 - x0, y1 - y0) + 1
+    lev = min(int(np.ceil(np.log2(span))) if span > 1 else 0, len(levels) - 1)
+    nys = np.arange(y0 >> lev, (y1 >> lev) + 1)
+    nxs = np.arange(x0 >> lev, (x1 >> lev) + 1)
+    ny_, nx_ = np.meshgrid(nys, nxs, indexing="ij")
+    q = np.repeat(np.arange(xq.size), ny_.size)
+    ny_ = np.tile(ny_.ravel(), xq.size)
+    nx_ = np.tile(nx_.ravel(), xq.size)
+    dy, dx = np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1])
+    while True:
+        lo, hi = levels[lev]
+        inside = ((lo[ny_, nx_, 0] <= xq[q]) & (xq[q] <= hi[ny_, nx_, 0])
+                  & (lo[ny_, nx_, 1] <= yq[q]) & (yq[q] <= hi[ny_, nx_, 1]))
+        q, ny_, nx_ = q[inside], ny_[inside], nx_[inside]
+        if lev == 0 or q.size == 0:
+            return q, ny_, nx_
+        lev -= 1
+        size_y, size_x = levels[lev][0].shape[:2]
+        q = np.repeat(q, 4)
+        ny_ = (2 * ny_[:, None] + dy).ravel()
+        nx_ = (2 * nx_[:, None] + dx).ravel()
+        keep = ((ny_ < size_y) & (nx_ < size_x)
+                & ((ny_ + 1) << lev > y0) & ((ny_ << lev) <= y1)
+                & ((nx_ + 1) << lev > x0) & ((nx_ << lev) <= x1))
+        q, ny_, nx_ = q[keep], ny_[keep], nx_[keep]
+
+
+def _flatten(levels):
+    """The box pyramid as flat arrays for the compiled traversal: ``lo, hi (nodes, 2)``,
+    level offsets, widths and heights."""
+    offs, nxs, nys, los, his = [], [], [], [], []
+    n = 0
+    for lo, hi in levels:
+        offs.append(n)
+        nys.append(lo.shape[0])
+        nxs.append(lo.shape[1])
+        los.append(lo.reshape(-1, 2))
+        his.append(hi.reshape(-1, 2))
+        n += lo.shape[0] * lo.shape[1]
+    return (np.ascontiguousarray(np.concatenate(los)), np.ascontiguousarray(np.concatenate(his)),
+            np.array(offs, np.int64), np.array(nxs, np.int64), np.array(nys, np.int64))
+
+
+@numba.njit(parallel=True, cache=True)
+def _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, params, W, x0, x1, y0, y1, out):  # pragma: no cover
+    """Compiled depth-first version of :func:`_traverse` that also sums ``W D_i``
+    (slope-space P22) into ``out`` per query."""
+    top = offs.size - 1
+    span = max(x1 - x0, y1 - y0) + 1
+    start = 0
+    while (1 << start) < span and start < top:
+        start += 1
+    nx0 = nxs[0]
+    for qi in numba.prange(xq.size):
+        x, y = xq[qi], yq[qi]
+        stack = np.empty((4 * (top + 2) + 8, 3), np.int64)
+        sp = 0
+        for ny_ in range(y0 >> start, (y1 >> start) + 1):
+            for nx_ in range(x0 >> start, (x1 >> start) + 1):
+                stack[sp, 0], stack[sp, 1], stack[sp, 2] = start, ny_, nx_
+                sp += 1
+        acc = 0.0
+        while sp > 0:
+            sp -= 1
+            lev, ny_, nx_ = stack[sp, 0], stack[sp, 1], stack[sp, 2]
+            k = offs[lev] + ny_ * nxs[lev] + nx_
+            if not (lo[k, 0] <= x and x <= hi[k, 0] and lo[k, 1] <= y and y <= hi[k, 1]):
+                continue
+            if lev == 0:
+                i = ny_ * nx0 + nx_
+                dx, dy = x - params[i, 0], y - params[i, 1]
+                qf = params[i, 2] * dx * dx + params[i, 3] * dy * dy + 2.0 * params[i, 4] * dx * dy
+                acc += W[ny_ - y0, nx_ - x0] * np.exp(params[i, 5] - 0.5 * qf)
+                continue
+            cl = lev - 1
+            for dy_ in range(2):
+                cy = 2 * ny_ + dy_
+                if cy >= nys[cl] or ((cy + 1) << cl) <= y0 or (cy << cl) > y1:
+                    continue
+                for dx_ in range(2):
+                    cx = 2 * nx_ + dx_
+                    if cx >= nxs[cl] or ((cx + 1) << cl) <= x0 or (cx << cl) > x1:
+                        continue
+                    stack[sp, 0], stack[sp, 1], stack[sp, 2] = cl, cy, cx
+                    sp += 1
+        out[qi] += acc
+
+
+# --------------------------------------------------------------------------- microsurface
+class Microsurface:
+    """A normal map as a mixture of Beckmann lobes ``D_n(m, u) ~ sum_i D_i(m) k_i(u)``
+    (Eq. 1-6) with an acceleration hierarchy (Sec. 5) and moment MIP levels (Sec. 4.2.2).
+
+    Build with :meth:`from_normal_map`; see the module docstring for the conventions.
+
+    Attributes
+    ----------
+    lobe_uv : (N, 2)
+        Lobe centres ``u_i`` in uv; lobe ``i = iy * nx + ix``.
+    lobe_moments : (N, 5)
+        ``E1..E5`` of each lobe in slope space (floored, Eq. 3-6).
+    kernel_sigma : (2,)
+        uv standard deviations ``(sigma_u, sigma_v)`` of the kernels ``k_i``.
+    resolution : (H, W)
+        The normal map's size in texels.
+    grid : (ny, nx)
+        Number of seeds per axis.
+    mip : list of (ny_l, nx_l, 5)
+        Lobe-moment MIP levels (level 0 = the lobes, averaged 2 x 2 upwards).
+    slopes : (H, W, 2)
+        The texel slopes (for the interpolated map, e.g. to sample a footprint).
+    """
+
+    def __init__(self, moments, slopes, h: float = 1.0, sigma_eps: float = 0.01,
+                 cutoff: float = 3.0, slope_cutoff: float = 4.0):
+        grid = np.asarray(moments, dtype=np.float64)
+        if grid.ndim != 3 or grid.shape[2] != 5 or 0 in grid.shape:
+            raise ValueError(f"moments must be an (ny, nx, 5) lobe grid, got shape {grid.shape}")
+        if not np.all(np.isfinite(grid)):
+            raise ValueError("lobe moments must be finite")
+        if not (cutoff > 0 and slope_cutoff > 0):
+            raise ValueError(f"cutoff and slope_cutoff must be > 0, got {cutoff}, {slope_cutoff}")
+        self._grid = _floor_moments(grid, sigma_eps)
+        self.slopes = np.asarray(slopes, dtype=np.float64)
+        self.h, self.sigma_eps = float(h), float(sigma_eps)
+        self.cutoff, self.slope_cutoff = float(cutoff), float(slope_cutoff)
+        ny, nx = grid.shape[:2]
+        self.grid = (ny, nx)
+        self.resolution = tuple(int(v) for v in self.slopes.shape[:2])
+        self.kernel_sigma = np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA
+        iy, ix = np.divmod(np.arange(nx * ny), nx)
+        self.lobe_uv = np.stack([(ix + 0.5) / nx, (iy + 0.5) / ny], -1)
+        self.lobe_moments = self._grid.reshape(-1, 5)
+        self._params = _lobe_params(self._grid)
+        e1, e2 = self._grid[..., 0], self._grid[..., 1]
+        std = np.sqrt(np.stack([self._grid[..., 2] - e1 * e1, self._grid[..., 3] - e2 * e2], -1))
+        mean = self._grid[..., :2]
+        self._boxes = _box_pyramid(mean - self.slope_cutoff * std, mean + self.slope_cutoff * std)
+        self._flat = _flatten(self._boxes)
+        self._flat_params = np.ascontiguousarray(self._params.reshape(-1, 6))
+        self.mip = mip_pyramid(self._grid)
+
+    # ----------------------------------------------------------------- construction
+    @classmethod
+    def from_normal_map(cls, path_or_array, h: float = 1.0, sigma_eps: float = 0.01, *,
+                        samples: int = 4, encoding: str = "auto", z: str = "auto",
+                        **kwargs) -> "Microsurface":
+        """Lobe mixture of a normal map (Sec. 3): one lobe per ``h x h`` texels.
+
+        Parameters
+        ----------
+        path_or_array : path or (H, W, C) array
+            Normal map (see :func:`load_slopes` for ``encoding`` and ``z``).
+        h : float
+            Seed spacing in texels (the paper uses 1).
+        sigma_eps : float
+            Floor of each lobe's slope standard deviations (Sec. 3.2, 0.01).
+        samples : int
+            Quadrature points per texel and axis for the lobe moments (Eq. 6).
+        cutoff, slope_cutoff : float
+            Truncation of the footprint weights (standard deviations of ``Sigma_P +
+            sigma_k^2``) and of the lobes' slope boxes of the hierarchy (Sec. 5).
+        """
+        slopes = load_slopes(path_or_array, encoding, z)
+        if not (np.isfinite(h) and h > 0):
+            raise ValueError(f"h must be > 0 (texels), got {h!r}")
+        if not (np.isfinite(sigma_eps) and sigma_eps > 0):
+            raise ValueError(f"sigma_eps must be > 0, got {sigma_eps!r}")
+        if int(samples) < 1:
+            raise ValueError(f"samples must be >= 1, got {samples!r}")
+        hgt, wid = slopes.shape[:2]
+        nx, ny = max(1, int(round(wid / h))), max(1, int(round(hgt / h)))
+        o, g = _quadrature((wid / nx) / FWHM_PER_SIGMA, int(samples))
+        raw = _lobe_moments(np.ascontiguousarray(slopes), nx, ny, o, g)
+        return cls(raw, slopes, h=h, sigma_eps=sigma_eps, **kwargs)
+
+    def __repr__(self) -> str:
+        return (f"Microsurface({self.grid[1]} x {self.grid[0]} lobes from a {self.resolution[1]} x "
+                f"{self.resolution[0]} map, h={self.h:g}, sigma_eps={self.sigma_eps:g})")
+
+    @property
+    def n_lobes(self) -> int:
+        return self.lobe_moments.shape[0]
+
+    def lobes(self, indices=None):
+        """The lobes ``indices`` as one :class:`microfacet.Beckmann` with array parameters."""
+        E = self.lobe_moments if indices is None else self.lobe_moments[np.asarray(indices)]
+        return from_moments(E, min_alpha=np.sqrt(2.0) * self.sigma_eps * 0.5, max_rho=MAX_RHO)
+
+    def slopes_at(self, uv) -> np.ndarray:
+        """Slopes ``(..., 2)`` of the interpolated normal map at ``uv (..., 2)``."""
+        return interpolate_slopes(self.slopes, uv)
+
+    def normal_at(self, uv) -> np.ndarray:
+        """Unit normals ``(..., 3)`` of the interpolated normal map at ``uv (..., 2)``."""
+        s = self.slopes_at(uv)
+        inv = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
+        return np.stack([-s[..., 0] * inv, -s[..., 1] * inv, inv], -1)
+
+    # ----------------------------------------------------------------- weights (Eq. 9)
+    def _blocks(self, center, cov, nx: int, ny: int, cutoff: float):
+        """Lobe rectangles (non-wrapped, inclusive) and their uv shifts, and the combined
+        covariance, for a footprint over a ``nx x ny`` seed grid."""
+        ks = np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA
+        S = cov + np.diag(ks**2)
+        r = cutoff * np.sqrt(np.diag(S))
+        blocks = []
+        rng = []
+        for n, c, rr in ((nx, center[0], r[0]), (ny, center[1], r[1])):
+            i0 = int(np.ceil((c - rr) * n - 0.5))
+            i1 = int(np.floor((c + rr) * n - 0.5))
+            parts = []
+            for t in range(i0 // n, i1 // n + 1):
+                a, b = max(i0, t * n) - t * n, min(i1, t * n + n - 1) - t * n
+                if a <= b:
+                    parts.append((a, b, float(t)))
+            rng.append(parts)
+        for ax, bx, tx in rng[0]:
+            for ay, by, ty in rng[1]:
+                blocks.append(((ax, bx, ay, by), (tx, ty)))
+        return blocks, S
+
+    def _weights_grid(self, center, cov, nx, ny, cutoff, normalize):
+        center, cov = _check_footprint(center, cov)
+        blocks, S = self._blocks(center, cov, nx, ny, cutoff)
+        det = S[0, 0] * S[1, 1] - S[0, 1] ** 2
+        inv = np.array([S[1, 1], S[0, 0], -S[0, 1]]) / det
+        area = 1.0 / (nx * ny)
+        out = []
+        total = 0.0
+        for (x0, x1, y0, y1), (tx, ty) in blocks:
+            du = (np.arange(x0, x1 + 1) + 0.5) / nx + tx - center[0]
+            dv = (np.arange(y0, y1 + 1) + 0.5) / ny + ty - center[1]
+            du, dv = du[None, :], dv[:, None]
+            q = inv[0] * du * du + inv[1] * dv * dv + 2 * inv[2] * du * dv
+            W = area * np.exp(-0.5 * q) / (2 * np.pi * np.sqrt(det))
+            out.append(W)
+            total += W.sum()
+        if normalize and total > 0:
+            out = [W / total for W in out]
+        return blocks, out
+
+    def weights(self, center, cov, *, normalize: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Lobes contributing to the footprint ``k_P`` and their weights (Eq. 9).
+
+        Parameters
+        ----------
+        center : (2,)
+            Footprint centre in uv.
+        cov : (2, 2)
+            Footprint covariance in uv^2 (0 is a point footprint).
+        normalize : bool
+            Divide the weights by their sum (default, Sec. 4.1); else the raw closed form
+            ``W_i = A N(u_i; c, Sigma_P + sigma_k^2 I)``.
+
+        Returns
+        -------
+        indices : (K,) int64
+            Lobe indices (a lobe appears once per periodic image the footprint covers).
+        W : (K,)
+            Their weights.
+        """
+        nx = self.grid[1]
+        blocks, Ws = self._weights_grid(center, cov, self.grid[1], self.grid[0], self.cutoff, normalize)
+        idx, ws = [], []
+        for ((x0, x1, y0, y1), _), W in zip(blocks, Ws):
+            iy, ix = np.meshgrid(np.arange(y0, y1 + 1), np.arange(x0, x1 + 1), indexing="ij")
+            idx.append((iy * nx + ix).ravel())
+            ws.append(W.ravel())
+        if not idx:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return np.concatenate(idx).astype(np.int64), np.concatenate(ws)
+
+    # ----------------------------------------------------------------- P-NDF (Eq. 9)
+    def pndf(self, h, center, cov, *, normalize: bool = True, method: str = "auto") -> np.ndarray:
+        """Patch NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9) at unit normals ``h (..., 3)``.
+
+        ``method``: ``"brute"`` sums every lobe of :meth:`weights` (NumPy);
+        ``"hierarchy"`` traverses the slope-box quadtree (Sec. 5) depth-first per half
+        vector (compiled), skipping lobes whose slope box (``slope_cutoff`` standard
+        deviations) does not contain ``h``'s slope; ``"hierarchy-numpy"`` is the same
+        traversal breadth-first in NumPy (the reference of the compiled one); ``"auto"``
+        uses the compiled hierarchy when the footprint has more than 16 lobes.
+        """
+        if method not in ("auto", "brute", "hierarchy", "hierarchy-numpy"):
+            raise ValueError(f"method must be 'auto', 'brute', 'hierarchy' or 'hierarchy-numpy', "
+                             f"got {method!r}")
+        xq, yq, inv4 = _half_slopes(h)
+        shape = xq.shape
+        xq, yq, inv4 = xq.ravel(), yq.ravel(), inv4.ravel()
+        blocks, Ws = self._weights_grid(center, cov, self.grid[1], self.grid[0], self.cutoff, normalize)
+        n = sum(W.size for W in Ws)
+        if method == "auto":
+            method = "hierarchy" if n > 16 else "brute"
+        out = np.zeros(xq.size)
+        if method == "brute":
+            params = np.concatenate([self._params[y0:y1 + 1, x0:x1 + 1].reshape(-1, 6)
+                                     for (x0, x1, y0, y1), _ in blocks]) if blocks else np.zeros((0, 6))
+            W = np.concatenate([w.ravel() for w in Ws]) if Ws else np.zeros(0)
+            chunk = max(1, 2_000_000 // max(1, W.size))
+            for s in range(0, xq.size, chunk):
+                sl = slice(s, s + chunk)
+                out[sl] = _p22(params[None], xq[sl, None], yq[sl, None]) @ W
+        elif method == "hierarchy":
+            lo, hi, offs, nxs, nys = self._flat
+            for ((x0, x1, y0, y1), _), W in zip(blocks, Ws):
+                _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, self._flat_params,
+                              np.ascontiguousarray(W), x0, x1, y0, y1, out)
+        else:
+            for ((x0, x1, y0, y1), _), W in zip(blocks, Ws):
+                q, iy, ix = _traverse(self._boxes, (x0, x1, y0, y1), xq, yq)
+                if q.size:
+                    val = W[iy - y0, ix - x0] * _p22(self._params[iy, ix], xq[q], yq[q])
+                    out += np.bincount(q, weights=val, minlength=xq.size)
+        return (out * inv4).reshape(shape)
+
+    def slope_pdf(self, slopes, center, cov, **kwargs) -> np.ndarray:
+        """The P-NDF in slope space, ``P_P(m~) = D_P(m) cos^4 theta_m`` at slopes ``(..., 2)``."""
+        s = np.asarray(slopes, dtype=np.float64)
+        inv = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
+        m = np.stack([-s[..., 0] * inv, -s[..., 1] * inv, inv], -1)
+        return self.pndf(m, center, cov, **kwargs) * inv**4
+
+    def sample_slopes(self, u, center, cov, *, normalize: bool = True) -> np.ndarray:
+        """Slopes ``(..., 2)`` distributed as the P-NDF in slope space (density
+        :meth:`slope_pdf`, i.e. ``D_P(m) cos m`` per solid angle): a lobe is chosen with
+        probability ``W_i / sum W`` (``u[..., 0]``), then its Gaussian (Eq. 4) is sampled
+        (Box-Muller, ``u[..., 1:3]``). ``u (..., 3)`` in ``[0, 1)``. With
+        ``normalize=False`` the density is ``slope_pdf / sum W``."""
+        u = np.asarray(u, dtype=np.float64)
+        if u.shape[-1:] != (3,):
+            raise ValueError(f"u must have a last axis of size 3, got shape {u.shape}")
+        idx, W = self.weights(center, cov, normalize=normalize)
+        if W.size == 0 or W.sum() <= 0:
+            raise ValueError("the footprint has no lobe")
+        cdf = np.cumsum(W) / W.sum()
+        k = idx[np.minimum(np.searchsorted(cdf, u[..., 0], side="right"), W.size - 1)]
+        E = self.lobe_moments[k]
+        e1, e2 = E[..., 0], E[..., 1]
+        vx, vy, cxy = E[..., 2] - e1 * e1, E[..., 3] - e2 * e2, E[..., 4] - e1 * e2
+        r = np.sqrt(-2.0 * np.log1p(-np.clip(u[..., 1], 0.0, 1.0 - 1e-16)))
+        g1, g2 = r * np.cos(2 * np.pi * u[..., 2]), r * np.sin(2 * np.pi * u[..., 2])
+        lxx = np.sqrt(vx)
+        lyx = cxy / lxx
+        lyy = np.sqrt(np.maximum(vy - lyx * lyx, 0.0))
+        return np.stack([e1 + lxx * g1, e2 + lyx * g1 + lyy * g2], -1)
+
+    # ----------------------------------------------------------------- MIP (Sec. 4.2.2)
+    def mip_level(self, cov) -> int:
+        """MIP level whose lobe spacing matches the footprint's largest std."""
+        _, cov = _check_footprint((0.0, 0.0), cov)
+        sd = np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))
+        spacing = 1.0 / max(self.grid)
+        lev = int(np.floor(np.log2(sd / spacing))) if sd > spacing else 0
+        return int(np.clip(lev, 0, len(self.mip) - 1))
+
+    def mip_moments(self, center, cov, level: int | None = None) -> np.ndarray:
+        """Moments ``(5,)`` of the single filtered lobe of a footprint (Sec. 4.2.2): the
+        ``W``-weighted average of the lobes of MIP level ``level`` (default
+        :meth:`mip_level`), with kernels sized to that level's texels."""
+        lev = self.mip_level(cov) if level is None else int(level)
+        if not 0 <= lev < len(self.mip):
+            raise ValueError(f"level must lie in [0, {len(self.mip) - 1}], got {level}")
+        grid = self.mip[lev]
+        ny, nx = grid.shape[:2]
+        blocks, Ws = self._weights_grid(center, cov, nx, ny, self.cutoff, True)
+        E = np.zeros(5)
+        for ((x0, x1, y0, y1), _), W in zip(blocks, Ws):
+            E += np.tensordot(W, grid[y0:y1 + 1, x0:x1 + 1], axes=([0, 1], [0, 1]))
+        return E
+
+    def mip_lobe(self, center, cov, level: int | None = None):
+        """The filtered lobe of :meth:`mip_moments` as a :class:`microfacet.Beckmann`."""
+        return from_moments(self.mip_moments(center, cov, level), max_rho=MAX_RHO)
+
+    # ----------------------------------------------------------------- P-BRDF
+    def pbrdf(self, center, cov, fresnel=None, exact: bool = True):
+        """The patch BRDF (Eq. 7) of a footprint; see :class:`microfacet.glints.pbrdf.PatchBRDF`."""
+        from .pbrdf import PatchBRDF
+        return PatchBRDF(self, center, cov, fresnel, exact)
+
+    # ----------------------------------------------------------------- files
+    def save(self, path) -> Path:
+        """Write a versioned ``.npz`` atomically; return its path."""
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as f:
+                np.savez_compressed(
+                    f, magic=np.array(_MAGIC), version=np.array(FORMAT_VERSION),
+                    moments=self._grid, slopes=self.slopes.astype(np.float32),
+                    params=np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff]))
+        return path
+
+    @classmethod
+    def load(cls, path) -> "Microsurface":
+        """Read a file written by :meth:`save`; errors name the file."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if "magic" not in z.files or str(z["magic"]) != _MAGIC:
+                    raise MicrofacetError(f"{path}: not a microfacet glints microsurface (.npz from "
+                                          f"'microfacet glints')")
+                version = int(z["version"])
+                if version != FORMAT_VERSION:
+                    raise MicrofacetError(f"{path}: unsupported microsurface format version {version} "
+                                          f"(this microfacet reads {FORMAT_VERSION})")
+                moments, slopes, params = z["moments"], z["slopes"], z["params"]
+        except FileNotFoundError:
+            raise MicrofacetError(f"{path}: no such file") from None
+        except IsADirectoryError:
+            raise MicrofacetError(f"{path}: is a directory, not a microsurface file") from None
+        except (ValueError, OSError, KeyError, zipfile.BadZipFile, EOFError) as e:
+            raise MicrofacetError(f"{path}: unreadable or corrupt microsurface file ({e})") from None
+        if moments.ndim != 3 or moments.shape[2] != 5 or slopes.ndim != 3 or slopes.shape[2] != 2 \
+                or params.shape != (4,):
+            raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
+        if not (np.all(np.isfinite(moments)) and np.all(np.isfinite(slopes)) and np.all(np.isfinite(params))):
+            raise MicrofacetError(f"{path}: corrupt microsurface file (non-finite values)")
+        h, eps, cutoff, scut = (float(v) for v in params)
+        try:
+            return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut)
+        except ValueError as e:
+            raise MicrofacetError(f"{path}: corrupt microsurface file ({e})") from None
