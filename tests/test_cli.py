@@ -41,14 +41,16 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
     # material, and the LEADR section's images (3 per light and level)
     leadr_srcs = [s for s in srcs if s.startswith("leadr/")]
     assert len(leadr_srcs) == LEADR_STEPS
-    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_examples()) + LEADR_STEPS
+    glints_srcs = [s for s in srcs if s.startswith("glints/")]
+    assert len(glints_srcs) == 5                   # normal map, exact, approx., naive x 2
+    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_examples()) + LEADR_STEPS + 5
     for src in srcs:
         with Image.open(demo_dir / src) as im:
             assert im.format == "PNG"
     for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05",
-                "Fitting by power iterations", "GGX α = 0.2, gold", "LEADR"):
+                "Fitting by power iterations", "GGX α = 0.2, gold", "LEADR", "Glints"):
         assert key in html
-    exrs = sorted(p for p in demo_dir.rglob("*.exr") if p.parent.name != "leadr")
+    exrs = sorted(p for p in demo_dir.rglob("*.exr") if p.parent.name not in ("leadr", "glints"))
     assert len(exrs) == 1 + 2 * n_panels
     assert len(list((demo_dir / "leadr").glob("*.exr"))) == LEADR_STEPS
     for path in exrs:

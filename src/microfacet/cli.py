@@ -281,12 +281,44 @@ def _add_glints_render(sub) -> None:
     p = sub.add_parser("render", help="render a microsurface built by 'microfacet glints'")
     p.add_argument("microsurface", metavar="OUT.npz", help="microsurface from 'microfacet glints'")
     p.add_argument("-o", "--output", metavar="IMG.png", required=True, help="output image")
+    p.add_argument("--light", metavar="X,Y,Z", default="0,0.35,0.9",
+                   help="direction from the plane's centre to the point light, local frame with z up "
+                        "(default 0,0.35,0.9)")
+    p.add_argument("--distance", type=_finite_float, default=1.2, metavar="D",
+                   help="distance of the point light from the plane's centre; the plane spans [-1, 1]^2 "
+                        "(default 1.2)")
+    p.add_argument("--size", type=int, default=256, metavar="W", help="image width in pixels (default 256)")
+    p.add_argument("--view", type=_finite_float, default=50.0, metavar="DEG",
+                   help="camera elevation above the plane, degrees (default 50)")
+    p.add_argument("--approx", action="store_true",
+                   help="MIP-approximated patch masking (Sec. 4.2.2) instead of the exact one")
     p.set_defaults(run=_run_glints_render)
 
 
 def _run_glints_render(args) -> int:
-    """HOOK: 'microfacet glints render' (to be filled by the glints rendering work)."""
-    raise MicrofacetError("glints render: not available")
+    """'microfacet glints render OUT.npz -o IMG.png': a plane with the microsurface under a
+    point light, each pixel shaded by its footprint's P-BRDF (Chermain et al. 2019, Eq. 7)."""
+    from pathlib import Path
+
+    from .glints.figures import render_cli
+    try:
+        light = tuple(float(v) for v in args.light.split(","))
+    except ValueError:
+        light = ()
+    if len(light) != 3:
+        raise ValueError(f"--light must be three numbers X,Y,Z, got {args.light!r}")
+    if args.size < 1 or args.size > 8192:
+        raise ValueError(f"--size must lie in [1, 8192], got {args.size}")
+    if not 0 < args.view <= 90:
+        raise ValueError(f"--view must lie in (0, 90] degrees, got {args.view}")
+    source, out = Path(args.microsurface), Path(args.output)
+    if source.exists() and out.exists() and out.samefile(source):
+        raise MicrofacetError(f"{out}: output would overwrite the input {source}; choose another -o")
+    png, img, seconds = render_cli(source, out, light=light, distance=args.distance,
+                                   width=args.size, view_deg=args.view, exact=not args.approx)
+    print(f"{png}: {img.shape[1]} x {img.shape[0]} plane, {'approximate' if args.approx else 'exact'} "
+          f"P-BRDF, {seconds:.2f} s")
+    return 0
 
 
 def _glints_render_parser() -> argparse.ArgumentParser:

@@ -361,12 +361,13 @@ def default_workers() -> int:
 
 LEADR_LEVELS = (1, 2, 3, 4, 5)
 LEADR_STEPS = 2 * 3 * len(LEADR_LEVELS)   # progress steps of leadr_section (lights x images x levels)
+GLINTS_STEPS = 4                           # progress steps of glints_section
 
 
 def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED,
              workers: int = 1, progress: bool = False,
              figures: Sequence[DemoFigure] | None = None,
-             fits: Sequence[FitExample] | None = None, leadr: bool = True) -> Path:
+             fits: Sequence[FitExample] | None = None, leadr: bool = True, glints: bool = True) -> Path:
     """Render every figure into ``out_dir`` and write ``out_dir/index.html`` (last).
 
     Parameters
@@ -387,6 +388,9 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     leadr : bool
         Include the LEADR section (Fig. 5.3: naive MIP vs LEADR against a supersampled
         reference, :func:`microfacet.leadr.figures.leadr_section`).
+    glints : bool
+        Include the glints section (patch BRDF of a procedural scratched normal map against
+        naive per-pixel sampling, :func:`microfacet.glints.figures.glints_section`).
 
     The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
     environment samples of panel ``j`` of figure ``i`` come from
@@ -404,7 +408,8 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     figures = thesis_figures() if figures is None else list(figures)
     env_map = procedural_sky()
     examples = fit_examples() if fits is None else list(fits)
-    total = sum(len(f.panels) + 1 for f in figures) + 1 + len(examples) + (LEADR_STEPS if leadr else 0)
+    total = (sum(len(f.panels) + 1 for f in figures) + 1 + len(examples) + (LEADR_STEPS if leadr else 0)
+             + (GLINTS_STEPS if glints else 0))
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
         tasks = [[pool.submit(render_panel, p.brdf, f.light, size, env_map, spp, (seed, i, j))
@@ -433,5 +438,8 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
             fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
             sections.append(leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
                                           progress=bar.update))
-    title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4) and LEADR (Fig. 5.3)"
+        if glints:
+            from .glints.figures import glints_section
+            sections.append(glints_section(out, progress=bar.update))
+    title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4), LEADR (Fig. 5.3) and glints"
     return write_text(out / "index.html", html_page(title, "\n".join(sections)))

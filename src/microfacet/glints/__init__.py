@@ -7,5 +7,7 @@ through an acceleration hierarchy (Sec. 5); ``ms.pbrdf(center, cov)`` gives the 
 BRDF (Eq. 7) with exact or approximate (MIP, Sec. 4.2.2) patch masking.
 """
 from .microsurface import FORMAT_VERSION, Microsurface, interpolate_slopes, load_slopes
+from .pbrdf import PatchBRDF, eval_cos_footprints, lobe_projected_area
 
-__all__ = ["Microsurface", "load_slopes", "interpolate_slopes", "FORMAT_VERSION"]
+__all__ = ["Microsurface", "load_slopes", "interpolate_slopes", "FORMAT_VERSION",
+           "PatchBRDF", "eval_cos_footprints", "lobe_projected_area"]

@@ -1,0 +1,606 @@
+"""Patch BRDF of a normal-mapped microsurface (Chermain, Claux, Mérillou 2019, Sec. 4-5).
+
+A footprint ``P`` (a normalized 2-D Gaussian ``k_P`` over texture space) sees the
+mixture of noncentered anisotropic Beckmann lobes ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9).
+Its BRDF (Eq. 7) is
+
+    f_P(o, i) = F(o.h) G2(P, h, o, i) D_P(h) / (4 A_P(o) A_P(i)),
+
+with the patch projected area ``A_P(k) = sum_i W_i <n_i, k>+ / n_i.z`` (Eq. 17, ``n_i``
+the mean normal of lobe ``i``: ``<n_i, k> / n_i.z = c_i(k) = z - x E_i[x~] - y E_i[y~]``)
+and the patch Smith function (Eq. 11-15)
+
+    1 + Lambda_P(k) = V_P(k) / A_P(k),   V_P(k) = int <k,h>+ D_P(h) dw_h
+                                               = sum_i W_i c_i(k) (1 + Lambda_i(k)).
+
+``Lambda_i`` is the analytic Smith Lambda of the sheared anisotropic Beckmann lobe
+(thesis Eq. 3.3, LEADR). We evaluate each lobe's projected area ``c_i (1 + Lambda_i)``
+as the mean of the positive part of the Gaussian variable ``s = z - x x~ - y y~``,
+``E[s+] = c Phi(c / sigma) + sigma phi(c / sigma)``, which equals ``c (1 + Lambda_i)``
+wherever ``c > 0`` and extends it to lobes whose mean normal faces away from ``k``
+(where Eq. 13 would drop their visible tail). So ``V_P`` is exactly ``int <k,h>+ D_P``
+and the normalization of Eq. 11 holds exactly.
+
+Conventions (the BRDF protocol of :mod:`microfacet.brdf`): ``wi`` light, ``wo`` view,
+local frame with z the macro normal. The renderer multiplies ``eval_cos`` by the light's
+radiance (or irradiance); as for :class:`~microfacet.MicrofacetBRDF` on a sheared lobe
+(the LEADR point-light normalization), the projected area of the lit surface is
+``A_P(i)``, not ``cos theta_i``:
+
+    eval_cos(wi, wo) = f_P(o, i) A_P(i) = F G2 D_P / (4 A_P(o)),   eval = eval_cos / z_i.
+
+With this, ``int eval_cos dw_i <= 1`` (white furnace), ``f_P`` (:meth:`PatchBRDF.f_p`)
+is symmetric, and a single-lobe patch equals ``MicrofacetBRDF`` of that Beckmann lobe.
+
+``G2``: ``"correlated"`` (default, the height-correlated form the library uses
+everywhere, ``G2 = 1 / (1 + Lambda_P(o) + Lambda_P(i))``) or ``"separable"``
+(Eq. 16 as printed, ``G1(o) G1(i)``). Both are energy conserving
+(``G2 <= G1(o)``); the local factors ``chi+(o.h) chi+(i.h)`` of Eq. 10 apply to both.
+
+``exact=False`` is the approximation of Sec. 4.2.2: one merged Beckmann lobe, the
+``W``-weighted average of the five linear slope moments of the MIP level that matches
+the footprint (``ms.mip_moments``; :meth:`PatchBRDF.from_lobes` averages the given lobes),
+whose Smith Lambda and mean-slope projected area replace ``Lambda_P`` and ``A_P``.
+``D_P`` stays exact. Merging lobes widens the lobe,
+which overestimates masking: the approximation darkens at grazing angles.
+
+Sampling (Sec. 5): a position of the footprint picks lobe ``i`` with probability
+``W_i / sum W``; a normal is drawn from its slope distribution ``P_i`` and ``wo`` is
+reflected about it. The pdf is ``D_P(h) z_h / (4 o.h)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.special import erfc
+
+from .. import fresnel as _fresnel
+from ..brdf import BRDF, _dirs
+from ..distributions import Beckmann
+from ..geometry import dot, half_vector, reflect
+
+__all__ = ["PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
+           "eval_cos_footprints", "G2_MODELS"]
+
+G2_MODELS = ("correlated", "separable")
+
+_SQRT2 = np.sqrt(2.0)
+_INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
+#: lobes x directions evaluated per vectorized block (bounds memory to ~100 MB)
+_BLOCK = 1 << 21
+
+
+def _moments(m) -> np.ndarray:
+    m = np.asarray(m, dtype=np.float64)
+    if m.ndim != 2 or m.shape[1] != 5:
+        raise ValueError(f"lobe moments must have shape (N, 5), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("lobe moments must be finite")
+    return m
+
+
+def _covariance(m: np.ndarray):
+    """Slope means and covariance entries ``(mx, my, sxx, syy, sxy)`` of moments (Eq. 5)."""
+    mx, my = m[..., 0], m[..., 1]
+    return mx, my, m[..., 2] - mx * mx, m[..., 3] - my * my, m[..., 4] - mx * my
+
+
+def lobe_projected_area(moments, k) -> tuple[np.ndarray, np.ndarray]:
+    """Projected areas of Beckmann lobes toward ``k``: ``(c_k, A(k))``.
+
+    ``A(k) = int <k,h>+ D(h) dw_h = E[s+]`` for ``s = z_k - x_k x~ - y_k y~`` with Gaussian
+    slopes ``(x~, y~)`` of the lobe's moments: ``s ~ N(c_k, sigma^2)``,
+    ``A = c Phi(c/sigma) + sigma phi(c/sigma)`` (``= c_k (1 + Lambda(k))`` of Eq. 3.3
+    where ``c_k > 0``, Chermain et al. Eq. 13). ``moments`` ``(..., 5)`` broadcast against
+    ``k`` ``(..., 3)``; ``c_k = <n_mean, k> / n_mean.z`` is returned unclamped.
+    """
+    m = np.asarray(moments, dtype=np.float64)
+    k = np.asarray(k, dtype=np.float64)
+    mx, my, sxx, syy, sxy = _covariance(m)
+    x, y, z = k[..., 0], k[..., 1], k[..., 2]
+    c = z - x * mx - y * my
+    var = np.maximum(x * x * sxx + 2.0 * x * y * sxy + y * y * syy, 0.0)
+    sigma = np.sqrt(var)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        t = np.where(sigma > 0, c / sigma, np.where(c > 0, np.inf, -np.inf))
+        gauss = np.where(np.isfinite(t), np.exp(-0.5 * np.where(np.isfinite(t), t, 0.0) ** 2), 0.0)
+        area = c * 0.5 * erfc(-t / _SQRT2) + sigma * _INV_SQRT_2PI * gauss
+    return c, np.where(sigma > 0, area, np.maximum(c, 0.0))
+
+
+def merge_moments(moments, weights) -> np.ndarray:
+    """``W``-weighted average of linear slope moments (LEADR): the single Beckmann lobe
+    with the mixture's mean and covariance (Sec. 4.2.2, what MIP levels store)."""
+    m = _moments(moments)
+    w = np.asarray(weights, dtype=np.float64)
+    return (w[:, None] * m).sum(0) / w.sum()
+
+
+def _g2_over_ao(g2: str, ai, vi, ao, vo) -> np.ndarray:
+    """``G2 / A_P(o)`` from the patch areas ``A_P``, ``V_P`` of ``i`` and ``o`` (Eq. 7, 11-16),
+    written without dividing by ``A_P`` (finite where it vanishes):
+    separable ``G1(o) G1(i) / A_o = A_i / (V_o V_i)``; height-correlated
+    ``1 / (A_o (1 + Lambda_o + Lambda_i)) = A_i / (V_o A_i + A_o V_i - A_o A_i)``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = vo * vi if g2 == "separable" else vo * ai + ao * (vi - ai)
+        return np.where((den > 0) & (ai > 0), ai / np.where(den > 0, den, 1.0), 0.0)
+
+
+def _local_ok(wi, wo, h, oh, ih):
+    """Both directions above the macro horizon and ``chi+(o.h) chi+(i.h)`` (Eq. 10)."""
+    return (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0) & (ih > 0) & (h[..., 2] > 0)
+
+
+class PatchBRDF(BRDF):
+    """P-BRDF of a footprint (Chermain et al. 2019, Eq. 7) with the BRDF protocol.
+
+    Parameters
+    ----------
+    ms : Microsurface
+        Mixture of Beckmann lobes (``ms.weights``, ``ms.lobe_moments``).
+    center : (2,) array
+        Footprint centre in texture space (the units of ``ms.lobe_uv``).
+    cov : (2, 2) array
+        Footprint covariance (``k_P`` is the normalized Gaussian of that covariance).
+    fresnel : Fresnel, optional
+        Microfacet Fresnel term (default: ideal mirrors).
+    exact : bool
+        Exact patch masking and projected area (Eq. 10-17) or the merged-lobe
+        approximation of Sec. 4.2.2.
+    g2 : {"correlated", "separable"}
+        Masking-shadowing form (see the module notes).
+
+    Attributes
+    ----------
+    indices, weights : (N,) arrays
+        Lobes of the footprint and their ``W_i`` (Eq. 9, ``ms.weights``), normalized to
+        sum to 1 (Sec. 4.1); ``weight_sum`` is the sum given. ``eval`` does not depend on
+        it (Eq. 7 is homogeneous of degree 0 in ``W``).
+    moments : (N, 5)
+        Their slope moments; ``merged`` ``(5,)`` the approximation's single lobe.
+    """
+
+    def __init__(self, ms, center, cov, fresnel: _fresnel.Fresnel | None = None,
+                 exact: bool = True, g2: str = "correlated"):
+        indices, weights = ms.weights(np.asarray(center, float), np.asarray(cov, float))
+        indices = np.asarray(indices)
+        moments = np.asarray(ms.lobe_moments, dtype=np.float64)[indices]
+        # Sec. 4.2.2: the filtered lobe of the MIP level matching the footprint
+        merged = None if exact else ms.mip_moments(center, cov)
+        self._setup(moments, weights, fresnel, exact, g2, merged)
+        self.microsurface, self.indices = ms, indices
+        self.center, self.cov = np.asarray(center, float), np.asarray(cov, float)
+
+    @classmethod
+    def from_lobes(cls, moments, weights, fresnel: _fresnel.Fresnel | None = None,
+                   exact: bool = True, g2: str = "correlated", merged=None) -> "PatchBRDF":
+        """P-BRDF of explicit lobes: slope moments ``(N, 5)`` and weights ``W`` ``(N,)``."""
+        self = cls.__new__(cls)
+        self._setup(moments, weights, fresnel, exact, g2, merged)
+        self.microsurface, self.indices = None, np.arange(len(self.weights))
+        self.center = self.cov = None
+        return self
+
+    def _setup(self, moments, weights, fresnel, exact, g2, merged) -> None:
+        if g2 not in G2_MODELS:
+            raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
+        m = _moments(moments)
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape != (m.shape[0],) or np.any(~np.isfinite(w)) or np.any(w < 0):
+            raise ValueError(f"weights must be {m.shape[0]} finite values >= 0")
+        keep = w > 0
+        self.weight_sum = float(w[keep].sum())
+        self.moments = m[keep]
+        self.weights = w[keep] / self.weight_sum if self.weight_sum > 0 else w[keep]
+        self.fresnel = _fresnel.Ideal() if fresnel is None else fresnel
+        self.exact, self.g2 = bool(exact), g2
+        if self.weight_sum > 0:
+            self.lobes = Beckmann.from_moments(*self.moments.T)
+            self._cdf = np.cumsum(self.weights)
+            self.merged = (merge_moments(self.moments, self.weights) if merged is None
+                           else np.asarray(merged, dtype=np.float64).reshape(5))
+        else:
+            self.lobes, self._cdf, self.merged = None, np.zeros(0), None
+
+    def __repr__(self) -> str:
+        return (f"PatchBRDF({len(self.weights)} lobes, sum W = {self.weight_sum:.6g}, "
+                f"exact={self.exact}, g2={self.g2!r}, fresnel={self.fresnel!r})")
+
+    # ---------------------------------------------------------------- mixture sums
+    def _lobe_sum(self, fn, *dirs) -> tuple[np.ndarray, ...]:
+        """``sum_i W_i fn(lobe_i, *dirs)`` for each output of ``fn``, in memory-bounded blocks."""
+        shape = np.broadcast_shapes(*(d.shape for d in dirs))[:-1]
+        flat = [np.broadcast_to(d, shape + (3,)).reshape(-1, 3) for d in dirs]
+        n, nl = flat[0].shape[0], len(self.weights)
+        step = max(1, _BLOCK // max(nl, 1))
+        out = None
+        for s in range(0, n, step):
+            parts = fn(*(f[s:s + step, None, :] for f in flat))
+            parts = parts if isinstance(parts, tuple) else (parts,)
+            if out is None:
+                out = [np.empty(n) for _ in parts]
+            for o, p in zip(out, parts):
+                o[s:s + step] = p @ self.weights
+        if out is None:
+            out = [np.empty(0)]
+        return tuple(o.reshape(shape) for o in out)
+
+    def pndf(self, h) -> np.ndarray:
+        """P-NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9), weights normalized to ``sum W = 1``."""
+        h = _dirs(h, "h")
+        if self.lobes is None:
+            return np.zeros(h.shape[:-1])
+        return self._lobe_sum(self.lobes.ndf, h)[0]
+
+    def areas(self, k) -> tuple[np.ndarray, np.ndarray]:
+        """``(A_P(k), V_P(k))``: patch projected area (Eq. 17) and the visible projected
+        area of the microfacets ``int <k,h>+ D_P = A_P (1 + Lambda_P)`` (Eq. 13-15);
+        with ``exact=False`` those of the merged lobe (Sec. 4.2.2)."""
+        k = _dirs(k, "k")
+        if self.lobes is None:
+            z = np.zeros(k.shape[:-1])
+            return z, z
+        if self.exact:
+            def fn(kk):
+                c, area = lobe_projected_area(self.moments, kk)
+                return np.maximum(c, 0.0), area
+            a, v = self._lobe_sum(fn, k)
+            return a, v
+        c, v = lobe_projected_area(self.merged, k)
+        return np.maximum(c, 0.0), v
+
+    def lambda_p(self, k) -> np.ndarray:
+        """Patch Smith ``Lambda_P(k) = V_P / A_P - 1`` (Eq. 15); ``inf`` where ``A_P = 0``."""
+        a, v = self.areas(k)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(a > 0, v / np.where(a > 0, a, 1.0) - 1.0, np.inf)
+
+    def g1(self, k) -> np.ndarray:
+        """Distant patch masking ``G1_dist(P, k) = A_P / V_P = 1 / (1 + Lambda_P)`` (Eq. 11, 14)."""
+        a, v = self.areas(k)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(v > 0, a / np.where(v > 0, v, 1.0), 0.0)
+
+    def _g2_over_ao(self, ai, vi, ao, vo) -> np.ndarray:
+        return _g2_over_ao(self.g2, ai, vi, ao, vo)
+
+    # -------------------------------------------------------------------- protocol
+    def _projected(self, wi, wo):
+        """``(o.h, D_P G2 / (4 A_P(o)), valid)``."""
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        h = half_vector(wi, wo)
+        oh, ih = dot(wo, h), dot(wi, h)
+        ok = _local_ok(wi, wo, h, oh, ih)
+        ai, vi = self.areas(wi)
+        ao, vo = self.areas(wo)
+        s = np.where(ok, self.pndf(h) * self._g2_over_ao(ai, vi, ao, vo) / 4.0, 0.0)
+        return oh, s
+
+    def eval_cos(self, wi, wo) -> np.ndarray:
+        """``f_P(o, i) A_P(i) = F G2 D_P / (4 A_P(o))`` (Eq. 7), RGB ``(..., 3)``."""
+        oh, s = self._projected(wi, wo)
+        return self.fresnel(oh) * s[..., None]
+
+    def f_p(self, wi, wo) -> np.ndarray:
+        """The symmetric P-BRDF of Eq. 7, ``F G2 D_P / (4 A_P(o) A_P(i))``, RGB."""
+        oh, s = self._projected(wi, wo)
+        ai, ao = self.areas(_dirs(wi, "wi"))[0], self.areas(_dirs(wo, "wo"))[0]
+        with np.errstate(divide="ignore", invalid="ignore"):      # Eq. 7 needs A_P > 0 on both sides
+            s = np.where((ai > 0) & (ao > 0), s / np.where(ai > 0, ai, 1.0), 0.0)
+        return self.fresnel(oh) * s[..., None]
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Density of :meth:`sample`: ``D_P(h) z_h / (4 o.h)`` (Sec. 5)."""
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        h = half_vector(wi, wo)
+        oh = dot(wo, h)
+        ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0) & (self.weight_sum > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p = self.pndf(h) * h[..., 2] / (4.0 * np.where(ok, oh, 1.0))
+        return np.where(ok, p, 0.0)
+
+    def sample(self, u, wo):
+        """Footprint position, then normal (Sec. 5): lobe ``i`` with probability
+        ``W_i / sum W`` from ``u[..., 0]`` (rescaled and reused), a normal of slope density
+        ``P_i`` (``mf.Beckmann.sample_p22``), ``wi`` the reflection of ``wo``.
+        Returns ``(wi, weight, pdf)`` with ``weight = eval_cos / pdf`` (0 where pdf is 0)."""
+        wo = _dirs(wo, "wo")
+        u = np.asarray(u, dtype=np.float64)
+        shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
+        u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        wof = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
+        if self.lobes is None:
+            z = np.zeros(shape)
+            return np.broadcast_to(wo, shape + (3,)) * [-1, -1, 1], np.zeros(shape + (3,)), z
+        j = np.minimum(np.searchsorted(self._cdf, u[:, 0], side="right"), len(self._cdf) - 1)
+        lo = np.where(j > 0, self._cdf[np.maximum(j - 1, 0)], 0.0)
+        u0 = np.clip((u[:, 0] - lo) / np.maximum(self._cdf[j] - lo, 1e-300), 0.0, 1.0 - 1e-16)
+        lobe = Beckmann.from_moments(*self.moments[j].T)
+        h = lobe.sample_p22(np.stack([u0, u[:, 1]], -1))
+        wi = reflect(wof, h)
+        pdf = self.pdf(wi, wof)
+        f = self.eval_cos(wi, wof)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where((pdf > 0)[:, None], f / np.where(pdf > 0, pdf, 1.0)[:, None], 0.0)
+        return wi.reshape(shape + (3,)), weight.reshape(shape + (3,)), pdf.reshape(shape)
+
+    # ---------------------------------------------------------------- diagnostics
+    def albedo(self, wo, order: int = 24) -> float:
+        """White furnace ``int eval_cos(wi, wo) dw_i`` (first channel).
+
+        With ``dw_i = 4 (o.h) dw_h``, ``dw_h = z_h^3 ds`` and ``D_i = P_i / z_h^4`` (slopes
+        ``s``) the integral is ``sum_i W_i E_{P_i}[F G2 (o.h) / (A_P(o) z_h)]`` (0 where
+        ``wi`` falls below the horizon), computed by ``order x order`` Gauss-Hermite
+        quadrature of each lobe's Gaussian slopes. Independent of :meth:`sample`;
+        ``<= 1`` for ``exact=True`` (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``."""
+        wo = np.asarray(wo, dtype=np.float64).reshape(3)
+        if self.lobes is None:
+            return 0.0
+        t, w = np.polynomial.hermite.hermgauss(order)
+        tx, ty = np.meshgrid(t, t, indexing="ij")
+        wq = (w[:, None] * w[None, :]).ravel() / np.pi
+        mx, my, sxx, syy, sxy = _covariance(self.moments)
+        lxx = np.sqrt(sxx)                                        # Cholesky of each covariance
+        lyx = sxy / lxx
+        lyy = np.sqrt(np.maximum(syy - lyx * lyx, 0.0))
+        gx, gy = _SQRT2 * tx.ravel(), _SQRT2 * ty.ravel()
+        sx = mx[:, None] + lxx[:, None] * gx
+        sy = my[:, None] + lyx[:, None] * gx + lyy[:, None] * gy  # (N, Q) slopes
+        inv = 1.0 / np.sqrt(1.0 + sx * sx + sy * sy)
+        h = np.stack([-sx * inv, -sy * inv, inv], -1)
+        wi = reflect(np.broadcast_to(wo, h.shape), h)
+        oh = dot(wo, h)
+        ok = (wi[..., 2] > 0) & (oh > 0)
+        ai, vi = self.areas(wi)
+        ao, vo = self.areas(wo)
+        g = self._g2_over_ao(ai, vi, ao, vo)
+        q = np.where(ok, self.fresnel(oh)[..., 0] * g * oh / h[..., 2], 0.0)
+        return float(self.weights @ (q @ wq))
+
+
+# ------------------------------------------------------------------ many footprints at once
+def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
+    """Lobes and weights ``W_i`` (Eq. 9, normalized) of many Gaussian footprints at once.
+
+    The seeds are the ``ny x nx`` grid of :class:`~microfacet.glints.Microsurface` (cell
+    centres of the wrapped unit uv square, kernels of FWHM one cell), and the lobe set is
+    its ``ms.weights``': the rectangle within ``cutoff`` standard deviations of
+    ``Sigma_P + sigma_k^2 I`` per axis. ``centers`` ``(P, 2)``, ``covs`` ``(P, 2, 2)`` or
+    ``(2, 2)``. Returns flat lobe indices ``(P, K)`` and weights ``(P, K)`` (0 outside each
+    footprint's rectangle; ``K`` the largest rectangle of the batch).
+    """
+    from .microsurface import FWHM_PER_SIGMA
+    ny, nx = grid_shape
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
+    cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (c.shape[0], 2, 2))
+    ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
+    sxx, syy, sxy = cov[:, 0, 0] + ks2[0], cov[:, 1, 1] + ks2[1], cov[:, 0, 1]
+    det = sxx * syy - sxy * sxy
+    r = cutoff * np.sqrt(np.stack([sxx, syy], -1))                          # (P, 2)
+    n = np.array([nx, ny])
+    i0 = np.ceil((c - r) * n - 0.5).astype(np.int64)
+    i1 = np.floor((c + r) * n - 0.5).astype(np.int64)
+    kx, ky = (int(v) for v in np.maximum((i1 - i0).max(0) + 1, 1))
+    ix = i0[:, 0, None] + np.arange(kx)                                      # (P, kx)
+    iy = i0[:, 1, None] + np.arange(ky)                                      # (P, ky)
+    du = ((ix + 0.5) / nx - c[:, 0, None])[:, None, :]
+    dv = ((iy + 0.5) / ny - c[:, 1, None])[:, :, None]
+    q = (syy[:, None, None] * du * du + sxx[:, None, None] * dv * dv
+         - 2.0 * sxy[:, None, None] * du * dv) / det[:, None, None]
+    inside = (ix <= i1[:, 0, None])[:, None, :] & (iy <= i1[:, 1, None])[:, :, None]
+    W = np.where(inside, np.exp(-0.5 * q), 0.0).reshape(c.shape[0], -1)
+    total = W.sum(-1, keepdims=True)
+    W = np.where(total > 0, W / np.where(total > 0, total, 1.0), 0.0)
+    idx = ((iy % ny)[:, :, None] * nx + (ix % nx)[:, None, :]).reshape(c.shape[0], -1)
+    return idx, W
+
+
+def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | None = None,
+                        exact: bool = True, g2: str = "correlated", block: int = 4096,
+                        backend: str = "auto") -> np.ndarray:
+    """``eval_cos`` of the P-BRDF of footprint ``p`` at ``(wi[p], wo[p])`` for many
+    footprints (a rendered image's pixels): the same math as :class:`PatchBRDF`, batched
+    over footprints (lobes gathered by :func:`footprint_lobes`; with ``exact=False`` the
+    merged lobe is the ``W``-weighted average over the MIP level of ``ms.mip_level``).
+    ``centers`` ``(P, 2)``, ``covs`` ``(P, 2, 2)`` or ``(2, 2)``, ``wi``, ``wo``
+    ``(P, 3)`` or ``(3,)``. Returns RGB ``(P, 3)``.
+
+    ``backend``: ``"numpy"`` (the reference: lobes gathered into padded ``(P, K)``
+    arrays), ``"numba"`` (a compiled loop over each footprint's window, the same sums;
+    tested against the reference) or ``"auto"`` (numba when available)."""
+    if g2 not in G2_MODELS:
+        raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
+    if backend == "numba" and _footprint_sums is None:
+        raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
+    if backend != "numpy" and _footprint_sums is not None:
+        return _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2)
+    fresnel = _fresnel.Ideal() if fresnel is None else fresnel
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
+    P = c.shape[0]
+    cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
+    wi = np.broadcast_to(_dirs(wi, "wi"), (P, 3))
+    wo = np.broadcast_to(_dirs(wo, "wo"), (P, 3))
+    out = np.zeros((P, 3))
+    E_all = np.asarray(ms.lobe_moments, dtype=np.float64)
+    for s in range(0, P, block):
+        sl = slice(s, min(P, s + block))
+        h = half_vector(wi[sl], wo[sl])
+        oh, ih = dot(wo[sl], h), dot(wi[sl], h)
+        ok = _local_ok(wi[sl], wo[sl], h, oh, ih)
+        idx, W = footprint_lobes(ms.grid, c[sl], cov[sl], ms.cutoff)
+        E = E_all[idx]                                                       # (B, K, 5)
+        D = np.einsum("bk,bk->b", W, Beckmann.from_moments(*np.moveaxis(E, -1, 0)).ndf(h[:, None, :]))
+        if exact:
+            def areas(k):
+                cc, v = lobe_projected_area(E, k[:, None, :])
+                return np.einsum("bk,bk->b", W, np.maximum(cc, 0.0)), np.einsum("bk,bk->b", W, v)
+        else:
+            merged = _merged_footprints(ms, c[sl], cov[sl])
+
+            def areas(k):
+                cc, v = lobe_projected_area(merged, k)
+                return np.maximum(cc, 0.0), v
+        ai, vi = areas(wi[sl])
+        ao, vo = areas(wo[sl])
+        val = np.where(ok, D * _g2_over_ao(g2, ai, vi, ao, vo) / 4.0, 0.0)
+        out[sl] = fresnel(oh) * val[:, None]
+    return out
+
+
+# ------------------------------------------------------------- compiled footprint kernel
+from .. import kernels as _kernels  # noqa: E402
+
+if _kernels.AVAILABLE:
+    import math
+
+    import numba
+
+    @numba.njit(cache=True, parallel=True, nogil=True)
+    def _footprint_sums(lob, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo, exact):  # pragma: no cover - compiled
+        """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
+        of :func:`footprint_lobes` (same window, same weights), looping over the window
+        instead of padding it. ``lob`` rows: ``mx, my, sxx, syy, sxy, ixx, iyy, ixy, norm``."""
+        P = fp.shape[0]
+        out = np.zeros((P, 5))
+        for p in numba.prange(P):
+            cu, cv = fp[p, 0], fp[p, 1]
+            sxx, syy, sxy = fp[p, 2] + ks2x, fp[p, 3] + ks2y, fp[p, 4]
+            det = sxx * syy - sxy * sxy
+            rx, ry = cutoff * math.sqrt(sxx), cutoff * math.sqrt(syy)
+            x0, x1 = int(math.ceil((cu - rx) * nx - 0.5)), int(math.floor((cu + rx) * nx - 0.5))
+            y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
+            hz = h[p, 2]
+            xh, yh = (-h[p, 0] / hz, -h[p, 1] / hz) if hz > 0 else (0.0, 0.0)
+            inv4 = 1.0 / (hz * hz * hz * hz) if hz > 0 else 0.0
+            wsum = d = ai = vi = ao = vo = 0.0
+            for iy in range(y0, y1 + 1):
+                dv = (iy + 0.5) / ny - cv
+                for ix in range(x0, x1 + 1):
+                    du = (ix + 0.5) / nx - cu
+                    w = math.exp(-0.5 * (syy * du * du + sxx * dv * dv - 2.0 * sxy * du * dv) / det)
+                    wsum += w
+                    k = (iy % ny) * nx + (ix % nx)
+                    mx, my = lob[k, 0], lob[k, 1]
+                    if hz > 0:
+                        ex, ey = xh - mx, yh - my
+                        q = lob[k, 5] * ex * ex + lob[k, 6] * ey * ey + 2.0 * lob[k, 7] * ex * ey
+                        if q < 1400.0:
+                            d += w * lob[k, 8] * math.exp(-0.5 * q)
+                    if exact:
+                        for j in range(2):
+                            kx, ky, kz = (wi[p, 0], wi[p, 1], wi[p, 2]) if j == 0 else (wo[p, 0], wo[p, 1], wo[p, 2])
+                            c = kz - kx * mx - ky * my
+                            var = kx * kx * lob[k, 2] + 2.0 * kx * ky * lob[k, 4] + ky * ky * lob[k, 3]
+                            sg = math.sqrt(max(var, 0.0))
+                            if sg > 0:
+                                t = c / sg
+                                area = 0.5 * c * math.erfc(-t / _SQRT2) + sg * _INV_SQRT_2PI * math.exp(-0.5 * t * t)
+                            else:
+                                area = max(c, 0.0)
+                            if j == 0:
+                                ai += w * max(c, 0.0)
+                                vi += w * area
+                            else:
+                                ao += w * max(c, 0.0)
+                                vo += w * area
+            if wsum > 0:
+                out[p, 0] = d * inv4 / wsum
+                out[p, 1], out[p, 2] = ai / wsum, vi / wsum
+                out[p, 3], out[p, 4] = ao / wsum, vo / wsum
+        return out
+
+    @numba.njit(cache=True, parallel=True, nogil=True)
+    def _footprint_merge(grid, nx, ny, ks2x, ks2y, cutoff, fp):  # pragma: no cover - compiled
+        """``W``-weighted average ``(P, 5)`` of the moments ``grid`` ``(ny * nx, 5)`` over
+        each footprint's window (the weights of :func:`footprint_lobes`)."""
+        P = fp.shape[0]
+        out = np.zeros((P, 5))
+        for p in numba.prange(P):
+            cu, cv = fp[p, 0], fp[p, 1]
+            sxx, syy, sxy = fp[p, 2] + ks2x, fp[p, 3] + ks2y, fp[p, 4]
+            det = sxx * syy - sxy * sxy
+            rx, ry = cutoff * math.sqrt(sxx), cutoff * math.sqrt(syy)
+            x0, x1 = int(math.ceil((cu - rx) * nx - 0.5)), int(math.floor((cu + rx) * nx - 0.5))
+            y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
+            wsum = 0.0
+            for iy in range(y0, y1 + 1):
+                dv = (iy + 0.5) / ny - cv
+                for ix in range(x0, x1 + 1):
+                    du = (ix + 0.5) / nx - cu
+                    w = math.exp(-0.5 * (syy * du * du + sxx * dv * dv - 2.0 * sxy * du * dv) / det)
+                    wsum += w
+                    k = (iy % ny) * nx + (ix % nx)
+                    for m in range(5):
+                        out[p, m] += w * grid[k, m]
+            if wsum > 0:
+                for m in range(5):
+                    out[p, m] /= wsum
+        return out
+else:  # pragma: no cover - without numba
+    _footprint_sums = _footprint_merge = None
+
+
+def _lobe_table(moments) -> np.ndarray:
+    """Per lobe ``mx, my, sxx, syy, sxy`` and the inverse covariance and normalization of
+    its Gaussian slope density (``P_i``, Eq. 4)."""
+    mx, my, sxx, syy, sxy = _covariance(np.asarray(moments, dtype=np.float64))
+    det = sxx * syy - sxy * sxy
+    return np.ascontiguousarray(np.stack([mx, my, sxx, syy, sxy, syy / det, sxx / det, -sxy / det,
+                                          1.0 / (2.0 * np.pi * np.sqrt(det))], -1))
+
+
+def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
+    """Merged-lobe moments ``(P, 5)`` of Sec. 4.2.2 for each footprint (MIP level of
+    ``ms.mip_level``, weights of that level's grid)."""
+    from .microsurface import FWHM_PER_SIGMA
+    flat = np.ascontiguousarray(cov).reshape(-1, 4)
+    uniq, inverse = np.unique(flat, axis=0, return_inverse=True)   # images often share footprints
+    levels = np.array([ms.mip_level(u.reshape(2, 2)) for u in uniq])[inverse.reshape(-1)]
+    merged = np.empty((c.shape[0], 5))
+    for lev in np.unique(levels):
+        sel = np.flatnonzero(levels == lev)
+        grid = ms.mip[lev]
+        if fast and _footprint_merge is not None:
+            ny, nx = grid.shape[:2]
+            ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
+            fp = np.ascontiguousarray(np.stack([c[sel, 0], c[sel, 1], cov[sel, 0, 0], cov[sel, 1, 1],
+                                                cov[sel, 0, 1]], -1))
+            merged[sel] = _footprint_merge(np.ascontiguousarray(grid.reshape(-1, 5)), nx, ny, ks2[0], ks2[1],
+                                           float(ms.cutoff), fp)
+            continue
+        for s in range(0, sel.size, 4096):
+            part = sel[s:s + 4096]
+            li, lw = footprint_lobes(grid.shape[:2], c[part], cov[part], ms.cutoff)
+            merged[part] = np.einsum("bk,bkm->bm", lw, grid.reshape(-1, 5)[li])
+    return merged
+
+
+def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2) -> np.ndarray:
+    from .microsurface import FWHM_PER_SIGMA
+    fresnel = _fresnel.Ideal() if fresnel is None else fresnel
+    c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
+    P = c.shape[0]
+    cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
+    wi = np.ascontiguousarray(np.broadcast_to(_dirs(wi, "wi"), (P, 3)))
+    wo = np.ascontiguousarray(np.broadcast_to(_dirs(wo, "wo"), (P, 3)))
+    table = getattr(ms, "_pbrdf_lobe_table", None)
+    if table is None or table.shape[0] != ms.n_lobes:
+        table = _lobe_table(ms.lobe_moments)
+        ms._pbrdf_lobe_table = table                  # cached per microsurface
+    ny, nx = ms.grid
+    ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
+    fp = np.ascontiguousarray(np.stack([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]], -1))
+    h = half_vector(wi, wo)
+    oh, ih = dot(wo, h), dot(wi, h)
+    ok = _local_ok(wi, wo, h, oh, ih)
+    sums = _footprint_sums(table, nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp, np.ascontiguousarray(h),
+                           wi, wo, bool(exact))
+    D, ai, vi, ao, vo = sums.T
+    if not exact:
+        merged = _merged_footprints(ms, c, cov, fast=True)
+        ci, vi = lobe_projected_area(merged, wi)
+        co, vo = lobe_projected_area(merged, wo)
+        ai, ao = np.maximum(ci, 0.0), np.maximum(co, 0.0)
+    val = np.where(ok, D * _g2_over_ao(g2, ai, vi, ao, vo) / 4.0, 0.0)
+    return fresnel(oh) * val[:, None]
