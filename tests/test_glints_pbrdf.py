@@ -25,9 +25,8 @@ def _upper(rng, n):
 
 @pytest.fixture(scope="module")
 def ms():
-    """A small scratched map; sigma_eps 0.1 keeps lobes wide enough for the chi-square
-    cells' quadrature (validation.chi2_test integrates the pdf with 6 x 6 points per cell;
-    needle lobes, |rho| -> 0.99, are thinner than a cell)."""
+    """A small scratched map; sigma_eps 0.1 keeps the other tests' quadratures cheap
+    (the chi-square test also runs at sigma_eps 0.05, see test_sampling_chi2_sigma_eps_005)."""
     return Microsurface.from_normal_map(scratched_normal_map(64, scratches=12, width=1.5, seed=3),
                                         sigma_eps=0.1)
 
@@ -76,6 +75,64 @@ def test_sampling_chi2(ms, center, sd, theta):
     p = ms.pbrdf(center, np.eye(2) * (sd / 64) ** 2)
     pval, stat, dof, total = chi2_test(p, _dir(theta), n=100_000)
     assert pval > 1e-3, (pval, stat, dof)
+
+
+@pytest.fixture(scope="module")
+def ms05():
+    return Microsurface.from_normal_map(scratched_normal_map(64, scratches=12, width=1.5, seed=3),
+                                        sigma_eps=0.05)
+
+
+@pytest.mark.parametrize("center,sd,theta", [((0.4, 0.6), 1.5, 0), ((0.4, 0.6), 1.5, 45),
+                                              ((0.1, 0.95), 2.0, 70), ((0.7, 0.2), 1.0, 80)])
+def test_sampling_chi2_sigma_eps_005(ms05, center, sd, theta):
+    """sigma_eps = 0.05: the floor acts on the principal axes of each lobe's covariance, so
+    lobes whose correlation is clamped at |rho| = 0.99 are no thinner than sigma_eps across
+    their minor axis (with the former per-axis floor the 36-lobe footprint at 80 degrees
+    failed with p = 0)."""
+    p = ms05.pbrdf(center, np.eye(2) * (sd / 64) ** 2)
+    pval, stat, dof, total = chi2_test(p, _dir(theta), n=100_000)
+    assert pval > 1e-3, (pval, stat, dof)
+
+
+@pytest.mark.parametrize("center,sd,theta", [((0.4, 0.6), 1.5, 45), ((0.1, 0.95), 2.0, 70),
+                                              ((0.7, 0.2), 1.0, 80)])
+def test_sampling_chi2_sigma_eps_001(center, sd, theta):
+    """sigma_eps = 0.01 (the paper's value) on 128 x 256 cells: the default 32 x 64 cells'
+    6 x 6 quadrature points do not resolve lobes of std 0.01 (p ~ 0 at 70 and 80 degrees
+    from the quadrature alone). With the former per-axis floor the 80-degree case failed
+    here too (p = 3e-27)."""
+    ms = Microsurface.from_normal_map(scratched_normal_map(64, scratches=12, width=1.5, seed=3),
+                                      sigma_eps=0.01)
+    p = ms.pbrdf(center, np.eye(2) * (sd / 64) ** 2)
+    pval, stat, dof, total = chi2_test(p, _dir(theta), n=100_000, res=(128, 256))
+    assert pval > 1e-3, (pval, stat, dof)
+
+
+def test_sigma_eps_floors_principal_axes(ms05):
+    """Every lobe's covariance has both eigenvalues >= sigma_eps^2 and |rho| <= 0.99, and
+    the hierarchy's slope boxes (leaf level) are the lobes' slope_cutoff-sigma boxes."""
+    E = ms05.lobe_moments
+    e1, e2 = E[:, 0], E[:, 1]
+    vx, vy, cxy = E[:, 2] - e1 * e1, E[:, 3] - e2 * e2, E[:, 4] - e1 * e2
+    lmin = 0.5 * (vx + vy) - np.hypot(0.5 * (vx - vy), cxy)
+    assert lmin.min() >= 0.05**2 * (1 - 1e-9)
+    np.testing.assert_array_equal(Microsurface(E.reshape(ms05._grid.shape), ms05.slopes,
+                                               sigma_eps=0.05).lobe_moments, E)   # idempotent
+    assert np.abs(cxy / np.sqrt(vx * vy)).max() <= 0.99 + 1e-12
+    assert np.abs(cxy / np.sqrt(vx * vy)).max() > 0.5          # correlated lobes exist
+    lo, hi = ms05._boxes[0]
+    sd = np.sqrt(np.stack([vx, vy], -1)).reshape(lo.shape)
+    mean = E[:, :2].reshape(lo.shape)
+    np.testing.assert_allclose(lo, mean - ms05.slope_cutoff * sd, atol=1e-12)
+    np.testing.assert_allclose(hi, mean + ms05.slope_cutoff * sd, atol=1e-12)
+    # uncorrelated lobes are floored per axis, lobes rougher than sigma_eps are unchanged
+    from microfacet.glints.microsurface import _floor_moments
+    raw = np.array([[0.1, 0.2, 0.01, 0.04 + 1e-6, 0.02], [0.0, 0.0, 0.5, 0.0, 0.0]])
+    out = _floor_moments(raw, 0.05)
+    np.testing.assert_allclose(out[1], [0, 0, 0.5, 0.0025, 0], atol=1e-15)
+    big = np.array([0.1, 0.2, 0.01 + 0.3, 0.04 + 0.2, 0.02 + 0.1])
+    np.testing.assert_allclose(_floor_moments(big, 0.05), big, rtol=1e-12)
 
 
 # ------------------------------------------------------------- energy (white furnace)
@@ -225,3 +282,38 @@ def test_cli_glints_render(tmp_path, capsys):
     assert main(["glints", "render", str(tmp_path / "missing.npz"), "-o", str(out)]) != 0
     err = capsys.readouterr().err
     assert "--light" in err and "missing.npz" in err and "Traceback" not in err
+
+
+def test_footprint_kernel_matches_reference_on_near_mirror_lobes():
+    """The compiled kernel's shortcuts (separable footprint weights, projected area ``c``
+    where ``c / sigma >= 8``) leave the sums equal to the NumPy reference: near-mirror
+    lobes (sigma_eps 0.01), where most lobes take the shortcut, anisotropic and correlated
+    footprints, grazing directions."""
+    from microfacet.glints import pbrdf as pb
+    if pb._footprint_sums is None:
+        pytest.skip("compiled kernels disabled")
+    _AREA_T, _area = pb._AREA_T, pb._area
+    from scipy.special import erfc
+    ms = Microsurface.from_normal_map(scratched_normal_map(64, scratches=12, width=1.5, seed=3),
+                                      sigma_eps=0.01)
+    rng = np.random.default_rng(11)
+    P = 300
+    centers = rng.random((P, 2))
+    A = rng.normal(size=(P, 2, 2)) * 3.0 / 64
+    covs = A @ np.swapaxes(A, -1, -2)
+    covs[: P // 3, 0, 1] = covs[: P // 3, 1, 0] = 0.0                         # uncorrelated ones too
+    wi, wo = _upper(rng, P), _upper(rng, P)
+    wi[:50, 2] *= 1e-3
+    wi[:50] /= np.linalg.norm(wi[:50], axis=-1, keepdims=True)
+    for exact in (True, False):
+        ref = eval_cos_footprints(ms, centers, covs, wi, wo, exact=exact, backend="numpy")
+        got = eval_cos_footprints(ms, centers, covs, wi, wo, exact=exact, backend="numba")
+        assert (ref > 0).mean() > 0.05
+        np.testing.assert_allclose(got, ref, rtol=1e-11, atol=1e-14 * np.abs(ref).max())
+    # the area shortcut is exact to rounding: E[s+] - c <= sigma phi(t) / (1 + t^2)
+    for t in np.linspace(_AREA_T, 40.0, 50):
+        full = 0.5 * t * erfc(-t / np.sqrt(2)) + np.exp(-0.5 * t * t) / np.sqrt(2 * np.pi)
+        assert _area(t, 1.0) == t and abs(full - t) <= 1e-16 * t
+    assert _area(0.3, 0.0) == 0.3 and _area(-0.3, 0.0) == 0.0
+    assert _area(1.0, 0.5) == pytest.approx(0.5 * erfc(-2 / np.sqrt(2)) + 0.5 * np.exp(-2) / np.sqrt(2 * np.pi),
+                                            rel=1e-14)

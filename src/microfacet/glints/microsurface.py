@@ -14,8 +14,9 @@ Conventions
   whose half maximum lies midway between seeds (FWHM = spacing) and whose integral is the
   cell area (Sec. 3.1).
 - Lobe ``i`` is the Beckmann lobe of the five slope moments of the interpolated map under
-  ``k_i / h^2`` (Eq. 3-6), with slope standard deviations floored at ``sigma_eps`` and the
-  correlation clamped to ``|rho| <= 0.99``.
+  ``k_i / h^2`` (Eq. 3-6), with the correlation clamped to ``|rho| <= 0.99`` and the
+  principal standard deviations (eigenvalues of the covariance of Eq. 5) floored at
+  ``sigma_eps`` (Sec. 3.2; see :func:`_floor_moments`).
 - The P-NDF of a Gaussian footprint ``k_P`` (centre in uv, covariance in uv^2) is
   ``D_P(h) = sum_i W_i D_i(h)`` with ``W_i = int k_i k_P du`` in closed form (Eq. 9):
   ``W_i = A N(u_i; c, Sigma_P + sigma_k^2 I)`` with ``A`` the cell area. By default the
@@ -213,13 +214,44 @@ def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
 
 
 def _floor_moments(E: np.ndarray, sigma_eps: float) -> np.ndarray:
-    """Moments with slope variances floored at ``sigma_eps^2`` and ``|rho| <= 0.99``."""
+    """Moments whose slope covariance has ``|rho| <= 0.99`` and both *principal* standard
+    deviations at least ``sigma_eps``.
+
+    Sec. 3.2 (after Eq. 6) replaces a vanishing slope standard deviation by
+    ``sigma_eps`` ("a negligible, tiny bit of roughness"): a floor, not a convolution, so
+    lobes already rougher than ``sigma_eps`` are unchanged (``Sigma_i + sigma_eps^2 I``
+    would widen every lobe of Eq. 4-5). The floor is applied to the eigenvalues of the
+    2 x 2 covariance ``Sigma_i`` of Eq. 5, ``lambda -> max(lambda, sigma_eps^2)`` (the
+    missing variance is added along each principal axis, eigenvectors kept): flooring
+    ``sigma_x`` and ``sigma_y`` separately lets a correlated lobe (|rho| -> 0.99) be
+    thinner than ``sigma_eps`` across its minor axis (std ``sigma sqrt(1 - |rho|)``).
+    For uncorrelated lobes (``c_xy = 0``) this is the per-axis floor. The correlation is
+    first clamped at 0.99 (flooring the minor eigenvalue then only lowers ``|rho|``);
+    the returned moments ``E3..E5`` carry the floored covariance, so every consumer
+    (parameters, slope boxes, sampling, MIP) sees the same lobe.
+    """
     E = np.array(E, dtype=np.float64)
     e1, e2 = E[..., 0], E[..., 1]
-    vx = np.maximum(E[..., 2] - e1 * e1, sigma_eps**2)
-    vy = np.maximum(E[..., 3] - e2 * e2, sigma_eps**2)
+    vx = np.maximum(E[..., 2] - e1 * e1, 0.0)
+    vy = np.maximum(E[..., 3] - e2 * e2, 0.0)
     lim = MAX_RHO * np.sqrt(vx * vy)
     cxy = np.clip(E[..., 4] - e1 * e2, -lim, lim)
+    # eigen-decomposition of [[vx, cxy], [cxy, vy]]: l1 >= l2, major axis angle t
+    half = 0.5 * (vx + vy)
+    r = np.hypot(0.5 * (vx - vy), cxy)
+    l1, l2 = half + r, half - r
+    f1, f2 = np.maximum(l1, sigma_eps**2), np.maximum(l2, sigma_eps**2)
+    t = 0.5 * np.arctan2(2.0 * cxy, vx - vy)
+    c, s = np.cos(t), np.sin(t)
+    fx, fy, fxy = f1 * c * c + f2 * s * s, f1 * s * s + f2 * c * c, (f1 - f2) * c * s
+    # rounding guard: keep the per-axis floor and the correlation bound exact
+    fx, fy = np.maximum(fx, sigma_eps**2), np.maximum(fy, sigma_eps**2)
+    lim = MAX_RHO * np.sqrt(fx * fy)
+    fxy = np.clip(fxy, -lim, lim)
+    # lobes already at the floor (to rounding) are kept bit for bit: idempotent, so
+    # moments saved floored reload unchanged
+    low = l2 < sigma_eps**2 * (1.0 - 1e-10)
+    vx, vy, cxy = np.where(low, fx, vx), np.where(low, fy, vy), np.where(low, fxy, cxy)
     E[..., 2], E[..., 3], E[..., 4] = vx + e1 * e1, vy + e2 * e2, cxy + e1 * e2
     return E
 
@@ -446,7 +478,7 @@ class Microsurface:
         h : float
             Seed spacing in texels (the paper uses 1).
         sigma_eps : float
-            Floor of each lobe's slope standard deviations (Sec. 3.2, 0.01).
+            Floor of each lobe's principal slope standard deviations (Sec. 3.2, 0.01).
         samples : int
             Quadrature points per texel and axis for the lobe moments (Eq. 6).
         cutoff, slope_cutoff : float
