@@ -43,3 +43,11 @@ def test_kernel_shapes_and_fallbacks():
     brdf = mf.MicrofacetBRDF(mf.GGX(alpha=np.array([0.1, 0.3, 0.9])))    # per-texel parameters
     np.testing.assert_allclose(brdf.eval(wi[0, :3], wo), brdf._projected_numpy(wi[0, :3], wo, True)[1][:, None]
                                * np.ones(3), rtol=1e-14)
+
+
+def test_compiled_conductor_fresnel_matches_numpy():
+    from microfacet.fresnel import conductor_reflectance
+    c = np.concatenate([np.linspace(0, 1, 1001), [0.0, 1.0]])
+    f = mf.fresnel.Conductor.metal("Au")
+    ref = np.stack([conductor_reflectance(c, e, k) for e, k in zip(f.eta, f.k)], axis=-1)   # NumPy
+    np.testing.assert_allclose(f(c), ref, rtol=1e-14, atol=1e-16)

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import kernels
+
 __all__ = ["Fresnel", "Ideal", "Dielectric", "Schlick", "Conductor", "Tabulated"]
 
 
@@ -119,17 +121,27 @@ class Conductor(Fresnel):
 
     def __call__(self, cos_theta_d) -> np.ndarray:
         c = np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)
-        c2 = c * c
-        s2 = 1.0 - c2
-        out = np.empty(c.shape + (3,))
-        for ch, (eta, k) in enumerate(zip(self.eta, self.k)):   # three 1-D passes
-            t1 = eta * eta - k * k - s2
-            a2b2 = np.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
-            ac2 = 2.0 * c * np.sqrt(np.maximum(0.5 * (a2b2 + t1), 0.0))
-            rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
-            t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
-            out[..., ch] = 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
-        return out
+        f = _conductor_compiled or conductor_reflectance
+        return np.stack([f(c, eta, k) for eta, k in zip(self.eta, self.k)], axis=-1)
+
+
+def conductor_reflectance(c, eta, k):
+    """One channel of :class:`Conductor` at ``c = cos theta_d`` (arrays or scalars; the
+    same function is compiled into a ufunc when Numba is available)."""
+    c2 = c * c
+    s2 = 1.0 - c2
+    t1 = eta * eta - k * k - s2
+    a2b2 = np.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
+    ac2 = 2.0 * c * np.sqrt(np.maximum(0.5 * (a2b2 + t1), 0.0))
+    rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
+    t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
+    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
+
+
+_conductor_compiled = None
+if kernels.AVAILABLE:
+    _conductor_compiled = kernels.numba.vectorize(["float64(float64, float64, float64)"],
+                                                  cache=True)(conductor_reflectance)
 
 
 class Tabulated(Fresnel):
