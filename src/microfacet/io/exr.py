@@ -13,6 +13,7 @@ import OpenEXR
 
 from ..errors import MicrofacetError
 from .atomic import atomic_path
+from .read import read_bytes
 
 __all__ = ["read_exr", "write_exr", "EXR_MAGIC"]
 
@@ -55,15 +56,7 @@ def write_exr(path: str | os.PathLike, image, half: bool = False) -> Path:
 
 
 def _check_magic(path: Path) -> None:
-    try:
-        with open(path, "rb") as f:
-            magic = f.read(4)
-    except FileNotFoundError:
-        raise MicrofacetError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise MicrofacetError(f"{path}: is a directory, not an EXR file") from None
-    except OSError as e:
-        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    magic = read_bytes(path, "an EXR file", 4)
     if magic != EXR_MAGIC:
         raise MicrofacetError(f"{path}: not an OpenEXR file (bad magic number {magic.hex() or 'empty'})")
 

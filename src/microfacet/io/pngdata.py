@@ -18,6 +18,7 @@ from PIL import Image
 
 from ..errors import MicrofacetError
 from .atomic import write_bytes
+from .read import read_bytes
 
 __all__ = ["read_png_data", "write_png_data", "PNG_MAGIC"]
 
@@ -94,14 +95,7 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
     Raises :class:`MicrofacetError` naming the file if it is missing, not a PNG or corrupt.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise MicrofacetError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise MicrofacetError(f"{path}: is a directory, not a PNG file") from None
-    except OSError as e:
-        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    data = read_bytes(path, "a PNG file")
     if not data.startswith(PNG_MAGIC):
         raise MicrofacetError(f"{path}: not a PNG file (bad signature)")
     if len(data) < 33 or data[12:16] != b"IHDR":

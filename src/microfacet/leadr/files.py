@@ -18,6 +18,7 @@ from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
 from ..io.exr import EXR_MAGIC, read_exr, write_exr
 from ..io.pngdata import PNG_MAGIC, read_png_data, write_png_data
+from ..io.read import read_bytes
 from .mip import mip_sizes
 
 __all__ = ["write_pyramid", "read_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
@@ -50,15 +51,7 @@ def write_pyramid(path: str | os.PathLike, pyramid) -> Path:
 
 
 def _check_magic(path: Path, magic: bytes, kind: str) -> None:
-    try:
-        with open(path, "rb") as f:
-            head = f.read(len(magic))
-    except FileNotFoundError:
-        raise MicrofacetError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise MicrofacetError(f"{path}: is a directory, not {kind}") from None
-    except OSError as e:
-        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    head = read_bytes(path, kind, len(magic))
     if head != magic:
         raise MicrofacetError(f"{path}: not {kind} (bad magic number {head.hex() or 'empty'})")
 
@@ -98,15 +91,7 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
 
 def _read_image(path: Path) -> np.ndarray:
     """Samples of a PNG (``uint8``/``uint16``) or EXR (float64), chosen by content."""
-    try:
-        with open(path, "rb") as f:
-            head = f.read(8)
-    except FileNotFoundError:
-        raise MicrofacetError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise MicrofacetError(f"{path}: is a directory, not an image") from None
-    except OSError as e:
-        raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+    head = read_bytes(path, "an image", 8)
     if head.startswith(PNG_MAGIC):
         return read_png_data(path)
     if head.startswith(EXR_MAGIC):
