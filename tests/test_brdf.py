@@ -4,17 +4,9 @@ import pytest
 
 import microfacet as mf
 from microfacet.geometry import dot, normalize, reflect, spherical_to_cartesian
-from chi2 import chi2_test
-from quadrature import integrate_hemisphere
+from microfacet.validation import SURFACES, albedo, chi2_test
 
 DISTS = (mf.Beckmann, mf.GGX)
-SURFACES = {   # isotropic, anisotropic, correlated, sheared, all at once
-    "iso": dict(alpha=0.4),
-    "aniso": dict(alpha_x=0.15, alpha_y=0.6),
-    "corr": dict(alpha_x=0.3, alpha_y=0.5, rho=0.7),
-    "shear": dict(alpha=0.3, mean_slope=(0.4, -0.3)),
-    "all": dict(alpha_x=0.5, alpha_y=0.2, rho=-0.5, mean_slope=(-0.3, 0.5)),
-}
 VIEWS_DEG = (0, 60, 85)
 P_MIN = 1e-3      # per-case significance; ~50 cases, so a family-wise false alarm ~5 %
 
@@ -130,14 +122,6 @@ def test_vgroove_and_normal_map_match_table_2_iv():
     np.testing.assert_allclose(mf.MicrofacetBRDF(d, gaf="normal_map").gaf(wi, wo), nm, rtol=1e-14)
 
 
-def _albedo(brdf, wo):
-    """int f_r cos(theta_i) dw_i = int f_r(i(h), o) cos(theta_i) 4 (o.h) dw_h, by quadrature."""
-    def g(h):
-        wi = reflect(wo, h)
-        return brdf.eval_cos(wi, np.broadcast_to(wo, wi.shape))[..., 0] * 4 * np.maximum(dot(wo, h), 0)
-    return integrate_hemisphere(g, brdf.distribution, k=wo, n=(200, 200))
-
-
 @pytest.mark.parametrize("D", DISTS, ids=lambda D: D.__name__)
 def test_white_furnace(D):
     """With F = 1, the albedo is <= 1 (Smith: single scattering loses energy at high
@@ -151,7 +135,7 @@ def test_white_furnace(D):
             wo = spherical_to_cartesian(theta, 0.4 + np.pi * (theta > 1.2))
             if brdf.distribution._warp(wo)[2] <= 0:
                 continue
-            a = _albedo(brdf, wo)
+            a = albedo(brdf, wo)
             assert 0 < a <= 1 + 1e-9, f"{kw} theta={theta}: albedo {a}"
             if kw == dict(alpha=0.01):
                 assert a > 0.99 if theta < 1.2 else a > 0.9

@@ -1,21 +1,14 @@
 """Validation of the slope distributions (thesis Ch. 2, 3.2; DESIGN.md's standard)."""
-import itertools
-
 import numpy as np
 import pytest
 
 import microfacet as mf
 from microfacet.distributions.beckmann import visible_slope_quantile
 from microfacet.geometry import dot, spherical_to_cartesian
-from quadrature import integrate_hemisphere, integrate_slopes
+from microfacet.validation import PARAMETER_GRID as PARAMS
+from microfacet.validation import integrate_hemisphere, integrate_slopes, lobe_shape
 
 DISTS = (mf.Beckmann, mf.GGX)
-# alpha from 1e-2 to 2, |rho| up to 0.9, mean slopes up to 1 (in norm)
-PARAMS = [dict(alpha_x=ax, alpha_y=ay, rho=rho, mean_slope=ms)
-          for (ax, ay), rho, ms in itertools.product(
-              [(0.01, 0.01), (0.02, 0.2), (0.3, 0.3), (1.0, 0.4), (2.0, 2.0)],
-              [0.0, 0.9, -0.6],
-              [(0.0, 0.0), (1.0, 0.0), (-0.6, 0.8)])]
 VIEWS = [spherical_to_cartesian(np.radians(t), p) for t, p in [(0, 0), (45, 0.3), (75, 2.0), (89, -1.2)]]
 QUAD = (160, 160)
 
@@ -115,7 +108,6 @@ def test_ellipse_parameters_round_trip_and_orientation(D):
 def test_beckmann_moments_and_from_moments():
     """Linear slope moments (Eq. 3.5-3.9) against quadrature, and back."""
     d = mf.Beckmann(alpha_x=0.3, alpha_y=0.2, rho=0.4, mean_slope=(0.1, -0.3))
-    from quadrature import lobe_shape
     c, s = lobe_shape(d)
     funcs = [lambda x, y: x, lambda x, y: y, lambda x, y: x * x, lambda x, y: y * y, lambda x, y: x * y]
     num = [integrate_slopes(lambda x, y, f=f: f(x, y) * d.p22(x, y), c, s) for f in funcs]

@@ -13,8 +13,7 @@ from microfacet.distributions.tabulated import TabulatedAnisotropic, TabulatedIs
 from microfacet.errors import MicrofacetError
 from microfacet.fit import extract
 from microfacet.geometry import dot, normalize, reflect, spherical_to_cartesian
-from chi2 import chi2_test
-from quadrature import integrate_slopes
+from microfacet.validation import chi2_test, integrate_slopes
 
 P_MIN = 1e-3
 SCHLICK = mf.fresnel.Schlick([0.9, 0.6, 0.3])

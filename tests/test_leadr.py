@@ -201,7 +201,7 @@ def test_compiled_bake_matches_the_numpy_reference():
 def test_base_roughness_and_material_merge():
     xi = leadr.gaussian_heightfield((32, 32), 0.3, seed=7)
     lobe = mf.Beckmann(alpha_x=0.2, alpha_y=0.1, rho=0.3, mean_slope=(0.05, 0.0))
-    merged = leadr.merge_material(leadr.bake(xi), mf.MicrofacetBRDF(lobe))
+    merged = leadr.downsample_operator(leadr.bake(xi), mf.MicrofacetBRDF(lobe))
     baked = leadr.bake(xi, roughness=lobe)
     for m, b in zip(merged, baked):
         np.testing.assert_allclose(m, b, rtol=1e-5, atol=1e-7)

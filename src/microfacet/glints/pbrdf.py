@@ -473,6 +473,18 @@ if _kernels.AVAILABLE:
             return 0.5 * c * math.erfc(-t / _SQRT2) + sg * _INV_SQRT_2PI * math.exp(-0.5 * t * t)
         return max(c, 0.0)
 
+    @numba.njit(cache=True, nogil=True)
+    def _window(f, nx, ny, ks2x, ks2y, cutoff):  # pragma: no cover - compiled
+        """Centre, covariance (footprint + kernel), its determinant and the inclusive seed
+        index window ``x0..x1, y0..y1`` of footprint row ``f = (u, v, cuu, cvv, cuv)``
+        (the window of :func:`footprint_lobes`)."""
+        cu, cv = f[0], f[1]
+        sxx, syy, sxy = f[2] + ks2x, f[3] + ks2y, f[4]
+        rx, ry = cutoff * math.sqrt(sxx), cutoff * math.sqrt(syy)
+        x0, x1 = int(math.ceil((cu - rx) * nx - 0.5)), int(math.floor((cu + rx) * nx - 0.5))
+        y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
+        return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
+
     @numba.njit(cache=True, parallel=True, nogil=True)
     def _footprint_sums(lob, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo, exact):  # pragma: no cover - compiled
         """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
@@ -489,12 +501,7 @@ if _kernels.AVAILABLE:
         P = fp.shape[0]
         out = np.zeros((P, 5))
         for p in numba.prange(P):
-            cu, cv = fp[p, 0], fp[p, 1]
-            sxx, syy, sxy = fp[p, 2] + ks2x, fp[p, 3] + ks2y, fp[p, 4]
-            det = sxx * syy - sxy * sxy
-            rx, ry = cutoff * math.sqrt(sxx), cutoff * math.sqrt(syy)
-            x0, x1 = int(math.ceil((cu - rx) * nx - 0.5)), int(math.floor((cu + rx) * nx - 0.5))
-            y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
+            cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
             if x1 < x0 or y1 < y0:
                 continue
             # footprint weights exp(-q/2): ex[ix] ey[iy] when uncorrelated (sxy = 0)
@@ -562,12 +569,7 @@ if _kernels.AVAILABLE:
         P = fp.shape[0]
         out = np.zeros((P, 5))
         for p in numba.prange(P):
-            cu, cv = fp[p, 0], fp[p, 1]
-            sxx, syy, sxy = fp[p, 2] + ks2x, fp[p, 3] + ks2y, fp[p, 4]
-            det = sxx * syy - sxy * sxy
-            rx, ry = cutoff * math.sqrt(sxx), cutoff * math.sqrt(syy)
-            x0, x1 = int(math.ceil((cu - rx) * nx - 0.5)), int(math.floor((cu + rx) * nx - 0.5))
-            y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
+            cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
             wsum = 0.0
             for iy in range(y0, y1 + 1):
                 dv = (iy + 0.5) / ny - cv

@@ -8,7 +8,7 @@ by adding (Listing 5.1) and convert to a Beckmann lobe with :func:`from_moments`
 from .files import load_height_map, load_normal_map, read_pyramid, write_normal_map, write_pyramid
 from .heightfield import gaussian_heightfield
 from .maps import (base_moments, bake, bake_reference, decode_normal_map, encode_normal_map,
-                   height_to_slopes, merge_material, normal_map_to_moments, normals_to_slopes,
+                   height_to_slopes, normal_map_to_moments, normals_to_slopes,
                    slopes_to_moments, slopes_to_normals)
 from .mip import downsample_weights, lookup, mip_pyramid, mip_sizes
 from .moments import (clean_moments, clean_to_moments, convolve, covariance, from_moments,
@@ -23,7 +23,7 @@ __all__ = ["to_moments", "from_moments", "convolve", "scale_height", "transform"
            "clean_moments", "clean_to_moments",
            "height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode_normal_map",
            "decode_normal_map", "slopes_to_moments", "normal_map_to_moments", "base_moments",
-           "bake", "bake_reference", "merge_material",
+           "bake", "bake_reference",
            "mip_pyramid", "mip_sizes", "downsample_weights", "lookup",
            "read_pyramid", "write_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
            "gaussian_heightfield",

@@ -24,7 +24,7 @@ from .moments import convolve, to_moments
 
 __all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode_normal_map",
            "decode_normal_map", "slopes_to_moments", "normal_map_to_moments", "base_moments",
-           "bake", "bake_reference", "merge_material", "BORDERS"]
+           "bake", "bake_reference", "BORDERS"]
 
 BORDERS = ("wrap", "clamp")
 _MIN_NZ = 1e-4          # decoded normals are kept above the horizon (slopes <= 1e4)
@@ -198,12 +198,3 @@ def bake_reference(height, scale: float = 1.0, roughness=None, *, border: str = 
     return mip_pyramid(E)
 
 
-def merge_material(pyramid, roughness) -> list[np.ndarray]:
-    """Every level of ``pyramid`` convolved with a base lobe (Ch. 5 downsampling operator:
-    moment addition, Listing 5.1), e.g. ``fit.to_beckmann()`` of a fitted material.
-    Convolution with a fixed lobe is affine in the moments, so it commutes with MIP
-    averaging: merging the pyramid equals baking with that base roughness."""
-    base = base_moments(roughness)
-    if base is None:
-        return [np.array(level) for level in pyramid]
-    return [convolve(level, base).astype(level.dtype) for level in pyramid]
