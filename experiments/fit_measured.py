@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 import microfacet as mf
-from microfacet.fit_outputs import material_name
+from microfacet.fit.outputs import material_name
 from microfacet.io import write_text
 from microfacet.metrics import describe_fit_error, fit_error, ndf_error
 

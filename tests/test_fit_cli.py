@@ -129,4 +129,4 @@ def test_fit_bad_arguments_give_usage_status(capsys):
     assert main(["fit", "x", "-o", "y", "--gaf", "bogus"]) == 2
     assert main(["fit", "x", "-o", "y", "--resolution", "2"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 2 and "invalid choice: 'bogus'" in err and "must be >= 8" in err
+    assert err.count("\n") == 2 and "invalid choice: 'bogus'" in err and "must lie in [8, 2048]" in err

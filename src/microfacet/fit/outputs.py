@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MicrofacetError
-from .io import write_text
-from .metrics import describe_fit_error, fit_error
+from ..errors import MicrofacetError
+from ..io import write_text
+from ..metrics import describe_fit_error, fit_error
 
 __all__ = ["material_name", "material_files", "fit_material", "fit_folder", "distribution_params",
            "fresnel_json", "summary_row", "format_summary_markdown", "format_summary_csv",
@@ -85,8 +85,8 @@ def _fit_fresnel(fit):
 
 
 def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str):
-    from . import fit as fitting        # imported on use: the fitter is a heavier layer
-    return fitting.fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf)
+    from .fitted import fit
+    return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf)
 
 
 def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotropic: bool = False,
@@ -118,7 +118,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     }
     fit.save(out_npz)                               # atomic (FittedBRDF.save)
     write_text(out_npz.with_suffix(".json"), json.dumps(summary, indent=2) + "\n")
-    from .render import save_fit_comparison
+    from ..render import save_fit_comparison
     save_fit_comparison(out_npz.with_suffix(".png"),
                         {"data": brdf, "tabulated fit": fit, "GGX": ggx, "Beckmann": beckmann},
                         title=title or material_name(out_npz), planes_deg=(0, 90) if anisotropic else (0,))
@@ -177,7 +177,7 @@ def fit_folder(folder: str | os.PathLike, out_dir: str | os.PathLike, resolution
     files (e.g. ``tqdm``). Returns the summary rows; raises :class:`MicrofacetError` when
     the folder holds no file.
     """
-    from .measured import load
+    from ..measured import load
     folder, out = Path(folder), Path(out_dir)
     files = material_files(folder)
     if not files:

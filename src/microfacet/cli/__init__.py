@@ -1,0 +1,81 @@
+"""The ``microfacet`` command line: one module per command.
+
+``microfacet demo -o DIR`` renders the demo report; ``microfacet validate`` checks the
+core models numerically; ``microfacet fit INPUT -o OUT`` fits measured BRDFs;
+``microfacet bake MAP -o OUT.exr`` prefilters a height or normal map into a LEAN/LEADR
+moment pyramid; ``microfacet glints NORMAL_MAP -o OUT.npz`` builds a glint microsurface and
+``microfacet glints render OUT.npz -o IMG.png`` renders one. Outputs follow one naming
+rule (:mod:`microfacet.cli.common`). Bad input prints one line on stderr and exits with a
+non-zero status, without a traceback; long work shows a progress bar only on a terminal.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from collections.abc import Sequence
+
+from .. import __version__
+from ..errors import MicrofacetError
+from . import bake, demo, fit, glints, validate
+from .common import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser
+
+__all__ = ["main", "build_parser"]
+
+COMMANDS = (demo, validate, fit, bake, glints)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``microfacet`` command."""
+    parser = Parser(prog=PROG, description="Multiscale microfacet rendering: BRDFs in slope space, "
+                                           "fitting, LEAN/LEADR prefiltering and glints.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    sub = parser.add_subparsers(title="commands", dest="command", metavar="COMMAND", required=True)
+    for command in COMMANDS:
+        command.add(sub)
+    return parser
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+
+def _one_line(e: Exception) -> str:
+    """``path: reason`` for OS errors, the message otherwise, on one line."""
+    if isinstance(e, OSError) and e.strerror and e.filename:
+        text = f"{e.filename}: {e.strerror}"
+    else:
+        text = str(e) or type(e).__name__
+    return " ".join(text.split())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if argv[:2] == ["glints", "render"]:        # second form of 'glints'
+            args = glints.render_parser().parse_args(argv[1:])
+        else:
+            args = build_parser().parse_args(argv)
+    except SystemExit as e:          # --help, --version, usage errors (already printed)
+        return e.code if isinstance(e.code, int) else EXIT_USAGE
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return args.run(args)
+    except (MicrofacetError, ValueError, OSError) as e:
+        print(f"{PROG}: error: {_one_line(e)}", file=sys.stderr)
+        return EXIT_ERROR
+    except ArithmeticError as e:     # overflow in a computation: the inputs are out of range
+        print(f"{PROG}: error: numbers out of range ({_one_line(e)}); check the parameters", file=sys.stderr)
+        return EXIT_ERROR
+    except MemoryError:
+        print(f"{PROG}: error: out of memory (try a smaller size or resolution)", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

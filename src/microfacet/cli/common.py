@@ -1,0 +1,96 @@
+"""What every ``microfacet`` command shares: one-line usage errors, argument types and the
+output naming rule.
+
+Output naming rule (every command): ``-o OUT`` names the main output file. ``OUT`` ending
+with the command's suffix (``.npz``, ``.exr``, ``.png``, ``.md``) is used as it is; ``OUT``
+without a suffix gets it appended; an existing folder receives ``<input name><suffix>``.
+Any other suffix is an error, and so is an output (or a side output such as ``OUT.png``)
+that is the input itself. Outputs are checked, and their folder created, before the work.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from ..errors import MicrofacetError
+
+PROG = "microfacet"
+EXIT_ERROR, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+
+
+class Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors are one line: ``microfacet: error: ...``."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
+
+
+def int_at_least(lo: int, hi: int | None = None):
+    """argparse type: an integer in ``[lo, hi]``."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < lo or (hi is not None and value > hi):
+            raise argparse.ArgumentTypeError(f"must lie in [{lo}, {hi}], got {value}" if hi is not None
+                                             else f"must be >= {lo}, got {value}")
+        return value
+    return parse
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite float."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+def float_in(lo: float, hi: float, open_lo: bool = False):
+    """argparse type: a float in ``[lo, hi]`` (``(lo, hi]`` with ``open_lo``)."""
+    def parse(text: str) -> float:
+        value = finite_float(text)
+        if value < lo or value > hi or (open_lo and value == lo):
+            raise argparse.ArgumentTypeError(f"must lie in {'(' if open_lo else '['}{lo:g}, {hi:g}], got {text}")
+        return value
+    return parse
+
+
+def input_name(source: str | os.PathLike) -> str:
+    """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``."""
+    from ..fit.outputs import material_name
+    name = material_name(source)
+    return name.rsplit(".", 1)[0] if Path(name).suffix.lower() in (".png", ".exr", ".npz") else name
+
+
+def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLike | None = None,
+                side: tuple[str, ...] = (), default_name: str = "") -> Path:
+    """The main output of a command under the output naming rule (module docstring).
+
+    ``side`` lists the suffixes of the files written beside it (``OUT.png``, ...); none of
+    them may be ``source``. The output's folder is created. Returns the main output path.
+    """
+    out = Path(output)
+    if out.is_dir():
+        name = input_name(source) if source is not None else default_name
+        if not name:
+            raise MicrofacetError(f"{out}: is a folder; give a {suffix} file")
+        out = out / f"{name}{suffix}"
+    elif out.suffix == "":
+        out = out.with_name(out.name + suffix)
+    elif out.suffix.lower() != suffix:
+        raise MicrofacetError(f"{out}: expected a {suffix} file name (or a folder), got {out.suffix!r}")
+    for path in (out, *(out.with_suffix(s) for s in side)):
+        if path.is_dir():
+            raise MicrofacetError(f"{path}: is a folder")
+        if source is not None and path.exists() and Path(source).exists() and path.samefile(source):
+            raise MicrofacetError(f"{path}: output would overwrite the input {source}; choose another -o")
+    if out.parent.exists() and not out.parent.is_dir():
+        raise MicrofacetError(f"{out.parent}: is not a folder")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return out

@@ -1,0 +1,33 @@
+"""``microfacet demo -o DIR``: the demo report (HTML, PNG, EXR)."""
+from __future__ import annotations
+
+import sys
+
+from .common import int_at_least
+
+
+def add(sub) -> None:
+    from ..demo import DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SPP, default_workers
+    p = sub.add_parser(
+        "demo", help="render the thesis Figs. 2.2-2.6 demo report and a fitting section (HTML, PNG, EXR)",
+        description="Render spheres and polar lobe plots showing the Fresnel term, the GAF, "
+                    "isotropic and anisotropic roughness and its orientation (thesis Figs. "
+                    "2.2-2.6) under a directional light and an environment, and fits of built-in "
+                    "analytic materials by power iterations (Ch. 4), into DIR/index.html.")
+    p.add_argument("-o", "--output", metavar="DIR", required=True, help="output folder (created if needed)")
+    p.add_argument("--size", type=int_at_least(8), default=DEFAULT_SIZE, metavar="PX",
+                   help=f"sphere image side in pixels (default {DEFAULT_SIZE})")
+    p.add_argument("--spp", type=int_at_least(1), default=DEFAULT_SPP, metavar="N",
+                   help=f"environment samples per pixel (default {DEFAULT_SPP})")
+    p.add_argument("--seed", type=int_at_least(0), default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
+    p.add_argument("-j", "--jobs", type=int_at_least(1), default=default_workers(), metavar="N",
+                   help="worker processes (default: usable CPUs, at most 4); results do not depend on it")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from ..demo import run_demo
+    index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
+                     workers=args.jobs, progress=sys.stderr.isatty())
+    print(index)
+    return 0
