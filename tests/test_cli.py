@@ -59,6 +59,7 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
     assert not [p for p in demo_dir.rglob("*") if p.name.startswith(".") or p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow
 def test_demo_is_deterministic_independent_of_workers_and_quiet_in_pipes(demo_dir, tmp_path):
     out = tmp_path / "again"
     proc = run_cli("demo", "-o", str(out), *SMALL, "-j", "2")
@@ -66,11 +67,6 @@ def test_demo_is_deterministic_independent_of_workers_and_quiet_in_pipes(demo_di
     assert proc.stdout.strip() == str(out / "index.html")
     assert proc.stderr == ""                       # no progress bar when stderr is not a TTY
     assert files(out) == files(demo_dir)
-
-
-def test_demo_prints_index_path(tmp_path, capsys):
-    assert main(["demo", "-o", str(tmp_path), "--size", "8", "--spp", "1", "-j", "1"]) == 0
-    assert capsys.readouterr().out.strip() == str(tmp_path / "index.html")
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -1,5 +1,6 @@
 """The validation tools can fail: they catch wrong samplers and wrong normalizations."""
 import numpy as np
+import pytest
 
 import microfacet as mf
 from microfacet.cli import main
@@ -29,6 +30,7 @@ def test_quadrature_sees_a_misnormalized_ndf():
     assert abs(integrate_hemisphere(lambda h: d.ndf(h) * h[..., 2], d) - 1) < 1e-12
 
 
+@pytest.mark.slow
 def test_validate_command(tmp_path, capsys):
     out = tmp_path / "report.md"
     assert main(["validate", "--quick", "-o", str(out)]) == 0

@@ -1,0 +1,26 @@
+"""Test-suite options: ``@pytest.mark.slow`` marks the long validation sweeps, which run in
+CI (``CI=true``) or with ``pytest --slow`` and are skipped, with that reason, elsewhere."""
+import os
+
+import pytest
+
+
+def pytest_addoption(parser):
+    parser.addoption("--slow", action="store_true", help="also run the long validation sweeps (@slow)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "slow: long validation sweep; runs in CI (CI=true) or with --slow")
+
+
+def run_slow(config) -> bool:
+    return config.getoption("--slow") or os.environ.get("CI", "").lower() in ("true", "1")
+
+
+def pytest_collection_modifyitems(config, items):
+    if run_slow(config):
+        return
+    skip = pytest.mark.skip(reason="slow validation sweep: runs in CI (CI=true) or with --slow")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
