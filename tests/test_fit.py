@@ -247,16 +247,22 @@ def test_anisotropic_fit_reproduces_backscattering(fits, kind, ref, tol_between)
                               rel_floor=1e-2) < tol_between
 
 
-def test_power_iteration_finds_the_perron_vector():
-    ref = _input(mf.GGX, alpha=0.4)
+@pytest.mark.parametrize("model", extract.BACKSCATTER_GAFS)
+def test_power_iteration_finds_the_perron_vector(model):
+    """The fixed point of both backscattering models is the dominant eigenvector of the
+    dense operator (``K`` or ``2 K - u v^T``)."""
+    ref = _input(mf.GGX, alpha=0.4, shadowing=model == "height_correlated")
     theta = theta_grid(40)
-    k = extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta)
-    p, lam, its = extract.power_iteration(k)
-    vals, vecs = np.linalg.eig(k)
+    k, rank_one = extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta, model)
+    p, lam, its = extract.power_iteration(k, rank_one=rank_one)
+    dense = k if rank_one is None else k - np.outer(*rank_one)
+    vals, vecs = np.linalg.eig(dense)
     i = np.argmax(vals.real)
     v = np.abs(vecs[:, i].real)
     np.testing.assert_allclose(p, v / v.sum(), rtol=1e-8, atol=1e-14)
     assert abs(lam / vals[i].real - 1) < 1e-8 and its < 100
+    with pytest.raises(ValueError, match="backscatter_gaf"):
+        extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta, "nope")
 
 
 @pytest.mark.parametrize("gaf", ["vgroove", "normal_map"])
