@@ -32,7 +32,7 @@ from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
            "smith_kernel_anisotropic", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
-           "fresnel_samples", "solve_fresnel", "extract_fresnel"]
+           "fresnel_samples", "solve_fresnel", "albedo_rows", "extract_fresnel"]
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
 BACKSCATTER_GAFS = ("masking", "height_correlated")
@@ -192,6 +192,16 @@ def ndf_closed_form(f_back: np.ndarray, theta: np.ndarray, gaf: str) -> np.ndarr
 
 
 # ---------------------------------------------------------------------- Fresnel
+def _hats(cos_d, n_d: int):
+    """Node ``k`` (``theta_d,k = k pi / (2 (n_d - 1))``) and weight ``t`` of the table's
+    linear interpolation in ``cos theta_d`` (as :class:`~microfacet.fresnel.Tabulated`):
+    ``F = (1 - t) F_k + t F_{k+1}``."""
+    c = np.clip(np.asarray(cos_d, dtype=np.float64), 0.0, 1.0)
+    k0 = np.minimum((np.arccos(c) / (HALF_PI / (n_d - 1))).astype(np.intp), n_d - 2)
+    ca, cb = np.cos(k0 * (HALF_PI / (n_d - 1))), np.cos((k0 + 1) * (HALF_PI / (n_d - 1)))
+    return k0, np.clip((ca - c) / (ca - cb), 0.0, 1.0)
+
+
 def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1) -> dict:
     """Configurations of Algorithm 2 and the input's values there, evaluated once.
 
@@ -216,7 +226,8 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
                 finite=finite, n_d=n_d)
 
 
-def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6):
+def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6, albedo=None,
+                  kd_max=None):
     """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2) bounded to
     ``[0, 1]``, and optionally a Lambertian base ``k_d``, by a box-constrained linear
     least-squares solve over the configurations ``samples`` (:func:`fresnel_samples`):
@@ -231,7 +242,13 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     ``sum f / sum f_id``, the ``f_id``-weighted mean of ``f / f_id`` (Eq. 4.11). The second-
     difference penalty only fills nodes that no configuration sees. The bounded problem is
     solved on its normal equations (``n x n``; :func:`scipy.optimize.lsq_linear`, BVLS on
-    the Cholesky factor).
+    the Cholesky factor). ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
+    backscattering, which the base may not exceed).
+
+    ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
+    ``sum_k F_k a[v, k] + k_d <= a_data[v]`` at each view ``v`` (the fit reflects no more
+    than the data); when the bounded solution violates them, the linearly constrained
+    problem is solved by SLSQP from it.
 
     Returns ``(cos_theta_d, rgb, k_d)``: increasing ``cos theta_d`` of the ``n_d`` nodes,
     ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``).
@@ -255,10 +272,7 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
         raise MicrofacetError("fit: no configuration to extract the Fresnel term from")
     f, f_id = f[ok], f_id[ok]
     w = 1.0 / (f_id + delta)
-    # hat coordinates of cos theta_d on the nodes theta_d = k pi / (2 (n_d - 1))
-    u = np.clip(np.arccos(np.clip(samples["cos_d"][ok], 0.0, 1.0)) / (HALF_PI / (n_d - 1)), 0.0, n_d - 1)
-    k0 = np.minimum(u.astype(np.intp), n_d - 2)
-    t = u - k0
+    k0, t = _hats(samples["cos_d"][ok], n_d)
     cols = [k0, k0 + 1]
     vals = [f_id * (1.0 - t), f_id * t]
     n_var = n_d + (1 if diffuse else 0)
@@ -280,14 +294,69 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     r = cholesky(h, lower=False)                                      # h = r^T r
     y = np.linalg.solve(r.T, b)                                       # r^T y = b
     lo = np.zeros(n_var)
-    hi = np.ones(n_var)
     x = np.empty((n_var, 3))
     for c in range(3):
+        hi = np.ones(n_var)
+        if diffuse and kd_max is not None:
+            hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
         x[:, c] = lsq_linear(r, y[:, c], bounds=(lo, hi), method="bvls", tol=1e-12).x
+        if albedo is not None:
+            x[:, c] = _energy_constrained(r, y[:, c], x[:, c], (lo, hi), albedo, c, n_d, diffuse)
     rgb = x[:n_d]
     kd = x[n_d] if diffuse else np.zeros(3)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
     return np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
+
+
+def _energy_constrained(r, y, x0, bounds, albedo, c, n_d, diffuse):
+    """``min |r x - y|^2`` under ``bounds`` and ``a x <= a_data`` (SLSQP from ``x0``)."""
+    from scipy.optimize import Bounds, LinearConstraint, minimize
+
+    a, a_data = albedo
+    rows = np.concatenate([a, np.ones((len(a), 1))], axis=1) if diffuse else a
+    limit = a_data[:, c]
+    if np.all(rows @ x0 <= limit + 1e-9):
+        return x0
+    scale = 1.0 / max(float(y @ y), 1e-300)
+    rtr, rty = r.T @ r * scale, r.T @ y * scale
+    res = minimize(lambda x: 0.5 * x @ rtr @ x - rty @ x, x0, jac=lambda x: rtr @ x - rty, method="SLSQP",
+                   bounds=Bounds(*bounds), constraints=[LinearConstraint(rows, -np.inf, limit)],
+                   options=dict(maxiter=500, ftol=1e-14))
+    x = np.clip(res.x, *bounds)
+    # feasibility first: scale down a remaining violation (all rows are nonnegative)
+    excess = np.max((rows @ x) / np.maximum(limit, 1e-300))
+    return x / excess if excess > 1.0 else x
+
+
+def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.01):
+    """Linear directional-albedo model of the fit and the data's albedo at ``views``
+    (``(V, 3)`` view directions): ``a[v, k] = int f_id(i, o_v) hat_k(cos theta_d) cos
+    theta_i dw_i`` (the fit's albedo is ``sum_k F_k a[v, k] + k_d``, Eq. 2.1 with the
+    table's hats) and ``a_data[v] = int f(i, o_v) cos theta_i dw_i + margin``, both by the
+    same stratified ``n_u x n_u`` importance sampling of the defensive mixture ``1/2``
+    visible normals of ``ideal`` + ``1/2`` cosine lobe. Returns ``(a, a_data)``."""
+    from ..brdf import Lambertian
+    from ..geometry import dot, half_vector
+
+    g = (np.arange(n_u) + 0.5) / n_u
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    half = len(u) // 2
+    views = np.asarray(views, dtype=np.float64)
+    wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
+    cosine = Lambertian(1.0)
+    wi = np.concatenate([ideal.sample(u[:half], wo[:, :half])[0], cosine.sample(u[half:], wo[:, half:])[0]], axis=1)
+    pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    ok = (pdf > 0) & (wi[..., 2] > 0)
+    inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / len(u)
+    fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
+    f = np.asarray(brdf.eval_cos(wi, wo), dtype=np.float64)
+    f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
+    k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
+    a = np.zeros((len(views), n_d))
+    for v in range(len(views)):
+        a[v] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
+                + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
+    return a, f.sum(axis=1) + margin
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
