@@ -52,10 +52,10 @@ def _stages(brdf, n: int = 90) -> dict:
     f_back = extract.backscattering(brdf, theta[:-1])
     t["backscattering f(o,o)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    k = extract.smith_kernel_isotropic(f_back, theta)
+    k, rank_one = extract.smith_kernel_isotropic(f_back, theta, "height_correlated")
     t["kernel K' (Eq. 4.14)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    d, _, its = extract.power_iteration(k)
+    d, _, its = extract.power_iteration(k, rank_one=rank_one)
     t[f"power iterations ({its})"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     dist = TabulatedIsotropic(np.append(d, d[-1]))

@@ -5,6 +5,8 @@ the fit exactly (``G(o, o) = G1(o)``, Eq. 4.2-4.3), so their fits must reproduce
 the accuracy of the tables; default (height-correlated) inputs differ from it by the
 hotspot factor ``(1 + Lambda) / (1 + 2 Lambda)`` at grazing angles only.
 """
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -247,16 +249,22 @@ def test_anisotropic_fit_reproduces_backscattering(fits, kind, ref, tol_between)
                               rel_floor=1e-2) < tol_between
 
 
-def test_power_iteration_finds_the_perron_vector():
-    ref = _input(mf.GGX, alpha=0.4)
+@pytest.mark.parametrize("model", extract.BACKSCATTER_GAFS)
+def test_power_iteration_finds_the_perron_vector(model):
+    """The fixed point of both backscattering models is the dominant eigenvector of the
+    dense operator (``K`` or ``2 K - u v^T``)."""
+    ref = _input(mf.GGX, alpha=0.4, shadowing=model == "height_correlated")
     theta = theta_grid(40)
-    k = extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta)
-    p, lam, its = extract.power_iteration(k)
-    vals, vecs = np.linalg.eig(k)
+    k, rank_one = extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta, model)
+    p, lam, its = extract.power_iteration(k, rank_one=rank_one)
+    dense = k if rank_one is None else k - np.outer(*rank_one)
+    vals, vecs = np.linalg.eig(dense)
     i = np.argmax(vals.real)
     v = np.abs(vecs[:, i].real)
     np.testing.assert_allclose(p, v / v.sum(), rtol=1e-8, atol=1e-14)
     assert abs(lam / vals[i].real - 1) < 1e-8 and its < 100
+    with pytest.raises(ValueError, match="backscatter_gaf"):
+        extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta, "nope")
 
 
 @pytest.mark.parametrize("gaf", ["vgroove", "normal_map"])
@@ -414,3 +422,150 @@ def test_save_samples_a_non_tabulated_fresnel(fits, tmp_path):
     c = np.linspace(0.0, 1.0, 33)
     np.testing.assert_allclose(g.fresnel(c), SCHLICK(c), rtol=2e-3)
     assert isinstance(mf.distributions.TabulatedIsotropic, type) and g.distribution.n_theta == 90
+
+
+# ------------------------------------------------- round trip of the library's own model
+def _uniform_pairs(n=4000, seed=3):
+    """Uniformly distributed direction pairs with both cosines > 0.1."""
+    rng = np.random.default_rng(seed)
+
+    def d():
+        z = rng.uniform(0.1, 1.0, n)
+        p = rng.uniform(0.0, 2 * np.pi, n)
+        s = np.sqrt(1 - z * z)
+        return np.stack([s * np.cos(p), s * np.sin(p), z], axis=-1)
+    return d(), d()
+
+
+def _pair_error(fit, ref, pairs):
+    """Relative RMS of ``f cos theta_i`` over ``pairs`` (cosine-weighted in ``theta_o``)."""
+    wi, wo = pairs
+    a, b = fit.eval_cos(wi, wo)[..., 1], ref.eval_cos(wi, wo)[..., 1]
+    w = wo[:, 2]
+    return float(np.sqrt(np.sum(w * (a - b) ** 2) / np.sum(w * b * b)))
+
+
+def _round_trip(D, params, gaf, shadowing, anisotropic, n):
+    ref = mf.MicrofacetBRDF(D(**params), fresnel=SCHLICK, gaf=gaf, shadowing=shadowing)
+    f = mf.fit.fit(ref, n, anisotropic=anisotropic, gaf=gaf, shadowing=shadowing)
+    conv = (f.to_ggx() if D is mf.GGX else f.to_beckmann()).distribution
+    want = [params.get("alpha_x", params.get("alpha")), params.get("alpha_y", params.get("alpha"))]
+    got = [conv.alpha_x, conv.alpha_y]
+    return f, ref, np.abs(np.array(got) / np.array(want) - 1), abs(conv.rho - params.get("rho", 0.0))
+
+
+ROUND_TRIP_FAST = [(D, a, sh) for D in (mf.GGX, mf.Beckmann) for a in (0.1, 0.8, 1.5) for sh in (True, False)]
+
+
+@pytest.mark.parametrize("D, alpha, shadowing", ROUND_TRIP_FAST,
+                         ids=[f"{D.__name__}-{a}-{'hc' if s else 'mask'}" for D, a, s in ROUND_TRIP_FAST])
+def test_round_trip_of_the_library_smith_model(D, alpha, shadowing):
+    """Issue 10: fitting the library's own Smith BRDF (height-correlated with shadowing,
+    masking-only without) and converting to the same family recovers alpha within 1 %,
+    and the tabulated fit reproduces f cos within 1 % over uniform pairs."""
+    f, ref, rel, _ = _round_trip(D, dict(alpha=alpha), "smith", shadowing, False, 90)
+    assert f.backscatter_gaf == ("height_correlated" if shadowing else "masking")
+    assert np.all(rel < 0.01), rel
+    assert _pair_error(f, ref, _uniform_pairs()) < 0.01
+
+
+def test_masking_backscatter_option_keeps_eq_4_3():
+    """``backscatter_gaf="masking"`` on a height-correlated input is the thesis's Eq. 4.3
+    fit: it under-estimates a rough GGX (the pre-issue-10 behaviour, alpha 0.8 -> 0.67)."""
+    ref = _input(mf.GGX, shadowing=True, alpha=0.8)
+    f = mf.fit.fit(ref, 90, backscatter_gaf="masking")
+    assert f.backscatter_gaf == "masking"
+    assert f.to_ggx().distribution.alpha_x < 0.7
+    with pytest.raises(ValueError, match="backscatter_gaf"):
+        mf.fit.fit(ref, 16, backscatter_gaf="separable")
+
+
+@pytest.mark.parametrize("gaf", ["vgroove", "normal_map"])
+@pytest.mark.parametrize("shadowing", [True, False])
+def test_round_trip_closed_form_gafs(gaf, shadowing):
+    f, ref, rel, _ = _round_trip(mf.GGX, dict(alpha=0.5), gaf, shadowing, False, 90)
+    assert np.all(rel < 0.01), rel
+    assert _pair_error(f, ref, _uniform_pairs()) < 0.01
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("D", [mf.GGX, mf.Beckmann])
+@pytest.mark.parametrize("gaf", mf.brdf.GAFS)
+@pytest.mark.parametrize("shadowing", [True, False])
+def test_round_trip_sweep(D, gaf, shadowing):
+    """The whole issue-10 sweep: alpha 0.01-1.5 isotropic (N = 90)."""
+    pairs = _uniform_pairs()
+    for alpha in (0.01, 0.05, 0.1, 0.3, 0.5, 0.8, 1.2, 1.5):
+        f, ref, rel, _ = _round_trip(D, dict(alpha=alpha), gaf, shadowing, False, 90)
+        assert np.all(rel < 0.01), (alpha, rel)
+        assert _pair_error(f, ref, pairs) < 0.01, alpha
+
+
+@pytest.mark.parametrize("D", [mf.GGX, mf.Beckmann])
+def test_anisotropic_round_trip_height_correlated(D):
+    """Anisotropic, correlated, height-correlated input (the issue's GGX(0.2, 0.4) gave
+    (0.192, 0.373) with Eq. 4.3): parameters within 1.5 % at 48 x 48, rho within 0.01."""
+    _, _, rel, drho = _round_trip(D, dict(alpha_x=0.2, alpha_y=0.4, rho=0.3), "smith", True, True, 48)
+    assert np.all(rel < 0.015), rel
+    assert drho < 0.01
+
+
+# ---------------------------------------------------------------- diffuse base, energy
+def test_diffuse_base_is_recovered_and_sampled_exactly():
+    """A GGX lobe over a Lambertian base: ``diffuse=True`` finds a base (biased low today:
+    part of it stays in the NDF's tail, see README) and halves the error of the plain fit;
+    the mixture sampler's weight is eval_cos / pdf exactly and its density is right."""
+    lobe = _input(mf.GGX, shadowing=True, alpha=0.2)
+    kd = np.array([0.3, 0.2, 0.1])
+
+    class Sum(mf.BRDF):
+        def eval_cos(self, wi, wo):
+            return lobe.eval_cos(wi, wo) + mf.Lambertian(kd).eval_cos(wi, wo)
+
+    f = mf.fit.fit(Sum(), 90, diffuse=True)
+    assert np.all(f.diffuse > 0.5 * kd) and np.all(f.diffuse <= kd + 0.01)
+    plain = mf.fit.fit(Sum(), 90)
+    assert _pair_error(f, Sum(), _uniform_pairs()) < 0.5 * _pair_error(plain, Sum(), _uniform_pairs())
+    rng = np.random.default_rng(0)
+    wo = _upper(rng, 2000)
+    wi, weight, pdf = f.sample(rng.random((2000, 2)), wo)
+    ok = pdf > 0
+    np.testing.assert_allclose(weight[ok], f.eval_cos(wi[ok], wo[ok]) / pdf[ok, None], rtol=1e-10)
+    np.testing.assert_allclose(pdf[ok], f.pdf(wi[ok], wo[ok]), rtol=1e-10)
+    assert chi2_test(f, spherical_to_cartesian(np.radians(40.0), 0.3))[0] > P_MIN
+
+
+def test_fresnel_is_bounded_to_unit_interval():
+    """A BRDF brighter than any mirror (Lambertian 3x) cannot push F above 1."""
+    lobe = _input(mf.GGX, shadowing=True, alpha=0.3, fresnel=mf.fresnel.Schlick(0.9))
+
+    class Bright(mf.BRDF):
+        def eval_cos(self, wi, wo):
+            return 3.0 * lobe.eval_cos(wi, wo)
+
+    f = mf.fit.fit(Bright(), 48)
+    assert np.all(f.fresnel.values <= 1.0) and np.all(f.fresnel.values >= 0.0)
+    assert f.fresnel.values.max() > 0.99
+
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+SHARED = sorted((DATA / "merl").glob("*.binary*")) + sorted((DATA / "rgl").glob("*.bsdf"))
+
+
+@pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")
+@pytest.mark.parametrize("path", SHARED, ids=[p.name.split(".")[0] for p in SHARED])
+def test_white_furnace_on_shared_materials(path):
+    """Every fit of every shared material (both backscattering models, with and without
+    the diffuse base): F in [0, 1] and, with white Fresnel, directional albedo <= 1."""
+    m = mf.measured.load(path)
+    u = (np.arange(64) + 0.5) / 64
+    u = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
+    for model in extract.BACKSCATTER_GAFS:
+        for diffuse in (False, True):
+            f = mf.fit.fit(m, 48, backscatter_gaf=model, diffuse=diffuse)
+            assert np.all((f.fresnel.values >= 0) & (f.fresnel.values <= 1))
+            assert np.all(f.diffuse >= 0) and np.all(f.diffuse <= 1)
+            white = mf.fit.FittedBRDF(f.distribution, mf.fresnel.Tabulated([0, 1], [1, 1]))
+            for t in np.radians([0.0, 30.0, 60.0, 75.0, 85.0]):
+                wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
+                assert np.mean(white.sample(u, wo)[1][:, 0]) <= 1.0 + 1e-3

@@ -3,7 +3,17 @@
 The slope distribution comes from backscattering (``i = o = h``, Eq. 4.1-4.3): with the
 Smith GAF it is the Perron eigenvector of the discretized Fredholm equation (Eq. 4.5-4.9,
 isotropic form Eq. 4.12-4.15), found by power iterations (Algorithms 1 and 3); with the
-V-groove and normal-map GAFs it is explicit (Eq. 4.16-4.18). The Fresnel term is the
+V-groove and normal-map GAFs it is explicit (Eq. 4.16-4.18).
+
+Two Smith backscattering models are inverted (``BACKSCATTER_GAFS``):
+
+- ``"masking"``: the thesis's Eq. 4.3, ``G(o, o) = G1(o) = cos theta_o / A(o)``, so
+  ``F0 D(o) = 4 f(o, o) cos theta_o A(o)`` (the forward model of ``shadowing=False``);
+- ``"height_correlated"``: the library's ``G2(o, o) = 1 / (1 + 2 Lambda(o))``
+  (Eq. 2.13 at ``i = o``) with ``1 + Lambda = A / cos``, so
+  ``F0 D(o) = 4 f(o, o) cos theta_o (2 A(o) - cos theta_o A(z))``, written with
+  ``A(z) = int cos D dw = 1`` to stay linear and homogeneous in ``D``: the operator is
+  twice the masking kernel minus a rank-one term, iterated as the same fixed point. The Fresnel term is the
 average ratio of the BRDF to the fitted ideal-mirror BRDF at each ``theta_d`` (Eq. 4.11,
 Algorithm 2).
 
@@ -20,9 +30,12 @@ from ..distributions.tabulated import HALF_PI, hat_weights
 from ..errors import MicrofacetError
 from ..geometry import hd_to_io
 
-__all__ = ["backscattering", "luminance", "smith_kernel_isotropic", "smith_kernel_anisotropic",
-           "power_iteration", "rule_area_at_normal", "ndf_closed_form", "extract_fresnel"]
+__all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
+           "smith_kernel_anisotropic", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
+           "fresnel_samples", "solve_fresnel", "albedo_rows", "extract_fresnel"]
 
+#: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
+BACKSCATTER_GAFS = ("masking", "height_correlated")
 #: Rec. 709 luminance weights
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -77,22 +90,40 @@ def projected_area_matrix_isotropic(theta: np.ndarray, theta_o: np.ndarray, orde
     return m
 
 
-def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """Matrix ``K'`` of Eq. 4.15 for the unknowns ``D(theta_0..theta_{n-2})``:
-    ``F0 D(o) = 4 f_r(o, o) cos theta_o A(o)`` (Eq. 4.4-4.6 written for ``D = P / cos^4``;
-    a similarity transform of the ``P`` form, same eigenvector), the grazing node folded
-    onto its neighbour."""
+def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray, model: str = "masking"):
+    """Kernel of Eq. 4.15 for the unknowns ``D(theta_0..theta_{n-2})`` (the grazing node
+    folded onto its neighbour), written for ``D = P / cos^4`` (a similarity transform of
+    the ``P`` form, same eigenvector): ``K' = 4 f_r(o, o) cos theta_o M`` with
+    ``A(o) = M D``, so that ``F0 D = K' D`` (Eq. 4.4-4.6, ``model="masking"``).
+
+    Returns ``(K', None)`` for ``"masking"`` and, for ``"height_correlated"``,
+    ``(2 K', (u, v))`` with the rank-one term ``u = 4 f cos^2 theta_o``, ``v = M[z]``
+    (the row of ``A`` at the normal): ``F0 D = 2 K' D - u (v . D)`` (module docstring).
+    """
+    _check_model(model)
     m = projected_area_matrix_isotropic(theta, theta[:-1])
     m[:, -2] += m[:, -1]
-    return (4.0 * f_back * np.cos(theta[:-1]))[:, None] * m[:, :-1]
+    m = m[:, :-1]
+    scale = 4.0 * f_back * np.cos(theta[:-1])
+    k = scale[:, None] * m
+    if model == "masking":
+        return k, None
+    return 2.0 * k, (scale * np.cos(theta[:-1]), m[0].copy())      # theta_0 = 0: the normal
+
+
+def _check_model(model: str) -> None:
+    if model not in BACKSCATTER_GAFS:
+        raise ValueError(f"backscatter_gaf must be one of {BACKSCATTER_GAFS}, got {model!r}")
 
 
 def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndarray,
-                             dtype=np.float32) -> np.ndarray:
-    """Matrix ``K`` of Eq. 4.8 over the nodes ``(theta_i, phi_j)``, ``i < n - 1``
-    (row-major), with ``A(o) = sum_n w_n <o, h_n>+ D_n``, ``w_n = int int hat_n sin dtheta
-    dphi`` (node rule), the grazing row folded onto its neighbour. ``f_back`` is
-    ``(n - 1, m)``."""
+                             model: str = "masking", dtype=np.float32):
+    """Kernel of Eq. 4.8 over the nodes ``(theta_i, phi_j)``, ``i < n - 1`` (row-major),
+    with ``A(o) = sum_n w_n <o, h_n>+ D_n``, ``w_n = int int hat_n sin dtheta dphi`` (node
+    rule), the grazing row folded onto its neighbour. ``f_back`` is ``(n - 1, m)``.
+    Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
+    as :func:`smith_kernel_isotropic`."""
+    _check_model(model)
     n, m = len(theta), len(phi)
     dirs = _directions(theta[:, None], phi[None, :])                  # (n, m, 3)
     o = dirs[:-1].reshape(-1, 3).astype(dtype)
@@ -103,8 +134,12 @@ def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndar
     wcol = np.repeat(w[:-1], m).astype(dtype)
     k *= wcol[None, :]
     k[:, -m:] += last * dtype(w[-1])
-    k *= (4.0 * f_back.ravel() * np.repeat(np.cos(theta[:-1]), m)).astype(dtype)[:, None]
-    return k
+    v = k[0].astype(np.float64)                                       # row of A at the normal
+    scale = 4.0 * f_back.ravel() * np.repeat(np.cos(theta[:-1]), m)
+    k *= (scale * (1.0 if model == "masking" else 2.0)).astype(dtype)[:, None]
+    if model == "masking":
+        return k, None
+    return k, (scale * np.repeat(np.cos(theta[:-1]), m), v)
 
 
 def rule_area_at_normal(dist) -> float:
@@ -118,15 +153,20 @@ def rule_area_at_normal(dist) -> float:
     return float(np.sum(w[:, None] * np.cos(dist.theta)[:, None] * d))
 
 
-def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000):
-    """Perron eigenvector and eigenvalue of the nonnegative matrix ``k`` (Eq. 4.9):
-    ``p <- K p / |K p|`` from ``p = 1`` until the relative change is below ``tol``
-    (Algorithms 1 and 3 use four iterations; we iterate to convergence). The matrix may
-    be float32 (anisotropic kernels); the iterate is kept in float64."""
+def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, rank_one=None):
+    """Perron eigenvector and eigenvalue of the kernel (Eq. 4.9): ``p <- K p / |K p|`` from
+    ``p = 1`` until the relative change is below ``tol`` (Algorithms 1 and 3 use four
+    iterations; we iterate to convergence). With ``rank_one = (u, v)`` the operator is
+    ``K p - u (v . p)`` (height-correlated backscattering), clamped at 0: it is
+    nonnegative on symmetric ``p`` (``A(o) >= cos theta_o A(z)``), so the clamp only
+    guards rounding and asymmetric inputs. The matrix may be float32 (anisotropic
+    kernels); the iterate is kept in float64."""
     p = np.full(k.shape[0], 1.0 / k.shape[0])
     lam = 0.0
     for it in range(1, max_iter + 1):
         q = np.asarray(k @ p.astype(k.dtype), dtype=np.float64)
+        if rank_one is not None:
+            q = np.maximum(q - rank_one[0] * float(rank_one[1] @ p), 0.0)
         s = float(np.sum(q, dtype=np.float64))
         if not s > 0 or not np.isfinite(s):
             raise MicrofacetError("fit: the backscattering kernel is zero or not finite "
@@ -152,37 +192,175 @@ def ndf_closed_form(f_back: np.ndarray, theta: np.ndarray, gaf: str) -> np.ndarr
 
 
 # ---------------------------------------------------------------------- Fresnel
-def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1):
-    """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2).
+def _hats(cos_d, n_d: int):
+    """Node ``k`` (``theta_d,k = k pi / (2 (n_d - 1))``) and weight ``t`` of the table's
+    linear interpolation in ``cos theta_d`` (as :class:`~microfacet.fresnel.Tabulated`):
+    ``F = (1 - t) F_k + t F_{k+1}``."""
+    c = np.clip(np.asarray(cos_d, dtype=np.float64), 0.0, 1.0)
+    k0 = np.minimum((np.arccos(c) / (HALF_PI / (n_d - 1))).astype(np.intp), n_d - 2)
+    ca, cb = np.cos(k0 * (HALF_PI / (n_d - 1))), np.cos((k0 + 1) * (HALF_PI / (n_d - 1)))
+    return k0, np.clip((ca - c) / (ca - cb), 0.0, 1.0)
 
-    For each ``theta_d`` of a uniform grid of ``n_d`` nodes on ``[0, pi/2]``, the ratio of
-    the input BRDF to the fitted ideal-mirror BRDF ``ideal`` (Eq. 4.10) is averaged over
-    ``theta_h`` (nodes ``((k + 1/2) / n_h)^2 pi/2``, dense where lobes are), ``phi_d`` and
-    ``phi_h`` (uniform), weighted by ``f_id``: ``F = sum f / sum f_id``, the ``f_id``-weighted
-    mean of ``f / f_id``. This equals Eq. 4.11 when the ratio is constant in the average,
-    and keeps near-zero ``f_id`` (tails, grazing garbage) from dominating it. Nodes without
-    any valid configuration take the value of the nearest valid one.
 
-    Returns ``(cos_theta_d, rgb)`` with increasing ``cos_theta_d``.
-    """
+def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1) -> dict:
+    """Configurations of Algorithm 2 and the input's values there, evaluated once.
+
+    ``theta_d`` runs over the nodes of the Fresnel table (``n_d`` uniform on
+    ``[0, pi/2]``) and the midpoints between them (even / odd ``phi_d`` indices), so that
+    the solve sees the table between its nodes; ``theta_h`` over
+    ``((k + 1/2) / n_h)^2 pi/2`` (dense where lobes are), ``phi_d`` and ``phi_h`` uniform.
+    Returns ``wi, wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` (nonfinite or
+    negative values set to 0) and ``finite`` ``(K,)`` (configurations to use)."""
+    step = HALF_PI / (n_d - 1)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
     theta_h = ((np.arange(n_h) + 0.5) / n_h) ** 2 * HALF_PI
     phi_d = (np.arange(n_phi_d) + 0.5) * (2.0 * np.pi / n_phi_d)
     phi_h = np.arange(n_phi_h) * (2.0 * np.pi / n_phi_h)
     TD, TH, PH, PD = np.meshgrid(theta_d, theta_h, phi_h, phi_d, indexing="ij")
-    h = _directions(TH, PH)
-    d = _directions(TD, PD)
-    wi, wo = hd_to_io(h, d)
+    TD = np.minimum(TD + 0.5 * step * (np.arange(n_phi_d) % 2), HALF_PI)
+    wi, wo = hd_to_io(_directions(TH, PH), _directions(TD, PD))
+    wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
     f = np.asarray(brdf.eval(wi, wo), dtype=np.float64)
-    f_id = np.asarray(ideal.eval(wi, wo), dtype=np.float64)[..., 0]
-    ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (f_id > 0) & np.all(np.isfinite(f), axis=-1)
-    f = np.where(ok[..., None], np.maximum(np.nan_to_num(f), 0.0), 0.0)
-    num = f.reshape(n_d, -1, 3).sum(axis=1)
-    den = np.where(ok, f_id, 0.0).reshape(n_d, -1).sum(axis=1)
-    valid = den > 0
-    if not np.any(valid):
+    finite = (wi[:, 2] > 0) & (wo[:, 2] > 0) & np.all(np.isfinite(f), axis=-1)
+    return dict(wi=wi, wo=wo, cos_d=np.cos(TD).ravel(), f=np.where(finite[:, None], np.maximum(np.nan_to_num(f), 0.0), 0.0),
+                finite=finite, n_d=n_d)
+
+
+def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6, albedo=None,
+                  kd_max=None):
+    """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2) bounded to
+    ``[0, 1]``, and optionally a Lambertian base ``k_d``, by a box-constrained linear
+    least-squares solve over the configurations ``samples`` (:func:`fresnel_samples`):
+
+    ``min sum_j w_j (f_j - f_id,j sum_k F_k hat_k(cos theta_d,j) - k_d / pi)^2
+    + smoothing tr(H) / n |Delta^2 F|^2``,  ``0 <= F_k <= 1``, ``0 <= k_d <= 1``
+
+    with ``f_id`` the fitted ideal-mirror BRDF ``ideal`` (Eq. 4.10), ``hat_k`` the linear
+    interpolation of the table in ``cos theta_d`` and ``w_j = 1 / (f_id,j + k_d0 / pi)``.
+    Without the diffuse term (``k_d0 = 0``, configurations with ``f_id = 0`` dropped) and
+    without the bounds and the smoothing, the solution at nodes sampled only there is
+    ``sum f / sum f_id``, the ``f_id``-weighted mean of ``f / f_id`` (Eq. 4.11). The second-
+    difference penalty only fills nodes that no configuration sees. The bounded problem is
+    solved on its normal equations (``n x n``; :func:`scipy.optimize.lsq_linear`, BVLS on
+    the Cholesky factor). ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
+    backscattering, which the base may not exceed).
+
+    ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
+    ``sum_k F_k a[v, k] + k_d <= a_data[v]`` at each view ``v`` (the fit reflects no more
+    than the data); when the bounded solution violates them, the linearly constrained
+    problem is solved by SLSQP from it.
+
+    Returns ``(cos_theta_d, rgb, k_d)``: increasing ``cos theta_d`` of the ``n_d`` nodes,
+    ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``).
+    """
+    from scipy.linalg import cholesky
+    from scipy.optimize import lsq_linear
+
+    n_d = samples["n_d"]
+    f = samples["f"]
+    f_id = np.asarray(ideal.eval(samples["wi"], samples["wo"]), dtype=np.float64)[..., 0]
+    ok = samples["finite"] & np.isfinite(f_id) & (f_id >= 0)
+    if diffuse:
+        # first guess of the base: the data's floor where the mirror lobe is negligible
+        low = ok & (f_id <= 1e-3 * np.max(np.where(ok, f_id, 0.0)))
+        floor = np.median(luminance(f[low])) if np.any(low) else 0.0
+        delta = max(float(floor), 1e-6 * float(np.max(luminance(f[ok])))) if np.any(ok) else 0.0
+    else:
+        ok &= f_id > 0
+        delta = 0.0
+    if not np.any(ok & (f_id > 0)):
         raise MicrofacetError("fit: no configuration to extract the Fresnel term from")
-    rgb = np.empty((n_d, 3))
+    f, f_id = f[ok], f_id[ok]
+    w = 1.0 / (f_id + delta)
+    k0, t = _hats(samples["cos_d"][ok], n_d)
+    cols = [k0, k0 + 1]
+    vals = [f_id * (1.0 - t), f_id * t]
+    n_var = n_d + (1 if diffuse else 0)
+    if diffuse:
+        cols.append(np.full(len(f), n_d))
+        vals.append(np.full(len(f), 1.0 / np.pi))
+    h = np.zeros(n_var * n_var)
+    b = np.zeros((n_var, 3))
+    for ca, va in zip(cols, vals):
+        wva = w * va
+        for cb, vb in zip(cols, vals):
+            h += np.bincount(ca * n_var + cb, weights=wva * vb, minlength=n_var * n_var)
+        b += np.stack([np.bincount(ca, weights=wva * f[:, c], minlength=n_var) for c in range(3)], axis=1)
+    h = h.reshape(n_var, n_var)
+    lap = np.diff(np.eye(n_d), 2, axis=0)
+    h[:n_d, :n_d] += smoothing * np.trace(h) / n_var * (lap.T @ lap) + 1e-14 * np.trace(h) * np.eye(n_d)
+    if diffuse:
+        h[n_d, n_d] += 1e-14 * np.trace(h)
+    r = cholesky(h, lower=False)                                      # h = r^T r
+    y = np.linalg.solve(r.T, b)                                       # r^T y = b
+    lo = np.zeros(n_var)
+    x = np.empty((n_var, 3))
     for c in range(3):
-        rgb[:, c] = np.interp(theta_d, theta_d[valid], num[valid, c] / den[valid])
-    return np.cos(theta_d)[::-1].copy(), rgb[::-1].copy()
+        hi = np.ones(n_var)
+        if diffuse and kd_max is not None:
+            hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
+        x[:, c] = lsq_linear(r, y[:, c], bounds=(lo, hi), method="bvls", tol=1e-12).x
+        if albedo is not None:
+            x[:, c] = _energy_constrained(r, y[:, c], x[:, c], (lo, hi), albedo, c, n_d, diffuse)
+    rgb = x[:n_d]
+    kd = x[n_d] if diffuse else np.zeros(3)
+    theta_d = np.linspace(0.0, HALF_PI, n_d)
+    return np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
+
+
+def _energy_constrained(r, y, x0, bounds, albedo, c, n_d, diffuse):
+    """``min |r x - y|^2`` under ``bounds`` and ``a x <= a_data`` (SLSQP from ``x0``)."""
+    from scipy.optimize import Bounds, LinearConstraint, minimize
+
+    a, a_data = albedo
+    rows = np.concatenate([a, np.ones((len(a), 1))], axis=1) if diffuse else a
+    limit = a_data[:, c]
+    if np.all(rows @ x0 <= limit + 1e-9):
+        return x0
+    scale = 1.0 / max(float(y @ y), 1e-300)
+    rtr, rty = r.T @ r * scale, r.T @ y * scale
+    res = minimize(lambda x: 0.5 * x @ rtr @ x - rty @ x, x0, jac=lambda x: rtr @ x - rty, method="SLSQP",
+                   bounds=Bounds(*bounds), constraints=[LinearConstraint(rows, -np.inf, limit)],
+                   options=dict(maxiter=500, ftol=1e-14))
+    x = np.clip(res.x, *bounds)
+    # feasibility first: scale down a remaining violation (all rows are nonnegative)
+    excess = np.max((rows @ x) / np.maximum(limit, 1e-300))
+    return x / excess if excess > 1.0 else x
+
+
+def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.01):
+    """Linear directional-albedo model of the fit and the data's albedo at ``views``
+    (``(V, 3)`` view directions): ``a[v, k] = int f_id(i, o_v) hat_k(cos theta_d) cos
+    theta_i dw_i`` (the fit's albedo is ``sum_k F_k a[v, k] + k_d``, Eq. 2.1 with the
+    table's hats) and ``a_data[v] = int f(i, o_v) cos theta_i dw_i + margin``, both by the
+    same stratified ``n_u x n_u`` importance sampling of the defensive mixture ``1/2``
+    visible normals of ``ideal`` + ``1/2`` cosine lobe. Returns ``(a, a_data)``."""
+    from ..brdf import Lambertian
+    from ..geometry import dot, half_vector
+
+    g = (np.arange(n_u) + 0.5) / n_u
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    half = len(u) // 2
+    views = np.asarray(views, dtype=np.float64)
+    wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
+    cosine = Lambertian(1.0)
+    wi = np.concatenate([ideal.sample(u[:half], wo[:, :half])[0], cosine.sample(u[half:], wo[:, half:])[0]], axis=1)
+    pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    ok = (pdf > 0) & (wi[..., 2] > 0)
+    inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / len(u)
+    fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
+    f = np.asarray(brdf.eval_cos(wi, wo), dtype=np.float64)
+    f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
+    k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
+    a = np.zeros((len(views), n_d))
+    for v in range(len(views)):
+        a[v] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
+                + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
+    return a, f.sum(axis=1) + margin
+
+
+def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
+                    diffuse: bool = False):
+    """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
+    Algorithm 2): ``(cos_theta_d, rgb, k_d)``."""
+    return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h), ideal, diffuse=diffuse)

@@ -8,56 +8,132 @@ from pathlib import Path
 import numpy as np
 
 from .. import fresnel as _fresnel
-from ..brdf import GAFS, MicrofacetBRDF
+from ..brdf import GAFS, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic, theta_grid
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
 from . import extract
 
-__all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION"]
+__all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION", "READABLE_VERSIONS"]
 
 FORMAT = "microfacet.fit"
-VERSION = 1
+VERSION = 2
+#: versions :func:`load` reads (version 1: no diffuse base, Eq. 4.3 backscattering)
+READABLE_VERSIONS = (1, 2)
 
 
 class FittedBRDF(MicrofacetBRDF):
     """A microfacet BRDF over a tabulated slope distribution with a tabulated Fresnel term,
-    as returned by :func:`fit` (Ch. 4). It answers the BRDF protocol of
-    :class:`MicrofacetBRDF`; ``f0`` is the Perron eigenvalue (luminance of ``F(0)``
-    estimated from backscattering, Eq. 4.9) and ``iterations`` the power iterations used.
+    plus an optional Lambertian base, as returned by :func:`fit` (Ch. 4):
+    ``f_r = F D G / (4 cos theta_i cos theta_o) + k_d / pi`` (Eq. 2.1 and 1.9).
+
+    It answers the BRDF protocol of :class:`MicrofacetBRDF`; ``f0`` is the Perron
+    eigenvalue (luminance of ``F(0)`` estimated from backscattering, Eq. 4.9),
+    ``iterations`` the power iterations used, ``backscatter_gaf`` the Smith
+    backscattering model the NDF was extracted with (``"height_correlated"`` or
+    ``"masking"``, Eq. 4.3) and ``diffuse`` the RGB reflectance ``k_d`` of the base.
+    With a base, ``sample`` picks the microfacet lobe or the cosine lobe with probability
+    proportional to their albedo estimates (``luminance(F(1))`` and ``luminance(k_d)``)
+    and ``pdf`` is the mixture's, so that ``weight = eval_cos / pdf`` exactly.
     """
 
-    def __init__(self, distribution, fresnel, gaf="smith", shadowing=True, f0=np.nan, iterations=0):
+    def __init__(self, distribution, fresnel, gaf="smith", shadowing=True, f0=np.nan, iterations=0, *,
+                 backscatter_gaf=None, diffuse=0.0):
         if not isinstance(distribution, (TabulatedIsotropic, TabulatedAnisotropic)):
             raise ValueError("FittedBRDF needs a TabulatedIsotropic or TabulatedAnisotropic distribution")
         super().__init__(distribution, fresnel=fresnel, gaf=gaf, shadowing=shadowing)
         self.f0 = float(f0)
         self.iterations = int(iterations)
+        self.backscatter_gaf = _backscatter_model(backscatter_gaf, shadowing)
+        self.base = Lambertian(diffuse)
+        self.diffuse = self.base.reflectance
 
     @property
     def anisotropic(self) -> bool:
         return isinstance(self.distribution, TabulatedAnisotropic)
 
+    @property
+    def has_diffuse(self) -> bool:
+        return bool(np.any(self.diffuse > 0))
+
     def __repr__(self) -> str:
-        return f"FittedBRDF({self.distribution!r}, gaf={self.gaf_model!r}, f0={self.f0:.4g})"
+        extra = f", diffuse={self.diffuse.round(4).tolist()}" if self.has_diffuse else ""
+        return f"FittedBRDF({self.distribution!r}, gaf={self.gaf_model!r}, f0={self.f0:.4g}{extra})"
+
+    # ------------------------------------------------------------ the protocol
+    def specular(self) -> MicrofacetBRDF:
+        """The microfacet lobe alone (Eq. 2.1), without the diffuse base."""
+        return MicrofacetBRDF(self.distribution, fresnel=self.fresnel, gaf=self.gaf_model,
+                              shadowing=self.shadowing)
+
+    def eval_cos(self, wi, wo) -> np.ndarray:
+        """``f_r cos theta_i``: the microfacet lobe (Listing 2.2) plus ``k_d cos theta_i / pi``."""
+        out = super().eval_cos(wi, wo)
+        return out + self.base.eval_cos(wi, wo) if self.has_diffuse else out
+
+    def eval(self, wi, wo) -> np.ndarray:
+        """``f_r = F D G / (4 cos theta_i cos theta_o) + k_d / pi`` (Eq. 2.1, 1.9)."""
+        out = super().eval(wi, wo)
+        return out + self.base.eval(wi, wo) if self.has_diffuse else out
+
+    def _lobe_probability(self) -> float:
+        """Probability of sampling the microfacet lobe: its albedo estimate
+        ``luminance(F(1))`` over the sum with ``luminance(k_d)``."""
+        a_s = float(extract.luminance(self.fresnel(np.ones(1))[0]))
+        a_d = float(extract.luminance(self.diffuse))
+        return a_s / (a_s + a_d) if a_s + a_d > 0 else 1.0
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Density of :meth:`sample`: ``p_s pdf_lobe + (1 - p_s) cos theta_i / pi``."""
+        if not self.has_diffuse:
+            return super().pdf(wi, wo)
+        p = self._lobe_probability()
+        return p * super().pdf(wi, wo) + (1.0 - p) * self.base.pdf(wi, wo)
+
+    def sample(self, u, wo):
+        """Sample the lobe (:meth:`MicrofacetBRDF.sample`) or the base (cosine warp),
+        chosen by ``u[..., 0]`` against :meth:`_lobe_probability` (rescaled to reuse it);
+        returns ``(wi, eval_cos / pdf, pdf)`` of the mixture."""
+        if not self.has_diffuse:
+            return super().sample(u, wo)
+        u = np.asarray(u, dtype=np.float64)
+        wo = np.asarray(wo, dtype=np.float64)
+        p = self._lobe_probability()
+        lobe = u[..., 0] < p
+        u0 = np.where(lobe, u[..., 0] / max(p, 1e-300), (u[..., 0] - p) / max(1.0 - p, 1e-300))
+        uu = np.stack([np.clip(u0, 0.0, np.nextafter(1.0, 0.0)), u[..., 1]], axis=-1)
+        wi_s = super().sample(uu, wo)[0]
+        wi_d = self.base.sample(uu, wo)[0]
+        wi = np.where(lobe[..., None], wi_s, wi_d)
+        wo_b = np.broadcast_to(wo, wi.shape)
+        pdf = self.pdf(wi, wo_b)
+        fc = self.eval_cos(wi, wo_b)
+        ok = pdf > 0
+        weight = np.where(ok[..., None], fc / np.where(ok, pdf, 1.0)[..., None], 0.0)
+        return wi, weight, np.where(ok, pdf, 0.0)
 
     # ------------------------------------------------------------ backscattering
     def backscatter(self, k) -> np.ndarray:
-        """The model of the fit, ``F(1) D(k) G(k, k) / (4 cos^2 theta_k)`` with the monostatic
-        ``G(k, k) = G1(k)`` for Smith (Eq. 4.2-4.3), ``min(1, 2 cos^2)`` for V-grooves and
-        ``cos^2`` for normal maps; RGB ``(..., 3)``."""
+        """The model of the fit, ``F(1) D(k) G(k, k) / (4 cos^2 theta_k) + k_d / pi`` with
+        the monostatic ``G(k, k)``: Smith ``1 / (1 + 2 Lambda(k))`` (height-correlated) or
+        ``G1(k)`` (Eq. 4.2-4.3, ``backscatter_gaf="masking"``), ``min(1, 2 cos^2)`` for
+        V-grooves and ``cos^2`` for normal maps; RGB ``(..., 3)``."""
         k = np.asarray(k, dtype=np.float64)
         z = k[..., 2]
         zs = np.where(z > 0, z, 1.0)
         if self.gaf_model == "smith":
-            g = self.distribution.g1(k)
+            g1 = self.distribution.g1(k)
+            if self.backscatter_gaf == "height_correlated":   # 1 + 2 Lambda = 2 / G1 - 1
+                g = np.where(g1 > 0, g1 / np.maximum(2.0 - g1, 1e-300), 0.0)
+            else:
+                g = g1
         elif self.gaf_model == "vgroove":
             g = np.minimum(1.0, 2.0 * z * z)
         else:
             g = z * z
         val = np.where(z > 0, self.distribution.ndf(k) * g / (4.0 * zs * zs), 0.0)
-        return val[..., None] * self.fresnel(np.ones_like(z))
+        return val[..., None] * self.fresnel(np.ones_like(z)) + np.where(z > 0, 1.0, 0.0)[..., None] * self.diffuse / np.pi
 
     # --------------------------------------------------------------- conversion
     def slope_moments(self) -> dict:
@@ -78,6 +154,7 @@ class FittedBRDF(MicrofacetBRDF):
                     beta1=np.sum(w * dx * dy * inv), beta2=np.sum(w * dy * dy * inv))
 
     def _analytic(self, distribution) -> MicrofacetBRDF:
+        """The analytic lobe with the fitted Fresnel term (the diffuse base is not carried)."""
         return MicrofacetBRDF(distribution, fresnel=self.fresnel, gaf=self.gaf_model, shadowing=self.shadowing)
 
     def to_beckmann(self) -> MicrofacetBRDF:
@@ -111,7 +188,8 @@ class FittedBRDF(MicrofacetBRDF):
         Fields: ``format``, ``version``, ``kind`` (``isotropic`` | ``anisotropic``), ``gaf``,
         ``shadowing``, ``ndf`` (the normalized standard ``D`` at the nodes), ``fresnel_cos``
         and ``fresnel_rgb`` (a non-tabulated Fresnel term is sampled at 91 points), ``f0``,
-        ``iterations``, ``alpha_x``, ``alpha_y``, ``rho``, ``mean_slope`` and, anisotropic,
+        ``iterations``, ``alpha_x``, ``alpha_y``, ``rho``, ``mean_slope``, ``backscatter_gaf``,
+        ``diffuse`` (RGB ``k_d``; both new in version 2) and, anisotropic,
         ``projected_area`` (the Lambda table)."""
         d = self.distribution
         fresnel = self.fresnel
@@ -124,7 +202,8 @@ class FittedBRDF(MicrofacetBRDF):
                       ndf=d.ndf_table, fresnel_cos=fresnel.cos_theta_d, fresnel_rgb=fresnel.values,
                       f0=np.array(self.f0), iterations=np.array(self.iterations),
                       alpha_x=np.asarray(d.alpha_x), alpha_y=np.asarray(d.alpha_y), rho=np.asarray(d.rho),
-                      mean_slope=np.asarray(d.mean_slope))
+                      mean_slope=np.asarray(d.mean_slope), backscatter_gaf=np.array(self.backscatter_gaf),
+                      diffuse=self.diffuse)
         if self.anisotropic:
             arrays["projected_area"] = d.area_table
         with atomic_path(path) as tmp:
@@ -134,9 +213,62 @@ class FittedBRDF(MicrofacetBRDF):
 
 
 # ------------------------------------------------------------------------ fitting
+def _backscatter_model(backscatter_gaf, shadowing) -> str:
+    """``backscatter_gaf`` or, when None, the model of the library's forward BRDF with
+    ``shadowing``: height-correlated ``G2(o, o)`` with shadowing, ``G1(o)`` without."""
+    if backscatter_gaf is None:
+        return "height_correlated" if shadowing else "masking"
+    if backscatter_gaf not in extract.BACKSCATTER_GAFS:
+        raise ValueError(f"backscatter_gaf must be one of {extract.BACKSCATTER_GAFS} or None, "
+                         f"got {backscatter_gaf!r}")
+    return str(backscatter_gaf)
+
+
+def _energy_views(anisotropic: bool) -> np.ndarray:
+    """Views of the energy constraint: ``theta_o`` 0-85 degrees, at ``phi_o = 0`` and, for
+    anisotropic fits, also 45, 90 and 135 degrees."""
+    th = np.radians([0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0])
+    ph = np.radians([0.0, 45.0, 90.0, 135.0] if anisotropic else [0.0])
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    return np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], axis=-1).reshape(-1, 3)
+
+
+def _fit_ndf(f_back, theta, phi, gaf, model, tol, max_iter):
+    """Normalized table of ``D`` and its ``F0`` from backscattering ``f_back``: power
+    iterations for Smith (Eq. 4.9, 4.15; :mod:`.extract`), closed forms otherwise
+    (Eq. 4.16-4.18). ``phi`` is None for an isotropic fit."""
+    n = len(theta)
+    if phi is None:
+        if gaf == "smith":
+            k, rank_one = extract.smith_kernel_isotropic(f_back, theta, model)
+            d, f0, its = extract.power_iteration(k, tol=tol, max_iter=max_iter, rank_one=rank_one)
+        else:
+            d, f0, its = extract.ndf_closed_form(f_back, theta[:-1], gaf), np.nan, 0
+        if not np.any(d > 0):
+            raise MicrofacetError("fit: the backscattering of the BRDF is zero")
+        dist = TabulatedIsotropic(np.append(d, d[-1]))
+    else:
+        m = len(phi)
+        if gaf == "smith":
+            k, rank_one = extract.smith_kernel_anisotropic(f_back, theta, phi, model)
+            d, f0, its = extract.power_iteration(k, tol=max(tol, 1e-6), max_iter=max_iter, rank_one=rank_one)
+            d = d.reshape(n - 1, m)
+        else:
+            d, f0, its = extract.ndf_closed_form(f_back, theta[:-1, None], gaf), np.nan, 0
+        if not np.any(d > 0):
+            raise MicrofacetError("fit: the backscattering of the BRDF is zero")
+        d = np.concatenate([d, d[-1:]], axis=0)
+        d[0] = d[0].mean()                                   # the pole is one direction
+        dist = TabulatedAnisotropic(d)
+    if gaf == "smith":     # eigenvalue of the discrete rule -> F0 of the exactly normalized D
+        f0 /= extract.rule_area_at_normal(dist)
+    return dist, f0, its
+
+
 def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith", *,
         resolution_phi: int | None = None, shadowing: bool = True, tol: float = 1e-10,
-        max_iter: int = 1000) -> FittedBRDF:
+        max_iter: int = 1000, backscatter_gaf: str | None = None, diffuse: bool = False,
+        diffuse_iterations: int = 8, energy_constraint: bool = False) -> FittedBRDF:
     """Fit ``brdf`` (anything with ``eval(wi, wo) -> RGB``) with a tabulated microfacet BRDF.
 
     Parameters
@@ -151,9 +283,25 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         samples) instead of a radial ``D(theta)`` (Algorithm 3).
     gaf : {"smith", "vgroove", "normal_map"}
         GAF of the fitted model: power iterations for Smith (Eq. 4.9, 4.15), closed forms
-        otherwise (Eq. 4.16-4.18).
+        otherwise (Eq. 4.16-4.18, their exact ``G(o, o)``).
     shadowing : bool
         Shadowing of the returned BRDF (the Fresnel term is extracted against it).
+    backscatter_gaf : {None, "height_correlated", "masking"}
+        Smith backscattering model inverted: ``G2(o, o) = 1 / (1 + 2 Lambda(o))`` of the
+        library's height-correlated BRDF, or the thesis's ``G1(o)`` (Eq. 4.3). None (the
+        default) takes the one the returned BRDF renders with: height-correlated with
+        ``shadowing``, masking without; so a fit of the library's own BRDF inverts it.
+    diffuse : bool
+        Also fit a Lambertian base ``k_d / pi``: the NDF is extracted from the
+        backscattering minus the base, and the base is re-estimated jointly with the
+        Fresnel table (:func:`extract.solve_fresnel`), alternating
+        ``diffuse_iterations`` times at most (until ``k_d`` moves by less than 1e-4).
+    energy_constraint : bool
+        Also bound the fit's directional albedo by the data's (plus 0.01) at the views of
+        :func:`_energy_views` (:func:`extract.albedo_rows`; SLSQP, slow: seconds).
+        Experimental and off by default: it trades the fit's error for energy (nickel:
+        error 0.21 -> 0.58) and is defeated by garbage grazing values of the data. The
+        Fresnel table is always bounded to ``[0, 1]`` (white furnace <= 1).
     tol, max_iter
         Stopping rule of the power iterations (relative change of the eigenvector).
 
@@ -163,6 +311,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     """
     if gaf not in GAFS:
         raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
+    model = _backscatter_model(backscatter_gaf, shadowing)
     n = int(resolution)
     if n < 4:
         raise ValueError(f"resolution must be >= 4, got {resolution!r}")
@@ -173,33 +322,32 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     if anisotropic:
         phi = np.arange(m) * (2.0 * np.pi / m)
         f_back = extract.backscattering(brdf, theta[:-1, None], phi[None, :])
-        if gaf == "smith":
-            k = extract.smith_kernel_anisotropic(f_back, theta, phi)
-            d, f0, its = extract.power_iteration(k, tol=max(tol, 1e-6), max_iter=max_iter)
-            d = d.reshape(n - 1, m)
-        else:
-            d, f0, its = extract.ndf_closed_form(f_back, theta[:-1, None], gaf), np.nan, 0
-        d = np.concatenate([d, d[-1:]], axis=0)
-        d[0] = d[0].mean()                                   # the pole is one direction
-        dist = TabulatedAnisotropic(d)
     else:
+        phi = None
         f_back = extract.backscattering(brdf, theta[:-1])
-        if gaf == "smith":
-            d, f0, its = extract.power_iteration(extract.smith_kernel_isotropic(f_back, theta),
-                                                 tol=tol, max_iter=max_iter)
-        else:
-            d, f0, its = extract.ndf_closed_form(f_back, theta[:-1], gaf), np.nan, 0
-        dist = TabulatedIsotropic(np.append(d, d[-1]))
-    if not np.any(dist.ndf_table > 0):
-        raise MicrofacetError("fit: the backscattering of the BRDF is zero")
-    if gaf == "smith":     # eigenvalue of the discrete rule -> F0 of the exactly normalized D
-        f0 /= extract.rule_area_at_normal(dist)
-    ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
-    cos_d, rgb = extract.extract_fresnel(brdf, ideal, n, n_phi_h=(8 if anisotropic else 1))
+    samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1))
+    views = _energy_views(anisotropic)
+    kd = np.zeros(3)
+    kd_max = None
+    if diffuse:    # the base may not exceed the backscattering (up to 80 degrees), per channel
+        th = np.linspace(0.0, np.radians(80.0), 33)
+        o = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
+        kd_max = np.pi * np.min(np.where(np.isfinite(rgb_back := np.asarray(brdf.eval(o, o), float)),
+                                         np.maximum(rgb_back, 0.0), 0.0), axis=0)
+    for _ in range(max(int(diffuse_iterations), 1) if diffuse else 1):
+        dist, f0, its = _fit_ndf(np.maximum(f_back - extract.luminance(kd) / np.pi, 0.0), theta, phi, gaf,
+                                 model, tol, max_iter)
+        ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
+        energy = extract.albedo_rows(brdf, ideal, n, views) if energy_constraint else None
+        cos_d, rgb, kd_new = extract.solve_fresnel(samples, ideal, diffuse=diffuse, albedo=energy, kd_max=kd_max)
+        moved = float(np.max(np.abs(kd_new - kd)))
+        kd = kd_new
+        if moved < 1e-4:
+            break
     if gaf != "smith":
         f0 = float(extract.luminance(rgb[-1]))
     return FittedBRDF(dist, _fresnel.Tabulated(cos_d, rgb), gaf=gaf, shadowing=shadowing, f0=f0,
-                      iterations=its)
+                      iterations=its, backscatter_gaf=model, diffuse=kd)
 
 
 # ------------------------------------------------------------------------- files
@@ -208,8 +356,9 @@ _KEYS = ("format", "version", "kind", "gaf", "shadowing", "ndf", "fresnel_cos", 
 
 
 def load(path: str | os.PathLike) -> FittedBRDF:
-    """Read a fit written by :meth:`FittedBRDF.save`; raises :class:`MicrofacetError`
-    naming the file when it is not a valid fit file of a supported version."""
+    """Read a fit written by :meth:`FittedBRDF.save` (any of :data:`READABLE_VERSIONS`);
+    raises :class:`MicrofacetError` naming the file when it is not a valid fit file of a
+    supported version."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -231,8 +380,8 @@ def _from_arrays(data: dict) -> FittedBRDF:
     if str(data["format"]) != FORMAT:
         raise ValueError(f"format is {str(data['format'])!r}, expected {FORMAT!r}")
     version = int(data["version"])
-    if version != VERSION:
-        raise ValueError(f"unsupported version {version} (this library reads version {VERSION})")
+    if version not in READABLE_VERSIONS:
+        raise ValueError(f"unsupported version {version} (this library reads versions {READABLE_VERSIONS})")
     kind, gaf = str(data["kind"]), str(data["gaf"])
     if gaf not in GAFS:
         raise ValueError(f"gaf is {gaf!r}")
@@ -254,5 +403,10 @@ def _from_arrays(data: dict) -> FittedBRDF:
     else:
         raise ValueError(f"kind is {kind!r}")
     fresnel = _fresnel.Tabulated(data["fresnel_cos"], data["fresnel_rgb"])
+    # version 1 files: Eq. 4.3 backscattering, no diffuse base
+    model = str(data["backscatter_gaf"]) if "backscatter_gaf" in data else "masking"
+    diffuse = np.asarray(data["diffuse"], dtype=np.float64) if "diffuse" in data else np.zeros(3)
+    if diffuse.shape != (3,):
+        raise ValueError(f"diffuse must have 3 values, got shape {diffuse.shape}")
     return FittedBRDF(dist, fresnel, gaf=gaf, shadowing=bool(data["shadowing"]), f0=float(data["f0"]),
-                      iterations=int(data["iterations"]))
+                      iterations=int(data["iterations"]), backscatter_gaf=model, diffuse=diffuse)
