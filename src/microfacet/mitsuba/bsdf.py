@@ -17,7 +17,7 @@ import drjit as dr
 import mitsuba as mi
 
 from . import fresnel as _fresnel
-from .slopes import BECKMANN, GGX, Lobe
+from .slopes import BECKMANN, GGX, Lobe, ratio
 
 __all__ = ["PLUGIN", "bsdf_class", "GAFS"]
 
@@ -44,7 +44,7 @@ def _texture(props, name: str, default: float, check=None, unbounded: bool = Fal
         msg = check(float(props[name]))
         if msg:
             raise _error(name, f"{msg}, got {float(props[name])!r}")
-    if name in props and not _is_float(props, name) and props.type(name) != mi.Properties.Type.Object:
+    if name in props and props.type(name) in (mi.Properties.Type.String, mi.Properties.Type.Bool):
         raise _error(name, f"must be a float or a texture, got {props.as_string(name)!r}")
     if unbounded:
         return props.get_unbounded_texture(name, default)
@@ -132,8 +132,8 @@ def _make_class() -> type:
             if "alpha" in props and ("alpha_u" in props or "alpha_v" in props):
                 raise _error("alpha", "and alpha_u/alpha_v are exclusive: give one or the other")
             if ("alpha_u" in props) != ("alpha_v" in props):
-                raise _error("alpha_u" if "alpha_v" not in props else "alpha_v",
-                             "needs its partner: give both alpha_u and alpha_v")
+                raise _error("alpha_v" if "alpha_u" in props else "alpha_u",
+                             "is missing: give both alpha_u and alpha_v (or alpha)")
             if "alpha_u" in props:
                 self.alpha_u = _texture(props, "alpha_u", 0.1, _positive)
                 self.alpha_v = _texture(props, "alpha_v", 0.1, _positive)
@@ -211,12 +211,12 @@ def _make_class() -> type:
                     lam_o, co = lobe.lambda_c(wo)
                     ok &= co > 0
                     lam_i = lobe.lambda_c(wi)[0] if self.shadowing else 0.0
-                    g = wo.z / (dr.maximum(co, 1e-30) * (1.0 + lam_i + lam_o))
+                    g = ratio(wo.z, co * (1.0 + lam_i + lam_o), ok)
             else:
-                go = wo.z * h.z / oh
+                go = ratio(wo.z * h.z, oh, ok)
                 if self.gaf == "vgroove":
                     go = 2.0 * go
-                    gi = 2.0 * wi.z * h.z / oh
+                    gi = ratio(2.0 * wi.z * h.z, oh, ok)
                     g = dr.minimum(1.0, dr.minimum(go, gi) if self.shadowing else go)
                 else:
                     g = go
@@ -240,10 +240,10 @@ def _make_class() -> type:
             value = pdf = None
             if want_value:
                 g = self._gaf(lobe, light, view, h, oh)
-                s = lobe.ndf(h) * g / (4.0 * view.z)
+                s = ratio(lobe.ndf(h) * g, 4.0 * view.z, active)
                 value = dr.select(active & (g > 0), self._fresnel(si, oh, active) * s, 0.0)
             if want_pdf:
-                pdf = dr.select(active, self._normal_pdf(lobe, h, view) / (4.0 * oh), 0.0)
+                pdf = ratio(self._normal_pdf(lobe, h, view), 4.0 * oh, active)
             return value, pdf
 
         # ------------------------------------------------------ Mitsuba API
@@ -271,11 +271,12 @@ def _make_class() -> type:
             light = 2.0 * oh * h - view
             active &= (light.z > 0) & (oh > 0)
             g = self._gaf(lobe, light, view, h, oh)
-            pdf = self._normal_pdf(lobe, h, view) / (4.0 * oh)
+            pdf = ratio(self._normal_pdf(lobe, h, view), 4.0 * oh, active)
             if self.gaf == "smith":
-                ratio = g / lobe.g1(view)
+                g1_o = lobe.g1(view)
+                weight = ratio(g, g1_o, g1_o > 0)
             else:
-                ratio = g * oh / (view.z * h.z)
+                weight = ratio(g * oh, view.z * h.z, active & (h.z > 0))
             active &= pdf > 0
             bs = dr.zeros(mi.BSDFSample3f)
             bs.wo = light
@@ -283,8 +284,7 @@ def _make_class() -> type:
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
             bs.sampled_component = mi.UInt32(0)
-            weight = self._fresnel(si, oh, active) * ratio
-            return bs, dr.select(active, weight, 0.0)
+            return bs, dr.select(active, self._fresnel(si, oh, active) * weight, 0.0)
 
         def traverse(self, callback):
             lobe = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous

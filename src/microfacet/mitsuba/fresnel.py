@@ -32,10 +32,10 @@ def dielectric(c, eta):
     c = dr.clip(c, 0.0, 1.0)
     g2 = eta * eta + c * c - 1.0
     g = dr.safe_sqrt(g2)
-    a = (g - c) / (g + c)
+    a = (g - c) / dr.maximum(g + c, 1e-30)
     b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
     f = 0.5 * a * a * (1.0 + b * b)
-    return dr.select((g2 < 0.0) | ~dr.isfinite(f), 1.0, f)
+    return dr.select((g2 >= 0.0) & dr.isfinite(f), f, 1.0)
 
 
 def schlick(c, f0):

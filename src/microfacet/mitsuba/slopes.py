@@ -14,12 +14,18 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["Lobe", "BECKMANN", "GGX", "beckmann_visible_slope_quantile", "NEWTON_STEPS"]
+__all__ = ["Lobe", "BECKMANN", "GGX", "beckmann_visible_slope_quantile", "NEWTON_STEPS", "ratio"]
 
 BECKMANN, GGX = "beckmann", "ggx"
 INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 U_MIN = 1e-6        # float32 uniforms are clamped to [U_MIN, 1 - U_MIN] (as Mitsuba's Beckmann)
 NEWTON_STEPS = 4    # fixed count of the Beckmann visible-slope inversion (see its docstring)
+
+
+def ratio(num, den, ok):
+    """``num / den`` where ``ok``, else 0, never dividing by 0 (the scalar variants compute
+    with Python floats, which raise instead of giving inf)."""
+    return dr.select(ok, num / dr.select(ok, den, 1.0), 0.0)
 
 
 def beckmann_visible_slope_quantile(u, cos_theta):
@@ -118,14 +124,14 @@ class Lobe:
     def g1(self, k):
         """Smith masking ``G1(k) = z_k / A(k)`` (Eq. 2.14, 3.3); 0 for ``z_k <= 0`` or ``c_k <= 0``."""
         area = self.projected_area(k)
-        return dr.select((k.z > 0) & (area > 0), k.z / area, 0.0)
+        return ratio(k.z, area, (k.z > 0) & (area > 0))
 
     # -------------------------------------------------------- visible normals
     def vndf(self, h, k):
         """``D_k(h) = <k,h>+ D(h) / A(k)`` (Eq. 2.17)."""
         area = self.projected_area(k)
         kh = dr.maximum(dr.dot(k, h), 0.0)
-        return dr.select(area > 0, kh * self.ndf(h) / area, 0.0)
+        return ratio(kh * self.ndf(h), area, area > 0)
 
     def sample_visible(self, u, k):
         """Normal ``h`` distributed as :meth:`vndf` ``(., k)``: standard visible slopes
