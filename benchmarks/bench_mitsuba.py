@@ -1,0 +1,105 @@
+#!/usr/bin/env python3
+"""Render time of the ``microfacet.mitsuba`` plugins against Mitsuba's built-ins.
+
+One scene: a sphere on a plane under an environment map (a procedural sky with a sun),
+``--res`` x ``--res`` pixels, ``--spp`` samples per pixel, Mitsuba's ``path`` integrator
+(max depth 4), ``llvm_ad_rgb`` on all cores. The sphere and the plane get the BSDF under
+test; each configuration is rendered once to trace and compile its kernels (reported
+as "first"), then ``--repeats`` times (configurations interleaved, so that load changes
+on the machine hit all of them alike); the figure is the best time, and the ratio is
+against ``roughconductor`` with the same distribution and roughness, measured in the
+same process. Goal (issue 8): ``mf_microfacet`` <= 1.2x ``roughconductor``.
+
+Usage::
+
+    python benchmarks/bench_mitsuba.py [--res 512] [--spp 64] [--repeats 2] [--json out.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+
+def environment(mi) -> dict:
+    """Sky gradient and a bright soft sun, 64 x 128 RGB."""
+    v, u = np.meshgrid(np.linspace(0, 1, 64), np.linspace(0, 1, 128), indexing="ij")
+    sky = np.stack([0.2 + 0.6 * v, 0.3 + 0.5 * v, 0.6 + 0.3 * (1 - v)], axis=-1)
+    sun = 20.0 * np.exp(-((u - 0.3) ** 2 + (v - 0.3) ** 2) / 0.002)[..., None]
+    return {"type": "envmap", "bitmap": mi.Bitmap((sky + sun).astype(np.float32))}
+
+
+def scene(mi, bsdf: dict, res: int, spp: int) -> dict:
+    T = mi.ScalarTransform4f
+    return {
+        "type": "scene", "integrator": {"type": "path", "max_depth": 4},
+        "sensor": {"type": "perspective", "fov": 35,
+                   "to_world": T().look_at(origin=[0, 1.5, 5], target=[0, 0.3, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": res, "height": res},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "sphere": {"type": "sphere", "center": [0, 1, 0], "radius": 1.0, "bsdf": bsdf},
+        "plane": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(6), "bsdf": bsdf},
+        "light": environment(mi),
+    }
+
+
+def configurations() -> dict[str, dict]:
+    cu = {"eta": {"type": "rgb", "value": [0.200, 0.924, 1.102]},
+          "k": {"type": "rgb", "value": [3.912, 2.452, 2.142]}}
+    out = {}
+    for kind in ("ggx", "beckmann"):
+        common = {"distribution": kind, "alpha_u": 0.2, "alpha_v": 0.35, **cu}
+        out[f"roughconductor {kind}"] = {"type": "roughconductor", **common}
+        out[f"mf_microfacet {kind}"] = {"type": "mf_microfacet", **common}
+        out[f"mf_microfacet {kind} sheared"] = {"type": "mf_microfacet", **common, "rho": 0.3,
+                                                "mean_slope_u": 0.1, "mean_slope_v": -0.2}
+    return out
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--res", type=int, default=512)
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--json", help="write the results here (atomically)")
+    args = ap.parse_args(argv)
+
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_rgb")
+    import microfacet.mitsuba as mfm
+    mfm.register()
+
+    scenes = {name: mi.load_dict(scene(mi, bsdf, args.res, args.spp)) for name, bsdf in configurations().items()}
+
+    def render(s) -> float:
+        t0 = time.perf_counter()
+        dr.eval(mi.render(s))
+        dr.sync_thread()
+        return time.perf_counter() - t0
+
+    first = {name: render(s) for name, s in scenes.items()}
+    times = {name: [] for name in scenes}
+    for _ in range(args.repeats):
+        for name, s in scenes.items():
+            times[name].append(render(s))
+    best = {name: min(t) for name, t in times.items()}
+    print(f"{args.res}x{args.res}, {args.spp} spp, path tracer, llvm_ad_rgb "
+          f"({dr.thread_count()} threads); best of {args.repeats} after a compile run")
+    print(f"{'configuration':32s} {'first (s)':>10s} {'best (s)':>9s} {'ratio':>7s}")
+    result = {"res": args.res, "spp": args.spp, "repeats": args.repeats, "rows": []}
+    for name in scenes:
+        ref = best[f"roughconductor {name.split()[1]}"]
+        ratio = best[name] / ref
+        print(f"{name:32s} {first[name]:10.2f} {best[name]:9.2f} {ratio:7.2f}x")
+        result["rows"].append({"name": name, "first_s": first[name], "best_s": best[name], "ratio": ratio})
+    if args.json:
+        from microfacet.io.atomic import write_text
+        write_text(args.json, json.dumps(result, indent=2))
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,45 @@
+"""Microfacet Fresnel terms ``F(cos theta_d)`` in Dr.Jit (thesis Sec. 2.1, Table 2.I): the
+Mitsuba twins of :mod:`microfacet.fresnel`, applied per spectral channel."""
+from __future__ import annotations
+
+import drjit as dr
+
+__all__ = ["conductor", "dielectric", "schlick"]
+
+
+def conductor(c, eta, k):
+    """Unpolarized conductor reflectance of ``eta + i k`` in real arithmetic, as
+    :func:`microfacet.fresnel.conductor_reflectance`:
+    ``R_s = (|n t|^2 + c^2 - 2 a c) / (|n t|^2 + c^2 + 2 a c)``,
+    ``R_p = R_s (|n t|^2 c^2 + s^4 - 2 a c s^2) / (|n t|^2 c^2 + s^4 + 2 a c s^2)``,
+    ``F = (R_s + R_p) / 2`` with ``s^2 = 1 - c^2``."""
+    c = dr.clip(c, 0.0, 1.0)
+    c2 = c * c
+    s2 = 1.0 - c2
+    t1 = eta * eta - k * k - s2
+    a2b2 = dr.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
+    ac2 = 2.0 * c * dr.safe_sqrt(0.5 * (a2b2 + t1))
+    rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
+    t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
+    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
+
+
+def dielectric(c, eta):
+    """Unpolarized dielectric reflectance of real index ``eta`` (Table 2.I), as
+    :class:`microfacet.fresnel.Dielectric`:
+    ``F = 1/2 (g-c)^2/(g+c)^2 [1 + (c(g+c)-1)^2/(c(g-c)+1)^2]``, ``g^2 = eta^2 + c^2 - 1``;
+    total internal reflection (``g^2 < 0``) gives 1."""
+    c = dr.clip(c, 0.0, 1.0)
+    g2 = eta * eta + c * c - 1.0
+    g = dr.safe_sqrt(g2)
+    a = (g - c) / dr.maximum(g + c, 1e-30)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    f = 0.5 * a * a * (1.0 + b * b)
+    return dr.select((g2 >= 0.0) & dr.isfinite(f), f, 1.0)
+
+
+def schlick(c, f0):
+    """Schlick's approximation ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I)."""
+    m = 1.0 - dr.clip(c, 0.0, 1.0)
+    m2 = m * m
+    return f0 + (1.0 - f0) * (m2 * m2 * m)
