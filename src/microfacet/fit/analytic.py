@@ -111,14 +111,16 @@ class _Data:
         blocks = [measurement_directions(n)] + ([uniform_directions(n_uniform, seed=1)] if n_uniform else [])
         wis, wos, refs, scales = [], [], [], []
         for directions in blocks:
-            wi, wo = compared_pairs(reference, directions)
+            pairs = compared_pairs(reference, directions)
+            wi, wo = pairs[:2]
+            w = pairs[2] if len(pairs) == 3 else np.ones(len(wi))
             ref = np.asarray(reference.eval_cos(wi, wo), dtype=np.float64)
             finite = np.all(np.isfinite(ref), axis=-1)
-            wi, wo, ref = wi[finite], wo[finite], ref[finite]
-            norm = float(np.sqrt(np.sum(ref**2)))
+            wi, wo, ref, w = wi[finite], wo[finite], ref[finite], w[finite]
+            norm = float(np.sqrt(np.sum(w[:, None] * ref**2)))
             if not norm > 0:
                 raise ValueError("fit_analytic: the reference BRDF is zero on the compared directions")
-            wis.append(wi), wos.append(wo), refs.append(ref), scales.append(np.full(len(wi), 1.0 / norm))
+            wis.append(wi), wos.append(wo), refs.append(ref), scales.append(np.sqrt(w) / norm)
         self.wi, self.wo, self.ref = np.concatenate(wis), np.concatenate(wos), np.concatenate(refs)
         self.scale = np.concatenate(scales)[:, None]        # each block: its relative RMS
         self.cos_d = dot(self.wo, half_vector(self.wi, self.wo))
