@@ -252,7 +252,7 @@ def _start_alpha(start) -> tuple[float, float, float, np.ndarray]:
 
 
 def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: bool = False,
-                 fresnel: str = "schlick", *, start=None, gaf: str | None = None, shadowing: bool = True,
+                 fresnel: str = "table", *, start=None, gaf: str | None = None, shadowing: bool = True,
                  n: int = 32, n_uniform: int = 2**13, max_nfev: int = 200):
     """Least-squares fit of an analytic microfacet BRDF (and a Lambertian base) to ``brdf``.
 
@@ -274,8 +274,8 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         Add a Lambertian base ``k_d / pi``, ``k_d`` in ``[0, 1]`` per channel.
     anisotropic : bool
         Fit ``alpha_x, alpha_y, rho`` (``|rho| <= 0.95``) instead of one ``alpha``.
-    fresnel : {"schlick", "conductor", "table"}
-        Schlick ``F0`` per channel in ``[0, 1]``; a conductor ``eta + i k`` per channel
+    fresnel : {"table", "schlick", "conductor"}
+        Default ``"table"``. Schlick ``F0`` per channel in ``[0, 1]``; a conductor ``eta + i k`` per channel
         (``eta`` in ``[0.02, 10]``, ``k`` in ``[0, 20]``; ``k = 0`` is a dielectric); or a
         piecewise-linear table of 7 nodes uniform in ``theta_d`` with values in ``[0, 1]``.
     start : FittedBRDF or MicrofacetBRDF, optional
