@@ -11,6 +11,13 @@ anisotropic fit of the RGL files) and reports
   and ``fit.to_beckmann()`` against the data (:func:`microfacet.metrics.fit_error`: a
   32^3 grid of MERL coordinates, **grazing pairs with cos theta_i or cos theta_o < 0.1
   excluded**, and for MERL the pairs touching unmeasured samples);
+* the least-squares fits of :func:`microfacet.fit.fit_analytic` (GGX and Beckmann, with
+  and without a Lambertian base, Fresnel table; started from the tabulated fit) and
+  their fit time;
+* for every fit the error over uniformly distributed pairs
+  (:func:`microfacet.metrics.uniform_error`) and the directional-albedo ratio fit/data at
+  0/30/60/75 deg (:func:`microfacet.metrics.albedo_ratios`: the ratio farthest from 1 over
+  views and RGB), and the white furnace of the fit (:func:`microfacet.metrics.white_furnace`);
 * for RGL files, the relative L2 difference of ``D cos theta_h`` over the hemisphere
   between each fit's NDF and the file's ``ndf`` field (both normalized to projected area
   1; :func:`microfacet.metrics.ndf_error`), the file's NDF having been retrieved by its
@@ -34,7 +41,8 @@ import numpy as np
 import microfacet as mf
 from microfacet.fit.outputs import material_name
 from microfacet.io import write_text
-from microfacet.metrics import describe_fit_error, fit_error, ndf_error
+from microfacet.metrics import (albedo_ratios, describe_albedo, describe_fit_error, describe_uniform_error,
+                                fit_error, ndf_error, uniform_error, white_furnace)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -51,40 +59,84 @@ def _alpha(brdf) -> str:
     return f"{ax:.4f}" if abs(ax - ay) < 1e-4 * ax and abs(rho) < 1e-6 else f"{ax:.4f}, {ay:.4f}, ρ {rho:+.3f}"
 
 
+#: Least-squares fits by column name: (model, diffuse).
+LEAST_SQUARES = {"LS GGX": ("ggx", False), "LS GGX+d": ("ggx", True),
+                 "LS Beck": ("beckmann", False), "LS Beck+d": ("beckmann", True)}
+
+
+def _worst(ratios) -> float:
+    r = np.asarray(ratios).ravel()
+    return float(r[np.argmax(np.abs(r - 1.0))])
+
+
+def _lobe(brdf):
+    return brdf.brdfs[0] if hasattr(brdf, "brdfs") else brdf
+
+
 def fit_one(path: Path, resolution: int, anisotropic: bool) -> dict:
     m = mf.measured.load(path)
     t0 = time.perf_counter()
     fit = mf.fit.fit(m, resolution=resolution, anisotropic=anisotropic)
     seconds = time.perf_counter() - t0
     fits = {"tabulated": fit, "ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
+    ls_seconds = {}
+    for name, (model, diffuse) in LEAST_SQUARES.items():
+        t0 = time.perf_counter()
+        fits[name] = mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, start=fit)
+        ls_seconds[name] = time.perf_counter() - t0
+    errors, uniform = fit_error(m, fits), uniform_error(m, fits)
+    best = min(LEAST_SQUARES, key=lambda k: errors[k] ** 2 + uniform[k] ** 2)
     row = {"material": material_name(path), "format": m.format,
-           "mode": "aniso" if anisotropic else "iso", "seconds": seconds,
-           "errors": fit_error(m, fits), "ggx": _alpha(fits["ggx"]), "beckmann": _alpha(fits["beckmann"])}
+           "mode": "aniso" if anisotropic else "iso", "seconds": seconds, "ls_seconds": ls_seconds,
+           "errors": errors, "uniform": uniform, "best": best,
+           "albedo": {k: _worst(albedo_ratios(m, b)) for k, b in fits.items()},
+           "furnace": {k: white_furnace(b) for k, b in fits.items()},
+           "alpha": {k: _alpha(_lobe(b)) for k, b in fits.items() if k != "tabulated"},
+           "kd": {k: float(b.brdfs[1].reflectance @ [0.2126, 0.7152, 0.0722])
+                  for k, b in fits.items() if hasattr(b, "brdfs")}}
     if hasattr(m, "ndf_table"):
-        row["ndf"] = {k: ndf_error(m.ndf, _ndf(b))["l2"] for k, b in fits.items()}
+        row["ndf"] = {k: ndf_error(m.ndf, _ndf(_lobe(b)))["l2"] for k, b in fits.items()}
     return row
 
 
 def format_tables(rows: list[dict], resolution: int) -> str:
+    names = ["tabulated", "ggx", "beckmann", *LEAST_SQUARES]
+    heads = ["tabulated", "GGX (moments)", "Beckmann (moments)", *LEAST_SQUARES]
     lines = [f"Fits at resolution {resolution} ({platform.processor() or platform.machine()}, "
-             f"Python {platform.python_version()}, NumPy {np.__version__}).", "",
-             "| material | format | fit | fit time (s) | err tabulated | err GGX | err Beckmann "
-             "| GGX α | Beckmann α | pairs |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             f"Python {platform.python_version()}, NumPy {np.__version__}); least-squares fits "
+             "(LS) by `mf.fit.fit_analytic(m, model, diffuse=..., start=fit)` (Fresnel table), "
+             "`+d`: with a Lambertian base. Best: the LS fit of least grid² + uniform² error.", "",
+             "Grid error (`fit_error`) / uniform-pairs error (`uniform_error`):", "",
+             "| material | format | fit | " + " | ".join(heads) + " | best LS / GGX moments |",
+             "|---|---|---|" + "---|" * (len(heads) + 1)]
     for r in rows:
-        e = r["errors"]
-        lines.append(f"| {r['material']} | {r['format']} | {r['mode']} | {r['seconds']:.2f} "
-                     f"| {e['tabulated']:.4f} | {e['ggx']:.4f} | {e['beckmann']:.4f} "
-                     f"| {r['ggx']} | {r['beckmann']} | {e['n_pairs']} |")
-    lines += ["", f"Errors: {describe_fit_error()}.", ""]
+        e, u = r["errors"], r["uniform"]
+        lines.append(f"| {r['material']} | {r['format']} | {r['mode']} | "
+                     + " | ".join(f"{e[k]:.4f} / {u[k]:.4f}" for k in names)
+                     + f" | {r['best']}: {e[r['best']] / e['ggx']:.2f} |")
+    lines += ["", "Albedo ratio fit/data farthest from 1 (views 0/30/60/75°, RGB) and white furnace "
+              "(max albedo of the microfacet lobe with F = 1, views 0–89°):", "",
+              "| material | fit | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
+    lines += [f"| {r['material']} | {r['mode']} | "
+              + " | ".join(f"{r['albedo'][k]:.3f} / {r['furnace'][k]:.3f}" for k in names) + " |" for r in rows]
+    lines += ["", "Fitted roughness (α, or αx, αy, ρ), diffuse luminance kd, fit times (s; tabulated "
+              "fit, then each LS fit; `time.perf_counter`, one run):", "",
+              "| material | fit | GGX mom | Beck mom | " + " | ".join(LEAST_SQUARES) + " | times |",
+              "|---|---|---|---|" + "---|" * (len(LEAST_SQUARES) + 1)]
+    for r in rows:
+        cells = [r["alpha"][k] + (f", kd {r['kd'][k]:.3f}" if k in r["kd"] else "") for k in names[1:]]
+        times = f"{r['seconds']:.2f}; " + ", ".join(f"{t:.2f}" for t in r["ls_seconds"].values())
+        lines.append(f"| {r['material']} | {r['mode']} | " + " | ".join(cells) + f" | {times} |")
+    lines += ["", f"Grid error: {describe_fit_error()}.", f"Uniform error: {describe_uniform_error()}.",
+              f"Albedo: {describe_albedo()}.", ""]
     ndf_rows = [r for r in rows if "ndf" in r]
     if ndf_rows:
         lines += ["NDF of the fits against the RGL file's own `ndf` field: relative L2 difference of "
                   "D cos θh over the hemisphere (both normalized to projected area 1; 128 × 128 "
                   "midpoint quadrature, θ quadratic in u).", "",
-                  "| material | fit | tabulated | GGX | Beckmann |", "|---|---|---|---|---|"]
-        lines += [f"| {r['material']} | {r['mode']} | {r['ndf']['tabulated']:.4f} | {r['ndf']['ggx']:.4f} "
-                  f"| {r['ndf']['beckmann']:.4f} |" for r in ndf_rows]
+                  "| material | fit | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
+        lines += [f"| {r['material']} | {r['mode']} | " + " | ".join(f"{r['ndf'][k]:.4f}" for k in names) + " |"
+                  for r in ndf_rows]
         lines.append("")
     return "\n".join(lines)
 
@@ -94,7 +146,9 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=ROOT / ".." / "shared" / "data")
     ap.add_argument("--resolution", type=int, default=90)
     ap.add_argument("--anisotropic", action="store_true", help="also fit the RGL files anisotropically")
-    ap.add_argument("--out", type=Path, help="write the Markdown tables here (atomically)")
+    ap.add_argument("--out", type=Path, default=ROOT / "experiments" / "results" / "fit_measured.md",
+                    help="write the Markdown tables here (atomically; default experiments/results/"
+                         "fit_measured.md)")
     args = ap.parse_args(argv)
     merl = sorted((args.data / "merl").glob("*.binary*"))
     rgl = sorted((args.data / "rgl").glob("*.bsdf"))

@@ -13,6 +13,8 @@ from PIL import Image
 
 import microfacet as mf
 from microfacet.cli import main
+from microfacet.fit.outputs import analytic_from_json
+from microfacet.metrics import fit_error
 from microfacet.geometry import hd_to_io, spherical_to_cartesian
 from microfacet.measured import merl
 
@@ -59,6 +61,16 @@ def test_fit_writes_npz_json_png(single):
     assert summary["ggx"]["alpha_y"] == pytest.approx(summary["ggx"]["alpha_x"], rel=1e-6)
     assert abs(summary["ggx"]["rho"]) < 1e-6
     assert summary["errors"]["ggx"] < 0.1 and summary["errors"]["tabulated"] < 0.1
+    assert summary["method"] == "least_squares" and summary["selected"]["ggx"].startswith("ggx")
+    assert set(summary["least_squares"]) == {"ggx", "ggx_diffuse", "beckmann", "beckmann_diffuse"}
+    assert summary["ggx"]["alpha_x"] == pytest.approx(ALPHA, rel=1e-3)     # least squares: exact family
+    assert summary["errors"]["ggx"] < 0.2 * summary["errors"]["ggx_moments"]
+    for kind in ("tabulated", "ggx", "beckmann"):
+        assert 0 <= summary["errors"]["uniform"][kind] < 1.0
+        ratios = np.array(summary["errors"]["albedo_ratio"][kind])
+        assert ratios.shape == (4, 3) and np.all(np.abs(ratios - 1.0) < 0.5)
+    assert np.allclose(summary["errors"]["albedo_ratio"]["ggx"], 1.0, atol=0.01)
+    assert 0.9 < summary["errors"]["white_furnace"]["ggx_least_squares"] <= 1.0 + 2e-3
     with Image.open(npz.with_suffix(".png")) as im:
         assert im.format == "PNG" and im.size[0] >= 600
     assert not [p for p in npz.parent.iterdir() if p.name.startswith(".") or p.name.endswith(".tmp")]
@@ -70,8 +82,12 @@ def test_fit_round_trips_through_load(single):
     summary = json.loads(npz.with_suffix(".json").read_text())
     for kind, brdf in (("ggx", fit.to_ggx()), ("beckmann", fit.to_beckmann())):
         d = brdf.distribution
-        assert float(d.alpha_x) == pytest.approx(summary[kind]["alpha_x"], rel=1e-9)
-        assert float(d.rho) == pytest.approx(summary[kind]["rho"], abs=1e-12)
+        assert float(d.alpha_x) == pytest.approx(summary["moments"][kind]["alpha_x"], rel=1e-9)
+        assert float(d.rho) == pytest.approx(summary["moments"][kind]["rho"], abs=1e-12)
+    rebuilt = analytic_from_json(summary["ggx"])
+    lobe = rebuilt.brdfs[0] if summary["ggx"]["diffuse"] is not None else rebuilt
+    assert float(lobe.distribution.alpha_x) == summary["ggx"]["alpha_x"]
+    assert fit_error(TRUTH, rebuilt)["fit"] < 0.01            # vs the truth, not the MERL-grid file
     rng = np.random.default_rng(1)
     wi = spherical_to_cartesian(np.arccos(rng.uniform(0.2, 1, 200)), rng.uniform(0, 2 * np.pi, 200))
     wo = spherical_to_cartesian(np.arccos(rng.uniform(0.2, 1, 200)), rng.uniform(0, 2 * np.pi, 200))
@@ -102,6 +118,31 @@ def test_fit_folder_writes_summary_and_reports_bad_files(inputs, tmp_path, capsy
     assert not (out / "notes.txt.npz").exists()
 
 
+def test_fit_recursive_folder_mirrors_the_tree_and_reports_all_metrics(inputs, tmp_path, capsys):
+    folder = tmp_path / "in"
+    (folder / "metals" / "gold").mkdir(parents=True)
+    (folder / "top.binary").symlink_to(inputs / "gold-ggx.binary")
+    (folder / "metals" / "gold" / "deep.binary").symlink_to(inputs / "gold-ggx.binary")
+    (folder / ".hidden").mkdir()
+    (folder / ".hidden" / "skip.binary").symlink_to(inputs / "gold-ggx.binary")
+    out = tmp_path / "out"
+    assert main(["fit", str(folder), "-o", str(out), "--resolution", "16", "--method", "moments"]) == 0
+    assert {p.relative_to(out).as_posix() for p in out.rglob("*.npz")} == {"top.npz"}   # not recursive
+    assert main(["fit", str(folder), "-o", str(out), "--resolution", "16", "--recursive", "--diffuse", "off",
+                 "--fresnel", "schlick"]) == 0
+    assert {p.relative_to(out).as_posix() for p in out.rglob("*.npz")} == {"top.npz", "metals/gold/deep.npz"}
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [r["material"] for r in rows] == ["metals/gold/deep", "top"]
+    for r in rows:
+        assert r["method"] == "least_squares" and r["ggx_diffuse"] == ""
+        assert float(r["error_ggx"]) < 0.5 * float(r["error_ggx_moments"])
+        assert 0 < float(r["uniform_ggx"]) < 0.1 and abs(float(r["albedo_ggx"]) - 1) < 0.1
+    summary = json.loads((out / "metals" / "gold" / "deep.json").read_text())
+    assert set(summary["least_squares"]) == {"ggx", "beckmann"}
+    assert summary["ggx"]["fresnel"]["type"] == "schlick"
+    assert "| metals/gold/deep |" in capsys.readouterr().out
+
+
 def test_fit_into_an_existing_folder_names_files_after_the_input(inputs, tmp_path, capsys):
     assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(tmp_path), "--resolution", "16",
                  "--gaf", "vgroove"]) == 0
@@ -128,5 +169,6 @@ def test_fit_bad_input_gives_one_line(make, message, tmp_path, capsys):
 def test_fit_bad_arguments_give_usage_status(capsys):
     assert main(["fit", "x", "-o", "y", "--gaf", "bogus"]) == 2
     assert main(["fit", "x", "-o", "y", "--resolution", "2"]) == 2
+    assert main(["fit", "x", "-o", "y", "--method", "lsq"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 2 and "invalid choice: 'bogus'" in err and "must lie in [8, 2048]" in err
+    assert err.count("\n") == 3 and "invalid choice: 'lsq'" in err and "invalid choice: 'bogus'" in err and "must lie in [8, 2048]" in err

@@ -5,7 +5,13 @@ import pytest
 import microfacet as mf
 from microfacet.geometry import spherical_to_cartesian
 from microfacet.measured.merl import hd_coordinates
-from microfacet.metrics import GRAZING_COS, fit_error, hemisphere_grid, measurement_directions, ndf_error
+from pathlib import Path
+
+from microfacet.metrics import (GRAZING_COS, albedo_ratios, directional_albedo, fit_error, hemisphere_grid,
+                                measurement_directions, ndf_error, uniform_directions, uniform_error,
+                                white_furnace)
+
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 
 GOLD = mf.MicrofacetBRDF(mf.GGX(alpha=0.15), fresnel=mf.fresnel.Conductor.metal("Au"))
 
@@ -82,3 +88,61 @@ def test_ndf_error_compares_shapes_not_scales():
     assert 0.0 < near < far
     with pytest.raises(ValueError, match="positive finite"):
         ndf_error(b.ndf, lambda h: np.zeros(len(h)))
+
+
+def test_uniform_directions_weigh_pairs_as_the_uniform_measure():
+    wi, wo, w = uniform_directions(2**14, seed=3)
+    assert wi[:, 2].min() >= GRAZING_COS and wo[:, 2].min() >= GRAZING_COS
+    # sum w g ~= int int g dwi dwo / (2 pi): g = 1 on cos >= 0.1 gives 2 pi 0.9^2
+    assert np.sum(w) == pytest.approx(2 * np.pi * 0.81, rel=0.01)
+    assert np.sum(w * wi[:, 2]) / np.sum(w) == pytest.approx(0.55, rel=0.01)   # mean cos, uniform in [0.1, 1]
+    assert np.array_equal(wi, uniform_directions(2**14, seed=3)[0])
+    assert not np.array_equal(wi[:100], uniform_directions(2**14, seed=4)[0][:100])
+
+
+def test_uniform_error_is_the_scale_error_and_stable_across_seeds():
+    beck = mf.MicrofacetBRDF(mf.Beckmann(alpha=0.15), fresnel=mf.fresnel.Conductor.metal("Au"))
+    e0 = uniform_error(GOLD, {"scaled": Scaled(GOLD, 1.03), "beckmann": beck}, seed=0)
+    e1 = uniform_error(GOLD, {"beckmann": beck}, seed=1)
+    assert e0["scaled"] == pytest.approx(0.03, rel=1e-9)
+    assert e0["beckmann"] == pytest.approx(e1["beckmann"], rel=0.01)
+
+
+@pytest.mark.skipif(not (DATA / "rgl").is_dir(), reason="../shared/data not present")
+def test_uniform_error_is_stable_to_one_percent_on_measured_data():
+    m = mf.measured.load(DATA / "rgl" / "cc_ibiza_sunset_rgb.bsdf")
+    fit = mf.MicrofacetBRDF(mf.GGX(alpha=0.1), fresnel=mf.fresnel.Schlick(0.15))
+    e = [uniform_error(m, fit, seed=s)["fit"] for s in (0, 1)]
+    assert e[0] == pytest.approx(e[1], rel=0.015)
+
+
+@pytest.mark.parametrize("alpha", [0.02, 0.2, 1.0])
+@pytest.mark.parametrize("family", [mf.GGX, mf.Beckmann])
+def test_directional_albedo_agrees_with_monte_carlo(family, alpha):
+    brdf = mf.MicrofacetBRDF(family(alpha=alpha), fresnel=mf.fresnel.Conductor.metal("Cu"))
+    views = (0.0, 45.0, 75.0)
+    quad = directional_albedo(brdf, views)
+    u = np.random.default_rng(0).random((100_000, 2))
+    for j, view in enumerate(views):
+        wo = np.array([np.sin(np.radians(view)), 0.0, np.cos(np.radians(view))])
+        mc = brdf.sample(u, wo)[1].mean(axis=0)
+        np.testing.assert_allclose(quad[j], mc, rtol=1e-2)
+
+
+def test_directional_albedo_of_lambertian_and_albedo_ratios_of_a_scaled_copy():
+    lam = mf.Lambertian((0.2, 0.5, 0.8))
+    np.testing.assert_allclose(directional_albedo(lam, (0.0, 60.0)), [[0.2, 0.5, 0.8]] * 2, rtol=1e-3)
+    r = albedo_ratios(GOLD, Scaled(GOLD, 1.25))
+    assert r.shape == (4, 3)
+    np.testing.assert_allclose(r, 1.25, rtol=1e-12)
+
+
+def test_white_furnace_is_at_most_one_for_microfacet_lobes():
+    rough = white_furnace(mf.MicrofacetBRDF(mf.GGX(alpha=1.0), fresnel=mf.fresnel.Conductor.metal("Au")))
+    smooth = white_furnace(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.05)))
+    assert 0.6 < rough < 0.99 and 0.99 < smooth <= 1.0 + 2e-3       # Smith loses energy at alpha 1
+    assert white_furnace(mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.05)),
+                                        mf.Lambertian(1.0))) == pytest.approx(smooth)
+    assert white_furnace(mf.Lambertian(0.5)) == 0.0
+    with pytest.raises(ValueError, match="white_furnace needs"):
+        white_furnace(Scaled(GOLD, 1.0))

@@ -2,6 +2,13 @@
 
 * :func:`fit_error` — relative RMS of ``f_r cos theta_i`` over a fixed set of direction
   pairs (:func:`measurement_directions`), the error table of fitting reports;
+* :func:`uniform_error` — the same relative RMS over direction pairs uniformly
+  distributed on the hemisphere (scrambled Sobol, seeded), where the grid above
+  concentrates on the specular peak and this one weighs every direction alike;
+* :func:`albedo_ratios` — directional albedo of a fit over the data's, per view and RGB
+  channel (:func:`directional_albedo`, half-vector quadrature);
+* :func:`white_furnace` — directional albedo of a fit's microfacet lobes with a white
+  Fresnel term (``<= 1`` for an energy-conserving model), the maximum over views;
 * :func:`ndf_error` — relative L2 difference of ``D cos theta_h`` over the hemisphere
   between two NDFs (e.g. a fit's and the ``ndf`` field of an RGL file).
 
@@ -20,12 +27,18 @@ import numpy as np
 
 from .geometry import hd_to_io, spherical_to_cartesian
 
-__all__ = ["GRAZING_COS", "measurement_directions", "fit_error", "ndf_error", "hemisphere_grid",
-           "describe_fit_error"]
+__all__ = ["GRAZING_COS", "ALBEDO_VIEWS_DEG", "measurement_directions", "uniform_directions",
+           "compared_pairs", "fit_error", "uniform_error", "directional_albedo", "albedo_ratios",
+           "white_furnace", "ndf_error", "hemisphere_grid", "describe_fit_error", "describe_uniform_error",
+           "describe_albedo"]
 
 #: Pairs with ``cos theta_i`` or ``cos theta_o`` below this are excluded (grazing).
 GRAZING_COS = 0.1
 _GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
+#: Views (theta_o, degrees) of :func:`albedo_ratios`.
+ALBEDO_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0)
+#: Default number of pairs of :func:`uniform_error` (before the grazing exclusion).
+UNIFORM_PAIRS = 2**17
 
 
 def describe_fit_error(n: int = 32) -> str:
@@ -33,6 +46,21 @@ def describe_fit_error(n: int = 32) -> str:
     return (f"relative RMS of f_r cos(theta_i) (RGB) over a {n}^3 grid of MERL coordinates "
             f"(theta_h, theta_d, phi_d), theta_h quadratic; pairs with cos(theta_i) or cos(theta_o) "
             f"< {GRAZING_COS:g} (grazing) and, for MERL, pairs touching unmeasured samples excluded")
+
+
+def describe_uniform_error(n: int = UNIFORM_PAIRS, seed: int = 0) -> str:
+    """One sentence saying what :func:`uniform_error` measures."""
+    return (f"relative RMS of f_r cos(theta_i) (RGB) over direction pairs uniformly distributed "
+            f"on the hemisphere (solid angle), estimated by {n} weighted pairs importance-sampled at "
+            f"the specular peak (scrambled Sobol, seed {seed}); pairs with cos(theta_i) or cos(theta_o) "
+            f"< {GRAZING_COS:g} and, for MERL, pairs touching unmeasured samples excluded")
+
+
+def describe_albedo(views_deg=ALBEDO_VIEWS_DEG) -> str:
+    """One sentence saying what :func:`albedo_ratios` measures."""
+    return (f"directional albedo fit / data per RGB channel at theta_o = "
+            f"{', '.join(f'{v:g}' for v in views_deg)} deg, light directions with cos(theta_i) >= "
+            f"{GRAZING_COS:g} (and measured, for MERL); half-vector quadrature, 128 x 128")
 
 
 def measurement_directions(n: int = 32) -> tuple[np.ndarray, np.ndarray]:
@@ -53,12 +81,53 @@ def measurement_directions(n: int = 32) -> tuple[np.ndarray, np.ndarray]:
     return wi[keep], wo[keep]
 
 
+def uniform_directions(n: int = UNIFORM_PAIRS, seed: int = 0):
+    """Weighted light/view pairs ``(wi, wo, w)`` whose weighted sums estimate integrals over
+    the uniform (solid-angle) measure of pairs, ``sum w g ~= int int g dwi dwo / (2 pi)``:
+    ``wo`` uniform on the hemisphere and ``wi = reflect(wo, h)`` for a half vector ``h``
+    with ``theta_h = u^2 pi / 2``, ``phi_h = 2 pi v``, i.e. importance-sampled at the
+    normal, where every view's specular peak lies (``dwi = 4 (o.h) dh``,
+    ``dh = sin theta_h pi u 2 pi du dv``), from a scrambled 4D Sobol sequence of ``seed``
+    (``n`` points). Pairs with either cosine below :data:`GRAZING_COS` are dropped.
+    Deterministic for a seed."""
+    from scipy.stats import qmc
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n!r}")
+    u = qmc.Sobol(4, scramble=True, seed=seed).random(int(n))
+    wo = spherical_to_cartesian(np.arccos(u[:, 0]), 2.0 * np.pi * u[:, 1])
+    theta_h = u[:, 2] ** 2 * (np.pi / 2)
+    h = spherical_to_cartesian(theta_h, 2.0 * np.pi * u[:, 3])
+    oh = np.sum(wo * h, axis=-1)
+    wi = 2.0 * oh[:, None] * h - wo
+    w = 4.0 * oh * np.sin(theta_h) * np.pi * u[:, 2] * 2.0 * np.pi / n
+    keep = (oh > 0) & (wi[:, 2] >= GRAZING_COS) & (wo[:, 2] >= GRAZING_COS)
+    return wi[keep], wo[keep], w[keep]
+
+
 def _measured(reference, wi, wo) -> np.ndarray:
     """Mask of pairs where ``reference`` rests on measured data only (MERL coverage)."""
     coverage = getattr(reference, "coverage", None)
     if coverage is None:
         return np.ones(len(wi), dtype=bool)
     return np.asarray(coverage(wi, wo)) >= 1.0 - 1e-9
+
+
+def compared_pairs(reference, directions) -> tuple[np.ndarray, ...]:
+    """The pairs ``(wi, wo)`` (or weighted ``(wi, wo, w)``) of ``directions`` (broadcast,
+    flattened to ``(M, 3)``) that fit errors compare: both cosines ``>= GRAZING_COS`` and,
+    for a reference with ``coverage`` (MERL), on measured samples only. Raises
+    ``ValueError`` if none is left."""
+    wi, wo = directions[0], directions[1]
+    wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64))
+    wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+    keep = (wi[:, 2] >= GRAZING_COS) & (wo[:, 2] >= GRAZING_COS)
+    keep[keep] = _measured(reference, wi[keep], wo[keep])
+    if not np.any(keep):
+        raise ValueError("no measured, non-grazing direction pairs to compare")
+    if len(directions) == 3:
+        w = np.broadcast_to(np.asarray(directions[2], dtype=np.float64), (len(keep),))
+        return wi[keep], wo[keep], w[keep]
+    return wi[keep], wo[keep]
 
 
 def fit_error(reference, fits, n: int = 32, directions=None) -> dict[str, float]:
@@ -76,8 +145,9 @@ def fit_error(reference, fits, n: int = 32, directions=None) -> dict[str, float]
         One fit, or several by name.
     n : int
         Grid size per MERL coordinate (``n^3`` pairs before exclusions).
-    directions : (wi, wo), optional
-        Use these pairs instead of the grid (still filtered by grazing and coverage).
+    directions : (wi, wo) or (wi, wo, w), optional
+        Use these pairs (with weights ``w`` in both sums) instead of the grid (still
+        filtered by grazing and coverage).
 
     Returns
     -------
@@ -85,23 +155,98 @@ def fit_error(reference, fits, n: int = 32, directions=None) -> dict[str, float]
         Error per fit name (``"fit"`` for a single BRDF), plus ``"n_pairs"``, the number
         of pairs used.
     """
-    wi, wo = measurement_directions(n) if directions is None else directions
-    wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64))
-    wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
-    keep = (wi[:, 2] >= GRAZING_COS) & (wo[:, 2] >= GRAZING_COS)
-    keep[keep] = _measured(reference, wi[keep], wo[keep])
-    wi, wo = wi[keep], wo[keep]
-    if len(wi) == 0:
-        raise ValueError("no measured, non-grazing direction pairs to compare")
+    pairs = compared_pairs(reference, measurement_directions(n) if directions is None else directions)
+    wi, wo = pairs[:2]
+    w = pairs[2][:, None] if len(pairs) == 3 else 1.0
     ref = reference.eval_cos(wi, wo)
-    norm = float(np.sqrt(np.sum(ref * ref)))
+    norm = float(np.sqrt(np.sum(w * ref * ref)))
     if not np.isfinite(norm) or norm == 0.0:
         raise ValueError("the reference BRDF is zero or not finite on the compared directions")
     named = fits if isinstance(fits, dict) else {"fit": fits}
-    out = {name: float(np.sqrt(np.sum((brdf.eval_cos(wi, wo) - ref) ** 2)) / norm)
+    out = {name: float(np.sqrt(np.sum(w * (brdf.eval_cos(wi, wo) - ref) ** 2)) / norm)
            for name, brdf in named.items()}
     out["n_pairs"] = int(len(wi))
     return out
+
+
+def uniform_error(reference, fits, n: int = UNIFORM_PAIRS, seed: int = 0) -> dict[str, float]:
+    """:func:`fit_error` over the pairs of :func:`uniform_directions` ``(n, seed)``: the
+    relative RMS of ``f_r cos theta_i`` with every direction weighted alike (solid
+    angle), grazing and unmeasured pairs excluded. With the default ``n = 2^17`` the
+    value changes by ~1 % between seeds on the shared materials (tests)."""
+    return fit_error(reference, fits, directions=uniform_directions(n, seed))
+
+
+def _albedo_nodes(theta_o: float, n_theta: int, n_phi: int):
+    """Light directions ``wi (K, 3)`` and weights ``w (K,)`` of the half-vector quadrature
+    of :func:`directional_albedo` for the view ``theta_o`` (in the plane ``phi = 0``)."""
+    wo = np.array([np.sin(theta_o), 0.0, np.cos(theta_o)])
+    h, wh = hemisphere_grid(n_theta, n_phi)
+    oh = h @ wo
+    wi = 2.0 * oh[:, None] * h - wo                          # reflect(wo, h)
+    w = np.where((oh > 0) & (wi[:, 2] > 0), 4.0 * oh * wh, 0.0)   # d wi = 4 (o.h) d h
+    return wi, np.broadcast_to(wo, wi.shape), w
+
+
+def directional_albedo(brdf, views_deg=ALBEDO_VIEWS_DEG, min_cos: float = 0.0, mask=None,
+                       n_theta: int = 128, n_phi: int = 128) -> np.ndarray:
+    """Directional albedo ``a(o) = int f_r(i, o) cos theta_i d i`` (Eq. 1.8), RGB, for each
+    view ``theta_o`` in ``views_deg``: ``(len(views_deg), 3)``.
+
+    Quadrature over the half vector, ``d i = 4 (o.h) d h`` with ``i = reflect(o, h)``, on
+    :func:`hemisphere_grid` (dense at the normal, i.e. at the mirror direction of every
+    view, where specular lobes peak); light directions with ``cos theta_i < min_cos``
+    or, if given, ``mask(wi, wo) == False`` are left out. With the default 128 x 128
+    nodes the albedo of a Lambertian BRDF is exact to 1e-3 and that of GGX/Beckmann
+    lobes of alpha 0.02-1 agrees with Monte Carlo (1e5 samples) to 1 % (tests).
+    """
+    out = np.zeros((len(views_deg), 3))
+    for j, view in enumerate(views_deg):
+        wi, wo, w = _albedo_nodes(np.radians(float(view)), n_theta, n_phi)
+        keep = (w > 0) & (wi[:, 2] >= min_cos)
+        if mask is not None:
+            keep[keep] = mask(wi[keep], wo[keep])
+        f = np.asarray(brdf.eval_cos(wi[keep], wo[keep]), dtype=np.float64)
+        out[j] = np.sum(w[keep, None] * np.where(np.isfinite(f), f, 0.0), axis=0)
+    return out
+
+
+def albedo_ratios(reference, fit, views_deg=ALBEDO_VIEWS_DEG) -> np.ndarray:
+    """Directional albedo of ``fit`` over that of ``reference`` per view and RGB channel,
+    ``(len(views_deg), 3)`` (:func:`directional_albedo`), both restricted to the light
+    directions fit errors compare: ``cos theta_i >= GRAZING_COS`` and, for MERL, measured
+    samples. NaN where the reference's albedo is 0."""
+    mask = (lambda wi, wo: _measured(reference, wi, wo)) if hasattr(reference, "coverage") else None
+    ref = directional_albedo(reference, views_deg, GRAZING_COS, mask)
+    fit_albedo = directional_albedo(fit, views_deg, GRAZING_COS, mask)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ref > 0, fit_albedo / ref, np.nan)
+
+
+def _white(brdf):
+    """The microfacet lobes of ``brdf`` with a white Fresnel term (``F = 1``): a
+    :class:`~microfacet.MicrofacetBRDF`, or the lobes of a sum BRDF (``brdfs``); other
+    terms (a Lambertian base) are dropped."""
+    from .brdf import Lambertian, MicrofacetBRDF
+    if isinstance(brdf, MicrofacetBRDF):
+        return [MicrofacetBRDF(brdf.distribution, gaf=brdf.gaf_model, shadowing=brdf.shadowing)]
+    if isinstance(brdf, Lambertian):
+        return []
+    if hasattr(brdf, "brdfs"):
+        return [w for b in brdf.brdfs for w in _white(b)]
+    raise ValueError(f"white_furnace needs a MicrofacetBRDF, a Lambertian or a sum of them, "
+                     f"got {type(brdf).__name__}")
+
+
+def white_furnace(brdf, views_deg=(0.0, 30.0, 60.0, 75.0, 85.0, 89.0)) -> float:
+    """White furnace test: the largest directional albedo (:func:`directional_albedo`,
+    all light directions) over ``views_deg`` of the microfacet lobes of ``brdf`` with
+    ``F = 1`` (a Lambertian base is left out). ``<= 1`` for an energy-conserving
+    microfacet model (Smith masking-shadowing loses energy, never gains it)."""
+    lobes = _white(brdf)
+    if not lobes:
+        return 0.0
+    return float(max(np.max(directional_albedo(lobe, views_deg)[:, 0]) for lobe in lobes))
 
 
 def hemisphere_grid(n_theta: int = 128, n_phi: int = 128) -> tuple[np.ndarray, np.ndarray]:

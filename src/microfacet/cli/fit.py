@@ -1,4 +1,4 @@
-"""``microfacet fit INPUT -o OUT``: fits of measured BRDFs (thesis Ch. 4)."""
+"""``microfacet fit INPUT -o OUT``: fits of measured BRDFs (thesis Ch. 4, least squares)."""
 from __future__ import annotations
 
 import sys
@@ -6,17 +6,27 @@ from pathlib import Path
 
 from .common import EXIT_ERROR, PROG, int_at_least, output_path
 
+#: Choices of --method, --diffuse and --fresnel (the same as microfacet.fit.outputs and
+#: microfacet.fit.analytic; spelled here so that --help imports neither).
+METHODS = ("least-squares", "moments")
+DIFFUSE = ("auto", "on", "off")
+FRESNELS = ("table", "schlick", "conductor")
+
 
 def add(sub) -> None:
     from ..brdf import GAFS
     p = sub.add_parser(
-        "fit", help="fit measured BRDFs by power iterations (tabulated, GGX and Beckmann fits)",
+        "fit", help="fit measured BRDFs (tabulated fit by power iterations, least-squares GGX and Beckmann)",
         description="Fit a measured BRDF (MERL .binary(.gz), RGL .bsdf, UTIA .bin; recognised by "
-                    "content) by power iterations (thesis Ch. 4). For a file: writes OUT.npz (the "
-                    "tabulated fit, loadable by microfacet.fit.load), OUT.json (GGX and Beckmann "
-                    "parameters, Fresnel term, fit time, fit errors) and OUT.png (comparison "
-                    "picture). For a folder: the same for every file in it, into the folder OUT, "
-                    "with summary.csv and summary.md. Prints the summary table.")
+                    "content) by power iterations (thesis Ch. 4), then GGX and Beckmann BRDFs by least "
+                    "squares started from its moment conversion. For a file: writes OUT.npz (the "
+                    "tabulated fit, loadable by microfacet.fit.load), OUT.json (GGX and Beckmann fits "
+                    "with their Fresnel term and diffuse base, every fit of both methods, fit times, and "
+                    "three metrics per fit: the grid error, the uniform-pairs error and the albedo "
+                    "ratios fit/data, plus the white furnace) and OUT.png (comparison picture with the "
+                    "errors). For a folder: the same for every file in it (--recursive: in its "
+                    "subfolders too, the outputs mirroring the input tree), into the folder OUT, with "
+                    "summary.csv and summary.md. Prints the summary table.")
     p.add_argument("input", metavar="INPUT", help="measured BRDF file, or a folder of them")
     p.add_argument("-o", "--output", metavar="OUT", required=True,
                    help="OUT.npz for a file (.npz added if missing; an existing folder takes "
@@ -26,21 +36,34 @@ def add(sub) -> None:
     p.add_argument("--anisotropic", action="store_true", help="fit an anisotropic NDF (slower)")
     p.add_argument("--gaf", choices=GAFS, default="smith",
                    help="geometric attenuation factor of the fit (default smith)")
+    p.add_argument("--method", choices=METHODS, default="least-squares",
+                   help="GGX and Beckmann fits reported as 'ggx'/'beckmann' and drawn: least-squares "
+                        "(default; fitted to the data, started from the moments) or moments (the "
+                        "tabulated fit's moment conversion, thesis App. C; faster)")
+    p.add_argument("--diffuse", choices=DIFFUSE, default="auto",
+                   help="Lambertian base of the least-squares fits: auto (fit with and without, keep "
+                        "the better by grid^2 + uniform^2 error; default), on, off")
+    p.add_argument("--fresnel", choices=FRESNELS, default="table",
+                   help="Fresnel term of the least-squares fits, each bounded to [0, 1] per channel: "
+                        "table (7 nodes in theta_d; default), schlick (F0) or conductor (eta, k; slower)")
+    p.add_argument("--recursive", action="store_true",
+                   help="folder INPUT: fit the files of its subfolders too (outputs mirror the tree)")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
     from ..fit.outputs import fit_folder, fit_material, format_summary_markdown, material_name, summary_row
     from ..measured import load
     source = Path(args.input)
-    options = dict(resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf)
+    options = dict(resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
+                   method=args.method.replace("-", "_"), diffuse=args.diffuse, fresnel=args.fresnel)
     if source.is_dir():
+        from tqdm import tqdm
+
         def progress(files):
             return tqdm(files, disable=not sys.stderr.isatty(), unit="material", desc="microfacet fit",
                         leave=False)
-        rows = fit_folder(source, args.output, progress=progress, **options)
+        rows = fit_folder(source, args.output, progress=progress, recursive=args.recursive, **options)
         print(format_summary_markdown(rows), end="")
         failed = sum(r["status"] != "ok" for r in rows)
         if failed:

@@ -1,17 +1,26 @@
 """What ``microfacet fit`` writes: a fit's files and the summary table of a folder of fits.
 
-For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch. 4):
+For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch. 4) and
+:func:`microfacet.fit.fit_analytic` (least squares, started from the moment conversion):
 
 * ``NAME.npz`` — the tabulated fit (``fit.save``), loadable by :func:`microfacet.fit.load`;
-* ``NAME.json`` — ``{"beckmann": {"alpha_x", "alpha_y", "rho"}, "ggx": {...},
-  "fresnel": {...}, "seconds": ..., "errors": {...}, ...}``: the analytic fits
-  (``fit.to_beckmann()``, ``fit.to_ggx()``), the fitted Fresnel term, the fitting time
-  and the fit errors of :func:`microfacet.metrics.fit_error`;
+* ``NAME.json`` — ``"ggx"`` and ``"beckmann"``: the analytic fits of the chosen method
+  (``least_squares`` by default: the best of the fits with and without a diffuse base,
+  by ``e_grid^2 + e_uniform^2``; ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``),
+  each ``{"alpha_x", "alpha_y", "rho", "fresnel", "diffuse"}`` (``diffuse``: the
+  Lambertian reflectance, RGB, or null); ``"moments"`` and ``"least_squares"``: every
+  fit of each method by name; ``"fresnel"`` (the tabulated fit's), ``"seconds"`` (fit
+  times), ``"errors"`` (per fit name: the grid error of
+  :func:`microfacet.metrics.fit_error`; ``"uniform"``: :func:`~microfacet.metrics.uniform_error`;
+  ``"albedo_ratio"``: :func:`~microfacet.metrics.albedo_ratios`, views x RGB;
+  ``"white_furnace"``: :func:`~microfacet.metrics.white_furnace`), and the options;
 * ``NAME.png`` — the comparison picture of :func:`microfacet.render.save_fit_comparison`
-  (data, tabulated fit, GGX, Beckmann).
+  (data, tabulated fit, GGX and Beckmann fits of the method, their errors).
 
-A folder of materials gives one such triple per material and ``summary.csv`` /
-``summary.md`` (one row per input file). Every file is written atomically.
+:func:`analytic_from_json` rebuilds an analytic fit from its JSON entry. A folder of
+materials gives one such triple per material (with ``recursive``, subfolders too, the
+outputs mirroring the input tree) and ``summary.csv`` / ``summary.md`` (one row per
+input file, all three metrics). Every file is written atomically.
 """
 from __future__ import annotations
 
@@ -28,19 +37,26 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from ..io import write_text
-from ..metrics import describe_fit_error, fit_error
+from ..metrics import (ALBEDO_VIEWS_DEG, albedo_ratios, describe_albedo, describe_fit_error,
+                       describe_uniform_error, fit_error, uniform_error, white_furnace)
 
 __all__ = ["material_name", "material_files", "fit_material", "fit_folder", "distribution_params",
-           "fresnel_json", "summary_row", "format_summary_markdown", "format_summary_csv",
-           "SUMMARY_COLUMNS"]
+           "fresnel_json", "analytic_json", "analytic_from_json", "summary_row",
+           "format_summary_markdown", "format_summary_csv", "SUMMARY_COLUMNS", "METHODS", "DIFFUSE"]
 
 #: File suffixes dropped from a material's name (longest first).
 _SUFFIXES = (".binary.gz", ".bsdf.gz", ".bin.gz", ".binary", ".bsdf", ".bin", ".gz")
+#: Conversion methods of the analytic fits.
+METHODS = ("least_squares", "moments")
+#: Diffuse-base choices of the least-squares fits: both (keep the best), with, without.
+DIFFUSE = ("auto", "on", "off")
+_KINDS = ("tabulated", "ggx", "beckmann")
 #: Columns of ``summary.csv`` (``summary.md`` shows the same, formatted).
-SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds",
-                   "error_tabulated", "error_ggx", "error_beckmann",
-                   "ggx_alpha_x", "ggx_alpha_y", "ggx_rho",
-                   "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho")
+SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "method",
+                   *(f"error_{k}" for k in _KINDS), *(f"uniform_{k}" for k in _KINDS),
+                   *(f"albedo_{k}" for k in _KINDS), "error_ggx_moments",
+                   "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "ggx_diffuse",
+                   "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
 
 
 def material_name(path: str | os.PathLike) -> str:
@@ -52,11 +68,14 @@ def material_name(path: str | os.PathLike) -> str:
     return name
 
 
-def material_files(folder: str | os.PathLike) -> list[Path]:
-    """Regular, non-hidden files directly in ``folder``, sorted by name (formats are
-    recognised by content when they are loaded)."""
+def material_files(folder: str | os.PathLike, recursive: bool = False) -> list[Path]:
+    """Regular, non-hidden files in ``folder`` (and, ``recursive``, in its non-hidden
+    subfolders), sorted by relative path (formats are recognised by content when loaded)."""
     folder = Path(folder)
-    return sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
+    found = folder.rglob("*") if recursive else folder.iterdir()
+    return sorted((p for p in found if p.is_file()
+                   and not any(part.startswith(".") for part in p.relative_to(folder).parts)),
+                  key=lambda p: p.relative_to(folder).parts)
 
 
 def distribution_params(brdf) -> dict[str, float]:
@@ -84,45 +103,150 @@ def _fit_fresnel(fit):
     return f if f is not None else fit.to_ggx().fresnel
 
 
-def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str):
+def _parts(brdf):
+    """``(microfacet lobe, Lambertian base or None)`` of an analytic fit."""
+    parts = getattr(brdf, "brdfs", None)
+    if parts is None:
+        return brdf, None
+    return parts[0], parts[1]
+
+
+def analytic_json(brdf) -> dict:
+    """``{"model", "alpha_x", "alpha_y", "rho", "mean_slope", "gaf", "fresnel", "diffuse"}``
+    of an analytic fit (a MicrofacetBRDF, or a SumBRDF of one and a Lambertian base)."""
+    lobe, base = _parts(brdf)
+    return {"model": type(lobe.distribution).__name__.lower(), **distribution_params(lobe),
+            "mean_slope": np.asarray(lobe.distribution.mean_slope, float).tolist(), "gaf": lobe.gaf_model,
+            "fresnel": fresnel_json(lobe.fresnel),
+            "diffuse": None if base is None else np.asarray(base.reflectance, float).round(6).tolist()}
+
+
+def analytic_from_json(entry: dict):
+    """The BRDF of an :func:`analytic_json` entry (inverse up to the rounding of tables)."""
+    from .. import fresnel as fr
+    from ..brdf import Lambertian, MicrofacetBRDF
+    from .analytic import MODELS, SumBRDF
+    f = entry["fresnel"]
+    kinds = {"schlick": lambda: fr.Schlick(f["f0"]), "conductor": lambda: fr.Conductor(f["eta"], f["k"]),
+             "tabulated": lambda: fr.Tabulated(f["cos_theta_d"], f["rgb"]), "ideal": fr.Ideal}
+    if entry.get("model") not in MODELS or f.get("type") not in kinds:
+        raise ValueError(f"not an analytic fit entry: model {entry.get('model')!r}, fresnel {f.get('type')!r}")
+    dist = MODELS[entry["model"]](alpha_x=entry["alpha_x"], alpha_y=entry["alpha_y"], rho=entry["rho"],
+                                  mean_slope=entry.get("mean_slope", (0.0, 0.0)))
+    lobe = MicrofacetBRDF(dist, fresnel=kinds[f["type"]](), gaf=entry.get("gaf", "smith"))
+    return lobe if entry.get("diffuse") is None else SumBRDF(lobe, Lambertian(entry["diffuse"]))
+
+
+def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffuse: bool):
     from .fitted import fit
-    return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf)
+    extra = {"diffuse": True} if tabulated_diffuse else {}     # forwarded once mf.fit.fit has it
+    return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf, **extra)
+
+
+def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str) -> dict:
+    """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann``, ...)."""
+    from .analytic import fit_analytic
+    bases = {"auto": (False, True), "on": (True,), "off": (False,)}[diffuse]
+    return {f"{model}{'_diffuse' if d else ''}": fit_analytic(brdf, model, diffuse=d, anisotropic=anisotropic,
+                                                             fresnel=fresnel, start=fit)
+            for model in ("ggx", "beckmann") for d in bases}
 
 
 def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotropic: bool = False,
-                 gaf: str = "smith", title: str = "") -> dict:
+                 gaf: str = "smith", title: str = "", method: str = "least_squares", diffuse: str = "auto",
+                 fresnel: str = "table", tabulated_diffuse: bool = False, picture: bool = True) -> dict:
     """Fit ``brdf`` and write ``out_npz`` with its ``.json`` and ``.png`` beside it
     (its folder is created if needed).
 
-    Returns the JSON summary (module docstring). ``seconds`` is the time of the fit
-    alone (not of the error evaluation, picture or files).
+    ``method`` (:data:`METHODS`) chooses the ``"ggx"``/``"beckmann"`` fits of the JSON
+    and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
+    least-squares fits (:func:`microfacet.fit.fit_analytic`); ``tabulated_diffuse`` is
+    forwarded to :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
+    summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
+    the least-squares fits (not of the errors, picture or files).
     """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if diffuse not in DIFFUSE:
+        raise ValueError(f"diffuse must be one of {DIFFUSE}, got {diffuse!r}")
     out_npz = Path(out_npz)
     if out_npz.is_dir():
         raise MicrofacetError(f"{out_npz}: is a folder")
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
     t0 = time.perf_counter()
-    fit = _run_fit(brdf, resolution, anisotropic, gaf)
-    seconds = time.perf_counter() - t0
-    ggx, beckmann = fit.to_ggx(), fit.to_beckmann()
-    fits = {"tabulated": fit, "ggx": ggx, "beckmann": beckmann}
-    errors = fit_error(brdf, fits)
+    fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse)
+    t1 = time.perf_counter()
+    moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
+    least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel) if method == "least_squares" else {}
+    t2 = time.perf_counter()
+    named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
+             **{f"{k}_least_squares": b for k, b in least.items()}}
+    grid, uniform = fit_error(brdf, named), uniform_error(brdf, named)
+    chosen = moments if method == "moments" else {
+        family: min((b for k, b in least.items() if k.startswith(family)),
+                    key=lambda b: grid[_name(least, b)] ** 2 + uniform[_name(least, b)] ** 2)
+        for family in ("ggx", "beckmann")}
+    albedo = {k: albedo_ratios(brdf, b) for k, b in named.items()}
+    fits = {"tabulated": fit, **chosen}
+    names = {"tabulated": "tabulated", **{k: _key(named, b) for k, b in chosen.items()}}
+    errors = {k: grid[names[k]] for k in fits}
+    errors.update({k: grid[k] for k in named})
     summary = {
-        "beckmann": distribution_params(beckmann),
-        "ggx": distribution_params(ggx),
+        **{k: analytic_json(b) for k, b in chosen.items()},
+        "method": method, "selected": {k: names[k] for k in chosen},
+        "moments": {k: analytic_json(b) for k, b in moments.items()},
+        "least_squares": {k: analytic_json(b) for k, b in least.items()},
         "fresnel": fresnel_json(_fit_fresnel(fit)),
-        "seconds": round(seconds, 4),
-        "errors": {"tabulated": errors["tabulated"], "ggx": errors["ggx"], "beckmann": errors["beckmann"],
-                   "n_pairs": errors["n_pairs"], "metric": describe_fit_error()},
+        "seconds": round(t1 - t0, 4), "seconds_least_squares": round(t2 - t1, 4),
+        "errors": {**errors, "n_pairs": grid["n_pairs"], "metric": describe_fit_error(),
+                   "uniform": {**{k: uniform[names[k]] for k in fits}, **{k: uniform[k] for k in named},
+                               "n_pairs": uniform["n_pairs"], "metric": describe_uniform_error()},
+                   "albedo_ratio": {**{k: albedo[names[k]].round(4).tolist() for k in fits},
+                                    **{k: v.round(4).tolist() for k, v in albedo.items()},
+                                    "views_deg": list(ALBEDO_VIEWS_DEG), "metric": describe_albedo()},
+                   "white_furnace": {k: round(white_furnace(b), 4) for k, b in named.items()}},
         "resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf,
+        "diffuse": diffuse, "fresnel_model": fresnel, "tabulated_diffuse": bool(tabulated_diffuse),
     }
     fit.save(out_npz)                               # atomic (FittedBRDF.save)
     write_text(out_npz.with_suffix(".json"), json.dumps(summary, indent=2) + "\n")
-    from ..render import save_fit_comparison
-    save_fit_comparison(out_npz.with_suffix(".png"),
-                        {"data": brdf, "tabulated fit": fit, "GGX": ggx, "Beckmann": beckmann},
-                        title=title or material_name(out_npz), planes_deg=(0, 90) if anisotropic else (0,))
+    if picture:
+        from ..render import save_fit_comparison
+        labels = {"tabulated": "tabulated fit", "ggx": f"GGX ({_label(names['ggx'])})",
+                  "beckmann": f"Beckmann ({_label(names['beckmann'])})"}
+        notes = {labels[k]: _note(grid[names[k]], uniform[names[k]], albedo[names[k]]) for k in fits}
+        save_fit_comparison(out_npz.with_suffix(".png"), {"data": brdf, **{labels[k]: b for k, b in fits.items()}},
+                            title=title or material_name(out_npz), planes_deg=(0, 90) if anisotropic else (0,),
+                            notes=notes)
     return summary
+
+
+def _name(fits: dict, brdf) -> str:
+    """The name of ``brdf`` among ``fits`` as :func:`fit_material` names the least-squares ones."""
+    return next(f"{k}_least_squares" for k, b in fits.items() if b is brdf)
+
+
+def _key(named: dict, brdf) -> str:
+    return next(k for k, b in named.items() if b is brdf)
+
+
+def _label(name: str) -> str:
+    """Short picture label of a fit name: ``ggx_diffuse_least_squares`` -> ``least squares + diffuse``."""
+    method = "moments" if name.endswith("_moments") else "least squares"
+    return method + (" + diffuse" if "_diffuse" in name else "")
+
+
+def _note(grid: float, uniform: float, albedo: np.ndarray) -> str:
+    """Two lines of errors under a sphere of the picture."""
+    return (f"grid {grid:.3f} · uniform {uniform:.3f}\n"
+            f"albedo ratio {np.nanmin(albedo):.2f}–{np.nanmax(albedo):.2f}")
+
+
+def _worst(ratios) -> float:
+    """The albedo ratio farthest from 1 (views x RGB)."""
+    r = np.asarray(ratios, dtype=np.float64).ravel()
+    r = r[np.isfinite(r)]
+    return float(r[np.argmax(np.abs(r - 1.0))]) if len(r) else float("nan")
 
 
 def summary_row(name: str, path, fmt: str, summary: dict | None, status: str = "ok") -> dict:
@@ -130,12 +254,19 @@ def summary_row(name: str, path, fmt: str, summary: dict | None, status: str = "
     row = dict.fromkeys(SUMMARY_COLUMNS, "")
     row.update(material=name, file=Path(path).name, format=fmt, status=status)
     if summary is not None:
-        row["seconds"] = summary["seconds"]
-        for kind in ("tabulated", "ggx", "beckmann"):
-            row[f"error_{kind}"] = summary["errors"][kind]
+        errors = summary["errors"]
+        row["seconds"] = round(summary["seconds"] + summary.get("seconds_least_squares", 0.0), 4)
+        row["method"] = summary["method"]
+        for kind in _KINDS:
+            row[f"error_{kind}"] = errors[kind]
+            row[f"uniform_{kind}"] = errors["uniform"][kind]
+            row[f"albedo_{kind}"] = _worst(errors["albedo_ratio"][kind])
+        row["error_ggx_moments"] = errors["ggx_moments"]
         for kind in ("ggx", "beckmann"):
-            for key, value in summary[kind].items():
-                row[f"{kind}_{key}"] = value
+            for key in ("alpha_x", "alpha_y", "rho"):
+                row[f"{kind}_{key}"] = summary[kind][key]
+            d = summary[kind]["diffuse"]
+            row[f"{kind}_diffuse"] = "" if d is None else " ".join(f"{v:.3f}" for v in d)
     return row
 
 
@@ -155,31 +286,39 @@ def _cell(value, digits: int = 4) -> str:
 
 
 def format_summary_markdown(rows: Sequence[dict]) -> str:
-    """The rows as a Markdown table, plus a note on the error metric."""
-    head = ("material", "format", "fit s", "err tab", "err GGX", "err Beck",
-            "GGX αx", "GGX αy", "GGX ρ", "Beck αx", "Beck αy", "Beck ρ", "status")
-    keys = ("material", "format", "seconds", "error_tabulated", "error_ggx", "error_beckmann",
-            "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "beckmann_alpha_x", "beckmann_alpha_y",
-            "beckmann_rho", "status")
+    """The rows as a Markdown table, plus notes on the metrics."""
+    head = ("material", "format", "fit s", "method", "err tab", "err GGX", "err Beck", "err GGX mom",
+            "unif tab", "unif GGX", "unif Beck", "albedo tab", "albedo GGX", "albedo Beck",
+            "GGX αx", "GGX αy", "GGX ρ", "GGX kd", "Beck αx", "Beck αy", "Beck ρ", "Beck kd", "status")
+    keys = ("material", "format", "seconds", "method", "error_tabulated", "error_ggx", "error_beckmann",
+            "error_ggx_moments", "uniform_tabulated", "uniform_ggx", "uniform_beckmann",
+            "albedo_tabulated", "albedo_ggx", "albedo_beckmann",
+            "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "ggx_diffuse",
+            "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse", "status")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(_cell(r[k], 3 if k == "seconds" else 4) if not k.endswith("_rho") or r[k] == ""
                                 else f"{r[k]:+.4f}" for k in keys) + " |" for r in rows]
-    return "\n".join(lines) + f"\n\nErrors: {describe_fit_error()}.\n"
+    return "\n".join(lines) + (f"\n\nerr: {describe_fit_error()}.\nunif: {describe_uniform_error()}."
+                               f"\nalbedo: the ratio farthest from 1 of the {describe_albedo()}."
+                               "\nkd: diffuse (Lambertian) reflectance of the fit, RGB.\n")
 
 
 def fit_folder(folder: str | os.PathLike, out_dir: str | os.PathLike, resolution: int = 90,
                anisotropic: bool = False, gaf: str = "smith",
-               progress: Callable[[Sequence[Path]], object] | None = None) -> list[dict]:
-    """Fit every material file of ``folder`` into ``out_dir`` and write the summaries.
+               progress: Callable[[Sequence[Path]], object] | None = None, recursive: bool = False,
+               **options) -> list[dict]:
+    """Fit every material file of ``folder`` (with ``recursive``, of its subfolders too)
+    into ``out_dir`` and write the summaries; ``options`` go to :func:`fit_material`.
 
-    A file that cannot be read or fitted is reported by a warning and a summary row with
-    its error as status; the others are still fitted. ``progress`` wraps the list of
-    files (e.g. ``tqdm``). Returns the summary rows; raises :class:`MicrofacetError` when
-    the folder holds no file.
+    Outputs mirror the input tree: ``folder/a/nickel.binary`` gives ``out_dir/a/nickel.npz``
+    (``.json``, ``.png``) and the row ``a/nickel``. A file that cannot be read or fitted is
+    reported by a warning and a summary row with its error as status; the others are
+    still fitted. ``progress`` wraps the list of files (e.g. ``tqdm``). Returns the
+    summary rows; raises :class:`MicrofacetError` when the folder holds no file.
     """
     from ..measured import load
     folder, out = Path(folder), Path(out_dir)
-    files = material_files(folder)
+    files = material_files(folder, recursive)
     if not files:
         raise MicrofacetError(f"{folder}: no files to fit")
     if out.exists() and not out.is_dir():
@@ -187,17 +326,19 @@ def fit_folder(folder: str | os.PathLike, out_dir: str | os.PathLike, resolution
     out.mkdir(parents=True, exist_ok=True)
     rows, used = [], set()
     for path in (progress(files) if progress else files):
-        name = material_name(path)
-        name = path.name if name in used else name          # nickel.binary and nickel.binary.gz
+        parent = path.parent.relative_to(folder)
+        name = (parent / material_name(path)).as_posix()
+        name = (parent / path.name).as_posix() if name in used else name   # nickel.binary and .binary.gz
         used.add(name)
         try:
             brdf = load(path)
-            summary = fit_material(brdf, out / f"{name}.npz", resolution, anisotropic, gaf, title=name)
+            summary = fit_material(brdf, out / f"{name}.npz", resolution, anisotropic, gaf, title=name, **options)
             rows.append(summary_row(name, path, getattr(brdf, "format", ""), summary))
         except (MicrofacetError, ValueError, OSError) as e:
             reason = " ".join(str(e).split()) or type(e).__name__
             reason = reason.removeprefix(f"{path}: ")        # the file is named already
-            warnings.warn(f"{path.name}: not fitted: {reason}", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"{path.relative_to(folder).as_posix()}: not fitted: {reason}", RuntimeWarning,
+                          stacklevel=2)
             rows.append(summary_row(name, path, "", None, status=f"error: {reason}"))
     write_text(out / "summary.csv", format_summary_csv(rows))
     write_text(out / "summary.md", format_summary_markdown(rows))

@@ -8,7 +8,8 @@ One PNG, Matplotlib's object API on the Agg canvas (no pyplot state, no display)
   few view angles ``theta_o`` (the view at ``-theta_o``, as in :mod:`.lobes`), log scale
   so that peaks and the diffuse floor both show;
 * bottom: the BRDFs on small orthographic spheres under one directional light (the same
-  exposure for all, set by the first BRDF's 99.5th-percentile pixel).
+  exposure for all, set by the first BRDF's 99.5th-percentile pixel), each with an
+  optional note below it (e.g. its fit errors).
 
 Colour BRDFs are plotted as luminance (Rec. 709 weights). The first BRDF is the
 reference (black); the grazing region ``cos theta < 0.1`` that fit errors exclude
@@ -115,7 +116,7 @@ def _plot_slices(ax, brdfs: Mapping, views_deg: Sequence[float]) -> None:
 
 def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = "",
                         views_deg: Sequence[float] = (0, 30, 60), planes_deg: Sequence[float] = (0,),
-                        size: int = 96, dpi: int = 100) -> Path:
+                        size: int = 96, dpi: int = 100, notes: Mapping[str, str] | None = None) -> Path:
     """Write the comparison picture (module docstring) of ``brdfs`` as a PNG, atomically.
 
     Parameters
@@ -133,11 +134,18 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
         Azimuths of the backscattering curves (e.g. ``(0, 90)`` for anisotropic data).
     size : int
         Side of each sphere image, pixels.
+    notes : mapping of str -> str, optional
+        Text under the sphere of a label (e.g. fit errors); labels not in ``brdfs`` are
+        an error.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     if not brdfs:
         raise ValueError("save_fit_comparison needs at least one BRDF")
+    notes = dict(notes or {})
+    unknown = sorted(set(notes) - set(brdfs))
+    if unknown:
+        raise ValueError(f"save_fit_comparison: notes for labels not in brdfs: {unknown}")
     n = len(brdfs)
     images = [render_sphere(b, size) for b in brdfs.values()]
     lum = images[0] @ LUMINANCE
@@ -145,7 +153,7 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
     scale = 1.0 / top if np.isfinite(top) and top > 0 else 1.0
     exposure = float(np.log2(scale))
 
-    fig = Figure(figsize=(max(8.0, 1.9 * n), 6.2))
+    fig = Figure(figsize=(max(8.0, 1.9 * n), 6.2 + (0.35 if notes else 0.0)))
     FigureCanvasAgg(fig)
     grid = fig.add_gridspec(2, n, height_ratios=(1.35, 1.0))
     half = max(1, n // 2)
@@ -156,12 +164,14 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
         ax.imshow(to_srgb8(image, exposure), interpolation="nearest")
         ax.set_axis_off()
         ax.set_title(label, fontsize=8, color=_COLOURS[k % len(_COLOURS)])
+        if label in notes:
+            ax.text(0.5, -0.04, notes[label], transform=ax.transAxes, ha="center", va="top", fontsize=6.5)
     fig.text(0.5, 0.015, f"spheres: directional light, common exposure {exposure:+.2f} stops; "
                          f"grey: grazing (cos θ < {GRAZING_COS:g}), excluded from fit errors",
              ha="center", fontsize=7)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.9 if title else 0.95, bottom=0.06,
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.9 if title else 0.95, bottom=0.1 if notes else 0.06,
                         wspace=0.35, hspace=0.3)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})

@@ -1,0 +1,90 @@
+"""mf.fit.fit_analytic (least-squares analytic fits) and SumBRDF (mixture sampling)."""
+import numpy as np
+import pytest
+
+import microfacet as mf
+from microfacet.fit.analytic import SumBRDF, fit_analytic
+from microfacet.metrics import directional_albedo, fit_error
+
+GOLD = mf.fresnel.Conductor.metal("Au")
+FAST = dict(n=14, n_uniform=2**10)
+
+
+def lobe(brdf):
+    return brdf.brdfs[0] if isinstance(brdf, SumBRDF) else brdf
+
+
+@pytest.mark.parametrize("family, model", [(mf.GGX, "ggx"), (mf.Beckmann, "beckmann")])
+@pytest.mark.parametrize("alpha", [0.05, 0.3, 0.8])
+def test_same_family_round_trip_recovers_alpha(family, model, alpha):
+    truth = mf.MicrofacetBRDF(family(alpha=alpha), fresnel=mf.fresnel.Schlick((0.9, 0.6, 0.3)))
+    start = mf.MicrofacetBRDF(family(alpha=0.5 * alpha))                 # a wrong start
+    f = fit_analytic(truth, model, fresnel="schlick", start=start, **FAST)
+    assert float(f.distribution.alpha_x) == pytest.approx(alpha, rel=1e-3)
+    np.testing.assert_allclose(f.fresnel.f0, (0.9, 0.6, 0.3), atol=2e-3)
+    assert fit_error(truth, f, n=12)["fit"] < 1e-3
+
+
+def test_anisotropic_round_trip_with_correlation():
+    truth = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.15, alpha_y=0.3, rho=0.25), fresnel=GOLD)
+    f = fit_analytic(truth, "ggx", anisotropic=True, fresnel="conductor", start=truth, **FAST)
+    d = f.distribution
+    assert (float(d.alpha_x), float(d.alpha_y), float(d.rho)) == pytest.approx((0.15, 0.3, 0.25), rel=1e-2)
+    np.testing.assert_allclose(f.fresnel(np.linspace(0, 1, 11)), GOLD(np.linspace(0, 1, 11)), atol=5e-3)
+
+
+def test_diffuse_base_is_recovered_and_returned_as_a_sum():
+    kd = np.array([0.5, 0.3, 0.2])
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=mf.fresnel.Schlick(0.04)), mf.Lambertian(kd))
+    f = fit_analytic(truth, "ggx", diffuse=True, fresnel="schlick", start=lobe(truth), **FAST)
+    assert isinstance(f, SumBRDF) and isinstance(f.brdfs[1], mf.Lambertian)
+    np.testing.assert_allclose(f.brdfs[1].reflectance, kd, rtol=1e-2)
+    assert float(lobe(f).distribution.alpha_x) == pytest.approx(0.2, rel=1e-2)
+    without = fit_analytic(truth, "ggx", diffuse=False, fresnel="schlick", start=lobe(truth), **FAST)
+    assert isinstance(without, mf.MicrofacetBRDF)
+    assert fit_error(truth, f, n=12)["fit"] < 0.1 * fit_error(truth, without, n=12)["fit"]
+
+
+@pytest.mark.parametrize("fresnel", ["schlick", "table", "conductor"])
+def test_fresnel_stays_in_unit_interval_on_too_bright_data(fresnel):
+    class Bright(mf.BRDF):                     # 3x a white mirror lobe: F would have to be 3
+        inner = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+
+        def eval_cos(self, wi, wo):
+            return 3.0 * self.inner.eval_cos(wi, wo)
+    f = fit_analytic(Bright(), "ggx", fresnel=fresnel, start=Bright.inner, **FAST)
+    values = f.fresnel(np.linspace(0.0, 1.0, 101))
+    assert np.all(values >= 0.0) and np.all(values <= 1.0 + 1e-12) and np.all(np.isfinite(values))
+
+
+def test_cross_family_least_squares_beats_the_moment_conversion():
+    """The demo's Beckmann copper fitted as GGX: half the error of the moment conversion."""
+    truth = mf.MicrofacetBRDF(mf.Beckmann(alpha=0.35), fresnel=mf.fresnel.Conductor.metal("Cu"))
+    tab = mf.fit.fit(truth, resolution=32)
+    e = fit_error(truth, {"moments": tab.to_ggx(), "ls": fit_analytic(truth, "ggx", start=tab, **FAST)}, n=16)
+    assert e["ls"] < 0.5 * e["moments"]
+
+
+def test_bad_arguments_raise_clear_errors():
+    truth = mf.MicrofacetBRDF(mf.GGX(alpha=0.2))
+    with pytest.raises(ValueError, match="model must be one of"):
+        fit_analytic(truth, "phong", start=truth)
+    with pytest.raises(ValueError, match="fresnel must be one of"):
+        fit_analytic(truth, "ggx", fresnel="cook", start=truth)
+    with pytest.raises(ValueError, match="start must be"):
+        fit_analytic(truth, "ggx", start=mf.Lambertian(0.5), **FAST)
+
+
+def test_sum_brdf_sampling_is_unbiased_and_consistent():
+    s = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.15), fresnel=GOLD), mf.Lambertian((0.2, 0.4, 0.6)),
+                weights=(0.7, 0.3))
+    wo = np.array([np.sin(0.6), 0.0, np.cos(0.6)])
+    u = np.random.default_rng(4).random((200_000, 2))
+    wi, weight, pdf = s.sample(u, wo)
+    ok = pdf > 0
+    np.testing.assert_allclose(pdf[ok], s.pdf(wi[ok], wo), rtol=1e-9)
+    np.testing.assert_allclose(weight[ok], s.eval_cos(wi[ok], wo) / pdf[ok, None], rtol=1e-9)
+    mc = weight.mean(axis=0)
+    np.testing.assert_allclose(mc, directional_albedo(s, (np.degrees(0.6),))[0], rtol=1e-2)
+    with pytest.raises(ValueError, match="weights"):
+        SumBRDF(mf.Lambertian(0.5), weights=(-1.0,))
