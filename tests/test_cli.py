@@ -48,7 +48,7 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
         with Image.open(demo_dir / src) as im:
             assert im.format == "PNG"
     for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05",
-                "Fitting by power iterations", "GGX α = 0.2, gold", "LEADR", "Glints"):
+                "Fitting: power iterations", "GGX α = 0.2, gold", "LEADR", "Glints"):
         assert key in html
     exrs = sorted(p for p in demo_dir.rglob("*.exr") if p.parent.name not in ("leadr", "glints"))
     assert len(exrs) == 1 + 2 * n_panels

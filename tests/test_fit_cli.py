@@ -64,7 +64,7 @@ def test_fit_writes_npz_json_png(single):
     assert summary["method"] == "least_squares" and summary["selected"]["ggx"].startswith("ggx")
     assert set(summary["least_squares"]) == {"ggx", "ggx_diffuse", "beckmann", "beckmann_diffuse"}
     assert summary["ggx"]["alpha_x"] == pytest.approx(ALPHA, rel=1e-3)     # least squares: exact family
-    assert summary["errors"]["ggx"] < 0.2 * summary["errors"]["ggx_moments"]
+    assert summary["errors"]["ggx"] <= summary["errors"]["ggx_moments"] and summary["errors"]["ggx"] < 0.01
     for kind in ("tabulated", "ggx", "beckmann"):
         assert 0 <= summary["errors"]["uniform"][kind] < 1.0
         ratios = np.array(summary["errors"]["albedo_ratio"][kind])
@@ -135,7 +135,7 @@ def test_fit_recursive_folder_mirrors_the_tree_and_reports_all_metrics(inputs, t
     assert [r["material"] for r in rows] == ["metals/gold/deep", "top"]
     for r in rows:
         assert r["method"] == "least_squares" and r["ggx_diffuse"] == ""
-        assert float(r["error_ggx"]) < 0.5 * float(r["error_ggx_moments"])
+        assert float(r["error_ggx"]) <= float(r["error_ggx_moments"])
         assert 0 < float(r["uniform_ggx"]) < 0.1 and abs(float(r["albedo_ggx"]) - 1) < 0.1
     summary = json.loads((out / "metals" / "gold" / "deep.json").read_text())
     assert set(summary["least_squares"]) == {"ggx", "beckmann"}
