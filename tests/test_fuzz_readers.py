@@ -239,6 +239,16 @@ def test_fuzz_png_height_map(folder):
     assert tried >= EXAMPLES
 
 
+def test_png16_with_a_short_ihdr_chunk_is_a_clear_error(folder):
+    """Found by fuzzing: a 16-bit colour PNG whose IHDR length field is not 13 raised struct.error."""
+    data = bytearray(_png_bytes(folder, np.zeros((2, 2, 3), np.uint16)))
+    data[8:12] = struct.pack(">I", 12)
+    path = folder / "short_ihdr.png"
+    path.write_bytes(bytes(data))
+    with pytest.raises(MicrofacetError, match="short_ihdr.png: corrupt PNG .IHDR chunk of 12 bytes"):
+        leadr_files.load_height_map(path)
+
+
 # ------------------------------------------------------------------ .npz and pyramids
 def _npz_bytes(folder: Path, arrays: dict, compressed=False) -> bytes:
     path = folder / "seed.npz"
