@@ -43,7 +43,7 @@ def test_chi2_slope_sampling(D, gaf, surface):
 
 
 def test_chi2_lambertian():
-    p, stat, dof, total = chi2_test(mf.Lambertian(0.5), np.array([0.3, 0.0, 0.954]), n=200_000)
+    p, stat, dof, total = chi2_test(mf.Lambertian(0.5), mf.geometry.normalize([0.3, 0.0, 0.954]), n=200_000)
     assert p > P_MIN and abs(total - 1) < 1e-6
 
 

@@ -35,7 +35,7 @@ def test_kernel_matches_numpy(D, kw, shadowing):
 
 def test_kernel_shapes_and_fallbacks():
     d = mf.GGX(alpha=0.3)
-    wi = np.broadcast_to([0.3, 0.1, 0.95], (4, 5, 3))
+    wi = np.broadcast_to(mf.geometry.normalize([0.3, 0.1, 0.95]), (4, 5, 3))
     wo = np.array([0.0, 0.0, 1.0])
     oh, s = kernels.smith_projected(d, True, wi, wo, False)
     assert oh.shape == s.shape == (4, 5)

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -297,6 +299,12 @@ def test_utia_decoding_and_errors(tmp_path):
     path.write_bytes(raw.astype("<f8").tobytes()[:-8])
     with pytest.raises(mf.MicrofacetError, match="unknown measured-BRDF format"):
         mf.measured.load(path)
+    raw[0, 1, 2, 3, 4] = 1e200                    # finite but decodes to inf (found by fuzzing)
+    path.write_bytes(raw.astype("<f8").tobytes())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(mf.MicrofacetError, match=r"decode\.bin.*decoded to RGB holds 1 NaN or infinite"):
+            mf.measured.load(path)
 
 
 # ============================================================================= RGL
@@ -430,6 +438,10 @@ def test_tensor_file_round_trip_and_errors(tmp_path):
     cases["nan.bsdf"] = (write_tensor_file(nan), "'ndf' holds 1 NaN")
     cases["dtype.bsdf"] = (write_tensor_file(dict(fields, sigma=fields["sigma"].astype(np.float64))), "'sigma' is float64")
     cases["shape.bsdf"] = (write_tensor_file(dict(fields, rgb=fields["rgb"][:, :2])), "tables disagree")
+    tiny = write_tensor_file({"a": np.zeros((1, 1), np.float32)})       # its shape is at bytes 32..48
+    for dims, what in (((0, 2**62), "impossible shape"), ((2**40, 2**40), "impossible shape"),
+                       ((2**33, 2**31), "impossible shape")):              # found by fuzzing: overflow, reshape
+        cases[f"shape{dims[1]}.bsdf"] = (tiny[:32] + struct.pack("<2Q", *dims) + tiny[48:], what)
     for name, (blob, what) in cases.items():
         path = tmp_path / name
         path.write_bytes(blob)

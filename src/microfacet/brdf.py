@@ -2,7 +2,9 @@
 
 Every BRDF-like object answers ``eval``, ``eval_cos``, ``sample`` and ``pdf`` over
 arrays of directions: ``wi`` is the light (emitter) direction, ``wo`` the view
-(receiver) direction, both ``(..., 3)`` in the local frame (z = macro normal).
+(receiver) direction, both unit ``(..., 3)`` in the local frame (z = macro normal).
+Directions that are not unit length (within :data:`UNIT_TOLERANCE`), or hold NaN/inf,
+and uniforms outside ``[0, 1]`` raise ``ValueError``: they are never normalized silently.
 """
 from __future__ import annotations
 
@@ -14,16 +16,46 @@ from .distributions.base import SlopeDistribution
 from .geometry import (cosine_hemisphere_pdf, dot, half_vector, reflect,
                        square_to_cosine_hemisphere)
 
-__all__ = ["BRDF", "MicrofacetBRDF", "Lambertian", "GAFS"]
+__all__ = ["BRDF", "MicrofacetBRDF", "Lambertian", "GAFS", "UNIT_TOLERANCE"]
 
 GAFS = ("smith", "vgroove", "normal_map")
 
 
+#: Largest accepted ``| |w|^2 - 1 |`` of a direction (``|w|`` within about ``1 +- 5e-6``):
+#: unit vectors rounded to float32 pass (their error is ~1e-7); within it ``f_r`` moves by
+#: ~1e-5 relative (1 % too long changes it by 2.2 %), so directions are used as given.
+UNIT_TOLERANCE = 1e-5
+
+
 def _dirs(w, name: str) -> np.ndarray:
+    """``w`` as float64 unit directions ``(..., 3)`` (the convention of every BRDF method).
+
+    Raises ``ValueError`` naming ``name`` if the last axis is not 3, or a vector is not
+    unit length within :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included).
+    The check is one compiled pass (:func:`microfacet.kernels.unit_deviation`)."""
     w = np.asarray(w, dtype=np.float64)
     if w.shape[-1:] != (3,):
         raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
+    if not kernels.unit_deviation(w) <= UNIT_TOLERANCE:
+        n2 = np.sum(w * w, axis=-1)
+        bad = np.argwhere(~(np.abs(n2 - 1.0) <= UNIT_TOLERANCE))[0]
+        where = f" at index {tuple(bad.tolist())}" if w.ndim > 1 else ""
+        raise ValueError(f"{name} must be unit vectors (| |w|^2 - 1 | <= {UNIT_TOLERANCE:g}; "
+                         f"normalize them first), got {w[tuple(bad)].tolist()} of length "
+                         f"{np.sqrt(n2[tuple(bad)]):.9g}{where}")
     return w
+
+
+def _uniforms(u) -> np.ndarray:
+    """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]``; ``ValueError`` otherwise (NaN too)."""
+    u = np.asarray(u, dtype=np.float64)
+    if u.shape[-1:] != (2,):
+        raise ValueError(f"u must have a last axis of size 2, got shape {u.shape}")
+    if u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0):
+        bad = ~((u >= 0.0) & (u <= 1.0))
+        raise ValueError(f"u must lie in [0, 1] (uniform random numbers), got {float(u[bad][0])!r} "
+                         f"({int(bad.sum())} value(s) outside)")
+    return u
 
 
 class BRDF:
@@ -43,7 +75,8 @@ class BRDF:
 
     def sample(self, u, wo):  # pragma: no cover - interface
         """Importance-sample ``f_r cos theta_i``: ``(wi, weight, pdf)`` from uniforms
-        ``u`` in ``[0,1)^2``, with ``weight = eval_cos / pdf`` (``evalp_is``)."""
+        ``u`` in ``[0,1]^2`` (``ValueError`` outside), with ``weight = eval_cos / pdf``
+        (``evalp_is``)."""
         raise NotImplementedError
 
     def pdf(self, wi, wo) -> np.ndarray:  # pragma: no cover - interface
@@ -55,9 +88,12 @@ class Lambertian(BRDF):
     """Ideal diffuse BRDF ``f_r = k_d / pi`` (Eq. 1.9), sampled by the cosine warp."""
 
     def __init__(self, reflectance=1.0):
-        r = np.broadcast_to(np.asarray(reflectance, dtype=np.float64), (3,)).copy()
-        if not np.all(np.isfinite(r)) or np.any(r < 0):
-            raise ValueError(f"reflectance must be finite and >= 0, got {reflectance!r}")
+        try:
+            r = np.broadcast_to(np.asarray(reflectance, dtype=np.float64), (3,)).copy()
+        except (ValueError, TypeError):
+            raise ValueError(f"reflectance must be a number or 3 RGB numbers, got {reflectance!r}") from None
+        if not np.all((r >= 0) & (r <= 1)):      # albedo <= 1: energy conservation
+            raise ValueError(f"reflectance must lie in [0, 1] per channel, got {reflectance!r}")
         self.reflectance = r
 
     def __repr__(self) -> str:
@@ -74,7 +110,7 @@ class Lambertian(BRDF):
 
     def sample(self, u, wo):
         wo = _dirs(wo, "wo")
-        u = np.asarray(u, dtype=np.float64)
+        u = _uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         ok = (wo[..., 2] > 0) & (wi[..., 2] > 0)
@@ -221,7 +257,7 @@ class MicrofacetBRDF(BRDF):
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0."""
         wo = _dirs(wo, "wo")
-        u = np.asarray(u, dtype=np.float64)
+        u = _uniforms(u)
         if self._samples_visible:
             h = self.distribution.sample_visible(u, wo)
         else:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "dot", "normalize", "spherical_to_cartesian", "cartesian_to_spherical",
+    "dot", "normalize", "unit_deviation", "spherical_to_cartesian", "cartesian_to_spherical",
     "slope_to_normal", "normal_to_slope", "half_vector", "reflect",
     "io_to_hd", "hd_to_io", "rot_z", "rot_y", "orthonormal_basis",
     "to_local", "to_world", "square_to_concentric_disk",
@@ -26,6 +26,18 @@ def normalize(v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     n = np.sqrt(dot(v, v))[..., None]
     return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def unit_deviation(w: np.ndarray) -> float:
+    """Largest ``| |w|^2 - 1 |`` over the directions ``w (..., 3)``; ``inf`` if any
+    component is NaN or infinite, 0 for an empty array. (NumPy reference of
+    :func:`microfacet.kernels.unit_deviation`.)"""
+    w = np.asarray(w, dtype=np.float64)
+    if w.size == 0:
+        return 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        e = np.max(np.abs(w[..., 0] ** 2 + w[..., 1] ** 2 + w[..., 2] ** 2 - 1.0))
+    return float(e) if np.isfinite(e) else np.inf
 
 
 def spherical_to_cartesian(theta, phi) -> np.ndarray:

@@ -20,7 +20,7 @@ try:
 except ImportError:  # pragma: no cover - exercised only without numba
     numba = None
 
-__all__ = ["AVAILABLE", "smith_projected"]
+__all__ = ["AVAILABLE", "smith_projected", "unit_deviation"]
 
 AVAILABLE = numba is not None
 BECKMANN, GGX = 0, 1
@@ -39,6 +39,17 @@ if AVAILABLE:
             return 0.0
         v = c / math.sqrt(r2)
         return max(0.5 * (math.exp(-v * v) / (v * _SQRT_PI) - math.erfc(v)), 0.0)
+
+    @_jit
+    def _unit_deviation(w):
+        """``max | |w|^2 - 1 |`` over the rows of ``w (n, 3)``; ``inf`` at the first NaN/inf."""
+        m = 0.0
+        for j in range(w.shape[0]):
+            e = abs(w[j, 0] * w[j, 0] + w[j, 1] * w[j, 1] + w[j, 2] * w[j, 2] - 1.0)
+            if not e < math.inf:                  # NaN or inf
+                return math.inf
+            m = max(m, e)
+        return m
 
     @numba.njit(cache=True, parallel=True, nogil=True)
     def _smith_projected(wi, wo, kind, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
@@ -99,3 +110,13 @@ def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
     _smith_projected(wi2, wo2, kind, float(d.alpha_x), float(d.alpha_y), float(d.rho), float(d.xn),
                      float(d.yn), bool(shadowing), bool(divide_cos_i), oh, s)
     return oh.reshape(shape), s.reshape(shape)
+
+
+def unit_deviation(w: np.ndarray) -> float:
+    """:func:`microfacet.geometry.unit_deviation` (``max | |w|^2 - 1 |``, ``inf`` on NaN/inf)
+    in one compiled pass over a C-contiguous float64 ``w (..., 3)``; the NumPy reference
+    for other arrays or without Numba."""
+    from .geometry import unit_deviation as reference
+    if not AVAILABLE or w.dtype != np.float64 or not w.flags.c_contiguous or w.size == 0:
+        return reference(w)
+    return float(_unit_deviation(w.reshape(-1, 3)))

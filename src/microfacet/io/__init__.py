@@ -7,8 +7,9 @@ Readers raise :class:`microfacet.MicrofacetError` naming the file and what is wr
 from .atomic import atomic_path, write_bytes, write_text
 from .exr import read_exr, write_exr
 from .html import html_figure, html_page, html_grid
+from .npz import load_npz
 from .png import srgb_encode, to_srgb8, tonemap, write_png
 
-__all__ = ["atomic_path", "write_bytes", "write_text", "read_exr", "write_exr",
+__all__ = ["atomic_path", "write_bytes", "write_text", "read_exr", "write_exr", "load_npz",
            "srgb_encode", "to_srgb8", "tonemap", "write_png",
            "html_figure", "html_page", "html_grid"]

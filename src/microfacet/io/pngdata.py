@@ -68,6 +68,8 @@ def _read_png16_colour(path: Path, data: bytes) -> np.ndarray:
     header, idat = None, []
     for kind, body in _chunks(data, path):
         if kind == b"IHDR":
+            if len(body) != 13:
+                raise MicrofacetError(f"{path}: corrupt PNG (IHDR chunk of {len(body)} bytes, expected 13)")
             header = struct.unpack(">IIBBBBB", body)
         elif kind == b"IDAT":
             idat.append(body)

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..brdf import BRDF
+from ..brdf import BRDF, _uniforms
+from ..brdf import _dirs as as_dirs   # the one direction check of every BRDF
 from ..errors import MicrofacetError
 from ..geometry import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 
@@ -37,14 +38,6 @@ def check_finite(path, values: np.ndarray, what: str) -> None:
     bad = ~np.isfinite(values)
     if bad.any():
         raise file_error(path, f"{what} holds {int(bad.sum())} NaN or infinite value(s)")
-
-
-def as_dirs(w, name: str) -> np.ndarray:
-    """``w`` as float64 directions with a last axis of size 3 (``ValueError`` otherwise)."""
-    w = np.asarray(w, dtype=np.float64)
-    if w.shape[-1:] != (3,):
-        raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
-    return w
 
 
 class MeasuredBRDF(BRDF):
@@ -83,7 +76,7 @@ class MeasuredBRDF(BRDF):
         """Cosine-weighted light directions: ``(wi, eval_cos / pdf, pdf)``; weight and pdf
         are 0 where ``wo`` or ``wi`` is below the horizon."""
         wo = as_dirs(wo, "wo")
-        u = np.asarray(u, dtype=np.float64)
+        u = _uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         wo = np.broadcast_to(wo, shape + (3,))

@@ -8,6 +8,7 @@ stored row-major at its offset.
 """
 from __future__ import annotations
 
+import math
 import struct
 
 import numpy as np
@@ -47,7 +48,10 @@ def read_tensor_file(data: bytes, path) -> dict[str, np.ndarray]:
             if code not in DTYPES:
                 raise file_error(path, f"tensor_file field {name!r} has unknown dtype code {code}")
             dtype = np.dtype(DTYPES[code])
-            count = int(np.prod(shape, dtype=np.int64))
+            count = math.prod(shape)                      # exact: declared sizes may be huge
+            if max(shape, default=0) > len(data):         # also with another dimension 0
+                raise file_error(path, f"tensor_file field {name!r} declares an impossible shape {shape} "
+                                       f"for a file of {len(data)} bytes")
             if offset + count * dtype.itemsize > len(data):
                 raise file_error(path, f"tensor_file truncated: field {name!r} {shape} needs bytes "
                                        f"up to {offset + count * dtype.itemsize}, file has {len(data)}")

@@ -43,7 +43,10 @@ def read_utia(data: bytes, path) -> np.ndarray:
                                f"(float64 {SHAPE})")
     raw = np.frombuffer(data, dtype="<f8").reshape(SHAPE)
     check_finite(path, raw, "UTIA data")
-    return np.moveaxis(100.0 * srgb_decode(np.maximum(raw, 0.0) / 140.0), 0, -1)
+    with np.errstate(over="ignore"):
+        rgb = 100.0 * srgb_decode(np.maximum(raw, 0.0) / 140.0)
+    check_finite(path, rgb, f"UTIA data (raw values up to {raw.max():.3g}) decoded to RGB")
+    return np.moveaxis(rgb, 0, -1)
 
 
 def _theta_axis(theta):
