@@ -38,21 +38,23 @@ def _steps(n: int) -> int:
 
 
 class Table:
-    """A float32 table read by :meth:`gather` (``dr.gather`` of the variant's ``Float``, or
-    NumPy indexing in the scalar variants, whose ``Float`` is a Python float)."""
+    """A float32 (or ``dtype="float64"|"uint32"``) table read by indexing: ``dr.gather`` of
+    the variant's ``Float`` / ``Float64`` / ``UInt32``, or NumPy indexing in the scalar variants (whose
+    ``Float`` is a Python float)."""
 
-    def __init__(self, values):
-        a = np.ascontiguousarray(np.asarray(values, dtype=np.float64).ravel(), dtype=np.float32)
+    def __init__(self, values, dtype: str = "float32"):
+        a = np.ascontiguousarray(np.asarray(values).ravel(), dtype=dtype)
         self.size = a.size
         self.scalar = not dr.is_array_v(mi.Float)
-        self.data = a if self.scalar else mi.Float(a)
+        self.type = {"float32": mi.Float, "float64": mi.Float64, "uint32": mi.UInt32}[dtype]
+        self.data = a if self.scalar else self.type(a)
 
     def __getitem__(self, index):
         """Value at ``index`` (clamped into the table)."""
-        index = dr.clip(index, 0, self.size - 1)
         if self.scalar:
-            return float(self.data[int(index)])
-        return dr.gather(mi.Float, self.data, mi.UInt32(index))
+            return self.type(self.data[min(max(int(index), 0), self.size - 1)])
+        index = dr.clip(mi.Int32(index), 0, self.size - 1)
+        return dr.gather(self.type, self.data, mi.UInt32(index))
 
 
 def index_of(x, n: int):
