@@ -49,7 +49,7 @@ def load_fit_parameter(props, name: str, plugin: str):
     try:
         return load_fit(path)
     except MicrofacetError as e:
-        raise _bsdf._error(name, f"{e}", plugin) from None
+        raise _bsdf._error(name, f"is not usable: {e}", plugin) from None
 
 
 _CLASSES: dict[str, type] = {}

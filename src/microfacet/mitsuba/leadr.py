@@ -54,7 +54,7 @@ def _read(props, name: str):
     try:
         return read_pyramid(path)
     except MicrofacetError as e:
-        raise _bsdf._error(name, f"{e}", PLUGIN) from None
+        raise _bsdf._error(name, f"is not usable: {e}", PLUGIN) from None
 
 
 class Pyramid:

@@ -69,9 +69,9 @@ def bisect_le(f, target, lo, hi, steps: int):
     for _ in range(steps):
         go = hi - lo > 1
         mid = (lo + hi) >> 1
-        le = f(mid) <= target
-        lo = dr.select(go & le, mid, lo)
-        hi = dr.select(go & ~le, mid, hi)
+        value = f(mid)
+        lo = dr.select(go & (value <= target), mid, lo)
+        hi = dr.select(go & (value > target), mid, hi)
     return lo
 
 
@@ -120,7 +120,7 @@ def sample_interval(v, ta, tb, las, lbs):
             p = p + dr.exp(la + w * (lb - la))
         p = p * 0.5 * dr.sin(2.0 * x)
         xn = x - ratio(f, p, p > 0)
-        bad = ~((xn > lo) & (xn < hi)) | (p <= 0)
+        bad = (xn <= lo) | (xn >= hi) | (p <= 0) | (xn != xn)
         x = dr.select(f == 0, x, dr.select(bad, 0.5 * (lo + hi), xn))
     return x
 
@@ -230,7 +230,7 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         k = bisect_le(lambda j: -f(j), -target, lo, hi, _steps(m))
         k = dr.select(left, dr.minimum(k, m - 2), k)
         kn = dr.minimum(k + 1, m - 1)
-        at_end = ~left & (k + 1 > kmax)
+        at_end = (u1 * z > 0.5 * a + t.L1[0]) & (k + 1 > kmax)
         f0 = f(k)
         f1 = dr.select(at_end, 0.0, f(kn))
         s0 = mi.Float(k) / (m - 1)
