@@ -8,7 +8,12 @@ test; each configuration is rendered once to trace and compile its kernels (repo
 as "first"), then ``--repeats`` times (configurations interleaved, so that load changes
 on the machine hit all of them alike); the figure is the best time, and the ratio is
 against ``roughconductor`` with the same distribution and roughness, measured in the
-same process. Goal (issue 8): ``mf_microfacet`` <= 1.2x ``roughconductor``.
+same process (``mf_fitted`` against ``roughconductor`` GGX; ``mf_leadr`` against
+``roughconductor`` Beckmann with a bitmap-textured alpha). Goals (issue 8):
+``mf_microfacet`` <= 1.2x, ``mf_fitted`` <= 2x, ``mf_leadr`` <= 3x. The fit (GGX 0.2 copper,
+90 nodes, isotropic; and 32 x 32 anisotropic) and the LEADR pyramid (256 x 256 Gaussian
+heights, base alpha 0.2, ``footprint`` 1/256: Mitsuba 3's path integrator provides no
+ray differentials) are made in a temporary folder first.
 
 Usage::
 
@@ -45,7 +50,25 @@ def scene(mi, bsdf: dict, res: int, spp: int) -> dict:
     }
 
 
-def configurations() -> dict[str, dict]:
+def make_files(folder) -> dict[str, str]:
+    """A fit of a GGX copper lobe (isotropic 90 nodes; anisotropic 32 x 32), a 256 x 256
+    LEADR pyramid and the alpha bitmap of the textured ``roughconductor``."""
+    import microfacet as mf
+    from pathlib import Path
+    folder = Path(folder)
+    cu = mf.fresnel.Conductor(*mf.fresnel.Conductor.METALS["Cu"])
+    out = {"fit": str(mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=cu), 90).save(folder / "fit.npz")),
+           "fit_aniso": str(mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.35), fresnel=cu), 32,
+                                       anisotropic=True).save(folder / "fit_aniso.npz"))}
+    h = mf.leadr.gaussian_heightfield((256, 256), 0.3, correlation=4.0, seed=1)
+    out["pyramid"] = str(mf.leadr.write_pyramid(folder / "pyramid.exr", mf.leadr.bake(h)))
+    rng = np.random.default_rng(0)
+    alpha = (0.2 + 0.1 * rng.random((256, 256, 1))).astype(np.float32)
+    out["alpha"] = alpha
+    return out
+
+
+def configurations(files=None) -> dict[str, dict]:
     cu = {"eta": {"type": "rgb", "value": [0.200, 0.924, 1.102]},
           "k": {"type": "rgb", "value": [3.912, 2.452, 2.142]}}
     out = {}
@@ -55,6 +78,17 @@ def configurations() -> dict[str, dict]:
         out[f"mf_microfacet {kind}"] = {"type": "mf_microfacet", **common}
         out[f"mf_microfacet {kind} sheared"] = {"type": "mf_microfacet", **common, "rho": 0.3,
                                                 "mean_slope_u": 0.1, "mean_slope_v": -0.2}
+    if files is not None:
+        import mitsuba as mi
+        out["mf_fitted ggx tabulated"] = {"type": "mf_fitted", "filename": files["fit"]}
+        out["mf_fitted ggx tabulated aniso"] = {"type": "mf_fitted", "filename": files["fit_aniso"]}
+        out["mf_fitted ggx use=ggx"] = {"type": "mf_fitted", "filename": files["fit"], "use": "ggx"}
+        out["roughconductor beckmann-textured"] = {
+            "type": "roughconductor", "distribution": "beckmann", **cu,
+            "alpha": {"type": "bitmap", "bitmap": mi.Bitmap(files["alpha"]), "raw": True,
+                      "to_uv": mi.ScalarTransform4f().scale([4, 4, 1])}}
+        out["mf_leadr beckmann-textured"] = {"type": "mf_leadr", "filename": files["pyramid"], "alpha": 0.2,
+                                             "uv_scale": 4.0, "footprint": 1.0 / 256, **cu}
     return out
 
 
@@ -72,7 +106,11 @@ def main(argv=None) -> dict:
     import microfacet.mitsuba as mfm
     mfm.register()
 
-    scenes = {name: mi.load_dict(scene(mi, bsdf, args.res, args.spp)) for name, bsdf in configurations().items()}
+    import tempfile
+    tmp = tempfile.TemporaryDirectory()
+    files = make_files(tmp.name)
+    scenes = {name: mi.load_dict(scene(mi, bsdf, args.res, args.spp))
+              for name, bsdf in configurations(files).items()}
 
     def render(s) -> float:
         t0 = time.perf_counter()

@@ -9,19 +9,21 @@
                          "mean_slope_u": 0.1, "material": "Au"})
 
 Plugins: ``mf_microfacet`` (:mod:`microfacet.mitsuba.bsdf`), the noncentral microfacet BRDF
-of :class:`microfacet.MicrofacetBRDF`. ``mi.set_variant`` is global and plugins are
+of :class:`microfacet.MicrofacetBRDF`; ``mf_fitted`` (:mod:`microfacet.mitsuba.fitted`), a
+fit of :mod:`microfacet.fit`; ``mf_leadr`` (:mod:`microfacet.mitsuba.leadr`), a LEADR
+pyramid of :mod:`microfacet.leadr` over a base material. ``mi.set_variant`` is global and plugins are
 registered per variant: call :func:`register` again after switching variants.
 """
 from __future__ import annotations
 
 __all__ = ["register", "PLUGINS"]
 
-PLUGINS = ("mf_microfacet",)
+PLUGINS = ("mf_microfacet", "mf_fitted", "mf_leadr")
 
 
 def register() -> tuple[str, ...]:
-    """Register every plugin of :data:`PLUGINS` for the current Mitsuba variant; returns
-    their names. Raises ``RuntimeError`` if Mitsuba is missing or no variant is set."""
+    """Register the plugins of :data:`PLUGINS` that support the current Mitsuba variant
+    (``mf_fitted`` and ``mf_leadr``: RGB variants); returns their names. Raises ``RuntimeError`` if Mitsuba is missing or no variant is set."""
     try:
         import mitsuba as mi
     except ImportError as e:  # pragma: no cover - depends on the environment
@@ -29,7 +31,13 @@ def register() -> tuple[str, ...]:
     if not mi.variant():
         raise RuntimeError("microfacet.mitsuba.register(): set a Mitsuba variant first "
                            "(mi.set_variant('llvm_ad_rgb'))")
-    from .bsdf import PLUGIN, bsdf_class
-    cls = bsdf_class()
-    mi.register_bsdf(PLUGIN, lambda props: cls(props))
-    return PLUGINS
+    from . import bsdf, fitted, leadr
+    names = []
+    for module in (bsdf, fitted, leadr):
+        try:
+            cls = module.bsdf_class()
+        except RuntimeError:        # a variant the plugin does not support (e.g. spectral)
+            continue
+        mi.register_bsdf(module.PLUGIN, lambda props, cls=cls: cls(props))
+        names.append(module.PLUGIN)
+    return tuple(names)

@@ -29,23 +29,23 @@ _ALPHA_MIN = 1e-4           # textured alpha is clamped here (as Mitsuba's rough
 _RHO_MAX = 1.0 - 1e-4       # textured rho is clamped into [-_RHO_MAX, _RHO_MAX]
 
 
-def _error(name: str, message: str) -> ValueError:
-    return ValueError(f"{PLUGIN}: parameter '{name}' {message}")
+def _error(name: str, message: str, plugin: str = PLUGIN) -> ValueError:
+    return ValueError(f"{plugin}: parameter '{name}' {message}")
 
 
 def _is_float(props, name: str) -> bool:
     return name in props and props.type(name) in (mi.Properties.Type.Float, mi.Properties.Type.Integer)
 
 
-def _texture(props, name: str, default: float, check=None, unbounded: bool = False):
+def _texture(props, name: str, default: float, check=None, unbounded: bool = False, plugin: str = PLUGIN):
     """``name`` as a texture (a float becomes a uniform one); ``check(value)`` returns an
     error message for a bad float, or None."""
     if _is_float(props, name) and check is not None:
         msg = check(float(props[name]))
         if msg:
-            raise _error(name, f"{msg}, got {float(props[name])!r}")
+            raise _error(name, f"{msg}, got {float(props[name])!r}", plugin)
     if name in props and props.type(name) in (mi.Properties.Type.String, mi.Properties.Type.Bool):
-        raise _error(name, f"must be a float or a texture, got {props.as_string(name)!r}")
+        raise _error(name, f"must be a float or a texture, got {props.as_string(name)!r}", plugin)
     if unbounded:
         return props.get_unbounded_texture(name, default)
     return props.get_texture(name, default)
@@ -63,28 +63,28 @@ def _correlation(v):
     return None if (math.isfinite(v) and abs(v) < 1) else "must lie in (-1, 1)"
 
 
-def _choice(props, name: str, default: str, choices) -> str:
+def _choice(props, name: str, default: str, choices, plugin: str = PLUGIN) -> str:
     value = props.get(name, default) if name in props else default
     if not isinstance(value, str) or value.lower() not in choices:
-        raise _error(name, f"must be one of {', '.join(choices)}, got {value!r}")
+        raise _error(name, f"must be one of {', '.join(choices)}, got {value!r}", plugin)
     return value.lower()
 
 
-def _flag(props, name: str, default: bool) -> bool:
+def _flag(props, name: str, default: bool, plugin: str = PLUGIN) -> bool:
     if name not in props:
         return default
     if props.type(name) != mi.Properties.Type.Bool:
-        raise _error(name, f"must be true or false, got {props.as_string(name)!r}")
+        raise _error(name, f"must be true or false, got {props.as_string(name)!r}", plugin)
     return bool(props[name])
 
 
-def _ior_textures(material: str):
+def _ior_textures(material: str, plugin: str = PLUGIN):
     """``(eta, k)`` textures of a named conductor from Mitsuba's IOR database
     (``data/ior/<material>.{eta,k}.spd``), converted as its ``roughconductor`` does."""
     paths = {part: str(mi.file_resolver().resolve(f"data/ior/{material}.{part}.spd")) for part in ("eta", "k")}
     if not all(os.path.isfile(p) for p in paths.values()):
         raise _error("material", f"is not a conductor in Mitsuba's IOR database "
-                                 f"(no data/ior/{material}.eta.spd), got {material!r}")
+                                 f"(no data/ior/{material}.eta.spd), got {material!r}", plugin)
     textures = []
     for part in ("eta", "k"):
         wavelengths, values = mi.spectrum_from_file(paths[part])
@@ -121,6 +121,8 @@ def _make_class() -> type:
     class MicrofacetBSDF(mi.BSDF):
         """Mitsuba BSDF of :class:`microfacet.MicrofacetBRDF` (see the module docstring)."""
 
+        PLUGIN_NAME = PLUGIN
+
         def __init__(self, props):
             mi.BSDF.__init__(self, props)
             self.kind = _choice(props, "distribution", BECKMANN, (BECKMANN, GGX))
@@ -144,6 +146,7 @@ def _make_class() -> type:
             self.xn = _texture(props, "mean_slope_u", 0.0, _finite, unbounded=True)
             self.yn = _texture(props, "mean_slope_v", 0.0, _finite, unbounded=True)
             self.specular_reflectance = _texture(props, "specular_reflectance", 1.0)
+            self.samples_visible = self.gaf == "smith"
             self._init_fresnel(props)
             anisotropic = not self.isotropic or any(n in props for n in ("rho", "mean_slope_u", "mean_slope_v"))
             flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
@@ -153,32 +156,35 @@ def _make_class() -> type:
             self.m_flags = flags
 
         def _init_fresnel(self, props):
+            """Fresnel parameters of Table 2.I (``material``, ``eta``/``k``, ``int_ior``/
+            ``ext_ior``, ``schlick_f0``, or none)."""
+            plugin = self.PLUGIN_NAME
             names = sorted(n for n in props.keys() if n in _FRESNEL_KEYS)
             if "material" in names and props.get("material") == "none":
                 names.remove("material")                  # Mitsuba's "none": F = 1
             if "material" in names and {"eta", "k"} & set(names):
-                raise _error("material", "and eta/k are exclusive: give one or the other")
+                raise _error("material", "and eta/k are exclusive: give one or the other", plugin)
             kinds = {_FRESNEL_KEYS[n] for n in names}
             if len(kinds) > 1:
                 raise _error(names[0], f"conflicts with {', '.join(names[1:])}: give one Fresnel "
-                                       "(material or eta/k, int_ior/ext_ior, schlick_f0) or none")
+                                       "(material or eta/k, int_ior/ext_ior, schlick_f0) or none", plugin)
             self.fresnel = kinds.pop() if kinds else "none"
             if self.fresnel == "conductor":
                 if "material" in names:
-                    self.eta, self.k = _ior_textures(props.get("material"))
+                    self.eta, self.k = _ior_textures(props.get("material"), plugin)
                 else:
-                    self.eta = _texture(props, "eta", 0.0, _finite, unbounded=True)
-                    self.k = _texture(props, "k", 1.0, _finite, unbounded=True)
+                    self.eta = _texture(props, "eta", 0.0, _finite, unbounded=True, plugin=plugin)
+                    self.k = _texture(props, "k", 1.0, _finite, unbounded=True, plugin=plugin)
             elif self.fresnel == "dielectric":
                 int_ior = mi.lookup_ior(props, "int_ior", 1.5046)
                 ext_ior = mi.lookup_ior(props, "ext_ior", 1.000277)
                 for name, v in (("int_ior", int_ior), ("ext_ior", ext_ior)):
                     if not (math.isfinite(v) and v > 0):
-                        raise _error(name, f"must be a finite number > 0, got {v!r}")
+                        raise _error(name, f"must be a finite number > 0, got {v!r}", plugin)
                 self.eta_real = mi.Float(int_ior / ext_ior)
             elif self.fresnel == "schlick":
                 self.f0 = _texture(props, "schlick_f0", 0.04,
-                                   lambda v: None if 0 <= v <= 1 else "must lie in [0, 1]")
+                                   lambda v: None if 0 <= v <= 1 else "must lie in [0, 1]", plugin=plugin)
 
         # ------------------------------------------------------------- terms
         def _lobe(self, si, active):
@@ -224,7 +230,7 @@ def _make_class() -> type:
 
         def _normal_pdf(self, lobe, h, wo):
             """Density of sampled normals: ``D_o(h)`` (Smith, Eq. 2.17) or ``D(h) z_h``."""
-            if self.gaf == "smith":
+            if self.samples_visible:
                 return lobe.vndf(h, wo)
             return lobe.ndf(h) * h.z
 
@@ -266,13 +272,13 @@ def _make_class() -> type:
             if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
                 active = active & False
             lobe = self._lobe(si, active)
-            h = lobe.sample_visible(sample2, view) if self.gaf == "smith" else lobe.sample_p22(sample2)
+            h = lobe.sample_visible(sample2, view) if self.samples_visible else lobe.sample_p22(sample2)
             oh = dr.dot(view, h)
             light = 2.0 * oh * h - view
             active &= (light.z > 0) & (oh > 0)
             g = self._gaf(lobe, light, view, h, oh)
             pdf = ratio(self._normal_pdf(lobe, h, view), 4.0 * oh, active)
-            if self.gaf == "smith":
+            if self.samples_visible:
                 g1_o = lobe.g1(view)
                 weight = ratio(g, g1_o, g1_o > 0)
             else:

@@ -1,0 +1,168 @@
+"""``mf_fitted``: a fit of :mod:`microfacet.fit` (the ``.npz`` of ``microfacet fit``) as a
+Mitsuba 3 BSDF plugin.
+
+``use="tabulated"`` (default) renders :class:`microfacet.fit.FittedBRDF` itself:
+``f_r cos theta_i = F D G / (4 z_o) + k_d z_i / pi`` (Eq. 2.1, 1.9) with the tabulated
+``D`` and ``Lambda`` of :mod:`microfacet.mitsuba.tabulated`, the fit's Fresnel table
+(piecewise linear in ``cos theta_d``), GAF and shadowing, and the fit's sampling
+(visible normals for isotropic Smith fits, slopes of ``P`` otherwise; with a diffuse
+base, the lobe or the cosine lobe with probability ``luminance(F(1))`` over
+``luminance(F(1)) + luminance(k_d)``, pdf the mixture's). ``use="ggx"|"beckmann"``
+renders :meth:`FittedBRDF.to_ggx` / :meth:`FittedBRDF.to_beckmann` (App. C; the diffuse
+base is not carried, as in the library) through ``mf_microfacet``'s analytic lobe. The
+lobe code (GAF, eval, pdf, sample) is ``mf_microfacet``'s (:mod:`.bsdf`).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import MicrofacetError
+from ..fit import load as load_fit
+from ..io.exr import EXR_MAGIC
+from . import bsdf as _bsdf
+from .slopes import BECKMANN, GGX, Lobe
+from .tabulated import InterpolatedRGB, tabulated_lobe
+
+__all__ = ["PLUGIN", "bsdf_class", "load_fit_parameter", "USES"]
+
+PLUGIN = "mf_fitted"
+USES = ("tabulated", GGX, BECKMANN)
+
+
+def load_fit_parameter(props, name: str, plugin: str):
+    """The :class:`~microfacet.fit.FittedBRDF` of the file named by string parameter ``name``
+    (resolved by Mitsuba's file resolver); a one-line ``ValueError`` naming the parameter
+    and the file when it is missing, not a fit (e.g. a LEADR pyramid EXR) or corrupt."""
+    if name not in props or props.type(name) != mi.Properties.Type.String:
+        raise _bsdf._error(name, "is required: the .npz written by `microfacet fit`", plugin)
+    path = str(mi.file_resolver().resolve(props[name]))
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(EXR_MAGIC))
+    except OSError as e:
+        raise _bsdf._error(name, f"cannot read {path!r} ({e.strerror or e})", plugin) from None
+    if head == EXR_MAGIC:
+        raise _bsdf._error(name, f"{path!r} is an OpenEXR file (a LEADR pyramid? use mf_leadr), "
+                                 "not a fit .npz of `microfacet fit`", plugin)
+    try:
+        return load_fit(path)
+    except MicrofacetError as e:
+        raise _bsdf._error(name, f"is not usable: {e}", plugin) from None
+
+
+_CLASSES: dict[str, type] = {}
+
+
+def bsdf_class() -> type:
+    """The ``mf_fitted`` class for the current Mitsuba variant (built once per variant)."""
+    variant = mi.variant()
+    if variant not in _CLASSES:
+        _CLASSES[variant] = _make_class()
+    return _CLASSES[variant]
+
+
+def _make_class() -> type:
+    if not mi.is_rgb or mi.is_polarized:
+        raise RuntimeError(f"{PLUGIN} needs an RGB variant (its Fresnel table and base are RGB), "
+                           f"not {mi.variant()}")
+    Base = _bsdf.bsdf_class()
+
+    class FittedBSDF(Base):
+        """Mitsuba BSDF of a :class:`microfacet.fit.FittedBRDF` (see the module docstring)."""
+
+        PLUGIN_NAME = PLUGIN
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            fit = load_fit_parameter(props, "filename", PLUGIN)
+            self.filename = props["filename"]
+            self.use = _bsdf._choice(props, "use", "tabulated", USES, PLUGIN)
+            self.gaf = fit.gaf_model
+            self.shadowing = fit.shadowing
+            self.separable = False
+            self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+            self.fresnel_table = InterpolatedRGB(fit.fresnel.cos_theta_d, fit.fresnel.values)
+            if self.use == "tabulated":
+                self.kind = "tabulated"
+                self.make_lobe = tabulated_lobe(fit.distribution)
+                self.samples_visible = self.gaf == "smith" and fit.distribution.supports_visible_sampling
+                self.diffuse = mi.Color3f(*(float(v) for v in fit.diffuse)) if fit.has_diffuse else None
+                self.p_lobe = float(fit._lobe_probability())
+                dist = fit.distribution
+            else:
+                self.kind = self.use
+                dist = (fit.to_ggx() if self.use == GGX else fit.to_beckmann()).distribution
+                params = [mi.Float(float(v)) for v in (dist.alpha_x, dist.alpha_y, dist.rho, dist.xn, dist.yn)]
+                self.make_lobe = lambda: Lobe(self.kind, *params)
+                self.samples_visible = self.gaf == "smith"
+                self.diffuse = None
+            anisotropic = (fit.anisotropic or float(dist.alpha_x) != float(dist.alpha_y)
+                           or np.any(np.asarray(dist.rho) != 0) or np.any(np.asarray(dist.mean_slope) != 0))
+            glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+            if anisotropic:
+                glossy = glossy | mi.BSDFFlags.Anisotropic
+            self.m_components = [glossy]
+            flags = glossy
+            if self.diffuse is not None:
+                diffuse = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+                self.m_components = [glossy, diffuse]
+                flags = flags | diffuse
+            self.m_flags = flags
+
+        # ------------------------------------------------------------- terms
+        def _lobe(self, si, active):
+            return self.make_lobe()
+
+        def _fresnel(self, si, oh, active):
+            """The fit's Fresnel table ``F(o.h)`` (Eq. 4.11), times ``specular_reflectance``."""
+            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0))
+
+        # ------------------------------------------------------ diffuse base
+        def _base(self, ctx, si, light, active):
+            """``(k_d z_i / pi, z_i / pi)`` of the Lambertian base (Eq. 1.9), 0 below the horizons."""
+            ok = active & (si.wi.z > 0) & (light.z > 0) & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+            cos_pdf = dr.select(ok, light.z * (1.0 / dr.pi), 0.0)
+            return self.diffuse * cos_pdf, cos_pdf
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            """The lobe (Listing 2.2) plus the base; pdf ``p pdf_lobe + (1 - p) z_i / pi``."""
+            value, pdf = Base._eval_pdf(self, ctx, si, wo, active)
+            if self.diffuse is None:
+                return value, pdf
+            value_d, pdf_d = self._base(ctx, si, wo, active)
+            return value + value_d, self.p_lobe * pdf + (1.0 - self.p_lobe) * pdf_d
+
+        def eval(self, ctx, si, wo, active=True):
+            return self.eval_pdf(ctx, si, wo, active)[0]
+
+        def pdf(self, ctx, si, wo, active=True):
+            return self.eval_pdf(ctx, si, wo, active)[1]
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            """The lobe's sample (``mf_microfacet``), or, with a base, the lobe or the cosine
+            lobe chosen by ``sample1 < p``; the weight is then the mixture's ``eval / pdf``."""
+            if self.diffuse is None:
+                return Base.sample(self, ctx, si, sample1, sample2, active)
+            bs, _ = Base.sample(self, ctx, si, sample1, sample2, active)
+            lobe = sample1 < self.p_lobe
+            light = dr.select(lobe, bs.wo, mi.warp.square_to_cosine_hemisphere(sample2))
+            value, pdf = self.eval_pdf(ctx, si, light, active)
+            ok = active & (pdf > 0) & (si.wi.z > 0) & (light.z > 0)
+            bs.wo = light
+            bs.pdf = dr.select(ok, pdf, 0.0)
+            bs.sampled_type = dr.select(lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
+                                        mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
+            bs.sampled_component = dr.select(lobe, mi.UInt32(0), mi.UInt32(1))
+            return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+
+        def traverse(self, callback):
+            callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
+
+        def to_string(self):
+            return (f"FittedBSDF[{PLUGIN}, filename={self.filename!r}, use={self.use}, gaf={self.gaf}, "
+                    f"shadowing={self.shadowing}, diffuse={self.diffuse is not None}]")
+
+    FittedBSDF.__name__ = FittedBSDF.__qualname__ = "FittedBSDF"
+    return FittedBSDF

@@ -1,0 +1,243 @@
+"""``mf_leadr``: a LEADR moment pyramid (``microfacet bake``) over a base material as a
+Mitsuba 3 BSDF plugin (thesis Sec. 3.3-3.4, Ch. 5).
+
+Per shading point: the five filtered moments ``E1..E5`` of the pyramid merged with the
+base lobe (:func:`microfacet.leadr.downsample_operator`: moment addition, Listing 5.1)
+are looked up as :func:`microfacet.leadr.lookup` does (trilinear, GPU-style anisotropic
+probes along the footprint's major axis, wrapping), converted to a noncentral Beckmann
+lobe as :func:`microfacet.leadr.from_moments` (Listing 3.5, same clamps) and shaded by
+``mf_microfacet``'s Beckmann path (Smith, height-correlated with the sheared
+normalization; :mod:`.bsdf`). The footprint is the ray differentials' ``si.duv_dx``,
+``si.duv_dy`` (times ``uv_scale``) where Mitsuba provides them (camera rays; the path
+integrator scales them by ``1/sqrt(spp)``), else the ``footprint`` parameter (a width
+in uv units of the map; 0, the default, is a bilinear lookup of the finest level).
+Slopes are taken along the shading frame's ``s`` (``dp/du``) and ``t`` axes.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import MicrofacetError
+from ..leadr import downsample_operator, read_pyramid
+from ..leadr.mip import MAX_ANISOTROPY
+from ..leadr.moments import MAX_RHO, MIN_ALPHA
+from . import bsdf as _bsdf
+from .fitted import load_fit_parameter
+from .slopes import BECKMANN, Lobe
+from .tabulated import InterpolatedRGB, Table, index_of
+
+__all__ = ["PLUGIN", "bsdf_class", "Pyramid"]
+
+PLUGIN = "mf_leadr"
+_ZIP_MAGIC = b"PK\x03\x04"
+
+
+def _read(props, name: str):
+    """The pyramid of the EXR named by ``name`` (:func:`microfacet.leadr.read_pyramid`), or a
+    one-line error naming the parameter and file (a ``.npz``, e.g. a fit or glint file,
+    is recognized and named as such)."""
+    if name not in props or props.type(name) != mi.Properties.Type.String:
+        raise _bsdf._error(name, "is required: the pyramid EXR written by `microfacet bake`", PLUGIN)
+    path = str(mi.file_resolver().resolve(props[name]))
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        raise _bsdf._error(name, f"cannot read {path!r} ({e.strerror or e})", PLUGIN) from None
+    if head == _ZIP_MAGIC:
+        raise _bsdf._error(name, f"{path!r} is a .npz archive (a fit or glint file?), not a LEADR "
+                                 "pyramid EXR of `microfacet bake`", PLUGIN)
+    try:
+        return read_pyramid(path)
+    except MicrofacetError as e:
+        raise _bsdf._error(name, f"is not usable: {e}", PLUGIN) from None
+
+
+class Pyramid:
+    """A moment pyramid in one flat table (level after level, row-major texels, 5 moments
+    each; the file's float32 values, widened) with per-level sizes and offsets;
+    :meth:`lookup` is :func:`microfacet.leadr.lookup` (``wrap=True``) in Dr.Jit. Lookups and
+    the moment-to-lobe conversion run in double precision, as the library's: the
+    variances ``E3 - E1^2`` of sharp lobes with large mean slopes cancel digits (float32
+    measured 1e-3 relative errors in the BRDF)."""
+
+    def __init__(self, levels, max_anisotropy: int = MAX_ANISOTROPY):
+        self.levels = len(levels)
+        self.h0, self.w0 = levels[0].shape[:2]
+        offsets = np.cumsum([0] + [lv.shape[0] * lv.shape[1] for lv in levels])[:-1]
+        self.data = Table(np.concatenate([np.asarray(lv, np.float32).ravel() for lv in levels]), "float64")
+        self.width = Table([lv.shape[1] for lv in levels], "float64")
+        self.height = Table([lv.shape[0] for lv in levels], "float64")
+        self.offset = Table(offsets, dtype="uint32")
+        self.max_anisotropy = int(max_anisotropy)
+
+    def _bilinear(self, k, u, v):
+        """Bilinear sample (texel centres at ``(i + 1/2) / W``, wrapping) of level ``k``."""
+        w, h, off = self.width[k], self.height[k], self.offset[k]
+        x, y = u * w - 0.5, v * h - 0.5
+        x0, y0 = dr.floor(x), dr.floor(y)
+        fx, fy = x - x0, y - y0
+        xa = x0 - w * dr.floor(x0 / w)
+        ya = y0 - h * dr.floor(y0 / h)
+        xb = dr.select(xa + 1.0 >= w, 0.0, xa + 1.0)
+        yb = dr.select(ya + 1.0 >= h, 0.0, ya + 1.0)
+        wu = mi.UInt32(w)
+
+        def texel(row, col):
+            i = (off + mi.UInt32(row) * wu + mi.UInt32(col)) * 5
+            return [self.data[i + c] for c in range(5)]
+
+        t00, t01, t10, t11 = texel(ya, xa), texel(ya, xb), texel(yb, xa), texel(yb, xb)
+        return [((t00[c] * (1 - fx) + t01[c] * fx) * (1 - fy) + (t10[c] * (1 - fx) + t11[c] * fx) * fy)
+                for c in range(5)]
+
+    def _trilinear(self, u, v, lod):
+        """Blend of levels ``floor(lod)`` and the next (the top level alone at the top)."""
+        top = self.levels - 1
+        lod = dr.clip(lod, 0.0, float(top))
+        k0 = index_of(lod, self.levels)
+        t = lod - mi.Float64(k0)
+        s0 = self._bilinear(k0, u, v)
+        s1 = self._bilinear(dr.minimum(k0 + 1, top), u, v)
+        return [a * (1.0 - t) + b * t for a, b in zip(s0, s1)]
+
+    def lookup(self, uv, a, b):
+        """Filtered moments ``[E1..E5]`` (double precision) at ``uv`` over the footprint axes
+        ``a``, ``b`` (uv units): ``N = min(ceil(major / minor), max_anisotropy)`` trilinear
+        probes (1 when the major axis is below a texel) spread over the major axis at
+        ``lod = log2(max(major / N, 1))``, averaged (:func:`microfacet.leadr.lookup`)."""
+        F = mi.Float64
+        u, v = F(uv.x), F(uv.y)
+        ax, ay, bx, by = F(a.x) * self.w0, F(a.y) * self.h0, F(b.x) * self.w0, F(b.y) * self.h0
+        la, lb = dr.sqrt(ax * ax + ay * ay), dr.sqrt(bx * bx + by * by)
+        major_is_a = la >= lb
+        major = dr.select(major_is_a, la, lb)
+        minor = dr.select(major_is_a, lb, la)
+        axis_u = dr.select(major_is_a, F(a.x), F(b.x))
+        axis_v = dr.select(major_is_a, F(a.y), F(b.y))
+        n = dr.clip(dr.ceil(major / dr.maximum(minor, 1e-12)), 1.0, float(self.max_anisotropy))
+        n = dr.select(major > 1.0, n, 1.0)
+        lod = dr.log2(dr.maximum(major / n, 1.0))
+
+        def body(j, e):
+            s = (j + 0.5) / n - 0.5
+            p = self._trilinear(u + s * axis_u, v + s * axis_v, lod)
+            return j + 1.0, [acc + q for acc, q in zip(e, p)]
+
+        zero = 0.0 * n
+        j, e = dr.while_loop(state=(zero, [zero] * 5), cond=lambda j, e: j < n, body=body)
+        return [c / n for c in e]
+
+
+def lobe_from_moments(e):
+    """Beckmann lobe of moments ``[E1..E5]`` (Listing 3.5, as
+    :func:`microfacet.leadr.from_moments`): ``alpha^2 = 2 max(Var, MIN_ALPHA^2 / 2)``,
+    ``rho = clip(2 Cov / (alpha_x alpha_y), +-MAX_RHO)``, mean slope ``(E1, E2)``."""
+    e1, e2, e3, e4, e5 = e
+    floor = 0.5 * MIN_ALPHA * MIN_ALPHA
+    ax = dr.sqrt(2.0 * dr.maximum(e3 - e1 * e1, floor))
+    ay = dr.sqrt(2.0 * dr.maximum(e4 - e2 * e2, floor))
+    rho = dr.clip(2.0 * (e5 - e1 * e2) / (ax * ay), -MAX_RHO, MAX_RHO)
+    return Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, rho, e1, e2)))
+
+
+_CLASSES: dict[str, type] = {}
+
+
+def bsdf_class() -> type:
+    """The ``mf_leadr`` class for the current Mitsuba variant (built once per variant)."""
+    variant = mi.variant()
+    if variant not in _CLASSES:
+        _CLASSES[variant] = _make_class()
+    return _CLASSES[variant]
+
+
+def _make_class() -> type:
+    if not mi.is_rgb or mi.is_polarized:
+        raise RuntimeError(f"{PLUGIN} needs an RGB variant, not {mi.variant()}")
+    Base = _bsdf.bsdf_class()
+
+    class LeadrBSDF(Base):
+        """Mitsuba BSDF of a LEADR-filtered displaced surface (see the module docstring)."""
+
+        PLUGIN_NAME = PLUGIN
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            pyramid = _read(props, "filename")
+            self.filename = props["filename"]
+            if "alpha" in props and "fit" in props:
+                raise _bsdf._error("alpha", "and fit are exclusive: the base is one material", PLUGIN)
+            self.fresnel_table = None
+            if "fit" in props:
+                fit = load_fit_parameter(props, "fit", PLUGIN)
+                if any(k in props for k in _bsdf._FRESNEL_KEYS):
+                    raise _bsdf._error("fit", "brings its own Fresnel table: drop the Fresnel parameters",
+                                       PLUGIN)
+                base = fit.to_beckmann()
+                self.fresnel_table = InterpolatedRGB(fit.fresnel.cos_theta_d, fit.fresnel.values)
+            else:
+                if "alpha" in props and props.type("alpha") not in (mi.Properties.Type.Float,
+                                                                      mi.Properties.Type.Integer):
+                    raise _bsdf._error("alpha", f"must be a number, got {props.as_string('alpha')!r}", PLUGIN)
+                alpha = float(props.get("alpha", 0.0))
+                if not (math.isfinite(alpha) and alpha >= 0):
+                    raise _bsdf._error("alpha", f"must be a finite number >= 0, got {alpha!r}", PLUGIN)
+                base = alpha if alpha > 0 else None
+                self._init_fresnel(props)
+            self.pyramid = Pyramid(downsample_operator(pyramid, base))
+            self.uv_scale = float(props.get("uv_scale", 1.0))
+            self.footprint = float(props.get("footprint", 0.0))
+            for name, v in (("uv_scale", self.uv_scale), ("footprint", self.footprint)):
+                if not (math.isfinite(v) and v >= 0) or (name == "uv_scale" and v == 0):
+                    raise _bsdf._error(name, f"must be a finite number {'>' if name == 'uv_scale' else '>='} 0, "
+                                             f"got {v!r}", PLUGIN)
+            self.kind = BECKMANN
+            self.gaf = "smith"
+            self.shadowing = _bsdf._flag(props, "shadowing", True, PLUGIN)
+            self.separable = False
+            self.samples_visible = True
+            self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+            flags = (mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
+                     | mi.BSDFFlags.SpatiallyVarying)
+            if hasattr(mi.BSDFFlags, "NeedsDifferentials"):      # Mitsuba 0.6; 3.x has no such flag
+                flags = flags | mi.BSDFFlags.NeedsDifferentials
+            self.m_components = [flags]
+            self.m_flags = flags
+
+        def footprint_axes(self, si):
+            """``(a, b)``: ``uv_scale`` times the ray differentials ``duv_dx``, ``duv_dy``
+            where they are set, else ``footprint`` along u and v (uv units of the map)."""
+            a, b = si.duv_dx * self.uv_scale, si.duv_dy * self.uv_scale
+            has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
+            f = self.footprint
+            a = dr.select(has, a, mi.Vector2f(f, 0.0))
+            b = dr.select(has, b, mi.Vector2f(0.0, f))
+            return a, b
+
+        def moments(self, si):
+            """Filtered moments ``[E1..E5]`` at ``si`` (:meth:`Pyramid.lookup`)."""
+            a, b = self.footprint_axes(si)
+            return self.pyramid.lookup(si.uv * self.uv_scale, a, b)
+
+        def _lobe(self, si, active):
+            return lobe_from_moments(self.moments(si))
+
+        def _fresnel(self, si, oh, active):
+            if self.fresnel_table is None:
+                return Base._fresnel(self, si, oh, active)
+            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0))
+
+        def traverse(self, callback):
+            callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
+
+        def to_string(self):
+            return (f"LeadrBSDF[{PLUGIN}, filename={self.filename!r}, levels={self.pyramid.levels}, "
+                    f"uv_scale={self.uv_scale}, footprint={self.footprint}, shadowing={self.shadowing}]")
+
+    LeadrBSDF.__name__ = LeadrBSDF.__qualname__ = "LeadrBSDF"
+    return LeadrBSDF

@@ -1,0 +1,428 @@
+"""Tabulated slope distributions and tables in Dr.Jit (thesis Ch. 4.2, 4.4; Dupuy et al.
+2015): the Mitsuba twins of :mod:`microfacet.distributions.tabulated` and of
+:class:`microfacet.fresnel.Tabulated`.
+
+Same tables, same interpolation, same sampling as the NumPy oracle (the tables are
+the oracle's own arrays, uploaded once as float32): ``D`` log-linear in ``theta`` (and
+linear in ``phi``); isotropic ``Lambda`` from the cubic Hermite ``L1`` table, visible
+slopes by inverting the tail tables (bisection over the fine nodes, linear in ``s``
+within a cell) and the conditional CDF of ``y~``; anisotropic ``Lambda`` from the
+bilinear projected-area table and slopes of ``P`` by cell, then a safeguarded Newton
+on the closed-form elevation CDF, then the linear azimuth quantile. Every search is
+a bisection with a fixed step count (enough for the table), so the code traces into
+one branch-free kernel. Indices are clamped into their tables, so inactive lanes
+(NaN, out of range) gather valid memory.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..distributions.tabulated import _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
+from .slopes import Lobe, _slope_normal, ratio
+
+__all__ = ["Table", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
+           "InterpolatedRGB", "NEWTON_STEPS"]
+
+#: Fixed Newton steps of the elevation sampling (safeguarded; float32 converges in < 8).
+NEWTON_STEPS = 12
+U_MIN = 2.0**-24
+
+
+def _steps(n: int) -> int:
+    """Bisection steps that shrink ``[0, n)`` to one cell."""
+    return max(1, int(math.ceil(math.log2(max(n, 2)))) + 1)
+
+
+class Table:
+    """A float32 (or ``dtype="float64"|"uint32"``) table read by indexing: ``dr.gather`` of
+    the variant's ``Float`` / ``Float64`` / ``UInt32``, or NumPy indexing in the scalar variants (whose
+    ``Float`` is a Python float)."""
+
+    def __init__(self, values, dtype: str = "float32"):
+        a = np.ascontiguousarray(np.asarray(values).ravel(), dtype=dtype)
+        self.size = a.size
+        self.scalar = not dr.is_array_v(mi.Float)
+        self.type = {"float32": mi.Float, "float64": mi.Float64, "uint32": mi.UInt32}[dtype]
+        self.data = a if self.scalar else self.type(a)
+
+    def __getitem__(self, index):
+        """Value at ``index`` (clamped into the table)."""
+        if self.scalar:
+            return self.type(self.data[min(max(int(index), 0), self.size - 1)])
+        index = dr.clip(mi.Int32(index), 0, self.size - 1)
+        return dr.gather(self.type, self.data, mi.UInt32(index))
+
+
+def index_of(x, n: int):
+    """``floor(x)`` as an index clamped into ``[0, n - 1]`` (NaN gives 0)."""
+    x = dr.select(x >= 0, x, 0.0)
+    return mi.Int32(dr.minimum(x, float(n - 1)))
+
+
+def bisect_le(f, target, lo, hi, steps: int):
+    """Largest ``k`` in ``[lo, hi)`` with ``f(k) <= target`` for increasing ``f`` (``lo``
+    assumed to qualify; ``hi`` an exclusive sentinel), ``steps`` halvings."""
+    for _ in range(steps):
+        go = hi - lo > 1
+        mid = (lo + hi) >> 1
+        value = f(mid)
+        lo = dr.select(go & (value <= target), mid, lo)
+        hi = dr.select(go & (value > target), mid, hi)
+    return lo
+
+
+def expm1(x):
+    """``exp(x) - 1`` without cancellation (Kahan: ``(u - 1) x / log u``, ``u = e^x``)."""
+    u = dr.exp(x)
+    d = u - 1.0
+    return dr.select(d == 0.0, x, dr.select(u == 0.0, -1.0, d * ratio(x, dr.log(u), d != 0.0)))
+
+
+def interval_integral(la, lb, ta, tb, theta):
+    """``int_{ta}^{theta} D(s) cos s sin s ds`` for ``D`` log-linear from ``e^la`` to
+    ``e^lb`` over ``[ta, tb]``, the closed form of
+    :func:`microfacet.distributions.tabulated.interval_integral`."""
+    beta = (lb - la) / (tb - ta)
+    dt = theta - ta
+    bd = beta * dt
+    da = dr.exp(la)
+    grow = dr.select(bd < 50.0, da * expm1(dr.minimum(bd, 50.0)), dr.exp(la + bd) - da)
+    st = theta + ta
+    out = (da * (2.0 * beta * dr.cos(st) + 4.0 * dr.sin(st)) * dr.sin(dt)
+           + grow * (beta * dr.sin(2.0 * theta) - 2.0 * dr.cos(2.0 * theta)))
+    return dr.maximum(out / (2.0 * (beta * beta + 4.0)), 0.0)
+
+
+def sample_interval(v, ta, tb, las, lbs):
+    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c cos sin`` from the uniform ``v``:
+    safeguarded Newton on the closed-form CDF, as
+    :func:`microfacet.distributions.tabulated.sample_interval` (``NEWTON_STEPS`` steps)."""
+    def cdf(x):
+        out = 0.0
+        for la, lb in zip(las, lbs):
+            out = out + interval_integral(la, lb, ta, tb, x)
+        return out
+
+    target = v * cdf(tb)
+    lo, hi = ta, tb
+    x = ta + v * (tb - ta)
+    for _ in range(NEWTON_STEPS):
+        f = cdf(x) - target
+        lo = dr.select(f < 0, x, lo)
+        hi = dr.select(f > 0, x, hi)
+        w = (x - ta) / (tb - ta)
+        p = 0.0
+        for la, lb in zip(las, lbs):
+            p = p + dr.exp(la + w * (lb - la))
+        p = p * 0.5 * dr.sin(2.0 * x)
+        xn = x - ratio(f, p, p > 0)
+        bad = (xn <= lo) | (xn >= hi) | (p <= 0) | (xn != xn)
+        x = dr.select(f == 0, x, dr.select(bad, 0.5 * (lo + hi), xn))
+    return x
+
+
+def _normal(theta, phi):
+    s, c = dr.sincos(theta)
+    sp, cp = dr.sincos(phi)
+    return mi.Vector3f(s * cp, s * sp, c)
+
+
+class _TabulatedLobe(Lobe):
+    """Shared parts of the tabulated lobes: the fit's (scalar) roughness map and the
+    elevation grid of Listing 4.1."""
+
+    def __init__(self, tables: "_Tables"):
+        d = tables.dist
+        super().__init__("tabulated", *(mi.Float(float(v)) for v in
+                                         (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)))
+        self.t = tables
+
+    def _locate(self, theta):
+        """Interval ``i`` and weight ``t`` of ``theta`` in the elevation grid
+        (:func:`microfacet.distributions.tabulated.locate`)."""
+        n = self.t.n_theta
+        theta = dr.clip(theta, 0.0, HALF_PI)
+        i = dr.minimum(index_of(dr.sqrt(theta / HALF_PI) * (n - 1), n), n - 2)
+        fi = mi.Float(i)
+        ta = (fi / (n - 1)) ** 2 * HALF_PI
+        tb = ((fi + 1.0) / (n - 1)) ** 2 * HALF_PI
+        return i, dr.clip((theta - ta) / (tb - ta), 0.0, 1.0)
+
+    def ndf(self, h):
+        """``D(h) = P_std(X/z, Y/z) / (z^4 det)`` with the interpolated table (Eq. 2.11)."""
+        z = dr.select(h.z > 0, h.z, 1.0)
+        x, y = self._unscale(-h.x - self.xn * z, -h.y - self.yn * z)
+        r2 = x * x + y * y
+        q = z * z + r2
+        p = self.d_interp(dr.atan2(dr.sqrt(r2), z), x, y) / (q * q)
+        return dr.select(h.z > 0, p / self.det, 0.0)
+
+
+class TabulatedIsotropicLobe(_TabulatedLobe):
+    """:class:`~microfacet.distributions.tabulated.TabulatedIsotropic` under the fit's
+    slope map (Eq. 3.4): radial ``P`` (Eq. 4.12), visible-normal sampling (Sec. 4.4)."""
+
+    def d_interp(self, theta, x=None, y=None):
+        """``D`` interpolated log-linearly in ``theta``."""
+        i, t = self._locate(theta)
+        ld = self.t.log_ndf
+        a = ld[i]
+        return dr.exp(a + t * (ld[i + 1] - a))
+
+    # ----------------------------------------------------------------- tables
+    def _fine(self, xi):
+        """Fine-grid coordinate ``s`` of the slope magnitude ``xi = tan(s^2 theta_cap)``."""
+        return dr.sqrt(dr.minimum(dr.atan(xi), _THETA_CAP) / _THETA_CAP)
+
+    def _l1(self, xi):
+        """``L1(xi)``: cubic Hermite in ``s`` with ``dL1/ds = -L0 dxi/ds`` (the oracle's ``_L1``)."""
+        m = self.t.m
+        f = self._fine(xi) * (m - 1)
+        k = dr.minimum(index_of(f, m), m - 2)
+        t = dr.clip(f - mi.Float(k), 0.0, 1.0)
+        y0, y1 = self.t.L1[k], self.t.L1[k + 1]
+        d0, d1 = self.t.dL1[k], self.t.dL1[k + 1]
+        t2 = t * t
+        t3 = t2 * t
+        val = (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * d0 + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * d1
+        return dr.maximum(val, 0.0)
+
+    def lambda_c(self, k):
+        """``(Lambda(k), c_k)`` with ``Lambda = L1(a) / a``, ``a = cot theta'`` of the warped
+        direction (Eq. 2.14, 3.3)."""
+        a, b, c = self.warp(k)
+        cot = dr.maximum(c, 1e-30) * dr.rsqrt(dr.maximum(a * a + b * b, 1e-30))
+        return self._l1(cot) / cot, c
+
+    # --------------------------------------------------------------- sampling
+    def sample_visible_std(self, u, cos_theta):
+        """Standard visible normal for a view at ``theta`` in the xz plane (Sec. 2.2, 4.4):
+        ``x~`` inverts the visible CDF written with the tail tables, ``y~`` the
+        conditional CDF (:meth:`TabulatedIsotropic.sample_visible_std`)."""
+        c = dr.clip(cos_theta, 0.0, 1.0)
+        sn = dr.safe_sqrt(1.0 - c * c)
+        a = dr.minimum(c / dr.maximum(sn, 1e-30), 1e8)
+        u1 = dr.clip(u.x, U_MIN, 1.0 - U_MIN)
+        x = self._visible_x(a, u1)
+        y = self._conditional_y(dr.abs(x), dr.clip(u.y, 0.0, 1.0))
+        return _slope_normal(x, y)
+
+    def _visible_x(self, a, u1):
+        t, m = self.t, self.t.m
+        l1a = self._l1(a)
+        z = a + l1a
+        left = u1 * z <= 0.5 * a + t.L1[0]          # x~ <= 0: F(0) Z = a / 2 + L1(0)
+        target = dr.select(left, u1 * z, (1.0 - u1) * z)
+
+        def f(k):    # decreasing: (a + xi) L0 + L1 left, (a - xi) L0 - L1 + L1(a) right
+            xi, l0, l1 = t.xi[k], t.L0[k], t.L1[k]
+            return dr.select(left, (a + xi) * l0 + l1, (a - xi) * l0 - l1 + l1a)
+
+        s_a = self._fine(a)
+        kmax = index_of(s_a * (m - 1), m)
+        kmax = dr.select(mi.Float(kmax) / (m - 1) > s_a, kmax - 1, kmax)
+        lo = dr.zeros(mi.Int32, dr.width(a)) if not t.scalar else 0
+        hi = dr.select(left, m - 1, kmax + 1)
+        k = bisect_le(lambda j: -f(j), -target, lo, hi, _steps(m))
+        k = dr.select(left, dr.minimum(k, m - 2), k)
+        kn = dr.minimum(k + 1, m - 1)
+        at_end = (u1 * z > 0.5 * a + t.L1[0]) & (k + 1 > kmax)
+        f0 = f(k)
+        f1 = dr.select(at_end, 0.0, f(kn))
+        s0 = mi.Float(k) / (m - 1)
+        s_end = dr.select(at_end, s_a, mi.Float(kn) / (m - 1))
+        w = dr.select(f0 > f1, ratio(f0 - target, f0 - f1, f0 > f1), 0.5)
+        s = s0 + dr.clip(w, 0.0, 1.0) * (s_end - s0)
+        xi = dr.tan(s * s * _THETA_CAP)
+        return dr.select(left, -xi, dr.minimum(xi, a))
+
+    def _conditional_y(self, xi, u2):
+        """``y~`` from the conditional CDF of ``|y~|`` given ``|x~| = xi``, rows mixed
+        linearly in ``s`` (sign from ``u2``)."""
+        m = self.t.m
+        sign = dr.select(u2 >= 0.5, 1.0, -1.0)
+        v = dr.clip(dr.abs(2.0 * u2 - 1.0), 0.0, 1.0 - U_MIN)
+        f = self._fine(xi) * (m - 1)
+        k = dr.minimum(index_of(f, m), m - 2)
+        w = dr.clip(f - mi.Float(k), 0.0, 1.0)
+        return sign * ((1.0 - w) * self._row_quantile(k, v) + w * self._row_quantile(k + 1, v))
+
+    def _row_quantile(self, k, v):
+        t = self.t
+        n = t.n_eta
+        row = k * n
+        lo = bisect_le(lambda j: t.y_cdf[row + j], v, 0 * k, 0 * k + (n - 1), _steps(n))
+        c0, c1 = t.y_cdf[row + lo], t.y_cdf[row + lo + 1]
+        w = dr.clip(ratio(v - c0, c1 - c0, c1 > c0), 0.0, 1.0)
+        e0 = t.eta[lo]
+        return dr.tan(e0 + w * (t.eta[lo + 1] - e0))
+
+    def sample_p22(self, u):
+        """Normal with slopes distributed as ``P``: ``theta`` from the marginal
+        ``2 pi D cos sin`` (interval by its mass, then the closed-form CDF), ``phi = 2 pi u2``."""
+        t = self.t
+        n = t.n_theta
+        v = dr.clip(u.x, U_MIN, 1.0 - U_MIN)
+        i = bisect_le(lambda j: t.mass_cdf[j], v, 0 * index_of(v, 1), 0 * index_of(v, 1) + (n - 1),
+                      _steps(n))
+        c0 = t.mass_cdf[i]
+        mass = t.mass_cdf[i + 1] - c0
+        r = dr.clip(dr.select(mass > 0, ratio(v - c0, mass, mass > 0), 0.5), 0.0, 1.0)
+        ld = t.log_ndf
+        th = sample_interval(r, t.theta[i], t.theta[i + 1], (ld[i],), (ld[i + 1],))
+        return self._normal_from_standard(_normal(th, 2.0 * math.pi * u.y))
+
+
+class TabulatedAnisotropicLobe(_TabulatedLobe):
+    """:class:`~microfacet.distributions.tabulated.TabulatedAnisotropic` under the fit's
+    slope map: ``P`` over ``(theta, phi)``, ``Lambda`` from the projected-area table,
+    slopes of ``P`` sampled exactly from the interpolant (App. A)."""
+
+    def _phi(self, phi):
+        t = self.t
+        f = (phi - 2.0 * math.pi * dr.floor(phi / (2.0 * math.pi))) / t.dphi
+        j = index_of(f, t.n_phi)
+        w = dr.clip(f - mi.Float(j), 0.0, 1.0)
+        j1 = dr.select(j + 1 >= t.n_phi, 0 * j, j + 1)
+        return j, j1, w
+
+    def _column(self, i, j, t):
+        ld = self.t.log_ndf
+        a = ld[i * self.t.n_phi + j]
+        return dr.exp(a + t * (ld[(i + 1) * self.t.n_phi + j] - a))
+
+    def d_interp(self, theta, x, y):
+        """``D`` log-linear in ``theta`` along each node azimuth, linear in ``phi`` between;
+        ``phi = atan2(-y~, -x~)`` is the azimuth of the normal of slope ``(x~, y~)``."""
+        i, t = self._locate(theta)
+        j, j1, w = self._phi(dr.atan2(-y, -x))
+        return (1.0 - w) * self._column(i, j, t) + w * self._column(i, j1, t)
+
+    def lambda_c(self, k):
+        """``(Lambda(k), c_k)``, ``Lambda = A(k') / cos theta_k' - 1`` from the bilinear
+        projected-area table (Eq. 2.14, 3.3)."""
+        a, b, c = self.warp(k)
+        r = dr.sqrt(a * a + b * b)
+        th = dr.atan2(r, dr.maximum(c, 0.0))
+        area = self._area(th, dr.atan2(b, a))
+        lam = dr.maximum(area * ratio(dr.sqrt(r * r + c * c), c, c > 0) - 1.0, 0.0)
+        return lam, c
+
+    def _area(self, theta, phi):
+        t = self.t
+        n = t.n_lambda
+        theta = dr.clip(theta, 0.0, HALF_PI)
+        s = dr.asin(dr.sqrt(theta / HALF_PI)) / HALF_PI * (n - 1)
+        i = dr.minimum(index_of(s, n), n - 2)
+        t0, t1 = t.theta_k[i], t.theta_k[i + 1]
+        wt = dr.clip((theta - t0) / (t1 - t0), 0.0, 1.0)
+        j, j1, w = self._phi(phi)
+        A = t.area
+        q = t.n_phi
+
+        def row(r):
+            return (1.0 - w) * A[r * q + j] + w * A[r * q + j1]
+
+        return (1.0 - wt) * row(i) + wt * row(i + 1)
+
+    def sample_p22(self, u):
+        """Normal whose slope is distributed as the interpolated ``P`` (App. A): a cell by
+        its mass, ``theta`` from the cell's marginal (Newton on the closed-form CDF),
+        ``phi`` from the linear ``D(theta, .)`` (closed-form quadratic)."""
+        t = self.t
+        cdf = t.cell_cdf
+        ncell = cdf.size - 1
+        v = dr.clip(u.x, U_MIN, 1.0 - U_MIN) * t.cell_total
+        zero = 0 * index_of(v, 1)
+        c = bisect_le(lambda j: cdf[j], v, zero, zero + ncell, _steps(ncell + 1))
+        c0 = cdf[c]
+        mass = cdf[c + 1] - c0
+        r = dr.clip(dr.select(mass > 0, ratio(v - c0, mass, mass > 0), 0.5), 0.0, 1.0)
+        i = c // t.n_phi
+        j = c - i * t.n_phi
+        j1 = dr.select(j + 1 >= t.n_phi, zero, j + 1)
+        ld, q = t.log_ndf, t.n_phi
+        ta, tb = t.theta[i], t.theta[i + 1]
+        th = sample_interval(r, ta, tb, (ld[i * q + j], ld[i * q + j1]),
+                             (ld[(i + 1) * q + j], ld[(i + 1) * q + j1]))
+        wt = dr.clip((th - ta) / (tb - ta), 0.0, 1.0)
+        d0, d1 = self._column(i, j, wt), self._column(i, j1, wt)
+        w = _linear_quantile(dr.clip(u.y, 0.0, 1.0), d0, d1)
+        return self._normal_from_standard(_normal(th, (mi.Float(j) + w) * t.dphi))
+
+    def sample_visible(self, u, k):  # pragma: no cover - guarded by samples_visible
+        raise NotImplementedError("anisotropic tables sample slopes of P")
+
+
+def _linear_quantile(v, d0, d1):
+    """``t`` in ``[0, 1]`` with density ``∝ (1 - t) d0 + t d1`` (closed-form quadratic)."""
+    den = d0 + dr.safe_sqrt(d0 * d0 + v * (d1 * d1 - d0 * d0))
+    t = ratio(v * (d0 + d1), den, den > 0)
+    return dr.select(den > 0, dr.clip(t, 0.0, 1.0), v)
+
+
+class _Tables:
+    """The oracle distribution's tables as :class:`Table` s (built once per plugin)."""
+
+    def __init__(self, dist):
+        self.dist = dist
+        self.scalar = not dr.is_array_v(mi.Float)
+        self.n_theta = dist.n_theta
+        self.theta = Table(dist.theta)
+        if isinstance(dist, TabulatedIsotropic):
+            self.log_ndf = Table(dist.log_ndf)
+            self.m = len(dist.s_fine)
+            h = dist.s_fine[1] - dist.s_fine[0]
+            self.xi, self.L0, self.L1 = Table(dist.xi), Table(dist.L0), Table(dist.L1)
+            self.dL1 = Table(-dist.L0 * dist.dxi_ds * h)
+            self.eta = Table(dist.eta_nodes[0])
+            self.n_eta = dist.eta_nodes.shape[1]
+            self.y_cdf = Table(dist.y_cdf)
+            self.mass_cdf = Table(dist._mass_cdf)
+            self.lobe = TabulatedIsotropicLobe
+        else:
+            self.n_phi, self.dphi = dist.n_phi, float(dist.dphi)
+            self.log_ndf = Table(dist.log_ndf)
+            self.theta_k = Table(dist.theta_k)
+            self.n_lambda = len(dist.theta_k)
+            self.area = Table(dist.area_table)
+            self.cell_cdf = Table(dist._cell_cdf)
+            self.cell_total = float(np.float32(dist._cell_cdf[-1]))
+            self.lobe = TabulatedAnisotropicLobe
+
+
+def tabulated_lobe(dist):
+    """A factory ``() -> lobe`` for a :class:`TabulatedIsotropic` or
+    :class:`TabulatedAnisotropic` ``dist`` (its tables uploaded once)."""
+    if not isinstance(dist, (TabulatedIsotropic, TabulatedAnisotropic)):
+        raise TypeError(f"not a tabulated distribution: {type(dist).__name__}")
+    tables = _Tables(dist)
+    return lambda: tables.lobe(tables)
+
+
+class InterpolatedRGB:
+    """Piecewise-linear ``x -> RGB`` table clamped at its ends, as ``np.interp`` per
+    channel (:class:`microfacet.fresnel.Tabulated`); the node is found by bisection."""
+
+    def __init__(self, x, rgb):
+        x = np.asarray(x, dtype=np.float64).ravel()
+        rgb = np.asarray(rgb, dtype=np.float64).reshape(len(x), 3)
+        self.n = len(x)
+        self.x = Table(x)
+        self.channels = [Table(rgb[:, c]) for c in range(3)]
+
+    def __call__(self, value):
+        x = self.x
+        zero = 0 * index_of(value, 1)
+        i = bisect_le(lambda j: x[j], value, zero, zero + (self.n - 1), _steps(self.n))
+        x0, x1 = x[i], x[i + 1]
+        t = dr.clip(ratio(value - x0, x1 - x0, x1 > x0), 0.0, 1.0)
+        out = []
+        for ch in self.channels:
+            a = ch[i]
+            out.append(a + t * (ch[i + 1] - a))
+        return mi.Color3f(*out)
