@@ -98,6 +98,7 @@ def f32(a) -> np.ndarray:
 
 
 def plugin_dict(kind, ax, ay, rho, mean, fresnel, gaf="smith", shadowing=True, separable=False):
+    mean = (0.0, 0.0) if gaf == "vgroove" else mean          # V-grooves need a zero mean slope
     d = {"type": "mf_microfacet", "distribution": kind, "alpha_u": ax, "alpha_v": ay, "rho": rho,
          "mean_slope_u": mean[0], "mean_slope_v": mean[1], "gaf": gaf, "shadowing": shadowing,
          "separable": separable}
@@ -107,6 +108,7 @@ def plugin_dict(kind, ax, ay, rho, mean, fresnel, gaf="smith", shadowing=True, s
 
 
 def oracle(kind, ax, ay, rho, mean, fresnel, gaf="smith", shadowing=True):
+    mean = (0.0, 0.0) if gaf == "vgroove" else mean          # V-grooves need a zero mean slope
     dist = {"beckmann": mf.Beckmann, "ggx": mf.GGX}[kind](alpha_x=ax, alpha_y=ay, rho=rho, mean_slope=mean)
     if "eta" in fresnel:
         fr = mf.fresnel.Conductor(fresnel["eta"], fresnel["k"])
@@ -319,6 +321,7 @@ def test_traverse_exposes_and_updates_parameters(variant):
     ({"material": "Cu", "int_ior": 1.5}, "int_ior"), ({"eta": 1.0, "material": "Au"}, "material"),
     ({"schlick_f0": 1.5}, "schlick_f0"), ({"gaf": "vgroove", "separable": True}, "separable"),
     ({"shadowing": "often"}, "shadowing"), ({"mean_slope_u": float("nan")}, "mean_slope_u"),
+    ({"gaf": "vgroove", "mean_slope_u": 0.3}, "gaf"),
 ])
 def test_bad_parameters_name_the_parameter(extra, name):
     use("scalar_rgb")

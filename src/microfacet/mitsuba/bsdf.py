@@ -145,6 +145,10 @@ def _make_class() -> type:
             self.rho = _texture(props, "rho", 0.0, _correlation, unbounded=True)
             self.xn = _texture(props, "mean_slope_u", 0.0, _finite, unbounded=True)
             self.yn = _texture(props, "mean_slope_v", 0.0, _finite, unbounded=True)
+            if self.gaf == "vgroove" and any(n in props and not (_is_float(props, n) and props[n] == 0)
+                                             for n in ("mean_slope_u", "mean_slope_v")):
+                raise _error("gaf", "vgroove needs a zero mean slope (V-grooves stand on the macro normal); "
+                             "use gaf=smith with mean_slope_u/mean_slope_v")
             self.specular_reflectance = _texture(props, "specular_reflectance", 1.0)
             self.samples_visible = self.gaf == "smith"
             self._init_fresnel(props)
