@@ -15,7 +15,7 @@ from microfacet.glints.microsurface import (FWHM_PER_SIGMA, _lobe_moments, _quad
                                             lobe_moments_reference)
 from microfacet.glints.reference import compare_histogram
 from microfacet.io import write_exr
-from microfacet.io.pngdata import write_png_data
+from microfacet.io.png import write_png_data
 from microfacet.validation import integrate_hemisphere
 
 MAPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "maps"

@@ -17,7 +17,7 @@ import OpenEXR
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
 from ..io.exr import EXR_MAGIC, read_exr, write_exr
-from ..io.pngdata import PNG_MAGIC, read_png_data, write_png_data
+from ..io.png import PNG_MAGIC, read_png_data, write_png_data
 from ..io.read import read_bytes
 from .mip import mip_sizes
 
