@@ -467,7 +467,7 @@ def test_cli_bake_normal_map_and_material(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["bake", "{d}/missing.png", "-o", "{d}/o.exr"], "missing.png: no such file"),
     (["bake", "{d}/junk.png", "-o", "{d}/o.exr"], "junk.png: not a PNG or OpenEXR image"),
-    (["bake", "{h}", "-o", "{d}/o.exr", "--normal-map"], "a normal map needs R, G, B channels"),
+    (["bake", "{h}", "-o", "{d}/o.exr", "--normal-map"], "a normal map needs 2 to 4 channels"),
     (["bake", "{h}", "-o", "{d}/junk.png/o.exr"], "junk.png"),        # a file where a folder should be
     (["bake", "{d}/o.png", "-o", "{d}/o.exr"], "would overwrite the input"),
 ])
