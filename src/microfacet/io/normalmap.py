@@ -50,7 +50,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MicrofacetError, NormalMapWarning
-from ..geometry import normal_to_slope
 from .image import read_image
 
 __all__ = ["decode_normals", "read_normals", "read_slopes", "normals_to_slopes", "NormalMapReport",
@@ -67,6 +66,7 @@ _SIGNED_BELOW = -0.01      # a float tangent channel below this is signed data
 _BIASED_MEAN_TOL = 0.25    # |mean(R, G) - 0.5| of biased float data
 _LENGTH_TOL = 0.1          # mean | |v| - 1 | above this: far from unit length
 _CONSTANT = 1e-6           # a decoded channel whose range is below this is constant
+_TINY = np.finfo(np.float64).tiny
 
 
 @dataclass(frozen=True)
@@ -134,19 +134,23 @@ def _resolve_encoding(a: np.ndarray, encoding: str, where: str) -> tuple[str, bo
 
 
 def _components(a: np.ndarray, encoding: str) -> np.ndarray:
-    """Decoded components ``n`` (float64) of samples ``a``: ``2 v - 1`` (biased) or ``v``."""
-    v = a.astype(np.float64)
+    """Decoded components ``n`` ``(H, W, 3)`` float64 of samples ``a (H, W, 2|3)``: ``2 v - 1``
+    (biased) or ``v`` (signed), ``v`` scaled to ``[0, 1]`` for integers; a missing third
+    channel is 0 (rebuilt later). One buffer, decoded in place."""
+    n = np.zeros(a.shape[:2] + (3,))
+    c = a.shape[2]
+    n[..., :c] = a
     if a.dtype.kind == "u":
-        v *= 1.0 / np.iinfo(a.dtype).max
+        n[..., :c] *= 1.0 / np.iinfo(a.dtype).max
     if encoding == "biased":
-        v *= 2.0
-        v -= 1.0
-    return v
+        n[..., :c] *= 2.0
+        n[..., :c] -= 1.0
+    return n
 
 
-def _placeholder_z(v: np.ndarray) -> bool:
-    """Whether the third channel of decoded components ``v`` is constant while R or G varies."""
-    return bool(np.ptp(v[..., 2]) <= _CONSTANT < max(np.ptp(v[..., 0]), np.ptp(v[..., 1])))
+def _placeholder_z(n: np.ndarray) -> bool:
+    """Whether the third channel of decoded components ``n`` is constant while R or G varies."""
+    return bool(np.ptp(n[..., 2]) <= _CONSTANT < max(np.ptp(n[..., 0]), np.ptp(n[..., 1])))
 
 
 def _clamp_to_max_angle(n: np.ndarray) -> int:
@@ -199,20 +203,20 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
     if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
         raise MicrofacetError(f"{where}a normal map must be finite (found NaN or inf)")
     encoding, detected = _resolve_encoding(a, encoding, where)
-    v = _components(a, encoding)
+    n = _components(a, encoding)
     if z == "stored" and c < 3:
         raise MicrofacetError(f"{where}z='stored' needs a third channel, the map has {c}")
     if z == "auto":
-        z = "stored" if c == 3 and not _placeholder_z(v) else "reconstruct"
+        z = "stored" if c == 3 and not _placeholder_z(n) else "reconstruct"
     if z == "stored":
-        length = np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
-        facing_away = int(np.count_nonzero(v[..., 2] <= 0))
-        n = np.divide(v, length[..., None], out=np.zeros_like(v), where=length[..., None] > 0)
+        facing_away = int(np.count_nonzero(n[..., 2] <= 0))
+        length = np.sqrt(np.einsum("...i,...i->...", n, n))
         mean_length = float(length.mean())
+        np.divide(n, np.maximum(length, _TINY)[..., None], out=n)      # zero vectors stay 0: repaired
     else:
-        r2 = v[..., 0] ** 2 + v[..., 1] ** 2
+        r2 = n[..., 0] ** 2 + n[..., 1] ** 2
         facing_away = int(np.count_nonzero(r2 > 1.0))
-        n = np.stack([v[..., 0], v[..., 1], np.sqrt(np.maximum(1.0 - r2, 0.0))], axis=-1)
+        n[..., 2] = np.sqrt(np.maximum(1.0 - r2, 0.0))
         mean_length = None
     repaired = _clamp_to_max_angle(n)
     report = NormalMapReport(source or "array", tuple(int(s) for s in a.shape[:2]), encoding, detected,
@@ -234,8 +238,11 @@ def read_normals(path_or_image, encoding: str = "auto", z: str = "auto", *,
 
 def normals_to_slopes(normals) -> np.ndarray:
     """Slopes ``(..., 2)`` ``(-n_x / n_z, -n_y / n_z)`` of upper normals ``(..., 3)`` (thesis
-    Eq. 2.9); decoded normals have ``|slope| <= tan 89deg``."""
-    return np.stack(normal_to_slope(normals), axis=-1)
+    Eq. 2.9, as :func:`microfacet.geometry.normal_to_slope`, into one array); decoded normals
+    have ``|slope| <= tan 89deg``."""
+    n = np.asarray(normals, dtype=np.float64)
+    slopes = np.divide(n[..., :2], n[..., 2:3])
+    return np.negative(slopes, out=slopes)
 
 
 def read_slopes(path_or_image, encoding: str = "auto", z: str = "auto", *,
