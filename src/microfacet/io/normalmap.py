@@ -37,9 +37,10 @@ Report and warnings
 :func:`decode_normals` returns a :class:`NormalMapReport` and, with ``warn=True``, emits
 each of its one-line :class:`~microfacet.errors.NormalMapWarning` s naming the file: the
 number (and percentage) of repaired texels; decoded vectors far from unit length on
-average (mean ``| |v| - 1 |`` above 0.1, stored ``z``); most texels facing away (more
-than half with ``n_z <= 0``, or ``x^2 + y^2 > 1`` when ``z`` is reconstructed). The last two
-mean the map looks inconsistent: a wrong ``encoding`` or ``z``.
+average (mean length ``|v|`` outside ``1 +- 0.1``, stored ``z``; the shipped 8-bit
+``glitterman_scratches.png`` has 1.015, a biased map read as signed about 1.22); most
+texels facing away (more than half with ``n_z <= 0``, or ``x^2 + y^2 > 1`` when ``z`` is
+reconstructed). The last two mean the map looks inconsistent: a wrong ``encoding`` or ``z``.
 """
 from __future__ import annotations
 
@@ -64,7 +65,7 @@ MAX_THETA_DEG = 89.0
 _COS_MAX, _SIN_MAX = np.cos(np.radians(MAX_THETA_DEG)), np.sin(np.radians(MAX_THETA_DEG))
 _SIGNED_BELOW = -0.01      # a float tangent channel below this is signed data
 _BIASED_MEAN_TOL = 0.25    # |mean(R, G) - 0.5| of biased float data
-_LENGTH_TOL = 0.1          # mean | |v| - 1 | above this: far from unit length
+_LENGTH_TOL = 0.1          # | mean |v| - 1 | above this: far from unit length
 _CONSTANT = 1e-6           # a decoded channel whose range is below this is constant
 _TINY = np.finfo(np.float64).tiny
 
@@ -185,8 +186,10 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
     warn : bool
         Emit the report's warnings (:class:`~microfacet.errors.NormalMapWarning`).
 
-    Every texel is a unit vector at most 89 degrees from ``(0, 0, 1)``: non-unit vectors
-    are renormalized and unusable ones repaired, each on its own (module docstring).
+    The inverse of the encoding of thesis Listing 3.6 (``(n + 1) / 2`` per channel) or of
+    a float map of ``n``. Every texel is a unit vector at most 89 degrees from ``(0, 0, 1)``
+    (so its slope, Eq. 2.9, is finite): non-unit vectors are renormalized and unusable ones
+    repaired, each on its own (module docstring).
     Raises :class:`MicrofacetError` (naming ``source``) for a wrong shape, dtype or
     non-finite samples, ``ValueError`` for an unknown ``encoding`` or ``z``.
     """
