@@ -46,12 +46,19 @@ def test_auto_detection_by_content():
              "float biased": (0.5 * n + 0.5, "biased"),
              "float signed": (n, "signed"),
              "flat signed (no negatives)": (np.tile([0.0, 0.0, 1.0], (4, 4, 1)), "signed"),
-             "flat biased": (np.tile([0.5, 0.5, 1.0], (4, 4, 1)), "biased")}
+             "flat biased": (np.tile([0.5, 0.5, 1.0], (4, 4, 1)), "biased"),
+             "tilted signed (no negatives)": (np.tile(leadr.slopes_to_normals([-0.5, -0.5]), (4, 4, 1)), "signed"),
+             "tilted biased": (np.tile(0.5 * leadr.slopes_to_normals([2.0, 1.0]) + 0.5, (4, 4, 1)), "biased")}
     for name, (image, encoding) in cases.items():
         normals, report = quiet(image)
         assert report.encoding == encoding and report.detected, name
         assert report.z == "stored" and report.repaired == 0, name
         np.testing.assert_allclose(np.linalg.norm(normals, axis=-1), 1.0, atol=1e-12)
+    for name, (image, encoding) in {"2-channel signed": (n[..., :2], "signed"),           # z rebuilt:
+                                    "2-channel biased": (0.5 * n[..., :2] + 0.5, "biased"),  # mean rule
+                                    "2-channel flat signed": (np.zeros((3, 3, 2)), "signed")}.items():
+        normals, report = quiet(image)
+        assert report.encoding == encoding and report.z == "reconstruct", name
 
 
 def test_explicit_encoding_overrides_and_offset_alias():

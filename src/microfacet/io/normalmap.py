@@ -8,9 +8,11 @@ Encodings (``encoding``)
 - ``"signed"``: a float EXR storing ``n`` itself.
 - ``"auto"`` (default), by content, one decision for the whole map: integer samples are
   biased. Float samples are signed if a tangent channel (R or G) holds a value below
-  ``-0.01`` (biased values lie in ``[0, 1]``); otherwise biased if the means of R and G both
-  lie within 0.25 of 0.5 (a biased map's mean is 0.5 plus half its mean tangent
-  component); otherwise signed (e.g. a nearly flat map storing ``n``, R and G near 0).
+  ``-0.01`` (biased values lie in ``[0, 1]``). Otherwise, when ``z`` is stored, the reading
+  whose vectors are closer to unit length (median of ``| |n| - 1 |`` over up to 65536
+  evenly spaced texels) wins, biased on a tie; when ``z`` is rebuilt, the map is biased if
+  the means of R and G both lie within 0.25 of 0.5 (a biased map's mean is 0.5 plus half
+  its mean tangent component) and signed otherwise (e.g. a nearly flat map of ``n``).
 
 The z channel (``z``)
 ---------------------
@@ -65,8 +67,9 @@ MAX_THETA_DEG = 89.0
 _COS_MAX, _SIN_MAX = np.cos(np.radians(MAX_THETA_DEG)), np.sin(np.radians(MAX_THETA_DEG))
 _SIGNED_BELOW = -0.01      # a float tangent channel below this is signed data
 _BIASED_MEAN_TOL = 0.25    # |mean(R, G) - 0.5| of biased float data
+_LENGTH_SAMPLES = 65536    # texels (at most about) whose lengths decide the encoding
 _LENGTH_TOL = 0.1          # | mean |v| - 1 | above this: far from unit length
-_CONSTANT = 1e-6           # a decoded channel whose range is below this is constant
+_CONSTANT = 1e-6           # a float channel whose range is below this is constant
 _TINY = np.finfo(np.float64).tiny
 
 
@@ -116,8 +119,14 @@ class NormalMapReport:
                 f"z {self.z}, {self.repaired} of {self.texels} texels repaired")
 
 
-def _resolve_encoding(a: np.ndarray, encoding: str, where: str) -> tuple[str, bool]:
-    """``(encoding, detected)`` of samples ``a`` (module docstring, "Encodings")."""
+def _unit_length_error(n: np.ndarray) -> float:
+    """Median of ``| |n| - 1 |`` of vectors ``n (N, 3)``."""
+    return float(np.median(np.abs(np.linalg.norm(n, axis=-1) - 1.0)))
+
+
+def _resolve_encoding(a: np.ndarray, encoding: str, z: str, where: str) -> tuple[str, bool]:
+    """``(encoding, detected)`` of samples ``a`` whose ``n_z`` is ``z`` (module docstring,
+    "Encodings")."""
     if encoding not in ENCODINGS:
         raise ValueError(f"encoding must be one of {ENCODINGS}, got {encoding!r}")
     encoding = "biased" if encoding == "offset" else encoding
@@ -130,6 +139,9 @@ def _resolve_encoding(a: np.ndarray, encoding: str, where: str) -> tuple[str, bo
     tangent = a[..., :2]
     if tangent.min() < _SIGNED_BELOW:
         return "signed", True
+    if z == "stored":
+        v = a.reshape(-1, 3)[::max(1, a.shape[0] * a.shape[1] // _LENGTH_SAMPLES)].astype(np.float64)
+        return ("signed" if _unit_length_error(v) < _unit_length_error(2.0 * v - 1.0) else "biased"), True
     mean = tangent.mean(axis=(0, 1))
     return ("biased" if np.all(np.abs(mean - 0.5) <= _BIASED_MEAN_TOL) else "signed"), True
 
@@ -149,9 +161,10 @@ def _components(a: np.ndarray, encoding: str) -> np.ndarray:
     return n
 
 
-def _placeholder_z(n: np.ndarray) -> bool:
-    """Whether the third channel of decoded components ``n`` is constant while R or G varies."""
-    return bool(np.ptp(n[..., 2]) <= _CONSTANT < max(np.ptp(n[..., 0]), np.ptp(n[..., 1])))
+def _placeholder_z(a: np.ndarray) -> bool:
+    """Whether the third channel of samples ``a (H, W, 3)`` is constant while R or G varies."""
+    tol = 0 if a.dtype.kind == "u" else _CONSTANT
+    return bool(np.ptp(a[..., 2]) <= tol < max(np.ptp(a[..., 0]), np.ptp(a[..., 1])))
 
 
 def _clamp_to_max_angle(n: np.ndarray) -> int:
@@ -205,12 +218,12 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
     a = a[..., :c]
     if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
         raise MicrofacetError(f"{where}a normal map must be finite (found NaN or inf)")
-    encoding, detected = _resolve_encoding(a, encoding, where)
-    n = _components(a, encoding)
     if z == "stored" and c < 3:
         raise MicrofacetError(f"{where}z='stored' needs a third channel, the map has {c}")
     if z == "auto":
-        z = "stored" if c == 3 and not _placeholder_z(n) else "reconstruct"
+        z = "stored" if c == 3 and not _placeholder_z(a) else "reconstruct"
+    encoding, detected = _resolve_encoding(a, encoding, z, where)
+    n = _components(a, encoding)
     if z == "stored":
         facing_away = int(np.count_nonzero(n[..., 2] <= 0))
         length = np.sqrt(np.einsum("...i,...i->...", n, n))
