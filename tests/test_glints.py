@@ -15,7 +15,7 @@ from microfacet.glints.microsurface import (FWHM_PER_SIGMA, _lobe_moments, _quad
                                             lobe_moments_reference)
 from microfacet.glints.reference import compare_histogram
 from microfacet.io import write_exr
-from microfacet.io.pngdata import write_png_data
+from microfacet.io.png import write_png_data
 from microfacet.validation import integrate_hemisphere
 
 MAPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "maps"
@@ -77,7 +77,7 @@ def test_load_slopes_errors_name_the_file(tmp_path):
         load_slopes(bad)
     with pytest.raises(MicrofacetError, match="missing.exr"):
         load_slopes(tmp_path / "missing.exr")
-    with pytest.raises(MicrofacetError, match="shape"):
+    with pytest.raises(MicrofacetError, match="2 to 4 channels.*shape"):
         load_slopes(np.zeros((4, 4)))
     with pytest.raises(ValueError, match="encoding"):
         load_slopes(np.zeros((4, 4, 3)), encoding="srgb")

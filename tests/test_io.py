@@ -8,8 +8,8 @@ import pytest
 from PIL import Image
 
 import microfacet as mf
-from microfacet.io import (atomic_path, html_figure, html_grid, html_page, read_exr, srgb_encode,
-                           to_srgb8, write_exr, write_png, write_text)
+from microfacet.io import (atomic_path, html_figure, html_grid, html_page, read_exr, read_png_data,
+                           srgb_encode, to_srgb8, write_exr, write_png, write_png_data, write_text)
 
 
 def leftovers(folder):
@@ -191,3 +191,32 @@ def test_html_escapes_text():
     assert page.startswith("<!DOCTYPE html>") and "<title>a &lt; b</title>" in page
     assert "cap &quot;q&quot; &amp; &lt;b&gt;" in page and "<b>" not in page
     assert '<img src="y.png"' in page and "α = 1" in page
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("shape", [(5, 7), (5, 7, 2), (5, 7, 3), (5, 7, 4)])
+def test_png_data_round_trips_exactly(tmp_path, shape, dtype):
+    """Gray, gray+alpha, RGB, RGBA at 8 and 16 bits, every sample value range covered."""
+    a = np.random.default_rng(3).integers(0, np.iinfo(dtype).max + 1, shape).astype(dtype)
+    a.flat[:2] = (0, np.iinfo(dtype).max)
+    path = write_png_data(tmp_path / "d.png", a)
+    back = read_png_data(path)
+    assert back.dtype == dtype and back.shape == shape
+    np.testing.assert_array_equal(back, a)
+    if len(shape) == 2 or dtype == np.uint8:       # Pillow reads these exactly (not 16-bit colour)
+        with Image.open(path) as im:
+            np.testing.assert_array_equal(np.asarray(im).astype(dtype), a)
+    assert leftovers(tmp_path) == []
+
+
+def test_png_data_reader_errors_name_the_file(tmp_path):
+    good = write_png_data(tmp_path / "g.png", np.zeros((64, 64, 3), np.uint16)).read_bytes()
+    (tmp_path / "cut.png").write_bytes(good[: len(good) // 2])
+    (tmp_path / "sig.png").write_bytes(b"GIF89a" + good[6:])
+    (tmp_path / "junk.png").write_bytes(good[:8] + b"\x00" * 40)
+    for name, message in (("cut.png", "corrupt PNG"), ("sig.png", "not a PNG file"),
+                          ("junk.png", "corrupt PNG"), ("missing.png", "no such file")):
+        with pytest.raises(mf.MicrofacetError, match=rf"{name}: .*{message}|{name}: {message}"):
+            read_png_data(tmp_path / name)
+    with pytest.raises(ValueError, match="uint8 or uint16"):
+        write_png_data(tmp_path / "f.png", np.zeros((2, 2), np.float32))

@@ -3,3 +3,7 @@
 
 class MicrofacetError(Exception):
     """A file, a parameter or an argument is unusable; the message says which and why."""
+
+
+class NormalMapWarning(UserWarning):
+    """A normal map was decoded, but some texels were repaired or the map looks inconsistent."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MicrofacetError
-from .common import finite_float, float_in, output_path
+from .common import add_normal_map_arguments, finite_float, float_in, output_path
 
 
 def add(sub) -> None:
@@ -14,7 +14,11 @@ def add(sub) -> None:
                     "differences (thesis Sec. 3.4, Listing 3.6), their five Beckmann moments E1..E5 "
                     "(Eq. 3.5-3.9) and an exactly averaged MIP pyramid, written as OUT.exr (one part "
                     "per level, mip0, mip1, ..., float32 channels E1..E5). Also writes OUT.png, the "
-                    "filtered appearance at several MIP levels. Prints the pyramid's summary.")
+                    "filtered appearance at several MIP levels. Prints the pyramid's summary. With "
+                    "--normal-map, MAP is a tangent-space normal map read by the library's one decoder "
+                    "(the same reading as 'microfacet glints'): 8/16-bit PNG or EXR, (n + 1) / 2 or n "
+                    "(--encoding), z stored or rebuilt (--z); texels facing away or beyond 89 degrees "
+                    "are clamped to 89 degrees, with a warning giving their number.")
     p.add_argument("map", metavar="MAP", help="height map (or normal map with --normal-map), PNG or EXR")
     p.add_argument("-o", "--output", metavar="OUT.exr", required=True,
                    help="output pyramid (.exr added if missing; an existing folder takes MAP's name)")
@@ -22,6 +26,7 @@ def add(sub) -> None:
                    help="height scale: x~ = W*S*(xi(i+1,j) - xi(i-1,j))/2; with --normal-map, "
                         "the normal map's slopes are multiplied by S (default 1)")
     p.add_argument("--normal-map", action="store_true", help="MAP is a tangent-space normal map, not heights")
+    add_normal_map_arguments(p)
     p.add_argument("--border", choices=("wrap", "clamp"), default="wrap",
                    help="height map borders for the central differences (default wrap)")
     base = p.add_mutually_exclusive_group()
@@ -35,7 +40,7 @@ def add(sub) -> None:
 def run(args) -> int:
     from .. import leadr
     from ..io import write_png
-    from ..leadr.files import load_height_map, load_normal_map
+    from ..leadr.files import load_height_map
     from ..leadr.preview import preview_image
     out = output_path(args.output, ".exr", args.map, side=(".png",))
     base = args.roughness
@@ -44,7 +49,8 @@ def run(args) -> int:
         base = load(args.material).to_beckmann()
     with np.errstate(over="ignore", invalid="ignore"):
         if args.normal_map:
-            pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(load_normal_map(args.map), base, args.scale))
+            pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(args.map, base, args.scale,
+                                                                    encoding=args.encoding, z=args.z))
         else:
             pyramid = leadr.bake(load_height_map(args.map), args.scale, base, border=args.border)
     if not all(np.isfinite(level).all() for level in pyramid):

@@ -61,6 +61,19 @@ def float_in(lo: float, hi: float, open_lo: bool = False):
     return parse
 
 
+def add_normal_map_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--encoding`` and ``--z`` of the normal-map decoder (:mod:`microfacet.io.normalmap`),
+    the same for every command that reads normal maps."""
+    from ..io.normalmap import ENCODINGS, Z_SOURCES
+    parser.add_argument("--encoding", choices=ENCODINGS, default="auto",
+                        help="normal map encoding: (n + 1) / 2 ('biased', alias 'offset'; 8/16-bit PNGs "
+                             "always), n itself ('signed', float EXR) or by content (default auto)")
+    parser.add_argument("--z", choices=Z_SOURCES, default="auto",
+                        help="n_z from the third channel ('stored'), rebuilt as sqrt(1 - x^2 - y^2) "
+                             "('reconstruct'), or auto: rebuilt for 2-channel maps and a constant third "
+                             "channel (default)")
+
+
 def input_name(source: str | os.PathLike) -> str:
     """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``."""
     from ..fit.outputs import material_name

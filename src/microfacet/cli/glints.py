@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from .common import PROG, Parser, finite_float, float_in, int_at_least, output_path
+from .common import PROG, Parser, add_normal_map_arguments, finite_float, float_in, int_at_least, output_path
 
 
 def add(sub) -> None:
@@ -17,8 +17,10 @@ def add(sub) -> None:
                     "noncentred Beckmann lobe per h x h texels, with slope moments E1..E5 of the "
                     "bilinearly interpolated map under Gaussian kernels (Eq. 3-6), their MIP levels "
                     "(Sec. 4.2.2) and the acceleration hierarchy (Sec. 5), written as a versioned "
-                    "OUT.npz. The map is an 8/16-bit PNG or an EXR, (n + 1) / 2 encoded (floats may "
-                    "hold n itself), 2 to 4 channels; n_z is reconstructed. "
+                    "OUT.npz. The map is an 8/16-bit PNG or an EXR, 2 to 4 channels, read by the "
+                    "library's one decoder (the same reading as 'microfacet bake --normal-map'): "
+                    "(n + 1) / 2 or n (--encoding), z stored or rebuilt (--z); texels facing away or "
+                    "beyond 89 degrees are clamped to 89 degrees, with a warning giving their number. "
                     "Second form: 'microfacet glints render OUT.npz -o IMG.png'.")
     p.add_argument("map", metavar="NORMAL_MAP", help="normal map, PNG or EXR")
     p.add_argument("-o", "--output", metavar="OUT.npz", required=True,
@@ -27,15 +29,15 @@ def add(sub) -> None:
                    help="seed spacing h in texels (default 1: one lobe per texel)")
     p.add_argument("--sigma-eps", type=float_in(0.0, 10.0, open_lo=True), default=0.01, metavar="S",
                    help="floor of the lobes' slope standard deviations, in (0, 10] (default 0.01)")
-    p.add_argument("--encoding", choices=("auto", "offset", "signed"), default="auto",
-                   help="float (EXR) maps: (n + 1) / 2 ('offset'), n ('signed') or by content (default)")
+    add_normal_map_arguments(p)
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
     from ..glints import Microsurface
     out = output_path(args.output, ".npz", args.map)
-    ms = Microsurface.from_normal_map(args.map, h=args.spacing, sigma_eps=args.sigma_eps, encoding=args.encoding)
+    ms = Microsurface.from_normal_map(args.map, h=args.spacing, sigma_eps=args.sigma_eps,
+                                      encoding=args.encoding, z=args.z)
     ms.save(out)
     alpha = np.sqrt(2.0 * (ms.lobe_moments[:, 2:4] - ms.lobe_moments[:, :2] ** 2))
     print(f"{out}: {ms.n_lobes} lobes ({ms.grid[1]} x {ms.grid[0]}) from a {ms.resolution[1]} x "

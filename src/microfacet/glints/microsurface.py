@@ -39,7 +39,6 @@ Conventions
 """
 from __future__ import annotations
 
-import os
 import zipfile
 from pathlib import Path
 
@@ -48,7 +47,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
-from ..leadr.maps import normals_to_slopes
+from ..io.normalmap import read_slopes
 from ..leadr.mip import mip_pyramid
 from ..leadr.moments import from_moments
 
@@ -63,74 +62,13 @@ _MAGIC = "microfacet.glints.Microsurface"
 
 
 # --------------------------------------------------------------------------- normal maps
-def _float_encoding(a: np.ndarray) -> str:
-    """'signed' (n stored) or 'offset' ((n + 1) / 2 stored) for a float map, by content."""
-    if np.any(a[..., :2] < -1e-6):
-        return "signed"
-    if a.shape[2] >= 3:
-        signed = np.median(np.abs(np.sum(a[..., :3] ** 2, axis=-1) - 1.0))
-        offset = np.median(np.abs(np.sum((2.0 * a[..., :3] - 1.0) ** 2, axis=-1) - 1.0))
-        return "signed" if signed < offset else "offset"
-    return "offset"
-
-
 def load_slopes(path_or_array, encoding: str = "auto", z: str = "auto") -> np.ndarray:
-    """Texel slopes ``(H, W, 2)`` float64 of a normal map (a file or an array).
-
-    Files: 8/16-bit PNG ((n + 1) / 2 encoded) or EXR (float). Arrays: ``(H, W, C)`` with
-    ``C`` = 2, 3 or 4, ``uint8``/``uint16`` ((n + 1) / 2 encoded) or float. Only the first
-    ``z``: ``"reconstruct"`` recomputes ``n_z = sqrt(1 - n_x^2 - n_y^2)`` from the first two
-    channels (2-channel maps, maps with a constant blue channel); ``"stored"`` uses the
-    third channel, slopes ``(-n_x / n_z, -n_y / n_z)`` (maps whose normals are not unit
-    length, e.g. glitterman_scratches.png, lengths 0.49-1.46); ``"auto"`` uses the stored
-    ``n_z`` when there is a third channel that varies and is positive, else reconstructs.
-    ``encoding`` for float data: ``"signed"`` (n stored),
-    ``"offset"`` ((n + 1) / 2 stored) or ``"auto"`` (by content: negative values mean
-    signed; otherwise the reading whose 3-channel normals are closer to unit length).
-    """
-    if encoding not in ("auto", "signed", "offset"):
-        raise ValueError(f"encoding must be 'auto', 'signed' or 'offset', got {encoding!r}")
-    if z not in ("auto", "reconstruct", "stored"):
-        raise ValueError(f"z must be 'auto', 'reconstruct' or 'stored', got {z!r}")
-    name = None
-    if isinstance(path_or_array, (str, os.PathLike)):
-        from ..leadr.files import _read_image
-        name = Path(path_or_array)
-        a = _read_image(name)
-    else:
-        a = np.asarray(path_or_array)
-    where = f"{name}: " if name is not None else ""
-    if a.ndim != 3 or a.shape[2] not in (2, 3, 4) or 0 in a.shape:
-        raise MicrofacetError(f"{where}a normal map must be (H, W, 2|3|4), got shape {a.shape}")
-    nc = min(a.shape[2], 3)
-    if a.dtype in (np.uint8, np.uint16):
-        n = a[..., :nc].astype(np.float64) * (2.0 / np.iinfo(a.dtype).max) - 1.0
-    elif a.dtype.kind == "f":
-        if not np.all(np.isfinite(a[..., :nc])):
-            raise MicrofacetError(f"{where}a normal map must be finite (found NaN or inf)")
-        enc = _float_encoding(a) if encoding == "auto" else encoding
-        n = a[..., :nc].astype(np.float64)
-        if enc == "offset":
-            n = 2.0 * n - 1.0
-        if z != "stored" and np.any(np.abs(n[..., :2]) > 1 + 1e-3) and not (
-                z == "auto" and nc == 3 and n[..., 2].min() > 0):
-            raise MicrofacetError(f"{where}normal components must lie in [-1, 1] "
-                                  f"({enc} encoding); is the encoding right?")
-    else:
-        raise MicrofacetError(f"{where}normal maps are uint8, uint16 or float, got {a.dtype}")
-    if z == "stored" and nc < 3:
-        raise MicrofacetError(f"{where}z='stored' needs a third channel")
-    if z == "auto":
-        z = "stored" if nc == 3 and np.ptp(n[..., 2]) > 1e-3 and n[..., 2].min() > 0 else "reconstruct"
-    if z == "reconstruct":
-        if np.any(np.abs(n[..., :2]) > 1 + 1e-3):
-            raise MicrofacetError(f"{where}normal components must lie in [-1, 1] to reconstruct n_z; "
-                                  f"is the encoding right?")
-        return normals_to_slopes(n[..., :2])
-    nz = n[..., 2]
-    if np.any(nz <= 0):
-        raise MicrofacetError(f"{where}stored n_z must be > 0 (normals above the horizon)")
-    return np.stack([-n[..., 0] / nz, -n[..., 1] / nz], -1)
+    """Texel slopes ``(H, W, 2)`` float64 of a normal map (a PNG/EXR file or an array
+    ``(H, W, 2|3|4)``), decoded by the library's one normal-map decoder
+    (:func:`microfacet.io.normalmap.read_slopes`: ``encoding`` ``"auto"``, ``"biased"``
+    (alias ``"offset"``) or ``"signed"``; ``z`` ``"auto"``, ``"stored"`` or ``"reconstruct"``;
+    per-texel repair with a warning)."""
+    return read_slopes(path_or_array, encoding, z)[0]
 
 
 def interpolate_slopes(slopes, uv) -> np.ndarray:

@@ -1,22 +1,33 @@
-"""8-bit sRGB PNG previews of linear images (Pillow).
+"""PNG files through ``imagecodecs`` (libpng): exact data images and 8-bit sRGB previews.
 
-Tone map (documented, the same everywhere): ``L' = clip(2^exposure L, 0, 1)``, i.e. an
-exposure in photographic stops followed by a hard clip at display white, then the sRGB
-transfer function (IEC 61966-2-1, ``~ gamma 2.4`` with a linear toe) and rounding to
-8 bits. Values above white saturate per channel; the EXR keeps the data.
+Data images (height and normal maps): :func:`read_png_data` returns the stored samples
+exactly (``uint8`` or ``uint16``, 8- and 16-bit gray, gray+alpha, RGB and RGBA, palette
+images expanded to RGB(A)), never colour-managed; :func:`write_png_data` writes them back
+bit for bit. (Pillow truncates 16-bit RGB(A) PNGs to 8 bits, so it is not used for data.)
+
+Previews of linear images, :func:`write_png`. Tone map (documented, the same
+everywhere): ``L' = clip(2^exposure L, 0, 1)``, i.e. an exposure in photographic stops
+followed by a hard clip at display white, then the sRGB transfer function
+(IEC 61966-2-1, ``~ gamma 2.4`` with a linear toe) and rounding to 8 bits. Values above
+white saturate per channel; the EXR keeps the data.
 """
 from __future__ import annotations
 
-import io
 import os
 from pathlib import Path
 
+import imagecodecs
 import numpy as np
-from PIL import Image
 
+from ..errors import MicrofacetError
 from .atomic import write_bytes
+from .read import read_bytes
 
-__all__ = ["tonemap", "srgb_encode", "to_srgb8", "write_png"]
+__all__ = ["tonemap", "srgb_encode", "to_srgb8", "write_png", "read_png_data", "write_png_data",
+           "PNG_MAGIC"]
+
+#: The eight-byte PNG signature (PNG spec, Sec. 5.2).
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def tonemap(linear, exposure: float = 0.0) -> np.ndarray:
@@ -53,6 +64,36 @@ def write_png(path: str | os.PathLike, linear, exposure: float = 0.0) -> Path:
         a = a[..., 0]
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] in (3, 4))) or 0 in a.shape:
         raise ValueError(f"a PNG image must be (H, W) or (H, W, 1|3|4), got shape {np.shape(linear)}")
-    buf = io.BytesIO()
-    Image.fromarray(to_srgb8(a, exposure)).save(buf, format="PNG")
-    return write_bytes(path, buf.getvalue())
+    return write_png_data(path, to_srgb8(a, exposure))
+
+
+def read_png_data(path: str | os.PathLike) -> np.ndarray:
+    """A PNG's stored samples: ``(H, W)`` for gray, ``(H, W, C)`` otherwise (``C`` = 2, 3, 4),
+    ``uint8`` or ``uint16``. Palette images are expanded to RGB(A), 1/2/4-bit gray to 8 bits.
+
+    Raises :class:`MicrofacetError` naming the file if it is missing, not a PNG or corrupt.
+    """
+    path = Path(path)
+    data = read_bytes(path, "a PNG file")
+    if not data.startswith(PNG_MAGIC):
+        raise MicrofacetError(f"{path}: not a PNG file (bad signature)")
+    try:
+        a = imagecodecs.png_decode(data)
+    except Exception as e:  # libpng errors come as PngError, ValueError, ...
+        raise MicrofacetError(f"{path}: unreadable or corrupt PNG ({' '.join(str(e).split())})") from None
+    if a.dtype not in (np.uint8, np.uint16) or a.ndim not in (2, 3) or 0 in a.shape:
+        raise MicrofacetError(f"{path}: unsupported PNG sample layout ({a.dtype}, shape {a.shape})")
+    return a
+
+
+def write_png_data(path: str | os.PathLike, image) -> Path:
+    """Write ``uint8`` or ``uint16`` samples ``(H, W)`` or ``(H, W, 1|2|3|4)`` as a PNG
+    exactly (gray, gray+alpha, RGB, RGBA; no colour management), atomically."""
+    a = np.asarray(image)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] not in (2, 3, 4)) or 0 in a.shape:
+        raise ValueError(f"a PNG image must be (H, W) or (H, W, 1|2|3|4), got shape {np.shape(image)}")
+    if a.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"PNG data must be uint8 or uint16, got {a.dtype}")
+    return write_bytes(path, imagecodecs.png_encode(np.ascontiguousarray(a), level=6))

@@ -16,8 +16,9 @@ import OpenEXR
 
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
-from ..io.exr import EXR_MAGIC, read_exr, write_exr
-from ..io.pngdata import PNG_MAGIC, read_png_data, write_png_data
+from ..io.exr import EXR_MAGIC, write_exr
+from ..io.image import read_image
+from ..io.png import write_png_data
 from ..io.read import read_bytes
 from .mip import mip_sizes
 
@@ -89,22 +90,12 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     return levels
 
 
-def _read_image(path: Path) -> np.ndarray:
-    """Samples of a PNG (``uint8``/``uint16``) or EXR (float64), chosen by content."""
-    head = read_bytes(path, "an image", 8)
-    if head.startswith(PNG_MAGIC):
-        return read_png_data(path)
-    if head.startswith(EXR_MAGIC):
-        return read_exr(path)
-    raise MicrofacetError(f"{path}: not a PNG or OpenEXR image")
-
-
 def load_height_map(path: str | os.PathLike) -> np.ndarray:
     """Heights ``(H, W)`` float64 of a PNG (8/16-bit gray or RGB(A), scaled to ``[0, 1]``)
     or EXR (``Y``, or the mean of ``R, G, B``) image. Colour PNGs use the mean of R, G, B
     (equal in a gray image); alpha is ignored."""
     path = Path(path)
-    a = _read_image(path)
+    a = read_image(path)
     if a.dtype in (np.uint8, np.uint16):
         a = a.astype(np.float64) / np.iinfo(a.dtype).max
     if a.ndim == 3:
@@ -116,14 +107,13 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
 
 
 def load_normal_map(path: str | os.PathLike) -> np.ndarray:
-    """A normal map as stored: ``(H, W, 3|4)`` ``uint8``/``uint16`` from a PNG, float64
-    (normal components) from an EXR; decode with :func:`microfacet.leadr.decode_normal_map`."""
+    """A normal map as stored: ``(H, W, 2|3|4)`` ``uint8``/``uint16`` from a PNG, float64
+    from an EXR; decode with :func:`microfacet.leadr.decode_normal_map` (or read and decode
+    in one step with :func:`microfacet.io.normalmap.read_normals`)."""
     path = Path(path)
-    a = _read_image(path)
-    if a.ndim != 3 or a.shape[2] not in (3, 4):
-        raise MicrofacetError(f"{path}: a normal map needs R, G, B channels, got shape {a.shape}")
-    if a.dtype.kind == "f" and np.any(np.abs(a[..., :2]) > 1 + 1e-3):
-        raise MicrofacetError(f"{path}: an EXR normal map must hold unit normals (components in [-1, 1])")
+    a = read_image(path)
+    if a.ndim != 3 or a.shape[2] not in (2, 3, 4):
+        raise MicrofacetError(f"{path}: a normal map needs 2 to 4 channels (H, W, R G[ B[ A]]), got shape {a.shape}")
     return a
 
 

@@ -8,10 +8,10 @@ uv square are central differences in texel units scaled by the resolution,
 
 with the map wrapped (``border="wrap"``, tileable maps) or clamped to its edge
 (``"clamp"``, where the outer texels see a one-sided half difference). A normal is
-``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)``. Normal maps store ``(n + 1) / 2`` per channel
-in 8 or 16 bits (rounded), or ``n`` itself as floats; on reading, ``z`` is recomputed as
-``sqrt(1 - x^2 - y^2)`` from the two tangent channels, so the blue channel's encoding
-(``n_z`` in Listing 3.6, ``(n_z + 1) / 2`` in most tools) does not matter.
+``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)``. Normal maps are written as ``(n + 1) / 2`` per
+channel in 8 or 16 bits (rounded), or ``n`` itself as floats (:func:`encode_normal_map`), and
+read by the library's one decoder, :mod:`microfacet.io.normalmap` (encodings by content or
+given, ``z`` stored or rebuilt, per-texel repair of unusable texels).
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from ..distributions import Beckmann
+from ..io.normalmap import normals_to_slopes, read_slopes
 from .mip import mip_pyramid
 from .moments import convolve, to_moments
 
@@ -27,7 +28,6 @@ __all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode
            "bake", "bake_reference", "BORDERS"]
 
 BORDERS = ("wrap", "clamp")
-_MIN_NZ = 1e-4          # decoded normals are kept above the horizon (slopes <= 1e4)
 
 
 def _check_height(height) -> np.ndarray:
@@ -66,15 +66,6 @@ def slopes_to_normals(slopes) -> np.ndarray:
     return np.stack([-s[..., 0] * inv, -s[..., 1] * inv, inv], axis=-1)
 
 
-def normals_to_slopes(normals) -> np.ndarray:
-    """Slopes ``(-n_x / n_z, -n_y / n_z)`` of normals ``(..., 3)``, ``n_z`` recomputed from
-    ``n_x, n_y`` (unit length) and kept ``>= 1e-4``."""
-    n = np.asarray(normals, dtype=np.float64)
-    x, y = n[..., 0], n[..., 1]
-    z = np.sqrt(np.maximum(1.0 - x * x - y * y, _MIN_NZ**2))
-    return np.stack([-x / z, -y / z], axis=-1)
-
-
 def encode_normal_map(slopes, dtype=np.uint8) -> np.ndarray:
     """Normal map ``(H, W, 3)`` of slopes: ``round((n + 1) / 2 * max)`` for ``uint8`` and
     ``uint16``, ``n`` itself for float dtypes."""
@@ -88,23 +79,12 @@ def encode_normal_map(slopes, dtype=np.uint8) -> np.ndarray:
     return np.rint((0.5 * n + 0.5) * top).astype(dtype)
 
 
-def decode_normal_map(nmap) -> np.ndarray:
-    """Slopes ``(H, W, 2)`` of a normal map (``uint8``, ``uint16`` or float, 3 or 4
-    channels; the inverse of :func:`encode_normal_map`, Listing 3.7)."""
-    a = np.asarray(nmap)
-    if a.ndim != 3 or a.shape[2] not in (3, 4) or 0 in a.shape:
-        raise ValueError(f"a normal map must be (H, W, 3|4), got shape {a.shape}")
-    if a.dtype in (np.uint8, np.uint16):
-        n = a[..., :2].astype(np.float64) * (2.0 / np.iinfo(a.dtype).max) - 1.0
-    elif a.dtype.kind == "f":
-        n = a[..., :2].astype(np.float64)
-        if not np.all(np.isfinite(n)):
-            raise ValueError("a normal map must be finite (found NaN or inf)")
-        if np.any(np.abs(n) > 1 + 1e-3):
-            raise ValueError("a float normal map must hold unit normals (components in [-1, 1])")
-    else:
-        raise ValueError(f"normal maps are uint8, uint16 or float, got {a.dtype}")
-    return normals_to_slopes(n)
+def decode_normal_map(nmap, encoding: str = "auto", z: str = "auto") -> np.ndarray:
+    """Slopes ``(H, W, 2)`` float64 of a normal map, an array ``(H, W, 2|3|4)`` (``uint8``,
+    ``uint16`` or float) or a PNG/EXR file: the inverse of :func:`encode_normal_map`
+    (Listing 3.7), through :func:`microfacet.io.normalmap.read_slopes` (``encoding``, ``z``,
+    repairs and warnings as documented there)."""
+    return read_slopes(nmap, encoding, z)[0]
 
 
 def slopes_to_moments(slopes, base=None) -> np.ndarray:
@@ -137,13 +117,15 @@ def base_moments(roughness) -> np.ndarray | None:
     return to_moments(ax, ay)
 
 
-def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0) -> np.ndarray:
-    """Level-0 LEAN moments ``(H, W, 5)`` float32 of a normal map with a base roughness
+def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0, *, encoding: str = "auto",
+                          z: str = "auto") -> np.ndarray:
+    """Level-0 LEAN moments ``(H, W, 5)`` float32 of a normal map (array or file, decoded by
+    :func:`decode_normal_map` with ``encoding`` and ``z``) with a base roughness
     (Listing 3.7; ``roughness`` as in :func:`base_moments`). ``scale`` multiplies the
     map's slopes before the base lobe is added (height scaling ``beta``, Sec. 3.4)."""
     if not np.isfinite(scale):
         raise ValueError(f"scale must be finite, got {scale!r}")
-    slopes = decode_normal_map(nmap) * float(scale)
+    slopes = decode_normal_map(nmap, encoding, z) * float(scale)
     return slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
 
 
