@@ -59,7 +59,7 @@ def bilinear_moments(Z, mean_slope=(0.0, 0.0)) -> np.ndarray:
                      exy + mx * ey + my * ex + mx * my])
 
 
-@numba.njit(cache=True)
+@numba.njit
 def _height(Z, x, y):
     H, W = Z.shape
     i, j = math.floor(x), math.floor(y)
@@ -72,7 +72,7 @@ def _height(Z, x, y):
     return h, hx, hy
 
 
-@numba.njit(cache=True)
+@numba.njit
 def _visible(Z, zmax, mx, my, dx, dy, s, x0, y0, h0):
     """1 if the ray from ``(x0, y0)`` at relative height ``h0`` above the plane, horizontal
     direction ``(dx, dy)`` and rise ``s`` per unit length, escapes the bilinear surface."""
@@ -120,7 +120,7 @@ def _visible(Z, zmax, mx, my, dx, dy, s, x0, y0, h0):
     return 1
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(parallel=True)
 def _trace_all(Z, zmax, mx, my, k, xs, ys, w_out, v_out):
     kx, ky, kz = k[0], k[1], k[2]
     r = math.sqrt(kx * kx + ky * ky)

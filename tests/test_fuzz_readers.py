@@ -35,7 +35,7 @@ from microfacet.errors import MicrofacetError  # noqa: E402
 from microfacet.glints import Microsurface  # noqa: E402
 from microfacet.glints.figures import scratched_normal_map  # noqa: E402
 from microfacet.io.exr import write_exr  # noqa: E402
-from microfacet.io.pngdata import write_png_data  # noqa: E402
+from microfacet.io.png import write_png_data  # noqa: E402
 from microfacet.leadr import files as leadr_files  # noqa: E402
 from microfacet.measured import merl, utia  # noqa: E402
 from microfacet.measured.tensor_file import write_tensor_file  # noqa: E402
@@ -240,12 +240,12 @@ def test_fuzz_png_height_map(folder):
 
 
 def test_png16_with_a_short_ihdr_chunk_is_a_clear_error(folder):
-    """Found by fuzzing: a 16-bit colour PNG whose IHDR length field is not 13 raised struct.error."""
+    """Found by fuzzing (hand-written codec, since replaced): a PNG whose IHDR length field is not 13 is a clear error."""
     data = bytearray(_png_bytes(folder, np.zeros((2, 2, 3), np.uint16)))
     data[8:12] = struct.pack(">I", 12)
     path = folder / "short_ihdr.png"
     path.write_bytes(bytes(data))
-    with pytest.raises(MicrofacetError, match="short_ihdr.png: corrupt PNG .IHDR chunk of 12 bytes"):
+    with pytest.raises(MicrofacetError, match="short_ihdr.png"):
         leadr_files.load_height_map(path)
 
 
