@@ -9,7 +9,7 @@ OUT    ?= demo-output
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,mitsuba]"
+	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask]"
 	touch $@
 
 setup: $(VENV)/.installed

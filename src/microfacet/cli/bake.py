@@ -1,10 +1,12 @@
 """``microfacet bake MAP -o OUT.exr``: LEAN/LEADR moment MIP pyramids (thesis Ch. 3, 5)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..errors import MicrofacetError
-from .common import finite_float, float_in, output_path
+from .common import add_batch_options, finite_float, float_in, output_path, run_batch
 
 
 def add(sub) -> None:
@@ -15,9 +17,11 @@ def add(sub) -> None:
                     "(Eq. 3.5-3.9) and an exactly averaged MIP pyramid, written as OUT.exr (one part "
                     "per level, mip0, mip1, ..., float32 channels E1..E5). Also writes OUT.png, the "
                     "filtered appearance at several MIP levels. Prints the pyramid's summary.")
-    p.add_argument("map", metavar="MAP", help="height map (or normal map with --normal-map), PNG or EXR")
+    p.add_argument("map", metavar="MAP", help="height map (or normal map with --normal-map), PNG or EXR; "
+                                             "or a folder of them")
     p.add_argument("-o", "--output", metavar="OUT.exr", required=True,
-                   help="output pyramid (.exr added if missing; an existing folder takes MAP's name)")
+                   help="output pyramid (.exr added if missing; an existing folder takes MAP's name); "
+                        "the output folder when MAP is a folder")
     p.add_argument("--scale", type=finite_float, default=1.0, metavar="S",
                    help="height scale: x~ = W*S*(xi(i+1,j) - xi(i-1,j))/2; with --normal-map, "
                         "the normal map's slopes are multiplied by S (default 1)")
@@ -29,10 +33,13 @@ def add(sub) -> None:
                       help="isotropic Beckmann base roughness merged into every texel (Listing 5.1)")
     base.add_argument("--material", metavar="FIT.npz",
                       help="a fit from 'microfacet fit': its Beckmann moments are the base roughness")
+    add_batch_options(p)
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
+    if Path(args.map).is_dir():
+        return run_batch(args, "bake", args.map)
     from .. import leadr
     from ..io import write_png
     from ..leadr.files import load_height_map, load_normal_map

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
-from .common import PROG, Parser, finite_float, float_in, int_at_least, output_path
+from .common import (PROG, Parser, add_batch_options, finite_float, float_in, int_at_least, output_path,
+                     run_batch)
 
 
 def add(sub) -> None:
@@ -20,19 +22,23 @@ def add(sub) -> None:
                     "OUT.npz. The map is an 8/16-bit PNG or an EXR, (n + 1) / 2 encoded (floats may "
                     "hold n itself), 2 to 4 channels; n_z is reconstructed. "
                     "Second form: 'microfacet glints render OUT.npz -o IMG.png'.")
-    p.add_argument("map", metavar="NORMAL_MAP", help="normal map, PNG or EXR")
+    p.add_argument("map", metavar="NORMAL_MAP", help="normal map, PNG or EXR; or a folder of them")
     p.add_argument("-o", "--output", metavar="OUT.npz", required=True,
-                   help="output microsurface (.npz added if missing; an existing folder takes the map's name)")
+                   help="output microsurface (.npz added if missing; an existing folder takes the map's name); "
+                        "the output folder when NORMAL_MAP is a folder")
     p.add_argument("--spacing", type=float_in(0.0, 1e4, open_lo=True), default=1.0, metavar="H",
                    help="seed spacing h in texels (default 1: one lobe per texel)")
     p.add_argument("--sigma-eps", type=float_in(0.0, 10.0, open_lo=True), default=0.01, metavar="S",
                    help="floor of the lobes' slope standard deviations, in (0, 10] (default 0.01)")
     p.add_argument("--encoding", choices=("auto", "offset", "signed"), default="auto",
                    help="float (EXR) maps: (n + 1) / 2 ('offset'), n ('signed') or by content (default)")
+    add_batch_options(p)
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
+    if Path(args.map).is_dir():
+        return run_batch(args, "glints", args.map)
     from ..glints import Microsurface
     out = output_path(args.output, ".npz", args.map)
     ms = Microsurface.from_normal_map(args.map, h=args.spacing, sigma_eps=args.sigma_eps, encoding=args.encoding)
