@@ -44,8 +44,9 @@ def _visible(path: Path, root: Path) -> bool:
 def _folder_files(task, folder: Path, out_dir: Path, recursive: bool) -> list[Path]:
     found = folder.rglob("*") if recursive else folder.iterdir()
     out_dir = out_dir.resolve()
+    inside = folder.resolve() in out_dir.parents          # outputs of an earlier run are no inputs
     return sorted(p for p in found if p.is_file() and _visible(p, folder) and task.accepts(p)
-                  and out_dir not in p.resolve().parents)
+                  and not (inside and out_dir in p.resolve().parents))
 
 
 def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir: str | os.PathLike,
