@@ -238,8 +238,10 @@ def test_plan_names_outputs_and_refuses_to_overwrite_inputs(tmp_path):
     assert len(plan(task, tmp_path, tmp_path / "out", recursive=True)) == 3     # outputs are not inputs
     with pytest.raises(mf.MicrofacetError, match="overwrite an input"):
         plan(task, tmp_path / "sub", tmp_path / "sub")      # the preview sub/h.png
+    (tmp_path / "texts").mkdir()
+    (tmp_path / "texts" / "notes.txt").write_text("not a map")
     with pytest.raises(mf.MicrofacetError, match="no bake inputs"):
-        plan(task, tmp_path / "out" / "sub", tmp_path / "x")
+        plan(task, tmp_path / "texts", tmp_path / "x")
     with pytest.raises(ValueError, match="unknown option"):
         mf.batch.run("bake", tmp_path, tmp_path / "o", spacing=2)
 
