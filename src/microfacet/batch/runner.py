@@ -53,9 +53,12 @@ def execute(task: Task, item: Item) -> dict:
             "peak_mb": round(memory.peak_bytes() / 2**20, 1), **figures}
 
 
-def _ignore_sigint() -> None:
-    """Local workers leave Ctrl-C to the parent, which stops the batch between files."""
+def _init_worker(threads: int) -> None:
+    """A local worker leaves Ctrl-C to the parent (which stops the batch between files) and
+    runs compiled kernels on its share of the CPUs."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import numba
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
 
 def _run_serial(task, items, report) -> None:
@@ -74,7 +77,8 @@ def _run_local(task, items, jobs: int, report) -> None:
     context = multiprocessing.get_context("forkserver" if "forkserver" in methods else None)
     if "forkserver" in methods:
         context.set_forkserver_preload([__name__])
-    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_init_worker,
+                               initargs=(memory.cpu_count() // jobs,))
     futures = {pool.submit(execute, task, item): item for item in items}
     pending = set(futures)
     try:

@@ -21,14 +21,17 @@ from ..errors import MicrofacetError
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
-#: Peak resident memory of a worker process: a fixed part (interpreter, NumPy, SciPy,
-#: OpenEXR, Numba) plus bytes per input pixel, fitted by least squares to peaks measured
-#: at 512^2 .. 4096^2 (``python benchmarks/bench_batch.py --memory``).
-WORKER_BYTES = 250e6
-BAKE_BYTES_PER_PIXEL = 90.0
-GLINTS_BYTES_PER_PIXEL = 330.0
-#: Peak of one fit (a MERL file: 90 x 90 x 180 RGB float64 and the fit-error grid).
-FIT_PEAK_BYTES = 700e6
+#: Peak resident memory of a task in a worker process: a fixed part (interpreter, NumPy,
+#: SciPy, OpenEXR, Numba, matplotlib) plus bytes per input pixel, the least-squares line
+#: through peaks measured in fresh processes (``python benchmarks/bench_batch.py
+#: --memory``: bake 239/257/404/1036 MB at 512^2/1024^2/2048^2/4096^2 -> 51.4 B/px +
+#: 211 MB; glints 192/249/474 MB at 256^2/512^2/1024^2 -> 300 B/px + 174 MB), rounded up.
+WORKER_BYTES = 220e6
+BAKE_BYTES_PER_PIXEL = 55.0
+GLINTS_BYTES_PER_PIXEL = 310.0
+#: Peak of one fit, fixed-size inputs (measured: 315 MB for MERL nickel, 216 MB for an
+#: RGL file, isotropic N = 90), with a margin.
+FIT_PEAK_BYTES = 400e6
 
 
 def image_pixels(path: str | os.PathLike) -> int:
