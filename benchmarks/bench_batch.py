@@ -8,7 +8,8 @@ Each mode bakes every map into its own fresh folder with :func:`microfacet.batch
 (EXR pyramid + PNG preview per map, written atomically, summary.csv/md); the time is the
 whole call (wall clock, ``time.perf_counter``), including the local pool's start-up, but
 not the LocalCluster's (printed apart). It prints files/s, the speed-up over the serial
-run, the mean task time and peak memory from the summary rows, the I/O volume per file,
+run, the mean task wall-clock and CPU time and the peak memory from the summary rows
+(the same CPU time per task in every mode: no parallel overhead inside the tasks), the I/O volume per file,
 and the load average before and after (the machine may be shared: compare the ratios
 of one run, not absolute figures across runs).
 
@@ -88,6 +89,7 @@ def throughput(args, work: Path) -> dict:
             assert all(r["status"] == "ok" for r in rows), [r for r in rows if r["status"] != "ok"][:3]
             results[name] = {"seconds": round(seconds, 2), "files_per_s": round(args.n / seconds, 3),
                              "task_s_mean": round(statistics.mean(r["seconds"] for r in rows), 4),
+                             "task_cpu_s_mean": round(statistics.mean(r["cpu_seconds"] for r in rows), 4),
                              "peak_mb_max": max(r["peak_mb"] for r in rows)}
     finally:
         if client is not None:

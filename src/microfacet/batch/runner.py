@@ -36,12 +36,13 @@ FILE_ERRORS = (MicrofacetError, ValueError, OSError, ArithmeticError, MemoryErro
 def execute(task: Task, item: Item) -> dict:
     """Run ``task`` on one file (in whichever process or machine): remove what an earlier
     killed attempt left, reset the peak memory, run, and return the row's status
-    (``ok`` or ``error: reason``), ``seconds``, ``peak_mb`` and figures. A failed file
+    (``ok`` or ``error: reason``), ``seconds`` (wall clock), ``cpu_seconds`` (this
+    process's CPU time: all its threads), ``peak_mb`` and figures. A failed file
     leaves none of its outputs."""
     remove_partials(task, [item])
     item.out.parent.mkdir(parents=True, exist_ok=True)
     memory.reset_peak()
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         figures, status = task(item.source, item.out), "ok"
     except FILE_ERRORS as e:
@@ -50,6 +51,7 @@ def execute(task: Task, item: Item) -> dict:
         for out in task.outputs(item.out):
             out.unlink(missing_ok=True)
     return {"status": status, "seconds": round(time.perf_counter() - t0, 4),
+            "cpu_seconds": round(time.process_time() - cpu0, 4),
             "peak_mb": round(memory.peak_bytes() / 2**20, 1), **figures}
 
 
@@ -132,8 +134,9 @@ def _run_dask(task, items, scheduler, report, progress: bool) -> None:
 
 
 def summary_columns(task: Task) -> tuple[str, ...]:
-    """Columns of a batch summary: ``file``, ``status``, ``seconds``, ``peak_mb`` and the task's figures."""
-    return ("file", "status", "seconds", "peak_mb", *task.columns)
+    """Columns of a batch summary: ``file``, ``status``, ``seconds``, ``cpu_seconds``,
+    ``peak_mb`` and the task's figures."""
+    return ("file", "status", "seconds", "cpu_seconds", "peak_mb", *task.columns)
 
 
 def format_summary_csv(task: Task, rows: Sequence[dict]) -> str:
@@ -222,7 +225,7 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
         if not force and up_to_date(task, item):
             old = previous.get(item.rel, {})
             rows[item.rel] = {**{k: old.get(k, "") for k in task.columns}, "status": "skipped",
-                              "seconds": "", "peak_mb": ""}
+                              "seconds": "", "cpu_seconds": "", "peak_mb": ""}
         else:
             todo.append(item)
     progress = sys.stderr.isatty() if progress is None else progress
