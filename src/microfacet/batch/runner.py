@@ -98,7 +98,8 @@ def _run_local(task, items, jobs: int, report) -> None:
             if f.done() and not f.cancelled() and f.exception() is None:
                 report(futures[f], f.result())
         raise
-    pool.shutdown(wait=True)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _run_dask(task, items, scheduler, report, progress: bool) -> None:
