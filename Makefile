@@ -9,7 +9,7 @@ OUT    ?= demo-output
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,mitsuba]"
+	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask]"
 	touch $@
 
 # llvm_ad_rgb (Mitsuba plugins) needs a system libLLVM >= 16: installed where apt and root

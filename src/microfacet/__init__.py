@@ -10,7 +10,8 @@ from .errors import MicrofacetError
 from . import fit  # noqa: E402  (after the core it builds on)
 from . import leadr  # noqa: E402
 from . import glints  # noqa: E402
+from . import batch  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError",
-           "SlopeDistribution", "fit", "fresnel", "geometry", "glints", "leadr", "measured"]
+           "SlopeDistribution", "batch", "fit", "fresnel", "geometry", "glints", "leadr", "measured"]

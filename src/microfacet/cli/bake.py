@@ -1,11 +1,9 @@
 """``microfacet bake MAP -o OUT.exr``: LEAN/LEADR moment MIP pyramids (thesis Ch. 3, 5)."""
 from __future__ import annotations
 
-import numpy as np
+from pathlib import Path
 
-from ..errors import MicrofacetError
-from .common import add_normal_map_arguments, finite_float, float_in, output_path
-
+from .common import add_batch_options, add_normal_map_arguments, finite_float, float_in, output_path, run_batch
 
 def add(sub) -> None:
     p = sub.add_parser(
@@ -19,9 +17,11 @@ def add(sub) -> None:
                     "(the same reading as 'microfacet glints'): 8/16-bit PNG or EXR, (n + 1) / 2 or n "
                     "(--encoding), z stored or rebuilt (--z); texels facing away or beyond 89 degrees "
                     "are clamped to 89 degrees, with a warning giving their number.")
-    p.add_argument("map", metavar="MAP", help="height map (or normal map with --normal-map), PNG or EXR")
+    p.add_argument("map", metavar="MAP", help="height map (or normal map with --normal-map), PNG or EXR; "
+                                             "or a folder of them")
     p.add_argument("-o", "--output", metavar="OUT.exr", required=True,
-                   help="output pyramid (.exr added if missing; an existing folder takes MAP's name)")
+                   help="output pyramid (.exr added if missing; an existing folder takes MAP's name); "
+                        "the output folder when MAP is a folder")
     p.add_argument("--scale", type=finite_float, default=1.0, metavar="S",
                    help="height scale: x~ = W*S*(xi(i+1,j) - xi(i-1,j))/2; with --normal-map, "
                         "the normal map's slopes are multiplied by S (default 1)")
@@ -34,35 +34,18 @@ def add(sub) -> None:
                       help="isotropic Beckmann base roughness merged into every texel (Listing 5.1)")
     base.add_argument("--material", metavar="FIT.npz",
                       help="a fit from 'microfacet fit': its Beckmann moments are the base roughness")
+    add_batch_options(p)
     p.set_defaults(run=run)
 
-
 def run(args) -> int:
-    from .. import leadr
-    from ..io import write_png
-    from ..leadr.files import load_height_map
-    from ..leadr.preview import preview_image
+    if Path(args.map).is_dir():
+        return run_batch(args, "bake", args.map)
+    from ..batch.tasks import bake_file
     out = output_path(args.output, ".exr", args.map, side=(".png",))
-    base = args.roughness
-    if args.material is not None:
-        from ..fit import load
-        base = load(args.material).to_beckmann()
-    with np.errstate(over="ignore", invalid="ignore"):
-        if args.normal_map:
-            pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(args.map, base, args.scale,
-                                                                    encoding=args.encoding, z=args.z))
-        else:
-            pyramid = leadr.bake(load_height_map(args.map), args.scale, base, border=args.border)
-    if not all(np.isfinite(level).all() for level in pyramid):
-        raise MicrofacetError(f"{args.map}: the slope moments overflow float32 (--scale {args.scale:g}"
-                              f"{'' if args.roughness is None else f', --roughness {args.roughness:g}'}"
-                              "); use a smaller scale or roughness")
-    leadr.write_pyramid(out, pyramid)
-    png = write_png(out.with_suffix(".png"), preview_image(pyramid))
-    top = leadr.from_moments(pyramid[-1][0, 0])
-    h, w = pyramid[0].shape[:2]
-    print(f"{out}: {len(pyramid)} MIP levels from {w} x {h}; top level: alpha_x {float(top.alpha_x):.4g}, "
-          f"alpha_y {float(top.alpha_y):.4g}, rho {float(top.rho):.4g}, mean slope "
-          f"({float(top.xn):.4g}, {float(top.yn):.4g})")
-    print(png)
+    r = bake_file(Path(args.map), out, scale=args.scale, normal_map=args.normal_map, border=args.border,
+                  roughness=args.roughness, material=args.material, encoding=args.encoding, z=args.z)
+    print(f"{out}: {r['levels']} MIP levels from {r['width']} x {r['height']}; top level: alpha_x "
+          f"{r['alpha_x']:.4g}, alpha_y {r['alpha_y']:.4g}, rho {r['rho']:.4g}, mean slope "
+          f"({r['mean_x']:.4g}, {r['mean_y']:.4g})")
+    print(out.with_suffix(".png"))
     return 0

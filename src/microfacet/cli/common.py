@@ -6,6 +6,8 @@ with the command's suffix (``.npz``, ``.exr``, ``.png``, ``.md``) is used as it 
 without a suffix gets it appended; an existing folder receives ``<input name><suffix>``.
 Any other suffix is an error, and so is an output (or a side output such as ``OUT.png``)
 that is the input itself. Outputs are checked, and their folder created, before the work.
+A folder input (``bake``, ``glints``) is a batch: ``-o`` is the output folder, whose tree
+mirrors the input's (:mod:`microfacet.batch`).
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import argparse
 import os
 from pathlib import Path
 
+from ..batch.files import input_name
 from ..errors import MicrofacetError
 
 PROG = "microfacet"
@@ -74,13 +77,6 @@ def add_normal_map_arguments(parser: argparse.ArgumentParser) -> None:
                              "channel (default)")
 
 
-def input_name(source: str | os.PathLike) -> str:
-    """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``."""
-    from ..fit.outputs import material_name
-    name = material_name(source)
-    return name.rsplit(".", 1)[0] if Path(name).suffix.lower() in (".png", ".exr", ".npz") else name
-
-
 def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLike | None = None,
                 side: tuple[str, ...] = (), default_name: str = "") -> Path:
     """The main output of a command under the output naming rule (module docstring).
@@ -107,3 +103,42 @@ def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLik
         raise MicrofacetError(f"{out.parent}: is not a folder")
     out.parent.mkdir(parents=True, exist_ok=True)
     return out
+
+
+def add_batch_options(parser) -> None:
+    """The options of a command's batch mode (a folder input): ``--recursive``, ``--jobs``,
+    ``--scheduler``, ``--force``."""
+    g = parser.add_argument_group(
+        "folders", "a folder input runs every file in it (outputs mirror its tree in the -o folder; "
+                   "summary.csv and summary.md list each file; exit 1 if one failed)")
+    g.add_argument("--recursive", action="store_true", help="also the files of its subfolders")
+    g.add_argument("-j", "--jobs", type=int_at_least(1), metavar="N",
+                   help="local worker processes (default: as many as fit in the available memory, "
+                        "at most the CPU count)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a Dask cluster, e.g. tcp://10.0.0.1:8786 (needs microfacet[dask] and "
+                        "the files on a shared file system)")
+    g.add_argument("--force", action="store_true",
+                   help="redo files whose outputs are newer than their inputs (else skipped, so a "
+                        "stopped batch resumes; use it after changing options)")
+
+
+def run_batch(args, task: str, folder: str) -> int:
+    """Run ``task`` on ``folder`` into the ``-o`` folder with the options of ``args`` that the
+    task takes; print the summary table; exit status 1 if a file failed."""
+    import sys
+
+    from ..batch import format_summary_markdown, get_task, run
+    task = get_task(task)
+    task = task.with_options(**{k: getattr(args, k) for k in task.option_names() if hasattr(args, k)})
+    if args.jobs is not None and args.scheduler is not None:
+        raise MicrofacetError("--jobs and --scheduler exclude each other")
+    rows = run(task, folder, args.output, jobs=args.jobs, scheduler=args.scheduler, force=args.force,
+               recursive=args.recursive, progress=sys.stderr.isatty())
+    print(format_summary_markdown(task, rows), end="")
+    failed = [r for r in rows if r["status"] != "ok" and r["status"] != "skipped"]
+    if failed:
+        print(f"{PROG}: error: {len(failed)} of {len(rows)} files failed (see "
+              f"{Path(args.output) / 'summary.md'})", file=sys.stderr)
+        return EXIT_ERROR
+    return 0

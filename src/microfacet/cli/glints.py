@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-import numpy as np
-
-from .common import PROG, Parser, add_normal_map_arguments, finite_float, float_in, int_at_least, output_path
-
+from .common import (PROG, Parser, add_batch_options, add_normal_map_arguments, finite_float, float_in,
+                     int_at_least, output_path, run_batch)
 
 def add(sub) -> None:
     p = sub.add_parser(
@@ -22,29 +21,28 @@ def add(sub) -> None:
                     "(n + 1) / 2 or n (--encoding), z stored or rebuilt (--z); texels facing away or "
                     "beyond 89 degrees are clamped to 89 degrees, with a warning giving their number. "
                     "Second form: 'microfacet glints render OUT.npz -o IMG.png'.")
-    p.add_argument("map", metavar="NORMAL_MAP", help="normal map, PNG or EXR")
+    p.add_argument("map", metavar="NORMAL_MAP", help="normal map, PNG or EXR; or a folder of them")
     p.add_argument("-o", "--output", metavar="OUT.npz", required=True,
-                   help="output microsurface (.npz added if missing; an existing folder takes the map's name)")
+                   help="output microsurface (.npz added if missing; an existing folder takes the map's name); "
+                        "the output folder when NORMAL_MAP is a folder")
     p.add_argument("--spacing", type=float_in(0.0, 1e4, open_lo=True), default=1.0, metavar="H",
                    help="seed spacing h in texels (default 1: one lobe per texel)")
     p.add_argument("--sigma-eps", type=float_in(0.0, 10.0, open_lo=True), default=0.01, metavar="S",
                    help="floor of the lobes' slope standard deviations, in (0, 10] (default 0.01)")
     add_normal_map_arguments(p)
+    add_batch_options(p)
     p.set_defaults(run=run)
 
-
 def run(args) -> int:
-    from ..glints import Microsurface
+    if Path(args.map).is_dir():
+        return run_batch(args, "glints", args.map)
+    from ..batch.tasks import glints_file
     out = output_path(args.output, ".npz", args.map)
-    ms = Microsurface.from_normal_map(args.map, h=args.spacing, sigma_eps=args.sigma_eps,
-                                      encoding=args.encoding, z=args.z)
-    ms.save(out)
-    alpha = np.sqrt(2.0 * (ms.lobe_moments[:, 2:4] - ms.lobe_moments[:, :2] ** 2))
-    print(f"{out}: {ms.n_lobes} lobes ({ms.grid[1]} x {ms.grid[0]}) from a {ms.resolution[1]} x "
-          f"{ms.resolution[0]} map, {len(ms.mip)} MIP levels; lobe alpha median "
-          f"{float(np.median(alpha)):.4g}, max {float(alpha.max()):.4g}")
+    r = glints_file(Path(args.map), out, spacing=args.spacing, sigma_eps=args.sigma_eps,
+                    encoding=args.encoding, z=args.z)
+    print(f"{out}: {r['lobes']} lobes from a {r['width']} x {r['height']} map, {r['levels']} MIP levels; "
+          f"lobe alpha median {r['alpha_median']:.4g}, max {r['alpha_max']:.4g}")
     return 0
-
 
 def add_render(sub) -> None:
     p = sub.add_parser("render", help="render a microsurface built by 'microfacet glints'")
@@ -64,7 +62,6 @@ def add_render(sub) -> None:
                    help="MIP-approximated patch masking (Sec. 4.2.2) instead of the exact one")
     p.set_defaults(run=run_render)
 
-
 def run_render(args) -> int:
     """A plane with the microsurface under a point light, each pixel shaded by its
     footprint's P-BRDF (Chermain et al. 2019, Eq. 7)."""
@@ -81,7 +78,6 @@ def run_render(args) -> int:
     print(f"{png}: {img.shape[1]} x {img.shape[0]} plane, {'approximate' if args.approx else 'exact'} "
           f"P-BRDF, {seconds:.2f} s")
     return 0
-
 
 def render_parser() -> argparse.ArgumentParser:
     """Parser of the second form ``microfacet glints render ...``."""

@@ -1,0 +1,191 @@
+"""Pure per-file tasks of a batch: ``bake`` (LEAN/LEADR moment pyramid), ``glints`` (glint
+microsurface) and ``fit`` (measured BRDF fit).
+
+A task reads one input file and writes its outputs (a main output and side outputs with
+the same stem), each atomically (:mod:`microfacet.io.atomic`); it returns the figures of
+its summary row. It has no other effect, so it can run in any process or on any machine
+that sees the files, any number of times: the outputs are the same bytes every time.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import inspect
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MicrofacetError
+
+__all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
+
+#: Peak resident memory of a task in a worker process: a fixed part (interpreter, NumPy,
+#: SciPy, OpenEXR, Numba, matplotlib) plus bytes per input pixel, the least-squares line
+#: through peaks measured in fresh processes (``python benchmarks/bench_batch.py
+#: --memory``: bake 239/257/404/1036 MB at 512^2/1024^2/2048^2/4096^2 -> 51.4 B/px +
+#: 211 MB; glints 192/249/474 MB at 256^2/512^2/1024^2 -> 300 B/px + 174 MB), rounded up.
+WORKER_BYTES = 220e6
+BAKE_BYTES_PER_PIXEL = 55.0
+GLINTS_BYTES_PER_PIXEL = 310.0
+#: Peak of one fit, fixed-size inputs (measured: 315 MB for MERL nickel, 216 MB for an
+#: RGL file, isotropic N = 90), with a margin.
+FIT_PEAK_BYTES = 400e6
+
+
+def image_pixels(path: str | os.PathLike) -> int:
+    """Pixels of a PNG (its IHDR chunk) or EXR (its header), without decoding the image;
+    for another or an unreadable file, its size in bytes (an upper bound for a PNG)."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(24)
+        if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+            return int.from_bytes(head[16:20], "big") * int.from_bytes(head[20:24], "big")
+        if head[:4] == b"\x76\x2f\x31\x01":
+            import OpenEXR
+            x0, x1 = np.asarray(OpenEXR.File(str(path), header_only=True).header()["dataWindow"])
+            return int(np.prod(x1 - x0 + 1))
+        return path.stat().st_size
+    except Exception:       # the task itself reports unreadable files
+        return 0
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """A per-file task with its options.
+
+    ``function(source, out, **options) -> dict`` writes ``out`` (suffix ``suffixes[0]``)
+    and its side outputs ``out.with_suffix(s)`` for ``s`` in ``suffixes[1:]`` and returns
+    the figures named by ``columns``. ``inputs`` are the input suffixes it takes from a
+    folder (``()``: every file). ``peak(source)`` estimates its peak memory in bytes.
+    """
+    name: str
+    function: Callable[..., dict]
+    suffixes: tuple[str, ...]
+    inputs: tuple[str, ...]
+    columns: tuple[str, ...]
+    peak: Callable[[Path], float]
+    options: tuple[tuple[str, object], ...] = ()
+
+    def with_options(self, **options) -> "Task":
+        """This task with ``options`` (keyword arguments of its function) set."""
+        known = [p for p in inspect.signature(self.function).parameters][2:]
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            raise ValueError(f"{self.name}: unknown option(s) {', '.join(unknown)} (known: {', '.join(known)})")
+        return dataclasses.replace(self, options=tuple(sorted({**dict(self.options), **options}.items())))
+
+    def option_names(self) -> list[str]:
+        """Keyword arguments of the task's function."""
+        return list(inspect.signature(self.function).parameters)[2:]
+
+    def accepts(self, path: Path) -> bool:
+        """Whether a folder's file ``path`` is an input of this task."""
+        return not self.inputs or path.suffix.lower() in self.inputs
+
+    def outputs(self, out: Path) -> list[Path]:
+        """The files written for the main output ``out``."""
+        return [out, *(out.with_suffix(s) for s in self.suffixes[1:])]
+
+    def __call__(self, source: Path, out: Path) -> dict:
+        return self.function(Path(source), Path(out), **dict(self.options))
+
+
+# ---------------------------------------------------------------------------- bake
+def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = False, border: str = "wrap",
+              roughness: float | None = None, material: str | os.PathLike | None = None,
+              encoding: str = "auto", z: str = "auto") -> dict:
+    """``microfacet bake``: a height (or normal) map's LEAN/LEADR moment pyramid
+    (E1..E5, thesis Eq. 3.5-3.9, merged with a base roughness by Listing 5.1) as
+    ``out`` (.exr) and its filtered-appearance preview ``out.png``. Returns the size, the
+    number of MIP levels and the top level's Beckmann lobe."""
+    from .. import leadr
+    from ..io import write_png
+    from ..leadr.files import load_height_map
+    from ..leadr.preview import preview_image
+    base = roughness
+    if material is not None:
+        from ..fit import load
+        base = load(material).to_beckmann()
+    with np.errstate(over="ignore", invalid="ignore"):
+        if normal_map:
+            pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
+        else:
+            pyramid = leadr.bake(load_height_map(source), scale, base, border=border)
+    if not all(np.isfinite(level).all() for level in pyramid):
+        raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
+                              f"{'' if roughness is None else f', roughness {roughness:g}'}); "
+                              "use a smaller scale or roughness")
+    leadr.write_pyramid(out, pyramid)
+    write_png(out.with_suffix(".png"), preview_image(pyramid))
+    top = leadr.from_moments(pyramid[-1][0, 0])
+    h, w = pyramid[0].shape[:2]
+    return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(top.alpha_x),
+            "alpha_y": float(top.alpha_y), "rho": float(top.rho), "mean_x": float(top.xn),
+            "mean_y": float(top.yn)}
+
+
+# -------------------------------------------------------------------------- glints
+def glints_file(source: Path, out: Path, spacing: float = 1.0, sigma_eps: float = 0.01,
+                encoding: str = "auto", z: str = "auto") -> dict:
+    """``microfacet glints``: a normal map's Beckmann lobe mixture and hierarchy
+    (Chermain et al. 2019, Eq. 3-6, Sec. 4.2.2, 5) as ``out`` (.npz). Returns the lobe
+    count, map size, MIP levels and the lobes' median and largest roughness."""
+    from ..glints import Microsurface
+    ms = Microsurface.from_normal_map(source, h=spacing, sigma_eps=sigma_eps, encoding=encoding, z=z)
+    ms.save(out)
+    alpha = np.sqrt(2.0 * (ms.lobe_moments[:, 2:4] - ms.lobe_moments[:, :2] ** 2))
+    return {"width": ms.resolution[1], "height": ms.resolution[0], "lobes": ms.n_lobes,
+            "levels": len(ms.mip), "alpha_median": float(np.median(alpha)), "alpha_max": float(alpha.max())}
+
+
+# ----------------------------------------------------------------------------- fit
+FIT_COLUMNS = ("format", "fit_seconds", "error_tabulated", "error_ggx", "error_beckmann",
+               "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho")
+
+
+def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith") -> dict:
+    """``microfacet fit``: a measured BRDF's power-iteration fit (thesis Ch. 4) as ``out``
+    (.npz) with ``out.json`` and ``out.png`` (:func:`microfacet.fit.outputs.fit_material`).
+    Returns the format, fit time, fit errors and the GGX and Beckmann parameters."""
+    from ..fit.outputs import fit_material, summary_row
+    from ..measured import load
+    from .files import input_name
+    brdf = load(source)
+    name = input_name(source)
+    summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name)
+    row = summary_row(name, source, getattr(brdf, "format", ""), summary)
+    row["fit_seconds"] = row["seconds"]
+    return {k: row[k] for k in FIT_COLUMNS}
+
+
+def map_peak(source: Path, bytes_per_pixel: float) -> float:
+    """Estimated peak memory of a map task: :data:`WORKER_BYTES` + ``bytes_per_pixel`` x pixels."""
+    return WORKER_BYTES + bytes_per_pixel * image_pixels(source)
+
+
+def fit_peak(source: Path) -> float:
+    """Estimated peak memory of a fit: :data:`FIT_PEAK_BYTES` (inputs have a fixed size)."""
+    return FIT_PEAK_BYTES
+
+
+TASKS = {
+    "bake": Task("bake", bake_file, (".exr", ".png"), (".png", ".exr"),
+                 ("width", "height", "levels", "alpha_x", "alpha_y", "rho", "mean_x", "mean_y"),
+                 functools.partial(map_peak, bytes_per_pixel=BAKE_BYTES_PER_PIXEL)),
+    "glints": Task("glints", glints_file, (".npz",), (".png", ".exr"),
+                   ("width", "height", "lobes", "levels", "alpha_median", "alpha_max"),
+                   functools.partial(map_peak, bytes_per_pixel=GLINTS_BYTES_PER_PIXEL)),
+    "fit": Task("fit", fit_file, (".npz", ".json", ".png"), (), FIT_COLUMNS, fit_peak),
+}
+
+
+def get_task(task: "str | Task", **options) -> Task:
+    """The task named ``task`` (``bake``, ``glints``, ``fit``) or ``task`` itself, with ``options``."""
+    if isinstance(task, str):
+        if task not in TASKS:
+            raise ValueError(f"unknown batch task {task!r} (known: {', '.join(TASKS)})")
+        task = TASKS[task]
+    return task.with_options(**options) if options else task
