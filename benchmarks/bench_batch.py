@@ -35,7 +35,7 @@ import numpy as np
 
 import microfacet as mf
 from microfacet.batch import tasks
-from microfacet.io.pngdata import write_png_data
+from microfacet.io.png import write_png_data
 
 
 def height_map(path: Path, n: int, k: int) -> Path:

@@ -18,8 +18,10 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
+
+from threadpoolctl import threadpool_limits
 
 from ..errors import MicrofacetError
 from ..io import write_text
@@ -44,7 +46,8 @@ def execute(task: Task, item: Item) -> dict:
     memory.reset_peak()
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        figures, status = task(item.source, item.out), "ok"
+        with threadpool_limits(limits=1, user_api="blas"):     # the same sums in every mode
+            figures, status = task(item.source, item.out), "ok"
     except FILE_ERRORS as e:
         reason = " ".join(str(e).split()) or type(e).__name__
         figures, status = {}, f"error: {reason.removeprefix(f'{item.source}: ')}"
