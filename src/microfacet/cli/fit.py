@@ -6,15 +6,16 @@ from pathlib import Path
 
 from .common import EXIT_ERROR, PROG, int_at_least, output_path
 
-#: Choices of --method, --diffuse and --fresnel (the same as microfacet.fit.outputs and
-#: microfacet.fit.analytic; spelled here so that --help imports neither).
+#: Choices of --gaf, --method, --diffuse and --fresnel (the same as microfacet.brdf.GAFS,
+#: microfacet.fit.outputs and microfacet.fit.analytic, tested; spelled here so that --help
+#: imports none of them).
+GAFS = ("smith", "vgroove", "normal_map")
 METHODS = ("least-squares", "moments")
 DIFFUSE = ("auto", "on", "off")
 FRESNELS = ("table", "schlick", "conductor")
 
 
 def add(sub) -> None:
-    from ..brdf import GAFS
     p = sub.add_parser(
         "fit", help="fit measured BRDFs (tabulated fit by power iterations, least-squares GGX and Beckmann)",
         description="Fit a measured BRDF (MERL .binary(.gz), RGL .bsdf, UTIA .bin; recognised by "
