@@ -46,3 +46,4 @@ def test_cli_constants_match_modules():
     assert set(cli_fit.FRESNELS) == set(analytic.FRESNELS)
     assert tuple(m.replace("-", "_") for m in cli_fit.METHODS) == outputs.METHODS
     assert cli_fit.DIFFUSE == outputs.DIFFUSE
+    assert cli_fit.ALBEDO_WEIGHT == analytic.ALBEDO_WEIGHT

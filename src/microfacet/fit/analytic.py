@@ -317,7 +317,7 @@ class _Problem:
                 return R @ (np.append(x, p[2]) if self.diffuse else x) - z
             p0 = np.clip(np.append(_CONDUCTOR_STARTS[best], kd[best])[:len(lo)], lo, hi)
             p = least_squares(residual, p0, bounds=(lo, hi), x_scale=[0.3, 0.3, 0.1][:len(lo)],
-                              xtol=1e-10, ftol=1e-12).x
+                              xtol=1e-8, ftol=1e-10, max_nfev=40).x
             total += float(np.sum(residual(p) ** 2) + k[c] - z @ z)
             params[c] = p
         return max(total, 0.0), params
