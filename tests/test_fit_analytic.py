@@ -1,4 +1,7 @@
 """mf.fit.fit_analytic (least-squares analytic fits) and SumBRDF (mixture sampling)."""
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -7,6 +10,9 @@ from microfacet.fit.analytic import SumBRDF, fit_analytic
 from microfacet.metrics import directional_albedo, fit_error
 
 GOLD = mf.fresnel.Conductor.metal("Au")
+#: The shared data: $MICROFACET_DATA, else ../shared/data beside the repository.
+DATA = Path(os.environ.get("MICROFACET_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"))
+SHARED = sorted(DATA.glob("merl/*.binary*")) + sorted(DATA.glob("rgl/*.bsdf"))
 FAST = dict(n=14, n_uniform=2**10)
 
 
@@ -137,3 +143,23 @@ def test_fits_of_one_material_share_its_data():
     fit_analytic(truth, "ggx", start=truth, **FAST)
     fit_analytic(truth, "beckmann", diffuse=True, start=truth, **FAST)
     assert len(analytic._DATA_CACHE[truth]) == 1
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHARED, reason="../shared/data (or $MICROFACET_DATA) not present")
+@pytest.mark.parametrize("path", SHARED, ids=lambda p: p.name.split(".")[0])
+def test_shared_materials_keep_their_albedo(path):
+    """Issue 10's energy goal at the default albedo weight: the better of the GGX and
+    Beckmann fits with a diffuse base has its directional albedo within 10 % of the data's
+    at 0/30/60/75 deg (RGB), a white furnace <= 1 and no NaN (the grid-error goal is
+    reported in experiments/results/fit_measured.md, not met on every material)."""
+    from microfacet.fit.outputs import objective
+    from microfacet.metrics import albedo_ratios, uniform_error, white_furnace
+    m = mf.measured.load(path)
+    start = mf.fit.fit(m, resolution=90)
+    fits = {model: fit_analytic(m, model, diffuse=True, start=start) for model in ("ggx", "beckmann")}
+    grid, uniform, albedo = fit_error(m, fits), uniform_error(m, fits), albedo_ratios(m, fits)
+    best = min(fits, key=lambda k: objective(grid[k], uniform[k], albedo[k], 4.0))
+    assert np.all(np.isfinite(albedo[best])) and np.all(np.abs(albedo[best] - 1.0) <= 0.10)
+    assert white_furnace(fits[best]) <= 1.0 + 1e-3
+    assert grid[best] < fit_error(m, start.to_ggx())["fit"]
