@@ -123,7 +123,7 @@ def test_node_space_objective_equals_the_direct_sum(fresnel, diffuse):
 def test_albedo_term_trades_shape_for_energy():
     """Two lobes fitted by one: the albedo term brings the albedo ratios towards 1, at the
     cost of a larger pair error; weight 0 is the shape-only fit."""
-    from microfacet.metrics import albedo_ratios, uniform_error
+    from microfacet.metrics import albedo_ratios
     truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.08), fresnel=mf.fresnel.Schlick(0.5)),
                     mf.MicrofacetBRDF(mf.GGX(alpha=0.6), fresnel=mf.fresnel.Schlick(0.3)))
     start = mf.MicrofacetBRDF(mf.GGX(alpha=0.1))
