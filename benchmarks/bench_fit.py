@@ -13,9 +13,18 @@ isotropic ``alpha = 0.3``, anisotropic ``alpha_x = 0.2, alpha_y = 0.4, rho = 0.3
 ``eval`` runs the Numba kernel. Reported: best and median of ``--repeats`` runs after one
 warm-up run (``time.perf_counter``), and a per-stage breakdown of one isotropic fit.
 
+Least squares (:func:`microfacet.fit.fit_analytic`, goal <= 1 s per material): the four
+fits ``microfacet fit`` makes per material (GGX and Beckmann, with and without a
+Lambertian base; Fresnel table, default albedo weight), started from the tabulated fit,
+on the analytic copper GGX above and on every shared material (``--data``, default
+``../shared/data``; skipped when absent). Reported per material: the first fit (which
+also evaluates the data on the fitted pairs, cached for the others), each of the other
+three, and the total; best of ``--ls-repeats`` runs (the data cache cleared between
+runs), plus the conductor Fresnel fit of GGX with a diffuse base.
+
 Usage::
 
-    python benchmarks/bench_fit.py [--repeats 7] [--aniso-repeats 3]
+    python benchmarks/bench_fit.py [--repeats 7] [--aniso-repeats 3] [--ls-repeats 3] [--data DIR]
 """
 from __future__ import annotations
 
@@ -24,6 +33,7 @@ import os
 import platform
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -32,6 +42,9 @@ from microfacet.distributions.tabulated import TabulatedIsotropic, theta_grid
 from microfacet.fit import extract
 
 GOALS = {"isotropic N=90": 0.1, "anisotropic 90x90": 2.0}
+LS_GOAL = 1.0
+#: The least-squares fits of ``microfacet fit`` (model, diffuse).
+LS_FITS = (("ggx", False), ("ggx", True), ("beckmann", False), ("beckmann", True))
 
 
 def _times(fn, repeats: int) -> list[float]:
@@ -66,10 +79,30 @@ def _stages(brdf, n: int = 90) -> dict:
     return t
 
 
+def _least_squares_times(brdf, repeats: int) -> dict:
+    """Seconds of each fit of :data:`LS_FITS` and of a conductor GGX + diffuse fit (best of
+    ``repeats``; the per-material data cache cleared before each run)."""
+    from microfacet.fit import analytic
+    start = mf.fit.fit(brdf, 90)
+    best = {}
+    for _ in range(repeats):
+        analytic._DATA_CACHE.clear()
+        times = {}
+        for model, diffuse in LS_FITS + (("ggx conductor", True),):
+            t0 = time.perf_counter()
+            mf.fit.fit_analytic(brdf, model.split()[0], diffuse=diffuse, start=start,
+                                fresnel="conductor" if "conductor" in model else "table")
+            times[f"{model}{' + diffuse' if diffuse else ''}"] = time.perf_counter() - t0
+        best = {k: min(v, best.get(k, np.inf)) for k, v in times.items()}
+    return best
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--aniso-repeats", type=int, default=3)
+    p.add_argument("--ls-repeats", type=int, default=3)
+    p.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[1] / ".." / "shared" / "data")
     args = p.parse_args(argv)
     cu = mf.fresnel.Conductor.metal("Cu")
     iso = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=cu)
@@ -87,6 +120,17 @@ def main(argv=None) -> int:
     print("\nOne isotropic N=90 fit by stage:\n\n| stage | time (s) |\n|---|---|")
     for stage, s in _stages(iso).items():
         print(f"| {stage} | {s:.4f} |")
+    materials = {"analytic GGX 0.3, Cu": iso}
+    for path in sorted((args.data / "merl").glob("*.binary*")) + sorted((args.data / "rgl").glob("*.bsdf")):
+        materials[path.name.split(".")[0]] = mf.measured.load(path)
+    print(f"\nLeast-squares fits (s, best of {args.ls_repeats}; goal <= {LS_GOAL} s per fit; the first "
+          "fit of a material also evaluates its data):\n")
+    rows = {name: _least_squares_times(brdf, args.ls_repeats) for name, brdf in materials.items()}
+    names = list(next(iter(rows.values())))
+    print("| material | " + " | ".join(names) + " | total of the 4 table fits |\n|---|" + "---|" * (len(names) + 1))
+    for material, t in rows.items():
+        total = sum(v for k, v in t.items() if "conductor" not in k)
+        print(f"| {material} | " + " | ".join(f"{t[k]:.3f}" for k in names) + f" | {total:.3f} |")
     return 0
 
 

@@ -12,8 +12,11 @@ anisotropic fit of the RGL files) and reports
   32^3 grid of MERL coordinates, **grazing pairs with cos theta_i or cos theta_o < 0.1
   excluded**, and for MERL the pairs touching unmeasured samples);
 * the least-squares fits of :func:`microfacet.fit.fit_analytic` (GGX and Beckmann, with
-  and without a Lambertian base, Fresnel table; started from the tabulated fit) and
-  their fit time;
+  and without a Lambertian base, Fresnel table, the default albedo weight; started from
+  the tabulated fit) and their fit time;
+* the trade-off of the albedo weight: for each weight of ``--weights``, the least-squares
+  fit of least objective (:func:`microfacet.fit.outputs.objective`) among the four, its
+  grid error (and its ratio to the moment-converted GGX), uniform error and albedo ratio;
 * for every fit the error over uniformly distributed pairs
   (:func:`microfacet.metrics.uniform_error`) and the directional-albedo ratio fit/data at
   0/30/60/75 deg (:func:`microfacet.metrics.albedo_ratios`: the ratio farthest from 1 over
@@ -26,7 +29,7 @@ anisotropic fit of the RGL files) and reports
 Usage::
 
     python experiments/fit_measured.py [--data ../shared/data] [--resolution 90]
-                                       [--anisotropic] [--out table.md]
+                                       [--anisotropic] [--weights 0,1,2,4,8] [--out table.md]
 """
 from __future__ import annotations
 
@@ -39,7 +42,8 @@ from pathlib import Path
 import numpy as np
 
 import microfacet as mf
-from microfacet.fit.outputs import material_name
+from microfacet.fit.analytic import ALBEDO_WEIGHT
+from microfacet.fit.outputs import material_name, objective
 from microfacet.io import write_text
 from microfacet.metrics import (albedo_ratios, describe_albedo, describe_fit_error, describe_uniform_error,
                                 fit_error, ndf_error, uniform_error, white_furnace)
@@ -73,7 +77,7 @@ def _lobe(brdf):
     return brdf.brdfs[0] if hasattr(brdf, "brdfs") else brdf
 
 
-def fit_one(path: Path, resolution: int, anisotropic: bool) -> dict:
+def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
     m = mf.measured.load(path)
     t0 = time.perf_counter()
     fit = mf.fit.fit(m, resolution=resolution, anisotropic=anisotropic)
@@ -84,12 +88,23 @@ def fit_one(path: Path, resolution: int, anisotropic: bool) -> dict:
         t0 = time.perf_counter()
         fits[name] = mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, start=fit)
         ls_seconds[name] = time.perf_counter() - t0
-    errors, uniform = fit_error(m, fits), uniform_error(m, fits)
-    best = min(LEAST_SQUARES, key=lambda k: errors[k] ** 2 + uniform[k] ** 2)
+    swept = {(w, name): mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, start=fit,
+                                            albedo_weight=w)
+             for w in weights if w != ALBEDO_WEIGHT for name, (model, diffuse) in LEAST_SQUARES.items()}
+    swept.update({(ALBEDO_WEIGHT, name): fits[name] for name in LEAST_SQUARES if ALBEDO_WEIGHT in weights})
+    keys = {f"w{w:g} {name}": b for (w, name), b in swept.items()}
+    all_fits = {**fits, **keys}
+    errors, uniform, albedo = fit_error(m, all_fits), uniform_error(m, all_fits), albedo_ratios(m, all_fits)
+    best = min(LEAST_SQUARES, key=lambda k: objective(errors[k], uniform[k], albedo[k], ALBEDO_WEIGHT))
+    tradeoff = {}
+    for w in weights:
+        k = min((f"w{w:g} {name}" for name in LEAST_SQUARES),
+                key=lambda k: objective(errors[k], uniform[k], albedo[k], w))
+        tradeoff[w] = (k.split(" ", 1)[1], errors[k], errors[k] / errors["ggx"], uniform[k], _worst(albedo[k]))
     row = {"material": material_name(path), "format": m.format,
            "mode": "aniso" if anisotropic else "iso", "seconds": seconds, "ls_seconds": ls_seconds,
-           "errors": errors, "uniform": uniform, "best": best,
-           "albedo": {k: _worst(albedo_ratios(m, b)) for k, b in fits.items()},
+           "errors": errors, "uniform": uniform, "best": best, "tradeoff": tradeoff,
+           "albedo": {k: _worst(albedo[k]) for k in fits},
            "furnace": {k: white_furnace(b) for k, b in fits.items()},
            "alpha": {k: _alpha(_lobe(b)) for k, b in fits.items() if k != "tabulated"},
            "kd": {k: float(b.brdfs[1].reflectance @ [0.2126, 0.7152, 0.0722])
@@ -104,8 +119,9 @@ def format_tables(rows: list[dict], resolution: int) -> str:
     heads = ["tabulated", "GGX (moments)", "Beckmann (moments)", *LEAST_SQUARES]
     lines = [f"Fits at resolution {resolution} ({platform.processor() or platform.machine()}, "
              f"Python {platform.python_version()}, NumPy {np.__version__}); least-squares fits "
-             "(LS) by `mf.fit.fit_analytic(m, model, diffuse=..., start=fit)` (Fresnel table), "
-             "`+d`: with a Lambertian base. Best: the LS fit of least grid² + uniform² error.", "",
+             f"(LS) by `mf.fit.fit_analytic(m, model, diffuse=..., start=fit)` (Fresnel table, albedo weight "
+             f"{ALBEDO_WEIGHT:g}), `+d`: with a Lambertian base. Best: the LS fit of least objective "
+             "(grid² + uniform² + weight² · mean (albedo ratio − 1)²).", "",
              "Grid error (`fit_error`) / uniform-pairs error (`uniform_error`):", "",
              "| material | format | fit | " + " | ".join(heads) + " | best LS / GGX moments |",
              "|---|---|---|" + "---|" * (len(heads) + 1)]
@@ -127,6 +143,17 @@ def format_tables(rows: list[dict], resolution: int) -> str:
         cells = [r["alpha"][k] + (f", kd {r['kd'][k]:.3f}" if k in r["kd"] else "") for k in names[1:]]
         times = f"{r['seconds']:.2f}; " + ", ".join(f"{t:.2f}" for t in r["ls_seconds"].values())
         lines.append(f"| {r['material']} | {r['mode']} | " + " | ".join(cells) + f" | {times} |")
+    sweep = [r for r in rows if r["tradeoff"]]
+    if sweep:
+        weights = list(sweep[0]["tradeoff"])
+        lines += ["", "Albedo weight trade-off: for each weight, the LS fit of least objective at that weight "
+                  "(its name), grid error (× the GGX moment conversion's), uniform error and albedo ratio "
+                  "farthest from 1:", "",
+                  "| material | fit | " + " | ".join(f"weight {w:g}" for w in weights) + " |",
+                  "|---|---|" + "---|" * len(weights)]
+        lines += [f"| {r['material']} | {r['mode']} | " + " | ".join(
+            f"{t[0]}: {t[1]:.4f} ({t[2]:.2f}×) / {t[3]:.4f} / {t[4]:.3f}" for t in r["tradeoff"].values()) + " |"
+            for r in sweep]
     lines += ["", f"Grid error: {describe_fit_error()}.", f"Uniform error: {describe_uniform_error()}.",
               f"Albedo: {describe_albedo()}.", ""]
     ndf_rows = [r for r in rows if "ndf" in r]
@@ -146,6 +173,8 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=ROOT / ".." / "shared" / "data")
     ap.add_argument("--resolution", type=int, default=90)
     ap.add_argument("--anisotropic", action="store_true", help="also fit the RGL files anisotropically")
+    ap.add_argument("--weights", default="0,1,2,4,8",
+                    help="albedo weights of the trade-off table, comma-separated ('' for none)")
     ap.add_argument("--out", type=Path, default=ROOT / "experiments" / "results" / "fit_measured.md",
                     help="write the Markdown tables here (atomically; default experiments/results/"
                          "fit_measured.md)")
@@ -159,7 +188,7 @@ def main(argv=None) -> int:
     rows = []
     for path, aniso in jobs:
         print(f"fitting {path.name} ({'anisotropic' if aniso else 'isotropic'}) ...", file=sys.stderr, flush=True)
-        rows.append(fit_one(path, args.resolution, aniso))
+        rows.append(fit_one(path, args.resolution, aniso, [float(w) for w in args.weights.split(",") if w]))
     text = format_tables(rows, args.resolution)
     print(text)
     if args.out:

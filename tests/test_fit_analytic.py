@@ -1,4 +1,7 @@
 """mf.fit.fit_analytic (least-squares analytic fits) and SumBRDF (mixture sampling)."""
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -7,6 +10,9 @@ from microfacet.fit.analytic import SumBRDF, fit_analytic
 from microfacet.metrics import directional_albedo, fit_error
 
 GOLD = mf.fresnel.Conductor.metal("Au")
+#: The shared data: $MICROFACET_DATA, else ../shared/data beside the repository.
+DATA = Path(os.environ.get("MICROFACET_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"))
+SHARED = sorted(DATA.glob("merl/*.binary*")) + sorted(DATA.glob("rgl/*.bsdf"))
 FAST = dict(n=14, n_uniform=2**10)
 
 
@@ -88,3 +94,72 @@ def test_sum_brdf_sampling_is_unbiased_and_consistent():
     np.testing.assert_allclose(mc, directional_albedo(s, (np.degrees(0.6),))[0], rtol=1e-2)
     with pytest.raises(ValueError, match="weights"):
         SumBRDF(mf.Lambertian(0.5), weights=(-1.0,))
+
+
+@pytest.mark.parametrize("fresnel, diffuse", [("table", True), ("schlick", False), ("conductor", True)])
+def test_node_space_objective_equals_the_direct_sum(fresnel, diffuse):
+    """The objective accumulated in Fresnel-node space equals the weighted sums computed
+    directly from the fitted BRDF on the same pairs and albedo nodes (exact for the table,
+    within the piecewise-linear Fresnel approximation otherwise)."""
+    from microfacet.fit import analytic
+    from microfacet.metrics import ALBEDO_VIEWS_DEG
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.25), fresnel=GOLD), mf.Lambertian((0.1, 0.2, 0.3)))
+    data = analytic._Data(truth, 10, 2**9, (24, 12))
+    problem = analytic._Problem(data, "ggx", diffuse, False, fresnel, gaf="smith", shadowing=True,
+                                mean_slope=np.zeros(2), albedo_weight=2.0)
+    q = np.array([np.log(0.2)])
+    e = problem.error(q)
+    fitted = problem.brdf(q)
+    f = fitted.eval_cos(data.wi, data.wo)
+    ref = truth.eval_cos(data.wi[:data.m], data.wo[:data.m])
+    pairs = np.sum(data.w[:, None] * (f[:data.m] - ref) ** 2)
+    view = data.albedo_index[: len(data.w_albedo)] // len(analytic.FRESNEL_NODES)     # view * nodes + j
+    albedo = np.stack([np.bincount(view, data.w_albedo * f[data.m:, c], minlength=len(ALBEDO_VIEWS_DEG))
+                       for c in range(3)], axis=-1)
+    direct = pairs + 4.0 * np.mean((albedo / data.albedo - 1.0) ** 2)
+    assert e == pytest.approx(direct, rel=1e-9 if fresnel == "table" else 2e-3)
+
+
+def test_albedo_term_trades_shape_for_energy():
+    """Two lobes fitted by one: the albedo term brings the albedo ratios towards 1, at the
+    cost of a larger pair error; weight 0 is the shape-only fit."""
+    from microfacet.metrics import albedo_ratios
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.08), fresnel=mf.fresnel.Schlick(0.5)),
+                    mf.MicrofacetBRDF(mf.GGX(alpha=0.6), fresnel=mf.fresnel.Schlick(0.3)))
+    start = mf.MicrofacetBRDF(mf.GGX(alpha=0.1))
+    fits = {w: fit_analytic(truth, "ggx", start=start, albedo_weight=w, **FAST) for w in (0.0, 10.0)}
+    worst = {w: np.max(np.abs(albedo_ratios(truth, f) - 1.0)) for w, f in fits.items()}
+    grid = fit_error(truth, fits, n=12)
+    assert worst[10.0] < 0.5 * worst[0.0]
+    assert grid[0.0] < grid[10.0]
+    with pytest.raises(ValueError, match="albedo_weight"):
+        fit_analytic(truth, "ggx", start=start, albedo_weight=-1.0, **FAST)
+
+
+def test_fits_of_one_material_share_its_data():
+    from microfacet.fit import analytic
+    truth = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=GOLD)
+    analytic._DATA_CACHE.pop(truth, None)
+    fit_analytic(truth, "ggx", start=truth, **FAST)
+    fit_analytic(truth, "beckmann", diffuse=True, start=truth, **FAST)
+    assert len(analytic._DATA_CACHE[truth]) == 1
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHARED, reason="../shared/data (or $MICROFACET_DATA) not present")
+@pytest.mark.parametrize("path", SHARED, ids=lambda p: p.name.split(".")[0])
+def test_shared_materials_keep_their_albedo(path):
+    """Issue 10's energy goal at the default albedo weight: the better of the GGX and
+    Beckmann fits with a diffuse base has its directional albedo within 10 % of the data's
+    at 0/30/60/75 deg (RGB), a white furnace <= 1 and no NaN (the grid-error goal is
+    reported in experiments/results/fit_measured.md, not met on every material)."""
+    from microfacet.fit.outputs import objective
+    from microfacet.metrics import albedo_ratios, uniform_error, white_furnace
+    m = mf.measured.load(path)
+    start = mf.fit.fit(m, resolution=90)
+    fits = {model: fit_analytic(m, model, diffuse=True, start=start) for model in ("ggx", "beckmann")}
+    grid, uniform, albedo = fit_error(m, fits), uniform_error(m, fits), albedo_ratios(m, fits)
+    best = min(fits, key=lambda k: objective(grid[k], uniform[k], albedo[k], 4.0))
+    assert np.all(np.isfinite(albedo[best])) and np.all(np.abs(albedo[best] - 1.0) <= 0.10)
+    assert white_furnace(fits[best]) <= 1.0 + 1e-3
+    assert grid[best] < fit_error(m, start.to_ggx())["fit"]

@@ -13,7 +13,7 @@ from PIL import Image
 
 import microfacet as mf
 from microfacet.cli import main
-from microfacet.fit.outputs import analytic_from_json
+from microfacet.fit.outputs import analytic_from_json, objective
 from microfacet.metrics import fit_error
 from microfacet.geometry import hd_to_io, spherical_to_cartesian
 from microfacet.measured import merl
@@ -71,9 +71,25 @@ def test_fit_writes_npz_json_png(single):
         assert ratios.shape == (4, 3) and np.all(np.abs(ratios - 1.0) < 0.5)
     assert np.allclose(summary["errors"]["albedo_ratio"]["ggx"], 1.0, atol=0.01)
     assert 0.9 < summary["errors"]["white_furnace"]["ggx_least_squares"] <= 1.0 + 2e-3
+    assert summary["albedo_weight"] == 4.0
+    errors = summary["errors"]                  # the kept fit of each family has the least objective
+    for family in ("ggx", "beckmann"):
+        values = {name: objective(errors[f"{name}_least_squares"], errors["uniform"][f"{name}_least_squares"],
+                                  errors["albedo_ratio"][f"{name}_least_squares"], 4.0)
+                  for name in (family, f"{family}_diffuse")}
+        assert summary["selected"][family] == min(values, key=values.get) + "_least_squares"
     with Image.open(npz.with_suffix(".png")) as im:
         assert im.format == "PNG" and im.size[0] >= 600
     assert not [p for p in npz.parent.iterdir() if p.name.startswith(".") or p.name.endswith(".tmp")]
+
+
+def test_fit_albedo_weight_option(inputs, tmp_path):
+    out = tmp_path / "w0.npz"
+    assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(out), "--resolution", RESOLUTION,
+                 "--albedo-weight", "0", "--diffuse", "off"]) == 0
+    summary = json.loads(out.with_suffix(".json").read_text())
+    assert summary["albedo_weight"] == 0.0 and summary["ggx"]["alpha_x"] == pytest.approx(ALPHA, rel=1e-3)
+    assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(out), "--albedo-weight", "-1"]) == 2
 
 
 def test_fit_round_trips_through_load(single):

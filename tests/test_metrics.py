@@ -1,4 +1,6 @@
 """microfacet.metrics: fit errors over MERL-grid direction pairs and NDF differences."""
+import os
+
 import numpy as np
 import pytest
 
@@ -11,7 +13,8 @@ from microfacet.metrics import (GRAZING_COS, albedo_ratios, directional_albedo, 
                                 measurement_directions, ndf_error, uniform_directions, uniform_error,
                                 white_furnace)
 
-DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+#: The shared data: $MICROFACET_DATA, else ../shared/data beside the repository.
+DATA = Path(os.environ.get("MICROFACET_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"))
 
 GOLD = mf.MicrofacetBRDF(mf.GGX(alpha=0.15), fresnel=mf.fresnel.Conductor.metal("Au"))
 
@@ -108,7 +111,7 @@ def test_uniform_error_is_the_scale_error_and_stable_across_seeds():
     assert e0["beckmann"] == pytest.approx(e1["beckmann"], rel=0.01)
 
 
-@pytest.mark.skipif(not (DATA / "rgl").is_dir(), reason="../shared/data not present")
+@pytest.mark.skipif(not (DATA / "rgl").is_dir(), reason="../shared/data (or $MICROFACET_DATA) not present")
 def test_uniform_error_is_stable_to_one_percent_on_measured_data():
     m = mf.measured.load(DATA / "rgl" / "cc_ibiza_sunset_rgb.bsdf")
     fit = mf.MicrofacetBRDF(mf.GGX(alpha=0.1), fresnel=mf.fresnel.Schlick(0.15))
@@ -146,3 +149,11 @@ def test_white_furnace_is_at_most_one_for_microfacet_lobes():
     assert white_furnace(mf.Lambertian(0.5)) == 0.0
     with pytest.raises(ValueError, match="white_furnace needs"):
         white_furnace(Scaled(GOLD, 1.0))
+
+
+def test_albedo_ratios_of_several_fits_match_one_at_a_time():
+    fits = {"a": GOLD, "b": Scaled(GOLD, 0.5)}
+    together = albedo_ratios(GOLD, fits)
+    for name, brdf in fits.items():
+        np.testing.assert_array_equal(together[name], albedo_ratios(GOLD, brdf))
+    np.testing.assert_allclose(together["b"], 0.5, rtol=1e-12)

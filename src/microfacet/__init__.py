@@ -2,16 +2,40 @@
 
 Microfacet BRDFs with roughness, correlation and mean slope (Dupuy 2015, Ch. 2-3),
 BRDF fitting by power iterations (Ch. 4), LEAN/LEADR prefiltering (Ch. 3, 5) and glints.
+
+Names and submodules are imported on first access (PEP 562 module ``__getattr__``), so
+``import microfacet`` and the command line's ``--help`` stay fast: ``mf.GGX`` imports
+:mod:`microfacet.distributions`, ``mf.fit`` imports :mod:`microfacet.fit`, and so on.
 """
-from . import fresnel, geometry, measured
-from .brdf import BRDF, Lambertian, MicrofacetBRDF
-from .distributions import GGX, Beckmann, SlopeDistribution
+from __future__ import annotations
+
+import importlib
+
 from .errors import MicrofacetError
-from . import fit  # noqa: E402  (after the core it builds on)
-from . import leadr  # noqa: E402
-from . import glints  # noqa: E402
-from . import batch  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError",
            "SlopeDistribution", "batch", "fit", "fresnel", "geometry", "glints", "leadr", "measured"]
+
+#: Public names defined in a submodule: name -> that submodule.
+_NAMES = {"BRDF": "brdf", "Lambertian": "brdf", "MicrofacetBRDF": "brdf",
+          "GGX": "distributions", "Beckmann": "distributions", "SlopeDistribution": "distributions"}
+#: Submodules reachable as attributes (``mf.metrics``, ``mf.render``, ...) without an import.
+_SUBMODULES = frozenset({"batch", "brdf", "distributions", "fit", "fresnel", "geometry", "glints", "io", "kernels",
+                         "leadr", "measured", "metrics", "render", "validation"})
+
+
+def __getattr__(name: str):
+    """Import ``name`` on first access (PEP 562) and keep it as a module attribute."""
+    if name in _NAMES:
+        value = getattr(importlib.import_module(f".{_NAMES[name]}", __name__), name)
+    elif name in _SUBMODULES:
+        value = importlib.import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_NAMES) | _SUBMODULES)

@@ -4,6 +4,8 @@ Every term maps ``cos(theta_d)`` of shape ``(...)`` to RGB reflectance ``(..., 3
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from . import kernels
@@ -121,13 +123,16 @@ class Conductor(Fresnel):
 
     def __call__(self, cos_theta_d) -> np.ndarray:
         c = np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)
-        f = _conductor_compiled or conductor_reflectance
-        return np.stack([f(c, eta, k) for eta, k in zip(self.eta, self.k)], axis=-1)
+        f = _conductor_compiled()
+        if f is None:
+            return np.stack([conductor_reflectance(c, eta, k) for eta, k in zip(self.eta, self.k)], axis=-1)
+        flat = np.ascontiguousarray(c).reshape(-1)
+        return np.stack([f(flat, eta, k).reshape(c.shape) for eta, k in zip(self.eta, self.k)], axis=-1)
 
 
 def conductor_reflectance(c, eta, k):
     """One channel of :class:`Conductor` at ``c = cos theta_d`` (arrays or scalars; the
-    same function is compiled into a ufunc when Numba is available)."""
+    same function is compiled by Numba when available)."""
     c2 = c * c
     s2 = 1.0 - c2
     t1 = eta * eta - k * k - s2
@@ -138,10 +143,10 @@ def conductor_reflectance(c, eta, k):
     return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
 
 
-_conductor_compiled = None
-if kernels.AVAILABLE:
-    _conductor_compiled = kernels.numba.vectorize(["float64(float64, float64, float64)"],
-                                                  cache=True)(conductor_reflectance)
+@functools.cache
+def _conductor_compiled():
+    """:func:`conductor_reflectance` compiled by Numba on first use (1-D arrays), or ``None``."""
+    return kernels.compiled(conductor_reflectance)
 
 
 class Tabulated(Fresnel):

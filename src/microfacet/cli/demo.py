@@ -5,9 +5,12 @@ import sys
 
 from .common import int_at_least
 
+#: microfacet.demo's DEFAULT_SIZE, DEFAULT_SPP and DEFAULT_SEED (tested), spelled here so
+#: that --help does not import the demo (and with it the whole library).
+DEFAULT_SIZE, DEFAULT_SPP, DEFAULT_SEED = 128, 64, 0
+
 
 def add(sub) -> None:
-    from ..demo import DEFAULT_SEED, DEFAULT_SIZE, DEFAULT_SPP, default_workers
     p = sub.add_parser(
         "demo", help="render the thesis Figs. 2.2-2.6 demo report and a fitting section (HTML, PNG, EXR)",
         description="Render spheres and polar lobe plots showing the Fresnel term, the GAF, "
@@ -20,14 +23,14 @@ def add(sub) -> None:
     p.add_argument("--spp", type=int_at_least(1), default=DEFAULT_SPP, metavar="N",
                    help=f"environment samples per pixel (default {DEFAULT_SPP})")
     p.add_argument("--seed", type=int_at_least(0), default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
-    p.add_argument("-j", "--jobs", type=int_at_least(1), default=default_workers(), metavar="N",
+    p.add_argument("-j", "--jobs", type=int_at_least(1), default=None, metavar="N",
                    help="worker processes (default: usable CPUs, at most 4); results do not depend on it")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    from ..demo import run_demo
+    from ..demo import default_workers, run_demo
     index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
-                     workers=args.jobs, progress=sys.stderr.isatty())
+                     workers=args.jobs or default_workers(), progress=sys.stderr.isatty())
     print(index)
     return 0

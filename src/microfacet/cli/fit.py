@@ -4,17 +4,20 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .common import EXIT_ERROR, PROG, int_at_least, output_path
+from .common import EXIT_ERROR, PROG, float_in, int_at_least, output_path
 
-#: Choices of --method, --diffuse and --fresnel (the same as microfacet.fit.outputs and
-#: microfacet.fit.analytic; spelled here so that --help imports neither).
+#: Choices of --gaf, --method, --diffuse and --fresnel (the same as microfacet.brdf.GAFS,
+#: microfacet.fit.outputs and microfacet.fit.analytic, tested; spelled here so that --help
+#: imports none of them).
+GAFS = ("smith", "vgroove", "normal_map")
 METHODS = ("least-squares", "moments")
 DIFFUSE = ("auto", "on", "off")
 FRESNELS = ("table", "schlick", "conductor")
+#: microfacet.fit.analytic.ALBEDO_WEIGHT (tested).
+ALBEDO_WEIGHT = 4.0
 
 
 def add(sub) -> None:
-    from ..brdf import GAFS
     p = sub.add_parser(
         "fit", help="fit measured BRDFs (tabulated fit by power iterations, least-squares GGX and Beckmann)",
         description="Fit a measured BRDF (MERL .binary(.gz), RGL .bsdf, UTIA .bin; recognised by "
@@ -42,10 +45,14 @@ def add(sub) -> None:
                         "tabulated fit's moment conversion, thesis App. C; faster)")
     p.add_argument("--diffuse", choices=DIFFUSE, default="auto",
                    help="Lambertian base of the least-squares fits: auto (fit with and without, keep "
-                        "the better by grid^2 + uniform^2 error; default), on, off")
+                        "the one of lower objective, see --albedo-weight; default), on, off")
     p.add_argument("--fresnel", choices=FRESNELS, default="table",
                    help="Fresnel term of the least-squares fits, each bounded to [0, 1] per channel: "
                         "table (7 nodes in theta_d; default), schlick (F0) or conductor (eta, k; slower)")
+    p.add_argument("--albedo-weight", type=float_in(0.0, 1e3), default=ALBEDO_WEIGHT, metavar="W",
+                   help="weight of the directional-albedo term of the least-squares fits: they minimize "
+                        "grid^2 + uniform^2 + W^2 mean((albedo fit/data - 1)^2) over views 0/30/60/75 deg "
+                        f"and RGB (default {ALBEDO_WEIGHT:g}; 0: fit the shape only, ~4: albedo within ~10 %%)")
     p.add_argument("--recursive", action="store_true",
                    help="folder INPUT: fit the files of its subfolders too (outputs mirror the tree)")
     p.set_defaults(run=run)
@@ -56,7 +63,8 @@ def run(args) -> int:
     from ..measured import load
     source = Path(args.input)
     options = dict(resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
-                   method=args.method.replace("-", "_"), diffuse=args.diffuse, fresnel=args.fresnel)
+                   method=args.method.replace("-", "_"), diffuse=args.diffuse, fresnel=args.fresnel,
+                   albedo_weight=args.albedo_weight)
     if source.is_dir():
         from tqdm import tqdm
 

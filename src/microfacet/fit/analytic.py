@@ -2,21 +2,35 @@
 that carries an optional Lambertian base.
 
 :func:`fit_analytic` fits ``f = F D G / (4 cos theta_i cos theta_o) + k_d / pi``
-(Eq. 2.1 plus Eq. 1.9) to a reference BRDF by minimizing ``e_grid^2 + e_uniform^2``, the
-squared relative RMS errors of ``f_r cos theta_i`` (RGB) of
-:func:`microfacet.metrics.fit_error` (a MERL-coordinate grid dense at the specular peak)
-and :func:`microfacet.metrics.uniform_error` (pairs uniform in solid angle), grazing and
-unmeasured pairs excluded as there. The grid alone leaves everything off the peak
-free (a fit of gold metallic paint to it alone has 2.5x the data's albedo); the uniform
-pairs pin the albedo and the diffuse base. The problem is solved by variable projection: for given nonlinear parameters
-``q`` (``log alpha_x``, ``log alpha_y``, ``rho``; for a conductor Fresnel also ``eta``,
-``k`` per channel) the model is linear in the remaining ones ``c`` (Schlick ``F0``, the
-nodes of a Fresnel table, ``k_d``), which are solved exactly per channel with bounds
-``[0, 1]``; ``q`` is found by ``scipy.optimize.least_squares`` with bounds (trust-region
-reflective), started from the best of the moment conversion of the tabulated fit
-(thesis App. C) and a coarse scan of the roughness.
+(Eq. 2.1 plus Eq. 1.9) to a reference BRDF by minimizing
+``e_grid^2 + e_uniform^2 + lambda^2 mean((a_fit / a_data - 1)^2)``: the squared relative RMS
+errors of ``f_r cos theta_i`` (RGB) of :func:`microfacet.metrics.fit_error` (a
+MERL-coordinate grid dense at the specular peak) and :func:`microfacet.metrics.uniform_error`
+(pairs uniform in solid angle), grazing and unmeasured pairs excluded as there, plus the
+directional-albedo ratios of :func:`microfacet.metrics.albedo_ratios` (views 0/30/60/75 deg,
+RGB) weighted by ``lambda = albedo_weight``. The grid alone leaves everything off the peak
+free; the uniform pairs pin the diffuse base; the albedo term makes the fit carry the
+data's energy, not only its shape.
+
+Variable projection, in node space. For given shape parameters ``q`` (``log alpha_x``,
+``log alpha_y``, ``rho``) the model is ``s(q) F(cos theta_d) + k_d cos theta_i / pi`` with
+``s = D G / (4 cos theta_o)``; ``F`` enters only through its values ``v`` at the 91
+:data:`FRESNEL_NODES` (1 deg apart in ``theta_d``; piecewise linear in ``cos theta_d``: exact
+for the table, whose 7 nodes are among them, within 1e-3 for Schlick and conductors). So
+the objective is, per channel, a quadratic form in ``x = (v, k_d)`` whose matrix and vector
+are sums over pairs accumulated into the nodes (``np.bincount``, banded) once per ``q``:
+one evaluation of ``s`` on the pairs and the albedo nodes per ``q``, nothing else per pair.
+The linear coefficients (Schlick ``F0``, table values, ``k_d``, each in ``[0, 1]``) are
+then solved exactly on that small system (BVLS where a bound is active); a conductor's
+``eta, k`` (per channel, bounded) by a small nonlinear solve on it. ``q`` is found by a scan
+of the roughness and a bounded Brent search (isotropic), then ``L-BFGS-B`` over
+``(log alpha_x, log alpha_y, rho)`` (anisotropic), started from the moment conversion of
+the tabulated fit (thesis App. C); a conductor is fitted at the table fit's shape and
+both refined together.
 """
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 
@@ -24,9 +38,10 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
-from ..metrics import compared_pairs, measurement_directions, uniform_directions
+from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, compared_pairs, measured_mask,
+                       measurement_directions, uniform_directions)
 
-__all__ = ["SumBRDF", "fit_analytic", "MODELS", "FRESNELS", "ALPHA_BOUNDS", "TABLE_NODES"]
+__all__ = ["SumBRDF", "fit_analytic", "MODELS", "FRESNELS", "ALPHA_BOUNDS", "TABLE_NODES", "FRESNEL_NODES"]
 
 MODELS = {"ggx": GGX, "beckmann": Beckmann}
 FRESNELS = ("conductor", "schlick", "table")
@@ -36,7 +51,15 @@ ALPHA_BOUNDS = (1e-3, 2.0)
 ETA_BOUNDS, K_BOUNDS = (0.02, 10.0), (0.0, 20.0)
 _RHO_BOUND = 0.95
 #: Nodes of the fitted Fresnel table, uniform in ``theta_d`` (as ``cos theta_d``, increasing).
-TABLE_NODES = np.cos(np.linspace(np.pi / 2, 0.0, 7))
+TABLE_NODES = np.cos(np.radians(np.arange(90, -1, -15)))
+#: Nodes through which every Fresnel model enters the objective (module docstring): 1 deg
+#: apart in ``theta_d``, as ``cos theta_d``, increasing; :data:`TABLE_NODES` are among them.
+FRESNEL_NODES = np.cos(np.radians(np.arange(90, -1, -1)))
+#: Starts ``(eta, k)`` of the conductor solve: dielectrics and metals of normal reflectance
+#: 0.01-0.95.
+_CONDUCTOR_STARTS = np.array([(eta, k) for eta in np.geomspace(0.2, 5.0, 8) for k in (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)])
+#: Default weight of the albedo term of :func:`fit_analytic`.
+ALBEDO_WEIGHT = 4.0
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 20)
 
@@ -102,14 +125,24 @@ class SumBRDF(BRDF):
 
 
 # ------------------------------------------------------------------ least squares
-class _Data:
-    """The compared pairs of a reference (the grid of :func:`~microfacet.metrics.fit_error`
-    and, optionally, uniformly distributed pairs), their weights and the model-independent
-    terms on them."""
+def _node_weights(cos_d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Left node ``j`` and weight ``t`` of ``cos_d`` in :data:`FRESNEL_NODES`: the hat
+    functions of nodes ``j`` and ``j + 1`` are ``1 - t`` and ``t`` there."""
+    nodes = FRESNEL_NODES
+    j = np.clip(np.searchsorted(nodes, cos_d, side="right") - 1, 0, len(nodes) - 2)
+    t = np.clip((cos_d - nodes[j]) / (nodes[j + 1] - nodes[j]), 0.0, 1.0)
+    return j, t
 
-    def __init__(self, reference, n: int, n_uniform: int):
+
+class _Data:
+    """The reference on the compared pairs (the grid of :func:`~microfacet.metrics.fit_error`
+    and uniformly distributed pairs, each block weighted by its own norm) and on the nodes
+    of a coarse :func:`~microfacet.metrics.directional_albedo` quadrature, with every
+    model-independent sum of the objective (module docstring)."""
+
+    def __init__(self, reference, n: int, n_uniform: int, albedo_grid: tuple[int, int]):
         blocks = [measurement_directions(n)] + ([uniform_directions(n_uniform, seed=1)] if n_uniform else [])
-        wis, wos, refs, scales = [], [], [], []
+        wis, wos, refs, weights = [], [], [], []
         for directions in blocks:
             pairs = compared_pairs(reference, directions)
             wi, wo = pairs[:2]
@@ -117,30 +150,57 @@ class _Data:
             ref = np.asarray(reference.eval_cos(wi, wo), dtype=np.float64)
             finite = np.all(np.isfinite(ref), axis=-1)
             wi, wo, ref, w = wi[finite], wo[finite], ref[finite], w[finite]
-            norm = float(np.sqrt(np.sum(w[:, None] * ref**2)))
-            if not norm > 0:
+            norm2 = float(np.sum(w[:, None] * ref**2))
+            if not norm2 > 0:
                 raise ValueError("fit_analytic: the reference BRDF is zero on the compared directions")
-            wis.append(wi), wos.append(wo), refs.append(ref), scales.append(np.sqrt(w) / norm)
-        self.wi, self.wo, self.ref = np.concatenate(wis), np.concatenate(wos), np.concatenate(refs)
-        self.scale = np.concatenate(scales)[:, None]        # each block: its relative RMS
-        self.cos_d = dot(self.wo, half_vector(self.wi, self.wo))
-        self.m5 = (1.0 - np.clip(self.cos_d, 0.0, 1.0)) ** 5                # Schlick (Table 2.I)
-        self.lambert = np.clip(self.wi[:, 2], 0.0, None) / np.pi          # k_d cos theta_i / pi
-        self.hats = np.stack([np.interp(self.cos_d, TABLE_NODES, e) for e in np.eye(len(TABLE_NODES))],
-                             axis=-1)
+            wis.append(wi), wos.append(wo), refs.append(ref), weights.append(w / norm2)
+        self.m = sum(len(w) for w in weights)
+        self.w = np.concatenate(weights)                        # each block: its relative MS
+        ref = np.concatenate(refs)
+        # albedo quadrature (views x nodes), restricted as albedo_ratios restricts it
+        wi_a, wo_a, w_a, view = albedo_directions(ALBEDO_VIEWS_DEG, GRAZING_COS, *albedo_grid)
+        keep = measured_mask(reference, wi_a, wo_a)
+        wi_a, wo_a, w_a, view = wi_a[keep], wo_a[keep], w_a[keep], view[keep]
+        f = np.asarray(reference.eval_cos(wi_a, wo_a), dtype=np.float64)
+        f = w_a[:, None] * np.where(np.isfinite(f), f, 0.0)
+        n_views = len(ALBEDO_VIEWS_DEG)
+        self.albedo = np.stack([np.bincount(view, f[:, c], minlength=n_views) for c in range(3)], axis=-1)
+        self.w_albedo = w_a
+        # every direction s(q) is evaluated on, and its Fresnel nodes
+        self.wi = np.concatenate(wis + [wi_a])
+        self.wo = np.concatenate(wos + [wo_a])
+        j, t = _node_weights(dot(self.wo, half_vector(self.wi, self.wo)))
+        m, n_nodes = self.m, len(FRESNEL_NODES)
+        self.j, self.t = j[:m], t[:m]
+        self.index = np.concatenate([j[:m], j[:m] + 1])                     # both hats of each pair
+        self.hat = np.concatenate([1.0 - t[:m], t[:m]])
+        self.albedo_index = np.concatenate([view * n_nodes + j[m:], view * n_nodes + j[m:] + 1])
+        self.albedo_hat = np.concatenate([1.0 - t[m:], t[m:]])
+        lam = np.clip(self.wi[:, 2], 0.0, None) / np.pi                   # k_d cos theta_i / pi
+        self.lambert = lam[:m]
+        self.lambert_albedo = np.bincount(view, w_a * lam[m:], minlength=n_views)
+        wref = self.w[:, None] * ref
+        self.ref_hat = np.tile(ref, (2, 1))                 # f_ref, once per hat
+        self.ref2 = np.sum(wref * ref, axis=0)              # sum w f_ref^2 per channel
+        self.lambert_lambert = float(np.sum(self.w * self.lambert**2))
+        self.lambert_ref = self.lambert @ wref
+
+
+def _table_map() -> np.ndarray:
+    """``(91, 7)``: Fresnel-node values of the piecewise-linear table of :data:`TABLE_NODES`."""
+    return np.stack([np.interp(FRESNEL_NODES, TABLE_NODES, e) for e in np.eye(len(TABLE_NODES))], axis=-1)
 
 
 class _Problem:
-    """One model on the data: the variable-projection residual (module docstring)."""
+    """One model on the data: the projected objective ``E(q)`` (module docstring)."""
 
-    def __init__(self, data: _Data, model, diffuse, anisotropic, fresnel, gaf, shadowing, mean_slope):
+    def __init__(self, data: _Data, model, diffuse, anisotropic, fresnel, gaf, shadowing, mean_slope,
+                 albedo_weight: float):
         self.data = data
         self.family, self.diffuse, self.anisotropic, self.fresnel = MODELS[model], diffuse, anisotropic, fresnel
         self.gaf, self.shadowing, self.mean_slope = gaf, shadowing, mean_slope
-
-    # --- parameters: q = [log ax, (log ay, rho)] + conductor [eta rgb, k rgb]
-    def n_shape(self) -> int:
-        return 3 if self.anisotropic else 1
+        self.albedo_weight = float(albedo_weight)
+        self._last = (None, None)
 
     def distribution(self, q):
         if self.anisotropic:
@@ -149,96 +209,140 @@ class _Problem:
 
     def bounds(self):
         la = np.log(ALPHA_BOUNDS)
-        lo, hi = [la[0]], [la[1]]
         if self.anisotropic:
-            lo += [la[0], -_RHO_BOUND]
-            hi += [la[1], _RHO_BOUND]
-        if self.fresnel == "conductor":
-            lo += [ETA_BOUNDS[0]] * 3 + [K_BOUNDS[0]] * 3
-            hi += [ETA_BOUNDS[1]] * 3 + [K_BOUNDS[1]] * 3
-        return np.array(lo), np.array(hi)
+            return np.array([la[0], la[0], -_RHO_BOUND]), np.array([la[1], la[1], _RHO_BOUND])
+        return np.array([la[0]]), np.array([la[1]])
 
-    def specular(self, q) -> np.ndarray:
-        """``D G / (4 cos theta_o)`` of the shape parameters, ``(M,)`` (``F = 1``)."""
+    def quadratic(self, q):
+        """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
+        ``x = (v, k_d)`` (``v``: Fresnel values at :data:`FRESNEL_NODES`; ``k_d`` only with
+        a diffuse base): the pairs' ``sum w (s F + k_d L - f_ref)^2`` plus the albedo term
+        ``lambda^2 / (3 V) sum_{views} (a_fit / a_data - 1)^2``."""
+        d, n = self.data, len(FRESNEL_NODES)
         brdf = MicrofacetBRDF(self.distribution(q), gaf=self.gaf, shadowing=self.shadowing)
-        s = brdf.eval_cos(self.data.wi, self.data.wo)[:, 0]
-        return np.where(np.isfinite(s), s, 0.0)
-
-    def conductor(self, q):
-        k = self.n_shape()
-        return _fresnel.Conductor(eta=q[k:k + 3], k=q[k + 3:k + 6])
-
-    def design(self, q):
-        """The model ``a0 + A c`` with linear coefficients ``c`` in ``[0, 1]``: the fixed
-        part ``a0 (M, 3)`` and the basis ``A (M, J)`` (the same for every channel)."""
-        s = self.specular(q)
-        cols = []
-        if self.fresnel == "schlick":                   # F = F0 (1 - m^5) + m^5
-            a0 = np.repeat((s * self.data.m5)[:, None], 3, axis=1)
-            cols.append((s * (1.0 - self.data.m5))[:, None])
-        elif self.fresnel == "table":                   # F = sum_k v_k hat_k(cos theta_d)
-            a0 = np.zeros((len(s), 3))
-            cols.append(s[:, None] * self.data.hats)
-        else:                                           # conductor: F(eta, k) fixed here
-            a0 = s[:, None] * self.conductor(q)(self.data.cos_d)
+        s = brdf._projected(d.wi, d.wo)[1]
+        s = np.where(np.isfinite(s), s, 0.0)
+        sp, sa = np.tile(s[:d.m], 2), np.tile(s[d.m:], 2)
+        ws = np.tile(d.w, 2) * sp * d.hat                               # w s hat, per hat
+        diag = np.bincount(d.index, ws * sp * d.hat, minlength=n)
+        off = np.bincount(d.j, (d.w * s[:d.m] ** 2) * (1.0 - d.t) * d.t, minlength=n)[:-1]
+        G = np.diag(diag) + np.diag(off, 1) + np.diag(off, -1)
+        g = np.stack([np.bincount(d.index, ws * d.ref_hat[:, c], minlength=n) for c in range(3)])
+        k = d.ref2.copy()
+        albedo_rows = np.bincount(d.albedo_index, np.tile(d.w_albedo, 2) * sa * d.albedo_hat,
+                                  minlength=len(ALBEDO_VIEWS_DEG) * n).reshape(-1, n)     # (V, n)
         if self.diffuse:
-            cols.append(self.data.lambert[:, None])
-        return a0, (np.concatenate(cols, axis=1) if cols else np.zeros((len(s), 0)))
+            gl = np.bincount(d.index, ws * np.tile(d.lambert, 2), minlength=n)
+            G = np.block([[G, gl[:, None]], [gl[None, :], np.array([[d.lambert_lambert]])]])
+            g = np.concatenate([g, d.lambert_ref[:, None]], axis=1)
+            albedo_rows = np.concatenate([albedo_rows, d.lambert_albedo[:, None]], axis=1)
+        H = np.repeat(G[None], 3, axis=0)
+        if self.albedo_weight > 0:
+            c2 = self.albedo_weight**2 / (3 * len(ALBEDO_VIEWS_DEG))
+            with np.errstate(divide="ignore"):
+                inv = np.where(d.albedo > 0, 1.0 / d.albedo, 0.0).T                    # (3, V)
+            scaled = albedo_rows[None] * inv[:, :, None]                               # (3, V, X)
+            H = H + c2 * np.einsum("cvx,cvy->cxy", scaled, scaled)
+            g = g + c2 * np.einsum("cvx,cv->cx", scaled, (inv > 0).astype(float))
+            k = k + c2 * np.sum(inv > 0, axis=1)
+        return H, g, k
 
-    def solve_linear(self, q):
-        """Bounded least squares of the linear coefficients per channel, ``(3, J)``:
-        ``||A c - b||^2 = ||R c - R^-T A^T b||^2 + const`` with ``A^T A = R^T R``, so the
-        bounded solve (BVLS) runs on the small ``J x J`` system."""
+    def _linear_map(self):
+        """``(Q, x0)``: ``x = Q y + x0`` for the linear Fresnel models, ``y`` in ``[0, 1]``."""
+        n = len(FRESNEL_NODES)
+        if self.fresnel == "table":
+            Q, x0 = _table_map(), np.zeros(n)
+        else:                                          # Schlick: F = F0 (1 - m^5) + m^5
+            m5 = (1.0 - FRESNEL_NODES) ** 5
+            Q, x0 = (1.0 - m5)[:, None], m5
+        if self.diffuse:
+            Q = np.block([[Q, np.zeros((n, 1))], [np.zeros((1, Q.shape[1])), np.ones((1, 1))]])
+            x0 = np.append(x0, 0.0)
+        return Q, x0
+
+    def solve(self, q):
+        """``(E, coefficients)``: the objective at ``q`` with the linear (or conductor)
+        parameters solved per channel; coefficients ``(3, J)``."""
+        if self._last[0] is not None and np.array_equal(self._last[0], q):
+            return self._last[1]
+        H, g, k = self.quadratic(q)
+        out = self._solve_conductor(H, g, k) if self.fresnel == "conductor" else self._solve_linear(H, g, k)
+        self._last = (np.array(q, dtype=np.float64), out)
+        return out
+
+    def _solve_linear(self, H, g, k):
         from scipy.optimize import lsq_linear
-        a0, A = self.design(q)
-        c = np.zeros((3, A.shape[1]))
-        if A.shape[1]:
-            w2 = self.data.scale**2
-            ata = A.T @ (w2 * A)
-            ata += (1e-12 * max(float(np.max(np.diag(ata))), 1e-300)) * np.eye(len(ata))
-            R = np.linalg.cholesky(ata).T
-            rhs = np.linalg.solve(R.T, A.T @ (w2 * (self.data.ref - a0)))
-            for ch in range(3):
-                c[ch] = lsq_linear(R, rhs[:, ch], bounds=(0.0, 1.0), method="bvls").x
-        return a0, A, c
+        Q, x0 = self._linear_map()
+        total, coef = 0.0, np.zeros((3, Q.shape[1]))
+        for c in range(3):
+            Hy = Q.T @ H[c] @ Q
+            Hy += (1e-12 * max(float(np.max(np.diag(Hy))), 1e-300)) * np.eye(len(Hy))
+            hx0 = H[c] @ x0
+            gy = Q.T @ (g[c] - hx0)
+            ky = k[c] - 2.0 * g[c] @ x0 + x0 @ hx0
+            R = np.linalg.cholesky(Hy).T
+            z = np.linalg.solve(R.T, gy)
+            y = np.linalg.solve(R, z)
+            if np.any(y < 0.0) or np.any(y > 1.0):
+                y = lsq_linear(R, z, bounds=(0.0, 1.0), method="bvls").x
+            total += float(np.sum((R @ y - z) ** 2) + ky - z @ z)
+            coef[c] = y
+        return max(total, 0.0), coef
 
-    def residual(self, q) -> np.ndarray:
-        """``(model - data) / ||data||`` over pairs and RGB, each block of pairs by its own
-        norm (linear coefficients projected out)."""
-        a0, A, c = self.solve_linear(q)
-        return ((a0 + A @ c.T - self.data.ref) * self.data.scale).ravel()
+    def _solve_conductor(self, H, g, k):
+        """Per channel, ``eta, k`` (and ``k_d``) minimizing ``E_c`` through the conductor's
+        values at the nodes (Table 2.I): the best of :data:`_CONDUCTOR_STARTS` (``k_d``
+        solved for each), refined by bounded least squares."""
+        from scipy.optimize import least_squares
+        lo = [ETA_BOUNDS[0], K_BOUNDS[0]] + ([0.0] if self.diffuse else [])
+        hi = [ETA_BOUNDS[1], K_BOUNDS[1]] + ([1.0] if self.diffuse else [])
+        n = len(FRESNEL_NODES)
+        v = _fresnel.conductor_reflectance(FRESNEL_NODES[None, :], _CONDUCTOR_STARTS[:, :1], _CONDUCTOR_STARTS[:, 1:])
+        total, params = 0.0, np.zeros((3, len(lo)))
+        for c in range(3):
+            Hv, gv = H[c][:n, :n], g[c][:n]
+            e = np.einsum("sx,xy,sy->s", v, Hv, v) - 2.0 * v @ gv
+            kd = np.zeros(len(v))
+            if self.diffuse:                            # the best k_d of each start
+                hl, hll, gl = H[c][:n, n], H[c][n, n], g[c][n]
+                kd = np.clip((gl - v @ hl) / hll, 0.0, 1.0)
+                e += 2.0 * kd * (v @ hl) + hll * kd**2 - 2.0 * gl * kd
+            best = int(np.argmin(e))
+            Hc = H[c] + (1e-12 * max(float(np.max(np.diag(H[c]))), 1e-300)) * np.eye(len(H[c]))
+            R = np.linalg.cholesky(Hc).T
+            z = np.linalg.solve(R.T, g[c])
+
+            def residual(p, R=R, z=z):
+                x = _fresnel.conductor_reflectance(FRESNEL_NODES, p[0], p[1])
+                return R @ (np.append(x, p[2]) if self.diffuse else x) - z
+            p0 = np.clip(np.append(_CONDUCTOR_STARTS[best], kd[best])[:len(lo)], lo, hi)
+            p = least_squares(residual, p0, bounds=(lo, hi), x_scale=[0.3, 0.3, 0.1][:len(lo)],
+                              xtol=1e-8, ftol=1e-10, max_nfev=40).x
+            total += float(np.sum(residual(p) ** 2) + k[c] - z @ z)
+            params[c] = p
+        return max(total, 0.0), params
 
     def error(self, q) -> float:
-        return float(np.sqrt(np.sum(self.residual(q) ** 2)))
+        """The objective ``E(q)`` (module docstring)."""
+        return self.solve(np.atleast_1d(np.asarray(q, dtype=np.float64)))[0]
 
     def brdf(self, q):
         """The fitted BRDF of parameters ``q`` (linear coefficients solved)."""
-        _, _, c = self.solve_linear(q)
+        _, c = self.solve(np.asarray(q, dtype=np.float64))
         if self.fresnel == "schlick":
-            fresnel = _fresnel.Schlick(c[:, 0])
+            fresnel = _fresnel.Schlick(np.clip(c[:, 0], 0.0, 1.0))
         elif self.fresnel == "table":
-            fresnel = _fresnel.Tabulated(TABLE_NODES, c[:, :len(TABLE_NODES)].T)
+            fresnel = _fresnel.Tabulated(TABLE_NODES, np.clip(c[:, :len(TABLE_NODES)].T, 0.0, 1.0))
         else:
-            fresnel = self.conductor(q)
+            fresnel = _fresnel.Conductor(eta=c[:, 0], k=c[:, 1])
         specular = MicrofacetBRDF(self.distribution(q), fresnel=fresnel, gaf=self.gaf, shadowing=self.shadowing)
         if not self.diffuse:
             return specular
-        kd = c[:, -1]
+        kd = np.clip(c[:, -1], 0.0, 1.0)
         base = Lambertian(kd)
         lum = np.array([0.2126, 0.7152, 0.0722])
         spec_weight = float(np.mean(fresnel(np.linspace(0.0, 1.0, 9)) @ lum))
         return SumBRDF(specular, base, weights=(max(spec_weight, 1e-3), max(float(kd @ lum), 1e-3)))
-
-
-def _conductor_start(f0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(eta, k)`` per channel with normal reflectance ``F0`` (Table 2.I at ``theta_d = 0``:
-    ``F0 = ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)``): a dielectric ``eta = (1 + sqrt F0) /
-    (1 - sqrt F0)`` below ``F0 = 0.2``, else ``eta = 0.5`` and ``k^2 = (F0 (eta+1)^2 - (eta-1)^2) / (1 - F0)``."""
-    f0 = np.clip(np.asarray(f0, dtype=np.float64), 1e-4, 0.98)
-    r = np.sqrt(f0)
-    eta = np.where(f0 < 0.2, (1.0 + r) / (1.0 - r), 0.5)
-    k = np.where(f0 < 0.2, 0.0, np.sqrt(np.maximum(f0 * 2.25 - 0.25, 0.0) / (1.0 - f0)))
-    return np.clip(eta, *ETA_BOUNDS), np.clip(k, *K_BOUNDS)
 
 
 def _start_alpha(start) -> tuple[float, float, float, np.ndarray]:
@@ -251,13 +355,57 @@ def _start_alpha(start) -> tuple[float, float, float, np.ndarray]:
     return float(d.alpha_x), float(d.alpha_y), float(d.rho), np.asarray(d.mean_slope, dtype=np.float64)
 
 
+_DATA_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _data(brdf, n: int, n_uniform: int, albedo_grid: tuple[int, int]) -> _Data:
+    """The :class:`_Data` of ``brdf``, kept (weakly, by object) so that fits of several
+    models to one material evaluate the data once."""
+    key = (n, n_uniform, albedo_grid)
+    try:
+        per_brdf = _DATA_CACHE.setdefault(brdf, {})
+    except TypeError:                                   # not weak-referenceable: no cache
+        return _Data(brdf, n, n_uniform, albedo_grid)
+    if key not in per_brdf:
+        per_brdf[key] = _Data(brdf, n, n_uniform, albedo_grid)
+    return per_brdf[key]
+
+
+def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> float:
+    """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``, then a
+    bounded Brent search between its neighbours."""
+    from scipy.optimize import minimize_scalar
+    grid = np.unique(np.clip(np.asarray(candidates, dtype=np.float64), lo, hi))
+    errors = [problem.error(la) for la in grid]
+    b = int(np.argmin(errors))
+    left, right = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
+    if right - left <= 0:
+        return float(grid[b])
+    r = minimize_scalar(problem.error, bounds=(left, right), method="bounded", options={"xatol": 1e-5})
+    return float(r.x) if r.fun <= errors[b] else float(grid[b])
+
+
+def _minimize(problem: _Problem, q0, max_nfev: int) -> np.ndarray:
+    """``q`` minimizing ``problem`` from ``q0``: Brent around ``q0`` (one parameter) or
+    bounded L-BFGS-B."""
+    from scipy.optimize import minimize
+    lo, hi = problem.bounds()
+    q0 = np.clip(np.asarray(q0, dtype=np.float64), lo, hi)
+    if len(q0) == 1:
+        return np.array([_minimize_log_alpha(problem, q0[0] + np.linspace(-0.3, 0.3, 5), lo[0], hi[0])])
+    r = minimize(problem.error, q0, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
+                 options={"maxfun": max_nfev, "ftol": 1e-12, "gtol": 1e-9})
+    return r.x if r.fun <= problem.error(q0) else q0
+
+
 def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: bool = False,
                  fresnel: str = "table", *, start=None, gaf: str | None = None, shadowing: bool = True,
-                 n: int = 32, n_uniform: int = 2**13, max_nfev: int = 200):
+                 albedo_weight: float = ALBEDO_WEIGHT, n: int = 32, n_uniform: int = 2**13,
+                 albedo_grid: tuple[int, int] = (64, 32), max_nfev: int = 200):
     """Least-squares fit of an analytic microfacet BRDF (and a Lambertian base) to ``brdf``.
 
-    Minimizes ``e_grid^2 + e_uniform^2`` with ``e^2 = sum |f_fit cos theta_i - f_ref cos theta_i|^2
-    / sum |f_ref cos theta_i|^2`` over RGB and the pairs of
+    Minimizes ``e_grid^2 + e_uniform^2 + albedo_weight^2 mean_{views, RGB}(a_fit / a_data - 1)^2``
+    with ``e^2 = sum |f_fit cos theta_i - f_ref cos theta_i|^2 / sum |f_ref cos theta_i|^2`` over RGB and the pairs of
     :func:`microfacet.metrics.measurement_directions` (``n`` per MERL coordinate) and of
     :func:`microfacet.metrics.uniform_directions` (``n_uniform``, seed 1, not the metric's
     seed 0; ``n_uniform = 0``: the grid alone), grazing and unmeasured pairs excluded as in
@@ -284,49 +432,48 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         ``brdf`` at resolution 90. A coarse roughness scan competes with it.
     gaf, shadowing
         GAF of the fitted model (default: the start's, else ``"smith"``).
-    n, n_uniform, max_nfev
-        Grid size and number of uniform pairs fitted; evaluation budget of ``least_squares``.
+    albedo_weight : float
+        Weight ``lambda`` of the directional-albedo ratios ``a_fit / a_data`` at
+        :data:`~microfacet.metrics.ALBEDO_VIEWS_DEG` (RGB; light directions as
+        :func:`~microfacet.metrics.albedo_ratios` takes them) in the objective; 0: shape only.
+    n, n_uniform, albedo_grid, max_nfev
+        Grid size and number of uniform pairs fitted; ``(n_theta, n_phi)`` of the albedo
+        quadrature (:func:`~microfacet.metrics.hemisphere_grid`, per view); evaluation
+        budget of the anisotropic search.
 
     Returns
     -------
     MicrofacetBRDF, or SumBRDF(MicrofacetBRDF, Lambertian) when ``diffuse``.
     """
-    from scipy.optimize import least_squares
     if model not in MODELS:
         raise ValueError(f"model must be one of {tuple(MODELS)}, got {model!r}")
     if fresnel not in FRESNELS:
         raise ValueError(f"fresnel must be one of {FRESNELS}, got {fresnel!r}")
+    if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
+        raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
     if start is None:
         from .fitted import fit
         start = fit(brdf, resolution=90, anisotropic=anisotropic)
     ax, ay, rho, mean_slope = _start_alpha(start)
     gaf = gaf if gaf is not None else getattr(start, "gaf_model", "smith")
-    data = _Data(brdf, int(n), int(n_uniform))
-    problem = _Problem(data, model, bool(diffuse), bool(anisotropic), fresnel, gaf, shadowing, mean_slope)
-    lo, hi = problem.bounds()
-    # stage 1: isotropic roughness by scan + refinement, with a linear Fresnel (Schlick or table)
-    linear = fresnel if fresnel != "conductor" else "schlick"
-    iso = _Problem(data, model, bool(diffuse), False, linear, gaf, shadowing, mean_slope)
-    candidates = [np.log(np.clip(np.sqrt(ax * ay), *ALPHA_BOUNDS))] + list(np.log(_SCAN))
-    best = min(candidates, key=lambda la: iso.error(np.array([la])))
+    data = _data(brdf, int(n), int(n_uniform), tuple(int(v) for v in albedo_grid))
+    options = dict(gaf=gaf, shadowing=shadowing, mean_slope=mean_slope, albedo_weight=albedo_weight)
+    # stage 1: isotropic roughness by scan + Brent, with a linear Fresnel (Schlick for a conductor)
+    linear = "schlick" if fresnel == "conductor" else fresnel
+    iso = _Problem(data, model, bool(diffuse), False, linear, **options)
     la = np.log(ALPHA_BOUNDS)
-    q_iso = least_squares(iso.residual, [best], bounds=([la[0]], [la[1]]), x_scale=[0.3],
-                          max_nfev=max_nfev).x
-    # stage 2: the full parameter set from there
-    q0 = list(q_iso)
+    q = np.array([_minimize_log_alpha(iso, [np.log(np.clip(np.sqrt(ax * ay), *ALPHA_BOUNDS))] + list(np.log(_SCAN)),
+                                      *la)])
+    # stage 2: anisotropy from there (the start's aspect and rho if it has them)
     if anisotropic:
-        q0 += [q_iso[0], 0.0]
-        if np.isfinite(np.log(ax)) and ax != ay:        # anisotropic start: keep its aspect and rho
+        aniso = _Problem(data, model, bool(diffuse), True, linear, **options)
+        q0 = [q[0], q[0], 0.0]
+        if ax != ay:
             ratio = 0.5 * np.log(ay / ax)
-            q0 = [q_iso[0] - ratio, q_iso[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
+            q0 = [q[0] - ratio, q[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
+        q = _minimize(aniso, q0, max_nfev)
+    # stage 3: a conductor, refined from that shape
     if fresnel == "conductor":
-        _, _, c = iso.solve_linear(q_iso)
-        eta, k = _conductor_start(c[:, 0])
-        q0 += list(eta) + list(k)
-    q0 = np.clip(np.array(q0, dtype=np.float64), lo, hi)
-    if len(q0) > 1 or fresnel != linear:
-        x_scale = np.concatenate([[0.3] * problem.n_shape(), [0.3] * (len(q0) - problem.n_shape())])
-        q = least_squares(problem.residual, q0, bounds=(lo, hi), x_scale=x_scale, max_nfev=max_nfev).x
-    else:
-        q = q0
-    return problem.brdf(q)
+        problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", **options)
+        return problem.brdf(_minimize(problem, q, max_nfev))
+    return (aniso if anisotropic else iso).brdf(q)

@@ -6,7 +6,8 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
 * ``NAME.npz`` — the tabulated fit (``fit.save``), loadable by :func:`microfacet.fit.load`;
 * ``NAME.json`` — ``"ggx"`` and ``"beckmann"``: the analytic fits of the chosen method
   (``least_squares`` by default: the best of the fits with and without a diffuse base,
-  by ``e_grid^2 + e_uniform^2``; ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``),
+  by the fit's own objective :func:`objective`, ``e_grid^2 + e_uniform^2`` plus the
+  weighted albedo term; ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``),
   each ``{"alpha_x", "alpha_y", "rho", "fresnel", "diffuse"}`` (``diffuse``: the
   Lambertian reflectance, RGB, or null); ``"moments"`` and ``"least_squares"``: every
   fit of each method by name; ``"fresnel"`` (the tabulated fit's), ``"seconds"`` (fit
@@ -42,7 +43,8 @@ from ..metrics import (ALBEDO_VIEWS_DEG, albedo_ratios, describe_albedo, describ
 
 __all__ = ["material_name", "material_files", "fit_material", "fit_folder", "distribution_params",
            "fresnel_json", "analytic_json", "analytic_from_json", "summary_row",
-           "format_summary_markdown", "format_summary_csv", "SUMMARY_COLUMNS", "METHODS", "DIFFUSE"]
+           "format_summary_markdown", "format_summary_csv", "objective", "SUMMARY_COLUMNS", "METHODS",
+           "DIFFUSE"]
 
 #: File suffixes dropped from a material's name (longest first).
 _SUFFIXES = (".binary.gz", ".bsdf.gz", ".bin.gz", ".binary", ".bsdf", ".bin", ".gz")
@@ -143,28 +145,42 @@ def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffu
     return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf, **extra)
 
 
-def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str) -> dict:
+def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float) -> dict:
     """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann``, ...)."""
     from .analytic import fit_analytic
     bases = {"auto": (False, True), "on": (True,), "off": (False,)}[diffuse]
     return {f"{model}{'_diffuse' if d else ''}": fit_analytic(brdf, model, diffuse=d, anisotropic=anisotropic,
-                                                             fresnel=fresnel, start=fit)
+                                                             fresnel=fresnel, start=fit, albedo_weight=albedo_weight)
             for model in ("ggx", "beckmann") for d in bases}
+
+
+def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -> float:
+    """The objective of :func:`microfacet.fit.fit_analytic` from the metrics:
+    ``e_grid^2 + e_uniform^2 + albedo_weight^2 mean((ratio - 1)^2)`` (views x RGB, NaN ratios
+    left out); :func:`fit_material` keeps the least-squares fit of least value."""
+    r = np.asarray(albedo_ratio, dtype=np.float64)
+    r = r[np.isfinite(r)]
+    return grid**2 + uniform**2 + (albedo_weight**2 * float(np.mean((r - 1.0) ** 2)) if len(r) else 0.0)
 
 
 def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotropic: bool = False,
                  gaf: str = "smith", title: str = "", method: str = "least_squares", diffuse: str = "auto",
-                 fresnel: str = "table", tabulated_diffuse: bool = False, picture: bool = True) -> dict:
+                 fresnel: str = "table", tabulated_diffuse: bool = False, picture: bool = True,
+                 albedo_weight: float | None = None) -> dict:
     """Fit ``brdf`` and write ``out_npz`` with its ``.json`` and ``.png`` beside it
     (its folder is created if needed).
 
     ``method`` (:data:`METHODS`) chooses the ``"ggx"``/``"beckmann"`` fits of the JSON
     and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
-    least-squares fits (:func:`microfacet.fit.fit_analytic`); ``tabulated_diffuse`` is
-    forwarded to :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
+    least-squares fits (:func:`microfacet.fit.fit_analytic`), ``albedo_weight`` the weight
+    of their albedo term (default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`); with
+    ``diffuse="auto"`` the fit of least :func:`objective` is kept. ``tabulated_diffuse``
+    is forwarded to :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
     summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
     the least-squares fits (not of the errors, picture or files).
     """
+    from .analytic import ALBEDO_WEIGHT
+    albedo_weight = ALBEDO_WEIGHT if albedo_weight is None else float(albedo_weight)
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     if diffuse not in DIFFUSE:
@@ -177,16 +193,17 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse)
     t1 = time.perf_counter()
     moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
-    least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel) if method == "least_squares" else {}
+    least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel, albedo_weight) \
+        if method == "least_squares" else {}
     t2 = time.perf_counter()
     named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
              **{f"{k}_least_squares": b for k, b in least.items()}}
-    grid, uniform = fit_error(brdf, named), uniform_error(brdf, named)
+    grid, uniform, albedo = fit_error(brdf, named), uniform_error(brdf, named), albedo_ratios(brdf, named)
     chosen = moments if method == "moments" else {
         family: min((b for k, b in least.items() if k.startswith(family)),
-                    key=lambda b: grid[_name(least, b)] ** 2 + uniform[_name(least, b)] ** 2)
+                    key=lambda b: objective(grid[_name(least, b)], uniform[_name(least, b)],
+                                            albedo[_name(least, b)], albedo_weight))
         for family in ("ggx", "beckmann")}
-    albedo = {k: albedo_ratios(brdf, b) for k, b in named.items()}
     fits = {"tabulated": fit, **chosen}
     names = {"tabulated": "tabulated", **{k: _key(named, b) for k, b in chosen.items()}}
     errors = {k: grid[names[k]] for k in fits}
@@ -206,7 +223,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
                                     "views_deg": list(ALBEDO_VIEWS_DEG), "metric": describe_albedo()},
                    "white_furnace": {k: round(white_furnace(b), 4) for k, b in named.items()}},
         "resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf,
-        "diffuse": diffuse, "fresnel_model": fresnel, "tabulated_diffuse": bool(tabulated_diffuse),
+        "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight,
+        "tabulated_diffuse": bool(tabulated_diffuse),
     }
     fit.save(out_npz)                               # atomic (FittedBRDF.save)
     write_text(out_npz.with_suffix(".json"), json.dumps(summary, indent=2) + "\n")
