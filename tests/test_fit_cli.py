@@ -121,11 +121,11 @@ def test_fit_folder_writes_summary_and_reports_bad_files(inputs, tmp_path, capsy
     assert main(["fit", str(folder), "-o", str(out), "--resolution", RESOLUTION]) == 1
     captured = capsys.readouterr()
     err = captured.err.splitlines()
-    assert len(err) == 2 and "notes.txt: not fitted" in err[0] and "1 of 2 files not fitted" in err[1]
+    assert len(err) == 1 and "1 of 2 files failed" in err[0]
     assert "Traceback" not in captured.err and "\r" not in captured.err     # no progress bar in pipes
     assert "| gold-ggx |" in captured.out
     rows = list(csv.DictReader((out / "summary.csv").open()))
-    assert [r["material"] for r in rows] == ["gold-ggx", "notes.txt"]
+    assert [r["file"] for r in rows] == ["gold-ggx.binary", "notes.txt"]
     assert rows[0]["status"] == "ok" and rows[1]["status"].startswith("error: ")
     assert float(rows[0]["ggx_alpha_x"]) == pytest.approx(ALPHA, rel=0.1)
     assert "| gold-ggx |" in (out / "summary.md").read_text()
@@ -145,10 +145,10 @@ def test_fit_recursive_folder_mirrors_the_tree_and_reports_all_metrics(inputs, t
     assert main(["fit", str(folder), "-o", str(out), "--resolution", "16", "--method", "moments"]) == 0
     assert {p.relative_to(out).as_posix() for p in out.rglob("*.npz")} == {"top.npz"}   # not recursive
     assert main(["fit", str(folder), "-o", str(out), "--resolution", "16", "--recursive", "--diffuse", "off",
-                 "--fresnel", "schlick"]) == 0
+                 "--fresnel", "schlick", "--force"]) == 0
     assert {p.relative_to(out).as_posix() for p in out.rglob("*.npz")} == {"top.npz", "metals/gold/deep.npz"}
     rows = list(csv.DictReader((out / "summary.csv").open()))
-    assert [r["material"] for r in rows] == ["metals/gold/deep", "top"]
+    assert [r["file"] for r in rows] == ["metals/gold/deep.binary", "top.binary"]
     for r in rows:
         assert r["method"] == "least_squares" and r["ggx_diffuse"] == ""
         assert float(r["error_ggx"]) <= float(r["error_ggx_moments"])
@@ -156,7 +156,7 @@ def test_fit_recursive_folder_mirrors_the_tree_and_reports_all_metrics(inputs, t
     summary = json.loads((out / "metals" / "gold" / "deep.json").read_text())
     assert set(summary["least_squares"]) == {"ggx", "beckmann"}
     assert summary["ggx"]["fresnel"]["type"] == "schlick"
-    assert "| metals/gold/deep |" in capsys.readouterr().out
+    assert "| metals/gold/deep.binary |" in capsys.readouterr().out
 
 
 def test_fit_into_an_existing_folder_names_files_after_the_input(inputs, tmp_path, capsys):
@@ -171,7 +171,7 @@ def test_fit_into_an_existing_folder_names_files_after_the_input(inputs, tmp_pat
 @pytest.mark.parametrize("make, message", [
     (lambda d: d / "missing.binary", "No such file or directory"),
     (lambda d: (d / "bad.binary").write_bytes(b"\0" * 100) and d / "bad.binary", "unknown measured-BRDF format"),
-    (lambda d: d / "empty", "no files to fit"),
+    (lambda d: d / "empty", "no fit inputs"),
 ])
 def test_fit_bad_input_gives_one_line(make, message, tmp_path, capsys):
     (tmp_path / "empty").mkdir()

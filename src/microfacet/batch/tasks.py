@@ -142,20 +142,27 @@ def glints_file(source: Path, out: Path, spacing: float = 1.0, sigma_eps: float 
 
 
 # ----------------------------------------------------------------------------- fit
-FIT_COLUMNS = ("format", "fit_seconds", "error_tabulated", "error_ggx", "error_beckmann",
-               "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho")
+#: The fit's summary figures (:data:`microfacet.fit.outputs.SUMMARY_COLUMNS` less the
+#: row's own ``file``/``status``/``seconds``; ``fit_seconds`` is the fit time alone).
+FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
+               *(f"{m}_{k}" for m in ("error", "uniform", "albedo") for k in ("tabulated", "ggx", "beckmann")),
+               "error_ggx_moments", "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "ggx_diffuse",
+               "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
 
 
-def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith") -> dict:
-    """``microfacet fit``: a measured BRDF's power-iteration fit (thesis Ch. 4) as ``out``
-    (.npz) with ``out.json`` and ``out.png`` (:func:`microfacet.fit.outputs.fit_material`).
-    Returns the format, fit time, fit errors and the GGX and Beckmann parameters."""
+def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
+             method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
+             albedo_weight: float | None = None) -> dict:
+    """``microfacet fit``: a measured BRDF's power-iteration fit (thesis Ch. 4) and its
+    least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
+    (:func:`microfacet.fit.outputs.fit_material`). Returns the summary figures."""
     from ..fit.outputs import fit_material, summary_row
     from ..measured import load
     from .files import input_name
     brdf = load(source)
     name = input_name(source)
-    summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name)
+    summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
+                           fresnel=fresnel, albedo_weight=albedo_weight)
     row = summary_row(name, source, getattr(brdf, "format", ""), summary)
     row["fit_seconds"] = row["seconds"]
     return {k: row[k] for k in FIT_COLUMNS}

@@ -1,10 +1,9 @@
 """``microfacet fit INPUT -o OUT``: fits of measured BRDFs (thesis Ch. 4, least squares)."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
-from .common import EXIT_ERROR, PROG, float_in, int_at_least, output_path
+from .common import add_batch_options, float_in, input_name, int_at_least, output_path, run_batch
 
 #: Choices of --gaf, --method, --diffuse and --fresnel (the same as microfacet.brdf.GAFS,
 #: microfacet.fit.outputs and microfacet.fit.analytic, tested; spelled here so that --help
@@ -53,35 +52,21 @@ def add(sub) -> None:
                    help="weight of the directional-albedo term of the least-squares fits: they minimize "
                         "grid^2 + uniform^2 + W^2 mean((albedo fit/data - 1)^2) over views 0/30/60/75 deg "
                         f"and RGB (default {ALBEDO_WEIGHT:g}; 0: fit the shape only, ~4: albedo within ~10 %%)")
-    p.add_argument("--recursive", action="store_true",
-                   help="folder INPUT: fit the files of its subfolders too (outputs mirror the tree)")
+    add_batch_options(p)
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    from ..fit.outputs import fit_folder, fit_material, format_summary_markdown, material_name, summary_row
-    from ..measured import load
+    args.method = args.method.replace("-", "_")
+    if Path(args.input).is_dir():
+        return run_batch(args, "fit", args.input)
+    from ..batch.tasks import fit_file
+    from ..fit.outputs import format_summary_markdown
     source = Path(args.input)
-    options = dict(resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
-                   method=args.method.replace("-", "_"), diffuse=args.diffuse, fresnel=args.fresnel,
-                   albedo_weight=args.albedo_weight)
-    if source.is_dir():
-        from tqdm import tqdm
-
-        def progress(files):
-            return tqdm(files, disable=not sys.stderr.isatty(), unit="material", desc="microfacet fit",
-                        leave=False)
-        rows = fit_folder(source, args.output, progress=progress, recursive=args.recursive, **options)
-        print(format_summary_markdown(rows), end="")
-        failed = sum(r["status"] != "ok" for r in rows)
-        if failed:
-            print(f"{PROG}: error: {failed} of {len(rows)} files not fitted (see the warnings "
-                  f"and {Path(args.output) / 'summary.md'})", file=sys.stderr)
-            return EXIT_ERROR
-        return 0
     target = output_path(args.output, ".npz", source, side=(".json", ".png"))
-    brdf = load(source)
-    name = material_name(source)
-    summary = fit_material(brdf, target, title=name, **options)
-    print(format_summary_markdown([summary_row(name, source, getattr(brdf, "format", ""), summary)]), end="")
+    row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
+                   method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
+                   albedo_weight=args.albedo_weight)
+    print(format_summary_markdown([{"material": input_name(source), "file": source.name, "status": "ok",
+                                    "seconds": row["fit_seconds"], **row}]), end="")
     return 0

@@ -19,19 +19,16 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
   (data, tabulated fit, GGX and Beckmann fits of the method, their errors).
 
 :func:`analytic_from_json` rebuilds an analytic fit from its JSON entry. A folder of
-materials gives one such triple per material (with ``recursive``, subfolders too, the
-outputs mirroring the input tree) and ``summary.csv`` / ``summary.md`` (one row per
-input file, all three metrics). Every file is written atomically.
+materials is a batch (:mod:`microfacet.batch`, task ``fit``): one such triple per
+material and ``summary.csv`` / ``summary.md`` with the figures of :func:`summary_row`.
+Every file is written atomically.
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import time
-import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -41,9 +38,9 @@ from ..io import write_text
 from ..metrics import (ALBEDO_VIEWS_DEG, albedo_ratios, describe_albedo, describe_fit_error,
                        describe_uniform_error, fit_error, uniform_error, white_furnace)
 
-__all__ = ["material_name", "material_files", "fit_material", "fit_folder", "distribution_params",
+__all__ = ["material_name", "fit_material", "distribution_params",
            "fresnel_json", "analytic_json", "analytic_from_json", "summary_row",
-           "format_summary_markdown", "format_summary_csv", "objective", "SUMMARY_COLUMNS", "METHODS",
+           "format_summary_markdown", "objective", "SUMMARY_COLUMNS", "METHODS",
            "DIFFUSE"]
 
 #: File suffixes dropped from a material's name (longest first).
@@ -68,16 +65,6 @@ def material_name(path: str | os.PathLike) -> str:
         if name.lower().endswith(suffix) and len(name) > len(suffix):
             return name[: -len(suffix)]
     return name
-
-
-def material_files(folder: str | os.PathLike, recursive: bool = False) -> list[Path]:
-    """Regular, non-hidden files in ``folder`` (and, ``recursive``, in its non-hidden
-    subfolders), sorted by relative path (formats are recognised by content when loaded)."""
-    folder = Path(folder)
-    found = folder.rglob("*") if recursive else folder.iterdir()
-    return sorted((p for p in found if p.is_file()
-                   and not any(part.startswith(".") for part in p.relative_to(folder).parts)),
-                  key=lambda p: p.relative_to(folder).parts)
 
 
 def distribution_params(brdf) -> dict[str, float]:
@@ -288,15 +275,6 @@ def summary_row(name: str, path, fmt: str, summary: dict | None, status: str = "
     return row
 
 
-def format_summary_csv(rows: Sequence[dict]) -> str:
-    """The rows as CSV (header :data:`SUMMARY_COLUMNS`, full precision)."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    return buf.getvalue()
-
-
 def _cell(value, digits: int = 4) -> str:
     if isinstance(value, float):
         return f"{value:.{digits}g}"
@@ -321,43 +299,3 @@ def format_summary_markdown(rows: Sequence[dict]) -> str:
                                "\nkd: diffuse (Lambertian) reflectance of the fit, RGB.\n")
 
 
-def fit_folder(folder: str | os.PathLike, out_dir: str | os.PathLike, resolution: int = 90,
-               anisotropic: bool = False, gaf: str = "smith",
-               progress: Callable[[Sequence[Path]], object] | None = None, recursive: bool = False,
-               **options) -> list[dict]:
-    """Fit every material file of ``folder`` (with ``recursive``, of its subfolders too)
-    into ``out_dir`` and write the summaries; ``options`` go to :func:`fit_material`.
-
-    Outputs mirror the input tree: ``folder/a/nickel.binary`` gives ``out_dir/a/nickel.npz``
-    (``.json``, ``.png``) and the row ``a/nickel``. A file that cannot be read or fitted is
-    reported by a warning and a summary row with its error as status; the others are
-    still fitted. ``progress`` wraps the list of files (e.g. ``tqdm``). Returns the
-    summary rows; raises :class:`MicrofacetError` when the folder holds no file.
-    """
-    from ..measured import load
-    folder, out = Path(folder), Path(out_dir)
-    files = material_files(folder, recursive)
-    if not files:
-        raise MicrofacetError(f"{folder}: no files to fit")
-    if out.exists() and not out.is_dir():
-        raise MicrofacetError(f"{out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    rows, used = [], set()
-    for path in (progress(files) if progress else files):
-        parent = path.parent.relative_to(folder)
-        name = (parent / material_name(path)).as_posix()
-        name = (parent / path.name).as_posix() if name in used else name   # nickel.binary and .binary.gz
-        used.add(name)
-        try:
-            brdf = load(path)
-            summary = fit_material(brdf, out / f"{name}.npz", resolution, anisotropic, gaf, title=name, **options)
-            rows.append(summary_row(name, path, getattr(brdf, "format", ""), summary))
-        except (MicrofacetError, ValueError, OSError) as e:
-            reason = " ".join(str(e).split()) or type(e).__name__
-            reason = reason.removeprefix(f"{path}: ")        # the file is named already
-            warnings.warn(f"{path.relative_to(folder).as_posix()}: not fitted: {reason}", RuntimeWarning,
-                          stacklevel=2)
-            rows.append(summary_row(name, path, "", None, status=f"error: {reason}"))
-    write_text(out / "summary.csv", format_summary_csv(rows))
-    write_text(out / "summary.md", format_summary_markdown(rows))
-    return rows
