@@ -26,7 +26,7 @@ import numpy as np
 
 from ..brdf import MicrofacetBRDF
 from ..distributions import Beckmann
-from .pbrdf import eval_cos_footprints
+from .pbrdf import Microsurface, eval_cos_footprints
 
 __all__ = ["scratched_normal_map", "PlaneScene", "render_pbrdf", "render_naive", "relative_error",
            "glints_section", "render_cli", "PIXEL_SIGMA"]
@@ -203,7 +203,6 @@ def glints_section(out, progress=None, map_size: int = 256, width: int = 48,
     from html import escape
 
     from ..io import html_grid, write_exr, write_png
-    from . import Microsurface
     tick = progress if progress is not None else (lambda n=1: None)
     folder = Path(out) / "glints"
     folder.mkdir(parents=True, exist_ok=True)
@@ -274,7 +273,6 @@ def render_cli(npz, out_png, light=(0.0, 0.35, 0.9), distance: float = 1.2, widt
     (exposure: the 99.5th percentile maps to 1 unless given). Returns
     ``(png_path, linear image, seconds)``."""
     from ..io import write_png
-    from . import Microsurface
     lt = np.asarray(light, dtype=np.float64)
     if lt.shape != (3,) or not np.all(np.isfinite(lt)) or lt[2] <= 0:
         raise ValueError(f"--light must be a direction x,y,z with z > 0, got {light!r}")

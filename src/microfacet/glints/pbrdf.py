@@ -57,8 +57,9 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, _dirs
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector, reflect
+from .microsurface import FWHM_PER_SIGMA, LobeMixture
 
-__all__ = ["PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
+__all__ = ["Microsurface", "PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
            "eval_cos_footprints", "G2_MODELS"]
 
 G2_MODELS = ("correlated", "separable")
@@ -148,6 +149,10 @@ class PatchBRDF(BRDF):
         approximation of Sec. 4.2.2.
     g2 : {"correlated", "separable"}
         Masking-shadowing form (see the module notes).
+    backend : {"auto", "numpy", "numba"}
+        ``eval``/``eval_cos``/``pdf``/``sample``: the NumPy sums over lobes (the reference)
+        or one compiled pass over the lobes per direction pair (:func:`_lobe_sums`, the
+        same sums; ``"auto"``: compiled when available).
 
     Attributes
     ----------
@@ -160,36 +165,42 @@ class PatchBRDF(BRDF):
     """
 
     def __init__(self, ms, center, cov, fresnel: _fresnel.Fresnel | None = None,
-                 exact: bool = True, g2: str = "correlated"):
+                 exact: bool = True, g2: str = "correlated", backend: str = "auto"):
         indices, weights = ms.weights(np.asarray(center, float), np.asarray(cov, float))
         indices = np.asarray(indices)
         moments = np.asarray(ms.lobe_moments, dtype=np.float64)[indices]
         # Sec. 4.2.2: the filtered lobe of the MIP level matching the footprint
         merged = None if exact else ms.mip_moments(center, cov)
-        self._setup(moments, weights, fresnel, exact, g2, merged)
+        self._setup(moments, weights, fresnel, exact, g2, merged, backend)
         self.microsurface, self.indices = ms, indices
         self.center, self.cov = np.asarray(center, float), np.asarray(cov, float)
 
     @classmethod
     def from_lobes(cls, moments, weights, fresnel: _fresnel.Fresnel | None = None,
-                   exact: bool = True, g2: str = "correlated", merged=None) -> "PatchBRDF":
+                   exact: bool = True, g2: str = "correlated", merged=None,
+                   backend: str = "auto") -> "PatchBRDF":
         """P-BRDF of explicit lobes: slope moments ``(N, 5)`` and weights ``W`` ``(N,)``."""
         self = cls.__new__(cls)
-        self._setup(moments, weights, fresnel, exact, g2, merged)
+        self._setup(moments, weights, fresnel, exact, g2, merged, backend)
         self.microsurface, self.indices = None, np.arange(len(self.weights))
         self.center = self.cov = None
         return self
 
-    def _setup(self, moments, weights, fresnel, exact, g2, merged) -> None:
+    def _setup(self, moments, weights, fresnel, exact, g2, merged, backend) -> None:
         if g2 not in G2_MODELS:
             raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
+        if backend not in ("auto", "numpy", "numba"):
+            raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
+        if backend == "numba" and _lobe_sums is None:
+            raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
+        self._compiled = backend != "numpy" and _lobe_sums is not None
         m = _moments(moments)
         w = np.asarray(weights, dtype=np.float64).reshape(-1)
         if w.shape != (m.shape[0],) or np.any(~np.isfinite(w)) or np.any(w < 0):
             raise ValueError(f"weights must be {m.shape[0]} finite values >= 0")
         keep = w > 0
         self.weight_sum = float(w[keep].sum())
-        self.moments = m[keep]
+        self.moments = np.ascontiguousarray(m[keep])
         self.weights = w[keep] / self.weight_sum if self.weight_sum > 0 else w[keep]
         self.fresnel = _fresnel.Ideal() if fresnel is None else fresnel
         self.exact, self.g2 = bool(exact), g2
@@ -264,15 +275,25 @@ class PatchBRDF(BRDF):
         return _g2_over_ao(self.g2, ai, vi, ao, vo)
 
     # -------------------------------------------------------------------- protocol
+    def _sums(self, h, wi, wo):
+        """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` (Eq. 9, 13-17), compiled or NumPy."""
+        if not self._compiled or self.lobes is None:
+            return (self.pndf(h),) + self.areas(wi) + self.areas(wo)
+        shape = np.broadcast_shapes(h.shape, wi.shape, wo.shape)
+        flat = [np.ascontiguousarray(np.broadcast_to(d, shape).reshape(-1, 3)) for d in (h, wi, wo)]
+        out = [v.reshape(shape[:-1]) for v in _lobe_sums(self.moments, self.weights, *flat, self.exact).T]
+        if not self.exact:
+            out[1:] = self.areas(wi) + self.areas(wo)
+        return tuple(out)
+
     def _projected(self, wi, wo):
         """``(o.h, D_P G2 / (4 A_P(o)), valid)``."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo)
         oh, ih = dot(wo, h), dot(wi, h)
         ok = _local_ok(wi, wo, h, oh, ih)
-        ai, vi = self.areas(wi)
-        ao, vo = self.areas(wo)
-        s = np.where(ok, self.pndf(h) * self._g2_over_ao(ai, vi, ao, vo) / 4.0, 0.0)
+        d, ai, vi, ao, vo = self._sums(h, wi, wo)
+        s = np.where(ok, d * self._g2_over_ao(ai, vi, ao, vo) / 4.0, 0.0)
         return oh, s
 
     def eval_cos(self, wi, wo) -> np.ndarray:
@@ -357,6 +378,17 @@ class PatchBRDF(BRDF):
         return float(self.weights @ (q @ wq))
 
 
+# ------------------------------------------------------------------ the microsurface
+class Microsurface(LobeMixture):
+    """A normal map's lobe mixture (:class:`~microfacet.glints.microsurface.LobeMixture`:
+    Sec. 3-5, P-NDF, files) with its patch BRDF (Eq. 7): the public class. It lives here
+    so that imports flow one way (``microsurface`` <- ``pbrdf`` <- ``figures``)."""
+
+    def pbrdf(self, center, cov, fresnel=None, exact: bool = True, **kwargs) -> PatchBRDF:
+        """The patch BRDF (Eq. 7) of a footprint; see :class:`PatchBRDF`."""
+        return PatchBRDF(self, center, cov, fresnel, exact, **kwargs)
+
+
 # ------------------------------------------------------------------ many footprints at once
 def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
     """Lobes and weights ``W_i`` (Eq. 9, normalized) of many Gaussian footprints at once.
@@ -368,7 +400,6 @@ def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
     ``(2, 2)``. Returns flat lobe indices ``(P, K)`` and weights ``(P, K)`` (0 outside each
     footprint's rectangle; ``K`` the largest rectangle of the batch).
     """
-    from .microsurface import FWHM_PER_SIGMA
     ny, nx = grid_shape
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (c.shape[0], 2, 2))
@@ -462,6 +493,10 @@ if _kernels.AVAILABLE:
     #: (less than half an ulp) for ``t >= 8``; the erfc and exp are skipped there.
     _AREA_T = 8.0
     _AREA_T2 = _AREA_T * _AREA_T
+    #: Mahalanobis distance^2 of a half vector's slope beyond which a lobe's slope density
+    #: (Eq. 4) is not evaluated: ``exp(-q / 2) < 1e-304``, below every double that matters.
+    _Q_MAX = 1400.0
+    _INV_2PI = 1.0 / (2.0 * math.pi)
 
     @numba.njit(cache=True, inline="always")
     def _area(c, sg):  # pragma: no cover - compiled
@@ -472,6 +507,49 @@ if _kernels.AVAILABLE:
                 return c
             return 0.5 * c * math.erfc(-t / _SQRT2) + sg * _INV_SQRT_2PI * math.exp(-0.5 * t * t)
         return max(c, 0.0)
+
+    @numba.njit(cache=True, inline="always")
+    def _areas(kx, ky, kz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
+        """``(<n_i, k>+ / n_i.z, E[s+])`` of one lobe toward ``k`` (Eq. 13, 17; see
+        :func:`lobe_projected_area`): ``c >= _AREA_T sigma`` is tested without sqrt."""
+        c = kz - kx * mx - ky * my
+        var = kx * kx * sxx + 2.0 * kx * ky * sxy + ky * ky * syy
+        if c > 0.0:
+            return c, (c if c * c >= _AREA_T2 * var else _area(c, math.sqrt(max(var, 0.0))))
+        return 0.0, _area(c, math.sqrt(max(var, 0.0)))
+
+    @numba.njit(cache=True, inline="always")
+    def _p22(xh, yh, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
+        """Gaussian slope density ``P_i`` (Eq. 4) of one lobe at slope ``(xh, yh)``."""
+        det = sxx * syy - sxy * sxy
+        gx, gy = xh - mx, yh - my
+        q = (syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy) / det
+        if q < _Q_MAX:
+            return math.exp(-0.5 * q) * _INV_2PI / math.sqrt(det)
+        return 0.0
+
+    @numba.njit(cache=True, inline="always")
+    def _accumulate(acc, w, E, k, hz, xh, yh, wi, wo, exact):  # pragma: no cover - compiled
+        """``acc += w (P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` for lobe ``k`` of raw
+        moments ``E`` (the terms of Eq. 9, 13 and 17)."""
+        mx, my = E[k, 0], E[k, 1]
+        sxx, syy, sxy = E[k, 2] - mx * mx, E[k, 3] - my * my, E[k, 4] - mx * my
+        if hz > 0:
+            acc[0] += w * _p22(xh, yh, mx, my, sxx, syy, sxy)
+        if exact:
+            a, v = _areas(wi[0], wi[1], wi[2], mx, my, sxx, syy, sxy)
+            acc[1] += w * a
+            acc[2] += w * v
+            a, v = _areas(wo[0], wo[1], wo[2], mx, my, sxx, syy, sxy)
+            acc[3] += w * a
+            acc[4] += w * v
+
+    @numba.njit(cache=True, inline="always")
+    def _half_slope(h):  # pragma: no cover - compiled
+        hz = h[2]
+        if hz > 0:
+            return hz, -h[0] / hz, -h[1] / hz, 1.0 / (hz * hz * hz * hz)
+        return hz, 0.0, 0.0, 0.0
 
     @numba.njit(cache=True, nogil=True)
     def _window(f, nx, ny, ks2x, ks2y, cutoff):  # pragma: no cover - compiled
@@ -486,18 +564,17 @@ if _kernels.AVAILABLE:
         return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
 
     @numba.njit(cache=True, parallel=True, nogil=True)
-    def _footprint_sums(lob, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo, exact):  # pragma: no cover - compiled
+    def _footprint_sums(E, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo, exact):  # pragma: no cover - compiled
         """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
         of :func:`footprint_lobes` (same window, same weights), looping over the window
-        instead of padding it. ``lob`` rows (:func:`_lobe_table`): ``mx, my, sxx, syy,
-        2 sxy, ixx, iyy, 2 ixy, log norm``.
+        instead of padding it; ``E`` the raw lobe moments ``(ny * nx, 5)`` (each lobe's
+        Gaussian is set up from them where it is used: no per-lobe table).
 
         The same sums as the NumPy reference up to rounding: the footprint weight
         ``exp(-q/2)`` of an uncorrelated footprint is factored into per-column and per-row
         exponentials (one exp per lobe otherwise), the lobe's slope density is
-        evaluated only where its exponent is above ``-700`` (``exp < 1e-304``), and the
-        projected areas skip erfc/exp where ``c / sigma >= 8`` (relative error < 1e-17,
-        see ``_AREA_T``)."""
+        evaluated only where its exponent is above ``-700`` (``_Q_MAX``), and the
+        projected areas skip erfc/exp where ``c / sigma >= 8`` (``_AREA_T``)."""
         P = fp.shape[0]
         out = np.zeros((P, 5))
         for p in numba.prange(P):
@@ -512,14 +589,10 @@ if _kernels.AVAILABLE:
                 du = (ix + 0.5) / nx - cu
                 ex[ix - x0] = math.exp(ax * du * du)
                 col[ix - x0] = ix % nx
-            hz = h[p, 2]
-            xh, yh = (-h[p, 0] / hz, -h[p, 1] / hz) if hz > 0 else (0.0, 0.0)
-            inv4 = 1.0 / (hz * hz * hz * hz) if hz > 0 else 0.0
-            kix, kiy, kiz = wi[p, 0], wi[p, 1], wi[p, 2]
-            kox, koy, koz = wo[p, 0], wo[p, 1], wo[p, 2]
-            ixx_, iyy_, ixy_ = kix * kix, kiy * kiy, kix * kiy
-            oxx_, oyy_, oxy_ = kox * kox, koy * koy, kox * koy
-            wsum = d = ai = vi = ao = vo = 0.0
+            hz, xh, yh, inv4 = _half_slope(h[p])
+            kin, kout = wi[p], wo[p]
+            acc = np.zeros(5)
+            wsum = 0.0
             for iy in range(y0, y1 + 1):
                 dv = (iy + 0.5) / ny - cv
                 ey = math.exp(ay * dv * dv)
@@ -532,34 +605,30 @@ if _kernels.AVAILABLE:
                         du = (x0 + jx + 0.5) / nx - cu
                         w = math.exp(ax * du * du + ay * dv * dv + cross * du)
                     wsum += w
-                    k = row + col[jx]
-                    mx, my = lob[k, 0], lob[k, 1]
-                    if hz > 0:
-                        gx, gy = xh - mx, yh - my
-                        q = lob[k, 5] * gx * gx + lob[k, 6] * gy * gy + lob[k, 7] * gx * gy
-                        if q < 1400.0:
-                            d += w * math.exp(lob[k, 8] - 0.5 * q)
-                    if exact:
-                        lxx, lyy, lxy = lob[k, 2], lob[k, 3], lob[k, 4]
-                        # c >= _AREA_T sigma (tested without sqrt or division): area = c
-                        c = kiz - kix * mx - kiy * my
-                        var = ixx_ * lxx + ixy_ * lxy + iyy_ * lyy
-                        if c > 0.0:
-                            ai += w * c
-                            vi += w * (c if c * c >= _AREA_T2 * var else _area(c, math.sqrt(max(var, 0.0))))
-                        else:
-                            vi += w * _area(c, math.sqrt(max(var, 0.0)))
-                        c = koz - kox * mx - koy * my
-                        var = oxx_ * lxx + oxy_ * lxy + oyy_ * lyy
-                        if c > 0.0:
-                            ao += w * c
-                            vo += w * (c if c * c >= _AREA_T2 * var else _area(c, math.sqrt(max(var, 0.0))))
-                        else:
-                            vo += w * _area(c, math.sqrt(max(var, 0.0)))
+                    _accumulate(acc, w, E, row + col[jx], hz, xh, yh, kin, kout, exact)
             if wsum > 0:
-                out[p, 0] = d * inv4 / wsum
-                out[p, 1], out[p, 2] = ai / wsum, vi / wsum
-                out[p, 3], out[p, 4] = ao / wsum, vo / wsum
+                out[p, 0] = acc[0] * inv4 / wsum
+                for m in range(1, 5):
+                    out[p, m] = acc[m] / wsum
+        return out
+
+    @numba.njit(cache=True, nogil=True)
+    def _lobe_sums(E, W, h, wi, wo, exact):  # pragma: no cover - compiled
+        """Per query ``q``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of explicit lobes
+        (raw moments ``E (N, 5)``, weights ``W`` summing to 1): the sums of
+        :meth:`PatchBRDF.pndf` and :meth:`PatchBRDF.areas` (Eq. 9, 13, 17) in one pass."""
+        Q = h.shape[0]
+        out = np.zeros((Q, 5))
+        acc = np.empty(5)
+        for q in range(Q):
+            hz, xh, yh, inv4 = _half_slope(h[q])
+            kin, kout = wi[q], wo[q]
+            acc[:] = 0.0
+            for k in range(E.shape[0]):
+                _accumulate(acc, W[k], E, k, hz, xh, yh, kin, kout, exact)
+            out[q, 0] = acc[0] * inv4
+            for m in range(1, 5):
+                out[q, m] = acc[m]
         return out
 
     @numba.njit(cache=True, parallel=True, nogil=True)
@@ -585,23 +654,12 @@ if _kernels.AVAILABLE:
                     out[p, m] /= wsum
         return out
 else:  # pragma: no cover - without numba
-    _footprint_sums = _footprint_merge = None
-
-
-def _lobe_table(moments) -> np.ndarray:
-    """Per lobe ``mx, my, sxx, syy, 2 sxy`` and the inverse covariance ``ixx, iyy, 2 ixy``
-    and log normalization of its Gaussian slope density (``P_i``, Eq. 4), the constants
-    of the compiled kernel (the factors 2 of the quadratic forms folded in)."""
-    mx, my, sxx, syy, sxy = _covariance(np.asarray(moments, dtype=np.float64))
-    det = sxx * syy - sxy * sxy
-    return np.ascontiguousarray(np.stack([mx, my, sxx, syy, 2.0 * sxy, syy / det, sxx / det,
-                                          -2.0 * sxy / det, -np.log(2.0 * np.pi * np.sqrt(det))], -1))
+    _footprint_sums = _footprint_merge = _lobe_sums = None
 
 
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
     """Merged-lobe moments ``(P, 5)`` of Sec. 4.2.2 for each footprint (MIP level of
     ``ms.mip_level``, weights of that level's grid)."""
-    from .microsurface import FWHM_PER_SIGMA
     flat = np.ascontiguousarray(cov).reshape(-1, 4)
     uniq, inverse = np.unique(flat, axis=0, return_inverse=True)   # images often share footprints
     levels = np.array([ms.mip_level(u.reshape(2, 2)) for u in uniq])[inverse.reshape(-1)]
@@ -625,24 +683,19 @@ def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
 
 
 def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2) -> np.ndarray:
-    from .microsurface import FWHM_PER_SIGMA
     fresnel = _fresnel.Ideal() if fresnel is None else fresnel
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
     wi = np.ascontiguousarray(np.broadcast_to(_dirs(wi, "wi"), (P, 3)))
     wo = np.ascontiguousarray(np.broadcast_to(_dirs(wo, "wo"), (P, 3)))
-    table = getattr(ms, "_pbrdf_lobe_table", None)
-    if table is None or table.shape[0] != ms.n_lobes:
-        table = _lobe_table(ms.lobe_moments)
-        ms._pbrdf_lobe_table = table                  # cached per microsurface
     ny, nx = ms.grid
     ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.ascontiguousarray(np.stack([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]], -1))
     h = half_vector(wi, wo)
     oh, ih = dot(wo, h), dot(wi, h)
     ok = _local_ok(wi, wo, h, oh, ih)
-    sums = _footprint_sums(table, nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp, np.ascontiguousarray(h),
+    sums = _footprint_sums(np.ascontiguousarray(ms.lobe_moments, dtype=np.float64), nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp, np.ascontiguousarray(h),
                            wi, wo, bool(exact))
     D, ai, vi, ao, vo = sums.T
     if not exact:
