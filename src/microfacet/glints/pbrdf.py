@@ -37,18 +37,27 @@ everywhere, ``G2 = 1 / (1 + Lambda_P(o) + Lambda_P(i))``) or ``"separable"``
 (Eq. 16 as printed, ``G1(o) G1(i)``). Both are energy conserving
 (``G2 <= G1(o)``); the local factors ``chi+(o.h) chi+(i.h)`` of Eq. 10 apply to both.
 
-``exact=False`` is the approximation of Sec. 4.2.2: one merged Beckmann lobe, the
+``exact=False`` is the approximation of Sec. 4.2.2: one merged Beckmann lobe ``m``, the
 ``W``-weighted average of the five linear slope moments of the MIP level that matches
 the footprint (``ms.mip_moments``; :meth:`PatchBRDF.from_lobes` averages the given lobes),
-whose Smith Lambda and mean-slope projected area replace ``Lambda_P`` and ``A_P``.
-``D_P`` stays exact. Merging lobes widens the lobe,
-which overestimates masking: the approximation darkens at grazing angles.
+whose Smith ``Lambda_m`` replaces ``Lambda_P``. ``D_P`` stays exact, and so does its
+visible projected area ``V_P(k) = int <k,h>+ D_P`` (Eq. 13-15); the patch projected area
+is then ``A_P(k) = V_P(k) / (1 + Lambda_m(k)) = V_P c_m+ / V_m`` (Eq. 15 solved for
+``A_P``), so that Eq. 11 normalizes ``D_P`` exactly and the approximation conserves
+energy like the exact model. Taking ``A_m = c_m+`` itself (the merged lobe's mean-normal
+area, as printed) gains energy wherever ``V_m < V_P``: ``int eval_cos = V_P(o) / V_m(o)``
+at most, up to 1.0024 at 60 degrees (MIP level 1 of a smooth map: the MIP lobe's mean
+normal is not the footprint's) and 1.048 at 89 degrees (a rough map: a mixture of lobes
+has heavier tails toward grazing ``k`` than the Gaussian of the same mean and variance),
+see ``tests/test_glints_pbrdf.py::test_white_furnace_approximation_conserves_energy``.
 
 Sampling (Sec. 5): a position of the footprint picks lobe ``i`` with probability
 ``W_i / sum W``; a normal is drawn from its slope distribution ``P_i`` and ``wo`` is
 reflected about it. The pdf is ``D_P(h) z_h / (4 o.h)``.
 """
 from __future__ import annotations
+
+from functools import cached_property
 
 import numpy as np
 from scipy.special import erfc
@@ -116,6 +125,17 @@ def merge_moments(moments, weights) -> np.ndarray:
     return (w[:, None] * m).sum(0) / w.sum()
 
 
+def _merged_area(v, merged, k) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_P, V_P)`` of the approximation (Sec. 4.2.2, module notes): ``Lambda_P`` is the
+    merged lobe's Smith ``Lambda_m = V_m / c_m - 1`` and ``A_P = V_P / (1 + Lambda_m) =
+    V_P c_m+ / V_m`` (Eq. 15), with ``V_P`` the mixture's visible projected area ``v``
+    (Eq. 13) and ``c_m``, ``V_m`` the merged lobe's (:func:`lobe_projected_area`)."""
+    c, vm = lobe_projected_area(merged, k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where((vm > 0) & (c > 0), v * np.maximum(c, 0.0) / np.where(vm > 0, vm, 1.0), 0.0)
+    return a, v
+
+
 def _g2_over_ao(g2: str, ai, vi, ao, vo) -> np.ndarray:
     """``G2 / A_P(o)`` from the patch areas ``A_P``, ``V_P`` of ``i`` and ``o`` (Eq. 7, 11-16),
     written without dividing by ``A_P`` (finite where it vanishes):
@@ -146,7 +166,7 @@ class PatchBRDF(BRDF):
         Microfacet Fresnel term (default: ideal mirrors).
     exact : bool
         Exact patch masking and projected area (Eq. 10-17) or the merged-lobe
-        approximation of Sec. 4.2.2.
+        approximation of Sec. 4.2.2 (module notes).
     g2 : {"correlated", "separable"}
         Masking-shadowing form (see the module notes).
     backend : {"auto", "numpy", "numba"}
@@ -205,12 +225,17 @@ class PatchBRDF(BRDF):
         self.fresnel = _fresnel.Ideal() if fresnel is None else fresnel
         self.exact, self.g2 = bool(exact), g2
         if self.weight_sum > 0:
-            self.lobes = Beckmann.from_moments(*self.moments.T)
             self._cdf = np.cumsum(self.weights)
             self.merged = (merge_moments(self.moments, self.weights) if merged is None
                            else np.asarray(merged, dtype=np.float64).reshape(5))
         else:
-            self.lobes, self._cdf, self.merged = None, np.zeros(0), None
+            self._cdf, self.merged = np.zeros(0), None
+
+    @cached_property
+    def lobes(self) -> Beckmann | None:
+        """The lobes as one :class:`~microfacet.Beckmann` with array parameters (built on
+        first use: the compiled sums read the moments); ``None`` without lobes."""
+        return Beckmann.from_moments(*self.moments.T) if self.weight_sum > 0 else None
 
     def __repr__(self) -> str:
         return (f"PatchBRDF({len(self.weights)} lobes, sum W = {self.weight_sum:.6g}, "
@@ -245,19 +270,18 @@ class PatchBRDF(BRDF):
     def areas(self, k) -> tuple[np.ndarray, np.ndarray]:
         """``(A_P(k), V_P(k))``: patch projected area (Eq. 17) and the visible projected
         area of the microfacets ``int <k,h>+ D_P = A_P (1 + Lambda_P)`` (Eq. 13-15);
-        with ``exact=False`` those of the merged lobe (Sec. 4.2.2)."""
+        with ``exact=False`` ``A_P = V_P / (1 + Lambda_m)`` of the merged lobe (Sec.
+        4.2.2, :func:`_merged_area`)."""
         k = _dirs(k, "k")
         if self.lobes is None:
             z = np.zeros(k.shape[:-1])
             return z, z
-        if self.exact:
-            def fn(kk):
-                c, area = lobe_projected_area(self.moments, kk)
-                return np.maximum(c, 0.0), area
-            a, v = self._lobe_sum(fn, k)
-            return a, v
-        c, v = lobe_projected_area(self.merged, k)
-        return np.maximum(c, 0.0), v
+
+        def fn(kk):
+            c, area = lobe_projected_area(self.moments, kk)
+            return np.maximum(c, 0.0), area
+        a, v = self._lobe_sum(fn, k)
+        return (a, v) if self.exact else _merged_area(v, self.merged, k)
 
     def lambda_p(self, k) -> np.ndarray:
         """Patch Smith ``Lambda_P(k) = V_P / A_P - 1`` (Eq. 15); ``inf`` where ``A_P = 0``."""
@@ -281,9 +305,10 @@ class PatchBRDF(BRDF):
             return (self.pndf(h),) + self.areas(wi) + self.areas(wo)
         shape = np.broadcast_shapes(h.shape, wi.shape, wo.shape)
         flat = [np.ascontiguousarray(np.broadcast_to(d, shape).reshape(-1, 3)) for d in (h, wi, wo)]
-        out = [v.reshape(shape[:-1]) for v in _lobe_sums(self.moments, self.weights, *flat, self.exact).T]
+        out = [v.reshape(shape[:-1]) for v in _lobe_sums(self.moments, self.weights, *flat).T]
         if not self.exact:
-            out[1:] = self.areas(wi) + self.areas(wo)
+            out[1:3] = _merged_area(out[2], self.merged, wi)
+            out[3:5] = _merged_area(out[4], self.merged, wo)
         return tuple(out)
 
     def _projected(self, wi, wo):
@@ -352,7 +377,7 @@ class PatchBRDF(BRDF):
         ``s``) the integral is ``sum_i W_i E_{P_i}[F G2 (o.h) / (A_P(o) z_h)]`` (0 where
         ``wi`` falls below the horizon), computed by ``order x order`` Gauss-Hermite
         quadrature of each lobe's Gaussian slopes. Independent of :meth:`sample`;
-        ``<= 1`` for ``exact=True`` (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``."""
+        ``<= 1`` for both models (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``."""
         wo = np.asarray(wo, dtype=np.float64).reshape(3)
         if self.lobes is None:
             return 0.0
@@ -462,16 +487,12 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
         idx, W = footprint_lobes(ms.grid, c[sl], cov[sl], ms.cutoff)
         E = E_all[idx]                                                       # (B, K, 5)
         D = np.einsum("bk,bk->b", W, Beckmann.from_moments(*np.moveaxis(E, -1, 0)).ndf(h[:, None, :]))
-        if exact:
-            def areas(k):
-                cc, v = lobe_projected_area(E, k[:, None, :])
-                return np.einsum("bk,bk->b", W, np.maximum(cc, 0.0)), np.einsum("bk,bk->b", W, v)
-        else:
-            merged = _merged_footprints(ms, c[sl], cov[sl])
+        merged = None if exact else _merged_footprints(ms, c[sl], cov[sl])
 
-            def areas(k):
-                cc, v = lobe_projected_area(merged, k)
-                return np.maximum(cc, 0.0), v
+        def areas(k):
+            cc, v = lobe_projected_area(E, k[:, None, :])
+            v = np.einsum("bk,bk->b", W, v)
+            return (np.einsum("bk,bk->b", W, np.maximum(cc, 0.0)), v) if exact else _merged_area(v, merged, k)
         ai, vi = areas(wi[sl])
         ao, vo = areas(wo[sl])
         val = np.where(ok, D * _g2_over_ao(g2, ai, vi, ao, vo) / 4.0, 0.0)
@@ -494,7 +515,8 @@ if _kernels.AVAILABLE:
     _AREA_T = 8.0
     _AREA_T2 = _AREA_T * _AREA_T
     #: Mahalanobis distance^2 of a half vector's slope beyond which a lobe's slope density
-    #: (Eq. 4) is not evaluated: ``exp(-q / 2) < 1e-304``, below every double that matters.
+    #: (Eq. 4) is not evaluated: ``exp(-q / 2) < 1e-304`` (a tighter cut, 1e-30, measured
+    #: no faster).
     _Q_MAX = 1400.0
     _INV_2PI = 1.0 / (2.0 * math.pi)
 
@@ -523,26 +545,21 @@ if _kernels.AVAILABLE:
         """Gaussian slope density ``P_i`` (Eq. 4) of one lobe at slope ``(xh, yh)``."""
         det = sxx * syy - sxy * sxy
         gx, gy = xh - mx, yh - my
-        q = (syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy) / det
-        if q < _Q_MAX:
-            return math.exp(-0.5 * q) * _INV_2PI / math.sqrt(det)
+        qdet = syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy      # q det (det > 0)
+        if qdet < _Q_MAX * det:
+            return math.exp(-0.5 * qdet / det) * _INV_2PI / math.sqrt(det)
         return 0.0
 
     @numba.njit(cache=True, inline="always")
-    def _accumulate(acc, w, E, k, hz, xh, yh, wi, wo, exact):  # pragma: no cover - compiled
-        """``acc += w (P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` for lobe ``k`` of raw
-        moments ``E`` (the terms of Eq. 9, 13 and 17)."""
+    def _lobe_terms(E, k, hz, xh, yh, ix, iy, iz, ox, oy, oz):  # pragma: no cover - compiled
+        """``(P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` of lobe ``k`` of raw moments ``E``
+        (the terms of Eq. 9, 13 and 17)."""
         mx, my = E[k, 0], E[k, 1]
         sxx, syy, sxy = E[k, 2] - mx * mx, E[k, 3] - my * my, E[k, 4] - mx * my
-        if hz > 0:
-            acc[0] += w * _p22(xh, yh, mx, my, sxx, syy, sxy)
-        if exact:
-            a, v = _areas(wi[0], wi[1], wi[2], mx, my, sxx, syy, sxy)
-            acc[1] += w * a
-            acc[2] += w * v
-            a, v = _areas(wo[0], wo[1], wo[2], mx, my, sxx, syy, sxy)
-            acc[3] += w * a
-            acc[4] += w * v
+        d = _p22(xh, yh, mx, my, sxx, syy, sxy) if hz > 0 else 0.0
+        ai, vi = _areas(ix, iy, iz, mx, my, sxx, syy, sxy)
+        ao, vo = _areas(ox, oy, oz, mx, my, sxx, syy, sxy)
+        return d, ai, vi, ao, vo
 
     @numba.njit(cache=True, inline="always")
     def _half_slope(h):  # pragma: no cover - compiled
@@ -564,7 +581,7 @@ if _kernels.AVAILABLE:
         return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
 
     @numba.njit(cache=True, parallel=True, nogil=True)
-    def _footprint_sums(E, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo, exact):  # pragma: no cover - compiled
+    def _footprint_sums(E, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo):  # pragma: no cover - compiled
         """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
         of :func:`footprint_lobes` (same window, same weights), looping over the window
         instead of padding it; ``E`` the raw lobe moments ``(ny * nx, 5)`` (each lobe's
@@ -590,9 +607,8 @@ if _kernels.AVAILABLE:
                 ex[ix - x0] = math.exp(ax * du * du)
                 col[ix - x0] = ix % nx
             hz, xh, yh, inv4 = _half_slope(h[p])
-            kin, kout = wi[p], wo[p]
-            acc = np.zeros(5)
-            wsum = 0.0
+            ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
+            wsum = s0 = s1 = s2 = s3 = s4 = 0.0
             for iy in range(y0, y1 + 1):
                 dv = (iy + 0.5) / ny - cv
                 ey = math.exp(ay * dv * dv)
@@ -605,30 +621,36 @@ if _kernels.AVAILABLE:
                         du = (x0 + jx + 0.5) / nx - cu
                         w = math.exp(ax * du * du + ay * dv * dv + cross * du)
                     wsum += w
-                    _accumulate(acc, w, E, row + col[jx], hz, xh, yh, kin, kout, exact)
+                    d, ai, vi, ao, vo = _lobe_terms(E, row + col[jx], hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_)
+                    s0 += w * d
+                    s1 += w * ai
+                    s2 += w * vi
+                    s3 += w * ao
+                    s4 += w * vo
             if wsum > 0:
-                out[p, 0] = acc[0] * inv4 / wsum
-                for m in range(1, 5):
-                    out[p, m] = acc[m] / wsum
+                out[p, 0], out[p, 1], out[p, 2] = s0 * inv4 / wsum, s1 / wsum, s2 / wsum
+                out[p, 3], out[p, 4] = s3 / wsum, s4 / wsum
         return out
 
-    @numba.njit(cache=True, nogil=True)
-    def _lobe_sums(E, W, h, wi, wo, exact):  # pragma: no cover - compiled
+    @numba.njit(cache=True, parallel=True, nogil=True)
+    def _lobe_sums(E, W, h, wi, wo):  # pragma: no cover - compiled
         """Per query ``q``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of explicit lobes
         (raw moments ``E (N, 5)``, weights ``W`` summing to 1): the sums of
         :meth:`PatchBRDF.pndf` and :meth:`PatchBRDF.areas` (Eq. 9, 13, 17) in one pass."""
         Q = h.shape[0]
         out = np.zeros((Q, 5))
-        acc = np.empty(5)
-        for q in range(Q):
+        for q in numba.prange(Q):
             hz, xh, yh, inv4 = _half_slope(h[q])
-            kin, kout = wi[q], wo[q]
-            acc[:] = 0.0
+            ix_, iy_, iz_, ox_, oy_, oz_ = wi[q, 0], wi[q, 1], wi[q, 2], wo[q, 0], wo[q, 1], wo[q, 2]
+            s0 = s1 = s2 = s3 = s4 = 0.0
             for k in range(E.shape[0]):
-                _accumulate(acc, W[k], E, k, hz, xh, yh, kin, kout, exact)
-            out[q, 0] = acc[0] * inv4
-            for m in range(1, 5):
-                out[q, m] = acc[m]
+                d, ai, vi, ao, vo = _lobe_terms(E, k, hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_)
+                s0 += W[k] * d
+                s1 += W[k] * ai
+                s2 += W[k] * vi
+                s3 += W[k] * ao
+                s4 += W[k] * vo
+            out[q, 0], out[q, 1], out[q, 2], out[q, 3], out[q, 4] = s0 * inv4, s1, s2, s3, s4
         return out
 
     @numba.njit(cache=True, parallel=True, nogil=True)
@@ -695,13 +717,12 @@ def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2) ->
     h = half_vector(wi, wo)
     oh, ih = dot(wo, h), dot(wi, h)
     ok = _local_ok(wi, wo, h, oh, ih)
-    sums = _footprint_sums(np.ascontiguousarray(ms.lobe_moments, dtype=np.float64), nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp, np.ascontiguousarray(h),
-                           wi, wo, bool(exact))
-    D, ai, vi, ao, vo = sums.T
+    E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64)
+    D, ai, vi, ao, vo = _footprint_sums(E, nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp,
+                                        np.ascontiguousarray(h), wi, wo).T
     if not exact:
         merged = _merged_footprints(ms, c, cov, fast=True)
-        ci, vi = lobe_projected_area(merged, wi)
-        co, vo = lobe_projected_area(merged, wo)
-        ai, ao = np.maximum(ci, 0.0), np.maximum(co, 0.0)
+        ai, vi = _merged_area(vi, merged, wi)
+        ao, vo = _merged_area(vo, merged, wo)
     val = np.where(ok, D * _g2_over_ao(g2, ai, vi, ao, vo) / 4.0, 0.0)
     return fresnel(oh) * val[:, None]
