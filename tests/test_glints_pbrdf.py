@@ -359,3 +359,44 @@ def test_footprint_kernel_matches_reference_on_near_mirror_lobes():
     assert _area(0.3, 0.0) == 0.3 and _area(-0.3, 0.0) == 0.0
     assert _area(1.0, 0.5) == pytest.approx(0.5 * erfc(-2 / np.sqrt(2)) + 0.5 * np.exp(-2) / np.sqrt(2 * np.pi),
                                             rel=1e-14)
+
+
+# ------------------------------------------------------------------- structure, demo
+def test_glints_imports_flow_one_way():
+    """microsurface <- (reference, pbrdf) <- figures: no glints module imports one that
+    imports it (``Microsurface`` with its ``.pbrdf`` lives in pbrdf)."""
+    import ast
+    from pathlib import Path
+
+    import microfacet.glints as g
+    allowed = {"microsurface": set(), "reference": {"microsurface"}, "pbrdf": {"microsurface"},
+               "figures": {"microsurface", "pbrdf"}}
+    for name, ok in allowed.items():
+        tree = ast.parse((Path(g.__file__).parent / f"{name}.py").read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                mods = [node.module] if node.module else [a.name for a in node.names]
+                assert {m.split(".")[0] for m in mods} <= ok, (name, mods)
+    assert Microsurface.pbrdf is not None and issubclass(Microsurface, g.LobeMixture)
+
+
+def test_errors_against_a_noisy_reference_remove_its_noise():
+    from microfacet.glints.figures import _errors_against_noisy_reference
+    rng = np.random.default_rng(8)
+    truth = rng.random((60, 80, 1)) + 0.5
+    biased = truth * 1.05                                       # relative error 0.05
+    a, b = (truth + 0.2 * rng.standard_normal(truth.shape) for _ in range(2))
+    (err,), noise = _errors_against_noisy_reference([biased], a, b)
+    assert err == pytest.approx(0.05, abs=0.005)
+    assert noise == pytest.approx(0.2 / np.sqrt(2) / np.sqrt(np.mean(truth ** 2)), rel=0.05)   # noise of (a + b) / 2
+    assert relative_error(biased, 0.5 * (a + b)) > 0.08         # the raw error carries the noise
+
+
+def test_glints_section_writes_native_size_images(tmp_path):
+    from PIL import Image
+
+    from microfacet.glints.figures import glints_section
+    html = glints_section(tmp_path, map_size=32, width=40, reference_spp=4, naive_spp=2)
+    for stem in ("pbrdf_exact", "pbrdf_approx", "naive", "naive_reference"):
+        assert Image.open(tmp_path / "glints" / f"{stem}.png").size == (40, PlaneScene(width=40).height)
+    assert "naive, 2 spp: rel. L2 error" in html and f"40×{PlaneScene(width=40).height} px" in html

@@ -277,10 +277,15 @@ class PatchBRDF(BRDF):
             z = np.zeros(k.shape[:-1])
             return z, z
 
-        def fn(kk):
-            c, area = lobe_projected_area(self.moments, kk)
-            return np.maximum(c, 0.0), area
-        a, v = self._lobe_sum(fn, k)
+        if self._compiled:         # the compiled sums (toward k; their P-NDF column unused)
+            flat = np.ascontiguousarray(k.reshape(-1, 3))
+            sums = _lobe_sums(self.moments, self.weights, flat, flat, flat)
+            a, v = sums[:, 1].reshape(k.shape[:-1]), sums[:, 2].reshape(k.shape[:-1])
+        else:
+            def fn(kk):
+                c, area = lobe_projected_area(self.moments, kk)
+                return np.maximum(c, 0.0), area
+            a, v = self._lobe_sum(fn, k)
         return (a, v) if self.exact else _merged_area(v, self.merged, k)
 
     def lambda_p(self, k) -> np.ndarray:
