@@ -11,7 +11,7 @@ from microfacet.cli import main
 from microfacet.errors import MicrofacetError
 from microfacet.geometry import spherical_to_cartesian
 from microfacet.glints import FORMAT_VERSION, Microsurface, interpolate_slopes, load_slopes
-from microfacet.glints.microsurface import (FWHM_PER_SIGMA, _central_float32, _floor_moments,
+from microfacet.glints.microsurface import (FWHM_PER_SIGMA, _central_float32, _floor_moments, _raw_from_central,
                                             _floor_moments_compiled, _lobe_moments, _quadrature,
                                             lobe_moments, lobe_moments_reference)
 from microfacet.glints.reference import compare_histogram
@@ -356,3 +356,13 @@ def test_cli_builds_and_saves_a_microsurface(tmp_path, capsys):
     assert main(["glints", str(tmp_path / "missing.png"), "-o", str(tmp_path / "x.npz")]) == 1
     err = capsys.readouterr().err
     assert "missing.png" in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_central_moment_conversions_invert_each_other():
+    E = lobe_moments(random_slopes((9, 7)), 7, 9)
+    C = _central_float32(E)
+    assert C.dtype == np.float32
+    np.testing.assert_allclose(C[..., 2], E[..., 2] - E[..., 0] ** 2, rtol=1e-6)
+    np.testing.assert_allclose(C[..., 4], E[..., 4] - E[..., 0] * E[..., 1], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(_raw_from_central(C), E, rtol=1e-6, atol=1e-9)
+    assert np.array_equal(_raw_from_central(C.astype(np.float64))[..., :2], C[..., :2])

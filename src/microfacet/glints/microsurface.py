@@ -533,26 +533,33 @@ class _LazyPyramid(Sequence):
         return self._levels[i]
 
 
-_ROWS = 256          # rows per chunk of the moment conversions (bounds their temporaries)
-
-
-def _central_float32(E: np.ndarray) -> np.ndarray:
-    """Float32 central moments ``(mx, my, vxx, vyy, cxy)`` of raw moments ``(ny, nx, 5)`` (Eq. 5)."""
+@numba.njit(parallel=True, cache=True)
+def _central_float32(E):  # pragma: no cover - compiled
+    """Float32 central moments ``(mx, my, vxx, vyy, cxy)`` of raw moments ``E (ny, nx, 5)``
+    (Eq. 5: ``vxx = E3 - E1^2``, ``vyy = E4 - E2^2``, ``cxy = E5 - E1 E2``)."""
     out = np.empty(E.shape, np.float32)
-    for r in range(0, E.shape[0], _ROWS):
-        e = E[r:r + _ROWS]
-        m1, m2 = e[..., 0], e[..., 1]
-        out[r:r + _ROWS] = np.stack([m1, m2, e[..., 2] - m1 * m1, e[..., 3] - m2 * m2, e[..., 4] - m1 * m2], -1)
+    for iy in numba.prange(E.shape[0]):
+        for ix in range(E.shape[1]):
+            m1, m2 = E[iy, ix, 0], E[iy, ix, 1]
+            out[iy, ix, 0], out[iy, ix, 1] = m1, m2
+            out[iy, ix, 2] = E[iy, ix, 2] - m1 * m1
+            out[iy, ix, 3] = E[iy, ix, 3] - m2 * m2
+            out[iy, ix, 4] = E[iy, ix, 4] - m1 * m2
     return out
 
 
-def _raw_from_central(C: np.ndarray) -> np.ndarray:
-    """Float64 raw moments ``E1..E5`` of central moments (inverse of :func:`_central_float32`)."""
+@numba.njit(parallel=True, cache=True)
+def _raw_from_central(C):  # pragma: no cover - compiled
+    """Float64 raw moments ``E1..E5`` of central moments ``C (ny, nx, 5)`` (inverse of
+    :func:`_central_float32`: ``E3 = vxx + mx^2``, ``E4 = vyy + my^2``, ``E5 = cxy + mx my``)."""
     out = np.empty(C.shape, np.float64)
-    for r in range(0, C.shape[0], _ROWS):
-        c = C[r:r + _ROWS].astype(np.float64)
-        m1, m2 = c[..., 0], c[..., 1]
-        out[r:r + _ROWS] = np.stack([m1, m2, c[..., 2] + m1 * m1, c[..., 3] + m2 * m2, c[..., 4] + m1 * m2], -1)
+    for iy in numba.prange(C.shape[0]):
+        for ix in range(C.shape[1]):
+            m1, m2 = np.float64(C[iy, ix, 0]), np.float64(C[iy, ix, 1])
+            out[iy, ix, 0], out[iy, ix, 1] = m1, m2
+            out[iy, ix, 2] = C[iy, ix, 2] + m1 * m1
+            out[iy, ix, 3] = C[iy, ix, 3] + m2 * m2
+            out[iy, ix, 4] = C[iy, ix, 4] + m1 * m2
     return out
 
 
