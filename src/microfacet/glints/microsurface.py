@@ -585,9 +585,9 @@ class LobeMixture:
     mip : sequence of (ny_l, nx_l, 5)
         Lobe-moment MIP levels (level 0 = the lobes, averaged 2 x 2 upwards), built on
         first access (as are ``lobe_uv`` and the hierarchy of :meth:`pndf`).
-    slopes : (H, W, 2)
-        The texel slopes, float64 or float32 (for the interpolated map, e.g. to sample a
-        footprint).
+    slopes : (H, W, 2) float32
+        The texel slopes (for the interpolated map, e.g. to sample a footprint), float32
+        as :meth:`save` stores them, so that a built and a loaded microsurface agree.
 
     ``moments`` ``(ny, nx, 5)`` raw moments are floored (:func:`_floor_moments`) in a
     copy, or in place with ``copy=False`` (the builders and :meth:`load` own theirs).
@@ -608,8 +608,7 @@ class LobeMixture:
             grid = np.array(grid, dtype=np.float64, order="C")
         _floor_moments_compiled(grid.reshape(-1, 5), float(sigma_eps))     # in place
         self._grid = grid
-        slopes = np.asarray(slopes)
-        self.slopes = slopes if slopes.dtype in (np.float32, np.float64) else slopes.astype(np.float64)
+        self.slopes = np.asarray(slopes, dtype=np.float32)       # as files store them
         self.h, self.sigma_eps = float(h), float(sigma_eps)
         self.cutoff, self.slope_cutoff = float(cutoff), float(slope_cutoff)
         ny, nx = grid.shape[:2]
@@ -897,7 +896,7 @@ class LobeMixture:
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez(f, magic=np.array(_MAGIC), version=np.array(FORMAT_VERSION),
-                         central=_central_float32(self._grid), slopes=self.slopes.astype(np.float32),
+                         central=_central_float32(self._grid), slopes=self.slopes,
                          params=np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff]))
         return path
 
