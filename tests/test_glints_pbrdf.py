@@ -72,6 +72,8 @@ def test_compiled_sums_match_numpy(ms):
             assert (e > 0).mean() > 0.3
             np.testing.assert_allclose(got.eval_cos(wi, wo), e, rtol=1e-11, atol=1e-14 * np.abs(e).max())
             np.testing.assert_allclose(got.eval(wi[0], wo[0]), ref.eval(wi[0], wo[0]), rtol=1e-11)
+            np.testing.assert_allclose(got.pndf(wi), ref.pndf(wi), rtol=1e-11, atol=1e-300)
+            np.testing.assert_allclose(got.areas(wo), ref.areas(wo), rtol=1e-11)
     with pytest.raises(ValueError, match="backend"):
         ms.pbrdf((0.5, 0.5), np.eye(2) * 1e-4, backend="gpu")
 
@@ -202,9 +204,9 @@ def test_white_furnace_approximation_conserves_energy(ms, smooth, case, theta):
     m = ms if case == "rough" else smooth
     p = m.pbrdf((0.37, 0.61), np.eye(2) * (np.sqrt(32) / 2 / m.resolution[1]) ** 2, exact=False)
     wo = np.array([np.sin(np.radians(theta)), 0.0, np.cos(np.radians(theta))])
-    a = p.albedo(wo, order=16)
+    a = p.albedo(wo, order=12)
     assert 0.9 < a <= 1.0 + 1e-9
-    _, w, _ = p.sample(np.random.default_rng(7).random((200_000, 2)), wo)
+    _, w, _ = p.sample(np.random.default_rng(7).random((50_000, 2)), wo)
     mean, err = w[:, 0].mean(), w[:, 0].std() / np.sqrt(len(w))
     assert mean <= 1.0 + 4 * err and mean == pytest.approx(a, abs=5 * err + 1e-3)
 
@@ -233,7 +235,7 @@ def test_single_lobe_equals_microfacet_brdf():
     assert ok.mean() > 0.7
     np.testing.assert_allclose(p.eval_cos(wi, wo)[ok], b.eval_cos(wi, wo)[ok], rtol=1e-9, atol=1e-14)
     np.testing.assert_allclose(p.eval(wi, wo)[ok], b.eval(wi, wo)[ok], rtol=1e-9, atol=1e-14)
-    np.testing.assert_allclose(p.pndf(wi), d.ndf(wi), rtol=1e-12)
+    np.testing.assert_allclose(p.pndf(wi), d.ndf(wi), rtol=1e-12, atol=1e-290)   # (subnormal tails)
     np.testing.assert_allclose(p.g1(wo[ok]), d._warp(wo[ok])[2] / d.projected_area(wo[ok]), rtol=1e-12)
 
 

@@ -263,8 +263,11 @@ class PatchBRDF(BRDF):
     def pndf(self, h) -> np.ndarray:
         """P-NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9), weights normalized to ``sum W = 1``."""
         h = _dirs(h, "h")
-        if self.lobes is None:
+        if self.weight_sum <= 0:
             return np.zeros(h.shape[:-1])
+        if self._compiled:         # the compiled sums (their area columns unused)
+            flat = np.ascontiguousarray(h.reshape(-1, 3))
+            return _lobe_sums(self.moments, self.weights, flat, flat, flat)[:, 0].reshape(h.shape[:-1])
         return self._lobe_sum(self.lobes.ndf, h)[0]
 
     def areas(self, k) -> tuple[np.ndarray, np.ndarray]:
