@@ -517,8 +517,8 @@ def _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, params, W, x0, x1, y0, y1, out
 
 # --------------------------------------------------------------------------- storage
 class _LazyPyramid(Sequence):
-    """The lobe-moment MIP levels (:func:`~microfacet.leadr.mip.mip_pyramid`), built on
-    first access; the number of levels is known without building them."""
+    """The lobe-moment MIP levels of Sec. 4.2.2 (:func:`~microfacet.leadr.mip.mip_pyramid`),
+    built on first access; the number of levels is known without building them."""
 
     def __init__(self, grid: np.ndarray):
         self._grid, self._levels = grid, None

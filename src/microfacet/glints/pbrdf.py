@@ -571,6 +571,8 @@ if _kernels.AVAILABLE:
 
     @numba.njit(cache=True, inline="always")
     def _half_slope(h):  # pragma: no cover - compiled
+        """``(z_h, x~, y~, 1 / z_h^4)`` of a half vector: its slope and the Jacobian of
+        ``D(h) = P22(h~) / cos^4`` (Eq. 4, 9); zeros below the horizon."""
         hz = h[2]
         if hz > 0:
             return hz, -h[0] / hz, -h[1] / hz, 1.0 / (hz * hz * hz * hz)
