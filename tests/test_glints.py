@@ -10,9 +10,10 @@ from microfacet import leadr
 from microfacet.cli import main
 from microfacet.errors import MicrofacetError
 from microfacet.geometry import spherical_to_cartesian
-from microfacet.glints import Microsurface, interpolate_slopes, load_slopes
-from microfacet.glints.microsurface import (FWHM_PER_SIGMA, _lobe_moments, _quadrature,
-                                            lobe_moments_reference)
+from microfacet.glints import FORMAT_VERSION, Microsurface, interpolate_slopes, load_slopes
+from microfacet.glints.microsurface import (FWHM_PER_SIGMA, _central_float32, _floor_moments, _raw_from_central,
+                                            _floor_moments_compiled, _lobe_moments, _quadrature,
+                                            lobe_moments, lobe_moments_reference)
 from microfacet.glints.reference import compare_histogram
 from microfacet.io import write_exr
 from microfacet.io.png import write_png_data
@@ -95,10 +96,35 @@ def test_interpolation_hits_texel_centres_and_wraps():
 
 # --------------------------------------------------------------------------- lobes (Eq. 3-6)
 def test_compiled_lobe_moments_match_numpy_reference():
+    """Both compiled kernels equal the NumPy quadrature: the direct sum, and the shared
+    fine-grid one that :func:`lobe_moments` takes when ``h * samples`` is an integer."""
     s = random_slopes((12, 10))
     for nx, ny in ((10, 12), (5, 6)):                                         # h = 1 and h = 2
         o, g = _quadrature((10 / nx) / FWHM_PER_SIGMA, 4)
         assert np.allclose(_lobe_moments(s, nx, ny, o, g), lobe_moments_reference(s, nx, ny), atol=1e-12)
+    s = random_slopes((24, 20))
+    for nx, ny, samples in ((20, 24, 4), (10, 12, 3), (20, 12, 4), (8, 16, 4), (7, 9, 4), (3, 5, 2)):
+        np.testing.assert_allclose(lobe_moments(s, nx, ny, samples), lobe_moments_reference(s, nx, ny, samples),
+                                   rtol=0, atol=1e-13)
+
+
+def test_compiled_floor_matches_numpy_floor():
+    """The in-place compiled floor equals :func:`_floor_moments` (correlated, degenerate
+    and already-floored lobes) and is idempotent."""
+    rng = np.random.default_rng(5)
+    m = rng.normal(size=(3000, 2)) * 0.3
+    v = np.abs(rng.normal(size=(3000, 2))) * np.array([[0.02, 0.005]]) ** 2 * rng.integers(0, 2, (3000, 1))
+    rho = rng.uniform(-1, 1, 3000)
+    rho[:300] = 1.0
+    E = np.stack([m[:, 0], m[:, 1], v[:, 0] + m[:, 0] ** 2, v[:, 1] + m[:, 1] ** 2,
+                  rho * np.sqrt(v[:, 0] * v[:, 1]) + m[:, 0] * m[:, 1]], -1)
+    ref = _floor_moments(E, 0.01)
+    got = E.copy()
+    _floor_moments_compiled(got, 0.01)
+    np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-17)
+    again = got.copy()
+    _floor_moments_compiled(again, 0.01)
+    assert np.array_equal(again, got)
 
 
 def test_constant_map_gives_sigma_eps_lobes_at_its_slope():
@@ -282,13 +308,29 @@ def test_mip_levels_average_lobe_moments(ms):
 
 # --------------------------------------------------------------------------- files and CLI
 def test_save_load_round_trip(ms, tmp_path):
+    """Format 2 stores float32 central moments: means, variances and covariances come back
+    to float32 precision (float32 raw moments would lose the variance of steep lobes to
+    cancellation); format 1 files (float64 raw moments) still load, bit for bit."""
     path = ms.save(tmp_path / "ms.npz")
     back = Microsurface.load(path)
-    assert np.array_equal(back.lobe_moments, ms.lobe_moments)
+    central = _central_float32(ms._grid).astype(np.float64)
+    np.testing.assert_allclose(_central_float32(back._grid), central, rtol=3e-7, atol=1e-12)
+    with np.load(path) as z:
+        assert int(z["version"]) == FORMAT_VERSION == 2 and z["central"].dtype == np.float32
     assert back.resolution == ms.resolution and back.h == ms.h and back.sigma_eps == ms.sigma_eps
     h = random_normals(20)
-    assert np.allclose(back.pndf(h, (0.5, 0.5), np.eye(2) * 1e-3), ms.pndf(h, (0.5, 0.5), np.eye(2) * 1e-3))
+    assert np.allclose(back.pndf(h, (0.5, 0.5), np.eye(2) * 1e-3), ms.pndf(h, (0.5, 0.5), np.eye(2) * 1e-3),
+                       rtol=1e-4)
     assert [p.name for p in tmp_path.iterdir()] == ["ms.npz"]        # no temporary left
+    params = np.array([ms.h, ms.sigma_eps, ms.cutoff, ms.slope_cutoff])
+    old = tmp_path / "v1.npz"
+    np.savez_compressed(old, magic=np.array("microfacet.glints.Microsurface"), version=np.array(1),
+                        moments=ms._grid, slopes=ms.slopes.astype(np.float32), params=params)
+    assert np.array_equal(Microsurface.load(old).lobe_moments, ms.lobe_moments)
+    future = tmp_path / "v9.npz"
+    np.savez(future, magic=np.array("microfacet.glints.Microsurface"), version=np.array(9), params=params)
+    with pytest.raises(MicrofacetError, match="v9.npz.*version 9"):
+        Microsurface.load(future)
 
 
 def test_load_errors_name_the_file(tmp_path):
@@ -314,3 +356,13 @@ def test_cli_builds_and_saves_a_microsurface(tmp_path, capsys):
     assert main(["glints", str(tmp_path / "missing.png"), "-o", str(tmp_path / "x.npz")]) == 1
     err = capsys.readouterr().err
     assert "missing.png" in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_central_moment_conversions_invert_each_other():
+    E = lobe_moments(random_slopes((9, 7)), 7, 9)
+    C = _central_float32(E)
+    assert C.dtype == np.float32
+    np.testing.assert_allclose(C[..., 2], E[..., 2] - E[..., 0] ** 2, rtol=1e-6)
+    np.testing.assert_allclose(C[..., 4], E[..., 4] - E[..., 0] * E[..., 1], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(_raw_from_central(C), E, rtol=1e-6, atol=1e-9)
+    assert np.array_equal(_raw_from_central(C.astype(np.float64))[..., :2], C[..., :2])

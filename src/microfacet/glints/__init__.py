@@ -5,9 +5,13 @@ patch NDF (P-NDF) and patch BRDF (Chermain, Claux and Mérillou 2019).
 Eq. 1-6); ``ms.pndf(h, center, cov)`` evaluates the P-NDF of a Gaussian footprint (Eq. 9)
 through an acceleration hierarchy (Sec. 5); ``ms.pbrdf(center, cov)`` gives the patch
 BRDF (Eq. 7) with exact or approximate (MIP, Sec. 4.2.2) patch masking.
-"""
-from .microsurface import FORMAT_VERSION, Microsurface, interpolate_slopes, load_slopes
-from .pbrdf import PatchBRDF, eval_cos_footprints, lobe_projected_area
 
-__all__ = ["Microsurface", "load_slopes", "interpolate_slopes", "FORMAT_VERSION",
+Modules: ``microsurface`` (:class:`LobeMixture`: lobes, P-NDF, files) <- ``pbrdf``
+(:class:`PatchBRDF` and the public :class:`Microsurface`, a ``LobeMixture`` with
+``.pbrdf``) <- ``figures``; ``reference`` needs only ``microsurface``.
+"""
+from .microsurface import FORMAT_VERSION, LobeMixture, interpolate_slopes, load_slopes
+from .pbrdf import Microsurface, PatchBRDF, eval_cos_footprints, lobe_projected_area
+
+__all__ = ["Microsurface", "LobeMixture", "load_slopes", "interpolate_slopes", "FORMAT_VERSION",
            "PatchBRDF", "eval_cos_footprints", "lobe_projected_area"]

@@ -39,7 +39,10 @@ Conventions
 """
 from __future__ import annotations
 
+import math
 import zipfile
+from collections.abc import Sequence
+from functools import cached_property
 from pathlib import Path
 
 import numba
@@ -48,13 +51,13 @@ import numpy as np
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
 from ..io.normalmap import read_slopes
-from ..leadr.mip import mip_pyramid
+from ..leadr.mip import mip_pyramid, mip_sizes
 from ..leadr.moments import from_moments
 
-__all__ = ["Microsurface", "load_slopes", "interpolate_slopes", "lobe_moments_reference",
+__all__ = ["LobeMixture", "load_slopes", "interpolate_slopes", "lobe_moments", "lobe_moments_reference",
            "FORMAT_VERSION", "FWHM_PER_SIGMA"]
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2       # 2: float32 central moments, uncompressed; 1 (float64 raw) still loads
 #: Full width at half maximum of a Gaussian in units of its standard deviation.
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
 MAX_RHO = 0.99
@@ -149,6 +152,108 @@ def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
             for c in range(5):
                 out[iy, ix, c] = acc[c]
     return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _lobe_moments_shared(s, nx, ny, px, py, g, samples, rows):  # pragma: no cover - compiled
+    """The moments of :func:`_lobe_moments` (Eq. 3-6, same quadrature) when the quadrature
+    points of neighbouring seeds coincide (``h * samples`` an integer: seed ``i``'s point
+    ``a`` is fine sample ``i p + a - k`` of a grid of ``samples`` points per texel):
+    each fine row of the interpolated map is evaluated once, convolved along x with the
+    weights ``g``, and the rows are then convolved along y (the tensor weights
+    ``g_a g_b`` are separable). Streams over chunks of ``rows`` seed rows, so the
+    buffers stay ``O(rows * samples * nx)``. ~10x fewer interpolations than the direct sum."""
+    hgt, wid = s.shape[0], s.shape[1]
+    k = (g.size - 1) // 2
+    mx_ = nx * px                        # fine samples per period along x
+    bx, by = 0.5 * wid / nx - 0.5, 0.5 * hgt / ny - 0.5
+    nf = mx_ + 2 * k                     # fine samples -k .. mx_ + k - 1 (wrapped)
+    c0 = np.empty(nf, np.int64)
+    c1 = np.empty(nf, np.int64)
+    fx = np.empty(nf)
+    for m in range(nf):
+        x = bx + (m - k) / samples
+        xf = np.floor(x)
+        fx[m] = x - xf
+        c0[m] = int(xf) % wid
+        c1[m] = (c0[m] + 1) % wid
+    out = np.zeros((ny, nx, 5))
+    for ch in numba.prange((ny + rows - 1) // rows):
+        r0 = ch * rows
+        r1 = min(ny, r0 + rows)
+        n0 = r0 * py - k
+        buf = np.empty(((r1 - 1) * py + k - n0 + 1, nx, 5))
+        f = np.empty((nf, 5))
+        for j in range(buf.shape[0]):
+            y = by + (n0 + j) / samples
+            yf = np.floor(y)
+            fy = y - yf
+            y0 = int(yf) % hgt
+            y1 = (y0 + 1) % hgt
+            for m in range(nf):
+                a0, a1, t = c0[m], c1[m], fx[m]
+                sx = ((s[y0, a0, 0] * (1 - t) + s[y0, a1, 0] * t) * (1 - fy)
+                      + (s[y1, a0, 0] * (1 - t) + s[y1, a1, 0] * t) * fy)
+                sy = ((s[y0, a0, 1] * (1 - t) + s[y0, a1, 1] * t) * (1 - fy)
+                      + (s[y1, a0, 1] * (1 - t) + s[y1, a1, 1] * t) * fy)
+                f[m, 0], f[m, 1], f[m, 2], f[m, 3], f[m, 4] = sx, sy, sx * sx, sy * sy, sx * sy
+            for ix in range(nx):
+                m0 = ix * px
+                acc0 = acc1 = acc2 = acc3 = acc4 = 0.0
+                for a in range(g.size):
+                    w = g[a]
+                    acc0 += w * f[m0 + a, 0]
+                    acc1 += w * f[m0 + a, 1]
+                    acc2 += w * f[m0 + a, 2]
+                    acc3 += w * f[m0 + a, 3]
+                    acc4 += w * f[m0 + a, 4]
+                buf[j, ix, 0], buf[j, ix, 1], buf[j, ix, 2], buf[j, ix, 3], buf[j, ix, 4] = acc0, acc1, acc2, acc3, acc4
+        for iy in range(r0, r1):
+            for b in range(g.size):
+                j = iy * py + b - k - n0
+                w = g[b]
+                for ix in range(nx):
+                    for c in range(5):
+                        out[iy, ix, c] += w * buf[j, ix, c]
+    return out
+
+
+def lobe_moments(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
+    """Raw moments ``(ny, nx, 5)`` of the interpolated map under each seed's normalized
+    kernel (Eq. 3-6), compiled: :func:`_lobe_moments_shared` when ``h * samples`` is an
+    integer along both axes, else the direct sum :func:`_lobe_moments`. Both equal
+    :func:`lobe_moments_reference` to rounding."""
+    s = np.ascontiguousarray(slopes, dtype=np.float64)
+    hgt, wid = s.shape[:2]
+    o, g = _quadrature((wid / nx) / FWHM_PER_SIGMA, int(samples))
+    px, py = wid * samples / nx, hgt * samples / ny
+    if abs(px - round(px)) < 1e-9 and abs(py - round(py)) < 1e-9:
+        return _lobe_moments_shared(s, nx, ny, int(round(px)), int(round(py)), g, int(samples), 16)
+    return _lobe_moments(s, nx, ny, o, g)
+
+
+@numba.njit(parallel=True, cache=True)
+def _floor_moments_compiled(E, sigma_eps):  # pragma: no cover - compiled
+    """:func:`_floor_moments` in place on ``E (N, 5)``, one lobe at a time (no temporaries)."""
+    e2 = sigma_eps * sigma_eps
+    for i in numba.prange(E.shape[0]):
+        m1, m2 = E[i, 0], E[i, 1]
+        vx = max(E[i, 2] - m1 * m1, 0.0)
+        vy = max(E[i, 3] - m2 * m2, 0.0)
+        lim = MAX_RHO * math.sqrt(vx * vy)
+        cxy = min(max(E[i, 4] - m1 * m2, -lim), lim)
+        half = 0.5 * (vx + vy)
+        r = math.hypot(0.5 * (vx - vy), cxy)
+        l2 = half - r
+        if l2 < e2 * (1.0 - 1e-10):
+            f1, f2 = max(half + r, e2), max(l2, e2)
+            t = 0.5 * math.atan2(2.0 * cxy, vx - vy)
+            c, sn = math.cos(t), math.sin(t)
+            vx = max(f1 * c * c + f2 * sn * sn, e2)
+            vy = max(f1 * sn * sn + f2 * c * c, e2)
+            lim = MAX_RHO * math.sqrt(vx * vy)
+            cxy = min(max((f1 - f2) * c * sn, -lim), lim)
+        E[i, 2], E[i, 3], E[i, 4] = vx + m1 * m1, vy + m2 * m2, cxy + m1 * m2
 
 
 def _floor_moments(E: np.ndarray, sigma_eps: float) -> np.ndarray:
@@ -348,8 +453,56 @@ def _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, params, W, x0, x1, y0, y1, out
         out[qi] += acc
 
 
+# --------------------------------------------------------------------------- storage
+class _LazyPyramid(Sequence):
+    """The lobe-moment MIP levels of Sec. 4.2.2 (:func:`~microfacet.leadr.mip.mip_pyramid`),
+    built on first access; the number of levels is known without building them."""
+
+    def __init__(self, grid: np.ndarray):
+        self._grid, self._levels = grid, None
+        self._n = len(mip_sizes(*grid.shape[:2]))
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, i):
+        if self._levels is None:
+            self._levels = mip_pyramid(self._grid)
+        return self._levels[i]
+
+
+@numba.njit(parallel=True, cache=True)
+def _central_float32(E):  # pragma: no cover - compiled
+    """Float32 central moments ``(mx, my, vxx, vyy, cxy)`` of raw moments ``E (ny, nx, 5)``
+    (Eq. 5: ``vxx = E3 - E1^2``, ``vyy = E4 - E2^2``, ``cxy = E5 - E1 E2``)."""
+    out = np.empty(E.shape, np.float32)
+    for iy in numba.prange(E.shape[0]):
+        for ix in range(E.shape[1]):
+            m1, m2 = E[iy, ix, 0], E[iy, ix, 1]
+            out[iy, ix, 0], out[iy, ix, 1] = m1, m2
+            out[iy, ix, 2] = E[iy, ix, 2] - m1 * m1
+            out[iy, ix, 3] = E[iy, ix, 3] - m2 * m2
+            out[iy, ix, 4] = E[iy, ix, 4] - m1 * m2
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _raw_from_central(C):  # pragma: no cover - compiled
+    """Float64 raw moments ``E1..E5`` of central moments ``C (ny, nx, 5)`` (inverse of
+    :func:`_central_float32`: ``E3 = vxx + mx^2``, ``E4 = vyy + my^2``, ``E5 = cxy + mx my``)."""
+    out = np.empty(C.shape, np.float64)
+    for iy in numba.prange(C.shape[0]):
+        for ix in range(C.shape[1]):
+            m1, m2 = np.float64(C[iy, ix, 0]), np.float64(C[iy, ix, 1])
+            out[iy, ix, 0], out[iy, ix, 1] = m1, m2
+            out[iy, ix, 2] = C[iy, ix, 2] + m1 * m1
+            out[iy, ix, 3] = C[iy, ix, 3] + m2 * m2
+            out[iy, ix, 4] = C[iy, ix, 4] + m1 * m2
+    return out
+
+
 # --------------------------------------------------------------------------- microsurface
-class Microsurface:
+class LobeMixture:
     """A normal map as a mixture of Beckmann lobes ``D_n(m, u) ~ sum_i D_i(m) k_i(u)``
     (Eq. 1-6) with an acceleration hierarchy (Sec. 5) and moment MIP levels (Sec. 4.2.2).
 
@@ -367,14 +520,19 @@ class Microsurface:
         The normal map's size in texels.
     grid : (ny, nx)
         Number of seeds per axis.
-    mip : list of (ny_l, nx_l, 5)
-        Lobe-moment MIP levels (level 0 = the lobes, averaged 2 x 2 upwards).
-    slopes : (H, W, 2)
-        The texel slopes (for the interpolated map, e.g. to sample a footprint).
+    mip : sequence of (ny_l, nx_l, 5)
+        Lobe-moment MIP levels (level 0 = the lobes, averaged 2 x 2 upwards), built on
+        first access (as are ``lobe_uv`` and the hierarchy of :meth:`pndf`).
+    slopes : (H, W, 2) float32
+        The texel slopes (for the interpolated map, e.g. to sample a footprint), float32
+        as :meth:`save` stores them, so that a built and a loaded microsurface agree.
+
+    ``moments`` ``(ny, nx, 5)`` raw moments are floored (:func:`_floor_moments`) in a
+    copy, or in place with ``copy=False`` (the builders and :meth:`load` own theirs).
     """
 
     def __init__(self, moments, slopes, h: float = 1.0, sigma_eps: float = 0.01,
-                 cutoff: float = 3.0, slope_cutoff: float = 4.0):
+                 cutoff: float = 3.0, slope_cutoff: float = 4.0, *, copy: bool = True):
         grid = np.asarray(moments, dtype=np.float64)
         if grid.ndim != 3 or grid.shape[2] != 5 or 0 in grid.shape:
             raise ValueError(f"moments must be an (ny, nx, 5) lobe grid, got shape {grid.shape}")
@@ -382,31 +540,53 @@ class Microsurface:
             raise ValueError("lobe moments must be finite")
         if not (cutoff > 0 and slope_cutoff > 0):
             raise ValueError(f"cutoff and slope_cutoff must be > 0, got {cutoff}, {slope_cutoff}")
-        self._grid = _floor_moments(grid, sigma_eps)
-        self.slopes = np.asarray(slopes, dtype=np.float64)
+        if not (np.isfinite(sigma_eps) and sigma_eps > 0):
+            raise ValueError(f"sigma_eps must be > 0, got {sigma_eps!r}")
+        if copy or not (grid.flags.c_contiguous and grid.flags.writeable):
+            grid = np.array(grid, dtype=np.float64, order="C")
+        _floor_moments_compiled(grid.reshape(-1, 5), float(sigma_eps))     # in place
+        self._grid = grid
+        self.slopes = np.asarray(slopes, dtype=np.float32)       # as files store them
         self.h, self.sigma_eps = float(h), float(sigma_eps)
         self.cutoff, self.slope_cutoff = float(cutoff), float(slope_cutoff)
         ny, nx = grid.shape[:2]
         self.grid = (ny, nx)
         self.resolution = tuple(int(v) for v in self.slopes.shape[:2])
         self.kernel_sigma = np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA
-        iy, ix = np.divmod(np.arange(nx * ny), nx)
-        self.lobe_uv = np.stack([(ix + 0.5) / nx, (iy + 0.5) / ny], -1)
         self.lobe_moments = self._grid.reshape(-1, 5)
-        self._params = _lobe_params(self._grid)
+        self.mip = _LazyPyramid(self._grid)
+
+    # the P-NDF's evaluation structures, built on first use (a 4096^2 map's would take GBs)
+    @cached_property
+    def lobe_uv(self) -> np.ndarray:
+        ny, nx = self.grid
+        iy, ix = np.divmod(np.arange(nx * ny), nx)
+        return np.stack([(ix + 0.5) / nx, (iy + 0.5) / ny], -1)
+
+    @cached_property
+    def _params(self) -> np.ndarray:
+        return _lobe_params(self._grid)
+
+    @cached_property
+    def _boxes(self):
         e1, e2 = self._grid[..., 0], self._grid[..., 1]
         std = np.sqrt(np.stack([self._grid[..., 2] - e1 * e1, self._grid[..., 3] - e2 * e2], -1))
         mean = self._grid[..., :2]
-        self._boxes = _box_pyramid(mean - self.slope_cutoff * std, mean + self.slope_cutoff * std)
-        self._flat = _flatten(self._boxes)
-        self._flat_params = np.ascontiguousarray(self._params.reshape(-1, 6))
-        self.mip = mip_pyramid(self._grid)
+        return _box_pyramid(mean - self.slope_cutoff * std, mean + self.slope_cutoff * std)
+
+    @cached_property
+    def _flat(self):
+        return _flatten(self._boxes)
+
+    @cached_property
+    def _flat_params(self) -> np.ndarray:
+        return np.ascontiguousarray(self._params.reshape(-1, 6))
 
     # ----------------------------------------------------------------- construction
     @classmethod
     def from_normal_map(cls, path_or_array, h: float = 1.0, sigma_eps: float = 0.01, *,
                         samples: int = 4, encoding: str = "auto", z: str = "auto",
-                        **kwargs) -> "Microsurface":
+                        **kwargs) -> "LobeMixture":
         """Lobe mixture of a normal map (Sec. 3): one lobe per ``h x h`` texels.
 
         Parameters
@@ -423,7 +603,17 @@ class Microsurface:
             Truncation of the footprint weights (standard deviations of ``Sigma_P +
             sigma_k^2``) and of the lobes' slope boxes of the hierarchy (Sec. 5).
         """
-        slopes = load_slopes(path_or_array, encoding, z)
+        return cls.from_slopes(load_slopes(path_or_array, encoding, z), h, sigma_eps,
+                               samples=samples, **kwargs)
+
+    @classmethod
+    def from_slopes(cls, slopes, h: float = 1.0, sigma_eps: float = 0.01, *, samples: int = 4,
+                    **kwargs) -> "LobeMixture":
+        """Lobe mixture (Sec. 3, Eq. 3-6) of texel slopes ``(H, W, 2)`` (see
+        :meth:`from_normal_map` for the parameters): the lobe construction alone."""
+        slopes = np.asarray(slopes)
+        if slopes.ndim != 3 or slopes.shape[2] != 2 or 0 in slopes.shape:
+            raise ValueError(f"slopes must be an (H, W, 2) array, got shape {slopes.shape}")
         if not (np.isfinite(h) and h > 0):
             raise ValueError(f"h must be > 0 (texels), got {h!r}")
         if not (np.isfinite(sigma_eps) and sigma_eps > 0):
@@ -432,12 +622,11 @@ class Microsurface:
             raise ValueError(f"samples must be >= 1, got {samples!r}")
         hgt, wid = slopes.shape[:2]
         nx, ny = max(1, int(round(wid / h))), max(1, int(round(hgt / h)))
-        o, g = _quadrature((wid / nx) / FWHM_PER_SIGMA, int(samples))
-        raw = _lobe_moments(np.ascontiguousarray(slopes), nx, ny, o, g)
-        return cls(raw, slopes, h=h, sigma_eps=sigma_eps, **kwargs)
+        raw = lobe_moments(slopes, nx, ny, int(samples))
+        return cls(raw, slopes, h=h, sigma_eps=sigma_eps, copy=False, **kwargs)
 
     def __repr__(self) -> str:
-        return (f"Microsurface({self.grid[1]} x {self.grid[0]} lobes from a {self.resolution[1]} x "
+        return (f"{type(self).__name__}({self.grid[1]} x {self.grid[0]} lobes from a {self.resolution[1]} x "
                 f"{self.resolution[0]} map, h={self.h:g}, sigma_eps={self.sigma_eps:g})")
 
     @property
@@ -635,27 +824,24 @@ class Microsurface:
         """The filtered lobe of :meth:`mip_moments` as a :class:`microfacet.Beckmann`."""
         return from_moments(self.mip_moments(center, cov, level), max_rho=MAX_RHO)
 
-    # ----------------------------------------------------------------- P-BRDF
-    def pbrdf(self, center, cov, fresnel=None, exact: bool = True):
-        """The patch BRDF (Eq. 7) of a footprint; see :class:`microfacet.glints.pbrdf.PatchBRDF`."""
-        from .pbrdf import PatchBRDF
-        return PatchBRDF(self, center, cov, fresnel, exact)
-
     # ----------------------------------------------------------------- files
     def save(self, path) -> Path:
-        """Write a versioned ``.npz`` atomically; return its path."""
+        """Write a versioned ``.npz`` atomically; return its path. Format 2: the lobes as
+        float32 *central* moments (means, variances, covariance: no cancellation, unlike
+        float32 raw moments ``E3 = var + mean^2``) and float32 slopes, uncompressed (fast);
+        loading refloors the lobes (the float32 rounding can sit 1 ulp below the floor)."""
         path = Path(path)
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
-                np.savez_compressed(
-                    f, magic=np.array(_MAGIC), version=np.array(FORMAT_VERSION),
-                    moments=self._grid, slopes=self.slopes.astype(np.float32),
-                    params=np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff]))
+                np.savez(f, magic=np.array(_MAGIC), version=np.array(FORMAT_VERSION),
+                         central=_central_float32(self._grid), slopes=self.slopes,
+                         params=np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff]))
         return path
 
     @classmethod
-    def load(cls, path) -> "Microsurface":
-        """Read a file written by :meth:`save`; errors name the file."""
+    def load(cls, path) -> "LobeMixture":
+        """Read a file written by :meth:`save` (format 2, or 1: float64 raw moments,
+        compressed); errors name the file."""
         path = Path(path)
         try:
             with np.load(path, allow_pickle=False) as z:
@@ -663,10 +849,17 @@ class Microsurface:
                     raise MicrofacetError(f"{path}: not a microfacet glints microsurface (.npz from "
                                           f"'microfacet glints')")
                 version = int(z["version"])
-                if version != FORMAT_VERSION:
+                if version not in (1, FORMAT_VERSION):
                     raise MicrofacetError(f"{path}: unsupported microsurface format version {version} "
-                                          f"(this microfacet reads {FORMAT_VERSION})")
-                moments, slopes, params = z["moments"], z["slopes"], z["params"]
+                                          f"(this microfacet reads 1 and {FORMAT_VERSION})")
+                slopes, params = z["slopes"], z["params"]
+                if version == 1:
+                    moments = z["moments"]
+                else:
+                    moments = z["central"]
+                    if moments.ndim != 3 or moments.shape[2] != 5:
+                        raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
+                    moments = _raw_from_central(moments)
         except FileNotFoundError:
             raise MicrofacetError(f"{path}: no such file") from None
         except IsADirectoryError:
@@ -680,6 +873,6 @@ class Microsurface:
             raise MicrofacetError(f"{path}: corrupt microsurface file (non-finite values)")
         h, eps, cutoff, scut = (float(v) for v in params)
         try:
-            return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut)
+            return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut, copy=False)
         except ValueError as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({e})") from None

@@ -37,18 +37,27 @@ everywhere, ``G2 = 1 / (1 + Lambda_P(o) + Lambda_P(i))``) or ``"separable"``
 (Eq. 16 as printed, ``G1(o) G1(i)``). Both are energy conserving
 (``G2 <= G1(o)``); the local factors ``chi+(o.h) chi+(i.h)`` of Eq. 10 apply to both.
 
-``exact=False`` is the approximation of Sec. 4.2.2: one merged Beckmann lobe, the
+``exact=False`` is the approximation of Sec. 4.2.2: one merged Beckmann lobe ``m``, the
 ``W``-weighted average of the five linear slope moments of the MIP level that matches
 the footprint (``ms.mip_moments``; :meth:`PatchBRDF.from_lobes` averages the given lobes),
-whose Smith Lambda and mean-slope projected area replace ``Lambda_P`` and ``A_P``.
-``D_P`` stays exact. Merging lobes widens the lobe,
-which overestimates masking: the approximation darkens at grazing angles.
+whose Smith ``Lambda_m`` replaces ``Lambda_P``. ``D_P`` stays exact, and so does its
+visible projected area ``V_P(k) = int <k,h>+ D_P`` (Eq. 13-15); the patch projected area
+is then ``A_P(k) = V_P(k) / (1 + Lambda_m(k)) = V_P c_m+ / V_m`` (Eq. 15 solved for
+``A_P``), so that Eq. 11 normalizes ``D_P`` exactly and the approximation conserves
+energy like the exact model. Taking ``A_m = c_m+`` itself (the merged lobe's mean-normal
+area, as printed) gains energy wherever ``V_m < V_P``: ``int eval_cos = V_P(o) / V_m(o)``
+at most, up to 1.0024 at 60 degrees (MIP level 1 of a smooth map: the MIP lobe's mean
+normal is not the footprint's) and 1.048 at 89 degrees (a rough map: a mixture of lobes
+has heavier tails toward grazing ``k`` than the Gaussian of the same mean and variance),
+see ``tests/test_glints_pbrdf.py::test_white_furnace_approximation_conserves_energy``.
 
 Sampling (Sec. 5): a position of the footprint picks lobe ``i`` with probability
 ``W_i / sum W``; a normal is drawn from its slope distribution ``P_i`` and ``wo`` is
 reflected about it. The pdf is ``D_P(h) z_h / (4 o.h)``.
 """
 from __future__ import annotations
+
+from functools import cached_property
 
 import numpy as np
 from scipy.special import erfc
@@ -57,8 +66,9 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, _dirs
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector, reflect
+from .microsurface import FWHM_PER_SIGMA, LobeMixture
 
-__all__ = ["PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
+__all__ = ["Microsurface", "PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
            "eval_cos_footprints", "G2_MODELS"]
 
 G2_MODELS = ("correlated", "separable")
@@ -115,6 +125,17 @@ def merge_moments(moments, weights) -> np.ndarray:
     return (w[:, None] * m).sum(0) / w.sum()
 
 
+def _merged_area(v, merged, k) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_P, V_P)`` of the approximation (Sec. 4.2.2, module notes): ``Lambda_P`` is the
+    merged lobe's Smith ``Lambda_m = V_m / c_m - 1`` and ``A_P = V_P / (1 + Lambda_m) =
+    V_P c_m+ / V_m`` (Eq. 15), with ``V_P`` the mixture's visible projected area ``v``
+    (Eq. 13) and ``c_m``, ``V_m`` the merged lobe's (:func:`lobe_projected_area`)."""
+    c, vm = lobe_projected_area(merged, k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where((vm > 0) & (c > 0), v * np.maximum(c, 0.0) / np.where(vm > 0, vm, 1.0), 0.0)
+    return a, v
+
+
 def _g2_over_ao(g2: str, ai, vi, ao, vo) -> np.ndarray:
     """``G2 / A_P(o)`` from the patch areas ``A_P``, ``V_P`` of ``i`` and ``o`` (Eq. 7, 11-16),
     written without dividing by ``A_P`` (finite where it vanishes):
@@ -145,9 +166,13 @@ class PatchBRDF(BRDF):
         Microfacet Fresnel term (default: ideal mirrors).
     exact : bool
         Exact patch masking and projected area (Eq. 10-17) or the merged-lobe
-        approximation of Sec. 4.2.2.
+        approximation of Sec. 4.2.2 (module notes).
     g2 : {"correlated", "separable"}
         Masking-shadowing form (see the module notes).
+    backend : {"auto", "numpy", "numba"}
+        ``eval``/``eval_cos``/``pdf``/``sample``: the NumPy sums over lobes (the reference)
+        or one compiled pass over the lobes per direction pair (:func:`_lobe_sums`, the
+        same sums; ``"auto"``: compiled when available).
 
     Attributes
     ----------
@@ -160,46 +185,57 @@ class PatchBRDF(BRDF):
     """
 
     def __init__(self, ms, center, cov, fresnel: _fresnel.Fresnel | None = None,
-                 exact: bool = True, g2: str = "correlated"):
+                 exact: bool = True, g2: str = "correlated", backend: str = "auto"):
         indices, weights = ms.weights(np.asarray(center, float), np.asarray(cov, float))
         indices = np.asarray(indices)
         moments = np.asarray(ms.lobe_moments, dtype=np.float64)[indices]
         # Sec. 4.2.2: the filtered lobe of the MIP level matching the footprint
         merged = None if exact else ms.mip_moments(center, cov)
-        self._setup(moments, weights, fresnel, exact, g2, merged)
+        self._setup(moments, weights, fresnel, exact, g2, merged, backend)
         self.microsurface, self.indices = ms, indices
         self.center, self.cov = np.asarray(center, float), np.asarray(cov, float)
 
     @classmethod
     def from_lobes(cls, moments, weights, fresnel: _fresnel.Fresnel | None = None,
-                   exact: bool = True, g2: str = "correlated", merged=None) -> "PatchBRDF":
+                   exact: bool = True, g2: str = "correlated", merged=None,
+                   backend: str = "auto") -> "PatchBRDF":
         """P-BRDF of explicit lobes: slope moments ``(N, 5)`` and weights ``W`` ``(N,)``."""
         self = cls.__new__(cls)
-        self._setup(moments, weights, fresnel, exact, g2, merged)
+        self._setup(moments, weights, fresnel, exact, g2, merged, backend)
         self.microsurface, self.indices = None, np.arange(len(self.weights))
         self.center = self.cov = None
         return self
 
-    def _setup(self, moments, weights, fresnel, exact, g2, merged) -> None:
+    def _setup(self, moments, weights, fresnel, exact, g2, merged, backend) -> None:
         if g2 not in G2_MODELS:
             raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
+        if backend not in ("auto", "numpy", "numba"):
+            raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
+        if backend == "numba" and _lobe_sums is None:
+            raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
+        self._compiled = backend != "numpy" and _lobe_sums is not None
         m = _moments(moments)
         w = np.asarray(weights, dtype=np.float64).reshape(-1)
         if w.shape != (m.shape[0],) or np.any(~np.isfinite(w)) or np.any(w < 0):
             raise ValueError(f"weights must be {m.shape[0]} finite values >= 0")
         keep = w > 0
         self.weight_sum = float(w[keep].sum())
-        self.moments = m[keep]
+        self.moments = np.ascontiguousarray(m[keep])
         self.weights = w[keep] / self.weight_sum if self.weight_sum > 0 else w[keep]
         self.fresnel = _fresnel.Ideal() if fresnel is None else fresnel
         self.exact, self.g2 = bool(exact), g2
         if self.weight_sum > 0:
-            self.lobes = Beckmann.from_moments(*self.moments.T)
             self._cdf = np.cumsum(self.weights)
             self.merged = (merge_moments(self.moments, self.weights) if merged is None
                            else np.asarray(merged, dtype=np.float64).reshape(5))
         else:
-            self.lobes, self._cdf, self.merged = None, np.zeros(0), None
+            self._cdf, self.merged = np.zeros(0), None
+
+    @cached_property
+    def lobes(self) -> Beckmann | None:
+        """The lobes as one :class:`~microfacet.Beckmann` with array parameters (built on
+        first use: the compiled sums read the moments); ``None`` without lobes."""
+        return Beckmann.from_moments(*self.moments.T) if self.weight_sum > 0 else None
 
     def __repr__(self) -> str:
         return (f"PatchBRDF({len(self.weights)} lobes, sum W = {self.weight_sum:.6g}, "
@@ -227,26 +263,33 @@ class PatchBRDF(BRDF):
     def pndf(self, h) -> np.ndarray:
         """P-NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9), weights normalized to ``sum W = 1``."""
         h = _dirs(h, "h")
-        if self.lobes is None:
+        if self.weight_sum <= 0:
             return np.zeros(h.shape[:-1])
+        if self._compiled:         # the compiled sums (their area columns unused)
+            flat = np.ascontiguousarray(h.reshape(-1, 3))
+            return _lobe_sums(self.moments, self.weights, flat, flat, flat)[:, 0].reshape(h.shape[:-1])
         return self._lobe_sum(self.lobes.ndf, h)[0]
 
     def areas(self, k) -> tuple[np.ndarray, np.ndarray]:
         """``(A_P(k), V_P(k))``: patch projected area (Eq. 17) and the visible projected
         area of the microfacets ``int <k,h>+ D_P = A_P (1 + Lambda_P)`` (Eq. 13-15);
-        with ``exact=False`` those of the merged lobe (Sec. 4.2.2)."""
+        with ``exact=False`` ``A_P = V_P / (1 + Lambda_m)`` of the merged lobe (Sec.
+        4.2.2, :func:`_merged_area`)."""
         k = _dirs(k, "k")
         if self.lobes is None:
             z = np.zeros(k.shape[:-1])
             return z, z
-        if self.exact:
+
+        if self._compiled:         # the compiled sums (toward k; their P-NDF column unused)
+            flat = np.ascontiguousarray(k.reshape(-1, 3))
+            sums = _lobe_sums(self.moments, self.weights, flat, flat, flat)
+            a, v = sums[:, 1].reshape(k.shape[:-1]), sums[:, 2].reshape(k.shape[:-1])
+        else:
             def fn(kk):
                 c, area = lobe_projected_area(self.moments, kk)
                 return np.maximum(c, 0.0), area
             a, v = self._lobe_sum(fn, k)
-            return a, v
-        c, v = lobe_projected_area(self.merged, k)
-        return np.maximum(c, 0.0), v
+        return (a, v) if self.exact else _merged_area(v, self.merged, k)
 
     def lambda_p(self, k) -> np.ndarray:
         """Patch Smith ``Lambda_P(k) = V_P / A_P - 1`` (Eq. 15); ``inf`` where ``A_P = 0``."""
@@ -264,15 +307,26 @@ class PatchBRDF(BRDF):
         return _g2_over_ao(self.g2, ai, vi, ao, vo)
 
     # -------------------------------------------------------------------- protocol
+    def _sums(self, h, wi, wo):
+        """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` (Eq. 9, 13-17), compiled or NumPy."""
+        if not self._compiled or self.lobes is None:
+            return (self.pndf(h),) + self.areas(wi) + self.areas(wo)
+        shape = np.broadcast_shapes(h.shape, wi.shape, wo.shape)
+        flat = [np.ascontiguousarray(np.broadcast_to(d, shape).reshape(-1, 3)) for d in (h, wi, wo)]
+        out = [v.reshape(shape[:-1]) for v in _lobe_sums(self.moments, self.weights, *flat).T]
+        if not self.exact:
+            out[1:3] = _merged_area(out[2], self.merged, wi)
+            out[3:5] = _merged_area(out[4], self.merged, wo)
+        return tuple(out)
+
     def _projected(self, wi, wo):
         """``(o.h, D_P G2 / (4 A_P(o)), valid)``."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo)
         oh, ih = dot(wo, h), dot(wi, h)
         ok = _local_ok(wi, wo, h, oh, ih)
-        ai, vi = self.areas(wi)
-        ao, vo = self.areas(wo)
-        s = np.where(ok, self.pndf(h) * self._g2_over_ao(ai, vi, ao, vo) / 4.0, 0.0)
+        d, ai, vi, ao, vo = self._sums(h, wi, wo)
+        s = np.where(ok, d * self._g2_over_ao(ai, vi, ao, vo) / 4.0, 0.0)
         return oh, s
 
     def eval_cos(self, wi, wo) -> np.ndarray:
@@ -331,7 +385,7 @@ class PatchBRDF(BRDF):
         ``s``) the integral is ``sum_i W_i E_{P_i}[F G2 (o.h) / (A_P(o) z_h)]`` (0 where
         ``wi`` falls below the horizon), computed by ``order x order`` Gauss-Hermite
         quadrature of each lobe's Gaussian slopes. Independent of :meth:`sample`;
-        ``<= 1`` for ``exact=True`` (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``."""
+        ``<= 1`` for both models (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``."""
         wo = np.asarray(wo, dtype=np.float64).reshape(3)
         if self.lobes is None:
             return 0.0
@@ -357,6 +411,17 @@ class PatchBRDF(BRDF):
         return float(self.weights @ (q @ wq))
 
 
+# ------------------------------------------------------------------ the microsurface
+class Microsurface(LobeMixture):
+    """A normal map's lobe mixture (:class:`~microfacet.glints.microsurface.LobeMixture`:
+    Sec. 3-5, P-NDF, files) with its patch BRDF (Eq. 7): the public class. It lives here
+    so that imports flow one way (``microsurface`` <- ``pbrdf`` <- ``figures``)."""
+
+    def pbrdf(self, center, cov, fresnel=None, exact: bool = True, **kwargs) -> PatchBRDF:
+        """The patch BRDF (Eq. 7) of a footprint; see :class:`PatchBRDF`."""
+        return PatchBRDF(self, center, cov, fresnel, exact, **kwargs)
+
+
 # ------------------------------------------------------------------ many footprints at once
 def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
     """Lobes and weights ``W_i`` (Eq. 9, normalized) of many Gaussian footprints at once.
@@ -368,7 +433,6 @@ def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
     ``(2, 2)``. Returns flat lobe indices ``(P, K)`` and weights ``(P, K)`` (0 outside each
     footprint's rectangle; ``K`` the largest rectangle of the batch).
     """
-    from .microsurface import FWHM_PER_SIGMA
     ny, nx = grid_shape
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (c.shape[0], 2, 2))
@@ -431,16 +495,12 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
         idx, W = footprint_lobes(ms.grid, c[sl], cov[sl], ms.cutoff)
         E = E_all[idx]                                                       # (B, K, 5)
         D = np.einsum("bk,bk->b", W, Beckmann.from_moments(*np.moveaxis(E, -1, 0)).ndf(h[:, None, :]))
-        if exact:
-            def areas(k):
-                cc, v = lobe_projected_area(E, k[:, None, :])
-                return np.einsum("bk,bk->b", W, np.maximum(cc, 0.0)), np.einsum("bk,bk->b", W, v)
-        else:
-            merged = _merged_footprints(ms, c[sl], cov[sl])
+        merged = None if exact else _merged_footprints(ms, c[sl], cov[sl])
 
-            def areas(k):
-                cc, v = lobe_projected_area(merged, k)
-                return np.maximum(cc, 0.0), v
+        def areas(k):
+            cc, v = lobe_projected_area(E, k[:, None, :])
+            v = np.einsum("bk,bk->b", W, v)
+            return (np.einsum("bk,bk->b", W, np.maximum(cc, 0.0)), v) if exact else _merged_area(v, merged, k)
         ai, vi = areas(wi[sl])
         ao, vo = areas(wo[sl])
         val = np.where(ok, D * _g2_over_ao(g2, ai, vi, ao, vo) / 4.0, 0.0)
@@ -462,6 +522,11 @@ if _kernels.AVAILABLE:
     #: (less than half an ulp) for ``t >= 8``; the erfc and exp are skipped there.
     _AREA_T = 8.0
     _AREA_T2 = _AREA_T * _AREA_T
+    #: Mahalanobis distance^2 of a half vector's slope beyond which a lobe's slope density
+    #: (Eq. 4) is not evaluated: ``exp(-q / 2) < 1e-304`` (a tighter cut, 1e-30, measured
+    #: no faster).
+    _Q_MAX = 1400.0
+    _INV_2PI = 1.0 / (2.0 * math.pi)
 
     @numba.njit(cache=True, inline="always")
     def _area(c, sg):  # pragma: no cover - compiled
@@ -472,6 +537,46 @@ if _kernels.AVAILABLE:
                 return c
             return 0.5 * c * math.erfc(-t / _SQRT2) + sg * _INV_SQRT_2PI * math.exp(-0.5 * t * t)
         return max(c, 0.0)
+
+    @numba.njit(cache=True, inline="always")
+    def _areas(kx, ky, kz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
+        """``(<n_i, k>+ / n_i.z, E[s+])`` of one lobe toward ``k`` (Eq. 13, 17; see
+        :func:`lobe_projected_area`): ``c >= _AREA_T sigma`` is tested without sqrt."""
+        c = kz - kx * mx - ky * my
+        var = kx * kx * sxx + 2.0 * kx * ky * sxy + ky * ky * syy
+        if c > 0.0:
+            return c, (c if c * c >= _AREA_T2 * var else _area(c, math.sqrt(max(var, 0.0))))
+        return 0.0, _area(c, math.sqrt(max(var, 0.0)))
+
+    @numba.njit(cache=True, inline="always")
+    def _p22(xh, yh, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
+        """Gaussian slope density ``P_i`` (Eq. 4) of one lobe at slope ``(xh, yh)``."""
+        det = sxx * syy - sxy * sxy
+        gx, gy = xh - mx, yh - my
+        qdet = syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy      # q det (det > 0)
+        if qdet < _Q_MAX * det:
+            return math.exp(-0.5 * qdet / det) * _INV_2PI / math.sqrt(det)
+        return 0.0
+
+    @numba.njit(cache=True, inline="always")
+    def _lobe_terms(E, k, hz, xh, yh, ix, iy, iz, ox, oy, oz):  # pragma: no cover - compiled
+        """``(P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` of lobe ``k`` of raw moments ``E``
+        (the terms of Eq. 9, 13 and 17)."""
+        mx, my = E[k, 0], E[k, 1]
+        sxx, syy, sxy = E[k, 2] - mx * mx, E[k, 3] - my * my, E[k, 4] - mx * my
+        d = _p22(xh, yh, mx, my, sxx, syy, sxy) if hz > 0 else 0.0
+        ai, vi = _areas(ix, iy, iz, mx, my, sxx, syy, sxy)
+        ao, vo = _areas(ox, oy, oz, mx, my, sxx, syy, sxy)
+        return d, ai, vi, ao, vo
+
+    @numba.njit(cache=True, inline="always")
+    def _half_slope(h):  # pragma: no cover - compiled
+        """``(z_h, x~, y~, 1 / z_h^4)`` of a half vector: its slope and the Jacobian of
+        ``D(h) = P22(h~) / cos^4`` (Eq. 4, 9); zeros below the horizon."""
+        hz = h[2]
+        if hz > 0:
+            return hz, -h[0] / hz, -h[1] / hz, 1.0 / (hz * hz * hz * hz)
+        return hz, 0.0, 0.0, 0.0
 
     @numba.njit(cache=True, nogil=True)
     def _window(f, nx, ny, ks2x, ks2y, cutoff):  # pragma: no cover - compiled
@@ -486,18 +591,17 @@ if _kernels.AVAILABLE:
         return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
 
     @numba.njit(cache=True, parallel=True, nogil=True)
-    def _footprint_sums(lob, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo, exact):  # pragma: no cover - compiled
+    def _footprint_sums(E, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo):  # pragma: no cover - compiled
         """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
         of :func:`footprint_lobes` (same window, same weights), looping over the window
-        instead of padding it. ``lob`` rows (:func:`_lobe_table`): ``mx, my, sxx, syy,
-        2 sxy, ixx, iyy, 2 ixy, log norm``.
+        instead of padding it; ``E`` the raw lobe moments ``(ny * nx, 5)`` (each lobe's
+        Gaussian is set up from them where it is used: no per-lobe table).
 
         The same sums as the NumPy reference up to rounding: the footprint weight
         ``exp(-q/2)`` of an uncorrelated footprint is factored into per-column and per-row
         exponentials (one exp per lobe otherwise), the lobe's slope density is
-        evaluated only where its exponent is above ``-700`` (``exp < 1e-304``), and the
-        projected areas skip erfc/exp where ``c / sigma >= 8`` (relative error < 1e-17,
-        see ``_AREA_T``)."""
+        evaluated only where its exponent is above ``-700`` (``_Q_MAX``), and the
+        projected areas skip erfc/exp where ``c / sigma >= 8`` (``_AREA_T``)."""
         P = fp.shape[0]
         out = np.zeros((P, 5))
         for p in numba.prange(P):
@@ -512,14 +616,9 @@ if _kernels.AVAILABLE:
                 du = (ix + 0.5) / nx - cu
                 ex[ix - x0] = math.exp(ax * du * du)
                 col[ix - x0] = ix % nx
-            hz = h[p, 2]
-            xh, yh = (-h[p, 0] / hz, -h[p, 1] / hz) if hz > 0 else (0.0, 0.0)
-            inv4 = 1.0 / (hz * hz * hz * hz) if hz > 0 else 0.0
-            kix, kiy, kiz = wi[p, 0], wi[p, 1], wi[p, 2]
-            kox, koy, koz = wo[p, 0], wo[p, 1], wo[p, 2]
-            ixx_, iyy_, ixy_ = kix * kix, kiy * kiy, kix * kiy
-            oxx_, oyy_, oxy_ = kox * kox, koy * koy, kox * koy
-            wsum = d = ai = vi = ao = vo = 0.0
+            hz, xh, yh, inv4 = _half_slope(h[p])
+            ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
+            wsum = s0 = s1 = s2 = s3 = s4 = 0.0
             for iy in range(y0, y1 + 1):
                 dv = (iy + 0.5) / ny - cv
                 ey = math.exp(ay * dv * dv)
@@ -532,34 +631,36 @@ if _kernels.AVAILABLE:
                         du = (x0 + jx + 0.5) / nx - cu
                         w = math.exp(ax * du * du + ay * dv * dv + cross * du)
                     wsum += w
-                    k = row + col[jx]
-                    mx, my = lob[k, 0], lob[k, 1]
-                    if hz > 0:
-                        gx, gy = xh - mx, yh - my
-                        q = lob[k, 5] * gx * gx + lob[k, 6] * gy * gy + lob[k, 7] * gx * gy
-                        if q < 1400.0:
-                            d += w * math.exp(lob[k, 8] - 0.5 * q)
-                    if exact:
-                        lxx, lyy, lxy = lob[k, 2], lob[k, 3], lob[k, 4]
-                        # c >= _AREA_T sigma (tested without sqrt or division): area = c
-                        c = kiz - kix * mx - kiy * my
-                        var = ixx_ * lxx + ixy_ * lxy + iyy_ * lyy
-                        if c > 0.0:
-                            ai += w * c
-                            vi += w * (c if c * c >= _AREA_T2 * var else _area(c, math.sqrt(max(var, 0.0))))
-                        else:
-                            vi += w * _area(c, math.sqrt(max(var, 0.0)))
-                        c = koz - kox * mx - koy * my
-                        var = oxx_ * lxx + oxy_ * lxy + oyy_ * lyy
-                        if c > 0.0:
-                            ao += w * c
-                            vo += w * (c if c * c >= _AREA_T2 * var else _area(c, math.sqrt(max(var, 0.0))))
-                        else:
-                            vo += w * _area(c, math.sqrt(max(var, 0.0)))
+                    d, ai, vi, ao, vo = _lobe_terms(E, row + col[jx], hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_)
+                    s0 += w * d
+                    s1 += w * ai
+                    s2 += w * vi
+                    s3 += w * ao
+                    s4 += w * vo
             if wsum > 0:
-                out[p, 0] = d * inv4 / wsum
-                out[p, 1], out[p, 2] = ai / wsum, vi / wsum
-                out[p, 3], out[p, 4] = ao / wsum, vo / wsum
+                out[p, 0], out[p, 1], out[p, 2] = s0 * inv4 / wsum, s1 / wsum, s2 / wsum
+                out[p, 3], out[p, 4] = s3 / wsum, s4 / wsum
+        return out
+
+    @numba.njit(cache=True, parallel=True, nogil=True)
+    def _lobe_sums(E, W, h, wi, wo):  # pragma: no cover - compiled
+        """Per query ``q``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of explicit lobes
+        (raw moments ``E (N, 5)``, weights ``W`` summing to 1): the sums of
+        :meth:`PatchBRDF.pndf` and :meth:`PatchBRDF.areas` (Eq. 9, 13, 17) in one pass."""
+        Q = h.shape[0]
+        out = np.zeros((Q, 5))
+        for q in numba.prange(Q):
+            hz, xh, yh, inv4 = _half_slope(h[q])
+            ix_, iy_, iz_, ox_, oy_, oz_ = wi[q, 0], wi[q, 1], wi[q, 2], wo[q, 0], wo[q, 1], wo[q, 2]
+            s0 = s1 = s2 = s3 = s4 = 0.0
+            for k in range(E.shape[0]):
+                d, ai, vi, ao, vo = _lobe_terms(E, k, hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_)
+                s0 += W[k] * d
+                s1 += W[k] * ai
+                s2 += W[k] * vi
+                s3 += W[k] * ao
+                s4 += W[k] * vo
+            out[q, 0], out[q, 1], out[q, 2], out[q, 3], out[q, 4] = s0 * inv4, s1, s2, s3, s4
         return out
 
     @numba.njit(cache=True, parallel=True, nogil=True)
@@ -585,23 +686,12 @@ if _kernels.AVAILABLE:
                     out[p, m] /= wsum
         return out
 else:  # pragma: no cover - without numba
-    _footprint_sums = _footprint_merge = None
-
-
-def _lobe_table(moments) -> np.ndarray:
-    """Per lobe ``mx, my, sxx, syy, 2 sxy`` and the inverse covariance ``ixx, iyy, 2 ixy``
-    and log normalization of its Gaussian slope density (``P_i``, Eq. 4), the constants
-    of the compiled kernel (the factors 2 of the quadratic forms folded in)."""
-    mx, my, sxx, syy, sxy = _covariance(np.asarray(moments, dtype=np.float64))
-    det = sxx * syy - sxy * sxy
-    return np.ascontiguousarray(np.stack([mx, my, sxx, syy, 2.0 * sxy, syy / det, sxx / det,
-                                          -2.0 * sxy / det, -np.log(2.0 * np.pi * np.sqrt(det))], -1))
+    _footprint_sums = _footprint_merge = _lobe_sums = None
 
 
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
     """Merged-lobe moments ``(P, 5)`` of Sec. 4.2.2 for each footprint (MIP level of
     ``ms.mip_level``, weights of that level's grid)."""
-    from .microsurface import FWHM_PER_SIGMA
     flat = np.ascontiguousarray(cov).reshape(-1, 4)
     uniq, inverse = np.unique(flat, axis=0, return_inverse=True)   # images often share footprints
     levels = np.array([ms.mip_level(u.reshape(2, 2)) for u in uniq])[inverse.reshape(-1)]
@@ -625,30 +715,24 @@ def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
 
 
 def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2) -> np.ndarray:
-    from .microsurface import FWHM_PER_SIGMA
     fresnel = _fresnel.Ideal() if fresnel is None else fresnel
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
     wi = np.ascontiguousarray(np.broadcast_to(_dirs(wi, "wi"), (P, 3)))
     wo = np.ascontiguousarray(np.broadcast_to(_dirs(wo, "wo"), (P, 3)))
-    table = getattr(ms, "_pbrdf_lobe_table", None)
-    if table is None or table.shape[0] != ms.n_lobes:
-        table = _lobe_table(ms.lobe_moments)
-        ms._pbrdf_lobe_table = table                  # cached per microsurface
     ny, nx = ms.grid
     ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.ascontiguousarray(np.stack([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]], -1))
     h = half_vector(wi, wo)
     oh, ih = dot(wo, h), dot(wi, h)
     ok = _local_ok(wi, wo, h, oh, ih)
-    sums = _footprint_sums(table, nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp, np.ascontiguousarray(h),
-                           wi, wo, bool(exact))
-    D, ai, vi, ao, vo = sums.T
+    E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64)
+    D, ai, vi, ao, vo = _footprint_sums(E, nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp,
+                                        np.ascontiguousarray(h), wi, wo).T
     if not exact:
         merged = _merged_footprints(ms, c, cov, fast=True)
-        ci, vi = lobe_projected_area(merged, wi)
-        co, vo = lobe_projected_area(merged, wo)
-        ai, ao = np.maximum(ci, 0.0), np.maximum(co, 0.0)
+        ai, vi = _merged_area(vi, merged, wi)
+        ao, vo = _merged_area(vo, merged, wo)
     val = np.where(ok, D * _g2_over_ao(g2, ai, vi, ao, vo) / 4.0, 0.0)
     return fresnel(oh) * val[:, None]
