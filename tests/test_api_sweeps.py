@@ -101,8 +101,6 @@ def test_protocol_rejects_bad_directions(zoo, name):
 def test_sample_rejects_uniforms_outside_unit_square(zoo, name):
     brdf = zoo[name]
     for u in ([1.5, 0.2], [0.2, -0.1], [np.nan, 0.5], [0.5]):
-        if name == "glints":
-            pytest.xfail("PatchBRDF.sample reads u with np.asarray (glints owner: use brdf._uniforms)")
         with pytest.raises(ValueError, match="^u "):
             brdf.sample(np.array(u), UP)
     wi, w, p = brdf.sample(np.array([[0.0, 0.0], [1.0, 1.0], [0.5, 0.5]]), UP)   # both ends are accepted

@@ -62,6 +62,7 @@ def test_compiled_sums_match_numpy(ms):
     rng = np.random.default_rng(12)
     wi, wo = _upper(rng, 500), _upper(rng, 500)
     wi[:40, 2] *= 1e-3
+    wi[:40] /= np.linalg.norm(wi[:40], axis=-1, keepdims=True)        # grazing, unit length
     for exact in (True, False):
         for sd in (1.0, 2.8):
             c, cov = (0.31, 0.77), np.eye(2) * (sd / 64) ** 2

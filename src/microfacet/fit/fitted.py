@@ -13,6 +13,7 @@ from ..distributions import GGX, Beckmann
 from ..distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic, theta_grid
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
+from ..io.npz import load_npz
 from . import extract
 
 __all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION", "READABLE_VERSIONS"]
@@ -360,13 +361,7 @@ def load(path: str | os.PathLike) -> FittedBRDF:
     raises :class:`MicrofacetError` naming the file when it is not a valid fit file of a
     supported version."""
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise MicrofacetError(f"{path}: no such file") from None
-    except Exception as e:   # zipfile/pickle/format errors of np.load
-        raise MicrofacetError(f"{path}: not a microfacet fit file ({type(e).__name__}: {e})") from None
+    data = load_npz(path, "a microfacet fit file")
     try:
         return _from_arrays(data)
     except (KeyError, ValueError, TypeError, IndexError) as e:

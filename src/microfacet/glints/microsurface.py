@@ -40,7 +40,6 @@ Conventions
 from __future__ import annotations
 
 import math
-import zipfile
 from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
@@ -50,6 +49,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
+from ..io.npz import load_npz
 from ..io.normalmap import read_slopes
 from ..leadr.mip import mip_pyramid, mip_sizes
 from ..leadr.moments import from_moments
@@ -843,29 +843,22 @@ class LobeMixture:
         """Read a file written by :meth:`save` (format 2, or 1: float64 raw moments,
         compressed); errors name the file."""
         path = Path(path)
+        z = load_npz(path, "a microfacet glints microsurface (.npz from 'microfacet glints')")
+        if "magic" not in z or str(z["magic"]) != _MAGIC:
+            raise MicrofacetError(f"{path}: not a microfacet glints microsurface (.npz from 'microfacet glints')")
         try:
-            with np.load(path, allow_pickle=False) as z:
-                if "magic" not in z.files or str(z["magic"]) != _MAGIC:
-                    raise MicrofacetError(f"{path}: not a microfacet glints microsurface (.npz from "
-                                          f"'microfacet glints')")
-                version = int(z["version"])
-                if version not in (1, FORMAT_VERSION):
-                    raise MicrofacetError(f"{path}: unsupported microsurface format version {version} "
-                                          f"(this microfacet reads 1 and {FORMAT_VERSION})")
-                slopes, params = z["slopes"], z["params"]
-                if version == 1:
-                    moments = z["moments"]
-                else:
-                    moments = z["central"]
-                    if moments.ndim != 3 or moments.shape[2] != 5:
-                        raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
-                    moments = _raw_from_central(moments)
-        except FileNotFoundError:
-            raise MicrofacetError(f"{path}: no such file") from None
-        except IsADirectoryError:
-            raise MicrofacetError(f"{path}: is a directory, not a microsurface file") from None
-        except (ValueError, OSError, KeyError, zipfile.BadZipFile, EOFError) as e:
-            raise MicrofacetError(f"{path}: unreadable or corrupt microsurface file ({e})") from None
+            version = int(z["version"])
+            if version not in (1, FORMAT_VERSION):
+                raise MicrofacetError(f"{path}: unsupported microsurface format version {version} "
+                                      f"(this microfacet reads 1 and {FORMAT_VERSION})")
+            slopes, params = z["slopes"], z["params"]
+            moments = z["moments"] if version == 1 else z["central"]
+        except (KeyError, TypeError, ValueError) as e:
+            raise MicrofacetError(f"{path}: corrupt microsurface file ({type(e).__name__}: {e})") from None
+        if version != 1:
+            if moments.ndim != 3 or moments.shape[2] != 5:
+                raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
+            moments = _raw_from_central(moments)
         if moments.ndim != 3 or moments.shape[2] != 5 or slopes.ndim != 3 or slopes.shape[2] != 2 \
                 or params.shape != (4,):
             raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")

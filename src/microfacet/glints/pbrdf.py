@@ -63,7 +63,7 @@ import numpy as np
 from scipy.special import erfc
 
 from .. import fresnel as _fresnel
-from ..brdf import BRDF, _dirs
+from ..brdf import BRDF, _dirs, _uniforms
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector, reflect
 from .microsurface import FWHM_PER_SIGMA, LobeMixture
@@ -358,7 +358,7 @@ class PatchBRDF(BRDF):
         ``P_i`` (``mf.Beckmann.sample_p22``), ``wi`` the reflection of ``wo``.
         Returns ``(wi, weight, pdf)`` with ``weight = eval_cos / pdf`` (0 where pdf is 0)."""
         wo = _dirs(wo, "wo")
-        u = np.asarray(u, dtype=np.float64)
+        u = _uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
         wof = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
