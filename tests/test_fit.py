@@ -5,6 +5,7 @@ the fit exactly (``G(o, o) = G1(o)``, Eq. 4.2-4.3), so their fits must reproduce
 the accuracy of the tables; default (height-correlated) inputs differ from it by the
 hotspot factor ``(1 + Lambda) / (1 + 2 Lambda)`` at grazing angles only.
 """
+import os
 from pathlib import Path
 
 import numpy as np
@@ -265,6 +266,31 @@ def test_power_iteration_finds_the_perron_vector(model):
     assert abs(lam / vals[i].real - 1) < 1e-8 and its < 100
     with pytest.raises(ValueError, match="backscatter_gaf"):
         extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta, "nope")
+
+
+def test_azimuthal_kernel_is_the_dense_node_rule():
+    """The DFT form of the anisotropic kernel (Eq. 4.8) and of the projected-area table
+    equals the explicit node rule ``sum_n w_n <o, h_n>+ D_n`` (grazing row folded)."""
+    from microfacet.distributions.tabulated import hat_weights
+    n, m = 12, 10
+    theta, phi = theta_grid(n), np.arange(m) * (2 * np.pi / m)
+    rng = np.random.default_rng(3)
+    f_back = rng.random((n - 1, m))
+    k, (u, v) = extract.smith_kernel_anisotropic(f_back, theta, phi, "height_correlated")
+    h = spherical_to_cartesian(theta[:, None], phi[None, :])
+    o = h[:-1].reshape(-1, 3)
+    w = hat_weights(theta, np.sin) * (2 * np.pi / m)
+    a = np.maximum(o @ o.T, 0.0) * np.repeat(w[:-1], m)
+    a[:, -m:] += np.maximum(o @ h[-1].T, 0.0) * w[-1]
+    scale = 4.0 * f_back.ravel() * np.repeat(np.cos(theta[:-1]), m)
+    np.testing.assert_allclose(k.dense(), 2.0 * scale[:, None] * a, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(v, a[0], rtol=1e-12)
+    np.testing.assert_allclose(u, scale * np.repeat(np.cos(theta[:-1]), m))
+    d = TabulatedAnisotropic(rng.random((n, m)) + 0.2)
+    grid = spherical_to_cartesian(d.theta_k[:, None], d.phi[None, :])
+    np.testing.assert_allclose(d.area_table, d.projected_area_nodes(grid), rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="uniform azimuths"):
+        extract.smith_kernel_anisotropic(f_back, theta, phi + 0.1)
 
 
 @pytest.mark.parametrize("gaf", ["vgroove", "normal_map"])
@@ -548,7 +574,8 @@ def test_fresnel_is_bounded_to_unit_interval():
     assert f.fresnel.values.max() > 0.99
 
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+#: the shared data: $MICROFACET_DATA, else ``../shared/data`` beside the repository
+DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 SHARED = sorted((DATA / "merl").glob("*.binary*")) + sorted((DATA / "rgl").glob("*.bsdf"))
 
 

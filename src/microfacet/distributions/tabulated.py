@@ -30,7 +30,8 @@ import numpy as np
 
 from .base import SlopeDistribution
 
-__all__ = ["TabulatedIsotropic", "TabulatedAnisotropic", "theta_grid"]
+__all__ = ["TabulatedIsotropic", "TabulatedAnisotropic", "theta_grid", "azimuthal_cosine_spectrum",
+           "circular_projection"]
 
 HALF_PI = 0.5 * np.pi
 _U_MIN = 2.0**-53
@@ -54,10 +55,11 @@ def locate(theta, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Interval ``i`` and weight ``t`` of ``theta`` in :func:`theta_grid` ``(n)``:
     ``theta = (1 - t) theta_i + t theta_{i+1}``."""
     theta = np.clip(np.asarray(theta, dtype=np.float64), 0.0, HALF_PI)
-    i = np.minimum((np.sqrt(theta / HALF_PI) * (n - 1)).astype(np.intp), n - 2)
-    ta = (i / (n - 1)) ** 2 * HALF_PI
-    tb = ((i + 1) / (n - 1)) ** 2 * HALF_PI
-    return i, np.clip((theta - ta) / (tb - ta), 0.0, 1.0)
+    u = np.sqrt(theta * (1.0 / HALF_PI)) * (n - 1)
+    i = np.minimum(u.astype(np.intp), n - 2)
+    # theta = (u / (n - 1))^2 pi/2: t = (u^2 - i^2) / (2 i + 1), exact on the grid
+    t = (u - i) * (u + i) / (2 * i + 1)
+    return i, np.clip(t, 0.0, 1.0)
 
 
 def hat_weights(theta: np.ndarray, weight) -> np.ndarray:
@@ -71,6 +73,27 @@ def hat_weights(theta: np.ndarray, weight) -> np.ndarray:
     out[:-1] += np.sum(w * (1.0 - _GL_T), axis=1)
     out[1:] += np.sum(w * _GL_T, axis=1)
     return out
+
+
+def azimuthal_cosine_spectrum(theta_k, theta_h, m: int) -> np.ndarray:
+    """Real DFT over the azimuth difference of ``c[i, j, d] = <k_i, h_j>+`` with
+    ``k_i = (theta_k[i], phi)`` and ``h_j = (theta_h[j], phi - 2 pi d / m)``:
+    ``<k, h>+ = max(0, cos cos + sin sin cos(2 pi d / m))`` depends on ``phi_k - phi_h``
+    only, so a node rule over a uniform azimuth grid is a circular convolution in
+    ``phi`` (Eq. 2.14, Eq. 4.8) diagonalized by the DFT. Returns ``(len(theta_k),
+    len(theta_h), m // 2 + 1)`` (real, as ``c`` is even in ``d``)."""
+    tk, th = np.asarray(theta_k, float)[:, None, None], np.asarray(theta_h, float)[None, :, None]
+    c = np.cos(tk) * np.cos(th) + np.sin(tk) * np.sin(th) * np.cos(np.arange(m) * (2.0 * np.pi / m))
+    return np.fft.rfft(np.maximum(c, 0.0), axis=-1).real
+
+
+def circular_projection(spectrum: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A[i, a] = sum_j sum_b <k_ia, h_jb>+ x[j, b]`` for node weights ``x`` ``(n_h, m)``
+    (:func:`azimuthal_cosine_spectrum`): ``irfft(sum_j C[i, j] rfft(x_j))``, exact to
+    rounding, ``O(n_k n_h m)`` instead of ``O(n_k n_h m^2)``."""
+    m = x.shape[-1]
+    xf = np.fft.rfft(x, axis=-1)
+    return np.fft.irfft(np.einsum("ijf,jf->if", spectrum, xf), n=m, axis=-1)
 
 
 def _cos_sin(t):
@@ -263,13 +286,17 @@ class TabulatedIsotropic(_Tabulated):
         # y = tan(eta) on the elevation grid of the table refined _Y_SPLIT times (dense
         # at y = 0 where sharp lobes live); P(xi, y) sec^2 eta stays smooth up to grazing
         eta = np.minimum(theta_grid(_Y_SPLIT * (self.n_theta - 1) + 1), _THETA_CAP)
-        eta = np.broadcast_to(eta, (m, len(eta)))
-        ea, eb = eta[:, :-1, None], eta[:, 1:, None]
-        es = ea + (eb - ea) * _GL4_T                                                  # (m, q(n-1), 4)
-        xs = self.xi[:, None, None]
-        vals = self.p22_std(xs, np.tan(es)) / np.cos(es) ** 2
-        mass = np.sum((eb - ea)[..., 0, None] * _GL4_W * vals, axis=-1)
+        ea, eb = eta[:-1, None], eta[1:, None]
+        es = (ea + (eb - ea) * _GL4_T).ravel()                                        # (q(n-1) 4,)
+        y2 = np.tan(es) ** 2
+        # P(xi, y) sec^2 eta = D(theta) cos^4 theta sec^2 eta, tan^2 theta = xi^2 + y^2
+        r2 = self.xi[:, None] ** 2 + y2
+        vals = self._d_interp(np.arctan(np.sqrt(r2)))
+        vals *= ((eb - ea) * _GL4_W).ravel() / np.cos(es) ** 2
+        vals /= (1.0 + r2) ** 2
+        mass = vals.reshape(m, -1, 4).sum(axis=-1)
         cdf = np.concatenate([np.zeros((m, 1)), np.cumsum(mass, axis=1)], axis=1)
+        eta = np.broadcast_to(eta, (m, len(eta)))
         half = cdf[:, -1].copy()
         self.p1_fine = 2.0 * half
         self.eta_nodes = eta
@@ -457,8 +484,8 @@ class TabulatedAnisotropic(_Tabulated):
         n_lambda = self.n_theta if n_lambda is None else int(n_lambda)
         s = np.linspace(0.0, 1.0, n_lambda)
         self.theta_k = HALF_PI * np.sin(HALF_PI * s) ** 2
-        self.area_table = (self.projected_area_nodes(_normal(self.theta_k[:, None], self.phi[None, :]))
-                           if projected_area is None else np.asarray(projected_area, float))
+        self.area_table = (self._projected_area_grid(self.theta_k) if projected_area is None
+                           else np.asarray(projected_area, float))
         # cell (theta interval x phi interval) masses: mean of the two log-linear columns
         cell = 0.5 * (mass + np.roll(mass, -1, axis=1)) / mass.sum()
         self._cell_cdf = np.concatenate([[0.0], np.cumsum(cell.ravel())])
@@ -507,10 +534,9 @@ class TabulatedAnisotropic(_Tabulated):
         scaled so that ``A(z) = 1`` (Eq. 2.8)."""
         k = np.asarray(k, dtype=np.float64)
         h = _normal(self.theta[:, None], self.phi[None, :]).reshape(-1, 3)
-        wd = (hat_weights(self.theta, np.sin)[:, None] * self.dphi * self.ndf_table).ravel()
         # rescaled so that A(z) = int cos D dw = 1 holds as for the exactly normalized
         # interpolant: removes the rule's leading (lobe-wide) error
-        wd /= np.dot(wd, h[:, 2])
+        wd = self._node_area_weights().ravel()
         flat = k.reshape(-1, 3)
         out = np.empty(len(flat))
         for s in range(0, len(flat), chunk):
@@ -518,6 +544,18 @@ class TabulatedAnisotropic(_Tabulated):
             np.maximum(dots, 0.0, out=dots)
             out[s:s + chunk] = dots @ wd
         return out.reshape(k.shape[:-1])
+
+    def _node_area_weights(self) -> np.ndarray:
+        """``w_n D_n`` of the node rule of :meth:`projected_area_nodes`, ``(n_theta, n_phi)``,
+        scaled so that ``A(z) = sum w_n D_n cos theta_n = 1``."""
+        wd = hat_weights(self.theta, np.sin)[:, None] * self.dphi * self.ndf_table
+        return wd / np.sum(wd * np.cos(self.theta)[:, None])
+
+    def _projected_area_grid(self, theta_k) -> np.ndarray:
+        """:meth:`projected_area_nodes` at ``theta_k x self.phi`` by the DFT in azimuth
+        (:func:`circular_projection`; the same rule, exact to rounding)."""
+        return circular_projection(azimuthal_cosine_spectrum(theta_k, self.theta, self.n_phi),
+                                   self._node_area_weights())
 
     def lambda_warped(self, a, b, c):
         """``Lambda = A(k') / cos theta_k' - 1`` from the bilinear projected-area table."""

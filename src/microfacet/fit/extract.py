@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..distributions.tabulated import HALF_PI, hat_weights
+from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
 from ..errors import MicrofacetError
 from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
-           "smith_kernel_anisotropic", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
+           "smith_kernel_anisotropic", "AzimuthalKernel", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
            "fresnel_samples", "solve_fresnel", "albedo_rows", "extract_fresnel"]
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
@@ -116,30 +116,56 @@ def _check_model(model: str) -> None:
         raise ValueError(f"backscatter_gaf must be one of {BACKSCATTER_GAFS}, got {model!r}")
 
 
-def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndarray,
-                             model: str = "masking", dtype=np.float32):
+class AzimuthalKernel:
+    """The anisotropic kernel of Eq. 4.8 as an operator, ``K p = s * (A p)`` with the node
+    rule ``(A p)[i, a] = sum_j w_j sum_b <o_ia, h_jb>+ p[j, b]`` over ``theta`` x uniform
+    ``phi``: block-circulant in azimuth, applied by the DFT
+    (:func:`~microfacet.distributions.tabulated.circular_projection`) in ``O(n^2 m log m)``
+    per product instead of ``O(n^2 m^2)`` for the dense ``(n m)^2`` matrix, and exact to
+    rounding. ``p`` is over the rows ``i < n - 1`` (row-major, ``(n - 1) m``); the grazing
+    row of ``h`` takes the values of its neighbour (folded). ``k @ p`` and ``k.dense()``
+    (the explicit matrix, for tests) are provided."""
+
+    dtype = np.float64
+
+    def __init__(self, theta: np.ndarray, m: int, scale: np.ndarray):
+        self.theta, self.m = np.asarray(theta, np.float64), int(m)
+        self.w = hat_weights(self.theta, np.sin) * (2.0 * np.pi / self.m)
+        self.spectrum = azimuthal_cosine_spectrum(self.theta[:-1], self.theta, self.m)
+        self.scale = np.asarray(scale, np.float64).ravel()
+        self.shape = (len(self.scale), len(self.scale))
+
+    def _weighted(self, p: np.ndarray) -> np.ndarray:
+        p = np.asarray(p, np.float64).reshape(len(self.theta) - 1, self.m)
+        return self.w[:, None] * np.concatenate([p, p[-1:]], axis=0)
+
+    def __matmul__(self, p):
+        return self.scale * circular_projection(self.spectrum, self._weighted(p)).ravel()
+
+    def dense(self) -> np.ndarray:
+        """The explicit matrix (``(n - 1) m`` square) of the same operator."""
+        return np.stack([self @ e for e in np.eye(self.shape[1])], axis=1)
+
+
+def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndarray, model: str = "masking"):
     """Kernel of Eq. 4.8 over the nodes ``(theta_i, phi_j)``, ``i < n - 1`` (row-major),
     with ``A(o) = sum_n w_n <o, h_n>+ D_n``, ``w_n = int int hat_n sin dtheta dphi`` (node
-    rule), the grazing row folded onto its neighbour. ``f_back`` is ``(n - 1, m)``.
+    rule), the grazing row folded onto its neighbour, as an :class:`AzimuthalKernel`
+    (``phi`` must be the uniform ``2 pi k / m``). ``f_back`` is ``(n - 1, m)``.
     Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
-    as :func:`smith_kernel_isotropic`."""
+    as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal."""
     _check_model(model)
     n, m = len(theta), len(phi)
-    dirs = _directions(theta[:, None], phi[None, :])                  # (n, m, 3)
-    o = dirs[:-1].reshape(-1, 3).astype(dtype)
-    w = hat_weights(theta, np.sin) * (2.0 * np.pi / m)
-    k = o @ o.T                                                       # h nodes = o nodes (folded)
-    np.maximum(k, 0.0, out=k)
-    last = np.maximum(o @ dirs[-1].reshape(-1, 3).astype(dtype).T, 0.0)   # (rows, m) grazing column
-    wcol = np.repeat(w[:-1], m).astype(dtype)
-    k *= wcol[None, :]
-    k[:, -m:] += last * dtype(w[-1])
-    v = k[0].astype(np.float64)                                       # row of A at the normal
-    scale = 4.0 * f_back.ravel() * np.repeat(np.cos(theta[:-1]), m)
-    k *= (scale * (1.0 if model == "masking" else 2.0)).astype(dtype)[:, None]
+    if not np.allclose(phi, np.arange(m) * (2.0 * np.pi / m), atol=1e-12):
+        raise ValueError("smith_kernel_anisotropic needs the uniform azimuths 2 pi k / m")
+    cos_o = np.repeat(np.cos(theta[:-1]), m)
+    scale = 4.0 * np.asarray(f_back, np.float64).ravel() * cos_o
+    k = AzimuthalKernel(theta, m, scale * (1.0 if model == "masking" else 2.0))
     if model == "masking":
         return k, None
-    return k, (scale * np.repeat(np.cos(theta[:-1]), m), v)
+    wc = k.w * np.cos(theta)
+    v = np.repeat(np.append(wc[:-2], wc[-2] + wc[-1]), m)             # A(z) = sum w cos p
+    return k, (scale * cos_o, v)
 
 
 def rule_area_at_normal(dist) -> float:
@@ -159,12 +185,12 @@ def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, ran
     iterations; we iterate to convergence). With ``rank_one = (u, v)`` the operator is
     ``K p - u (v . p)`` (height-correlated backscattering), clamped at 0: it is
     nonnegative on symmetric ``p`` (``A(o) >= cos theta_o A(z)``), so the clamp only
-    guards rounding and asymmetric inputs. The matrix may be float32 (anisotropic
-    kernels); the iterate is kept in float64."""
+    guards rounding and asymmetric inputs. ``k`` is a matrix or an operator with
+    ``k @ p`` (:class:`AzimuthalKernel`); the iterate is kept in float64."""
     p = np.full(k.shape[0], 1.0 / k.shape[0])
     lam = 0.0
     for it in range(1, max_iter + 1):
-        q = np.asarray(k @ p.astype(k.dtype), dtype=np.float64)
+        q = np.asarray(k @ p, dtype=np.float64)
         if rank_one is not None:
             q = np.maximum(q - rank_one[0] * float(rank_one[1] @ p), 0.0)
         s = float(np.sum(q, dtype=np.float64))
@@ -202,19 +228,26 @@ def _hats(cos_d, n_d: int):
     return k0, np.clip((ca - c) / (ca - cb), 0.0, 1.0)
 
 
-def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1) -> dict:
+def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
+                    isotropic: bool = False) -> dict:
     """Configurations of Algorithm 2 and the input's values there, evaluated once.
 
     ``theta_d`` runs over the nodes of the Fresnel table (``n_d`` uniform on
     ``[0, pi/2]``) and the midpoints between them (even / odd ``phi_d`` indices), so that
     the solve sees the table between its nodes; ``theta_h`` over
-    ``((k + 1/2) / n_h)^2 pi/2`` (dense where lobes are), ``phi_d`` and ``phi_h`` uniform.
+    ``((k + 1/2) / n_h)^2 pi/2`` (dense where lobes are), ``phi_d`` and ``phi_h`` uniform
+    on ``[0, 2 pi)``, or, with ``isotropic``, ``phi_d`` on ``[0, pi)`` with half the
+    samples: an isotropic reciprocal BRDF is even in ``phi_d`` and ``pi``-periodic
+    (``f(theta_h, theta_d, phi_d) = f(theta_h, theta_d, pi - phi_d)``), so the full
+    circle only repeats these configurations.
     Returns ``wi, wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` (nonfinite or
     negative values set to 0) and ``finite`` ``(K,)`` (configurations to use)."""
     step = HALF_PI / (n_d - 1)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
     theta_h = ((np.arange(n_h) + 0.5) / n_h) ** 2 * HALF_PI
-    phi_d = (np.arange(n_phi_d) + 0.5) * (2.0 * np.pi / n_phi_d)
+    if isotropic:
+        n_phi_d = max(n_phi_d // 2, 2)
+    phi_d = (np.arange(n_phi_d) + 0.5) * ((np.pi if isotropic else 2.0 * np.pi) / n_phi_d)
     phi_h = np.arange(n_phi_h) * (2.0 * np.pi / n_phi_h)
     TD, TH, PH, PD = np.meshgrid(theta_d, theta_h, phi_h, phi_d, indexing="ij")
     TD = np.minimum(TD + 0.5 * step * (np.arange(n_phi_d) % 2), HALF_PI)
@@ -360,7 +393,7 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.0
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
-                    diffuse: bool = False):
+                    diffuse: bool = False, isotropic: bool = False):
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
     Algorithm 2): ``(cos_theta_d, rgb, k_d)``."""
-    return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h), ideal, diffuse=diffuse)
+    return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h, isotropic), ideal, diffuse=diffuse)

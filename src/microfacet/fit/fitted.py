@@ -251,7 +251,7 @@ def _fit_ndf(f_back, theta, phi, gaf, model, tol, max_iter):
         m = len(phi)
         if gaf == "smith":
             k, rank_one = extract.smith_kernel_anisotropic(f_back, theta, phi, model)
-            d, f0, its = extract.power_iteration(k, tol=max(tol, 1e-6), max_iter=max_iter, rank_one=rank_one)
+            d, f0, its = extract.power_iteration(k, tol=tol, max_iter=max_iter, rank_one=rank_one)
             d = d.reshape(n - 1, m)
         else:
             d, f0, its = extract.ndf_closed_form(f_back, theta[:-1, None], gaf), np.nan, 0
@@ -325,7 +325,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     else:
         phi = None
         f_back = extract.backscattering(brdf, theta[:-1])
-    samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1))
+    samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1), isotropic=not anisotropic)
     views = _energy_views(anisotropic)
     kd = np.zeros(3)
     kd_max = None
