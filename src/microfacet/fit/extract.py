@@ -32,7 +32,7 @@ from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
            "smith_kernel_anisotropic", "AzimuthalKernel", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
-           "fresnel_samples", "solve_fresnel", "albedo_rows", "extract_fresnel"]
+           "fresnel_samples", "solve_fresnel", "box_qp", "chi2_residual", "albedo_rows", "extract_fresnel"]
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
 BACKSCATTER_GAFS = ("masking", "height_correlated")
@@ -260,7 +260,7 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
 
 
 def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6, albedo=None,
-                  kd_max=None):
+                  kd_max=None, return_residual: bool = False):
     """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2) bounded to
     ``[0, 1]``, and optionally a Lambertian base ``k_d``, by a box-constrained linear
     least-squares solve over the configurations ``samples`` (:func:`fresnel_samples`):
@@ -274,21 +274,20 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     without the bounds and the smoothing, the solution at nodes sampled only there is
     ``sum f / sum f_id``, the ``f_id``-weighted mean of ``f / f_id`` (Eq. 4.11). The second-
     difference penalty only fills nodes that no configuration sees. The bounded problem is
-    solved on its normal equations (``n x n``; :func:`scipy.optimize.lsq_linear`, BVLS on
-    the Cholesky factor). ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
+    solved on its normal equations (``n x n``) by :func:`box_qp`. ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
     backscattering, which the base may not exceed).
 
     ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
     ``sum_k F_k a[v, k] + k_d <= a_data[v]`` at each view ``v`` (the fit reflects no more
     than the data); when the bounded solution violates them, the linearly constrained
-    problem is solved by SLSQP from it.
+    problem is solved by :func:`_energy_constrained`.
 
     Returns ``(cos_theta_d, rgb, k_d)``: increasing ``cos theta_d`` of the ``n_d`` nodes,
-    ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``).
+    ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``),
+    and with ``return_residual`` also the model's misfit :func:`chi2_residual` over the
+    usable configurations (a weighting that does not depend on ``ideal``, so that fits
+    with different NDFs compare).
     """
-    from scipy.linalg import cholesky
-    from scipy.optimize import lsq_linear
-
     n_d = samples["n_d"]
     f = samples["f"]
     f_id = np.asarray(ideal.eval(samples["wi"], samples["wo"]), dtype=np.float64)[..., 0]
@@ -324,39 +323,118 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     h[:n_d, :n_d] += smoothing * np.trace(h) / n_var * (lap.T @ lap) + 1e-14 * np.trace(h) * np.eye(n_d)
     if diffuse:
         h[n_d, n_d] += 1e-14 * np.trace(h)
-    r = cholesky(h, lower=False)                                      # h = r^T r
-    y = np.linalg.solve(r.T, b)                                       # r^T y = b
     lo = np.zeros(n_var)
     x = np.empty((n_var, 3))
     for c in range(3):
         hi = np.ones(n_var)
         if diffuse and kd_max is not None:
             hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
-        x[:, c] = lsq_linear(r, y[:, c], bounds=(lo, hi), method="bvls", tol=1e-12).x
+        x[:, c] = box_qp(h, b[:, c], lo, hi)
         if albedo is not None:
-            x[:, c] = _energy_constrained(r, y[:, c], x[:, c], (lo, hi), albedo, c, n_d, diffuse)
+            x[:, c] = _energy_constrained(h, b[:, c], x[:, c], (lo, hi), albedo, c, diffuse)
     rgb = x[:n_d]
     kd = x[n_d] if diffuse else np.zeros(3)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
-    return np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
+    out = np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
+    if not return_residual:
+        return out
+    model = f_id[:, None] * ((1.0 - t)[:, None] * rgb[k0] + t[:, None] * rgb[k0 + 1]) + kd / np.pi
+    return out + (chi2_residual(model, f),)
 
 
-def _energy_constrained(r, y, x0, bounds, albedo, c, n_d, diffuse):
-    """``min |r x - y|^2`` under ``bounds`` and ``a x <= a_data`` (SLSQP from ``x0``)."""
-    from scipy.optimize import Bounds, LinearConstraint, minimize
+def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
+    """``sum_j sum_c (model_jc - f_jc)^2 / (Y(f_j) + eps) / sum_j Y(f_j)`` (a Pearson
+    chi-square, ``Y`` the luminance, ``eps`` 1e-3 of its mean): relative to the data
+    everywhere, lobe and floor alike, whatever the model."""
+    y = luminance(f)
+    eps = 1e-3 * max(float(np.mean(y)), 1e-300)
+    return float(np.sum(np.sum((model - f) ** 2, axis=-1) / (y + eps)) / max(float(np.sum(y)), 1e-300))
+
+
+def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-12,
+           max_iter: int = 200) -> np.ndarray:
+    """``argmin 1/2 x^T h x - g^T x`` over the box ``lo <= x <= hi`` (``h`` symmetric
+    positive definite; ``hi`` may be ``inf``): Bertsekas' projected Newton method (1982)
+    -- the Newton step on the variables not held at a bound by the gradient, an Armijo
+    search along the projection arc -- until the projected gradient vanishes
+    (``|x - P(x - grad)| <= tol |g|``). Exact for the final active set (one Cholesky solve
+    per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
+    ``g = r^T y``."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    scale = max(float(np.max(np.abs(g))), 1e-300)
+    x = np.clip(cho_solve(cho_factor(h), g), lo, hi)
+    for _ in range(max_iter):
+        grad = h @ x - g
+        step = x - np.clip(x - grad, lo, hi)
+        if np.max(np.abs(step)) <= tol * scale:
+            break
+        eps = min(float(np.linalg.norm(step)), 1e-3)
+        held = ((x <= lo + eps) & (grad > 0)) | ((x >= hi - eps) & (grad < 0))
+        free = ~held
+        d = np.where(held, -grad, 0.0)
+        if np.any(free):
+            d[free] = -cho_solve(cho_factor(h[np.ix_(free, free)]), grad[free])
+        s = 1.0
+        for _ in range(60):
+            xn = np.clip(x + s * d, lo, hi)
+            dx = xn - x                            # q(xn) - q(x) without cancellation
+            if grad @ dx + 0.5 * dx @ h @ dx <= 1e-4 * grad @ dx:
+                break
+            s *= 0.5
+        if np.array_equal(xn, x):
+            break
+        x = xn
+    return x
+
+
+def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50):
+    """``min 1/2 x^T h x - g^T x`` under ``bounds`` and ``a x <= a_data`` (the albedo
+    rows of channel ``c``), from the box-constrained solution ``x0`` (returned when
+    feasible).
+
+    Dual Newton on the multipliers ``lambda >= 0`` of the ``V`` rows: ``x(lambda)`` is
+    the box QP with ``g - a^T lambda`` (:func:`box_qp`), the dual gradient is
+    ``a x - a_data`` and its Hessian ``-a_F h_FF^-1 a_F^T`` over the variables ``F``
+    strictly inside their bounds; each step maximizes that local quadratic model over
+    ``lambda >= 0`` (itself a small box QP; damped so that the dual never decreases),
+    exact once the free set settles. A remaining
+    violation is removed by scaling ``x`` down (all rows are nonnegative), so the result
+    is feasible."""
+    from scipy.linalg import cho_factor, cho_solve
 
     a, a_data = albedo
     rows = np.concatenate([a, np.ones((len(a), 1))], axis=1) if diffuse else a
     limit = a_data[:, c]
     if np.all(rows @ x0 <= limit + 1e-9):
         return x0
-    scale = 1.0 / max(float(y @ y), 1e-300)
-    rtr, rty = r.T @ r * scale, r.T @ y * scale
-    res = minimize(lambda x: 0.5 * x @ rtr @ x - rty @ x, x0, jac=lambda x: rtr @ x - rty, method="SLSQP",
-                   bounds=Bounds(*bounds), constraints=[LinearConstraint(rows, -np.inf, limit)],
-                   options=dict(maxiter=500, ftol=1e-14))
-    x = np.clip(res.x, *bounds)
-    # feasibility first: scale down a remaining violation (all rows are nonnegative)
+    lo, hi = bounds
+    v = len(rows)
+    delta = 1e-8 * max(float(np.trace(rows @ cho_solve(cho_factor(h), rows.T))), 1e-300)
+    dual = lambda x, lam: 0.5 * x @ h @ x - g @ x + lam @ (rows @ x - limit)   # noqa: E731
+    lam, x = np.zeros(v), x0
+    value = dual(x, lam)
+    for _ in range(max_iter):
+        gap = rows @ x - limit
+        if np.all(gap <= 1e-10 * np.abs(limit)) and np.all(lam * np.abs(gap) <= 1e-10 * np.abs(value)):
+            break
+        free = (x > lo) & (x < hi)
+        m = np.zeros((v, v))
+        if np.any(free):
+            af = rows[:, free]
+            m = af @ cho_solve(cho_factor(h[np.ix_(free, free)]), af.T)
+        target = box_qp(m + delta * np.eye(v), gap + m @ lam, np.zeros(v), np.full(v, np.inf))
+        step = 1.0
+        for _ in range(40):                        # the dual may only increase
+            lam_n = lam + step * (target - lam)
+            x_n = box_qp(h, g - rows.T @ lam_n, lo, hi)
+            value_n = dual(x_n, lam_n)
+            if value_n >= value - 1e-13 * abs(value):
+                break
+            step *= 0.5
+        if np.array_equal(lam_n, lam):
+            break
+        lam, x, value = lam_n, x_n, value_n
     excess = np.max((rows @ x) / np.maximum(limit, 1e-300))
     return x / excess if excess > 1.0 else x
 
@@ -367,22 +445,25 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.0
     theta_i dw_i`` (the fit's albedo is ``sum_k F_k a[v, k] + k_d``, Eq. 2.1 with the
     table's hats) and ``a_data[v] = int f(i, o_v) cos theta_i dw_i + margin``, both by the
     same stratified ``n_u x n_u`` importance sampling of the defensive mixture ``1/2``
-    visible normals of ``ideal`` + ``1/2`` cosine lobe. Returns ``(a, a_data)``."""
+    visible normals of ``ideal`` + ``1/2`` cosine lobe (each on the whole grid, weights of
+    the balance heuristic). Returns ``(a, a_data)``."""
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
 
     g = (np.arange(n_u) + 0.5) / n_u
     u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
-    half = len(u) // 2
     views = np.asarray(views, dtype=np.float64)
     wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
     cosine = Lambertian(1.0)
-    wi = np.concatenate([ideal.sample(u[:half], wo[:, :half])[0], cosine.sample(u[half:], wo[:, half:])[0]], axis=1)
+    # both strategies on the whole stratified grid (a split of the grid would sample
+    # each from half its domain), balance-heuristic weights
+    wi = np.concatenate([ideal.sample(u, wo)[0], cosine.sample(u, wo)[0]], axis=1)
+    wo = np.concatenate([wo, wo], axis=1)
     pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
     ok = (pdf > 0) & (wi[..., 2] > 0)
-    inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / len(u)
+    inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
-    f = np.asarray(brdf.eval_cos(wi, wo), dtype=np.float64)
+    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
     f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
     a = np.zeros((len(views), n_d))
