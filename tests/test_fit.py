@@ -245,7 +245,7 @@ def test_anisotropic_fit_reproduces_backscattering(fits, kind, ref, tol_between)
     steep tails of a Beckmann lobe (down to 1e-2 of the peak) at 40 azimuths."""
     node_phi = np.arange(40) * (2 * np.pi / 40)
     assert _backscatter_error(fits[kind], ref, _nodes(40, 80.0), node_phi[::3], rel_floor=1e-2) < 3e-3
-    assert abs(fits[kind].f0 - extract.luminance(SCHLICK(1.0))) < 5e-3
+    assert abs(fits[kind].f0 - extract.luminance(SCHLICK(1.0))) < 6e-3
     assert _backscatter_error(fits[kind], ref, _between(80.0), np.linspace(0, 2 * np.pi, 17),
                               rel_floor=1e-2) < tol_between
 
@@ -291,6 +291,20 @@ def test_azimuthal_kernel_is_the_dense_node_rule():
     np.testing.assert_allclose(d.area_table, d.projected_area_nodes(grid), rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError, match="uniform azimuths"):
         extract.smith_kernel_anisotropic(f_back, theta, phi + 0.1)
+
+
+@pytest.mark.parametrize("n, tol", [(40, 0.2), (90, 0.05)])
+def test_anisotropic_table_between_nodes(n, tol):
+    """The log-bilinear interpolant of an anisotropic Beckmann table (0.2, 0.4, rho 0.3)
+    between the nodes (mid-theta and mid-phi), where D > 1e-3 of its peak: 0.19 / 0.043
+    at 40 / 90 nodes per axis (linear in phi: 0.42 / 0.099)."""
+    ref = mf.Beckmann(alpha_x=0.2, alpha_y=0.4, rho=0.3)
+    theta, phi = theta_grid(n), np.arange(n) * (2 * np.pi / n)
+    table = TabulatedAnisotropic(ref.ndf(spherical_to_cartesian(theta[:, None], phi[None, :])))
+    h = spherical_to_cartesian(0.5 * (theta[:-1, None] + theta[1:, None]), phi[None, :] + np.pi / n)
+    a, b = table.ndf(h), ref.ndf(h)
+    keep = b > 1e-3 * b.max()
+    assert np.max(np.abs(a[keep] / b[keep] - 1.0)) < tol
 
 
 def test_box_qp_matches_bvls_and_energy_rows_hold():
@@ -613,20 +627,41 @@ DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parent
 SHARED = sorted((DATA / "merl").glob("*.binary*")) + sorted((DATA / "rgl").glob("*.bsdf"))
 
 
+def _albedo(brdf, sampler, t, n=64):
+    """Directional albedo at view ``theta_o = t`` of ``brdf`` by the balance-heuristic
+    mixture of ``sampler.sample`` and the cosine lobe, each on a stratified ``n x n`` grid."""
+    u = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
+    wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
+    cosine = mf.Lambertian(1.0)
+    wi = np.concatenate([sampler.sample(u, wo)[0], cosine.sample(u, wo)[0]])
+    wo = np.concatenate([wo, wo])
+    pdf = 0.5 * sampler.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    f = np.asarray(brdf.eval(wi, wo), float) * wi[:, 2:]
+    f = np.where(ok[:, None] & np.isfinite(f) & (f > 0), f, 0.0)
+    return np.sum(f / np.where(ok, pdf, 1.0)[:, None], axis=0) / len(wi)
+
+
 @pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")
 @pytest.mark.parametrize("path", SHARED, ids=[p.name.split(".")[0] for p in SHARED])
-def test_white_furnace_on_shared_materials(path):
-    """Every fit of every shared material (both backscattering models, with and without
-    the diffuse base): F in [0, 1] and, with white Fresnel, directional albedo <= 1."""
+def test_white_furnace_and_energy_on_shared_materials(path):
+    """Every fit of every shared material (both backscattering models, and the diffuse
+    base): F in [0, 1]; with white Fresnel, directional albedo <= 1; with the fitted
+    Fresnel term, directional albedo <= the data's + 0.02 at 0/30/60/75 degrees, per
+    channel (the energy constraint; the same estimator for both)."""
     m = mf.measured.load(path)
     u = (np.arange(64) + 0.5) / 64
     u = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
-    for model in extract.BACKSCATTER_GAFS:
-        for diffuse in (False, True):
-            f = mf.fit.fit(m, 48, backscatter_gaf=model, diffuse=diffuse)
-            assert np.all((f.fresnel.values >= 0) & (f.fresnel.values <= 1))
-            assert np.all(f.diffuse >= 0) and np.all(f.diffuse <= 1)
-            white = mf.fit.FittedBRDF(f.distribution, mf.fresnel.Tabulated([0, 1], [1, 1]))
-            for t in np.radians([0.0, 30.0, 60.0, 75.0, 85.0]):
-                wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
-                assert np.mean(white.sample(u, wo)[1][:, 0]) <= 1.0 + 1e-3
+    settings = [dict(backscatter_gaf=model) for model in extract.BACKSCATTER_GAFS] + [dict(diffuse=True)]
+    for kw in settings:
+        f = mf.fit.fit(m, 48, **kw)
+        assert np.all((f.fresnel.values >= 0) & (f.fresnel.values <= 1))
+        assert np.all(f.diffuse >= 0) and np.all(f.diffuse <= 1)
+        white = mf.fit.FittedBRDF(f.distribution, mf.fresnel.Tabulated([0, 1], [1, 1]))
+        for t in np.radians([0.0, 30.0, 60.0, 75.0, 85.0]):
+            wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
+            assert np.mean(white.sample(u, wo)[1][:, 0]) <= 1.0 + 1e-3
+        for t in np.radians([0.0, 30.0, 60.0, 75.0]):
+            excess = _albedo(f, f, t) - _albedo(m, f, t)
+            assert np.all(excess <= 0.02), (kw, np.degrees(t), excess)

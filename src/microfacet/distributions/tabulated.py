@@ -122,16 +122,14 @@ def interval_integral(la, lb, ta, tb, theta):
     return np.maximum(out / (2.0 * (beta * beta + 4.0)), 0.0)
 
 
-def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
-    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c(theta) cos theta sin theta``,
-    each ``D_c`` log-linear from ``exp(las[c])`` to ``exp(lbs[c])``, from the uniform ``v``:
-    safeguarded Newton on the closed-form CDF (:func:`interval_integral`)."""
-    cdf = lambda x: sum(interval_integral(la, lb, ta, tb, x) for la, lb in zip(las, lbs))   # noqa: E731
+def invert_cdf(v, ta, tb, cdf, pdf, iterations: int = 60):
+    """``theta`` in ``[ta, tb]`` with ``cdf(theta) = v cdf(tb)`` for an increasing ``cdf``
+    with derivative ``pdf``: safeguarded Newton (bisection when a step leaves the
+    bracket)."""
     total = cdf(tb)
     target = v * total
     lo, hi = ta.copy(), tb.copy()
     x = ta + v * (tb - ta)
-    w = (x - ta) / (tb - ta)
     for _ in range(iterations):
         f = cdf(x) - target
         done = np.abs(f) <= 1e-13 * total
@@ -139,14 +137,29 @@ def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
             break
         lo = np.where(f < 0, x, lo)
         hi = np.where(f > 0, x, hi)
-        w = (x - ta) / (tb - ta)
-        p = sum(np.exp(la + w * (lb - la)) for la, lb in zip(las, lbs)) * _cos_sin(x)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            xn = x - f / p
+            xn = x - f / pdf(x)
         bad = ~((xn > lo) & (xn < hi))
         xn = np.where(bad, 0.5 * (lo + hi), xn)
         x = np.where(done, x, xn)
     return x
+
+
+def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
+    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c(theta) cos theta sin theta``,
+    each ``D_c`` log-linear from ``exp(las[c])`` to ``exp(lbs[c])``, from the uniform ``v``
+    (:func:`invert_cdf` on the closed-form CDF, :func:`interval_integral`)."""
+    cdf = lambda x: sum(interval_integral(la, lb, ta, tb, x) for la, lb in zip(las, lbs))   # noqa: E731
+    pdf = lambda x: sum(np.exp(la + (x - ta) / (tb - ta) * (lb - la)) for la, lb in zip(las, lbs)) * _cos_sin(x)  # noqa: E731
+    return invert_cdf(v, ta, tb, cdf, pdf, iterations)
+
+
+def exp_mean(b):
+    """``int_0^1 e^(w b) dw = expm1(b) / b`` (1 at ``b = 0``)."""
+    b = np.asarray(b, dtype=np.float64)
+    small = np.abs(b) < 1e-8
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.where(small, 1.0 + 0.5 * b, np.expm1(b) / np.where(small, 1.0, b))
 
 
 def _linear_quantile(v, d0, d1):
@@ -478,17 +491,17 @@ class TabulatedAnisotropic(_Tabulated):
         self.phi = np.arange(self.n_phi) * self.dphi
         if not np.max(d) > 0:
             raise ValueError("ndf table is zero")
-        mass = self._interval_masses(log_table(d))                  # (n_theta - 1, n_phi)
-        self.ndf_table = d / (self.dphi * mass.sum())
-        self.log_ndf = log_table(self.ndf_table)
+        self.log_ndf = log_table(d)
+        cell = self._cell_masses()                                   # (n_theta - 1, n_phi)
+        total = cell.sum()
+        self.ndf_table = d / total
+        self.log_ndf = self.log_ndf - np.log(total)
         n_lambda = self.n_theta if n_lambda is None else int(n_lambda)
         s = np.linspace(0.0, 1.0, n_lambda)
         self.theta_k = HALF_PI * np.sin(HALF_PI * s) ** 2
         self.area_table = (self._projected_area_grid(self.theta_k) if projected_area is None
                            else np.asarray(projected_area, float))
-        # cell (theta interval x phi interval) masses: mean of the two log-linear columns
-        cell = 0.5 * (mass + np.roll(mass, -1, axis=1)) / mass.sum()
-        self._cell_cdf = np.concatenate([[0.0], np.cumsum(cell.ravel())])
+        self._cell_cdf = np.concatenate([[0.0], np.cumsum(cell.ravel() / total)])
         x, y, w = self.standard_quadrature()
         self.second_moment_std = float(np.sum(w * x * x))
 
@@ -503,16 +516,40 @@ class TabulatedAnisotropic(_Tabulated):
 
     # -------------------------------------------------------------- the NDF
     def _d_interp(self, theta, phi=None) -> np.ndarray:
-        """``D`` log-linear in ``theta`` along each node azimuth, linear in ``phi`` between."""
+        """``D`` log-bilinear: ``ln D`` linear in ``theta`` along each node azimuth and
+        linear in ``phi`` between them (second-order accurate for lobes whose logarithm
+        is smooth in both: anisotropic Beckmann tails, where linear interpolation in
+        ``phi`` errs by tens of percent between nodes)."""
         i, t = locate(theta, self.n_theta)
         f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi
         j = np.minimum(f.astype(np.intp), self.n_phi - 1)
         w = np.clip(f - j, 0.0, 1.0)
-        return (1 - w) * self._column(i, j, t) + w * self._column(i, (j + 1) % self.n_phi, t)
+        a = self._log_column(i, j, t)
+        return np.exp(a + w * (self._log_column(i, (j + 1) % self.n_phi, t) - a))
 
-    def _column(self, i, j, t):
+    def _log_column(self, i, j, t):
         ld = self.log_ndf
-        return np.exp(ld[i, j] + t * (ld[i + 1, j] - ld[i, j]))
+        return ld[i, j] + t * (ld[i + 1, j] - ld[i, j])
+
+    def _cell_marginal(self, theta, i, j):
+        """``int D(theta, phi) dphi cos theta sin theta`` over the azimuth interval ``j``
+        (closed form in ``phi``: ``D_j^(1-w) D_(j+1)^w`` integrates to ``D_j
+        expm1(b) / b``, ``b = ln D_(j+1) - ln D_j``), at ``theta`` in elevation interval ``i``."""
+        t = (theta - self.theta[i]) / (self.theta[i + 1] - self.theta[i])
+        a = self._log_column(i, j, t)
+        b = self._log_column(i, (j + 1) % self.n_phi, t) - a
+        return self.dphi * np.exp(a) * exp_mean(b) * _cos_sin(theta)
+
+    def _cell_masses(self) -> np.ndarray:
+        """Mass ``int int D cos sin dtheta dphi`` of each cell (elevation x azimuth
+        interval) of the log-bilinear interpolant: closed form in ``phi``, 8-point
+        Gauss-Legendre in ``theta`` (smooth: exact to rounding on these intervals)."""
+        n, m = self.n_theta - 1, self.n_phi
+        i = np.arange(n)[:, None, None]
+        ta, tb = self.theta[:-1, None, None], self.theta[1:, None, None]
+        th = ta + (tb - ta) * _GL_T[None, :, None]
+        vals = self._cell_marginal(th, i, np.arange(m)[None, None, :])       # (n, 8, m)
+        return np.sum(vals * ((tb - ta) * _GL_W[None, :, None]), axis=1)
 
     def p22_std(self, x, y):
         """``P(x~, y~) = D(h) cos^4 theta_h`` with ``h ∝ (-x~, -y~, 1)`` (Eq. 2.11)."""
@@ -584,9 +621,9 @@ class TabulatedAnisotropic(_Tabulated):
     # ------------------------------------------------------------ sampling
     def sample_p22_std(self, u):
         """Normal whose slope is distributed as the interpolated ``P`` (App. A): a cell by
-        its exact mass, ``theta`` from the cell's marginal (the mean of its two log-linear
-        columns times ``cos sin``, Newton on the closed-form CDF), then ``phi`` from the
-        linear ``D(theta, .)`` (closed-form quadratic)."""
+        its mass, ``theta`` from the cell's marginal (:meth:`_cell_marginal`, Newton on
+        its CDF by 8-point Gauss-Legendre from the cell's edge), then ``phi`` from the
+        log-linear ``D(theta, .)`` in closed form (``w = log1p(v expm1(b)) / b``)."""
         u = np.asarray(u, dtype=np.float64)
         cdf = self._cell_cdf
         v = np.clip(u[..., 0], _U_MIN, 1.0 - _U_MIN) * cdf[-1]
@@ -595,13 +632,20 @@ class TabulatedAnisotropic(_Tabulated):
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.clip(np.where(mass > 0, (v - cdf[c]) / mass, 0.5), 0.0, 1.0)
         i, j = np.divmod(c, self.n_phi)
-        j1 = (j + 1) % self.n_phi
-        ld = self.log_ndf
-        th = sample_interval(r, self.theta[i], self.theta[i + 1], (ld[i, j], ld[i, j1]), (ld[i + 1, j], ld[i + 1, j1]))
-        t = np.clip((th - self.theta[i]) / (self.theta[i + 1] - self.theta[i]), 0.0, 1.0)
-        d0, d1 = self._column(i, j, t), self._column(i, j1, t)
-        w = _linear_quantile(np.clip(u[..., 1], 0.0, 1.0), d0, d1)
-        return _normal(th, (j + w) * self.dphi)
+        ta, tb = self.theta[i], self.theta[i + 1]
+
+        def partial(x):
+            nodes = ta[..., None] + (x - ta)[..., None] * _GL_T
+            return (x - ta) * np.sum(_GL_W * self._cell_marginal(nodes, i[..., None], j[..., None]), axis=-1)
+
+        th = invert_cdf(r, ta, tb, partial, lambda x: self._cell_marginal(x, i, j))
+        t = np.clip((th - ta) / (tb - ta), 0.0, 1.0)
+        b = self._log_column(i, (j + 1) % self.n_phi, t) - self._log_column(i, j, t)
+        q = np.clip(u[..., 1], 0.0, 1.0)
+        small = np.abs(b) < 1e-8
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            w = np.where(small, q, np.log1p(q * np.expm1(b)) / np.where(small, 1.0, b))
+        return _normal(th, (j + np.clip(np.nan_to_num(w, nan=q), 0.0, 1.0)) * self.dphi)
 
     def sample_visible_std(self, u, cos_theta):  # pragma: no cover - not supported
         raise NotImplementedError("anisotropic tables sample slopes of P (supports_visible_sampling = False)")
