@@ -6,10 +6,12 @@ elevation grid ``theta_j = (j / (n - 1))^2 pi / 2`` of Listing 4.1 (dense near t
 normal, where sharp lobes live), and, for anisotropic tables, at the azimuths
 ``phi_k = 2 pi k / m`` of the normal. ``D`` is interpolated log-linearly in ``theta``
 (exact for Gaussian-like tails to second order, where linear interpolation of a sharp
-Beckmann lobe errs by tens of percent between nodes) and periodically linearly in
-``phi``; the slope PDF is ``P(h~) = D(h) cos^4 theta_h`` (Eq. 2.11), normalized so that
-``int P dh~ = int D cos theta_h dw_h = 1`` (Eq. 2.12, 2.8) exactly (closed form) for the
-interpolant. Every other table (Smith ``Lambda``, the marginal and
+Beckmann lobe errs by tens of percent between nodes) and, for anisotropic tables, ``ln D``
+periodically linearly in ``phi`` too (log-bilinear); the slope PDF is
+``P(h~) = D(h) cos^4 theta_h`` (Eq. 2.11), normalized so that
+``int P dh~ = int D cos theta_h dw_h = 1`` (Eq. 2.12, 2.8) for the interpolant (closed
+form for radial tables; closed form in ``phi`` and Gauss-Legendre in ``theta`` per cell,
+exact to rounding, for anisotropic ones). Every other table (Smith ``Lambda``, the marginal and
 conditional CDFs used for sampling) is derived from that interpolant.
 
 - :class:`TabulatedIsotropic`: radial ``P`` (Eq. 4.12). ``Lambda`` is a 1D function of
@@ -160,13 +162,6 @@ def exp_mean(b):
     small = np.abs(b) < 1e-8
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         return np.where(small, 1.0 + 0.5 * b, np.expm1(b) / np.where(small, 1.0, b))
-
-
-def _linear_quantile(v, d0, d1):
-    """``t`` in ``[0, 1]`` with density ``∝ (1 - t) d0 + t d1`` (closed-form quadratic)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = v * (d0 + d1) / (d0 + np.sqrt(d0 * d0 + v * (d1 * d1 - d0 * d0)))
-    return np.where(np.isfinite(t), np.clip(t, 0.0, 1.0), v)
 
 
 def _normal(theta, phi):
