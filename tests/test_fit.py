@@ -574,10 +574,12 @@ def test_round_trip_sweep(D, gaf, shadowing):
 @pytest.mark.parametrize("D", [mf.GGX, mf.Beckmann])
 def test_anisotropic_round_trip_height_correlated(D):
     """Anisotropic, correlated, height-correlated input (the issue's GGX(0.2, 0.4) gave
-    (0.192, 0.373) with Eq. 4.3): parameters within 1.5 % at 48 x 48, rho within 0.01."""
-    _, _, rel, drho = _round_trip(D, dict(alpha_x=0.2, alpha_y=0.4, rho=0.3), "smith", True, True, 48)
-    assert np.all(rel < 0.015), rel
-    assert drho < 0.01
+    (0.192, 0.373) with Eq. 4.3): at 48 x 48, alphas within 1 % (measured 0.6 % at
+    most), rho within 0.005 and f cos over uniform pairs within 1 %."""
+    f, ref, rel, drho = _round_trip(D, dict(alpha_x=0.2, alpha_y=0.4, rho=0.3), "smith", True, True, 48)
+    assert np.all(rel < 0.01), rel
+    assert drho < 0.005
+    assert _pair_error(f, ref, _uniform_pairs()) < 0.01
 
 
 # ---------------------------------------------------------------- diffuse base, energy
@@ -665,3 +667,25 @@ def test_white_furnace_and_energy_on_shared_materials(path):
         for t in np.radians([0.0, 30.0, 60.0, 75.0]):
             excess = _albedo(f, f, t) - _albedo(m, f, t)
             assert np.all(excess <= 0.02), (kw, np.degrees(t), excess)
+
+
+@pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")
+@pytest.mark.parametrize("path", [p for p in SHARED if p.suffix == ".bsdf"], ids=lambda p: p.name.split(".")[0])
+def test_rgl_ndf_is_recovered_from_its_own_masking_model(path):
+    """The RGL file's ``ndf`` explains the retro-reflection of the masking model with the
+    file's own D and sigma, ``D(h) / (4 cos theta_i sigma(o))`` (Dupuy & Jakob 2018): the
+    masking fit of that model recovers it within 0.01 (relative L2 of D cos theta_h). The
+    file's reconstructed BRDF does not (0.30 / 0.19): its rgb factor at retro-reflection
+    is not constant (README)."""
+    from microfacet.geometry import half_vector
+    from microfacet.metrics import ndf_error
+    m = mf.measured.load(path)
+
+    class Masking(mf.BRDF):
+        def eval(self, wi, wo):
+            val = m.ndf(half_vector(wi, wo)) / (4.0 * np.maximum(wi[..., 2], 1e-12) * np.maximum(m.sigma(wo), 1e-12))
+            return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), val, 0.0)[..., None] * np.ones(3)
+
+    f = mf.fit.fit(Masking(), 90, backscatter_gaf="masking", energy_constraint=False)
+    assert ndf_error(m.ndf, f.distribution.ndf)["l2"] < 0.01
+    assert ndf_error(m.ndf, mf.fit.fit(m, 90, backscatter_gaf="masking").distribution.ndf)["l2"] > 0.1
