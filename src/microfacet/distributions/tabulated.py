@@ -178,6 +178,19 @@ def _check_ndf(values, ndim: int) -> np.ndarray:
     return d
 
 
+def row_masses(xi, y2, w, log_d) -> np.ndarray:
+    """``M[k, l] = sum_q w_q P(xi_k, y_q) sec^2 eta_q`` over the 4 quadrature points ``q``
+    of each ``eta`` interval ``l`` (``y2 = tan^2 eta``, ``w`` the weights times
+    ``sec^2 eta``), with ``P = D(theta) cos^4 theta``, ``tan^2 theta = xi^2 + y^2`` (Eq.
+    2.11) and ``D`` log-linear in ``theta`` on the nodes of :func:`theta_grid`
+    (``log_d``): the ``y`` masses of the radial ``P`` behind ``P1`` and the conditional
+    CDFs."""
+    r2 = xi[:, None] ** 2 + y2
+    i, t = locate(np.arctan(np.sqrt(r2)), len(log_d))
+    vals = np.exp(log_d[i] + t * (log_d[i + 1] - log_d[i])) * w / (1.0 + r2) ** 2
+    return vals.reshape(len(xi), -1, 4).sum(axis=-1)
+
+
 class _Tabulated(SlopeDistribution):
     """Shared parts: the elevation grid, interval masses and the moment quadrature."""
 
@@ -296,13 +309,8 @@ class TabulatedIsotropic(_Tabulated):
         eta = np.minimum(theta_grid(_Y_SPLIT * (self.n_theta - 1) + 1), _THETA_CAP)
         ea, eb = eta[:-1, None], eta[1:, None]
         es = (ea + (eb - ea) * _GL4_T).ravel()                                        # (q(n-1) 4,)
-        y2 = np.tan(es) ** 2
-        # P(xi, y) sec^2 eta = D(theta) cos^4 theta sec^2 eta, tan^2 theta = xi^2 + y^2
-        r2 = self.xi[:, None] ** 2 + y2
-        vals = self._d_interp(np.arctan(np.sqrt(r2)))
-        vals *= ((eb - ea) * _GL4_W).ravel() / np.cos(es) ** 2
-        vals /= (1.0 + r2) ** 2
-        mass = vals.reshape(m, -1, 4).sum(axis=-1)
+        mass = row_masses(self.xi, np.tan(es) ** 2, ((eb - ea) * _GL4_W).ravel() / np.cos(es) ** 2,
+                          self.log_ndf)
         cdf = np.concatenate([np.zeros((m, 1)), np.cumsum(mass, axis=1)], axis=1)
         eta = np.broadcast_to(eta, (m, len(eta)))
         half = cdf[:, -1].copy()
