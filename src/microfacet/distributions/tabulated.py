@@ -41,7 +41,7 @@ _GL_T, _GL_W = np.polynomial.legendre.leggauss(8)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W          # on [0, 1]
 _GL4_T, _GL4_W = np.polynomial.legendre.leggauss(4)
 _GL4_T, _GL4_W = 0.5 * (_GL4_T + 1.0), 0.5 * _GL4_W
-_Y_SPLIT = 4
+_Y_SPLIT = 2
 #: Largest elevation of the fine sampling grids: slopes up to 1e7 (the mass beyond is
 #: below 1e-13 for any table, as ``P <= D_max / r^4``).
 _THETA_CAP = np.arctan(1e7)
