@@ -343,7 +343,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         table (and ``k_d``) against it: ``(dist, f0, its, (cos_d, rgb, k_d, residual))``."""
         dist, f0, its = _fit_ndf(np.maximum(f_back - base / np.pi, 0.0), theta, phi, gaf, model, tol, max_iter)
         ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
-        energy = extract.albedo_rows(brdf, ideal, n, views, n_u=32, margin=ENERGY_MARGIN) if energy_constraint else None
+        energy = extract.albedo_rows(brdf, ideal, n, views, n_u=20, margin=ENERGY_MARGIN) if energy_constraint else None
         return dist, f0, its, extract.solve_fresnel(samples, ideal, diffuse=diffuse, albedo=energy, kd_max=kd_max,
                                                     return_residual=diffuse)
 
