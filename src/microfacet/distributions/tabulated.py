@@ -164,6 +164,26 @@ def exp_mean(b):
         return np.where(small, 1.0 + 0.5 * b, np.expm1(b) / np.where(small, 1.0, b))
 
 
+#: azimuthal refinement of the log table of :class:`TabulatedAnisotropic`
+PHI_REFINE = 4
+
+
+def refine_periodic(values: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """Periodic cubic (Catmull-Rom) interpolation along the last axis of ``values``
+    ``(..., m)`` (nodes ``k``, period ``m``) at ``k / r``, ``k < m r``, keeping the node
+    values; intervals whose 4-node stencil touches a value ``<= floor`` (a zero of the
+    table) are interpolated linearly instead, so that the cubic cannot overshoot a
+    jump to the floor."""
+    m = values.shape[-1]
+    t = np.arange(r) / r                                              # (r,)
+    p0, p1, p2, p3 = (np.roll(values, -s, axis=-1)[..., None] for s in (-1, 0, 1, 2))
+    cubic = 0.5 * (2.0 * p1 + (p2 - p0) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t * t
+                   + (3.0 * (p1 - p2) + p3 - p0) * t ** 3)
+    linear = p1 + (p2 - p1) * t
+    floored = np.minimum(np.minimum(p0, p1), np.minimum(p2, p3)) <= floor
+    return np.where(floored, linear, cubic).reshape(values.shape[:-1] + (m * r,))
+
+
 def _normal(theta, phi):
     s = np.sin(theta)
     return np.stack(np.broadcast_arrays(s * np.cos(phi), s * np.sin(phi), np.cos(theta)), axis=-1)
@@ -478,6 +498,12 @@ class TabulatedAnisotropic(_Tabulated):
     n_lambda : int, optional
         Elevation resolution of the projected-area table (default ``n_theta``); its nodes
         ``theta = pi/2 sin^2(pi s / 2)`` are dense at the normal and at grazing angles.
+
+    ``ln D`` is first refined :data:`PHI_REFINE` times in azimuth by periodic cubic
+    (Catmull-Rom) interpolation of the node values (linear next to zeros of the table),
+    then interpolated log-bilinearly on the refined grid: cubic accuracy in ``phi`` with
+    the exact masses and sampling of the log-bilinear interpolant.
+    ``ndf_table``, ``n_phi`` and the projected-area table stay on the given nodes.
     """
 
     supports_visible_sampling = False
@@ -494,8 +520,11 @@ class TabulatedAnisotropic(_Tabulated):
         self.phi = np.arange(self.n_phi) * self.dphi
         if not np.max(d) > 0:
             raise ValueError("ndf table is zero")
-        self.log_ndf = log_table(d)
-        cell = self._cell_masses()                                   # (n_theta - 1, n_phi)
+        self.n_fine = PHI_REFINE * self.n_phi
+        self.dphi_fine = 2.0 * np.pi / self.n_fine
+        log_d = log_table(d)
+        self.log_ndf = refine_periodic(log_d, PHI_REFINE, floor=np.min(log_d) if np.min(d) == 0 else -np.inf)
+        cell = self._cell_masses()                                   # (n_theta - 1, n_fine)
         total = cell.sum()
         self.ndf_table = d / total
         self.log_ndf = self.log_ndf - np.log(total)
@@ -524,11 +553,11 @@ class TabulatedAnisotropic(_Tabulated):
         is smooth in both: anisotropic Beckmann tails, where linear interpolation in
         ``phi`` errs by tens of percent between nodes)."""
         i, t = locate(theta, self.n_theta)
-        f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi
-        j = np.minimum(f.astype(np.intp), self.n_phi - 1)
+        f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi_fine
+        j = np.minimum(f.astype(np.intp), self.n_fine - 1)
         w = np.clip(f - j, 0.0, 1.0)
         a = self._log_column(i, j, t)
-        return np.exp(a + w * (self._log_column(i, (j + 1) % self.n_phi, t) - a))
+        return np.exp(a + w * (self._log_column(i, (j + 1) % self.n_fine, t) - a))
 
     def _log_column(self, i, j, t):
         ld = self.log_ndf
@@ -540,14 +569,14 @@ class TabulatedAnisotropic(_Tabulated):
         expm1(b) / b``, ``b = ln D_(j+1) - ln D_j``), at ``theta`` in elevation interval ``i``."""
         t = (theta - self.theta[i]) / (self.theta[i + 1] - self.theta[i])
         a = self._log_column(i, j, t)
-        b = self._log_column(i, (j + 1) % self.n_phi, t) - a
-        return self.dphi * np.exp(a) * exp_mean(b) * _cos_sin(theta)
+        b = self._log_column(i, (j + 1) % self.n_fine, t) - a
+        return self.dphi_fine * np.exp(a) * exp_mean(b) * _cos_sin(theta)
 
     def _cell_masses(self) -> np.ndarray:
         """Mass ``int int D cos sin dtheta dphi`` of each cell (elevation x azimuth
         interval) of the log-bilinear interpolant: closed form in ``phi``, 8-point
         Gauss-Legendre in ``theta`` (smooth: exact to rounding on these intervals)."""
-        n, m = self.n_theta - 1, self.n_phi
+        n, m = self.n_theta - 1, self.n_fine
         i = np.arange(n)[:, None, None]
         ta, tb = self.theta[:-1, None, None], self.theta[1:, None, None]
         th = ta + (tb - ta) * _GL_T[None, :, None]
@@ -634,7 +663,7 @@ class TabulatedAnisotropic(_Tabulated):
         mass = cdf[c + 1] - cdf[c]
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.clip(np.where(mass > 0, (v - cdf[c]) / mass, 0.5), 0.0, 1.0)
-        i, j = np.divmod(c, self.n_phi)
+        i, j = np.divmod(c, self.n_fine)
         ta, tb = self.theta[i], self.theta[i + 1]
 
         def partial(x):
@@ -643,12 +672,12 @@ class TabulatedAnisotropic(_Tabulated):
 
         th = invert_cdf(r, ta, tb, partial, lambda x: self._cell_marginal(x, i, j))
         t = np.clip((th - ta) / (tb - ta), 0.0, 1.0)
-        b = self._log_column(i, (j + 1) % self.n_phi, t) - self._log_column(i, j, t)
+        b = self._log_column(i, (j + 1) % self.n_fine, t) - self._log_column(i, j, t)
         q = np.clip(u[..., 1], 0.0, 1.0)
         small = np.abs(b) < 1e-8
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             w = np.where(small, q, np.log1p(q * np.expm1(b)) / np.where(small, 1.0, b))
-        return _normal(th, (j + np.clip(np.nan_to_num(w, nan=q), 0.0, 1.0)) * self.dphi)
+        return _normal(th, (j + np.clip(np.nan_to_num(w, nan=q), 0.0, 1.0)) * self.dphi_fine)
 
     def sample_visible_std(self, u, cos_theta):  # pragma: no cover - not supported
         raise NotImplementedError("anisotropic tables sample slopes of P (supports_visible_sampling = False)")
