@@ -293,12 +293,12 @@ def test_azimuthal_kernel_is_the_dense_node_rule():
         extract.smith_kernel_anisotropic(f_back, theta, phi + 0.1)
 
 
-@pytest.mark.parametrize("n, tol_phi, tol", [(40, 0.005, 0.06), (90, 0.001, 0.012)])
+@pytest.mark.parametrize("n, tol_phi, tol", [(40, 0.005, 0.005), (90, 0.001, 0.001)])
 def test_anisotropic_table_between_nodes(n, tol_phi, tol):
     """The anisotropic interpolant of a Beckmann table (0.2, 0.4, rho 0.3) between the
-    nodes, where D > 1e-3 of its peak: at mid-phi on the elevation nodes (cubic in phi:
-    0.0039 / 0.0007 at 40 / 90 nodes per axis; linear in D: 0.42 / 0.099) and at mid-theta
-    and mid-phi (0.053 / 0.011: the log-linear elevation part)."""
+    nodes, where D > 1e-3 of its peak (the issue's goal: 1 %): at mid-phi on the elevation
+    nodes and at mid-theta and mid-phi, 0.0023 / 0.0019 at 40 nodes per axis and 0.0002
+    at 90 (linear in D between azimuths, log-linear in theta: 0.42 / 0.099)."""
     ref = mf.Beckmann(alpha_x=0.2, alpha_y=0.4, rho=0.3)
     theta, phi = theta_grid(n), np.arange(n) * (2 * np.pi / n)
     table = TabulatedAnisotropic(ref.ndf(spherical_to_cartesian(theta[:, None], phi[None, :])))

@@ -164,24 +164,44 @@ def exp_mean(b):
         return np.where(small, 1.0 + 0.5 * b, np.expm1(b) / np.where(small, 1.0, b))
 
 
-#: azimuthal refinement of the log table of :class:`TabulatedAnisotropic`
+#: azimuthal and elevation refinements of the log table of :class:`TabulatedAnisotropic`
 PHI_REFINE = 4
+THETA_REFINE = 2
 
 
-def refine_periodic(values: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
-    """Periodic cubic (Catmull-Rom) interpolation along the last axis of ``values``
-    ``(..., m)`` (nodes ``k``, period ``m``) at ``k / r``, ``k < m r``, keeping the node
-    values; intervals whose 4-node stencil touches a value ``<= floor`` (a zero of the
-    table) are interpolated linearly instead, so that the cubic cannot overshoot a
-    jump to the floor."""
-    m = values.shape[-1]
-    t = np.arange(r) / r                                              # (r,)
-    p0, p1, p2, p3 = (np.roll(values, -s, axis=-1)[..., None] for s in (-1, 0, 1, 2))
+def catmull_rom(padded: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """Cubic (Catmull-Rom) interpolation along the last axis of ``padded`` ``(..., m + 3)``
+    (the values at nodes ``-1 .. m + 1``) at ``k / r`` for ``k <= (m - 1) r`` (interval
+    ``[j, j + 1]`` from the stencil ``j - 1 .. j + 2``), keeping the node values;
+    intervals whose stencil touches a value ``<= floor`` (a zero of the table) are
+    interpolated linearly instead, so that the cubic cannot overshoot a jump to the floor."""
+    t = np.arange(r) / r
+    p0, p1, p2, p3 = (padded[..., s:padded.shape[-1] - 3 + s, None] for s in range(4))
     cubic = 0.5 * (2.0 * p1 + (p2 - p0) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t * t
                    + (3.0 * (p1 - p2) + p3 - p0) * t ** 3)
     linear = p1 + (p2 - p1) * t
     floored = np.minimum(np.minimum(p0, p1), np.minimum(p2, p3)) <= floor
-    return np.where(floored, linear, cubic).reshape(values.shape[:-1] + (m * r,))
+    out = np.where(floored, linear, cubic).reshape(padded.shape[:-1] + (-1,))
+    return np.concatenate([out, padded[..., -2:-1]], axis=-1)
+
+
+def refine_periodic(values: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """:func:`catmull_rom` along the last axis of ``values`` ``(..., m)``, period ``m``:
+    ``m r`` values at ``k / r``."""
+    m = values.shape[-1]
+    return catmull_rom(values[..., np.arange(-1, m + 2) % m], r, floor)[..., :m * r]
+
+
+def refine_elevation(log_d: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """:func:`catmull_rom` of an anisotropic log table ``(n, m)`` along the elevation
+    grid's ``u = sqrt(2 theta / pi)`` (uniform; refined ``r`` times, its nodes are those of
+    :func:`theta_grid` ``(r (n - 1) + 1)``): through the pole the row beyond node 0 is
+    node 1 at the opposite azimuth (``m`` even; else node 1 itself), beyond grazing the
+    linear extrapolation. Returns ``(r (n - 1) + 1, m)``."""
+    n, m = log_d.shape
+    opposite = log_d[1, (np.arange(m) + m // 2) % m] if m % 2 == 0 else log_d[1]
+    padded = np.concatenate([opposite[None], log_d, (2.0 * log_d[-1] - log_d[-2])[None]], axis=0)
+    return np.moveaxis(catmull_rom(np.moveaxis(padded, 0, -1), r, floor), -1, 0)
 
 
 def _normal(theta, phi):
@@ -522,9 +542,12 @@ class TabulatedAnisotropic(_Tabulated):
             raise ValueError("ndf table is zero")
         self.n_fine = PHI_REFINE * self.n_phi
         self.dphi_fine = 2.0 * np.pi / self.n_fine
+        self.n_theta_fine = THETA_REFINE * (self.n_theta - 1) + 1
+        self.theta_fine = theta_grid(self.n_theta_fine)
         log_d = log_table(d)
-        self.log_ndf = refine_periodic(log_d, PHI_REFINE, floor=np.min(log_d) if np.min(d) == 0 else -np.inf)
-        cell = self._cell_masses()                                   # (n_theta - 1, n_fine)
+        floor = np.min(log_d) if np.min(d) == 0 else -np.inf
+        self.log_ndf = refine_elevation(refine_periodic(log_d, PHI_REFINE, floor), THETA_REFINE, floor)
+        cell = self._cell_masses()                             # (n_theta_fine - 1, n_fine)
         total = cell.sum()
         self.ndf_table = d / total
         self.log_ndf = self.log_ndf - np.log(total)
@@ -552,7 +575,7 @@ class TabulatedAnisotropic(_Tabulated):
         linear in ``phi`` between them (second-order accurate for lobes whose logarithm
         is smooth in both: anisotropic Beckmann tails, where linear interpolation in
         ``phi`` errs by tens of percent between nodes)."""
-        i, t = locate(theta, self.n_theta)
+        i, t = locate(theta, self.n_theta_fine)
         f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi_fine
         j = np.minimum(f.astype(np.intp), self.n_fine - 1)
         w = np.clip(f - j, 0.0, 1.0)
@@ -567,7 +590,7 @@ class TabulatedAnisotropic(_Tabulated):
         """``int D(theta, phi) dphi cos theta sin theta`` over the azimuth interval ``j``
         (closed form in ``phi``: ``D_j^(1-w) D_(j+1)^w`` integrates to ``D_j
         expm1(b) / b``, ``b = ln D_(j+1) - ln D_j``), at ``theta`` in elevation interval ``i``."""
-        t = (theta - self.theta[i]) / (self.theta[i + 1] - self.theta[i])
+        t = (theta - self.theta_fine[i]) / (self.theta_fine[i + 1] - self.theta_fine[i])
         a = self._log_column(i, j, t)
         b = self._log_column(i, (j + 1) % self.n_fine, t) - a
         return self.dphi_fine * np.exp(a) * exp_mean(b) * _cos_sin(theta)
@@ -576,9 +599,9 @@ class TabulatedAnisotropic(_Tabulated):
         """Mass ``int int D cos sin dtheta dphi`` of each cell (elevation x azimuth
         interval) of the log-bilinear interpolant: closed form in ``phi``, 8-point
         Gauss-Legendre in ``theta`` (smooth: exact to rounding on these intervals)."""
-        n, m = self.n_theta - 1, self.n_fine
+        n, m = self.n_theta_fine - 1, self.n_fine
         i = np.arange(n)[:, None, None]
-        ta, tb = self.theta[:-1, None, None], self.theta[1:, None, None]
+        ta, tb = self.theta_fine[:-1, None, None], self.theta_fine[1:, None, None]
         th = ta + (tb - ta) * _GL_T[None, :, None]
         vals = self._cell_marginal(th, i, np.arange(m)[None, None, :])       # (n, 8, m)
         return np.sum(vals * ((tb - ta) * _GL_W[None, :, None]), axis=1)
@@ -664,7 +687,7 @@ class TabulatedAnisotropic(_Tabulated):
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.clip(np.where(mass > 0, (v - cdf[c]) / mass, 0.5), 0.0, 1.0)
         i, j = np.divmod(c, self.n_fine)
-        ta, tb = self.theta[i], self.theta[i + 1]
+        ta, tb = self.theta_fine[i], self.theta_fine[i + 1]
 
         def partial(x):
             nodes = ta[..., None] + (x - ta)[..., None] * _GL_T
