@@ -7,7 +7,8 @@ normal, where sharp lobes live), and, for anisotropic tables, at the azimuths
 ``phi_k = 2 pi k / m`` of the normal. ``D`` is interpolated log-linearly in ``theta``
 (exact for Gaussian-like tails to second order, where linear interpolation of a sharp
 Beckmann lobe errs by tens of percent between nodes) and, for anisotropic tables, ``ln D``
-periodically linearly in ``phi`` too (log-bilinear); the slope PDF is
+periodically linearly in ``phi`` too (log-bilinear), on a grid refined by cubic
+interpolation of the nodes (:class:`TabulatedAnisotropic`); the slope PDF is
 ``P(h~) = D(h) cos^4 theta_h`` (Eq. 2.11), normalized so that
 ``int P dh~ = int D cos theta_h dw_h = 1`` (Eq. 2.12, 2.8) for the interpolant (closed
 form for radial tables; closed form in ``phi`` and Gauss-Legendre in ``theta`` per cell,
