@@ -74,7 +74,7 @@ def _stages(brdf, n: int = 90) -> dict:
     dist = TabulatedIsotropic(np.append(d, d[-1]))
     t["tables (D, Lambda, sampling)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    extract.extract_fresnel(brdf, mf.MicrofacetBRDF(dist), n)
+    extract.extract_fresnel(brdf, mf.MicrofacetBRDF(dist), n, isotropic=True)
     t["Fresnel (Algorithm 2)"] = time.perf_counter() - t0
     return t
 

@@ -5,6 +5,7 @@ the fit exactly (``G(o, o) = G1(o)``, Eq. 4.2-4.3), so their fits must reproduce
 the accuracy of the tables; default (height-correlated) inputs differ from it by the
 hotspot factor ``(1 + Lambda) / (1 + 2 Lambda)`` at grazing angles only.
 """
+import os
 from pathlib import Path
 
 import numpy as np
@@ -244,7 +245,7 @@ def test_anisotropic_fit_reproduces_backscattering(fits, kind, ref, tol_between)
     steep tails of a Beckmann lobe (down to 1e-2 of the peak) at 40 azimuths."""
     node_phi = np.arange(40) * (2 * np.pi / 40)
     assert _backscatter_error(fits[kind], ref, _nodes(40, 80.0), node_phi[::3], rel_floor=1e-2) < 3e-3
-    assert abs(fits[kind].f0 - extract.luminance(SCHLICK(1.0))) < 5e-3
+    assert abs(fits[kind].f0 - extract.luminance(SCHLICK(1.0))) < 6e-3
     assert _backscatter_error(fits[kind], ref, _between(80.0), np.linspace(0, 2 * np.pi, 17),
                               rel_floor=1e-2) < tol_between
 
@@ -265,6 +266,77 @@ def test_power_iteration_finds_the_perron_vector(model):
     assert abs(lam / vals[i].real - 1) < 1e-8 and its < 100
     with pytest.raises(ValueError, match="backscatter_gaf"):
         extract.smith_kernel_isotropic(extract.backscattering(ref, theta[:-1]), theta, "nope")
+
+
+def test_azimuthal_kernel_is_the_dense_node_rule():
+    """The DFT form of the anisotropic kernel (Eq. 4.8) and of the projected-area table
+    equals the explicit node rule ``sum_n w_n <o, h_n>+ D_n`` (grazing row folded)."""
+    from microfacet.distributions.tabulated import hat_weights
+    n, m = 12, 10
+    theta, phi = theta_grid(n), np.arange(m) * (2 * np.pi / m)
+    rng = np.random.default_rng(3)
+    f_back = rng.random((n - 1, m))
+    k, (u, v) = extract.smith_kernel_anisotropic(f_back, theta, phi, "height_correlated")
+    h = spherical_to_cartesian(theta[:, None], phi[None, :])
+    o = h[:-1].reshape(-1, 3)
+    w = hat_weights(theta, np.sin) * (2 * np.pi / m)
+    a = np.maximum(o @ o.T, 0.0) * np.repeat(w[:-1], m)
+    a[:, -m:] += np.maximum(o @ h[-1].T, 0.0) * w[-1]
+    scale = 4.0 * f_back.ravel() * np.repeat(np.cos(theta[:-1]), m)
+    np.testing.assert_allclose(k.dense(), 2.0 * scale[:, None] * a, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(v, a[0], rtol=1e-12)
+    np.testing.assert_allclose(u, scale * np.repeat(np.cos(theta[:-1]), m))
+    d = TabulatedAnisotropic(rng.random((n, m)) + 0.2)
+    grid = spherical_to_cartesian(d.theta_k[:, None], d.phi[None, :])
+    np.testing.assert_allclose(d.area_table, d.projected_area_nodes(grid), rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="uniform azimuths"):
+        extract.smith_kernel_anisotropic(f_back, theta, phi + 0.1)
+
+
+@pytest.mark.parametrize("n, tol_phi, tol", [(40, 0.005, 0.005), (90, 0.001, 0.001)])
+def test_anisotropic_table_between_nodes(n, tol_phi, tol):
+    """The anisotropic interpolant of a Beckmann table (0.2, 0.4, rho 0.3) between the
+    nodes, where D > 1e-3 of its peak (the issue's goal: 1 %): at mid-phi on the elevation
+    nodes and at mid-theta and mid-phi, 0.0023 / 0.0019 at 40 nodes per axis and 0.0002
+    at 90 (linear in D between azimuths, log-linear in theta: 0.42 / 0.099)."""
+    ref = mf.Beckmann(alpha_x=0.2, alpha_y=0.4, rho=0.3)
+    theta, phi = theta_grid(n), np.arange(n) * (2 * np.pi / n)
+    table = TabulatedAnisotropic(ref.ndf(spherical_to_cartesian(theta[:, None], phi[None, :])))
+    for th, tolerance in ((theta[:, None], tol_phi), (0.5 * (theta[:-1, None] + theta[1:, None]), tol)):
+        h = spherical_to_cartesian(th, phi[None, :] + np.pi / n)
+        a, b = table.ndf(h), ref.ndf(h)
+        keep = b > 1e-3 * b.max()
+        assert np.max(np.abs(a[keep] / b[keep] - 1.0)) < tolerance
+
+
+def test_box_qp_matches_bvls_and_energy_rows_hold():
+    """The projected-Newton box QP equals BVLS (its oracle) on random bounded least
+    squares, and the energy-constrained solve meets ``a x <= a_data`` at the optimum of
+    BVLS on the slack form of the same problem."""
+    from scipy.optimize import lsq_linear
+    rng = np.random.default_rng(5)
+    for n in (3, 17, 60):
+        r, y = rng.normal(size=(n + 4, n)), 3.0 * rng.normal(size=n + 4)
+        lo, hi = np.zeros(n), np.append(np.ones(n - 1), np.inf)
+        ref = lsq_linear(r, y, bounds=(lo, hi), method="bvls", tol=1e-14).x
+        np.testing.assert_allclose(extract.box_qp(r.T @ r, r.T @ y, lo, hi), ref, atol=1e-10)
+    n, v = 30, 5
+    r, y = rng.random((n + 10, n)), rng.random(n + 10) * n
+    h, g, lo, hi = r.T @ r, r.T @ y, np.zeros(n), np.ones(n)
+    a = rng.random((v, n)) / n
+    x0 = extract.box_qp(h, g, lo, hi)
+    limit = 0.5 * a @ x0
+    x = extract._energy_constrained(h, g, x0, (lo, hi), (a, limit[:, None]), 0, False)
+    assert np.all(a @ x <= limit + 1e-12) and np.all((x >= lo) & (x <= hi))
+    # oracle: BVLS on the slack form |r x - y|^2 + mu^2 |a x + s - limit|^2, s >= 0
+    mu = 1e5
+    system = np.block([[r, np.zeros((n + 10, v))], [mu * a, mu * np.eye(v)]])
+    ref = lsq_linear(system, np.concatenate([y, mu * limit]), method="bvls", tol=1e-14,
+                     bounds=(np.zeros(n + v), np.append(hi, np.full(v, np.inf)))).x[:n]
+    q = lambda z: 0.5 * z @ h @ z - g @ z  # noqa: E731
+    assert np.all(a @ ref <= limit + 1e-6)
+    assert q(x) <= q(ref) + 1e-5 * abs(q(ref))
+    np.testing.assert_allclose(x, ref, atol=1e-5)
 
 
 @pytest.mark.parametrize("gaf", ["vgroove", "normal_map"])
@@ -504,18 +576,22 @@ def test_round_trip_sweep(D, gaf, shadowing):
 @pytest.mark.parametrize("D", [mf.GGX, mf.Beckmann])
 def test_anisotropic_round_trip_height_correlated(D):
     """Anisotropic, correlated, height-correlated input (the issue's GGX(0.2, 0.4) gave
-    (0.192, 0.373) with Eq. 4.3): parameters within 1.5 % at 48 x 48, rho within 0.01."""
-    _, _, rel, drho = _round_trip(D, dict(alpha_x=0.2, alpha_y=0.4, rho=0.3), "smith", True, True, 48)
-    assert np.all(rel < 0.015), rel
-    assert drho < 0.01
+    (0.192, 0.373) with Eq. 4.3): at 48 x 48, alphas within 1 % (measured 0.6 % at
+    most), rho within 0.005 and f cos over uniform pairs within 1 %."""
+    f, ref, rel, drho = _round_trip(D, dict(alpha_x=0.2, alpha_y=0.4, rho=0.3), "smith", True, True, 48)
+    assert np.all(rel < 0.01), rel
+    assert drho < 0.005
+    assert _pair_error(f, ref, _uniform_pairs()) < 0.01
 
 
 # ---------------------------------------------------------------- diffuse base, energy
-def test_diffuse_base_is_recovered_and_sampled_exactly():
-    """A GGX lobe over a Lambertian base: ``diffuse=True`` finds a base (biased low today:
-    part of it stays in the NDF's tail, see README) and halves the error of the plain fit;
-    the mixture sampler's weight is eval_cos / pdf exactly and its density is right."""
-    lobe = _input(mf.GGX, shadowing=True, alpha=0.2)
+@pytest.mark.parametrize("D, alpha", [(mf.GGX, 0.2), (mf.Beckmann, 0.3)])
+def test_diffuse_base_is_recovered_and_sampled_exactly(D, alpha):
+    """A GGX / Beckmann lobe over a Lambertian base: ``diffuse=True`` recovers the base
+    per channel within 2 % and the lobe's alpha within 1 % (unbiased), with a fit error a
+    tenth of the plain fit's; the mixture sampler's weight is eval_cos / pdf exactly and
+    its density is right."""
+    lobe = _input(D, shadowing=True, alpha=alpha)
     kd = np.array([0.3, 0.2, 0.1])
 
     class Sum(mf.BRDF):
@@ -523,9 +599,11 @@ def test_diffuse_base_is_recovered_and_sampled_exactly():
             return lobe.eval_cos(wi, wo) + mf.Lambertian(kd).eval_cos(wi, wo)
 
     f = mf.fit.fit(Sum(), 90, diffuse=True)
-    assert np.all(f.diffuse > 0.5 * kd) and np.all(f.diffuse <= kd + 0.01)
+    np.testing.assert_allclose(f.diffuse, kd, rtol=0.02)
+    converted = f.to_ggx() if D is mf.GGX else f.to_beckmann()
+    assert abs(float(converted.distribution.alpha_x) / alpha - 1.0) < 0.01
     plain = mf.fit.fit(Sum(), 90)
-    assert _pair_error(f, Sum(), _uniform_pairs()) < 0.5 * _pair_error(plain, Sum(), _uniform_pairs())
+    assert _pair_error(f, Sum(), _uniform_pairs()) < 0.1 * _pair_error(plain, Sum(), _uniform_pairs())
     rng = np.random.default_rng(0)
     wo = _upper(rng, 2000)
     wi, weight, pdf = f.sample(rng.random((2000, 2)), wo)
@@ -548,24 +626,68 @@ def test_fresnel_is_bounded_to_unit_interval():
     assert f.fresnel.values.max() > 0.99
 
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+#: the shared data: $MICROFACET_DATA, else ``../shared/data`` beside the repository
+DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 SHARED = sorted((DATA / "merl").glob("*.binary*")) + sorted((DATA / "rgl").glob("*.bsdf"))
+
+
+def _albedo(brdf, sampler, t, n=64):
+    """Directional albedo at view ``theta_o = t`` of ``brdf`` by the balance-heuristic
+    mixture of ``sampler.sample`` and the cosine lobe, each on a stratified ``n x n`` grid."""
+    u = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
+    wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
+    cosine = mf.Lambertian(1.0)
+    wi = np.concatenate([sampler.sample(u, wo)[0], cosine.sample(u, wo)[0]])
+    wo = np.concatenate([wo, wo])
+    pdf = 0.5 * sampler.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    f = np.asarray(brdf.eval(wi, wo), float) * wi[:, 2:]
+    f = np.where(ok[:, None] & np.isfinite(f) & (f > 0), f, 0.0)
+    return np.sum(f / np.where(ok, pdf, 1.0)[:, None], axis=0) / len(wi)
 
 
 @pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")
 @pytest.mark.parametrize("path", SHARED, ids=[p.name.split(".")[0] for p in SHARED])
-def test_white_furnace_on_shared_materials(path):
-    """Every fit of every shared material (both backscattering models, with and without
-    the diffuse base): F in [0, 1] and, with white Fresnel, directional albedo <= 1."""
+def test_white_furnace_and_energy_on_shared_materials(path):
+    """Every fit of every shared material (both backscattering models, and the diffuse
+    base): F in [0, 1]; with white Fresnel, directional albedo <= 1; with the fitted
+    Fresnel term, directional albedo <= the data's + 0.02 at 0/30/60/75 degrees, per
+    channel (the energy constraint; the same estimator for both)."""
     m = mf.measured.load(path)
     u = (np.arange(64) + 0.5) / 64
     u = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
-    for model in extract.BACKSCATTER_GAFS:
-        for diffuse in (False, True):
-            f = mf.fit.fit(m, 48, backscatter_gaf=model, diffuse=diffuse)
-            assert np.all((f.fresnel.values >= 0) & (f.fresnel.values <= 1))
-            assert np.all(f.diffuse >= 0) and np.all(f.diffuse <= 1)
-            white = mf.fit.FittedBRDF(f.distribution, mf.fresnel.Tabulated([0, 1], [1, 1]))
-            for t in np.radians([0.0, 30.0, 60.0, 75.0, 85.0]):
-                wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
-                assert np.mean(white.sample(u, wo)[1][:, 0]) <= 1.0 + 1e-3
+    settings = [dict(backscatter_gaf=model) for model in extract.BACKSCATTER_GAFS] + [dict(diffuse=True)]
+    for kw in settings:
+        f = mf.fit.fit(m, 48, **kw)
+        assert np.all((f.fresnel.values >= 0) & (f.fresnel.values <= 1))
+        assert np.all(f.diffuse >= 0) and np.all(f.diffuse <= 1)
+        white = mf.fit.FittedBRDF(f.distribution, mf.fresnel.Tabulated([0, 1], [1, 1]))
+        for t in np.radians([0.0, 30.0, 60.0, 75.0, 85.0]):
+            wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
+            assert np.mean(white.sample(u, wo)[1][:, 0]) <= 1.0 + 1e-3
+        for t in np.radians([0.0, 30.0, 60.0, 75.0]):
+            excess = _albedo(f, f, t) - _albedo(m, f, t)
+            assert np.all(excess <= 0.02), (kw, np.degrees(t), excess)
+
+
+@pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")
+@pytest.mark.parametrize("path", [p for p in SHARED if p.suffix == ".bsdf"], ids=lambda p: p.name.split(".")[0])
+def test_rgl_ndf_is_recovered_from_its_own_masking_model(path):
+    """The RGL file's ``ndf`` explains the retro-reflection of the masking model with the
+    file's own D and sigma, ``D(h) / (4 cos theta_i sigma(o))`` (Dupuy & Jakob 2018): the
+    masking fit of that model recovers it within 0.01 (relative L2 of D cos theta_h). The
+    file's reconstructed BRDF does not (0.30 / 0.19): its rgb factor at retro-reflection
+    is not constant (README)."""
+    from microfacet.geometry import half_vector
+    from microfacet.metrics import ndf_error
+    m = mf.measured.load(path)
+
+    class Masking(mf.BRDF):
+        def eval(self, wi, wo):
+            val = m.ndf(half_vector(wi, wo)) / (4.0 * np.maximum(wi[..., 2], 1e-12) * np.maximum(m.sigma(wo), 1e-12))
+            return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), val, 0.0)[..., None] * np.ones(3)
+
+    f = mf.fit.fit(Masking(), 90, backscatter_gaf="masking", energy_constraint=False)
+    assert ndf_error(m.ndf, f.distribution.ndf)["l2"] < 0.01
+    assert ndf_error(m.ndf, mf.fit.fit(m, 90, backscatter_gaf="masking").distribution.ndf)["l2"] > 0.1

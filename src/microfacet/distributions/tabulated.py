@@ -6,10 +6,13 @@ elevation grid ``theta_j = (j / (n - 1))^2 pi / 2`` of Listing 4.1 (dense near t
 normal, where sharp lobes live), and, for anisotropic tables, at the azimuths
 ``phi_k = 2 pi k / m`` of the normal. ``D`` is interpolated log-linearly in ``theta``
 (exact for Gaussian-like tails to second order, where linear interpolation of a sharp
-Beckmann lobe errs by tens of percent between nodes) and periodically linearly in
-``phi``; the slope PDF is ``P(h~) = D(h) cos^4 theta_h`` (Eq. 2.11), normalized so that
-``int P dh~ = int D cos theta_h dw_h = 1`` (Eq. 2.12, 2.8) exactly (closed form) for the
-interpolant. Every other table (Smith ``Lambda``, the marginal and
+Beckmann lobe errs by tens of percent between nodes) and, for anisotropic tables, ``ln D``
+periodically linearly in ``phi`` too (log-bilinear), on a grid refined by cubic
+interpolation of the nodes (:class:`TabulatedAnisotropic`); the slope PDF is
+``P(h~) = D(h) cos^4 theta_h`` (Eq. 2.11), normalized so that
+``int P dh~ = int D cos theta_h dw_h = 1`` (Eq. 2.12, 2.8) for the interpolant (closed
+form for radial tables; closed form in ``phi`` and Gauss-Legendre in ``theta`` per cell,
+exact to rounding, for anisotropic ones). Every other table (Smith ``Lambda``, the marginal and
 conditional CDFs used for sampling) is derived from that interpolant.
 
 - :class:`TabulatedIsotropic`: radial ``P`` (Eq. 4.12). ``Lambda`` is a 1D function of
@@ -30,7 +33,8 @@ import numpy as np
 
 from .base import SlopeDistribution
 
-__all__ = ["TabulatedIsotropic", "TabulatedAnisotropic", "theta_grid"]
+__all__ = ["TabulatedIsotropic", "TabulatedAnisotropic", "theta_grid", "azimuthal_cosine_spectrum",
+           "circular_projection"]
 
 HALF_PI = 0.5 * np.pi
 _U_MIN = 2.0**-53
@@ -38,7 +42,7 @@ _GL_T, _GL_W = np.polynomial.legendre.leggauss(8)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W          # on [0, 1]
 _GL4_T, _GL4_W = np.polynomial.legendre.leggauss(4)
 _GL4_T, _GL4_W = 0.5 * (_GL4_T + 1.0), 0.5 * _GL4_W
-_Y_SPLIT = 4
+_Y_SPLIT = 2
 #: Largest elevation of the fine sampling grids: slopes up to 1e7 (the mass beyond is
 #: below 1e-13 for any table, as ``P <= D_max / r^4``).
 _THETA_CAP = np.arctan(1e7)
@@ -54,10 +58,11 @@ def locate(theta, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Interval ``i`` and weight ``t`` of ``theta`` in :func:`theta_grid` ``(n)``:
     ``theta = (1 - t) theta_i + t theta_{i+1}``."""
     theta = np.clip(np.asarray(theta, dtype=np.float64), 0.0, HALF_PI)
-    i = np.minimum((np.sqrt(theta / HALF_PI) * (n - 1)).astype(np.intp), n - 2)
-    ta = (i / (n - 1)) ** 2 * HALF_PI
-    tb = ((i + 1) / (n - 1)) ** 2 * HALF_PI
-    return i, np.clip((theta - ta) / (tb - ta), 0.0, 1.0)
+    u = np.sqrt(theta * (1.0 / HALF_PI)) * (n - 1)
+    i = np.minimum(u.astype(np.intp), n - 2)
+    # theta = (u / (n - 1))^2 pi/2: t = (u^2 - i^2) / (2 i + 1), exact on the grid
+    t = (u - i) * (u + i) / (2 * i + 1)
+    return i, np.clip(t, 0.0, 1.0)
 
 
 def hat_weights(theta: np.ndarray, weight) -> np.ndarray:
@@ -71,6 +76,27 @@ def hat_weights(theta: np.ndarray, weight) -> np.ndarray:
     out[:-1] += np.sum(w * (1.0 - _GL_T), axis=1)
     out[1:] += np.sum(w * _GL_T, axis=1)
     return out
+
+
+def azimuthal_cosine_spectrum(theta_k, theta_h, m: int) -> np.ndarray:
+    """Real DFT over the azimuth difference of ``c[i, j, d] = <k_i, h_j>+`` with
+    ``k_i = (theta_k[i], phi)`` and ``h_j = (theta_h[j], phi - 2 pi d / m)``:
+    ``<k, h>+ = max(0, cos cos + sin sin cos(2 pi d / m))`` depends on ``phi_k - phi_h``
+    only, so a node rule over a uniform azimuth grid is a circular convolution in
+    ``phi`` (Eq. 2.14, Eq. 4.8) diagonalized by the DFT. Returns ``(len(theta_k),
+    len(theta_h), m // 2 + 1)`` (real, as ``c`` is even in ``d``)."""
+    tk, th = np.asarray(theta_k, float)[:, None, None], np.asarray(theta_h, float)[None, :, None]
+    c = np.cos(tk) * np.cos(th) + np.sin(tk) * np.sin(th) * np.cos(np.arange(m) * (2.0 * np.pi / m))
+    return np.fft.rfft(np.maximum(c, 0.0), axis=-1).real
+
+
+def circular_projection(spectrum: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A[i, a] = sum_j sum_b <k_ia, h_jb>+ x[j, b]`` for node weights ``x`` ``(n_h, m)``
+    (:func:`azimuthal_cosine_spectrum`): ``irfft(sum_j C[i, j] rfft(x_j))``, exact to
+    rounding, ``O(n_k n_h m)`` instead of ``O(n_k n_h m^2)``."""
+    m = x.shape[-1]
+    xf = np.fft.rfft(x, axis=-1)
+    return np.fft.irfft(np.einsum("ijf,jf->if", spectrum, xf), n=m, axis=-1)
 
 
 def _cos_sin(t):
@@ -99,16 +125,14 @@ def interval_integral(la, lb, ta, tb, theta):
     return np.maximum(out / (2.0 * (beta * beta + 4.0)), 0.0)
 
 
-def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
-    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c(theta) cos theta sin theta``,
-    each ``D_c`` log-linear from ``exp(las[c])`` to ``exp(lbs[c])``, from the uniform ``v``:
-    safeguarded Newton on the closed-form CDF (:func:`interval_integral`)."""
-    cdf = lambda x: sum(interval_integral(la, lb, ta, tb, x) for la, lb in zip(las, lbs))   # noqa: E731
+def invert_cdf(v, ta, tb, cdf, pdf, iterations: int = 60):
+    """``theta`` in ``[ta, tb]`` with ``cdf(theta) = v cdf(tb)`` for an increasing ``cdf``
+    with derivative ``pdf``: safeguarded Newton (bisection when a step leaves the
+    bracket)."""
     total = cdf(tb)
     target = v * total
     lo, hi = ta.copy(), tb.copy()
     x = ta + v * (tb - ta)
-    w = (x - ta) / (tb - ta)
     for _ in range(iterations):
         f = cdf(x) - target
         done = np.abs(f) <= 1e-13 * total
@@ -116,21 +140,69 @@ def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
             break
         lo = np.where(f < 0, x, lo)
         hi = np.where(f > 0, x, hi)
-        w = (x - ta) / (tb - ta)
-        p = sum(np.exp(la + w * (lb - la)) for la, lb in zip(las, lbs)) * _cos_sin(x)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            xn = x - f / p
+            xn = x - f / pdf(x)
         bad = ~((xn > lo) & (xn < hi))
         xn = np.where(bad, 0.5 * (lo + hi), xn)
         x = np.where(done, x, xn)
     return x
 
 
-def _linear_quantile(v, d0, d1):
-    """``t`` in ``[0, 1]`` with density ``∝ (1 - t) d0 + t d1`` (closed-form quadratic)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = v * (d0 + d1) / (d0 + np.sqrt(d0 * d0 + v * (d1 * d1 - d0 * d0)))
-    return np.where(np.isfinite(t), np.clip(t, 0.0, 1.0), v)
+def sample_interval(v, ta, tb, las, lbs, iterations: int = 60):
+    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c(theta) cos theta sin theta``,
+    each ``D_c`` log-linear from ``exp(las[c])`` to ``exp(lbs[c])``, from the uniform ``v``
+    (:func:`invert_cdf` on the closed-form CDF, :func:`interval_integral`)."""
+    cdf = lambda x: sum(interval_integral(la, lb, ta, tb, x) for la, lb in zip(las, lbs))   # noqa: E731
+    pdf = lambda x: sum(np.exp(la + (x - ta) / (tb - ta) * (lb - la)) for la, lb in zip(las, lbs)) * _cos_sin(x)  # noqa: E731
+    return invert_cdf(v, ta, tb, cdf, pdf, iterations)
+
+
+def exp_mean(b):
+    """``int_0^1 e^(w b) dw = expm1(b) / b`` (1 at ``b = 0``)."""
+    b = np.asarray(b, dtype=np.float64)
+    small = np.abs(b) < 1e-8
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.where(small, 1.0 + 0.5 * b, np.expm1(b) / np.where(small, 1.0, b))
+
+
+#: azimuthal and elevation refinements of the log table of :class:`TabulatedAnisotropic`
+PHI_REFINE = 4
+THETA_REFINE = 2
+
+
+def catmull_rom(padded: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """Cubic (Catmull-Rom) interpolation along the last axis of ``padded`` ``(..., m + 3)``
+    (the values at nodes ``-1 .. m + 1``) at ``k / r`` for ``k <= (m - 1) r`` (interval
+    ``[j, j + 1]`` from the stencil ``j - 1 .. j + 2``), keeping the node values;
+    intervals whose stencil touches a value ``<= floor`` (a zero of the table) are
+    interpolated linearly instead, so that the cubic cannot overshoot a jump to the floor."""
+    t = np.arange(r) / r
+    p0, p1, p2, p3 = (padded[..., s:padded.shape[-1] - 3 + s, None] for s in range(4))
+    cubic = 0.5 * (2.0 * p1 + (p2 - p0) * t + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t * t
+                   + (3.0 * (p1 - p2) + p3 - p0) * t ** 3)
+    linear = p1 + (p2 - p1) * t
+    floored = np.minimum(np.minimum(p0, p1), np.minimum(p2, p3)) <= floor
+    out = np.where(floored, linear, cubic).reshape(padded.shape[:-1] + (-1,))
+    return np.concatenate([out, padded[..., -2:-1]], axis=-1)
+
+
+def refine_periodic(values: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """:func:`catmull_rom` along the last axis of ``values`` ``(..., m)``, period ``m``:
+    ``m r`` values at ``k / r``."""
+    m = values.shape[-1]
+    return catmull_rom(values[..., np.arange(-1, m + 2) % m], r, floor)[..., :m * r]
+
+
+def refine_elevation(log_d: np.ndarray, r: int, floor: float = -np.inf) -> np.ndarray:
+    """:func:`catmull_rom` of an anisotropic log table ``(n, m)`` along the elevation
+    grid's ``u = sqrt(2 theta / pi)`` (uniform; refined ``r`` times, its nodes are those of
+    :func:`theta_grid` ``(r (n - 1) + 1)``): through the pole the row beyond node 0 is
+    node 1 at the opposite azimuth (``m`` even; else node 1 itself), beyond grazing the
+    linear extrapolation. Returns ``(r (n - 1) + 1, m)``."""
+    n, m = log_d.shape
+    opposite = log_d[1, (np.arange(m) + m // 2) % m] if m % 2 == 0 else log_d[1]
+    padded = np.concatenate([opposite[None], log_d, (2.0 * log_d[-1] - log_d[-2])[None]], axis=0)
+    return np.moveaxis(catmull_rom(np.moveaxis(padded, 0, -1), r, floor), -1, 0)
 
 
 def _normal(theta, phi):
@@ -145,6 +217,19 @@ def _check_ndf(values, ndim: int) -> np.ndarray:
     if not np.all(np.isfinite(d)) or np.any(d < 0):
         raise ValueError("ndf table must be finite and >= 0")
     return d
+
+
+def row_masses(xi, y2, w, log_d) -> np.ndarray:
+    """``M[k, l] = sum_q w_q P(xi_k, y_q) sec^2 eta_q`` over the 4 quadrature points ``q``
+    of each ``eta`` interval ``l`` (``y2 = tan^2 eta``, ``w`` the weights times
+    ``sec^2 eta``), with ``P = D(theta) cos^4 theta``, ``tan^2 theta = xi^2 + y^2`` (Eq.
+    2.11) and ``D`` log-linear in ``theta`` on the nodes of :func:`theta_grid`
+    (``log_d``): the ``y`` masses of the radial ``P`` behind ``P1`` and the conditional
+    CDFs."""
+    r2 = xi[:, None] ** 2 + y2
+    i, t = locate(np.arctan(np.sqrt(r2)), len(log_d))
+    vals = np.exp(log_d[i] + t * (log_d[i + 1] - log_d[i])) * w / (1.0 + r2) ** 2
+    return vals.reshape(len(xi), -1, 4).sum(axis=-1)
 
 
 class _Tabulated(SlopeDistribution):
@@ -263,13 +348,12 @@ class TabulatedIsotropic(_Tabulated):
         # y = tan(eta) on the elevation grid of the table refined _Y_SPLIT times (dense
         # at y = 0 where sharp lobes live); P(xi, y) sec^2 eta stays smooth up to grazing
         eta = np.minimum(theta_grid(_Y_SPLIT * (self.n_theta - 1) + 1), _THETA_CAP)
-        eta = np.broadcast_to(eta, (m, len(eta)))
-        ea, eb = eta[:, :-1, None], eta[:, 1:, None]
-        es = ea + (eb - ea) * _GL4_T                                                  # (m, q(n-1), 4)
-        xs = self.xi[:, None, None]
-        vals = self.p22_std(xs, np.tan(es)) / np.cos(es) ** 2
-        mass = np.sum((eb - ea)[..., 0, None] * _GL4_W * vals, axis=-1)
+        ea, eb = eta[:-1, None], eta[1:, None]
+        es = (ea + (eb - ea) * _GL4_T).ravel()                                        # (q(n-1) 4,)
+        mass = row_masses(self.xi, np.tan(es) ** 2, ((eb - ea) * _GL4_W).ravel() / np.cos(es) ** 2,
+                          self.log_ndf)
         cdf = np.concatenate([np.zeros((m, 1)), np.cumsum(mass, axis=1)], axis=1)
+        eta = np.broadcast_to(eta, (m, len(eta)))
         half = cdf[:, -1].copy()
         self.p1_fine = 2.0 * half
         self.eta_nodes = eta
@@ -435,6 +519,12 @@ class TabulatedAnisotropic(_Tabulated):
     n_lambda : int, optional
         Elevation resolution of the projected-area table (default ``n_theta``); its nodes
         ``theta = pi/2 sin^2(pi s / 2)`` are dense at the normal and at grazing angles.
+
+    ``ln D`` is first refined :data:`PHI_REFINE` times in azimuth by periodic cubic
+    (Catmull-Rom) interpolation of the node values (linear next to zeros of the table),
+    then interpolated log-bilinearly on the refined grid: cubic accuracy in ``phi`` with
+    the exact masses and sampling of the log-bilinear interpolant.
+    ``ndf_table``, ``n_phi`` and the projected-area table stay on the given nodes.
     """
 
     supports_visible_sampling = False
@@ -451,17 +541,23 @@ class TabulatedAnisotropic(_Tabulated):
         self.phi = np.arange(self.n_phi) * self.dphi
         if not np.max(d) > 0:
             raise ValueError("ndf table is zero")
-        mass = self._interval_masses(log_table(d))                  # (n_theta - 1, n_phi)
-        self.ndf_table = d / (self.dphi * mass.sum())
-        self.log_ndf = log_table(self.ndf_table)
+        self.n_fine = PHI_REFINE * self.n_phi
+        self.dphi_fine = 2.0 * np.pi / self.n_fine
+        self.n_theta_fine = THETA_REFINE * (self.n_theta - 1) + 1
+        self.theta_fine = theta_grid(self.n_theta_fine)
+        log_d = log_table(d)
+        floor = np.min(log_d) if np.min(d) == 0 else -np.inf
+        self.log_ndf = refine_elevation(refine_periodic(log_d, PHI_REFINE, floor), THETA_REFINE, floor)
+        cell = self._cell_masses()                             # (n_theta_fine - 1, n_fine)
+        total = cell.sum()
+        self.ndf_table = d / total
+        self.log_ndf = self.log_ndf - np.log(total)
         n_lambda = self.n_theta if n_lambda is None else int(n_lambda)
         s = np.linspace(0.0, 1.0, n_lambda)
         self.theta_k = HALF_PI * np.sin(HALF_PI * s) ** 2
-        self.area_table = (self.projected_area_nodes(_normal(self.theta_k[:, None], self.phi[None, :]))
-                           if projected_area is None else np.asarray(projected_area, float))
-        # cell (theta interval x phi interval) masses: mean of the two log-linear columns
-        cell = 0.5 * (mass + np.roll(mass, -1, axis=1)) / mass.sum()
-        self._cell_cdf = np.concatenate([[0.0], np.cumsum(cell.ravel())])
+        self.area_table = (self._projected_area_grid(self.theta_k) if projected_area is None
+                           else np.asarray(projected_area, float))
+        self._cell_cdf = np.concatenate([[0.0], np.cumsum(cell.ravel() / total)])
         x, y, w = self.standard_quadrature()
         self.second_moment_std = float(np.sum(w * x * x))
 
@@ -476,16 +572,40 @@ class TabulatedAnisotropic(_Tabulated):
 
     # -------------------------------------------------------------- the NDF
     def _d_interp(self, theta, phi=None) -> np.ndarray:
-        """``D`` log-linear in ``theta`` along each node azimuth, linear in ``phi`` between."""
-        i, t = locate(theta, self.n_theta)
-        f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi
-        j = np.minimum(f.astype(np.intp), self.n_phi - 1)
+        """``D`` log-bilinear: ``ln D`` linear in ``theta`` along each node azimuth and
+        linear in ``phi`` between them (second-order accurate for lobes whose logarithm
+        is smooth in both: anisotropic Beckmann tails, where linear interpolation in
+        ``phi`` errs by tens of percent between nodes)."""
+        i, t = locate(theta, self.n_theta_fine)
+        f = np.mod(np.asarray(phi, dtype=np.float64), 2.0 * np.pi) / self.dphi_fine
+        j = np.minimum(f.astype(np.intp), self.n_fine - 1)
         w = np.clip(f - j, 0.0, 1.0)
-        return (1 - w) * self._column(i, j, t) + w * self._column(i, (j + 1) % self.n_phi, t)
+        a = self._log_column(i, j, t)
+        return np.exp(a + w * (self._log_column(i, (j + 1) % self.n_fine, t) - a))
 
-    def _column(self, i, j, t):
+    def _log_column(self, i, j, t):
         ld = self.log_ndf
-        return np.exp(ld[i, j] + t * (ld[i + 1, j] - ld[i, j]))
+        return ld[i, j] + t * (ld[i + 1, j] - ld[i, j])
+
+    def _cell_marginal(self, theta, i, j):
+        """``int D(theta, phi) dphi cos theta sin theta`` over the azimuth interval ``j``
+        (closed form in ``phi``: ``D_j^(1-w) D_(j+1)^w`` integrates to ``D_j
+        expm1(b) / b``, ``b = ln D_(j+1) - ln D_j``), at ``theta`` in elevation interval ``i``."""
+        t = (theta - self.theta_fine[i]) / (self.theta_fine[i + 1] - self.theta_fine[i])
+        a = self._log_column(i, j, t)
+        b = self._log_column(i, (j + 1) % self.n_fine, t) - a
+        return self.dphi_fine * np.exp(a) * exp_mean(b) * _cos_sin(theta)
+
+    def _cell_masses(self) -> np.ndarray:
+        """Mass ``int int D cos sin dtheta dphi`` of each cell (elevation x azimuth
+        interval) of the log-bilinear interpolant: closed form in ``phi``, 8-point
+        Gauss-Legendre in ``theta`` (smooth: exact to rounding on these intervals)."""
+        n, m = self.n_theta_fine - 1, self.n_fine
+        i = np.arange(n)[:, None, None]
+        ta, tb = self.theta_fine[:-1, None, None], self.theta_fine[1:, None, None]
+        th = ta + (tb - ta) * _GL_T[None, :, None]
+        vals = self._cell_marginal(th, i, np.arange(m)[None, None, :])       # (n, 8, m)
+        return np.sum(vals * ((tb - ta) * _GL_W[None, :, None]), axis=1)
 
     def p22_std(self, x, y):
         """``P(x~, y~) = D(h) cos^4 theta_h`` with ``h ∝ (-x~, -y~, 1)`` (Eq. 2.11)."""
@@ -507,10 +627,9 @@ class TabulatedAnisotropic(_Tabulated):
         scaled so that ``A(z) = 1`` (Eq. 2.8)."""
         k = np.asarray(k, dtype=np.float64)
         h = _normal(self.theta[:, None], self.phi[None, :]).reshape(-1, 3)
-        wd = (hat_weights(self.theta, np.sin)[:, None] * self.dphi * self.ndf_table).ravel()
         # rescaled so that A(z) = int cos D dw = 1 holds as for the exactly normalized
         # interpolant: removes the rule's leading (lobe-wide) error
-        wd /= np.dot(wd, h[:, 2])
+        wd = self._node_area_weights().ravel()
         flat = k.reshape(-1, 3)
         out = np.empty(len(flat))
         for s in range(0, len(flat), chunk):
@@ -518,6 +637,18 @@ class TabulatedAnisotropic(_Tabulated):
             np.maximum(dots, 0.0, out=dots)
             out[s:s + chunk] = dots @ wd
         return out.reshape(k.shape[:-1])
+
+    def _node_area_weights(self) -> np.ndarray:
+        """``w_n D_n`` of the node rule of :meth:`projected_area_nodes`, ``(n_theta, n_phi)``,
+        scaled so that ``A(z) = sum w_n D_n cos theta_n = 1``."""
+        wd = hat_weights(self.theta, np.sin)[:, None] * self.dphi * self.ndf_table
+        return wd / np.sum(wd * np.cos(self.theta)[:, None])
+
+    def _projected_area_grid(self, theta_k) -> np.ndarray:
+        """:meth:`projected_area_nodes` at ``theta_k x self.phi`` by the DFT in azimuth
+        (:func:`circular_projection`; the same rule, exact to rounding)."""
+        return circular_projection(azimuthal_cosine_spectrum(theta_k, self.theta, self.n_phi),
+                                   self._node_area_weights())
 
     def lambda_warped(self, a, b, c):
         """``Lambda = A(k') / cos theta_k' - 1`` from the bilinear projected-area table."""
@@ -546,9 +677,9 @@ class TabulatedAnisotropic(_Tabulated):
     # ------------------------------------------------------------ sampling
     def sample_p22_std(self, u):
         """Normal whose slope is distributed as the interpolated ``P`` (App. A): a cell by
-        its exact mass, ``theta`` from the cell's marginal (the mean of its two log-linear
-        columns times ``cos sin``, Newton on the closed-form CDF), then ``phi`` from the
-        linear ``D(theta, .)`` (closed-form quadratic)."""
+        its mass, ``theta`` from the cell's marginal (:meth:`_cell_marginal`, Newton on
+        its CDF by 8-point Gauss-Legendre from the cell's edge), then ``phi`` from the
+        log-linear ``D(theta, .)`` in closed form (``w = log1p(v expm1(b)) / b``)."""
         u = np.asarray(u, dtype=np.float64)
         cdf = self._cell_cdf
         v = np.clip(u[..., 0], _U_MIN, 1.0 - _U_MIN) * cdf[-1]
@@ -556,14 +687,21 @@ class TabulatedAnisotropic(_Tabulated):
         mass = cdf[c + 1] - cdf[c]
         with np.errstate(divide="ignore", invalid="ignore"):
             r = np.clip(np.where(mass > 0, (v - cdf[c]) / mass, 0.5), 0.0, 1.0)
-        i, j = np.divmod(c, self.n_phi)
-        j1 = (j + 1) % self.n_phi
-        ld = self.log_ndf
-        th = sample_interval(r, self.theta[i], self.theta[i + 1], (ld[i, j], ld[i, j1]), (ld[i + 1, j], ld[i + 1, j1]))
-        t = np.clip((th - self.theta[i]) / (self.theta[i + 1] - self.theta[i]), 0.0, 1.0)
-        d0, d1 = self._column(i, j, t), self._column(i, j1, t)
-        w = _linear_quantile(np.clip(u[..., 1], 0.0, 1.0), d0, d1)
-        return _normal(th, (j + w) * self.dphi)
+        i, j = np.divmod(c, self.n_fine)
+        ta, tb = self.theta_fine[i], self.theta_fine[i + 1]
+
+        def partial(x):
+            nodes = ta[..., None] + (x - ta)[..., None] * _GL_T
+            return (x - ta) * np.sum(_GL_W * self._cell_marginal(nodes, i[..., None], j[..., None]), axis=-1)
+
+        th = invert_cdf(r, ta, tb, partial, lambda x: self._cell_marginal(x, i, j))
+        t = np.clip((th - ta) / (tb - ta), 0.0, 1.0)
+        b = self._log_column(i, (j + 1) % self.n_fine, t) - self._log_column(i, j, t)
+        q = np.clip(u[..., 1], 0.0, 1.0)
+        small = np.abs(b) < 1e-8
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            w = np.where(small, q, np.log1p(q * np.expm1(b)) / np.where(small, 1.0, b))
+        return _normal(th, (j + np.clip(np.nan_to_num(w, nan=q), 0.0, 1.0)) * self.dphi_fine)
 
     def sample_visible_std(self, u, cos_theta):  # pragma: no cover - not supported
         raise NotImplementedError("anisotropic tables sample slopes of P (supports_visible_sampling = False)")

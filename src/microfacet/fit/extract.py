@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..distributions.tabulated import HALF_PI, hat_weights
+from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
 from ..errors import MicrofacetError
 from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
-           "smith_kernel_anisotropic", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
-           "fresnel_samples", "solve_fresnel", "albedo_rows", "extract_fresnel"]
+           "smith_kernel_anisotropic", "AzimuthalKernel", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
+           "fresnel_samples", "solve_fresnel", "box_qp", "chi2_residual", "albedo_rows", "extract_fresnel"]
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
 BACKSCATTER_GAFS = ("masking", "height_correlated")
@@ -116,30 +116,56 @@ def _check_model(model: str) -> None:
         raise ValueError(f"backscatter_gaf must be one of {BACKSCATTER_GAFS}, got {model!r}")
 
 
-def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndarray,
-                             model: str = "masking", dtype=np.float32):
+class AzimuthalKernel:
+    """The anisotropic kernel of Eq. 4.8 as an operator, ``K p = s * (A p)`` with the node
+    rule ``(A p)[i, a] = sum_j w_j sum_b <o_ia, h_jb>+ p[j, b]`` over ``theta`` x uniform
+    ``phi``: block-circulant in azimuth, applied by the DFT
+    (:func:`~microfacet.distributions.tabulated.circular_projection`) in ``O(n^2 m log m)``
+    per product instead of ``O(n^2 m^2)`` for the dense ``(n m)^2`` matrix, and exact to
+    rounding. ``p`` is over the rows ``i < n - 1`` (row-major, ``(n - 1) m``); the grazing
+    row of ``h`` takes the values of its neighbour (folded). ``k @ p`` and ``k.dense()``
+    (the explicit matrix, for tests) are provided."""
+
+    dtype = np.float64
+
+    def __init__(self, theta: np.ndarray, m: int, scale: np.ndarray):
+        self.theta, self.m = np.asarray(theta, np.float64), int(m)
+        self.w = hat_weights(self.theta, np.sin) * (2.0 * np.pi / self.m)
+        self.spectrum = azimuthal_cosine_spectrum(self.theta[:-1], self.theta, self.m)
+        self.scale = np.asarray(scale, np.float64).ravel()
+        self.shape = (len(self.scale), len(self.scale))
+
+    def _weighted(self, p: np.ndarray) -> np.ndarray:
+        p = np.asarray(p, np.float64).reshape(len(self.theta) - 1, self.m)
+        return self.w[:, None] * np.concatenate([p, p[-1:]], axis=0)
+
+    def __matmul__(self, p):
+        return self.scale * circular_projection(self.spectrum, self._weighted(p)).ravel()
+
+    def dense(self) -> np.ndarray:
+        """The explicit matrix (``(n - 1) m`` square) of the same operator."""
+        return np.stack([self @ e for e in np.eye(self.shape[1])], axis=1)
+
+
+def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndarray, model: str = "masking"):
     """Kernel of Eq. 4.8 over the nodes ``(theta_i, phi_j)``, ``i < n - 1`` (row-major),
     with ``A(o) = sum_n w_n <o, h_n>+ D_n``, ``w_n = int int hat_n sin dtheta dphi`` (node
-    rule), the grazing row folded onto its neighbour. ``f_back`` is ``(n - 1, m)``.
+    rule), the grazing row folded onto its neighbour, as an :class:`AzimuthalKernel`
+    (``phi`` must be the uniform ``2 pi k / m``). ``f_back`` is ``(n - 1, m)``.
     Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
-    as :func:`smith_kernel_isotropic`."""
+    as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal."""
     _check_model(model)
     n, m = len(theta), len(phi)
-    dirs = _directions(theta[:, None], phi[None, :])                  # (n, m, 3)
-    o = dirs[:-1].reshape(-1, 3).astype(dtype)
-    w = hat_weights(theta, np.sin) * (2.0 * np.pi / m)
-    k = o @ o.T                                                       # h nodes = o nodes (folded)
-    np.maximum(k, 0.0, out=k)
-    last = np.maximum(o @ dirs[-1].reshape(-1, 3).astype(dtype).T, 0.0)   # (rows, m) grazing column
-    wcol = np.repeat(w[:-1], m).astype(dtype)
-    k *= wcol[None, :]
-    k[:, -m:] += last * dtype(w[-1])
-    v = k[0].astype(np.float64)                                       # row of A at the normal
-    scale = 4.0 * f_back.ravel() * np.repeat(np.cos(theta[:-1]), m)
-    k *= (scale * (1.0 if model == "masking" else 2.0)).astype(dtype)[:, None]
+    if not np.allclose(phi, np.arange(m) * (2.0 * np.pi / m), atol=1e-12):
+        raise ValueError("smith_kernel_anisotropic needs the uniform azimuths 2 pi k / m")
+    cos_o = np.repeat(np.cos(theta[:-1]), m)
+    scale = 4.0 * np.asarray(f_back, np.float64).ravel() * cos_o
+    k = AzimuthalKernel(theta, m, scale * (1.0 if model == "masking" else 2.0))
     if model == "masking":
         return k, None
-    return k, (scale * np.repeat(np.cos(theta[:-1]), m), v)
+    wc = k.w * np.cos(theta)
+    v = np.repeat(np.append(wc[:-2], wc[-2] + wc[-1]), m)             # A(z) = sum w cos p
+    return k, (scale * cos_o, v)
 
 
 def rule_area_at_normal(dist) -> float:
@@ -159,12 +185,12 @@ def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, ran
     iterations; we iterate to convergence). With ``rank_one = (u, v)`` the operator is
     ``K p - u (v . p)`` (height-correlated backscattering), clamped at 0: it is
     nonnegative on symmetric ``p`` (``A(o) >= cos theta_o A(z)``), so the clamp only
-    guards rounding and asymmetric inputs. The matrix may be float32 (anisotropic
-    kernels); the iterate is kept in float64."""
+    guards rounding and asymmetric inputs. ``k`` is a matrix or an operator with
+    ``k @ p`` (:class:`AzimuthalKernel`); the iterate is kept in float64."""
     p = np.full(k.shape[0], 1.0 / k.shape[0])
     lam = 0.0
     for it in range(1, max_iter + 1):
-        q = np.asarray(k @ p.astype(k.dtype), dtype=np.float64)
+        q = np.asarray(k @ p, dtype=np.float64)
         if rank_one is not None:
             q = np.maximum(q - rank_one[0] * float(rank_one[1] @ p), 0.0)
         s = float(np.sum(q, dtype=np.float64))
@@ -202,19 +228,26 @@ def _hats(cos_d, n_d: int):
     return k0, np.clip((ca - c) / (ca - cb), 0.0, 1.0)
 
 
-def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1) -> dict:
+def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
+                    isotropic: bool = False) -> dict:
     """Configurations of Algorithm 2 and the input's values there, evaluated once.
 
     ``theta_d`` runs over the nodes of the Fresnel table (``n_d`` uniform on
     ``[0, pi/2]``) and the midpoints between them (even / odd ``phi_d`` indices), so that
     the solve sees the table between its nodes; ``theta_h`` over
-    ``((k + 1/2) / n_h)^2 pi/2`` (dense where lobes are), ``phi_d`` and ``phi_h`` uniform.
+    ``((k + 1/2) / n_h)^2 pi/2`` (dense where lobes are), ``phi_d`` and ``phi_h`` uniform
+    on ``[0, 2 pi)``, or, with ``isotropic``, ``phi_d`` on ``[0, pi)`` with half the
+    samples: an isotropic reciprocal BRDF is even in ``phi_d`` and ``pi``-periodic
+    (``f(theta_h, theta_d, phi_d) = f(theta_h, theta_d, pi - phi_d)``), so the full
+    circle only repeats these configurations.
     Returns ``wi, wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` (nonfinite or
     negative values set to 0) and ``finite`` ``(K,)`` (configurations to use)."""
     step = HALF_PI / (n_d - 1)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
     theta_h = ((np.arange(n_h) + 0.5) / n_h) ** 2 * HALF_PI
-    phi_d = (np.arange(n_phi_d) + 0.5) * (2.0 * np.pi / n_phi_d)
+    if isotropic:
+        n_phi_d = max(n_phi_d // 2, 2)
+    phi_d = (np.arange(n_phi_d) + 0.5) * ((np.pi if isotropic else 2.0 * np.pi) / n_phi_d)
     phi_h = np.arange(n_phi_h) * (2.0 * np.pi / n_phi_h)
     TD, TH, PH, PD = np.meshgrid(theta_d, theta_h, phi_h, phi_d, indexing="ij")
     TD = np.minimum(TD + 0.5 * step * (np.arange(n_phi_d) % 2), HALF_PI)
@@ -227,7 +260,7 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
 
 
 def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6, albedo=None,
-                  kd_max=None):
+                  kd_max=None, return_residual: bool = False):
     """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2) bounded to
     ``[0, 1]``, and optionally a Lambertian base ``k_d``, by a box-constrained linear
     least-squares solve over the configurations ``samples`` (:func:`fresnel_samples`):
@@ -241,21 +274,20 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     without the bounds and the smoothing, the solution at nodes sampled only there is
     ``sum f / sum f_id``, the ``f_id``-weighted mean of ``f / f_id`` (Eq. 4.11). The second-
     difference penalty only fills nodes that no configuration sees. The bounded problem is
-    solved on its normal equations (``n x n``; :func:`scipy.optimize.lsq_linear`, BVLS on
-    the Cholesky factor). ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
+    solved on its normal equations (``n x n``) by :func:`box_qp`. ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
     backscattering, which the base may not exceed).
 
     ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
     ``sum_k F_k a[v, k] + k_d <= a_data[v]`` at each view ``v`` (the fit reflects no more
     than the data); when the bounded solution violates them, the linearly constrained
-    problem is solved by SLSQP from it.
+    problem is solved by :func:`_energy_constrained`.
 
     Returns ``(cos_theta_d, rgb, k_d)``: increasing ``cos theta_d`` of the ``n_d`` nodes,
-    ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``).
+    ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``),
+    and with ``return_residual`` also the model's misfit :func:`chi2_residual` over the
+    usable configurations (a weighting that does not depend on ``ideal``, so that fits
+    with different NDFs compare).
     """
-    from scipy.linalg import cholesky
-    from scipy.optimize import lsq_linear
-
     n_d = samples["n_d"]
     f = samples["f"]
     f_id = np.asarray(ideal.eval(samples["wi"], samples["wo"]), dtype=np.float64)[..., 0]
@@ -291,39 +323,118 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     h[:n_d, :n_d] += smoothing * np.trace(h) / n_var * (lap.T @ lap) + 1e-14 * np.trace(h) * np.eye(n_d)
     if diffuse:
         h[n_d, n_d] += 1e-14 * np.trace(h)
-    r = cholesky(h, lower=False)                                      # h = r^T r
-    y = np.linalg.solve(r.T, b)                                       # r^T y = b
     lo = np.zeros(n_var)
     x = np.empty((n_var, 3))
     for c in range(3):
         hi = np.ones(n_var)
         if diffuse and kd_max is not None:
             hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
-        x[:, c] = lsq_linear(r, y[:, c], bounds=(lo, hi), method="bvls", tol=1e-12).x
+        x[:, c] = box_qp(h, b[:, c], lo, hi)
         if albedo is not None:
-            x[:, c] = _energy_constrained(r, y[:, c], x[:, c], (lo, hi), albedo, c, n_d, diffuse)
+            x[:, c] = _energy_constrained(h, b[:, c], x[:, c], (lo, hi), albedo, c, diffuse)
     rgb = x[:n_d]
     kd = x[n_d] if diffuse else np.zeros(3)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
-    return np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
+    out = np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
+    if not return_residual:
+        return out
+    model = f_id[:, None] * ((1.0 - t)[:, None] * rgb[k0] + t[:, None] * rgb[k0 + 1]) + kd / np.pi
+    return out + (chi2_residual(model, f),)
 
 
-def _energy_constrained(r, y, x0, bounds, albedo, c, n_d, diffuse):
-    """``min |r x - y|^2`` under ``bounds`` and ``a x <= a_data`` (SLSQP from ``x0``)."""
-    from scipy.optimize import Bounds, LinearConstraint, minimize
+def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
+    """``sum_j sum_c (model_jc - f_jc)^2 / (Y(f_j) + eps) / sum_j Y(f_j)`` (a Pearson
+    chi-square, ``Y`` the luminance, ``eps`` 1e-3 of its mean): relative to the data
+    everywhere, lobe and floor alike, whatever the model."""
+    y = luminance(f)
+    eps = 1e-3 * max(float(np.mean(y)), 1e-300)
+    return float(np.sum(np.sum((model - f) ** 2, axis=-1) / (y + eps)) / max(float(np.sum(y)), 1e-300))
+
+
+def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-12,
+           max_iter: int = 200) -> np.ndarray:
+    """``argmin 1/2 x^T h x - g^T x`` over the box ``lo <= x <= hi`` (``h`` symmetric
+    positive definite; ``hi`` may be ``inf``): Bertsekas' projected Newton method (1982)
+    -- the Newton step on the variables not held at a bound by the gradient, an Armijo
+    search along the projection arc -- until the projected gradient vanishes
+    (``|x - P(x - grad)| <= tol |g|``). Exact for the final active set (one Cholesky solve
+    per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
+    ``g = r^T y``."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    scale = max(float(np.max(np.abs(g))), 1e-300)
+    x = np.clip(cho_solve(cho_factor(h), g), lo, hi)
+    for _ in range(max_iter):
+        grad = h @ x - g
+        step = x - np.clip(x - grad, lo, hi)
+        if np.max(np.abs(step)) <= tol * scale:
+            break
+        eps = min(float(np.linalg.norm(step)), 1e-3)
+        held = ((x <= lo + eps) & (grad > 0)) | ((x >= hi - eps) & (grad < 0))
+        free = ~held
+        d = np.where(held, -grad, 0.0)
+        if np.any(free):
+            d[free] = -cho_solve(cho_factor(h[np.ix_(free, free)]), grad[free])
+        s = 1.0
+        for _ in range(60):
+            xn = np.clip(x + s * d, lo, hi)
+            dx = xn - x                            # q(xn) - q(x) without cancellation
+            if grad @ dx + 0.5 * dx @ h @ dx <= 1e-4 * grad @ dx:
+                break
+            s *= 0.5
+        if np.array_equal(xn, x):
+            break
+        x = xn
+    return x
+
+
+def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50):
+    """``min 1/2 x^T h x - g^T x`` under ``bounds`` and ``a x <= a_data`` (the albedo
+    rows of channel ``c``), from the box-constrained solution ``x0`` (returned when
+    feasible).
+
+    Dual Newton on the multipliers ``lambda >= 0`` of the ``V`` rows: ``x(lambda)`` is
+    the box QP with ``g - a^T lambda`` (:func:`box_qp`), the dual gradient is
+    ``a x - a_data`` and its Hessian ``-a_F h_FF^-1 a_F^T`` over the variables ``F``
+    strictly inside their bounds; each step maximizes that local quadratic model over
+    ``lambda >= 0`` (itself a small box QP; damped so that the dual never decreases),
+    exact once the free set settles. A remaining
+    violation is removed by scaling ``x`` down (all rows are nonnegative), so the result
+    is feasible."""
+    from scipy.linalg import cho_factor, cho_solve
 
     a, a_data = albedo
     rows = np.concatenate([a, np.ones((len(a), 1))], axis=1) if diffuse else a
     limit = a_data[:, c]
     if np.all(rows @ x0 <= limit + 1e-9):
         return x0
-    scale = 1.0 / max(float(y @ y), 1e-300)
-    rtr, rty = r.T @ r * scale, r.T @ y * scale
-    res = minimize(lambda x: 0.5 * x @ rtr @ x - rty @ x, x0, jac=lambda x: rtr @ x - rty, method="SLSQP",
-                   bounds=Bounds(*bounds), constraints=[LinearConstraint(rows, -np.inf, limit)],
-                   options=dict(maxiter=500, ftol=1e-14))
-    x = np.clip(res.x, *bounds)
-    # feasibility first: scale down a remaining violation (all rows are nonnegative)
+    lo, hi = bounds
+    v = len(rows)
+    delta = 1e-8 * max(float(np.trace(rows @ cho_solve(cho_factor(h), rows.T))), 1e-300)
+    dual = lambda x, lam: 0.5 * x @ h @ x - g @ x + lam @ (rows @ x - limit)   # noqa: E731
+    lam, x = np.zeros(v), x0
+    value = dual(x, lam)
+    for _ in range(max_iter):
+        gap = rows @ x - limit
+        if np.all(gap <= 1e-10 * np.abs(limit)) and np.all(lam * np.abs(gap) <= 1e-10 * np.abs(value)):
+            break
+        free = (x > lo) & (x < hi)
+        m = np.zeros((v, v))
+        if np.any(free):
+            af = rows[:, free]
+            m = af @ cho_solve(cho_factor(h[np.ix_(free, free)]), af.T)
+        target = box_qp(m + delta * np.eye(v), gap + m @ lam, np.zeros(v), np.full(v, np.inf))
+        step = 1.0
+        for _ in range(40):                        # the dual may only increase
+            lam_n = lam + step * (target - lam)
+            x_n = box_qp(h, g - rows.T @ lam_n, lo, hi)
+            value_n = dual(x_n, lam_n)
+            if value_n >= value - 1e-13 * abs(value):
+                break
+            step *= 0.5
+        if np.array_equal(lam_n, lam):
+            break
+        lam, x, value = lam_n, x_n, value_n
     excess = np.max((rows @ x) / np.maximum(limit, 1e-300))
     return x / excess if excess > 1.0 else x
 
@@ -334,22 +445,25 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.0
     theta_i dw_i`` (the fit's albedo is ``sum_k F_k a[v, k] + k_d``, Eq. 2.1 with the
     table's hats) and ``a_data[v] = int f(i, o_v) cos theta_i dw_i + margin``, both by the
     same stratified ``n_u x n_u`` importance sampling of the defensive mixture ``1/2``
-    visible normals of ``ideal`` + ``1/2`` cosine lobe. Returns ``(a, a_data)``."""
+    visible normals of ``ideal`` + ``1/2`` cosine lobe (each on the whole grid, weights of
+    the balance heuristic). Returns ``(a, a_data)``."""
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
 
     g = (np.arange(n_u) + 0.5) / n_u
     u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
-    half = len(u) // 2
     views = np.asarray(views, dtype=np.float64)
     wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
     cosine = Lambertian(1.0)
-    wi = np.concatenate([ideal.sample(u[:half], wo[:, :half])[0], cosine.sample(u[half:], wo[:, half:])[0]], axis=1)
+    # both strategies on the whole stratified grid (a split of the grid would sample
+    # each from half its domain), balance-heuristic weights
+    wi = np.concatenate([ideal.sample(u, wo)[0], cosine.sample(u, wo)[0]], axis=1)
+    wo = np.concatenate([wo, wo], axis=1)
     pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
     ok = (pdf > 0) & (wi[..., 2] > 0)
-    inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / len(u)
+    inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
-    f = np.asarray(brdf.eval_cos(wi, wo), dtype=np.float64)
+    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
     f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
     a = np.zeros((len(views), n_d))
@@ -360,7 +474,7 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.0
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
-                    diffuse: bool = False):
+                    diffuse: bool = False, isotropic: bool = False):
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
     Algorithm 2): ``(cos_theta_d, rgb, k_d)``."""
-    return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h), ideal, diffuse=diffuse)
+    return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h, isotropic), ideal, diffuse=diffuse)

@@ -18,6 +18,8 @@ from . import extract
 
 __all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION", "READABLE_VERSIONS"]
 
+#: slack of the energy constraint: fit albedo <= data albedo + ENERGY_MARGIN at each view
+ENERGY_MARGIN = 0.01
 FORMAT = "microfacet.fit"
 VERSION = 2
 #: versions :func:`load` reads (version 1: no diffuse base, Eq. 4.3 backscattering)
@@ -226,9 +228,10 @@ def _backscatter_model(backscatter_gaf, shadowing) -> str:
 
 
 def _energy_views(anisotropic: bool) -> np.ndarray:
-    """Views of the energy constraint: ``theta_o`` 0-85 degrees, at ``phi_o = 0`` and, for
-    anisotropic fits, also 45, 90 and 135 degrees."""
-    th = np.radians([0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0])
+    """Views of the energy constraint: ``theta_o`` 0-80 degrees (beyond, ``cos theta_o <
+    0.1``, measured data are unreliable), at ``phi_o = 0`` and, for anisotropic fits, also
+    45, 90 and 135 degrees."""
+    th = np.radians([0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0])
     ph = np.radians([0.0, 45.0, 90.0, 135.0] if anisotropic else [0.0])
     T, P = np.meshgrid(th, ph, indexing="ij")
     return np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], axis=-1).reshape(-1, 3)
@@ -252,7 +255,7 @@ def _fit_ndf(f_back, theta, phi, gaf, model, tol, max_iter):
         m = len(phi)
         if gaf == "smith":
             k, rank_one = extract.smith_kernel_anisotropic(f_back, theta, phi, model)
-            d, f0, its = extract.power_iteration(k, tol=max(tol, 1e-6), max_iter=max_iter, rank_one=rank_one)
+            d, f0, its = extract.power_iteration(k, tol=tol, max_iter=max_iter, rank_one=rank_one)
             d = d.reshape(n - 1, m)
         else:
             d, f0, its = extract.ndf_closed_form(f_back, theta[:-1, None], gaf), np.nan, 0
@@ -269,7 +272,7 @@ def _fit_ndf(f_back, theta, phi, gaf, model, tol, max_iter):
 def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith", *,
         resolution_phi: int | None = None, shadowing: bool = True, tol: float = 1e-10,
         max_iter: int = 1000, backscatter_gaf: str | None = None, diffuse: bool = False,
-        diffuse_iterations: int = 8, energy_constraint: bool = False) -> FittedBRDF:
+        diffuse_iterations: int = 16, energy_constraint: bool = True) -> FittedBRDF:
     """Fit ``brdf`` (anything with ``eval(wi, wo) -> RGB``) with a tabulated microfacet BRDF.
 
     Parameters
@@ -293,16 +296,23 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         default) takes the one the returned BRDF renders with: height-correlated with
         ``shadowing``, masking without; so a fit of the library's own BRDF inverts it.
     diffuse : bool
-        Also fit a Lambertian base ``k_d / pi``: the NDF is extracted from the
-        backscattering minus the base, and the base is re-estimated jointly with the
-        Fresnel table (:func:`extract.solve_fresnel`), alternating
-        ``diffuse_iterations`` times at most (until ``k_d`` moves by less than 1e-4).
+        Also fit a Lambertian base ``k_d / pi``: for a base luminance ``b`` the NDF is
+        extracted from the backscattering minus ``b / pi`` and ``k_d`` (RGB) is solved
+        jointly with the Fresnel table (:func:`extract.solve_fresnel`, ``k_d`` bounded by
+        the backscattering); ``b`` minimizes the misfit of the whole model to the data
+        (:func:`extract.chi2_residual`, a bounded scalar search of at most
+        ``diffuse_iterations`` steps, compared with ``b = 0``). Alternating NDF and base
+        instead converges to a biased fixed point (part of the base stays in the NDF's
+        tail).
     energy_constraint : bool
-        Also bound the fit's directional albedo by the data's (plus 0.01) at the views of
-        :func:`_energy_views` (:func:`extract.albedo_rows`; SLSQP, slow: seconds).
-        Experimental and off by default: it trades the fit's error for energy (nickel:
-        error 0.21 -> 0.58) and is defeated by garbage grazing values of the data. The
-        Fresnel table is always bounded to ``[0, 1]`` (white furnace <= 1).
+        Bound the fit's directional albedo by the data's plus :data:`ENERGY_MARGIN` at
+        the views of :func:`_energy_views` (0-80 degrees; :func:`extract.albedo_rows`,
+        linear inequalities on the Fresnel table solved with it). On by default: a
+        microfacet lobe whose NDF comes from backscattering can be wider than the data's
+        lobe away from backscattering (measured metals), and the unconstrained Fresnel
+        term then reflects more than the data. Inactive (no cost but the albedo rows)
+        when the fit already conserves the data's energy. The Fresnel table is always
+        bounded to ``[0, 1]`` (white furnace <= 1).
     tol, max_iter
         Stopping rule of the power iterations (relative change of the eigenvector).
 
@@ -326,25 +336,45 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     else:
         phi = None
         f_back = extract.backscattering(brdf, theta[:-1])
-    samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1))
+    samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1), isotropic=not anisotropic)
     views = _energy_views(anisotropic)
-    kd = np.zeros(3)
-    kd_max = None
-    if diffuse:    # the base may not exceed the backscattering (up to 80 degrees), per channel
-        th = np.linspace(0.0, np.radians(80.0), 33)
-        o = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
-        kd_max = np.pi * np.min(np.where(np.isfinite(rgb_back := np.asarray(brdf.eval(o, o), float)),
-                                         np.maximum(rgb_back, 0.0), 0.0), axis=0)
-    for _ in range(max(int(diffuse_iterations), 1) if diffuse else 1):
-        dist, f0, its = _fit_ndf(np.maximum(f_back - extract.luminance(kd) / np.pi, 0.0), theta, phi, gaf,
-                                 model, tol, max_iter)
+
+    def solve(base):
+        """NDF from the backscattering minus ``base / pi`` (luminance), then the Fresnel
+        table (and ``k_d``) against it: ``(dist, f0, its, (cos_d, rgb, k_d, residual))``."""
+        dist, f0, its = _fit_ndf(np.maximum(f_back - base / np.pi, 0.0), theta, phi, gaf, model, tol, max_iter)
         ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
-        energy = extract.albedo_rows(brdf, ideal, n, views) if energy_constraint else None
-        cos_d, rgb, kd_new = extract.solve_fresnel(samples, ideal, diffuse=diffuse, albedo=energy, kd_max=kd_max)
-        moved = float(np.max(np.abs(kd_new - kd)))
-        kd = kd_new
-        if moved < 1e-4:
-            break
+        energy = extract.albedo_rows(brdf, ideal, n, views, n_u=20, margin=ENERGY_MARGIN) if energy_constraint else None
+        return dist, f0, its, extract.solve_fresnel(samples, ideal, diffuse=diffuse, albedo=energy, kd_max=kd_max,
+                                                    return_residual=diffuse)
+
+    kd_max = None
+    if diffuse:    # the base may not exceed the backscattering (up to 70 degrees), per channel
+        th = np.linspace(0.0, np.radians(70.0), 29)
+        o = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
+        rgb_back = np.asarray(brdf.eval(o, o), dtype=np.float64)
+        kd_max = np.pi * np.min(np.where(np.isfinite(rgb_back), np.maximum(rgb_back, 0.0), 0.0), axis=0)
+        # the base's luminance minimizes the misfit of the whole model (a bounded 1D search)
+        from scipy.optimize import minimize_scalar
+        top = float(min(extract.luminance(kd_max), np.pi * np.max(f_back)))
+        cache = {}
+
+        def misfit(base):
+            if base not in cache:
+                try:
+                    cache[base] = solve(base)
+                except MicrofacetError:          # nothing left for the lobe
+                    return np.inf
+            return cache[base][3][3]
+
+        best = 0.0
+        if top > 0:
+            found = minimize_scalar(misfit, bounds=(0.0, top), method="bounded",
+                                    options=dict(xatol=1e-3 * top, maxiter=max(int(diffuse_iterations), 1))).x
+            best = found if misfit(found) < misfit(0.0) else 0.0
+        dist, f0, its, (cos_d, rgb, kd, _) = cache[best] if best in cache else solve(best)
+    else:
+        dist, f0, its, (cos_d, rgb, kd) = solve(0.0)
     if gaf != "smith":
         f0 = float(extract.luminance(rgb[-1]))
     return FittedBRDF(dist, _fresnel.Tabulated(cos_d, rgb), gaf=gaf, shadowing=shadowing, f0=f0,
