@@ -685,8 +685,11 @@ def test_rgl_ndf_is_recovered_from_its_own_masking_model(path):
 
     class Masking(mf.BRDF):
         def eval(self, wi, wo):
-            val = m.ndf(half_vector(wi, wo)) / (4.0 * np.maximum(wi[..., 2], 1e-12) * np.maximum(m.sigma(wo), 1e-12))
-            return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), val, 0.0)[..., None] * np.ones(3)
+            h = half_vector(wi, wo)
+            ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+            h = np.where(ok[..., None], h, [0.0, 0.0, 1.0])                 # opposite pairs: h = 0
+            val = m.ndf(h) / (4.0 * np.maximum(wi[..., 2], 1e-12) * np.maximum(m.sigma(wo), 1e-12))
+            return np.where(ok, val, 0.0)[..., None] * np.ones(3)
 
     f = mf.fit.fit(Masking(), 90, backscatter_gaf="masking", energy_constraint=False)
     assert ndf_error(m.ndf, f.distribution.ndf)["l2"] < 0.01
