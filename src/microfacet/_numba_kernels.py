@@ -63,18 +63,40 @@ def _lambda_c(kind, ax, ay, rho, s1, xn, yn, kx, ky, kz):
 
 
 @_jit
-def _fresnel(fk, fp, tx, tv, c, ch):
-    """Channel ``ch`` of the Fresnel term at ``c = cos theta_d`` (Table 2.I; the formulas
-    of :mod:`microfacet.fresnel`: ``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx, tv``
-    the :class:`~microfacet.fresnel.Tabulated` grid and values)."""
+def _fresnel(fk, p0, p1, c):
+    """One channel of an analytic Fresnel term at ``c = cos theta_d`` (Table 2.I; the formulas
+    of :mod:`microfacet.fresnel`): ``p0`` is ``f0`` (Schlick) or ``eta``, ``p1`` ``k`` (conductor)."""
     if fk == IDEAL:
         return 1.0
-    if fk == TABULATED:                              # np.interp, clamped at the ends
+    c = min(max(c, 0.0), 1.0)
+    if fk == SCHLICK:
+        m = 1.0 - c
+        m2 = m * m
+        return p0 + (1.0 - p0) * (m2 * m2 * m)
+    c2 = c * c
+    if fk == DIELECTRIC:
+        g2 = p0 * p0 + c2 - 1.0
+        g = math.sqrt(max(g2, 0.0))
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        f = 0.5 * a * a * (1.0 + b * b)
+        return 1.0 if (g2 < 0.0 or not abs(f) < math.inf) else f
+    s2 = 1.0 - c2                                    # CONDUCTOR: conductor_reflectance
+    t1 = p0 * p0 - p1 * p1 - s2
+    a2b2 = math.sqrt(t1 * t1 + 4.0 * p0 * p0 * p1 * p1)
+    ac2 = 2.0 * c * math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
+    rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
+    t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
+    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _fresnel_rgb(fk, fp, tx, tv, c, out, j, scale):
+    """``out[j] = F(c) * scale`` per RGB channel: :func:`_fresnel`, or ``np.interp`` of the
+    :class:`~microfacet.fresnel.Tabulated` grid ``tx`` and values ``tv`` (clamped at the ends).
+    Inlined (Numba IR), so that the arrays are not passed, and reference-counted, per element."""
+    if fk == TABULATED:
         n = tx.shape[0]
-        if c <= tx[0]:
-            return tv[0, ch]
-        if c >= tx[n - 1]:
-            return tv[n - 1, ch]
         lo, hi = 0, n - 1
         while hi - lo > 1:
             mid = (lo + hi) >> 1
@@ -82,30 +104,17 @@ def _fresnel(fk, fp, tx, tv, c, ch):
                 lo = mid
             else:
                 hi = mid
-        return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
-    c = min(max(c, 0.0), 1.0)
-    if fk == SCHLICK:
-        f0 = fp[0, ch]
-        m = 1.0 - c
-        m2 = m * m
-        return f0 + (1.0 - f0) * (m2 * m2 * m)
-    eta = fp[0, ch]
-    c2 = c * c
-    if fk == DIELECTRIC:
-        g2 = eta * eta + c2 - 1.0
-        g = math.sqrt(max(g2, 0.0))
-        a = (g - c) / (g + c)
-        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-        f = 0.5 * a * a * (1.0 + b * b)
-        return 1.0 if (g2 < 0.0 or not abs(f) < math.inf) else f
-    k = fp[1, ch]                                    # CONDUCTOR: conductor_reflectance
-    s2 = 1.0 - c2
-    t1 = eta * eta - k * k - s2
-    a2b2 = math.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
-    ac2 = 2.0 * c * math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
-    rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
-    t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
-    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
+        for ch in range(3):
+            if c <= tx[0]:
+                f = tv[0, ch]
+            elif c >= tx[n - 1]:
+                f = tv[n - 1, ch]
+            else:
+                f = (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
+            out[j, ch] = f * scale
+    else:
+        for ch in range(3):
+            out[j, ch] = _fresnel(fk, fp[0, ch], fp[1, ch], c) * scale
 
 
 @_jit
@@ -279,8 +288,7 @@ def _smith_eval(wi, wo, kind, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, 
                        wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
         if divide_cos_i and s > 0.0:
             s = s / wi[j, 2]
-        for ch in range(3):
-            out[j, ch] = _fresnel(fk, fp, tx, tv, oh, ch) * s
+        _fresnel_rgb(fk, fp, tx, tv, oh, out, j, s)
 
 
 @_pjit
@@ -346,5 +354,4 @@ def _smith_sample(u, wo, kind, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, w
             visible &= ci > 0.0
         ratio = area / (co * (1.0 + lam))            # G / G1(o)
         pdf_out[j] = p if ok else 0.0
-        for ch in range(3):
-            weight_out[j, ch] = ratio * _fresnel(fk, fp, tx, tv, oh, ch) if visible else 0.0
+        _fresnel_rgb(fk, fp, tx, tv, oh, weight_out, j, ratio if visible else 0.0)
