@@ -2,7 +2,8 @@
 """Throughput of ``MicrofacetBRDF.eval``, ``pdf`` and ``sample`` against Mitsuba 3.
 
 For ``--n`` fixed-seed random direction pairs (uniform in the upper hemisphere) this
-times our NumPy (float64, single-threaded) BRDF for anisotropic GGX and Beckmann, with
+times our BRDF (float64; Smith eval, pdf and sample by the fused Numba kernels of
+:mod:`microfacet.kernels`, on Numba's threads) for anisotropic GGX and Beckmann, with
 and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
 same directions with the same parameters (rho = 0, zero mean slope: the only case both
 models share) and the same conductor Fresnel term. Each timing is the best and the
@@ -20,6 +21,11 @@ the figures.
 Usage::
 
     python benchmarks/bench_brdf.py [--n 1000000] [--repeats 5] [--json results.json]
+                                    [--scaling 1e4,1e5,1e6,1e7]
+
+``--scaling`` adds a table of time per element and peak extra memory per element
+(``tracemalloc``: NumPy's allocations made by the call, outputs included, inputs not) of
+eval, pdf and sample over the given batch sizes.
 """
 from __future__ import annotations
 
@@ -32,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tracemalloc
 from typing import Callable
 
 import numpy as np
@@ -104,6 +111,29 @@ def bench_ours(inputs, repeats: int) -> list[dict]:
         for op, fn in ops.items():
             rows.append({"impl": "microfacet", "op": op, "distribution": name, "n": len(wi),
                          "extrapolated": False, **time_it(fn, repeats)})
+    return rows
+
+
+def scaling(sizes: list[int], repeats: int) -> list[dict]:
+    """Best time per element and peak extra bytes per element of eval, pdf and sample
+    (GGX and Beckmann, non-sheared) for each batch size."""
+    rows = []
+    configs = our_configs()
+    for n in sizes:
+        inputs = make_inputs(n, seed=1)
+        wi, wo, u = inputs["wi"], inputs["wo"], inputs["u"]
+        for name in ("ggx", "beckmann"):
+            b = configs[name]
+            ops = {"eval": lambda: b.eval(wi, wo), "pdf": lambda: b.pdf(wi, wo), "sample": lambda: b.sample(u, wo)}
+            for op, fn in ops.items():
+                t = time_it(fn, repeats)
+                tracemalloc.start()
+                fn()
+                peak = tracemalloc.get_traced_memory()[1]
+                tracemalloc.stop()
+                rows.append({"op": op, "distribution": name, "n": n, "ns_per_element": t["best_s"] / n * 1e9,
+                             "peak_bytes_per_element": peak / n})
+        del inputs, wi, wo, u
     return rows
 
 
@@ -273,7 +303,16 @@ def main(argv: list[str] | None = None) -> int:
                     help="directions actually timed with scalar_rgb, extrapolated to --n")
     ap.add_argument("--mitsuba-threads", type=int, default=None,
                     help="Dr.Jit CPU threads for llvm_ad_rgb (default: all cores; 1 for a per-core ratio)")
+    ap.add_argument("--scaling", metavar="N1,N2,...", default=None,
+                    help="also time eval/pdf/sample over these batch sizes (e.g. 1e4,1e5,1e6,1e7) and "
+                         "report time and peak extra memory per element")
     args = ap.parse_args(argv)
+    try:
+        sizes = [int(float(v)) for v in args.scaling.split(",")] if args.scaling else []
+    except ValueError:
+        ap.error(f"--scaling must be comma-separated batch sizes, got {args.scaling!r}")
+    if any(n < 1 for n in sizes):
+        ap.error("--scaling sizes must be >= 1")
     if args.n < 1 or args.repeats < 1 or args.scalar_n < 1 or (args.mitsuba_threads or 1) < 1:
         ap.error("--n, --repeats, --scalar-n and --mitsuba-threads must be >= 1")
 
@@ -300,8 +339,8 @@ def main(argv: list[str] | None = None) -> int:
     rat = ratios(rows)
     if rat:
         print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64; "
-              f"Smith eval by the fused Numba kernel ({_numba_threads()} threads), pdf and sample NumPy "
-              f"(1 thread). Mitsuba {variant}: float32"
+              f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads). "
+              f"Mitsuba {variant}: float32"
               + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
         for r in rat:
             first = (f"   (Mitsuba's first call, tracing + kernel compile or cache load, not counted: "
@@ -315,6 +354,17 @@ def main(argv: list[str] | None = None) -> int:
     for name, t in goal:
         print(f"  {name:17s} {t:7.3f} s  {'met' if t < EVAL_GOAL_S else 'NOT met'}")
 
+    scale_rows = scaling(sizes, args.repeats) if sizes else []
+    if scale_rows:
+        print("\nscaling (best time per element, peak extra memory per element incl. the outputs):")
+        print(f"  {'op':7s} {'distribution':9s} {'N':>10s} {'ns/elem':>9s} {'bytes/elem':>11s}")
+        for r in scale_rows:
+            print(f"  {r['op']:7s} {r['distribution']:9s} {r['n']:10d} {r['ns_per_element']:9.1f} "
+                  f"{r['peak_bytes_per_element']:11.1f}")
+    load = os.getloadavg() if hasattr(os, "getloadavg") else None
+    if load:
+        print(f"\nload average at the end: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} CPUs)")
+
     if args.json:
         write_json(args.json, {
             "n": args.n, "repeats": args.repeats, "mitsuba_variant": variant, "mitsuba_note": why,
@@ -322,7 +372,8 @@ def main(argv: list[str] | None = None) -> int:
             "machine": platform.machine(), "cpus": os.cpu_count(),
             "parameters": {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y, "rho": RHO,
                            "mean_slope": MEAN_SLOPE, "fresnel": f"conductor {METAL}"},
-            "results": rows, "ratios": rat, "eval_goal_s": EVAL_GOAL_S})
+            "results": rows, "ratios": rat, "eval_goal_s": EVAL_GOAL_S, "scaling": scale_rows,
+            "load_average": load, "numba_threads": _numba_threads()})
         print(f"\nwrote {args.json}")
     return 0
 

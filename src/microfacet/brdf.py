@@ -226,19 +226,36 @@ class MicrofacetBRDF(BRDF):
                 s = np.where(s > 0, s / wi[..., 2], 0.0)
         return oh, s
 
+    def _eval(self, wi, wo, divide_cos_i: bool) -> np.ndarray:
+        """``F D G / (4 z_o) [/ z_i]``: one compiled pass for Smith BRDFs with scalar
+        parameters and a :mod:`microfacet.fresnel` term (:func:`microfacet.kernels.smith_eval`),
+        :meth:`_projected` times the Fresnel term otherwise (the reference)."""
+        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        fast = kernels.smith_eval(self, wi, wo, divide_cos_i)
+        if fast is not None:
+            return fast
+        oh, s = self._projected(wi, wo, divide_cos_i)
+        return self.fresnel(oh) * s[..., None]
+
     def eval_cos(self, wi, wo) -> np.ndarray:
         """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
-        oh, s = self._projected(wi, wo)
-        return self.fresnel(oh) * s[..., None]
+        return self._eval(wi, wo, False)
 
     def eval(self, wi, wo) -> np.ndarray:
         """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1)."""
-        oh, s = self._projected(wi, wo, divide_cos_i=True)
-        return self.fresnel(oh) * s[..., None]
+        return self._eval(wi, wo, True)
 
     def pdf(self, wi, wo) -> np.ndarray:
-        """Density of ``sample``: the density of the sampled normal over ``4 oh``."""
+        """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
+        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        fast = kernels.smith_pdf(self, wi, wo)
+        if fast is not None:
+            return fast
+        return self._pdf_numpy(wi, wo)
+
+    def _pdf_numpy(self, wi, wo) -> np.ndarray:
+        """NumPy reference of :meth:`pdf` (unit ``wi``, ``wo``)."""
         h = half_vector(wi, wo)
         oh = dot(wo, h)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0)
@@ -260,9 +277,17 @@ class MicrofacetBRDF(BRDF):
         """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2)
         when the distribution supports it, slopes of ``P`` otherwise. Returns
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
-        samples have weight 0 and pdf 0."""
+        samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
+        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
         wo = _dirs(wo, "wo")
         u = _uniforms(u)
+        fast = kernels.smith_sample(self, u, wo)
+        if fast is not None:
+            return fast
+        return self._sample_numpy(u, wo)
+
+    def _sample_numpy(self, u, wo):
+        """NumPy reference of :meth:`sample` (unit ``wo``, uniforms ``u``)."""
         if self._samples_visible:
             h = self.distribution.sample_visible(u, wo)
         else:
