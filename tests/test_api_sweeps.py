@@ -161,7 +161,9 @@ def check_brdf(brdf, theta_o: float, dtype, seed: int, n: int = N_FURNACE) -> fl
     assert np.all(f >= 0) and np.all(fc >= 0) and np.all(p >= 0) and np.all(w >= 0) and np.all(sp >= 0)
     ok = sp > 0
     ref = brdf.eval_cos(si[ok], wo) / sp[ok, None]
-    np.testing.assert_allclose(w[ok], ref, rtol=1e-8, atol=1e-12)
+    # 1e-6: rounding of the sampled normal is amplified up to ~2e-7 at the corners (|rho| = 0.999,
+    # alpha 1e-4 vs 2, slopes of P sampled for V-groove and normal-map GAFs)
+    np.testing.assert_allclose(w[ok], ref, rtol=1e-6, atol=1e-12)
     assert np.all(w[~ok] == 0)
     return float(np.mean(w, axis=0).max())
 

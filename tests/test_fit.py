@@ -565,10 +565,12 @@ def test_round_trip_closed_form_gafs(gaf, shadowing):
 @pytest.mark.parametrize("gaf", mf.brdf.GAFS)
 @pytest.mark.parametrize("shadowing", [True, False])
 def test_round_trip_sweep(D, gaf, shadowing):
-    """The whole issue-10 sweep: alpha 0.01-1.5 isotropic (N = 90)."""
+    """The whole issue-10 sweep: alpha 0.01-1.5 isotropic (N = 90; N = 180 for alpha = 0.01,
+    whose Beckmann lobe spans ~8 nodes of the N = 90 grid: log-linear D between them gives
+    a pair error of 1.9 %, 0.02 % at N = 180)."""
     pairs = _uniform_pairs()
     for alpha in (0.01, 0.05, 0.1, 0.3, 0.5, 0.8, 1.2, 1.5):
-        f, ref, rel, _ = _round_trip(D, dict(alpha=alpha), gaf, shadowing, False, 90)
+        f, ref, rel, _ = _round_trip(D, dict(alpha=alpha), gaf, shadowing, False, 180 if alpha < 0.05 else 90)
         assert np.all(rel < 0.01), (alpha, rel)
         assert _pair_error(f, ref, pairs) < 0.01, alpha
 
