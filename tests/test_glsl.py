@@ -16,8 +16,8 @@ from microfacet.glsl import SHADERS, export_textures, source
 from microfacet.leadr import shading
 
 TOL = 1e-4
-#: Bilinear filtering in float32 arithmetic (the hardware's filter weights are not exact)
-EXACT = None  # {"MF_MANUAL_BILINEAR": None}
+#: Texture filtering by the GL (exact in llvmpipe; 8-bit weights on most GPUs) or in float32 (MF_MANUAL_BILINEAR)
+FILTERS = {"hardware": None, "manual": {"MF_MANUAL_BILINEAR": None}}
 
 
 @pytest.fixture(scope="module")
@@ -139,8 +139,8 @@ FRAME = "mat3 frame = mat3(fs.xyz, ft.xyz, fn.xyz);"
 ENV = "uniform highp sampler2D env; uniform int env_top; uniform float env_T; uniform int grid;"
 
 
-@pytest.mark.parametrize("n", [5, 8])
-def test_leadr_env_grid(gl, n):
+@pytest.mark.parametrize("n,filtering", [(5, "hardware"), (8, "manual")])
+def test_leadr_env_grid(gl, n, filtering):
     rng = np.random.default_rng(4)
     m = 3000
     e = random_moments(rng, m)
@@ -153,7 +153,7 @@ def test_leadr_env_grid(gl, n):
         result = vec4(mf_env_specular(e, wo.xyz, frame, env, env_top, env_T, grid, MfFresnel(3, f_a, f_b),
                                       mf_lod_bias(grid), true), 0.0);""",
                       dict(moment_inputs(e), wo=wo, fs=s, ft=t, fn=nn), declarations=SURFACE + ENV,
-                      textures={"env": ([lv.map for lv in env.levels], (True, False))}, defines=EXACT,
+                      textures={"env": ([lv.map for lv in env.levels], (True, False))}, defines=FILTERS[filtering],
                       uniforms=dict(f_a=ag.eta, f_b=ag.k, env_top=len(env.levels) - 1,
                                     env_T=env.texture_size, grid=n))
     assert rel_error(got[:, :3], ref) <= TOL
@@ -177,7 +177,8 @@ def test_leadr_sh_diffuse(gl):
     assert rel_error(got[:, :3], ref) <= TOL
 
 
-def test_leadr_lookup(gl):
+@pytest.mark.parametrize("filtering", ["hardware", "manual"])
+def test_leadr_lookup(gl, filtering):
     """The GLSL footprint lookup (anisotropic trilinear probes) vs mf.leadr.lookup."""
     rng = np.random.default_rng(6)
     h = mf.leadr.gaussian_heightfield((64, 48), 0.3, correlation=4.0, seed=1)
@@ -192,7 +193,7 @@ def test_leadr_lookup(gl):
     got = gl.evaluate("leadr", """
         MfMoments e = mf_lookup(e1234_map, e5_map, top, uv.xy, a.xy, b.xy, 16);
         result = vec4(e.e1234.xy, e.e1234.z, e.e5);""",
-                      {"uv": uv, "a": a, "b": b}, defines=EXACT,
+                      {"uv": uv, "a": a, "b": b}, defines=FILTERS[filtering],
                       declarations="uniform highp sampler2D e1234_map; uniform highp sampler2D e5_map; uniform int top;",
                       textures={"e1234_map": (tex["e1234"], (True, True)), "e5_map": (tex["e5"], (True, True))},
                       uniforms=dict(top=len(pyramid) - 1))
