@@ -284,16 +284,17 @@ export class Viewer {
     return Array.from(flipped);
   }
 
-  // Mean frame time (ms) of `frames` synchronized frames of the scene at w x h.
-  benchmark({ method = 1, light = 0, supersampling = 4, width = 1280, height = 720, frames = 5 } = {}) {
+  // Mean frame time (ms) of `frames` synchronized frames of the scene (or, with `patch`, of
+  // the uv square filling the viewport) at w x h, after `warmup` frames.
+  benchmark({ method = 1, light = 0, supersampling = 4, width = 1280, height = 720, frames = 3, warmup = 1,
+              patch = false } = {}) {
     const saved = { ...this.state };
     Object.assign(this.state, { method, light, supersampling });
     this.canvas.width = width;
     this.canvas.height = height;
-    this.draw(width, height);
-    this._sync();                                     // warm-up
+    for (let i = 0; i < warmup; ++i) { this.draw(width, height, { patch }); this._sync(); }
     const t0 = performance.now();
-    for (let i = 0; i < frames; ++i) { this.draw(width, height); this._sync(); }
+    for (let i = 0; i < frames; ++i) { this.draw(width, height, { patch }); this._sync(); }
     const ms = (performance.now() - t0) / frames;
     this.state = saved;
     return ms;
