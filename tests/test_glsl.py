@@ -129,6 +129,25 @@ def test_leadr_point_light(gl, shadowing):
     assert rel_error(got[:, :3], ref) <= TOL
 
 
+def test_leadr_convolve_micronormal_area(gl):
+    """Listing 5.1 (base merge), the artificial micronormal (Sec. 3.7) and A(k) (Eq. 4, 9)."""
+    rng = np.random.default_rng(8)
+    e, b = random_moments(rng, 2000), random_moments(rng, 2000)
+    wo = directions(rng, 2000)
+    got = gl.evaluate("leadr", MOMENTS + """
+        MfMoments c = mf_convolve(e, MfMoments(b1234, b5.x));
+        result = c.e1234;""", dict(moment_inputs(e), b1234=b[:, :4], b5=b[:, 4:]))
+    got5 = gl.evaluate("leadr", MOMENTS + "result = vec4(mf_convolve(e, MfMoments(b1234, b5.x)).e5);",
+                       dict(moment_inputs(e), b1234=b[:, :4], b5=b[:, 4:]))
+    ref = mf.leadr.convolve(e, b)
+    np.testing.assert_allclose(np.column_stack([got, got5[:, 0]]), ref, rtol=1e-5, atol=1e-7)
+    got = gl.evaluate("leadr", MOMENTS + """
+        result = vec4(mf_artificial_micronormal(e, wo.xyz), mf_leadr_projected_area(e, wo.xyz));""",
+                      dict(moment_inputs(e), wo=wo))
+    np.testing.assert_allclose(got[:, :3], shading.artificial_micronormal(e, wo), atol=1e-5)   # unit vectors
+    assert rel_error(got[:, 3], shading.projected_area(e, wo)) <= TOL
+
+
 def random_frames(rng, n):
     nn = directions(rng, n, np.radians(60))[:, [0, 2, 1]]          # world y up
     s, t = mf.geometry.orthonormal_basis(nn)

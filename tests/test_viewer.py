@@ -154,3 +154,13 @@ def test_server_binds_localhost_only(pyramid_file):
         assert server.server_address[0] == "127.0.0.1" and server.server_address[1] > 0
     finally:
         server.server_close()
+
+
+def test_ctrl_c_stops_the_server(pyramid_file):
+    import signal
+    proc = subprocess.Popen([sys.executable, "-m", "microfacet", "view", str(pyramid_file)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=_env())
+    url = proc.stdout.readline().strip()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert url.startswith("http://127.0.0.1:") and proc.returncode == 0 and err.strip().endswith("stopped")

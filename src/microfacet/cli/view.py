@@ -34,9 +34,9 @@ def run(args) -> int:
         server = make_server(data, args.port)
     except OSError as e:
         raise MicrofacetError(f"cannot listen on {HOST}:{args.port} ({e.strerror or e})") from None
-    print(f"http://{HOST}:{server.server_address[1]}/", flush=True)
-    print("Ctrl-C stops the server", file=sys.stderr, flush=True)
     try:
+        print(f"http://{HOST}:{server.server_address[1]}/", flush=True)
+        print("Ctrl-C stops the server", file=sys.stderr, flush=True)
         server.serve_forever()
     except KeyboardInterrupt:
         print("stopped", file=sys.stderr)

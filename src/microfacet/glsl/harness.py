@@ -68,6 +68,7 @@ def evaluate(library: str, body: str, inputs: dict, *, uniforms: dict | None = N
     textures : dict of name -> (levels, wrap) or (levels, wrap, nearest)
         Samplers (``uniform highp sampler2D name;`` in ``declarations`` or the library).
     """
+    import moderngl
     ctx = context()
     arrays = {k: np.asarray(v, dtype=np.float32).reshape(len(v), -1) for k, v in inputs.items()}
     n = len(next(iter(arrays.values())))
@@ -110,7 +111,7 @@ def evaluate(library: str, body: str, inputs: dict, *, uniforms: dict | None = N
     vao = ctx.vertex_array(prog, [(quad, "2f", "in_pos")])
     fbo.use()
     ctx.viewport = (0, 0, w, h)
-    vao.render(mode=ctx.TRIANGLES if hasattr(ctx, "TRIANGLES") else 4)
+    vao.render(moderngl.TRIANGLES)
     data = np.frombuffer(fbo.read(components=4, dtype="f4"), dtype=np.float32).reshape(h * w, 4)[:n].copy()
     for obj in (vao, quad, fbo, out, prog, *owned):
         obj.release()

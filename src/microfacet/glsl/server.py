@@ -75,10 +75,6 @@ def load_viewer_data(pyramid_path, material=None, roughness=None, env_path=None)
     levels = read_pyramid(pyramid_path)
     if material is not None:
         path = Path(material)
-        head = path.read_bytes()[:4] if path.is_file() else b""
-        if not head.startswith(b"PK"):
-            raise MicrofacetError(f"{path}: not a microfacet fit file (.npz)" if path.exists()
-                                  else f"{path}: no such file")
         fit = _fit.load(path)
         base = base_lobe(fit)
         f = fit.fresnel
