@@ -21,10 +21,10 @@ const float MF_THETA_CAP = 1.5707962267948967;    // atan(1e7)
 float mf_tab_d(float theta) {
     int n = mf_fit_sizes.x;
     theta = clamp(theta, 0.0, MF_HALF_PI);
-    int i = min(int(sqrt(theta / MF_HALF_PI) * float(n - 1)), n - 2);
-    float ta = float(i * i) / float((n - 1) * (n - 1)) * MF_HALF_PI;
-    float tb = float((i + 1) * (i + 1)) / float((n - 1) * (n - 1)) * MF_HALF_PI;
-    float t = clamp((theta - ta) / (tb - ta), 0.0, 1.0);
+    float u = sqrt(theta / MF_HALF_PI) * float(n - 1);
+    int i = min(int(u), n - 2);
+    float fi = float(i);
+    float t = clamp((u - fi) * (u + fi) / (2.0 * fi + 1.0), 0.0, 1.0);   // theta = (u / (n-1))^2 pi/2
     float la = texelFetch(mf_fit_table, ivec2(i, 0), 0).x;
     float lb = texelFetch(mf_fit_table, ivec2(i + 1, 0), 0).x;
     return exp(la + t * (lb - la));
