@@ -9,7 +9,7 @@ OUT    ?= demo-output
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask]"
+	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask,view]"
 	touch $@
 
 # llvm_ad_rgb (Mitsuba plugins) needs a system libLLVM >= 16: installed where apt and root
@@ -20,6 +20,12 @@ setup: $(VENV)/.installed
 	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
 	  apt-get update -qq && apt-get install -y -qq libllvm19 >/dev/null; \
 	else echo "setup: no libLLVM >= 16 and no root apt: Mitsuba llvm_ad_rgb tests will skip"; fi
+# GLSL tests (moderngl on EGL: Mesa llvmpipe) and viewer tests (Playwright on the system
+# Chromium; never 'playwright install'): system packages where apt and root are available.
+	@if [ -e /usr/lib/chromium/chromium ] && /sbin/ldconfig -p | grep -q libEGL_mesa; then :; \
+	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 >/dev/null; \
+	else echo "setup: no chromium/Mesa EGL and no root apt: GLSL and viewer tests will skip"; fi
 
 demo: setup
 	$(VENV)/bin/microfacet demo -o $(OUT)
@@ -29,6 +35,7 @@ test: setup
 
 bench: setup
 	$(PY) benchmarks/bench_brdf.py
+	$(PY) benchmarks/bench_view.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache

@@ -17,12 +17,12 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import MicrofacetError
-from . import bake, demo, fit, glints, validate
+from . import bake, demo, fit, glints, validate, view
 from .common import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = (demo, validate, fit, bake, glints)
+COMMANDS = (demo, validate, fit, bake, glints, view)
 
 
 def build_parser() -> argparse.ArgumentParser:
