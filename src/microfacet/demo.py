@@ -374,10 +374,27 @@ LEADR_STEPS = 2 * 3 * len(LEADR_LEVELS)   # progress steps of leadr_section (lig
 GLINTS_STEPS = 4                           # progress steps of glints_section
 
 
+def _viewer_section(out) -> str:
+    """The real-time section, or a note saying why it is missing (no Playwright/Chromium)."""
+    import warnings
+    from html import escape
+
+    from .glsl import demo_section
+    try:
+        return demo_section(out)
+    except (ImportError, MicrofacetError) as e:
+        why = " ".join(str(e).split())
+        warnings.warn(f"demo: real-time viewer section skipped: {why}", RuntimeWarning, stacklevel=2)
+        return (f'<section id="viewer"><h2>Real time: GLSL and the WebGL2 viewer</h2>'
+                f"<p>Skipped on this machine: {escape(why)} (make setup installs Chromium and Playwright).</p>"
+                "</section>")
+
+
 def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED,
              workers: int = 1, progress: bool = False,
              figures: Sequence[DemoFigure] | None = None,
-             fits: Sequence[FitExample] | None = None, leadr: bool = True, glints: bool = True) -> Path:
+             fits: Sequence[FitExample] | None = None, leadr: bool = True, glints: bool = True,
+             viewer: bool = True) -> Path:
     """Render every figure into ``out_dir`` and write ``out_dir/index.html`` (last).
 
     Parameters
@@ -401,6 +418,10 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     glints : bool
         Include the glints section (patch BRDF of a procedural scratched normal map against
         naive per-pixel sampling, :func:`microfacet.glints.figures.glints_section`).
+    viewer : bool
+        Include the real-time section (the WebGL2 viewer's renders in headless Chromium
+        beside the NumPy renders, :func:`microfacet.glsl.demo_section`); where Playwright or
+        Chromium is missing the section says so and a warning is printed.
 
     The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
     environment samples of panel ``j`` of figure ``i`` come from
@@ -451,5 +472,7 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         if glints:
             from .glints.figures import glints_section
             sections.append(glints_section(out, progress=bar.update))
+        if viewer:
+            sections.append(_viewer_section(out))
     title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4), LEADR (Fig. 5.3) and glints"
     return write_text(out / "index.html", html_page(title, "\n".join(sections)))

@@ -4,7 +4,8 @@
 core models numerically; ``microfacet fit INPUT -o OUT`` fits measured BRDFs;
 ``microfacet bake MAP -o OUT.exr`` prefilters a height or normal map into a LEAN/LEADR
 moment pyramid; ``microfacet glints NORMAL_MAP -o OUT.npz`` builds a glint microsurface and
-``microfacet glints render OUT.npz -o IMG.png`` renders one. Outputs follow one naming
+``microfacet glints render OUT.npz -o IMG.png`` renders one; ``microfacet view PYRAMID.exr``
+serves the WebGL2 viewer on 127.0.0.1. Outputs follow one naming
 rule (:mod:`microfacet.cli.common`). Bad input prints one line on stderr and exits with a
 non-zero status, without a traceback; long work shows a progress bar only on a terminal.
 """

@@ -25,12 +25,14 @@ def add(sub) -> None:
     p.add_argument("--seed", type=int_at_least(0), default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
     p.add_argument("-j", "--jobs", type=int_at_least(1), default=None, metavar="N",
                    help="worker processes (default: usable CPUs, at most 4); results do not depend on it")
+    p.add_argument("--no-viewer", action="store_true",
+                   help="leave out the real-time section (WebGL2 viewer renders in headless Chromium, ~35 s)")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
     from ..demo import default_workers, run_demo
     index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
-                     workers=args.jobs or default_workers(), progress=sys.stderr.isatty())
+                     workers=args.jobs or default_workers(), progress=sys.stderr.isatty(), viewer=not args.no_viewer)
     print(index)
     return 0
