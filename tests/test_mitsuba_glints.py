@@ -161,7 +161,7 @@ def test_glints_scalar_variant_matches_library(glint_file):
     path, ms = glint_file
     brdf = ms.pbrdf((0.0, 0.0), np.diag([(PIXEL_SIGMA * 2.0 / RES) ** 2] * 2), fresnel=mf.fresnel.Schlick(0.5),
                     backend="numpy")
-    wi, wo = _pairs(brdf, np.random.default_rng(2), 1500)
+    wi, wo = _pairs(brdf, np.random.default_rng(2), 2500)
     bsdf = mi.load_dict({"type": "mf_glints", "filename": path, "footprint": 2.0, "schlick_f0": 0.5})
     f, pdf = plugin_eval_pdf(bsdf, "scalar_rgb", wi, wo)
     assert_close("eval", f, brdf.eval_cos(wi, wo))
@@ -171,9 +171,11 @@ def test_glints_scalar_variant_matches_library(glint_file):
 @pytest.mark.parametrize("exact", [True, False])
 def test_glints_white_furnace(llvm, glint_file, exact):
     """A sphere (white Fresnel, constant unit environment, path tracer, 2-texel footprint):
-    no pixel above 1 + 3 sigma (sigma from 8 independent renders)."""
+    no pixel above 1 + 3 sigma (sigma from 32 independent renders of 128 spp: the
+    weights of a mixture of sharp lobes are heavy-tailed, and 16 x 64 spp underestimated
+    sigma at one pixel, 1.018 at "5.2 sigma", which 64 x 128 spp measured at 1.003)."""
     bsdf = {"type": "mf_glints", "filename": glint_file[0], "footprint": 2.0, "exact": exact}
-    mean, se = render_stats(sphere_scene(bsdf, {"type": "constant", "radiance": 1.0}), spp=32, renders=8)
+    mean, se = render_stats(sphere_scene(bsdf, {"type": "constant", "radiance": 1.0}), spp=128, renders=32)
     mean, se = mean[..., 0], se[..., 0]
     excess = (mean - 1.0) / np.where(se > 0, se, np.inf)
     print(f"white furnace mf_glints exact={exact}: max pixel {mean.max():.4f}, max (value - 1)/sigma "

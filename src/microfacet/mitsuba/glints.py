@@ -45,6 +45,7 @@ PLUGIN = "mf_glints"
 _ZIP_MAGIC = b"PK\x03\x04"
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
+_FWHM = float(FWHM_PER_SIGMA)
 
 
 def _load(props, name: str):
@@ -94,7 +95,7 @@ def _window(cu, cv, sxx, syy, sxy, nx, ny, cutoff):
     """Seed window (first index and count per axis) and inverse covariance ``(iuu, ivv,
     iuv)`` of the footprint plus the kernel of ``nx x ny`` seeds (the window and weights of
     :func:`microfacet.glints.pbrdf.footprint_lobes`)."""
-    kx, ky = (1.0 / nx / FWHM_PER_SIGMA) ** 2, (1.0 / ny / FWHM_PER_SIGMA) ** 2
+    kx, ky = (1.0 / nx / _FWHM) ** 2, (1.0 / ny / _FWHM) ** 2
     sxx, syy = sxx + kx, syy + ky
     det = sxx * syy - sxy * sxy
     rx, ry = cutoff * dr.sqrt(sxx), cutoff * dr.sqrt(syy)
@@ -200,7 +201,7 @@ def _make_class() -> type:
             side = float(math.floor(math.sqrt(self.max_lobes)) - 1) / (2.0 * t.cutoff)
             scale = 1.0
             for s, n in ((suu, t.nx), (svv, t.ny)):
-                cap = (side / n) ** 2 - (1.0 / n / FWHM_PER_SIGMA) ** 2
+                cap = (side / n) ** 2 - (1.0 / n / _FWHM) ** 2
                 scale = dr.minimum(scale, dr.select(s > cap, cap / dr.maximum(s, 1e-300), 1.0))
             u, v = F64(si.uv.x) * self.uv_scale, F64(si.uv.y) * self.uv_scale
             return u - dr.floor(u), v - dr.floor(v), (suu * scale, svv * scale, suv * scale)
