@@ -22,7 +22,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..distributions.tabulated import _GL_T, _GL_W, _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
+from ..distributions.tabulated import _GL4_T, _GL4_W, _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
 from .slopes import Lobe, _slope_normal, ratio
 
 __all__ = ["Table", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
@@ -30,6 +30,9 @@ __all__ = ["Table", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabul
 
 #: Fixed Newton steps of the elevation sampling (safeguarded; float32 converges in < 8).
 NEWTON_STEPS = 12
+#: Newton steps within a refined anisotropic cell (started at the linear guess inside a
+#: cell of ~1/8000 of the mass, the marginal is nearly linear: float32 converges in <= 4).
+CELL_NEWTON_STEPS = 6
 U_MIN = 2.0**-24
 
 
@@ -98,14 +101,14 @@ def interval_integral(la, lb, ta, tb, theta):
     return dr.maximum(out / (2.0 * (beta * beta + 4.0)), 0.0)
 
 
-def invert_cdf(v, ta, tb, cdf, pdf):
+def invert_cdf(v, ta, tb, cdf, pdf, steps: int = NEWTON_STEPS):
     """``theta`` in ``[ta, tb]`` with ``cdf(theta) = v cdf(tb)``: safeguarded Newton
-    (bisection when a step leaves the bracket), ``NEWTON_STEPS`` steps, as
+    (bisection when a step leaves the bracket), ``steps`` fixed steps, as
     :func:`microfacet.distributions.tabulated.invert_cdf`."""
     target = v * cdf(tb)
     lo, hi = ta, tb
     x = ta + v * (tb - ta)
-    for _ in range(NEWTON_STEPS):
+    for _ in range(steps):
         f = cdf(x) - target
         lo = dr.select(f < 0, x, lo)
         hi = dr.select(f > 0, x, hi)
@@ -353,9 +356,11 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
 
     def sample_p22(self, u):
         """Normal whose slope is distributed as the interpolated ``P`` (App. A, the oracle's
-        ``sample_p22_std``): a cell by its mass, ``theta`` by safeguarded Newton on the
-        cell marginal ``m(theta) = dphi D_j exp_mean(b) cos sin`` (its CDF by 8-point
-        Gauss-Legendre from the cell's edge), ``phi`` in closed form
+        ``sample_p22_std``): a cell by its mass, ``theta`` by safeguarded Newton
+        (:data:`CELL_NEWTON_STEPS`) on the cell marginal ``m(theta) = dphi D_j exp_mean(b)
+        cos sin`` (its CDF by 4-point Gauss-Legendre from the cell's edge, where the
+        oracle uses 8: on these small smooth cells both are exact to float32), ``phi`` in
+        closed form
         ``w = log1p(v expm1(b)) / b``, ``b = ln D_(j+1) - ln D_j`` at ``theta``."""
         t = self.t
         cdf = t.cell_cdf
@@ -381,11 +386,11 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
 
         def partial(x):
             out = 0.0
-            for gt, gw in zip(_GL_T, _GL_W):
+            for gt, gw in zip(_GL4_T, _GL4_W):
                 out = out + float(gw) * marginal(ta + (x - ta) * float(gt))
             return (x - ta) * out
 
-        th = invert_cdf(r, ta, tb, partial, marginal)
+        th = invert_cdf(r, ta, tb, partial, marginal, CELL_NEWTON_STEPS)
         w = dr.clip((th - ta) / (tb - ta), 0.0, 1.0)
         b = b0 + w * (b1 - b0)
         v2 = dr.clip(u.y, 0.0, 1.0)
