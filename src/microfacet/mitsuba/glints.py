@@ -300,12 +300,12 @@ def _make_class() -> type:
             target = F64(sample1) * ws
 
             def pick(index, w, s):
-                acc, chosen = s
+                acc, chosen, last = s
                 take = (acc <= target) & (acc + w > target)
-                return [acc + w, dr.select(take, index, chosen)]
+                return [acc + w, dr.select(take, index, chosen), index]
 
-            _, chosen = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero, zero - 1.0], pick)
-            chosen = dr.select(chosen < 0, 0.0, chosen)     # sample1 * ws rounded up to ws
+            _, chosen, last = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero, zero - 1.0, zero], pick)
+            chosen = dr.select(chosen < 0, last, chosen)    # sample1 * ws rounded up to ws
             mx, my, sxx, syy, sxy = (t.central[5 * chosen + c] for c in range(5))
             ax, ay = dr.sqrt(2.0 * sxx), dr.sqrt(2.0 * syy)
             lobe = Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, 2.0 * sxy / (ax * ay), mx, my)))
