@@ -204,14 +204,14 @@ def test_leadr_footprint_parameter_is_the_fallback(llvm, files):
 
 
 # ------------------------------------------------------------- chi-square
-def _chi2(plugin, d, tmp_path, monkeypatch, label, uv=(0.5, 0.5)):
+def _chi2(plugin, d, tmp_path, monkeypatch, label, uv=(0.5, 0.5), ires=8):
     from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
     monkeypatch.chdir(tmp_path)
     for deg in (0, 60, 85):
         theta = np.radians(deg)
         sample, pdf = BSDFAdapter(plugin, d, wi=[float(np.sin(theta)), 0.0, float(np.cos(theta))], uv=list(uv))
         chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf,
-                             sample_dim=3, sample_count=200_000, res=100, ires=8)
+                             sample_dim=3, sample_count=200_000, res=100, ires=ires)
         assert chi2.run(0.01, test_count=3, quiet=True), f"{label} view {deg} deg: {chi2.messages}"
         print(f"chi2 {label} view={deg}: p = {chi2.p_value:.3f}")
 

@@ -3,12 +3,13 @@
 :class:`microfacet.fresnel.Tabulated`.
 
 Same tables, same interpolation, same sampling as the NumPy oracle (the tables are
-the oracle's own arrays, uploaded once as float32): ``D`` log-linear in ``theta`` (and
-linear in ``phi``); isotropic ``Lambda`` from the cubic Hermite ``L1`` table, visible
-slopes by inverting the tail tables (bisection over the fine nodes, linear in ``s``
-within a cell) and the conditional CDF of ``y~``; anisotropic ``Lambda`` from the
-bilinear projected-area table and slopes of ``P`` by cell, then a safeguarded Newton
-on the closed-form elevation CDF, then the linear azimuth quantile. Every search is
+the oracle's own arrays, uploaded once as float32): ``D`` log-linear in ``theta``;
+isotropic ``Lambda`` from the cubic Hermite ``L1`` table, visible slopes by inverting
+the tail tables (bisection over the fine nodes, linear in ``s`` within a cell) and the
+conditional CDF of ``y~``; anisotropic ``D`` log-bilinear on the oracle's refined grid
+(its Catmull-Rom refinement in azimuth and elevation is precomputed there), ``Lambda``
+from the bilinear projected-area table, slopes of ``P`` by cell, safeguarded Newton on
+the cell marginal and the closed-form azimuth quantile. Every search is
 a bisection with a fixed step count (enough for the table), so the code traces into
 one branch-free kernel. Indices are clamped into their tables, so inactive lanes
 (NaN, out of range) gather valid memory.
@@ -21,7 +22,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..distributions.tabulated import _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
+from ..distributions.tabulated import _GL4_T, _GL4_W, _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
 from .slopes import Lobe, _slope_normal, ratio
 
 __all__ = ["Table", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
@@ -29,6 +30,9 @@ __all__ = ["Table", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabul
 
 #: Fixed Newton steps of the elevation sampling (safeguarded; float32 converges in < 8).
 NEWTON_STEPS = 12
+#: Newton steps within a refined anisotropic cell (started at the linear guess inside a
+#: cell of ~1/8000 of the mass, the marginal is nearly linear: float32 converges in <= 4).
+CELL_NEWTON_STEPS = 6
 U_MIN = 2.0**-24
 
 
@@ -97,32 +101,42 @@ def interval_integral(la, lb, ta, tb, theta):
     return dr.maximum(out / (2.0 * (beta * beta + 4.0)), 0.0)
 
 
+def invert_cdf(v, ta, tb, cdf, pdf, steps: int = NEWTON_STEPS):
+    """``theta`` in ``[ta, tb]`` with ``cdf(theta) = v cdf(tb)``: safeguarded Newton
+    (bisection when a step leaves the bracket), ``steps`` fixed steps, as
+    :func:`microfacet.distributions.tabulated.invert_cdf`."""
+    target = v * cdf(tb)
+    lo, hi = ta, tb
+    x = ta + v * (tb - ta)
+    for _ in range(steps):
+        f = cdf(x) - target
+        lo = dr.select(f < 0, x, lo)
+        hi = dr.select(f > 0, x, hi)
+        p = pdf(x)
+        xn = x - ratio(f, p, p > 0)
+        bad = (xn <= lo) | (xn >= hi) | (p <= 0) | (xn != xn)
+        x = dr.select(f == 0, x, dr.select(bad, 0.5 * (lo + hi), xn))
+    return x
+
+
 def sample_interval(v, ta, tb, las, lbs):
-    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c cos sin`` from the uniform ``v``:
-    safeguarded Newton on the closed-form CDF, as
-    :func:`microfacet.distributions.tabulated.sample_interval` (``NEWTON_STEPS`` steps)."""
+    """``theta`` in ``[ta, tb]`` with density ``∝ sum_c D_c cos sin`` from the uniform ``v``,
+    each ``D_c`` log-linear: :func:`invert_cdf` on the closed-form CDF
+    (:func:`interval_integral`), as :func:`microfacet.distributions.tabulated.sample_interval`."""
     def cdf(x):
         out = 0.0
         for la, lb in zip(las, lbs):
             out = out + interval_integral(la, lb, ta, tb, x)
         return out
 
-    target = v * cdf(tb)
-    lo, hi = ta, tb
-    x = ta + v * (tb - ta)
-    for _ in range(NEWTON_STEPS):
-        f = cdf(x) - target
-        lo = dr.select(f < 0, x, lo)
-        hi = dr.select(f > 0, x, hi)
+    def pdf(x):
         w = (x - ta) / (tb - ta)
-        p = 0.0
+        out = 0.0
         for la, lb in zip(las, lbs):
-            p = p + dr.exp(la + w * (lb - la))
-        p = p * 0.5 * dr.sin(2.0 * x)
-        xn = x - ratio(f, p, p > 0)
-        bad = (xn <= lo) | (xn >= hi) | (p <= 0) | (xn != xn)
-        x = dr.select(f == 0, x, dr.select(bad, 0.5 * (lo + hi), xn))
-    return x
+            out = out + dr.exp(la + w * (lb - la))
+        return out * 0.5 * dr.sin(2.0 * x)
+
+    return invert_cdf(v, ta, tb, cdf, pdf)
 
 
 def _normal(theta, phi):
@@ -144,7 +158,10 @@ class _TabulatedLobe(Lobe):
     def _locate(self, theta):
         """Interval ``i`` and weight ``t`` of ``theta`` in the elevation grid
         (:func:`microfacet.distributions.tabulated.locate`)."""
-        n = self.t.n_theta
+        return self._locate_in(theta, self.t.n_theta)
+
+    @staticmethod
+    def _locate_in(theta, n: int):
         theta = dr.clip(theta, 0.0, HALF_PI)
         i = dr.minimum(index_of(dr.sqrt(theta / HALF_PI) * (n - 1), n), n - 2)
         fi = mi.Float(i)
@@ -279,28 +296,36 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
 
 class TabulatedAnisotropicLobe(_TabulatedLobe):
     """:class:`~microfacet.distributions.tabulated.TabulatedAnisotropic` under the fit's
-    slope map: ``P`` over ``(theta, phi)``, ``Lambda`` from the projected-area table,
-    slopes of ``P`` sampled exactly from the interpolant (App. A)."""
+    slope map: ``P`` over ``(theta, phi)`` log-bilinear on the refined grid (the oracle's
+    ``log_ndf``, ``theta_fine`` x ``n_fine``), ``Lambda`` from the projected-area table
+    (node azimuths), slopes of ``P`` sampled exactly from the interpolant (App. A)."""
 
-    def _phi(self, phi):
-        t = self.t
-        f = (phi - 2.0 * math.pi * dr.floor(phi / (2.0 * math.pi))) / t.dphi
-        j = index_of(f, t.n_phi)
+    def _locate(self, theta):
+        """Interval and weight of ``theta`` in the refined elevation grid."""
+        return self._locate_in(theta, self.t.n_theta_fine)
+
+    @staticmethod
+    def _wrap(phi, n: int, dphi: float):
+        """Interval ``j``, next node ``j1`` (periodic) and weight of ``phi`` on ``n`` azimuths."""
+        f = (phi - 2.0 * math.pi * dr.floor(phi / (2.0 * math.pi))) / dphi
+        j = index_of(f, n)
         w = dr.clip(f - mi.Float(j), 0.0, 1.0)
-        j1 = dr.select(j + 1 >= t.n_phi, 0 * j, j + 1)
+        j1 = dr.select(j + 1 >= n, 0 * j, j + 1)
         return j, j1, w
 
-    def _column(self, i, j, t):
-        ld = self.t.log_ndf
-        a = ld[i * self.t.n_phi + j]
-        return dr.exp(a + t * (ld[(i + 1) * self.t.n_phi + j] - a))
+    def _log_column(self, i, j, t):
+        """``ln D`` linear in ``theta`` along the refined azimuth ``j``."""
+        ld, q = self.t.log_ndf, self.t.n_fine
+        a = ld[i * q + j]
+        return a + t * (ld[(i + 1) * q + j] - a)
 
     def d_interp(self, theta, x, y):
-        """``D`` log-linear in ``theta`` along each node azimuth, linear in ``phi`` between;
-        ``phi = atan2(-y~, -x~)`` is the azimuth of the normal of slope ``(x~, y~)``."""
+        """``D`` log-bilinear (the oracle's ``_d_interp``); ``phi = atan2(-y~, -x~)`` is the
+        azimuth of the normal of slope ``(x~, y~)``."""
         i, t = self._locate(theta)
-        j, j1, w = self._phi(dr.atan2(-y, -x))
-        return (1.0 - w) * self._column(i, j, t) + w * self._column(i, j1, t)
+        j, j1, w = self._wrap(dr.atan2(-y, -x), self.t.n_fine, self.t.dphi_fine)
+        a = self._log_column(i, j, t)
+        return dr.exp(a + w * (self._log_column(i, j1, t) - a))
 
     def lambda_c(self, k):
         """``(Lambda(k), c_k)``, ``Lambda = A(k') / cos theta_k' - 1`` from the bilinear
@@ -320,7 +345,7 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         i = dr.minimum(index_of(s, n), n - 2)
         t0, t1 = t.theta_k[i], t.theta_k[i + 1]
         wt = dr.clip((theta - t0) / (t1 - t0), 0.0, 1.0)
-        j, j1, w = self._phi(phi)
+        j, j1, w = self._wrap(phi, t.n_phi, t.dphi)
         A = t.area
         q = t.n_phi
 
@@ -330,9 +355,13 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         return (1.0 - wt) * row(i) + wt * row(i + 1)
 
     def sample_p22(self, u):
-        """Normal whose slope is distributed as the interpolated ``P`` (App. A): a cell by
-        its mass, ``theta`` from the cell's marginal (Newton on the closed-form CDF),
-        ``phi`` from the linear ``D(theta, .)`` (closed-form quadratic)."""
+        """Normal whose slope is distributed as the interpolated ``P`` (App. A, the oracle's
+        ``sample_p22_std``): a cell by its mass, ``theta`` by safeguarded Newton
+        (:data:`CELL_NEWTON_STEPS`) on the cell marginal ``m(theta) = dphi D_j exp_mean(b)
+        cos sin`` (its CDF by 4-point Gauss-Legendre from the cell's edge, where the
+        oracle uses 8: on these small smooth cells both are exact to float32), ``phi`` in
+        closed form
+        ``w = log1p(v expm1(b)) / b``, ``b = ln D_(j+1) - ln D_j`` at ``theta``."""
         t = self.t
         cdf = t.cell_cdf
         ncell = cdf.size - 1
@@ -342,27 +371,50 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         c0 = cdf[c]
         mass = cdf[c + 1] - c0
         r = dr.clip(dr.select(mass > 0, ratio(v - c0, mass, mass > 0), 0.5), 0.0, 1.0)
-        i = c // t.n_phi
-        j = c - i * t.n_phi
-        j1 = dr.select(j + 1 >= t.n_phi, zero, j + 1)
-        ld, q = t.log_ndf, t.n_phi
-        ta, tb = t.theta[i], t.theta[i + 1]
-        th = sample_interval(r, ta, tb, (ld[i * q + j], ld[i * q + j1]),
-                             (ld[(i + 1) * q + j], ld[(i + 1) * q + j1]))
-        wt = dr.clip((th - ta) / (tb - ta), 0.0, 1.0)
-        d0, d1 = self._column(i, j, wt), self._column(i, j1, wt)
-        w = _linear_quantile(dr.clip(u.y, 0.0, 1.0), d0, d1)
-        return self._normal_from_standard(_normal(th, (mi.Float(j) + w) * t.dphi))
+        q = t.n_fine
+        i = c // q
+        j = c - i * q
+        j1 = dr.select(j + 1 >= q, zero, j + 1)
+        ld = t.log_ndf
+        a0, a1 = ld[i * q + j], ld[(i + 1) * q + j]            # ln D at the cell's corners
+        b0, b1 = ld[i * q + j1] - a0, ld[(i + 1) * q + j1] - a1
+        ta, tb = t.theta_fine[i], t.theta_fine[i + 1]
+
+        def marginal(x):
+            w = (x - ta) / (tb - ta)
+            return dr.exp(a0 + w * (a1 - a0)) * exp_mean(b0 + w * (b1 - b0)) * 0.5 * dr.sin(2.0 * x)
+
+        def partial(x):
+            out = 0.0
+            for gt, gw in zip(_GL4_T, _GL4_W):
+                out = out + float(gw) * marginal(ta + (x - ta) * float(gt))
+            return (x - ta) * out
+
+        th = invert_cdf(r, ta, tb, partial, marginal, CELL_NEWTON_STEPS)
+        w = dr.clip((th - ta) / (tb - ta), 0.0, 1.0)
+        b = b0 + w * (b1 - b0)
+        v2 = dr.clip(u.y, 0.0, 1.0)
+        small = dr.abs(b) < 1e-4
+        wphi = dr.select(small, v2 * (1.0 + 0.5 * b * (1.0 - v2)),
+                         ratio(log1p(v2 * expm1(b)), b, dr.abs(b) >= 1e-4))
+        wphi = dr.clip(dr.select(wphi == wphi, wphi, v2), 0.0, 1.0)
+        return self._normal_from_standard(_normal(th, (mi.Float(j) + wphi) * t.dphi_fine))
 
     def sample_visible(self, u, k):  # pragma: no cover - guarded by samples_visible
         raise NotImplementedError("anisotropic tables sample slopes of P")
 
 
-def _linear_quantile(v, d0, d1):
-    """``t`` in ``[0, 1]`` with density ``∝ (1 - t) d0 + t d1`` (closed-form quadratic)."""
-    den = d0 + dr.safe_sqrt(d0 * d0 + v * (d1 * d1 - d0 * d0))
-    t = ratio(v * (d0 + d1), den, den > 0)
-    return dr.select(den > 0, dr.clip(t, 0.0, 1.0), v)
+def log1p(x):
+    """``log(1 + x)`` without cancellation (Kahan: ``log(u) x / (u - 1)``, ``u = 1 + x``)."""
+    u = 1.0 + x
+    d = u - 1.0
+    return dr.select(d == 0.0, x, dr.log(u) * ratio(x, d, d != 0.0))
+
+
+def exp_mean(b):
+    """``int_0^1 e^(w b) dw = expm1(b) / b`` (``1 + b / 2`` near 0), as the oracle's."""
+    small = dr.abs(b) < 1e-4
+    return dr.select(small, 1.0 + 0.5 * b, ratio(expm1(b), b, dr.abs(b) >= 1e-4))
 
 
 class _Tables:
@@ -386,6 +438,9 @@ class _Tables:
             self.lobe = TabulatedIsotropicLobe
         else:
             self.n_phi, self.dphi = dist.n_phi, float(dist.dphi)
+            self.n_fine, self.dphi_fine = dist.n_fine, float(dist.dphi_fine)
+            self.n_theta_fine = dist.n_theta_fine
+            self.theta_fine = Table(dist.theta_fine)
             self.log_ndf = Table(dist.log_ndf)
             self.theta_k = Table(dist.theta_k)
             self.n_lambda = len(dist.theta_k)

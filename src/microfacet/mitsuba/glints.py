@@ -1,0 +1,334 @@
+"""``mf_glints``: the patch BRDF of a glint microsurface (``microfacet glints``) as a
+Mitsuba 3 BSDF plugin (Chermain, Claux, Mérillou 2019, Eq. 7-17; Sec. 5 sampling).
+
+Per shading point the footprint ``k_P`` (a Gaussian over uv) gathers the lobes of
+:func:`microfacet.glints.pbrdf.footprint_lobes` (the seeds within ``cutoff`` standard
+deviations of ``Sigma_P + sigma_k^2 I`` per axis, weights ``W_i = exp(-q_i / 2)``,
+normalized) in one Dr.Jit loop over that window, summing the terms of the library's
+compiled ``_footprint_sums``: ``D_P(h)`` (Eq. 9), ``A_P`` and ``V_P`` of both directions
+(Eq. 13-17, ``E[s+]`` of each lobe). ``exact=false`` replaces ``A_P`` by the merged lobe of
+the MIP level matching the footprint (Sec. 4.2.2, :func:`microfacet.glints.pbrdf._merged_area`).
+``eval = F(o.h) D_P G2 / (4 A_P(o))`` (:meth:`PatchBRDF.eval_cos`), ``pdf = D_P z_h / (4 o.h)``;
+``sample`` picks a lobe with probability ``W_i / sum W`` (``sample1``), then a normal of its
+slope distribution (``sample2``, the Beckmann ``erfinv`` map of ``mf_microfacet``).
+The sums run in double precision (footprint weights of far lobes and sharp lobes'
+exponents lose digits in float32).
+
+Footprint: ``Sigma_P = PIXEL_SIGMA^2 (a a^T + b b^T)`` with ``a, b`` the ray differentials
+``si.duv_dx``, ``si.duv_dy`` (times ``uv_scale``) where set, else the ``footprint``
+parameter (a pixel width in texels of the normal map, along u and v): the Gaussian pixel
+filter of ``microfacet glints render`` (:data:`microfacet.glints.figures.PIXEL_SIGMA`).
+A footprint whose window would hold more than ``max_lobes`` lobes is shrunk (its
+covariance scaled) until it fits: the plugin then renders the P-BRDF of that smaller
+footprint (documented limit; the library has none).
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import MicrofacetError
+from ..glints import Microsurface
+from ..glints.figures import PIXEL_SIGMA
+from ..glints.microsurface import FWHM_PER_SIGMA
+from ..glints.pbrdf import G2_MODELS
+from . import bsdf as _bsdf
+from .slopes import BECKMANN, Lobe, ratio
+from .tabulated import Table
+
+__all__ = ["PLUGIN", "bsdf_class", "GlintTables"]
+
+PLUGIN = "mf_glints"
+_ZIP_MAGIC = b"PK\x03\x04"
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_INV_SQRT2 = 1.0 / math.sqrt(2.0)
+_FWHM = float(FWHM_PER_SIGMA)
+
+
+def _load(props, name: str):
+    """The :class:`~microfacet.glints.Microsurface` of the ``.npz`` named by ``name``, or a
+    one-line error naming the parameter and file (an EXR, e.g. a LEADR pyramid, is named)."""
+    if name not in props or props.type(name) != mi.Properties.Type.String:
+        raise _bsdf._error(name, "is required: the .npz written by `microfacet glints`", PLUGIN)
+    path = str(mi.file_resolver().resolve(props[name]))
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        raise _bsdf._error(name, f"cannot read {path!r} ({e.strerror or e})", PLUGIN) from None
+    if head == b"v/1\x01":
+        raise _bsdf._error(name, f"{path!r} is an OpenEXR image (a LEADR pyramid of `microfacet bake`? "
+                                 "use mf_leadr), not a glint microsurface .npz", PLUGIN)
+    try:
+        return Microsurface.load(path)
+    except MicrofacetError as e:
+        raise _bsdf._error(name, f"is not usable: {e}", PLUGIN) from None
+
+
+class GlintTables:
+    """A microsurface's lobes as Dr.Jit tables: central moments ``(mx, my, sxx, syy, sxy)``
+    of level 0 (float64, from the library's raw moments) and, for ``exact=false``, the raw
+    moments of every MIP level (one flat table with per-level sizes and offsets)."""
+
+    def __init__(self, ms, mip: bool):
+        self.ny, self.nx = ms.grid
+        self.height, self.width = ms.resolution
+        self.cutoff = float(ms.cutoff)
+        E = np.asarray(ms.lobe_moments, np.float64)
+        mx, my = E[:, 0], E[:, 1]
+        central = np.stack([mx, my, E[:, 2] - mx * mx, E[:, 3] - my * my, E[:, 4] - mx * my], -1)
+        self.central = Table(central, "float64")
+        self.levels = len(ms.mip) if mip else 0
+        if mip:
+            levels = [np.asarray(ms.mip[k], np.float64) for k in range(self.levels)]
+            offsets = np.cumsum([0] + [lv.shape[0] * lv.shape[1] for lv in levels])[:-1]
+            self.mip = Table(np.concatenate([lv.ravel() for lv in levels]), "float64")
+            self.mip_nx = Table([lv.shape[1] for lv in levels], "float64")
+            self.mip_ny = Table([lv.shape[0] for lv in levels], "float64")
+            self.mip_offset = Table(offsets, "float64")
+
+
+def _window(cu, cv, sxx, syy, sxy, nx, ny, cutoff):
+    """Seed window (first index and count per axis) and inverse covariance ``(iuu, ivv,
+    iuv)`` of the footprint plus the kernel of ``nx x ny`` seeds (the window and weights of
+    :func:`microfacet.glints.pbrdf.footprint_lobes`)."""
+    kx, ky = (1.0 / nx / _FWHM) ** 2, (1.0 / ny / _FWHM) ** 2
+    sxx, syy = sxx + kx, syy + ky
+    det = sxx * syy - sxy * sxy
+    rx, ry = cutoff * dr.sqrt(sxx), cutoff * dr.sqrt(syy)
+    x0, y0 = dr.ceil((cu - rx) * nx - 0.5), dr.ceil((cv - ry) * ny - 0.5)
+    cx = dr.maximum(dr.floor((cu + rx) * nx - 0.5) - x0 + 1.0, 0.0)
+    cy = dr.maximum(dr.floor((cv + ry) * ny - 0.5) - y0 + 1.0, 0.0)
+    return x0, y0, cx, cy, syy / det, sxx / det, -sxy / det
+
+
+def _walk(cu, cv, cov, nx, ny, cutoff, state, body):
+    """``state = body(index, W, state)`` over the window's seeds (row-major, index wrapped
+    into ``nx x ny``; ``W = exp(-q / 2)`` unnormalized), one ``dr.while_loop``."""
+    x0, y0, cx, cy, iuu, ivv, iuv = _window(cu, cv, *cov, nx, ny, cutoff)
+    n = cx * cy
+
+    def step(j, s):
+        r = dr.floor(j / cx)
+        ix, iy = x0 + (j - r * cx), y0 + r
+        du, dv = (ix + 0.5) / nx - cu, (iy + 0.5) / ny - cv
+        w = dr.exp(-0.5 * (iuu * du * du + ivv * dv * dv + 2.0 * iuv * du * dv))
+        index = (iy - ny * dr.floor(iy / ny)) * nx + (ix - nx * dr.floor(ix / nx))
+        return j + 1.0, body(index, w, s)
+
+    j = 0.0 * n
+    _, state = dr.while_loop(state=(j, state), cond=lambda j, s: j < n, body=lambda j, s: step(j, s))
+    return state
+
+
+def _area(c, var):
+    """``E[s+]`` of ``s ~ N(c, var)`` (:func:`microfacet.glints.pbrdf.lobe_projected_area`):
+    ``c Phi(c / sigma) + sigma phi(c / sigma)``, ``max(c, 0)`` at ``sigma = 0``."""
+    sg = dr.sqrt(dr.maximum(var, 0.0))
+    t = ratio(c, sg, sg > 0)
+    area = c * 0.5 * (1.0 + dr.erf(t * _INV_SQRT2)) + sg * _INV_SQRT_2PI * dr.exp(-0.5 * t * t)
+    return dr.select(sg > 0, area, dr.maximum(c, 0.0))
+
+
+def _lobe_areas(k, mx, my, sxx, syy, sxy):
+    """``(max(c, 0), E[s+])`` of one lobe toward ``k`` (Eq. 13, 17), ``c = z - x mx - y my``."""
+    x, y, z = k
+    c = z - x * mx - y * my
+    return dr.maximum(c, 0.0), _area(c, x * x * sxx + 2.0 * x * y * sxy + y * y * syy)
+
+
+_CLASSES: dict[str, type] = {}
+
+
+def bsdf_class() -> type:
+    """The ``mf_glints`` class for the current Mitsuba variant (built once per variant)."""
+    variant = mi.variant()
+    if variant not in _CLASSES:
+        _CLASSES[variant] = _make_class()
+    return _CLASSES[variant]
+
+
+def _make_class() -> type:
+    if not mi.is_rgb or mi.is_polarized:
+        raise RuntimeError(f"{PLUGIN} needs an RGB variant, not {mi.variant()}")
+    Base = _bsdf.bsdf_class()
+    F64 = mi.Float64
+
+    class GlintsBSDF(Base):
+        """Mitsuba BSDF of :class:`microfacet.glints.PatchBRDF` (see the module docstring)."""
+
+        PLUGIN_NAME = PLUGIN
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            ms = _load(props, "filename")
+            self.filename = props["filename"]
+            self.exact = _bsdf._flag(props, "exact", True, PLUGIN)
+            self.g2 = _bsdf._choice(props, "g2", "correlated", G2_MODELS, PLUGIN)
+            self.uv_scale = float(props.get("uv_scale", 1.0))
+            self.footprint = float(props.get("footprint", 1.0))
+            self.max_lobes = int(props.get("max_lobes", 1024))
+            for name, v, ok, what in (("uv_scale", self.uv_scale, self.uv_scale > 0, "> 0"),
+                                      ("footprint", self.footprint, self.footprint >= 0, ">= 0"),
+                                      ("max_lobes", self.max_lobes, self.max_lobes >= 16, ">= 16")):
+                if not (math.isfinite(v) and ok):
+                    raise _bsdf._error(name, f"must be a finite number {what}, got {v!r}", PLUGIN)
+            self.t = GlintTables(ms, mip=not self.exact)
+            self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+            self._init_fresnel(props)
+            flags = (mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
+                     | mi.BSDFFlags.SpatiallyVarying)
+            if hasattr(mi.BSDFFlags, "NeedsDifferentials"):
+                flags = flags | mi.BSDFFlags.NeedsDifferentials
+            self.m_components = [flags]
+            self.m_flags = flags
+
+        # ------------------------------------------------------------ footprint
+        def footprint_cov(self, si):
+            """Centre (wrapped into the unit square) and covariance ``(uu, vv, uv)`` of the
+            footprint (module docstring), shrunk to fit ``max_lobes`` (double precision)."""
+            t = self.t
+            a, b = si.duv_dx * self.uv_scale, si.duv_dy * self.uv_scale
+            has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
+            ax, ay = F64(dr.select(has, a.x, self.footprint / t.width)), F64(dr.select(has, a.y, 0.0))
+            bx, by = F64(dr.select(has, b.x, 0.0)), F64(dr.select(has, b.y, self.footprint / t.height))
+            s2 = PIXEL_SIGMA * PIXEL_SIGMA
+            suu, svv, suv = s2 * (ax * ax + bx * bx), s2 * (ay * ay + by * by), s2 * (ax * ay + bx * by)
+            # per axis at most L = floor(sqrt(max_lobes)) seeds: sd_total <= (L - 1) / (2 cutoff n)
+            side = float(math.floor(math.sqrt(self.max_lobes)) - 1) / (2.0 * t.cutoff)
+            scale = 1.0
+            for s, n in ((suu, t.nx), (svv, t.ny)):
+                cap = (side / n) ** 2 - (1.0 / n / _FWHM) ** 2
+                scale = dr.minimum(scale, dr.select(s > cap, cap / dr.maximum(s, 1e-300), 1.0))
+            u, v = F64(si.uv.x) * self.uv_scale, F64(si.uv.y) * self.uv_scale
+            return u - dr.floor(u), v - dr.floor(v), (suu * scale, svv * scale, suv * scale)
+
+        def _sums(self, si, h, wi, wo):
+            """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the footprint (Eq. 9, 13-17),
+            as ``_footprint_sums``; with ``exact=false`` ``A_P`` from the merged lobe."""
+            t = self.t
+            cu, cv, cov = self.footprint_cov(si)
+            hz = F64(h.z)
+            xh, yh = -F64(h.x) / hz, -F64(h.y) / hz
+            ki = (F64(wi.x), F64(wi.y), F64(wi.z))
+            ko = (F64(wo.x), F64(wo.y), F64(wo.z))
+
+            def body(index, w, s):
+                mx, my, sxx, syy, sxy = (t.central[5 * index + c] for c in range(5))
+                det = sxx * syy - sxy * sxy
+                gx, gy = xh - mx, yh - my
+                q = (syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy) / det
+                d = dr.exp(-0.5 * q) / (2.0 * math.pi * dr.sqrt(det))
+                ai, vi = _lobe_areas(ki, mx, my, sxx, syy, sxy)
+                ao, vo = _lobe_areas(ko, mx, my, sxx, syy, sxy)
+                return [acc + w * x for acc, x in zip(s, (1.0, d, ai, vi, ao, vo))]
+
+            zero = 0.0 * cu
+            ws, d, ai, vi, ao, vo = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero] * 6, body)
+            ok = ws > 0
+            d, ai, vi, ao, vo = (ratio(x, ws, ok) for x in (d, ai, vi, ao, vo))
+            if not self.exact:
+                m = self._merged(cu, cv, cov)
+                ai, vi = self._merged_area(vi, m, ki)
+                ao, vo = self._merged_area(vo, m, ko)
+            return d / (hz * hz * hz * hz), ai, vi, ao, vo      # D_P(h) = P_P(h~) / z_h^4 (Eq. 9)
+
+        def _merged(self, cu, cv, cov):
+            """Raw moments of the footprint's merged lobe (Sec. 4.2.2: ``W``-weighted average
+            over the MIP level of :meth:`LobeMixture.mip_level`)."""
+            t = self.t
+            suu, svv, suv = cov
+            half = 0.5 * (suu + svv)
+            sd = dr.sqrt(half + dr.sqrt(dr.maximum(0.25 * (suu - svv) ** 2 + suv * suv, 0.0)))
+            spacing = 1.0 / max(t.nx, t.ny)
+            lev = dr.select(sd > spacing, dr.floor(dr.log2(dr.maximum(sd, 1e-300) / spacing)), 0.0)
+            lev = dr.clip(lev, 0.0, float(t.levels - 1))
+            nx, ny, off = t.mip_nx[lev], t.mip_ny[lev], t.mip_offset[lev]
+
+            def body(index, w, s):
+                base = 5.0 * (off + index)
+                return [s[0] + w] + [acc + w * t.mip[base + c] for c, acc in enumerate(s[1:])]
+
+            zero = 0.0 * cu
+            s = _walk(cu, cv, cov, nx, ny, t.cutoff, [zero] * 6, body)
+            return [ratio(x, s[0], s[0] > 0) for x in s[1:]]
+
+        @staticmethod
+        def _merged_area(v, m, k):
+            """``(A_P, V_P)`` with ``A_P = V_P c_m+ / V_m`` (:func:`..glints.pbrdf._merged_area`)."""
+            e1, e2, e3, e4, e5 = m
+            c, vm = _lobe_areas(k, e1, e2, e3 - e1 * e1, e4 - e2 * e2, e5 - e1 * e2)
+            return dr.select((vm > 0) & (c > 0), v * ratio(c, vm, vm > 0), 0.0), v
+
+        def _g2_over_ao(self, ai, vi, ao, vo):
+            """``G2 / A_P(o)`` (:func:`microfacet.glints.pbrdf._g2_over_ao`)."""
+            den = vo * vi if self.g2 == "separable" else vo * ai + ao * (vi - ai)
+            return dr.select((den > 0) & (ai > 0), ratio(ai, den, den > 0), 0.0)
+
+        # ------------------------------------------------------------ Mitsuba API
+        def _eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
+            view = si.wi
+            active = active & (light.z > 0) & (view.z > 0)
+            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
+                active = active & False
+            h = dr.normalize(light + view)
+            oh = dr.dot(view, h)
+            active &= (oh > 0) & (h.z > 0)
+            d, ai, vi, ao, vo = self._sums(si, h, light, view)
+            value = pdf = None
+            if want_value:
+                s = mi.Float(d * self._g2_over_ao(ai, vi, ao, vo) * 0.25)
+                value = dr.select(active, self._fresnel(si, oh, active) * s, 0.0)
+            if want_pdf:
+                pdf = dr.select(active, mi.Float(d * F64(h.z) / (4.0 * F64(oh))), 0.0)
+            return value, pdf
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            """Lobe ``i`` with probability ``W_i / sum W`` (``sample1``), a normal of its slope
+            density (``sample2``), the view reflected about it (Sec. 5); weight ``eval / pdf``."""
+            t = self.t
+            view = si.wi
+            active = active & (view.z > 0)
+            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
+                active = active & False
+            cu, cv, cov = self.footprint_cov(si)
+            zero = 0.0 * cu
+            ws = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero], lambda i, w, s: [s[0] + w])[0]
+            target = F64(sample1) * ws
+
+            def pick(index, w, s):
+                acc, chosen, last = s
+                take = (acc <= target) & (acc + w > target)
+                return [acc + w, dr.select(take, index, chosen), index]
+
+            _, chosen, last = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero, zero - 1.0, zero], pick)
+            chosen = dr.select(chosen < 0, last, chosen)    # sample1 * ws rounded up to ws
+            mx, my, sxx, syy, sxy = (t.central[5 * chosen + c] for c in range(5))
+            ax, ay = dr.sqrt(2.0 * sxx), dr.sqrt(2.0 * syy)
+            lobe = Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, 2.0 * sxy / (ax * ay), mx, my)))
+            h = lobe.sample_p22(sample2)
+            oh = dr.dot(view, h)
+            light = 2.0 * oh * h - view
+            value, pdf = self._eval_pdf(ctx, si, light, active & (light.z > 0))
+            active &= (pdf > 0) & (light.z > 0)
+            bs = dr.zeros(mi.BSDFSample3f)
+            bs.wo = light
+            bs.pdf = dr.select(active, pdf, 0.0)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+            bs.sampled_component = mi.UInt32(0)
+            return bs, dr.select(active, value / dr.select(active, pdf, 1.0), 0.0)
+
+        def traverse(self, callback):
+            callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
+
+        def to_string(self):
+            return (f"GlintsBSDF[{PLUGIN}, filename={self.filename!r}, lobes={self.t.nx}x{self.t.ny}, "
+                    f"exact={self.exact}, g2={self.g2}, uv_scale={self.uv_scale}, "
+                    f"footprint={self.footprint}, max_lobes={self.max_lobes}]")
+
+    GlintsBSDF.__name__ = GlintsBSDF.__qualname__ = "GlintsBSDF"
+    return GlintsBSDF
