@@ -79,10 +79,8 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
         raise MicrofacetError(f"{path}: not a PNG file (bad signature)")
     try:
         a = imagecodecs.png_decode(data)
-    except UnicodeDecodeError:  # libpng's message itself was garbled: say no more than that
-        raise MicrofacetError(f"{path}: unreadable or corrupt PNG") from None
-    except Exception as e:  # libpng errors come as PngError, ValueError, ...
-        raise MicrofacetError(f"{path}: unreadable or corrupt PNG ({' '.join(str(e).split())})") from None
+    except Exception:  # PngError, ValueError, ...: libpng's message may hold garbage bytes, so not echoed
+        raise MicrofacetError(f"{path}: unreadable or corrupt PNG (libpng could not decode it)") from None
     if a.dtype not in (np.uint8, np.uint16) or a.ndim not in (2, 3) or 0 in a.shape:
         raise MicrofacetError(f"{path}: unsupported PNG sample layout ({a.dtype}, shape {a.shape})")
     return a
