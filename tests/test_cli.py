@@ -11,7 +11,7 @@ from microfacet.cli import main
 from microfacet.demo import LEADR_STEPS, fit_examples, thesis_figures
 from microfacet.io import read_exr
 
-SMALL = ["--size", "16", "--spp", "2", "--no-viewer"]   # the viewer section: tests/test_viewer.py
+SMALL = ["--size", "16", "--spp", "2", "--no-viewer", "--no-mitsuba"]   # tests/test_viewer.py, test_mitsuba_demo.py
 
 
 def run_cli(*args):

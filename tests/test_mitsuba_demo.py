@@ -34,3 +34,8 @@ def test_section_writes_images_and_timed_html(tmp_path):
 def test_section_rejects_bad_sizes(tmp_path):
     with pytest.raises(ValueError, match="spp"):
         demo_section(tmp_path, spp=0)
+
+
+def test_run_demo_counts_the_section_steps():
+    from microfacet.demo import MITSUBA_STEPS
+    assert MITSUBA_STEPS == STEPS

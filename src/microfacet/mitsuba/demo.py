@@ -259,7 +259,7 @@ def _glints(mi, folder: Path, size: int, spp: int, tick) -> str:
 
 
 #: Progress steps of :func:`demo_section` (renders).
-STEPS = 2 * 4 + 3 + 1
+STEPS = 2 * 4 + 3 + 1   # microfacet.demo.MITSUBA_STEPS (tested equal)
 
 
 def demo_section(out, size: int = 96, spp: int = 64, reference_spp: int = 1024, variant: str | None = None,
