@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import html_grid, write_exr, write_png
+
 __all__ = ["demo_section", "choose_variant", "relative_rms"]
 
 _LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); import drjit as dr; "
@@ -64,7 +66,6 @@ def _render(mi, scene: dict, spp: int, seed: int = 0) -> tuple[np.ndarray, float
 
 
 def _save(folder: Path, stem: str, image: np.ndarray, exposure: float = 0.0) -> str:
-    from ..io import write_exr, write_png
     write_exr(folder / f"{stem}.exr", image)
     write_png(folder / f"{stem}.png", image, exposure)
     return f"mitsuba/{stem}.png"
@@ -103,7 +104,6 @@ def _materials(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) 
     from .. import fit as fitting
     from ..demo import fit_examples
     from ..render import procedural_sky
-    from ..io import write_exr
     env = write_exr(folder / "environment.exr", procedural_sky())
     rows, table = [], []
     for ex in fit_examples():
@@ -133,7 +133,6 @@ def _materials(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) 
         table.append((ex.label, t_fit))
     notes = "".join(f"<li>{escape(label)}: fitted in {t:.2f} s (resolution {FIT_RESOLUTION})</li>"
                     for label, t in table)
-    from ..io import html_grid
     return (f"<h3>Fitted materials on spheres</h3><p>{escape(_MATERIALS_TEXT.format(size=size, spp=spp, ref=reference_spp))}</p>"
             f"{html_grid(rows)}<ul>{notes}</ul>")
 
@@ -191,7 +190,6 @@ def _footprint_integrator(mi) -> str:
 
 def _leadr(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) -> str:
     """Scene 2: a LEADR plane receding to the horizon: naive MIP vs mf_leadr vs reference."""
-    from ..io import html_grid
     from ..leadr import bake, naive_pyramid, write_pyramid
     from ..leadr.figures import default_heightfield
     side = 256 if size >= 64 else 64
@@ -234,7 +232,6 @@ def _glints(mi, folder: Path, size: int, spp: int, tick) -> str:
     """Scene 3: a scratched glint plane under a small point light (mf_glints)."""
     from ..glints import Microsurface
     from ..glints.figures import scratched_normal_map
-    from ..io import html_grid
     side = 256 if size >= 64 else 32
     t = time.perf_counter()
     normals = scratched_normal_map(side, scratches=max(4, int(160 * (side / 512) ** 2)), seed=0)
