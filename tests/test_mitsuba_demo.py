@@ -15,10 +15,12 @@ pytest.importorskip("drjit", reason="the Mitsuba plugins need drjit (installed w
 from microfacet.mitsuba.demo import STEPS, demo_section  # noqa: E402
 
 
-def test_section_writes_images_and_timed_html(tmp_path):
+@pytest.mark.parametrize("variant", [None, "scalar_rgb"])     # None: llvm_ad_rgb where it runs
+def test_section_writes_images_and_timed_html(tmp_path, variant):
     steps = []
-    html = demo_section(tmp_path, size=16, spp=2, reference_spp=8, progress=steps.append)
+    html = demo_section(tmp_path, size=16, spp=2, reference_spp=8, variant=variant, progress=steps.append)
     assert html.startswith('<section id="mitsuba">') and html.endswith("</section>")
+    assert variant is None or f"variant {variant}" in html
     assert sum(steps) == STEPS
     sources = re.findall(r'<img src="([^"]+)"', html)
     assert len(sources) == 2 * 3 + 3 + 1

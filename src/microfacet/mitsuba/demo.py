@@ -171,10 +171,14 @@ def _footprint_integrator(mi) -> str:
             if self.footprint:
                 si.compute_uv_partials(ray)
             hit = si.is_valid()
-            bsdf = si.bsdf(ray)
+            scalar = isinstance(hit, bool)                   # scalar variants: one ray per call
+            bsdf = si.bsdf(ray) if hit or not scalar else None
+            env = scene.environment()
             ds, weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, hit)
-            value = bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), hit) * weight
-            background = si.emitter(scene).eval(si, ~hit)
+            value = (bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), hit) * weight
+                     if bsdf is not None else mi.Color3f(0.0))
+            miss = (not hit) if scalar else ~hit
+            background = env.eval(si, miss) if env is not None else mi.Color3f(0.0)
             return dr.select(hit, value, background), dr.full(mi.Bool, True), []
 
         def aov_names(self):
@@ -259,22 +263,29 @@ def _glints(mi, folder: Path, size: int, spp: int, tick) -> str:
 STEPS = 2 * 4 + 3 + 1   # microfacet.demo.MITSUBA_STEPS (tested equal)
 
 
-def demo_section(out, size: int = 96, spp: int = 64, reference_spp: int = 1024, variant: str | None = None,
-                 progress=None) -> str:
+#: ``(size, spp, reference_spp)`` defaults of :func:`demo_section`: vectorized (llvm) and
+#: scalar variants (Python runs per ray there: a few 10^4 rays per second).
+DEFAULTS = {"llvm": (96, 64, 1024), "scalar": (32, 4, 32)}
+
+
+def demo_section(out, size: int | None = None, spp: int | None = None, reference_spp: int | None = None,
+                 variant: str | None = None, progress=None) -> str:
     """Render the Mitsuba scenes under ``out/mitsuba/`` and return the HTML section.
 
     ``size``: image side in pixels (the LEADR plane is ``size × size/2``); ``spp``: samples
-    per pixel (``reference_spp`` for the LEADR reference); ``variant``: a Mitsuba RGB
-    variant, default :func:`choose_variant`. ``progress(n)`` is called as renders
-    complete. Raises ``ImportError`` without Mitsuba.
+    per pixel (``reference_spp`` for the references); ``None`` takes :data:`DEFAULTS` of
+    the variant; ``variant``: a Mitsuba RGB variant, default :func:`choose_variant`.
+    ``progress(n)`` is called as renders complete. Raises ``ImportError`` without Mitsuba.
     """
+    variant = choose_variant() if variant is None else variant
+    defaults = DEFAULTS["scalar" if variant.startswith("scalar") else "llvm"]
+    size, spp, reference_spp = (d if v is None else v for v, d in zip((size, spp, reference_spp), defaults))
     for name, v, lo in (("size", size, 8), ("spp", spp, 1), ("reference_spp", reference_spp, 1)):
         if isinstance(v, bool) or int(v) != v or v < lo:
             raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
     import mitsuba as mi
 
     from . import register
-    variant = choose_variant() if variant is None else variant
     mi.set_variant(variant)
     register()
     tick = progress if progress is not None else (lambda n=1: None)
