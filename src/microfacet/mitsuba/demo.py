@@ -172,7 +172,7 @@ def _footprint_integrator(mi) -> str:
                 si.compute_uv_partials(ray)
             hit = si.is_valid()
             scalar = isinstance(hit, bool)                   # scalar variants: one ray per call
-            bsdf = si.bsdf(ray) if hit or not scalar else None
+            bsdf = si.bsdf(ray) if not scalar or hit else None
             env = scene.environment()
             ds, weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, hit)
             value = (bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), hit) * weight
