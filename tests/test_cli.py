@@ -11,7 +11,7 @@ from microfacet.cli import main
 from microfacet.demo import LEADR_STEPS, fit_examples, thesis_figures
 from microfacet.io import read_exr
 
-SMALL = ["--size", "16", "--spp", "2", "--no-viewer"]   # the viewer section: tests/test_viewer.py
+SMALL = ["--size", "16", "--spp", "2", "--no-viewer", "--no-mitsuba"]   # tests/test_viewer.py, test_mitsuba_demo.py
 
 
 def run_cli(*args):
@@ -116,3 +116,14 @@ def test_demo_images_are_finite_and_lit(demo_dir):
             for light in ("directional", "environment"):
                 img = read_exr(demo_dir / fig.key / f"{p.key}-{light}.exr")
                 assert np.isfinite(img).all() and img.max() > 0, (fig.key, p.key, light)
+
+
+def test_demo_mitsuba_section_without_mitsuba_is_a_note(tmp_path, monkeypatch):
+    """Where microfacet.mitsuba.demo cannot be imported (no Mitsuba), the section says so
+    and a warning is printed; the rest of the demo runs."""
+    from microfacet.demo import _mitsuba_section
+    monkeypatch.setitem(sys.modules, "microfacet.mitsuba.demo", None)   # import raises ImportError
+    with pytest.warns(RuntimeWarning, match="Mitsuba section skipped"):
+        html = _mitsuba_section(tmp_path)
+    assert html.startswith('<section id="mitsuba">') and "Skipped on this machine" in html
+    assert not (tmp_path / "mitsuba").exists()

@@ -372,6 +372,7 @@ def default_workers() -> int:
 LEADR_LEVELS = (1, 2, 3, 4, 5)
 LEADR_STEPS = 2 * 3 * len(LEADR_LEVELS)   # progress steps of leadr_section (lights x images x levels)
 GLINTS_STEPS = 4                           # progress steps of glints_section
+MITSUBA_STEPS = 12                         # progress steps of microfacet.mitsuba.demo (tested equal)
 
 
 def _viewer_section(out) -> str:
@@ -390,11 +391,25 @@ def _viewer_section(out) -> str:
                 "</section>")
 
 
+def _mitsuba_section(out, progress=None) -> str:
+    """The Mitsuba 3 section, or a note saying why it is missing (no Mitsuba, or a Mitsuba
+    that cannot run a variant)."""
+    try:
+        from .mitsuba.demo import demo_section
+        return demo_section(out, progress=progress)
+    except (ImportError, RuntimeError) as e:
+        why = " ".join(str(e).split())
+        warnings.warn(f"demo: Mitsuba section skipped: {why}", RuntimeWarning, stacklevel=2)
+        return (f'<section id="mitsuba"><h2>Rendering in Mitsuba 3</h2>'
+                f"<p>Skipped on this machine: {escape(why)} (pip install 'microfacet[mitsuba]').</p>"
+                "</section>")
+
+
 def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED,
              workers: int = 1, progress: bool = False,
              figures: Sequence[DemoFigure] | None = None,
              fits: Sequence[FitExample] | None = None, leadr: bool = True, glints: bool = True,
-             viewer: bool = True) -> Path:
+             viewer: bool = True, mitsuba: bool = True) -> Path:
     """Render every figure into ``out_dir`` and write ``out_dir/index.html`` (last).
 
     Parameters
@@ -422,6 +437,10 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         Include the real-time section (the WebGL2 viewer's renders in headless Chromium
         beside the NumPy renders, :func:`microfacet.glsl.demo_section`); where Playwright or
         Chromium is missing the section says so and a warning is printed.
+    mitsuba : bool
+        Include the Mitsuba 3 section (the ``microfacet.mitsuba`` plugins in scenes,
+        :func:`microfacet.mitsuba.demo.demo_section`); where Mitsuba is missing the section
+        says so and a warning is printed.
 
     The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
     environment samples of panel ``j`` of figure ``i`` come from
@@ -440,7 +459,7 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     env_map = procedural_sky()
     examples = fit_examples() if fits is None else list(fits)
     total = (sum(len(f.panels) + 1 for f in figures) + 1 + len(examples) + (LEADR_STEPS if leadr else 0)
-             + (GLINTS_STEPS if glints else 0))
+             + (GLINTS_STEPS if glints else 0) + (MITSUBA_STEPS if mitsuba else 0))
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
         tasks = [[pool.submit(render_panel, p.brdf, f.light, size, env_map, spp, (seed, i, j))
@@ -472,6 +491,8 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         if glints:
             from .glints.figures import glints_section
             sections.append(glints_section(out, progress=bar.update))
+        if mitsuba:
+            sections.append(_mitsuba_section(out, progress=bar.update))
         if viewer:
             sections.append(_viewer_section(out))
     title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4), LEADR (Fig. 5.3) and glints"

@@ -27,12 +27,15 @@ def add(sub) -> None:
                    help="worker processes (default: usable CPUs, at most 4); results do not depend on it")
     p.add_argument("--no-viewer", action="store_true",
                    help="leave out the real-time section (WebGL2 viewer renders in headless Chromium, ~35 s)")
+    p.add_argument("--no-mitsuba", action="store_true",
+                   help="leave out the Mitsuba 3 section (the microfacet.mitsuba plugins in scenes)")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
     from ..demo import default_workers, run_demo
     index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
-                     workers=args.jobs or default_workers(), progress=sys.stderr.isatty(), viewer=not args.no_viewer)
+                     workers=args.jobs or default_workers(), progress=sys.stderr.isatty(), viewer=not args.no_viewer,
+                     mitsuba=not args.no_mitsuba)
     print(index)
     return 0
