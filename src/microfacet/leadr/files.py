@@ -35,7 +35,7 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -
 
     ``compression`` is a lossless name of :data:`microfacet.io.exr.COMPRESSIONS`. The default
     ``none`` is chosen by measurement (README, "LEAN/LEADR"): float32 moments barely compress
-    (``zip`` saves 7-26 % of the bytes at ~10x the write time on a 4096² map)."""
+    (``zip`` saves 0-16 % of the bytes at 4-10x the write time on a 4096² map)."""
     compression_type = exr_compression(compression)
     levels = [np.asarray(level) for level in pyramid]
     if not levels:
