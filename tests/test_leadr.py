@@ -470,6 +470,17 @@ def test_cli_bake_writes_pyramid_and_preview(height_png, tmp_path, capsys):
     assert png.dtype == np.uint8 and png.ndim == 3 and png.shape[1] > png.shape[0] and png.std() > 0
 
 
+def test_cli_bake_compression(height_png, tmp_path, capsys):
+    import OpenEXR
+    out = tmp_path / "z.exr"
+    assert main(["bake", str(height_png), "-o", str(out), "--compression", "zip"]) == 0
+    assert OpenEXR.File(str(out)).parts[0].header["compression"] == OpenEXR.ZIP_COMPRESSION
+    for a, b in zip(leadr.read_pyramid(out), leadr.bake(load_height_map(height_png)), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert main(["bake", str(height_png), "-o", str(out), "--compression", "dwaa"]) == 2
+    assert "invalid choice: 'dwaa'" in capsys.readouterr().err
+
+
 def test_cli_bake_normal_map_and_material(tmp_path, capsys):
     slopes = np.random.default_rng(21).uniform(-0.5, 0.5, (24, 24, 2))
     write_png_data(tmp_path / "nmap.png", leadr.encode_normal_map(slopes, np.uint16))
