@@ -14,9 +14,15 @@ faults that bake's fresh outputs pay too) and converts it into two bounds:
 - *as implemented*: level 0 is written, then each level is read to build the next
   (``4 HW + 20 HW + 2 * 20 HW * 4/3 - 20 HW``, roughly).
 
+``--write DIR`` also times ``write_pyramid`` (atomic, fsync'd, OpenEXR on all cores) into
+fresh files in ``DIR`` with every lossless compression, on this noise map's pyramid and on a
+smooth Gaussian surface's quantized to 16 bits like a PNG height map (``gaussian_heightfield``,
+alpha 0.3): best of ``--repeats``, file
+size, ``read_pyramid`` time and a bit-exact round-trip check.
+
 Usage::
 
-    python benchmarks/bench_leadr.py [--size 4096] [--repeats 3] [--reference] [--json out.json]
+    python benchmarks/bench_leadr.py [--size 4096] [--repeats 3] [--reference] [--write DIR] [--json out.json]
 """
 from __future__ import annotations
 
@@ -31,6 +37,7 @@ import numba
 import numpy as np
 
 from microfacet import leadr
+from microfacet.io.exr import COMPRESSIONS
 from microfacet.leadr.mip import downsample, mip_sizes
 
 GOAL_S = 1.0
@@ -56,11 +63,34 @@ def pyramid_bytes(h: int, w: int) -> tuple[int, int]:
     return minimal, implemented
 
 
+def time_writes(pyramid, folder: str, repeats: int) -> dict:
+    """Per lossless compression: best write time of ``repeats`` into a fresh file, size,
+    read time and whether the round trip is bit-exact."""
+    out = {}
+    path = os.path.join(folder, "bench_leadr_pyramid.exr")
+    for name in COMPRESSIONS:
+        times = []
+        for _ in range(repeats):
+            if os.path.exists(path):
+                os.unlink(path)                   # a fresh file each time, as `bake` writes one
+            t0 = time.perf_counter()
+            leadr.write_pyramid(path, pyramid, compression=name)
+            times.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        back = leadr.read_pyramid(path)
+        read_s = time.perf_counter() - t0
+        out[name] = {"write_best_s": min(times), "bytes": os.path.getsize(path), "read_s": read_s,
+                     "exact": all(np.array_equal(a, b) for a, b in zip(pyramid, back, strict=True))}
+        os.unlink(path)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", type=int, default=4096)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--reference", action="store_true", help="also time the NumPy reference (slow, ~2 GB)")
+    ap.add_argument("--write", metavar="DIR", help="also time write_pyramid per compression into DIR")
     ap.add_argument("--json", metavar="FILE")
     args = ap.parse_args()
     n = args.size
@@ -115,6 +145,16 @@ def main() -> None:
           f"{res['bound_minimal_copyto_s']:.3f} s ({res['bound_minimal_copy_fresh_s']:.3f} s with page faults)")
     print(f"  bandwidth bound, as implemented {implemented / 1e6:.0f} MB: "
           f"{res['bound_implemented_copyto_s']:.3f} s ({res['bound_implemented_copy_fresh_s']:.3f} s with page faults)")
+    if args.write:
+        g = leadr.gaussian_heightfield((n, n), 0.3, seed=0)
+        g16 = np.round((g - g.min()) / np.ptp(g) * 65535) / 65535    # as a 16-bit PNG reads
+        maps = {"noise": height, "gaussian16": g16}
+        res["write"] = {m: time_writes(leadr.bake(h), args.write, args.repeats) for m, h in maps.items()}
+        for m, rows in res["write"].items():
+            print(f"  write_pyramid, {m} map (best of {args.repeats}, fresh file):")
+            for name, r in rows.items():
+                print(f"    {name:5s} {r['write_best_s']:6.3f} s  {r['bytes'] / 2**20:6.1f} MiB  "
+                      f"read {r['read_s']:.3f} s  {'exact' if r['exact'] else 'NOT EXACT'}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(res, f, indent=2)

@@ -8,6 +8,7 @@ import pytest
 from PIL import Image
 
 import microfacet as mf
+from microfacet.io.exr import COMPRESSIONS, exr_threads
 from microfacet.io import (atomic_path, html_figure, html_grid, html_page, read_exr, read_png_data,
                            srgb_encode, to_srgb8, write_exr, write_png, write_png_data, write_text)
 
@@ -30,6 +31,21 @@ def test_exr_round_trip_rgb_is_float32_exact(tmp_path, rgb):
     assert back.dtype == np.float64 and back.shape == (5, 7, 3)
     np.testing.assert_array_equal(back, rgb.astype(np.float32))
     assert leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("compression", sorted(COMPRESSIONS))
+def test_exr_every_compression_is_float32_exact(tmp_path, compression):
+    img = np.random.default_rng(5).standard_normal((41, 9, 4)) * 1e3
+    path = write_exr(tmp_path / "z.exr", img, compression=compression)
+    np.testing.assert_array_equal(read_exr(path), img.astype(np.float32))
+    assert OpenEXR.File(str(path)).header()["compression"] == COMPRESSIONS[compression]
+
+
+def test_exr_threads_uses_the_cores_and_restores_the_count():
+    before = OpenEXR.global_thread_count()
+    with exr_threads():
+        assert OpenEXR.global_thread_count() == len(os.sched_getaffinity(0))
+    assert OpenEXR.global_thread_count() == before
 
 
 def test_exr_keeps_orientation_and_channels(tmp_path):

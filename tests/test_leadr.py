@@ -12,6 +12,7 @@ from microfacet import leadr
 from microfacet.cli import main
 from microfacet.errors import MicrofacetError
 from microfacet.io import write_exr
+from microfacet.io.exr import COMPRESSIONS
 from microfacet.io.png import read_png_data, write_png_data
 from microfacet.leadr.files import load_height_map, load_normal_map
 from microfacet.leadr.heightfield import slope_spectrum
@@ -411,6 +412,26 @@ def test_pyramid_exr_round_trip(tmp_path):
     assert sorted(parts[1].channels) == ["E1", "E2", "E3", "E4", "E5"]
 
 
+@pytest.mark.parametrize("compression", sorted(COMPRESSIONS))
+def test_pyramid_every_lossless_compression_is_exact(tmp_path, compression):
+    pyr = leadr.bake(leadr.gaussian_heightfield((70, 45), 0.3, seed=3), roughness=0.05)   # > 1 PIZ block
+    path = leadr.write_pyramid(tmp_path / "p.exr", pyr, compression=compression)
+    for a, b in zip(pyr, leadr.read_pyramid(path), strict=True):
+        np.testing.assert_array_equal(a, b)
+    import OpenEXR
+    assert {p.header["compression"] for p in OpenEXR.File(str(path)).parts} == {COMPRESSIONS[compression]}
+
+
+def test_pyramid_default_is_uncompressed_and_lossy_compressions_refused(tmp_path):
+    pyr = leadr.bake(leadr.gaussian_heightfield((8, 8), 0.3, seed=3))
+    path = leadr.write_pyramid(tmp_path / "p.exr", pyr)
+    import OpenEXR
+    assert OpenEXR.File(str(path)).parts[0].header["compression"] == OpenEXR.NO_COMPRESSION
+    with pytest.raises(ValueError, match="EXR compression must be one of .*got 'dwaa'"):
+        leadr.write_pyramid(tmp_path / "q.exr", pyr, compression="dwaa")
+    assert not (tmp_path / "q.exr").exists()
+
+
 def test_bad_pyramid_files(tmp_path):
     (tmp_path / "t.exr").write_bytes(b"v/1\x01garbage")
     with pytest.raises(MicrofacetError, match="t.exr: unreadable or corrupt"):
@@ -447,6 +468,17 @@ def test_cli_bake_writes_pyramid_and_preview(height_png, tmp_path, capsys):
         np.testing.assert_array_equal(a, b)
     png = read_png_data(tmp_path / "out.png")
     assert png.dtype == np.uint8 and png.ndim == 3 and png.shape[1] > png.shape[0] and png.std() > 0
+
+
+def test_cli_bake_compression(height_png, tmp_path, capsys):
+    import OpenEXR
+    out = tmp_path / "z.exr"
+    assert main(["bake", str(height_png), "-o", str(out), "--compression", "zip"]) == 0
+    assert OpenEXR.File(str(out)).parts[0].header["compression"] == OpenEXR.ZIP_COMPRESSION
+    for a, b in zip(leadr.read_pyramid(out), leadr.bake(load_height_map(height_png)), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert main(["bake", str(height_png), "-o", str(out), "--compression", "dwaa"]) == 2
+    assert "invalid choice: 'dwaa'" in capsys.readouterr().err
 
 
 def test_cli_bake_normal_map_and_material(tmp_path, capsys):

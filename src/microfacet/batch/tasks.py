@@ -96,10 +96,10 @@ class Task:
 # ---------------------------------------------------------------------------- bake
 def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = False, border: str = "wrap",
               roughness: float | None = None, material: str | os.PathLike | None = None,
-              encoding: str = "auto", z: str = "auto") -> dict:
+              encoding: str = "auto", z: str = "auto", compression: str = "none") -> dict:
     """``microfacet bake``: a height (or normal) map's LEAN/LEADR moment pyramid
     (E1..E5, thesis Eq. 3.5-3.9, merged with a base roughness by Listing 5.1) as
-    ``out`` (.exr) and its filtered-appearance preview ``out.png``. Returns the size, the
+    ``out`` (.exr, lossless ``compression``, see ``leadr.write_pyramid``) and its filtered-appearance preview ``out.png``. Returns the size, the
     number of MIP levels and the top level's Beckmann lobe."""
     from .. import leadr
     from ..io import write_png
@@ -118,7 +118,7 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
         raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
                               f"{'' if roughness is None else f', roughness {roughness:g}'}); "
                               "use a smaller scale or roughness")
-    leadr.write_pyramid(out, pyramid)
+    leadr.write_pyramid(out, pyramid, compression=compression)
     write_png(out.with_suffix(".png"), preview_image(pyramid))
     top = leadr.from_moments(pyramid[-1][0, 0])
     h, w = pyramid[0].shape[:2]

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..io.exr import COMPRESSIONS
 from .common import add_batch_options, add_normal_map_arguments, finite_float, float_in, output_path, run_batch
 
 def add(sub) -> None:
@@ -34,6 +35,9 @@ def add(sub) -> None:
                       help="isotropic Beckmann base roughness merged into every texel (Listing 5.1)")
     base.add_argument("--material", metavar="FIT.npz",
                       help="a fit from 'microfacet fit': its Beckmann moments are the base roughness")
+    p.add_argument("--compression", choices=tuple(COMPRESSIONS), default="none",
+                   help="lossless EXR compression of OUT.exr (default none: the fastest write; zip or "
+                        "zstd give files 0-20%% smaller at 3-10x the write time; zstd needs OpenEXR >= 3.4)")
     add_batch_options(p)
     p.set_defaults(run=run)
 
@@ -43,7 +47,8 @@ def run(args) -> int:
     from ..batch.tasks import bake_file
     out = output_path(args.output, ".exr", args.map, side=(".png",))
     r = bake_file(Path(args.map), out, scale=args.scale, normal_map=args.normal_map, border=args.border,
-                  roughness=args.roughness, material=args.material, encoding=args.encoding, z=args.z)
+                  roughness=args.roughness, material=args.material, encoding=args.encoding, z=args.z,
+                  compression=args.compression)
     print(f"{out}: {r['levels']} MIP levels from {r['width']} x {r['height']}; top level: alpha_x "
           f"{r['alpha_x']:.4g}, alpha_y {r['alpha_y']:.4g}, rho {r['rho']:.4g}, mean slope "
           f"({r['mean_x']:.4g}, {r['mean_y']:.4g})")
