@@ -123,7 +123,7 @@ def test_demo_mitsuba_section_without_mitsuba_is_a_note(tmp_path, monkeypatch):
     and a warning is printed; the rest of the demo runs."""
     from microfacet.demo import _mitsuba_section
     monkeypatch.setitem(sys.modules, "microfacet.mitsuba.demo", None)   # import raises ImportError
-    with pytest.warns(RuntimeWarning, match="Mitsuba section skipped"):
+    with pytest.warns(RuntimeWarning, match="Rendering in Mitsuba 3 section skipped"):
         html = _mitsuba_section(tmp_path)
     assert html.startswith('<section id="mitsuba">') and "Skipped on this machine" in html
     assert not (tmp_path / "mitsuba").exists()

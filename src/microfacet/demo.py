@@ -375,34 +375,34 @@ GLINTS_STEPS = 4                           # progress steps of glints_section
 MITSUBA_STEPS = 12                         # progress steps of microfacet.mitsuba.demo (tested equal)
 
 
-def _viewer_section(out) -> str:
-    """The real-time section, or a note saying why it is missing (no Playwright/Chromium)."""
-    import warnings
-    from html import escape
-
-    from .glsl import demo_section
+def _optional_section(key: str, title: str, install: str, render, errors) -> str:
+    """``render()``'s section, or one that says why it is missing (``errors``: a missing
+    optional package or system piece), with a warning."""
     try:
-        return demo_section(out)
-    except (ImportError, MicrofacetError) as e:
+        return render()
+    except errors as e:
         why = " ".join(str(e).split())
-        warnings.warn(f"demo: real-time viewer section skipped: {why}", RuntimeWarning, stacklevel=2)
-        return (f'<section id="viewer"><h2>Real time: GLSL and the WebGL2 viewer</h2>'
-                f"<p>Skipped on this machine: {escape(why)} (make setup installs Chromium and Playwright).</p>"
-                "</section>")
+        warnings.warn(f"demo: {title} section skipped: {why}", RuntimeWarning, stacklevel=3)
+        return (f'<section id="{key}"><h2>{escape(title)}</h2>'
+                f"<p>Skipped on this machine: {escape(why)} ({escape(install)}).</p></section>")
+
+
+def _viewer_section(out) -> str:
+    """The real-time section (WebGL2 viewer in headless Chromium)."""
+    def render():
+        from .glsl import demo_section
+        return demo_section(out)
+    return _optional_section("viewer", "Real time: GLSL and the WebGL2 viewer",
+                             "make setup installs Chromium and Playwright", render, (ImportError, MicrofacetError))
 
 
 def _mitsuba_section(out, progress=None) -> str:
-    """The Mitsuba 3 section, or a note saying why it is missing (no Mitsuba, or a Mitsuba
-    that cannot run a variant)."""
-    try:
+    """The Mitsuba 3 section (no Mitsuba, or a Mitsuba that cannot run a variant: a note)."""
+    def render():
         from .mitsuba.demo import demo_section
         return demo_section(out, progress=progress)
-    except (ImportError, RuntimeError) as e:
-        why = " ".join(str(e).split())
-        warnings.warn(f"demo: Mitsuba section skipped: {why}", RuntimeWarning, stacklevel=2)
-        return (f'<section id="mitsuba"><h2>Rendering in Mitsuba 3</h2>'
-                f"<p>Skipped on this machine: {escape(why)} (pip install 'microfacet[mitsuba]').</p>"
-                "</section>")
+    return _optional_section("mitsuba", "Rendering in Mitsuba 3", "pip install 'microfacet[mitsuba]'", render,
+                             (ImportError, RuntimeError))
 
 
 def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: int = DEFAULT_SEED,
