@@ -27,7 +27,7 @@ from microfacet.io.png import write_png_data
 
 N_MAPS, SIZE = 20, 32
 CORRUPT = b"\x89PNG\r\n\x1a\n" + b"\0" * 20            # a PNG signature and nothing readable
-FIT_OPTIONS = {"resolution": 16}
+FIT_OPTIONS = {"resolution": 16, "method": "moments"}   # the least-squares fits: tests/test_fit_cli.py
 
 
 def height(n: int, k: int) -> np.ndarray:
