@@ -247,20 +247,44 @@ def fitted(params, diffuse=(0.0, 0.0, 0.0), shadowing=True):
     (dict(alpha=0.5), (0.05, 0.05, 0.05), False)], ids=["plain", "sheared+diffuse", "masking"])
 def test_fitted_brdf(gl, params, diffuse, shadowing, tmp_path):
     brdf = fitted(params, diffuse, shadowing)
-    path = brdf.save(tmp_path / "fit.npz")
-    tex = export_textures(path)                     # through the file, as an engine would
+    assert shader_fit_error(gl, brdf, tmp_path) <= TOL
+
+
+def shader_fit_error(gl, brdf, tmp_path, n=4000):
+    """:func:`rel_error` of ``mf_fit_eval_cos`` (textures exported through the .npz file, as an
+    engine would) against ``brdf.eval_cos`` at ``n`` pairs, half of them beyond 70 degrees."""
+    tex = export_textures(brdf.save(tmp_path / "fit.npz"))
     rng = np.random.default_rng(7)
-    wi, wo = directions(rng, 4000), directions(rng, 4000)
-    ref = brdf.eval_cos(wi, wo)
+    wi, wo = directions(rng, n), directions(rng, n)
     got = gl.evaluate("tabulated", """
         MfSurface s = MfSurface(MF_TABULATED_DISTRIBUTION, s_alpha, s_rho, s_mean);
         result = vec4(mf_fit_eval_cos(s, shadowing, diffuse, wi.xyz, wo.xyz), 0.0);""",
                       {"wi": wi, "wo": wo}, declarations=FIT,
                       textures={"mf_fit_table": ([tex["fit_table"]], (False, False), True)},
-                      uniforms=dict(mf_fit_sizes=tuple(int(v) for v in tex["fit_sizes"]), s_alpha=tex["alpha"],
+                      uniforms=dict(mf_fit_sizes=tuple(int(v) for v in tex["fit_sizes"]),
+                                    mf_fit_azimuths=tuple(int(v) for v in tex["fit_azimuths"]), s_alpha=tex["alpha"],
                                     s_rho=float(tex["rho"]), s_mean=tex["mean_slope"], diffuse=tex["diffuse"],
                                     shadowing=tex["shadowing"]))
-    assert rel_error(got[:, :3], ref) <= TOL
+    return rel_error(got[:, :3], brdf.eval_cos(wi, wo))
+
+
+class _LobeOverBase:
+    """A correlated anisotropic GGX copper lobe over a Lambertian base (input of a diffuse fit)."""
+
+    def __init__(self, lobe):
+        self.lobe, self.base = lobe, mf.Lambertian([0.2, 0.1, 0.05])
+
+    def eval(self, wi, wo):
+        return self.lobe.eval(wi, wo) + self.base.eval(wi, wo)
+
+
+@pytest.mark.parametrize("diffuse", [False, True], ids=["lobe", "diffuse"])
+def test_fitted_brdf_anisotropic(gl, diffuse, tmp_path):
+    """Anisotropic fits (refined log-bilinear D, projected-area Lambda, Fresnel table, base)."""
+    lobe = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.4, rho=0.3), fresnel=fr.Conductor.metal("Cu"))
+    brdf = mf.fit.fit(_LobeOverBase(lobe) if diffuse else lobe, 32, anisotropic=True, diffuse=diffuse)
+    assert brdf.anisotropic and brdf.has_diffuse == diffuse
+    assert shader_fit_error(gl, brdf, tmp_path) <= TOL
 
 
 @pytest.mark.parametrize("version", ["330", "es300"])
@@ -294,6 +318,7 @@ def test_export_textures_errors(tmp_path):
         export_textures(bad)
     with pytest.raises(MicrofacetError, match="no such file"):
         export_textures(tmp_path / "missing.exr")
-    aniso = mf.fit.FittedBRDF(mf.distributions.tabulated.TabulatedAnisotropic(np.ones((8, 8))), fr.Ideal())
-    with pytest.raises(MicrofacetError, match="isotropic"):
-        export_textures(aniso.save(tmp_path / "a.npz"))
+    vgroove = mf.fit.FittedBRDF(mf.distributions.tabulated.TabulatedAnisotropic(np.ones((8, 8))), fr.Ideal(),
+                                gaf="vgroove")
+    with pytest.raises(MicrofacetError, match="Smith"):
+        export_textures(vgroove.save(tmp_path / "a.npz"))

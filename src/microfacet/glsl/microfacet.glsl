@@ -14,7 +14,7 @@ struct MfSurface { int dist; vec2 alpha; float rho; vec2 mean_slope; };
 
 #ifdef MF_TABULATED
 float mf_tab_p22_std_over_z4(vec2 m, float z);
-float mf_tab_lambda_std(float cot_theta);
+float mf_tab_lambda_std(vec3 warped);
 #endif
 
 // Inverse of the linear part of Eq. 3.4 applied to a slope offset d (standard slope).
@@ -66,7 +66,7 @@ float mf_lambda(MfSurface s, vec3 k) {
     if (r2 <= 0.0) return 0.0;
     if (s.dist == MF_BECKMANN) return mf_beckmann_lambda(w.z / sqrt(r2));
 #ifdef MF_TABULATED
-    if (s.dist == MF_TABULATED_DISTRIBUTION) return mf_tab_lambda_std(w.z / sqrt(r2));
+    if (s.dist == MF_TABULATED_DISTRIBUTION) return mf_tab_lambda_std(w);
 #endif
     return r2 / (2.0 * w.z * (sqrt(r2 + w.z * w.z) + w.z));    // GGX, cancellation-free
 }

@@ -9,14 +9,27 @@ LEADR pyramid (``leadr.glsl``), from :func:`pyramid_textures` or a pyramid EXR:
 Sampler state: wrap ``REPEAT``, ``LINEAR_MIPMAP_NEAREST`` min filter, ``LINEAR`` mag filter,
 ``TEXTURE_MAX_LEVEL = len(levels) - 1`` (the shader blends levels itself).
 
-Fitted BRDF (``tabulated.glsl``, isotropic fits), from :func:`fit_textures` or a fit .npz:
+Fitted BRDF (``tabulated.glsl``), from :func:`fit_textures` or a fit .npz; ``fit_table`` is
+RGBA32F, ``NEAREST``, read by ``texelFetch``. Isotropic fits:
 
-* ``fit_table``: ``(3, W, 4)`` float32, RGBA32F, ``NEAREST``, read by ``texelFetch``;
+* ``fit_table``: ``(3, W, 4)`` float32, ``W = max(N, M, K)``;
   row 0 ``x``: ``ln D`` at the ``N`` elevation nodes; row 1 ``xy``: ``L1`` and ``dL1/ds h``
   on the ``M`` fine nodes; row 2 ``rgba``: Fresnel RGB and its ``cos theta_d``, ``K`` nodes;
 * ``fit_sizes``: ``(3,)`` int32 ``(N, M, K)`` (uniform ``mf_fit_sizes``);
-* ``alpha`` ``(2,)``, ``rho`` ``()``, ``mean_slope`` ``(2,)``, ``diffuse`` ``(3,)``, ``shadowing``:
-  the uniforms of the ``MfSurface`` and of ``mf_fit_eval_cos``.
+* ``fit_azimuths``: ``(2,)`` int32 ``(0, 0)`` (uniform ``mf_fit_azimuths``: isotropic).
+
+Anisotropic fits (:class:`~microfacet.distributions.tabulated.TabulatedAnisotropic`):
+
+* ``fit_table``: ``(N + L + 1, W, 4)`` float32, ``W = max(Nf, Na, K)``; rows ``0 .. N - 1``
+  ``x``: the *refined* ``ln D`` (Catmull-Rom, ``log_ndf``) at ``theta_i = (i / (N - 1))^2 pi/2``
+  and ``phi_j = 2 pi j / Nf`` (texel ``(j, i)``; the shader only interpolates it
+  log-bilinearly); rows ``N .. N + L - 1`` ``xy``: the projected area ``A`` (``area_table``)
+  at ``theta_l`` (``theta_k``), ``phi_j = 2 pi j / Na``, and ``theta_l`` itself; row
+  ``N + L`` ``rgba``: the Fresnel table as above;
+* ``fit_sizes``: ``(N, L, K)``; ``fit_azimuths``: ``(Nf, Na)``.
+
+Both: ``alpha`` ``(2,)``, ``rho`` ``()``, ``mean_slope`` ``(2,)``, ``diffuse`` ``(3,)``,
+``shadowing``: the uniforms of the ``MfSurface`` and of ``mf_fit_eval_cos``.
 """
 from __future__ import annotations
 
@@ -43,12 +56,12 @@ def pyramid_textures(levels) -> dict:
 
 
 def fit_textures(fit) -> dict:
-    """Textures and uniforms of an isotropic :class:`~microfacet.fit.FittedBRDF` (module docstring)."""
-    from ..distributions.tabulated import TabulatedIsotropic
+    """Textures and uniforms of a :class:`~microfacet.fit.FittedBRDF` (module docstring)."""
+    from ..distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic
     from ..fresnel import Tabulated
     d = fit.distribution
-    if not isinstance(d, TabulatedIsotropic):
-        raise MicrofacetError("the GLSL fitted BRDF takes isotropic fits only (this fit is anisotropic)")
+    if not isinstance(d, (TabulatedIsotropic, TabulatedAnisotropic)):
+        raise MicrofacetError(f"the GLSL fitted BRDF takes tabulated fits, got {type(d).__name__}")
     if fit.gaf_model != "smith":
         raise MicrofacetError(f"the GLSL fitted BRDF uses Smith masking; this fit's GAF is {fit.gaf_model!r}")
     if any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
@@ -57,16 +70,21 @@ def fit_textures(fit) -> dict:
     if not isinstance(f, Tabulated):
         c = np.linspace(0.0, 1.0, 91)
         f = Tabulated(c, f(c))
-    h = d.s_fine[1] - d.s_fine[0]
-    rows = [np.stack([d.log_ndf], -1),
-            np.stack([d.L1, -d.L0 * d.dxi_ds * h], -1),
-            np.concatenate([f.values, f.cos_theta_d[:, None]], -1)]
-    width = max(len(r) for r in rows)
-    table = np.zeros((3, width, 4), dtype=np.float32)
+    fresnel = np.concatenate([f.values, f.cos_theta_d[:, None]], -1)
+    if isinstance(d, TabulatedIsotropic):
+        h = d.s_fine[1] - d.s_fine[0]
+        rows = [d.log_ndf[:, None], np.stack([d.L1, -d.L0 * d.dxi_ds * h], -1), fresnel]
+        sizes, azimuths = [len(r) for r in rows], (0, 0)
+    else:
+        theta_k = np.broadcast_to(d.theta_k[:, None], d.area_table.shape)
+        rows = [*d.log_ndf[..., None], *np.stack([d.area_table, theta_k], -1), fresnel]
+        sizes = (len(d.log_ndf), len(d.area_table), len(fresnel))
+        azimuths = (d.log_ndf.shape[1], d.area_table.shape[1])
+    table = np.zeros((len(rows), max(len(r) for r in rows), 4), dtype=np.float32)
     for i, r in enumerate(rows):
         table[i, :len(r), :r.shape[1]] = r
-    return {"fit_table": table,
-            "fit_sizes": np.array([len(r) for r in rows], dtype=np.int32),
+    return {"fit_table": table, "fit_sizes": np.array(sizes, dtype=np.int32),
+            "fit_azimuths": np.array(azimuths, dtype=np.int32),
             "alpha": np.array([d.alpha_x, d.alpha_y], dtype=np.float32),
             "rho": np.float32(d.rho), "mean_slope": np.asarray(d.mean_slope, dtype=np.float32),
             "diffuse": np.asarray(fit.diffuse, dtype=np.float32), "shadowing": bool(fit.shadowing)}
