@@ -102,16 +102,20 @@ def _ior_textures(material: str, plugin: str = PLUGIN):
     return tuple(textures)
 
 
-_CLASSES: dict[str, type] = {}
+def per_variant(make, plugin: str = "", rgb: str = ""):
+    """``bsdf_class()``: the plugin class ``make()`` builds for the current Mitsuba variant
+    (``mi.BSDF`` differs per variant, so each class is built once per variant). With
+    ``rgb`` (the reason), non-RGB and polarized variants raise ``RuntimeError``."""
+    classes: dict[str, type] = {}
 
-
-def bsdf_class() -> type:
-    """The ``mf_microfacet`` class for the current Mitsuba variant (``mi.BSDF`` differs
-    per variant, so the class is built, once, per variant)."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = _make_class()
-    return _CLASSES[variant]
+    def bsdf_class() -> type:
+        variant = mi.variant()
+        if variant not in classes:
+            if rgb and (not mi.is_rgb or mi.is_polarized):
+                raise RuntimeError(f"{plugin} needs an RGB variant ({rgb}), not {variant}")
+            classes[variant] = make()
+        return classes[variant]
+    return bsdf_class
 
 
 def _make_class() -> type:
@@ -238,14 +242,24 @@ def _make_class() -> type:
                 return lobe.vndf(h, wo)
             return lobe.ndf(h) * h.z
 
-        def _eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
-            view = si.wi
-            active = active & (light.z > 0) & (view.z > 0)
+        def _reflecting(self, ctx, si, active):
+            """``active`` where the view is above the surface and glossy reflection is asked."""
+            active = active & (si.wi.z > 0)
             if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
                 active = active & False
-            h = dr.normalize(light + view)
-            oh = dr.dot(view, h)
-            active &= oh > 0
+            return active
+
+        def _half(self, ctx, si, light, active):
+            """``(h, o.h, active)`` of ``light`` and the view, active where both are above the
+            surface and ``o.h > 0``."""
+            active = self._reflecting(ctx, si, active & (light.z > 0))
+            h = dr.normalize(light + si.wi)
+            oh = dr.dot(si.wi, h)
+            return h, oh, active & (oh > 0)
+
+        def _eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
+            view = si.wi
+            h, oh, active = self._half(ctx, si, light, active)
             lobe = self._lobe(si, active)
             value = pdf = None
             if want_value:
@@ -272,9 +286,7 @@ def _make_class() -> type:
             """Reflect the view about a sampled normal (Sec. 2.2, 3.2); the Smith weight is
             ``F G / G1(o)`` (Eq. 2.23), the others' ``F G o.h / (z_o z_h)``."""
             view = si.wi
-            active = active & (view.z > 0)
-            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
-                active = active & False
+            active = self._reflecting(ctx, si, active)
             lobe = self._lobe(si, active)
             h = lobe.sample_visible(sample2, view) if self.samples_visible else lobe.sample_p22(sample2)
             oh = dr.dot(view, h)
@@ -322,3 +334,6 @@ def _make_class() -> type:
 
     MicrofacetBSDF.__name__ = MicrofacetBSDF.__qualname__ = "MicrofacetBSDF"
     return MicrofacetBSDF
+
+
+bsdf_class = per_variant(_make_class)

@@ -52,21 +52,7 @@ def load_fit_parameter(props, name: str, plugin: str):
         raise _bsdf._error(name, f"is not usable: {e}", plugin) from None
 
 
-_CLASSES: dict[str, type] = {}
-
-
-def bsdf_class() -> type:
-    """The ``mf_fitted`` class for the current Mitsuba variant (built once per variant)."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = _make_class()
-    return _CLASSES[variant]
-
-
 def _make_class() -> type:
-    if not mi.is_rgb or mi.is_polarized:
-        raise RuntimeError(f"{PLUGIN} needs an RGB variant (its Fresnel table and base are RGB), "
-                           f"not {mi.variant()}")
     Base = _bsdf.bsdf_class()
 
     class FittedBSDF(Base):
@@ -166,3 +152,6 @@ def _make_class() -> type:
 
     FittedBSDF.__name__ = FittedBSDF.__qualname__ = "FittedBSDF"
     return FittedBSDF
+
+
+bsdf_class = _bsdf.per_variant(_make_class, PLUGIN, rgb="its Fresnel table and base are RGB")

@@ -140,20 +140,7 @@ def _lobe_areas(k, mx, my, sxx, syy, sxy):
     return dr.maximum(c, 0.0), _area(c, x * x * sxx + 2.0 * x * y * sxy + y * y * syy)
 
 
-_CLASSES: dict[str, type] = {}
-
-
-def bsdf_class() -> type:
-    """The ``mf_glints`` class for the current Mitsuba variant (built once per variant)."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = _make_class()
-    return _CLASSES[variant]
-
-
 def _make_class() -> type:
-    if not mi.is_rgb or mi.is_polarized:
-        raise RuntimeError(f"{PLUGIN} needs an RGB variant, not {mi.variant()}")
     Base = _bsdf.bsdf_class()
     F64 = mi.Float64
 
@@ -271,12 +258,8 @@ def _make_class() -> type:
         # ------------------------------------------------------------ Mitsuba API
         def _eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
             view = si.wi
-            active = active & (light.z > 0) & (view.z > 0)
-            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
-                active = active & False
-            h = dr.normalize(light + view)
-            oh = dr.dot(view, h)
-            active &= (oh > 0) & (h.z > 0)
+            h, oh, active = self._half(ctx, si, light, active)
+            active &= h.z > 0
             d, ai, vi, ao, vo = self._sums(si, h, light, view)
             value = pdf = None
             if want_value:
@@ -291,9 +274,7 @@ def _make_class() -> type:
             density (``sample2``), the view reflected about it (Sec. 5); weight ``eval / pdf``."""
             t = self.t
             view = si.wi
-            active = active & (view.z > 0)
-            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
-                active = active & False
+            active = self._reflecting(ctx, si, active)
             cu, cv, cov = self.footprint_cov(si)
             zero = 0.0 * cu
             ws = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero], lambda i, w, s: [s[0] + w])[0]
@@ -332,3 +313,6 @@ def _make_class() -> type:
 
     GlintsBSDF.__name__ = GlintsBSDF.__qualname__ = "GlintsBSDF"
     return GlintsBSDF
+
+
+bsdf_class = _bsdf.per_variant(_make_class, PLUGIN, rgb="its Fresnel term is RGB")

@@ -145,20 +145,7 @@ def lobe_from_moments(e):
     return Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, rho, e1, e2)))
 
 
-_CLASSES: dict[str, type] = {}
-
-
-def bsdf_class() -> type:
-    """The ``mf_leadr`` class for the current Mitsuba variant (built once per variant)."""
-    variant = mi.variant()
-    if variant not in _CLASSES:
-        _CLASSES[variant] = _make_class()
-    return _CLASSES[variant]
-
-
 def _make_class() -> type:
-    if not mi.is_rgb or mi.is_polarized:
-        raise RuntimeError(f"{PLUGIN} needs an RGB variant, not {mi.variant()}")
     Base = _bsdf.bsdf_class()
 
     class LeadrBSDF(Base):
@@ -241,3 +228,6 @@ def _make_class() -> type:
 
     LeadrBSDF.__name__ = LeadrBSDF.__qualname__ = "LeadrBSDF"
     return LeadrBSDF
+
+
+bsdf_class = _bsdf.per_variant(_make_class, PLUGIN, rgb="its Fresnel term is RGB")
