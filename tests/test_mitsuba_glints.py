@@ -213,17 +213,5 @@ def test_glints_bad_parameters(glint_file, extra, name):
 def test_glints_scalar_and_llvm_render_alike(llvm_ok, glint_file):
     """The same sphere under an environment in ``scalar_rgb`` and ``llvm_ad_rgb`` (10 x 10
     pixels, 4 renders of 16 spp each, ``footprint`` 2): mean |diff| / sigma < 3."""
-    from test_mitsuba_fitted_leadr import _env, _render_small
-    stats = {}
-    for v in ("scalar_rgb", "llvm_ad_rgb"):
-        use(v)
-        scene = sphere_scene({"type": "mf_glints", "filename": glint_file[0], "footprint": 2.0}, _env())
-        scene["sensor"]["film"]["width"] = scene["sensor"]["film"]["height"] = 10
-        stats[v] = _render_small(scene)
-    (m0, s0), (m1, s1) = stats.values()
-    sigma = np.sqrt(s0**2 + s1**2)
-    noisy = sigma > 0
-    assert noisy.mean() > 0.3
-    z = np.abs(m0 - m1)[noisy] / sigma[noisy]
-    print(f"scalar vs llvm mf_glints: mean |diff|/sigma = {z.mean():.3f}")
-    assert z.mean() < 3.0
+    from test_mitsuba_fitted_leadr import assert_scalar_and_llvm_alike
+    assert_scalar_and_llvm_alike({"type": "mf_glints", "filename": glint_file[0], "footprint": 2.0}, 10, "mf_glints")
