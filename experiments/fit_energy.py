@@ -41,31 +41,15 @@ from microfacet.fit import extract
 from microfacet.geometry import half_vector
 from microfacet.io import write_text
 from microfacet.metrics import ndf_error
+from microfacet.validation import sampled_albedo
 
 ROOT = Path(__file__).resolve().parents[1]
 VIEWS = (0.0, 30.0, 60.0, 75.0, 85.0)
 
 
-def albedo(brdf, sampler, theta: float, n: int = 128) -> np.ndarray:
-    """``int f(i, o) cos theta_i dw_i`` at ``o = (theta, phi = 0)`` (RGB): ``sampler``'s
-    ``sample``/``pdf`` and the cosine lobe, each on a stratified ``n x n`` grid, balance
-    heuristic; nonfinite or negative data values count as 0."""
-    g = (np.arange(n) + 0.5) / n
-    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
-    wo = np.broadcast_to([np.sin(theta), 0.0, np.cos(theta)], (len(u), 3))
-    cosine = mf.Lambertian(1.0)
-    wi = np.concatenate([sampler.sample(u, wo)[0], cosine.sample(u, wo)[0]])
-    wo = np.concatenate([wo, wo])
-    pdf = 0.5 * sampler.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
-    ok = (pdf > 0) & (wi[:, 2] > 0)
-    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[:, 2:]
-    f = np.where(ok[:, None] & np.isfinite(f) & (f > 0), f, 0.0)
-    return np.sum(f / np.where(ok, pdf, 1.0)[:, None], axis=0) / len(wi)
-
-
 def energy_row(m, fit) -> dict:
-    fit_a = np.array([albedo(fit, fit, np.radians(t)) for t in VIEWS])
-    data_a = np.array([albedo(m, fit, np.radians(t)) for t in VIEWS])
+    fit_a = np.array([sampled_albedo(fit, fit, np.radians(t)) for t in VIEWS])
+    data_a = np.array([sampled_albedo(m, fit, np.radians(t)) for t in VIEWS])
     return dict(excess=np.max(fit_a - data_a, axis=1), ratio=np.max(np.abs(fit_a / data_a - 1.0), axis=1)[:4])
 
 

@@ -16,7 +16,7 @@ from microfacet.distributions.tabulated import TabulatedAnisotropic, TabulatedIs
 from microfacet.errors import MicrofacetError
 from microfacet.fit import extract
 from microfacet.geometry import dot, normalize, reflect, spherical_to_cartesian
-from microfacet.validation import chi2_test, integrate_slopes
+from microfacet.validation import chi2_test, integrate_slopes, sampled_albedo
 
 P_MIN = 1e-3
 SCHLICK = mf.fresnel.Schlick([0.9, 0.6, 0.3])
@@ -633,20 +633,8 @@ DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parent
 SHARED = sorted((DATA / "merl").glob("*.binary*")) + sorted((DATA / "rgl").glob("*.bsdf"))
 
 
-def _albedo(brdf, sampler, t, n=64):
-    """Directional albedo at view ``theta_o = t`` of ``brdf`` by the balance-heuristic
-    mixture of ``sampler.sample`` and the cosine lobe, each on a stratified ``n x n`` grid."""
-    u = (np.arange(n) + 0.5) / n
-    u = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
-    wo = np.broadcast_to([np.sin(t), 0.0, np.cos(t)], (len(u), 3))
-    cosine = mf.Lambertian(1.0)
-    wi = np.concatenate([sampler.sample(u, wo)[0], cosine.sample(u, wo)[0]])
-    wo = np.concatenate([wo, wo])
-    pdf = 0.5 * sampler.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
-    ok = (pdf > 0) & (wi[:, 2] > 0)
-    f = np.asarray(brdf.eval(wi, wo), float) * wi[:, 2:]
-    f = np.where(ok[:, None] & np.isfinite(f) & (f > 0), f, 0.0)
-    return np.sum(f / np.where(ok, pdf, 1.0)[:, None], axis=0) / len(wi)
+def _albedo(brdf, sampler, t):
+    return sampled_albedo(brdf, sampler, t, n=64)
 
 
 @pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")

@@ -24,7 +24,7 @@ import time
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-from .brdf import MicrofacetBRDF
+from .brdf import Lambertian, MicrofacetBRDF
 from .distributions import GGX, Beckmann, SlopeDistribution
 from .geometry import dot, reflect, slope_to_normal, spherical_to_cartesian
 
@@ -159,6 +159,24 @@ SURFACES = {"iso": dict(alpha=0.4), "aniso": dict(alpha_x=0.15, alpha_y=0.6),
             "corr": dict(alpha_x=0.3, alpha_y=0.5, rho=0.7),
             "shear": dict(alpha=0.3, mean_slope=(0.4, -0.3)),
             "all": dict(alpha_x=0.5, alpha_y=0.2, rho=-0.5, mean_slope=(-0.3, 0.5))}
+
+
+def sampled_albedo(brdf, sampler, theta_o: float, n: int = 128) -> np.ndarray:
+    """Directional albedo ``int f(i, o) cos theta_i d i`` (Eq. 1.8), RGB, of any BRDF-like
+    ``brdf`` (measured data too) at ``o = (theta_o, phi = 0)``: ``sampler``'s ``sample``/``pdf``
+    and the cosine lobe, each on a stratified ``n x n`` grid, balance heuristic (MIS);
+    non-finite or negative values of ``brdf`` count as 0."""
+    g = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    wo = np.broadcast_to([np.sin(theta_o), 0.0, np.cos(theta_o)], (len(u), 3))
+    cosine = Lambertian(1.0)
+    wi = np.concatenate([sampler.sample(u, wo)[0], cosine.sample(u, wo)[0]])
+    wo = np.concatenate([wo, wo])
+    pdf = 0.5 * sampler.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[:, 2:]
+    f = np.where(ok[:, None] & np.isfinite(f) & (f > 0), f, 0.0)
+    return np.sum(f / np.where(ok, pdf, 1.0)[:, None], axis=0) / len(wi)
 
 
 def _upper(rng, n):
