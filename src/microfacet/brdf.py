@@ -209,7 +209,10 @@ class MicrofacetBRDF(BRDF):
         Smith BRDFs with scalar parameters use the fused compiled kernel
         (:mod:`microfacet.kernels`); :meth:`_projected_numpy` is the reference.
         """
-        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        return self._projected_unit(_dirs(wi, "wi"), _dirs(wo, "wo"), divide_cos_i)
+
+    def _projected_unit(self, wi, wo, divide_cos_i: bool = False):
+        """:meth:`_projected` of directions already checked by ``_dirs``."""
         if self.gaf_model == "smith":
             fast = kernels.smith_projected(self.distribution, self.shadowing, wi, wo, divide_cos_i)
             if fast is not None:
@@ -234,7 +237,7 @@ class MicrofacetBRDF(BRDF):
         fast = kernels.smith_eval(self, wi, wo, divide_cos_i)
         if fast is not None:
             return fast
-        oh, s = self._projected(wi, wo, divide_cos_i)
+        oh, s = self._projected_unit(wi, wo, divide_cos_i)
         return self.fresnel(oh) * s[..., None]
 
     def eval_cos(self, wi, wo) -> np.ndarray:
