@@ -71,6 +71,28 @@ def test_cross_family_least_squares_beats_the_moment_conversion():
     assert e["ls"] < 0.5 * e["moments"]
 
 
+def test_fitted_brdf_converts_by_least_squares_without_data():
+    """``to_ggx/to_beckmann(method="least_squares")`` fit the tabulated fit itself: the same
+    family comes back, and the cross family beats the moment conversion on the fit."""
+    truth = mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5))
+    tab = mf.fit.fit(truth, resolution=32)
+    same = tab.to_beckmann(method="least_squares", **FAST)
+    assert isinstance(same, mf.MicrofacetBRDF) and abs(same.distribution.alpha_x / 0.3 - 1.0) < 0.01
+    e = fit_error(tab, {"moments": tab.to_ggx(), "ls": tab.to_ggx(method="least_squares", **FAST)}, n=16)
+    assert e["ls"] < 0.5 * e["moments"]
+    with pytest.raises(ValueError, match="method must be one of"):
+        tab.to_ggx(method="fast")
+
+
+def test_analytic_fits_do_not_import_the_tabulated_fit():
+    """No import circle: ``fit.fitted`` imports ``fit.analytic``, never the reverse."""
+    import ast
+    import microfacet.fit.analytic as analytic
+    tree = ast.parse(Path(analytic.__file__).read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert "fitted" not in imported and not any(m and m.endswith(".fitted") for m in imported)
+
+
 def test_bad_arguments_raise_clear_errors():
     truth = mf.MicrofacetBRDF(mf.GGX(alpha=0.2))
     with pytest.raises(ValueError, match="model must be one of"):

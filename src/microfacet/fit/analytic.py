@@ -428,8 +428,9 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         piecewise-linear table of 7 nodes uniform in ``theta_d`` with values in ``[0, 1]``.
     start : FittedBRDF or MicrofacetBRDF, optional
         Start of the roughness: the moment conversion ``start.to_ggx()`` of a tabulated
-        fit (App. C), or an analytic BRDF's own roughness; default :func:`fit` of
-        ``brdf`` at resolution 90. A coarse roughness scan competes with it.
+        fit (App. C), or an analytic BRDF's own roughness (and mean slope, GAF). A
+        coarse roughness scan competes with it; without a start, the scan alone
+        (isotropic start, zero mean slope).
     gaf, shadowing
         GAF of the fitted model (default: the start's, else ``"smith"``).
     albedo_weight : float
@@ -451,10 +452,7 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         raise ValueError(f"fresnel must be one of {FRESNELS}, got {fresnel!r}")
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
-    if start is None:
-        from .fitted import fit
-        start = fit(brdf, resolution=90, anisotropic=anisotropic)
-    ax, ay, rho, mean_slope = _start_alpha(start)
+    ax, ay, rho, mean_slope = _start_alpha(start) if start is not None else (_SCAN[10], _SCAN[10], 0.0, np.zeros(2))
     gaf = gaf if gaf is not None else getattr(start, "gaf_model", "smith")
     data = _data(brdf, int(n), int(n_uniform), tuple(int(v) for v in albedo_grid))
     options = dict(gaf=gaf, shadowing=shadowing, mean_slope=mean_slope, albedo_weight=albedo_weight)

@@ -15,6 +15,10 @@ from ..errors import MicrofacetError
 from ..io.atomic import atomic_path
 from ..io.npz import load_npz
 from . import extract
+from .analytic import fit_analytic
+
+#: Conversions of :meth:`FittedBRDF.to_ggx` / :meth:`FittedBRDF.to_beckmann`.
+CONVERSIONS = ("moments", "least_squares")
 
 __all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION", "READABLE_VERSIONS"]
 
@@ -160,22 +164,41 @@ class FittedBRDF(MicrofacetBRDF):
         """The analytic lobe with the fitted Fresnel term (the diffuse base is not carried)."""
         return MicrofacetBRDF(distribution, fresnel=self.fresnel, gaf=self.gaf_model, shadowing=self.shadowing)
 
-    def to_beckmann(self) -> MicrofacetBRDF:
-        """Beckmann BRDF of the same second slope moments (App. C, as LEAN/LEADR:
+    def _least_squares(self, model: str, options: dict):
+        """:func:`~microfacet.fit.analytic.fit_analytic` of this fit itself (it is a BRDF:
+        no data needed), started from its moment conversion, with a Lambertian base when
+        the fit has one and its anisotropy."""
+        options = {"diffuse": self.has_diffuse, "anisotropic": self.anisotropic, **options}
+        return fit_analytic(self, model, start=self, gaf=self.gaf_model, shadowing=self.shadowing, **options)
+
+    def to_beckmann(self, method: str = "moments", **options):
+        """Beckmann BRDF with the fitted Fresnel term.
+
+        ``method="moments"``: the same second slope moments (App. C, as LEAN/LEADR:
         ``alpha_x^2 = 2 Var[x~]``, ``alpha_y^2 = 2 Var[y~]``, ``rho alpha_x alpha_y =
-        2 Cov[x~, y~]``, mean slope kept) with the fitted Fresnel term. Exact (up to the
-        fit's quadrature) when the fitted BRDF is a Beckmann one."""
+        2 Cov[x~, y~]``, mean slope kept); exact (up to the fit's quadrature) when the
+        fitted BRDF is a Beckmann one. ``method="least_squares"``: the least-squares fit
+        of this BRDF (:func:`~microfacet.fit.analytic.fit_analytic`, ``options`` passed
+        on; a :class:`~microfacet.fit.analytic.SumBRDF` with a Lambertian base when the
+        fit has one)."""
+        if _conversion(method) == "least_squares":
+            return self._least_squares("beckmann", options)
         m = self.slope_moments()
         return self._analytic(Beckmann.from_moments(m["e1"], m["e2"], m["e3"], m["e4"], m["e5"]))
 
-    def to_ggx(self) -> MicrofacetBRDF:
-        """GGX BRDF from first absolute moments (App. C): ``alpha_x = E|x~|``,
+    def to_ggx(self, method: str = "moments", **options):
+        """GGX BRDF with the fitted Fresnel term.
+
+        ``method="moments"``: first absolute moments (App. C): ``alpha_x = E|x~|``,
         ``alpha_y = E|y~|`` (about the mean, which is kept) and ``rho`` from the angular
         moments ``beta1, beta2``. Since ``[[1 - beta2, beta1], [beta1, beta2]] =
         S / tr S`` with ``S = Sigma^(1/2)`` for any elliptic distribution,
         ``rho = beta1 / sqrt(((1 - beta2)^2 + beta1^2) (beta1^2 + beta2^2))`` (the paper's
         ``(alpha_y / alpha_x) beta1 / (beta1^2 + beta2^2)`` when both hold exactly).
-        Exact (up to the fit's quadrature) when the fitted BRDF is a GGX one."""
+        Exact (up to the fit's quadrature) when the fitted BRDF is a GGX one.
+        ``method="least_squares"``: as in :meth:`to_beckmann`."""
+        if _conversion(method) == "least_squares":
+            return self._least_squares("ggx", options)
         m = self.slope_moments()
         b1, b2 = m["beta1"], m["beta2"]
         rho = b1 / np.sqrt(((1.0 - b2) ** 2 + b1 * b1) * (b1 * b1 + b2 * b2))
@@ -216,6 +239,12 @@ class FittedBRDF(MicrofacetBRDF):
 
 
 # ------------------------------------------------------------------------ fitting
+def _conversion(method: str) -> str:
+    if method not in CONVERSIONS:
+        raise ValueError(f"method must be one of {CONVERSIONS}, got {method!r}")
+    return method
+
+
 def _backscatter_model(backscatter_gaf, shadowing) -> str:
     """``backscatter_gaf`` or, when None, the model of the library's forward BRDF with
     ``shadowing``: height-correlated ``G2(o, o)`` with shadowing, ``G1(o)`` without."""
