@@ -188,3 +188,18 @@ def test_fit_bad_arguments_give_usage_status(capsys):
     assert main(["fit", "x", "-o", "y", "--method", "lsq"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 3 and "invalid choice: 'lsq'" in err and "invalid choice: 'bogus'" in err and "must lie in [8, 2048]" in err
+
+
+def test_coat_fits_without_picture(inputs, tmp_path):
+    """``--coat --no-picture``: every least-squares fit carries a coat lobe, its JSON entry
+    rebuilds the same BRDF, and no picture is drawn; a folder refuses --no-picture."""
+    out = tmp_path / "coat.npz"
+    assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(out), "--resolution", RESOLUTION,
+                 "--coat", "--diffuse", "off", "--no-picture"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["coat.json", "coat.npz"]
+    summary = json.loads(out.with_suffix(".json").read_text())
+    assert summary["coat"] and set(summary["least_squares"]) == {"ggx_coat", "beckmann_coat"}
+    assert summary["ggx"]["coat"]["alpha"] > 0
+    rebuilt = analytic_from_json(summary["ggx"])
+    assert len(rebuilt.brdfs) == 2 and fit_error(TRUTH, rebuilt)["fit"] < 0.02
+    assert main(["fit", str(inputs), "-o", str(tmp_path / "folder"), "--no-picture"]) == 1

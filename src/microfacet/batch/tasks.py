@@ -152,17 +152,18 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
 
 def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
              method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
-             albedo_weight: float | None = None) -> dict:
+             albedo_weight: float | None = None, coat: bool = False, picture: bool = True) -> dict:
     """``microfacet fit``: a measured BRDF's power-iteration fit (thesis Ch. 4) and its
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
-    (:func:`microfacet.fit.outputs.fit_material`). Returns the summary figures."""
+    (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
+    Returns the summary figures."""
     from ..fit.outputs import fit_material, summary_row
     from ..measured import load
     from .files import input_name
     brdf = load(source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
-                           fresnel=fresnel, albedo_weight=albedo_weight)
+                           fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)
     row = summary_row(name, source, getattr(brdf, "format", ""), summary)
     row["fit_seconds"] = row["seconds"]
     return {k: row[k] for k in FIT_COLUMNS}

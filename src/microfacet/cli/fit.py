@@ -52,6 +52,13 @@ def add(sub) -> None:
                    help="weight of the directional-albedo term of the least-squares fits: they minimize "
                         "grid^2 + uniform^2 + W^2 mean((albedo fit/data - 1)^2) over views 0/30/60/75 deg "
                         f"and RGB (default {ALBEDO_WEIGHT:g}; 0: fit the shape only, ~4: albedo within ~10 %%)")
+    p.add_argument("--coat", action="store_true",
+                   help="add a coat to the least-squares fits: a second GGX/Beckmann lobe with a Schlick "
+                        "Fresnel term of free normal and grazing reflectance (clear coats, varnished paints; "
+                        "about twice slower)")
+    p.add_argument("--no-picture", dest="picture", action="store_false",
+                   help="do not draw OUT.png (saves ~2 s of matplotlib per file; single files only: a "
+                        "folder's up-to-date check wants the picture)")
     add_batch_options(p)
     p.set_defaults(run=run)
 
@@ -59,6 +66,8 @@ def add(sub) -> None:
 def run(args) -> int:
     args.method = args.method.replace("-", "_")
     if Path(args.input).is_dir():
+        if not args.picture:
+            raise ValueError(f"--no-picture applies to a single file, not to the folder {args.input}")
         return run_batch(args, "fit", args.input)
     from ..batch.tasks import fit_file
     from ..fit.outputs import format_summary_markdown
@@ -66,7 +75,7 @@ def run(args) -> int:
     target = output_path(args.output, ".npz", source, side=(".json", ".png"))
     row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
                    method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
-                   albedo_weight=args.albedo_weight)
+                   albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture)
     print(format_summary_markdown([{"material": input_name(source), "file": source.name, "status": "ok",
                                     "seconds": row["fit_seconds"], **row}]), end="")
     return 0

@@ -1,8 +1,9 @@
 """Least-squares fits of analytic microfacet BRDFs to data (issue 10), and the sum BRDF
-that carries an optional Lambertian base.
+that carries an optional coat lobe and Lambertian base.
 
 :func:`fit_analytic` fits ``f = F D G / (4 cos theta_i cos theta_o) + k_d / pi``
-(Eq. 2.1 plus Eq. 1.9) to a reference BRDF by minimizing
+(Eq. 2.1 plus Eq. 1.9; with ``coat=True`` plus a second lobe whose Fresnel term is
+Schlick's with free ``f0, f90``, linear in them like ``k_d``) to a reference BRDF by minimizing
 ``e_grid^2 + e_uniform^2 + lambda^2 mean((a_fit / a_data - 1)^2)``: the squared relative RMS
 errors of ``f_r cos theta_i`` (RGB) of :func:`microfacet.metrics.fit_error` (a
 MERL-coordinate grid dense at the specular peak) and :func:`microfacet.metrics.uniform_error`
@@ -165,7 +166,6 @@ class _Data:
         f = w_a[:, None] * np.where(np.isfinite(f), f, 0.0)
         n_views = len(ALBEDO_VIEWS_DEG)
         self.albedo = np.stack([np.bincount(view, f[:, c], minlength=n_views) for c in range(3)], axis=-1)
-        self.w_albedo = w_a
         # every direction s(q) is evaluated on, and its Fresnel nodes
         self.wi = np.concatenate(wis + [wi_a])
         self.wo = np.concatenate(wos + [wo_a])
@@ -176,14 +176,12 @@ class _Data:
         self.hat = np.concatenate([1.0 - t[:m], t[:m]])
         self.albedo_index = np.concatenate([view * n_nodes + j[m:], view * n_nodes + j[m:] + 1])
         self.albedo_hat = np.concatenate([1.0 - t[m:], t[m:]])
-        lam = np.clip(self.wi[:, 2], 0.0, None) / np.pi                   # k_d cos theta_i / pi
-        self.lambert = lam[:m]
-        self.lambert_albedo = np.bincount(view, w_a * lam[m:], minlength=n_views)
-        wref = self.w[:, None] * ref
+        self.view, self.w_albedo = view, w_a
+        self.lambert = np.clip(self.wi[:, 2], 0.0, None) / np.pi            # k_d cos theta_i / pi
+        self.m5 = (1.0 - np.clip(dot(self.wo, half_vector(self.wi, self.wo)), 0.0, 1.0)) ** 5    # Schlick's
+        self.wref = self.w[:, None] * ref                                    # w f_ref
         self.ref_hat = np.tile(ref, (2, 1))                 # f_ref, once per hat
-        self.ref2 = np.sum(wref * ref, axis=0)              # sum w f_ref^2 per channel
-        self.lambert_lambert = float(np.sum(self.w * self.lambert**2))
-        self.lambert_ref = self.lambert @ wref
+        self.ref2 = np.sum(self.wref * ref, axis=0)         # sum w f_ref^2 per channel
 
 
 def _table_map() -> np.ndarray:
@@ -192,14 +190,16 @@ def _table_map() -> np.ndarray:
 
 
 class _Problem:
-    """One model on the data: the projected objective ``E(q)`` (module docstring)."""
+    """One model on the data: the projected objective ``E(q)`` (module docstring). ``q`` is
+    ``log alpha`` (or ``log alpha_x, log alpha_y, rho``), then ``log alpha_c`` of the coat."""
 
     def __init__(self, data: _Data, model, diffuse, anisotropic, fresnel, gaf, shadowing, mean_slope,
-                 albedo_weight: float):
+                 albedo_weight: float, coat: bool = False):
         self.data = data
         self.family, self.diffuse, self.anisotropic, self.fresnel = MODELS[model], diffuse, anisotropic, fresnel
         self.gaf, self.shadowing, self.mean_slope = gaf, shadowing, mean_slope
         self.albedo_weight = float(albedo_weight)
+        self.coat = bool(coat)
         self._last = (None, None)
 
     def distribution(self, q):
@@ -207,21 +207,32 @@ class _Problem:
             return self.family(alpha_x=np.exp(q[0]), alpha_y=np.exp(q[1]), rho=q[2], mean_slope=self.mean_slope)
         return self.family(alpha=np.exp(q[0]), mean_slope=self.mean_slope)
 
+    def coat_distribution(self, q):
+        """The coat's isotropic NDF, ``alpha_c = exp(q[-1])``, same family."""
+        return self.family(alpha=np.exp(q[-1]))
+
     def bounds(self):
         la = np.log(ALPHA_BOUNDS)
-        if self.anisotropic:
-            return np.array([la[0], la[0], -_RHO_BOUND]), np.array([la[1], la[1], _RHO_BOUND])
-        return np.array([la[0]]), np.array([la[1]])
+        lo, hi = ([la[0], la[0], -_RHO_BOUND], [la[1], la[1], _RHO_BOUND]) if self.anisotropic else ([la[0]], [la[1]])
+        if self.coat:
+            lo, hi = lo + [la[0]], hi + [la[1]]
+        return np.array(lo), np.array(hi)
+
+    def _s(self, distribution) -> np.ndarray:
+        """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid."""
+        d = self.data
+        s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected(d.wi, d.wo)[1]
+        return np.where(np.isfinite(s), s, 0.0)
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
-        ``x = (v, k_d)`` (``v``: Fresnel values at :data:`FRESNEL_NODES`; ``k_d`` only with
-        a diffuse base): the pairs' ``sum w (s F + k_d L - f_ref)^2`` plus the albedo term
+        ``x = (v, f0_c, f90_c, k_d)`` (``v``: Fresnel values at :data:`FRESNEL_NODES`; the
+        coat's ``f0, f90`` only with a coat, ``k_d`` only with a diffuse base): the pairs'
+        ``sum w (s F + s_c (f0_c (1 - m^5) + f90_c m^5) + k_d L - f_ref)^2``
+        (``m = 1 - cos theta_d``) plus the albedo term
         ``lambda^2 / (3 V) sum_{views} (a_fit / a_data - 1)^2``."""
         d, n = self.data, len(FRESNEL_NODES)
-        brdf = MicrofacetBRDF(self.distribution(q), gaf=self.gaf, shadowing=self.shadowing)
-        s = brdf._projected(d.wi, d.wo)[1]
-        s = np.where(np.isfinite(s), s, 0.0)
+        s = self._s(self.distribution(q))
         sp, sa = np.tile(s[:d.m], 2), np.tile(s[d.m:], 2)
         ws = np.tile(d.w, 2) * sp * d.hat                               # w s hat, per hat
         diag = np.bincount(d.index, ws * sp * d.hat, minlength=n)
@@ -231,11 +242,19 @@ class _Problem:
         k = d.ref2.copy()
         albedo_rows = np.bincount(d.albedo_index, np.tile(d.w_albedo, 2) * sa * d.albedo_hat,
                                   minlength=len(ALBEDO_VIEWS_DEG) * n).reshape(-1, n)     # (V, n)
-        if self.diffuse:
-            gl = np.bincount(d.index, ws * np.tile(d.lambert, 2), minlength=n)
-            G = np.block([[G, gl[:, None]], [gl[None, :], np.array([[d.lambert_lambert]])]])
-            g = np.concatenate([g, d.lambert_ref[:, None]], axis=1)
-            albedo_rows = np.concatenate([albedo_rows, d.lambert_albedo[:, None]], axis=1)
+        # the other columns, one value per pair: the coat's f0 and f90 terms, the base k_d L
+        s_c = self._s(self.coat_distribution(q)) if self.coat else None
+        extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + \
+            ([d.lambert] if self.diffuse else [])
+        if extras:
+            E = np.stack(extras, axis=-1)
+            Ep, Ea = E[:d.m], E[d.m:]
+            GE = np.stack([np.bincount(d.index, ws * np.tile(e, 2), minlength=n) for e in Ep.T], axis=-1)
+            G = np.block([[G, GE], [GE.T, Ep.T @ (d.w[:, None] * Ep)]])
+            g = np.concatenate([g, (Ep.T @ d.wref).T], axis=1)
+            rows = np.stack([np.bincount(d.view, d.w_albedo * e, minlength=len(ALBEDO_VIEWS_DEG)) for e in Ea.T],
+                            axis=-1)
+            albedo_rows = np.concatenate([albedo_rows, rows], axis=1)
         H = np.repeat(G[None], 3, axis=0)
         if self.albedo_weight > 0:
             c2 = self.albedo_weight**2 / (3 * len(ALBEDO_VIEWS_DEG))
@@ -247,6 +266,11 @@ class _Problem:
             k = k + c2 * np.sum(inv > 0, axis=1)
         return H, g, k
 
+    @property
+    def n_extra(self) -> int:
+        """Number of linear coefficients after the Fresnel term (coat ``f0, f90``; ``k_d``)."""
+        return 2 * int(self.coat) + int(self.diffuse)
+
     def _linear_map(self):
         """``(Q, x0)``: ``x = Q y + x0`` for the linear Fresnel models, ``y`` in ``[0, 1]``."""
         n = len(FRESNEL_NODES)
@@ -255,10 +279,9 @@ class _Problem:
         else:                                          # Schlick: F = F0 (1 - m^5) + m^5
             m5 = (1.0 - FRESNEL_NODES) ** 5
             Q, x0 = (1.0 - m5)[:, None], m5
-        if self.diffuse:
-            Q = np.block([[Q, np.zeros((n, 1))], [np.zeros((1, Q.shape[1])), np.ones((1, 1))]])
-            x0 = np.append(x0, 0.0)
-        return Q, x0
+        e = self.n_extra
+        Q = np.block([[Q, np.zeros((n, e))], [np.zeros((e, Q.shape[1])), np.eye(e)]])
+        return Q, np.append(x0, np.zeros(e))
 
     def solve(self, q):
         """``(E, coefficients)``: the objective at ``q`` with the linear (or conductor)
@@ -290,33 +313,30 @@ class _Problem:
         return max(total, 0.0), coef
 
     def _solve_conductor(self, H, g, k):
-        """Per channel, ``eta, k`` (and ``k_d``) minimizing ``E_c`` through the conductor's
-        values at the nodes (Table 2.I): the best of :data:`_CONDUCTOR_STARTS` (``k_d``
-        solved for each), refined by bounded least squares."""
+        """Per channel, ``eta, k`` (and the coat's ``f0, f90``, ``k_d``) minimizing ``E_c`` through
+        the conductor's values at the nodes (Table 2.I): the best of
+        :data:`_CONDUCTOR_STARTS` (the other coefficients solved for each, clipped to
+        ``[0, 1]``), refined by bounded least squares."""
         from scipy.optimize import least_squares
-        lo = [ETA_BOUNDS[0], K_BOUNDS[0]] + ([0.0] if self.diffuse else [])
-        hi = [ETA_BOUNDS[1], K_BOUNDS[1]] + ([1.0] if self.diffuse else [])
+        e = self.n_extra
+        lo, hi = [ETA_BOUNDS[0], K_BOUNDS[0]] + [0.0] * e, [ETA_BOUNDS[1], K_BOUNDS[1]] + [1.0] * e
         n = len(FRESNEL_NODES)
         v = _fresnel.conductor_reflectance(FRESNEL_NODES[None, :], _CONDUCTOR_STARTS[:, :1], _CONDUCTOR_STARTS[:, 1:])
         total, params = 0.0, np.zeros((3, len(lo)))
         for c in range(3):
-            Hv, gv = H[c][:n, :n], g[c][:n]
-            e = np.einsum("sx,xy,sy->s", v, Hv, v) - 2.0 * v @ gv
-            kd = np.zeros(len(v))
-            if self.diffuse:                            # the best k_d of each start
-                hl, hll, gl = H[c][:n, n], H[c][n, n], g[c][n]
-                kd = np.clip((gl - v @ hl) / hll, 0.0, 1.0)
-                e += 2.0 * kd * (v @ hl) + hll * kd**2 - 2.0 * gl * kd
-            best = int(np.argmin(e))
+            x = np.concatenate([v, np.zeros((len(v), e))], axis=1)
+            if e:                                       # the best other coefficients of each start
+                Hee, Hev, ge = H[c][n:, n:], H[c][n:, :n], g[c][n:]
+                x[:, n:] = np.clip(np.linalg.solve(Hee + 1e-300 * np.eye(e), (ge[:, None] - Hev @ v.T)).T, 0.0, 1.0)
+            best = int(np.argmin(np.einsum("sx,xy,sy->s", x, H[c], x) - 2.0 * x @ g[c]))
             Hc = H[c] + (1e-12 * max(float(np.max(np.diag(H[c]))), 1e-300)) * np.eye(len(H[c]))
             R = np.linalg.cholesky(Hc).T
             z = np.linalg.solve(R.T, g[c])
 
             def residual(p, R=R, z=z):
-                x = _fresnel.conductor_reflectance(FRESNEL_NODES, p[0], p[1])
-                return R @ (np.append(x, p[2]) if self.diffuse else x) - z
-            p0 = np.clip(np.append(_CONDUCTOR_STARTS[best], kd[best])[:len(lo)], lo, hi)
-            p = least_squares(residual, p0, bounds=(lo, hi), x_scale=[0.3, 0.3, 0.1][:len(lo)],
+                return R @ np.append(_fresnel.conductor_reflectance(FRESNEL_NODES, p[0], p[1]), p[2:]) - z
+            p0 = np.clip(np.append(_CONDUCTOR_STARTS[best], x[best, n:]), lo, hi)
+            p = least_squares(residual, p0, bounds=(lo, hi), x_scale=[0.3, 0.3] + [0.1] * e,
                               xtol=1e-8, ftol=1e-10, max_nfev=40).x
             total += float(np.sum(residual(p) ** 2) + k[c] - z @ z)
             params[c] = p
@@ -335,14 +355,34 @@ class _Problem:
             fresnel = _fresnel.Tabulated(TABLE_NODES, np.clip(c[:, :len(TABLE_NODES)].T, 0.0, 1.0))
         else:
             fresnel = _fresnel.Conductor(eta=c[:, 0], k=c[:, 1])
-        specular = MicrofacetBRDF(self.distribution(q), fresnel=fresnel, gaf=self.gaf, shadowing=self.shadowing)
-        if not self.diffuse:
-            return specular
-        kd = np.clip(c[:, -1], 0.0, 1.0)
-        base = Lambertian(kd)
-        lum = np.array([0.2126, 0.7152, 0.0722])
-        spec_weight = float(np.mean(fresnel(np.linspace(0.0, 1.0, 9)) @ lum))
-        return SumBRDF(specular, base, weights=(max(spec_weight, 1e-3), max(float(kd @ lum), 1e-3)))
+        lobes = [MicrofacetBRDF(self.distribution(q), fresnel=fresnel, gaf=self.gaf, shadowing=self.shadowing)]
+        if self.coat:
+            f0, f90 = np.clip(c[:, len(c[0]) - 2 - int(self.diffuse):][:, :2].T, 0.0, 1.0)
+            lobes.append(MicrofacetBRDF(self.coat_distribution(q), fresnel=coat_fresnel(f0, f90), gaf=self.gaf,
+                                        shadowing=self.shadowing))
+        if self.diffuse:
+            lobes.append(Lambertian(np.clip(c[:, -1], 0.0, 1.0)))
+        if len(lobes) == 1:
+            return lobes[0]
+        return SumBRDF(*lobes, weights=[max(_albedo_estimate(b), 1e-3) for b in lobes])
+
+
+def coat_fresnel(f0, f90) -> _fresnel.Tabulated:
+    """The coat's Fresnel term, Schlick's approximation with a free grazing value,
+    ``F = f0 (1 - (1 - cos theta_d)^5) + f90 (1 - cos theta_d)^5`` (RGB ``f0``, ``f90`` in
+    ``[0, 1]``; ``f90 = 1``: Schlick, Eq. 2.6), tabulated at :data:`FRESNEL_NODES`
+    (piecewise linear: within 1e-3 of the formula the fit uses)."""
+    m5 = ((1.0 - FRESNEL_NODES) ** 5)[:, None]
+    return _fresnel.Tabulated(FRESNEL_NODES, f0 * (1.0 - m5) + f90 * m5)
+
+
+def _albedo_estimate(brdf) -> float:
+    """Luminance of a lobe's mean Fresnel term over ``cos theta_d`` (a microfacet lobe) or
+    of ``k_d`` (a Lambertian): the mixture weights of the sum BRDF's sampling."""
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    if isinstance(brdf, Lambertian):
+        return float(brdf.reflectance @ lum)
+    return float(np.mean(brdf.fresnel(np.linspace(0.0, 1.0, 9)) @ lum))
 
 
 def _start_alpha(start) -> tuple[float, float, float, np.ndarray]:
@@ -399,10 +439,11 @@ def _minimize(problem: _Problem, q0, max_nfev: int) -> np.ndarray:
 
 
 def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: bool = False,
-                 fresnel: str = "table", *, start=None, gaf: str | None = None, shadowing: bool = True,
+                 fresnel: str = "table", *, coat: bool = False, start=None, gaf: str | None = None, shadowing: bool = True,
                  albedo_weight: float = ALBEDO_WEIGHT, n: int = 32, n_uniform: int = 2**13,
                  albedo_grid: tuple[int, int] = (64, 32), max_nfev: int = 200):
-    """Least-squares fit of an analytic microfacet BRDF (and a Lambertian base) to ``brdf``.
+    """Least-squares fit of an analytic microfacet BRDF (with an optional clear coat and
+    Lambertian base) to ``brdf``.
 
     Minimizes ``e_grid^2 + e_uniform^2 + albedo_weight^2 mean_{views, RGB}(a_fit / a_data - 1)^2``
     with ``e^2 = sum |f_fit cos theta_i - f_ref cos theta_i|^2 / sum |f_ref cos theta_i|^2`` over RGB and the pairs of
@@ -410,7 +451,9 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     :func:`microfacet.metrics.uniform_directions` (``n_uniform``, seed 1, not the metric's
     seed 0; ``n_uniform = 0``: the grid alone), grazing and unmeasured pairs excluded as in
     :func:`microfacet.metrics.fit_error`, with ``f_fit = F D G / (4 cos theta_i cos theta_o)``
-    (Eq. 2.1) ``[+ k_d / pi]`` (Eq. 1.9), by variable projection (module docstring).
+    (Eq. 2.1) ``[+ F_c D_c G_c / (4 cos theta_i cos theta_o)] [+ k_d / pi]`` (a coat lobe,
+    Eq. 2.1 with a Schlick Fresnel term of free ``f0, f90``, and Eq. 1.9), by variable
+    projection (module docstring).
 
     Parameters
     ----------
@@ -422,6 +465,12 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         Add a Lambertian base ``k_d / pi``, ``k_d`` in ``[0, 1]`` per channel.
     anisotropic : bool
         Fit ``alpha_x, alpha_y, rho`` (``|rho| <= 0.95``) instead of one ``alpha``.
+    coat : bool
+        Add a coat: a second isotropic lobe of the same family, roughness ``alpha_c``
+        (any, sharper or wider than the first), with a Schlick Fresnel term of free
+        normal and grazing values ``f0, f90`` in ``[0, 1]`` per channel
+        (:func:`coat_fresnel`), summed with the others (as a production clear coat,
+        without attenuating the base).
     fresnel : {"table", "schlick", "conductor"}
         Default ``"table"``. Schlick ``F0`` per channel in ``[0, 1]``; a conductor ``eta + i k`` per channel
         (``eta`` in ``[0.02, 10]``, ``k`` in ``[0, 20]``; ``k = 0`` is a dielectric); or a
@@ -444,7 +493,8 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
 
     Returns
     -------
-    MicrofacetBRDF, or SumBRDF(MicrofacetBRDF, Lambertian) when ``diffuse``.
+    MicrofacetBRDF, or SumBRDF(MicrofacetBRDF[, coat MicrofacetBRDF][, Lambertian]) with a
+    coat or a diffuse base.
     """
     if model not in MODELS:
         raise ValueError(f"model must be one of {tuple(MODELS)}, got {model!r}")
@@ -470,8 +520,14 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
             ratio = 0.5 * np.log(ay / ax)
             q0 = [q[0] - ratio, q[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
         q = _minimize(aniso, q0, max_nfev)
-    # stage 3: a conductor, refined from that shape
+    # stage 3: the coat, from a scan of its roughness at that shape, then refined with it
+    if coat:
+        problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
+        scan = np.log(_SCAN[::2])
+        best = min(scan, key=lambda lc: problem.error(np.append(q, lc)))
+        q = _minimize(problem, np.append(q, best), max_nfev)
+    # stage 4: a conductor, refined from that shape
     if fresnel == "conductor":
-        problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", **options)
+        problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)
         return problem.brdf(_minimize(problem, q, max_nfev))
-    return (aniso if anisotropic else iso).brdf(q)
+    return (problem if coat else aniso if anisotropic else iso).brdf(q)

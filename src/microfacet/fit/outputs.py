@@ -93,20 +93,23 @@ def _fit_fresnel(fit):
 
 
 def _parts(brdf):
-    """``(microfacet lobe, Lambertian base or None)`` of an analytic fit."""
-    parts = getattr(brdf, "brdfs", None)
-    if parts is None:
-        return brdf, None
-    return parts[0], parts[1]
+    """``(microfacet lobe, coat lobe or None, Lambertian base or None)`` of an analytic fit."""
+    from ..brdf import Lambertian
+    parts = list(getattr(brdf, "brdfs", [brdf]))
+    base = parts.pop() if isinstance(parts[-1], Lambertian) else None
+    return parts[0], (parts[1] if len(parts) > 1 else None), base
 
 
 def analytic_json(brdf) -> dict:
-    """``{"model", "alpha_x", "alpha_y", "rho", "mean_slope", "gaf", "fresnel", "diffuse"}``
-    of an analytic fit (a MicrofacetBRDF, or a SumBRDF of one and a Lambertian base)."""
-    lobe, base = _parts(brdf)
+    """``{"model", "alpha_x", "alpha_y", "rho", "mean_slope", "gaf", "fresnel", "coat", "diffuse"}``
+    of an analytic fit (a MicrofacetBRDF, or a SumBRDF of one, an optional coat lobe and an
+    optional Lambertian base); ``"coat"``: ``{"alpha", "fresnel"}`` or null."""
+    lobe, coat, base = _parts(brdf)
     return {"model": type(lobe.distribution).__name__.lower(), **distribution_params(lobe),
             "mean_slope": np.asarray(lobe.distribution.mean_slope, float).tolist(), "gaf": lobe.gaf_model,
             "fresnel": fresnel_json(lobe.fresnel),
+            "coat": None if coat is None else {"alpha": float(coat.distribution.alpha_x),
+                                                "fresnel": fresnel_json(coat.fresnel)},
             "diffuse": None if base is None else np.asarray(base.reflectance, float).round(6).tolist()}
 
 
@@ -115,15 +118,23 @@ def analytic_from_json(entry: dict):
     from .. import fresnel as fr
     from ..brdf import Lambertian, MicrofacetBRDF
     from .analytic import MODELS, SumBRDF
-    f = entry["fresnel"]
-    kinds = {"schlick": lambda: fr.Schlick(f["f0"]), "conductor": lambda: fr.Conductor(f["eta"], f["k"]),
-             "tabulated": lambda: fr.Tabulated(f["cos_theta_d"], f["rgb"]), "ideal": fr.Ideal}
-    if entry.get("model") not in MODELS or f.get("type") not in kinds:
-        raise ValueError(f"not an analytic fit entry: model {entry.get('model')!r}, fresnel {f.get('type')!r}")
-    dist = MODELS[entry["model"]](alpha_x=entry["alpha_x"], alpha_y=entry["alpha_y"], rho=entry["rho"],
-                                  mean_slope=entry.get("mean_slope", (0.0, 0.0)))
-    lobe = MicrofacetBRDF(dist, fresnel=kinds[f["type"]](), gaf=entry.get("gaf", "smith"))
-    return lobe if entry.get("diffuse") is None else SumBRDF(lobe, Lambertian(entry["diffuse"]))
+    kinds = {"schlick": lambda f: fr.Schlick(f["f0"]), "conductor": lambda f: fr.Conductor(f["eta"], f["k"]),
+             "tabulated": lambda f: fr.Tabulated(f["cos_theta_d"], f["rgb"]), "ideal": lambda f: fr.Ideal()}
+    coat = entry.get("coat")
+    fresnels = [entry["fresnel"]] + ([coat["fresnel"]] if coat else [])
+    if entry.get("model") not in MODELS or any(f.get("type") not in kinds for f in fresnels):
+        raise ValueError(f"not an analytic fit entry: model {entry.get('model')!r}, "
+                         f"fresnel {[f.get('type') for f in fresnels]!r}")
+    family, gaf = MODELS[entry["model"]], entry.get("gaf", "smith")
+    dist = family(alpha_x=entry["alpha_x"], alpha_y=entry["alpha_y"], rho=entry["rho"],
+                  mean_slope=entry.get("mean_slope", (0.0, 0.0)))
+    parts = [MicrofacetBRDF(dist, fresnel=kinds[fresnels[0]["type"]](fresnels[0]), gaf=gaf)]
+    if coat:
+        parts.append(MicrofacetBRDF(family(alpha=coat["alpha"]), fresnel=kinds[fresnels[1]["type"]](fresnels[1]),
+                                    gaf=gaf))
+    if entry.get("diffuse") is not None:
+        parts.append(Lambertian(entry["diffuse"]))
+    return parts[0] if len(parts) == 1 else SumBRDF(*parts)
 
 
 def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffuse: bool):
@@ -132,12 +143,14 @@ def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffu
     return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf, **extra)
 
 
-def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float) -> dict:
-    """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann``, ...)."""
+def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
+                   coat: bool = False) -> dict:
+    """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann_coat_diffuse``, ...)."""
     from .analytic import fit_analytic
     bases = {"auto": (False, True), "on": (True,), "off": (False,)}[diffuse]
-    return {f"{model}{'_diffuse' if d else ''}": fit_analytic(brdf, model, diffuse=d, anisotropic=anisotropic,
-                                                             fresnel=fresnel, start=fit, albedo_weight=albedo_weight)
+    return {f"{model}{'_coat' if coat else ''}{'_diffuse' if d else ''}":
+            fit_analytic(brdf, model, diffuse=d, anisotropic=anisotropic, fresnel=fresnel, coat=coat, start=fit,
+                         albedo_weight=albedo_weight)
             for model in ("ggx", "beckmann") for d in bases}
 
 
@@ -153,13 +166,14 @@ def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -
 def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotropic: bool = False,
                  gaf: str = "smith", title: str = "", method: str = "least_squares", diffuse: str = "auto",
                  fresnel: str = "table", tabulated_diffuse: bool = False, picture: bool = True,
-                 albedo_weight: float | None = None) -> dict:
+                 albedo_weight: float | None = None, coat: bool = False) -> dict:
     """Fit ``brdf`` and write ``out_npz`` with its ``.json`` and ``.png`` beside it
     (its folder is created if needed).
 
     ``method`` (:data:`METHODS`) chooses the ``"ggx"``/``"beckmann"`` fits of the JSON
     and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
-    least-squares fits (:func:`microfacet.fit.fit_analytic`), ``albedo_weight`` the weight
+    least-squares fits (:func:`microfacet.fit.fit_analytic`; ``coat``: each with a coat
+    lobe), ``albedo_weight`` the weight
     of their albedo term (default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`); with
     ``diffuse="auto"`` the fit of least :func:`objective` is kept. ``tabulated_diffuse``
     is forwarded to :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
@@ -180,7 +194,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse)
     t1 = time.perf_counter()
     moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
-    least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel, albedo_weight) \
+    least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel, albedo_weight, coat) \
         if method == "least_squares" else {}
     t2 = time.perf_counter()
     named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
@@ -210,7 +224,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
                                     "views_deg": list(ALBEDO_VIEWS_DEG), "metric": describe_albedo()},
                    "white_furnace": {k: round(white_furnace(b), 4) for k, b in named.items()}},
         "resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf,
-        "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight,
+        "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
         "tabulated_diffuse": bool(tabulated_diffuse),
     }
     fit.save(out_npz)                               # atomic (FittedBRDF.save)
@@ -238,7 +252,7 @@ def _key(named: dict, brdf) -> str:
 def _label(name: str) -> str:
     """Short picture label of a fit name: ``ggx_diffuse_least_squares`` -> ``least squares + diffuse``."""
     method = "moments" if name.endswith("_moments") else "least squares"
-    return method + (" + diffuse" if "_diffuse" in name else "")
+    return method + (" + coat" if "_coat" in name else "") + (" + diffuse" if "_diffuse" in name else "")
 
 
 def _note(grid: float, uniform: float, albedo: np.ndarray) -> str:
