@@ -154,7 +154,7 @@ def test_node_space_objective_equals_the_direct_sum(fresnel, diffuse, coat):
     f = fitted.eval_cos(data.wi, data.wo)
     ref = truth.eval_cos(data.wi[:data.m], data.wo[:data.m])
     pairs = np.sum(data.w[:, None] * (f[:data.m] - ref) ** 2)
-    view = data.albedo_index[: len(data.w_albedo)] // len(analytic.FRESNEL_NODES)     # view * nodes + j
+    view = data.view
     albedo = np.stack([np.bincount(view, data.w_albedo * f[data.m:, c], minlength=len(ALBEDO_VIEWS_DEG))
                        for c in range(3)], axis=-1)
     direct = pairs + 4.0 * np.mean((albedo / data.albedo - 1.0) ** 2)

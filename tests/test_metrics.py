@@ -157,3 +157,16 @@ def test_albedo_ratios_of_several_fits_match_one_at_a_time():
     for name, brdf in fits.items():
         np.testing.assert_array_equal(together[name], albedo_ratios(GOLD, brdf))
     np.testing.assert_allclose(together["b"], 0.5, rtol=1e-12)
+
+
+def test_sobol_is_scipys_sequence_and_a_shifted_net():
+    """:func:`sobol` without a shift is SciPy's unscrambled Sobol sequence; with a seed each
+    coordinate stays stratified (1024 points: 16 in each of 64 intervals) and depends on it."""
+    from scipy.stats import qmc
+    from microfacet.metrics import sobol
+    assert np.array_equal(sobol(4096, seed=None), qmc.Sobol(4, scramble=False).random(4096))
+    u = sobol(1024, seed=3)
+    assert np.all((u >= 0) & (u < 1))
+    for d in range(4):
+        assert np.all(np.bincount((u[:, d] * 64).astype(int), minlength=64) == 16)
+    assert not np.array_equal(u, sobol(1024, seed=4))

@@ -3,7 +3,7 @@
 * :func:`fit_error` — relative RMS of ``f_r cos theta_i`` over a fixed set of direction
   pairs (:func:`measurement_directions`), the error table of fitting reports;
 * :func:`uniform_error` — the same relative RMS over direction pairs uniformly
-  distributed on the hemisphere (scrambled Sobol, seeded), where the grid above
+  distributed on the hemisphere (digitally shifted Sobol, seeded), where the grid above
   concentrates on the specular peak and this one weighs every direction alike;
 * :func:`albedo_ratios` — directional albedo of a fit over the data's, per view and RGB
   channel (:func:`directional_albedo`, half-vector quadrature);
@@ -28,7 +28,7 @@ import numpy as np
 from .geometry import hd_to_io, spherical_to_cartesian
 
 __all__ = ["GRAZING_COS", "ALBEDO_VIEWS_DEG", "measurement_directions", "uniform_directions",
-           "measured_mask", "compared_pairs", "fit_error", "uniform_error", "albedo_directions",
+           "measured_mask", "compared_pairs", "sobol", "fit_error", "uniform_error", "albedo_directions",
            "directional_albedo", "albedo_ratios", "white_furnace", "ndf_error", "hemisphere_grid",
            "describe_fit_error", "describe_uniform_error", "describe_albedo"]
 
@@ -52,7 +52,7 @@ def describe_uniform_error(n: int = UNIFORM_PAIRS, seed: int = 0) -> str:
     """One sentence saying what :func:`uniform_error` measures."""
     return (f"relative RMS of f_r cos(theta_i) (RGB) over direction pairs uniformly distributed "
             f"on the hemisphere (solid angle), estimated by {n} weighted pairs importance-sampled at "
-            f"the specular peak (scrambled Sobol, seed {seed}); pairs with cos(theta_i) or cos(theta_o) "
+            f"the specular peak (digitally shifted Sobol, seed {seed}); pairs with cos(theta_i) or cos(theta_o) "
             f"< {GRAZING_COS:g} and, for MERL, pairs touching unmeasured samples excluded")
 
 
@@ -81,19 +81,60 @@ def measurement_directions(n: int = 32) -> tuple[np.ndarray, np.ndarray]:
     return wi[keep], wo[keep]
 
 
+#: Sobol generators of dimensions 2-4 (Joe & Kuo 2008): degree ``s``, coefficients ``a``
+#: of the primitive polynomial, initial direction numbers ``m``.
+_SOBOL = ((1, 0, (1,)), (2, 1, (1, 3)), (3, 1, (1, 3, 1)))
+
+
+def _sobol_directions(bits: int = 32) -> np.ndarray:
+    """``(4, bits)`` direction numbers ``v_k`` (as integers scaled by ``2^bits``) of the
+    first four Sobol dimensions: ``v_k = m_k 2^(bits-1-k)`` for ``k < s``, then Bratley &
+    Fox's recurrence ``v_k = v_(k-s) ^ (v_(k-s) >> s) ^ XOR_j a_j v_(k-j)``."""
+    v = np.zeros((4, bits), dtype=np.uint64)
+    v[0] = np.left_shift(np.uint64(1), np.arange(bits - 1, -1, -1, dtype=np.uint64))
+    for d, (deg, a, m) in enumerate(_SOBOL, start=1):
+        for k in range(bits):
+            if k < deg:
+                v[d, k] = np.uint64(m[k] << (bits - 1 - k))
+                continue
+            x = v[d, k - deg] ^ (v[d, k - deg] >> np.uint64(deg))
+            for j in range(1, deg):
+                if (a >> (deg - 1 - j)) & 1:
+                    x ^= v[d, k - j]
+            v[d, k] = x
+    return v
+
+
+def sobol(n: int, seed: int | None = 0) -> np.ndarray:
+    """The first ``n`` points of the 4D Sobol sequence, ``(n, 4)`` in ``[0, 1)``, digitally
+    shifted (each coordinate's 32 bits XOR-ed with a random word of ``seed``; ``seed=None``:
+    unshifted). The point ``i`` is the XOR of the direction numbers of the set bits of
+    its Gray code ``i ^ (i >> 1)`` (:func:`_sobol_directions`; Antonov & Saleev's order,
+    as SciPy's ``qmc.Sobol``): NumPy only, no SciPy import."""
+    i = np.arange(int(n), dtype=np.uint64)
+    i ^= i >> np.uint64(1)
+    v = _sobol_directions()
+    x = np.zeros((int(n), 4), dtype=np.uint64)
+    for b in range(max(int(n) - 1, 1).bit_length()):
+        on = ((i >> np.uint64(b)) & np.uint64(1)).astype(bool)
+        x[on] ^= v[:, b]
+    if seed is not None:
+        x ^= np.random.default_rng(seed).integers(0, 2**32, size=4, dtype=np.uint64)
+    return x.astype(np.float64) / 2.0**32
+
+
 def uniform_directions(n: int = UNIFORM_PAIRS, seed: int = 0):
     """Weighted light/view pairs ``(wi, wo, w)`` whose weighted sums estimate integrals over
     the uniform (solid-angle) measure of pairs, ``sum w g ~= int int g dwi dwo / (2 pi)``:
     ``wo`` uniform on the hemisphere and ``wi = reflect(wo, h)`` for a half vector ``h``
     with ``theta_h = u^2 pi / 2``, ``phi_h = 2 pi v``, i.e. importance-sampled at the
     normal, where every view's specular peak lies (``dwi = 4 (o.h) dh``,
-    ``dh = sin theta_h pi u 2 pi du dv``), from a scrambled 4D Sobol sequence of ``seed``
+    ``dh = sin theta_h pi u 2 pi du dv``), from a digitally shifted 4D Sobol sequence of ``seed`` (:func:`sobol`)
     (``n`` points). Pairs with either cosine below :data:`GRAZING_COS` are dropped.
     Deterministic for a seed."""
-    from scipy.stats import qmc
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n!r}")
-    u = qmc.Sobol(4, scramble=True, seed=seed).random(int(n))
+    u = sobol(n, seed)
     wo = spherical_to_cartesian(np.arccos(u[:, 0]), 2.0 * np.pi * u[:, 1])
     theta_h = u[:, 2] ** 2 * (np.pi / 2)
     h = spherical_to_cartesian(theta_h, 2.0 * np.pi * u[:, 3])

@@ -43,8 +43,8 @@ def add(sub) -> None:
                         "(default; fitted to the data, started from the moments) or moments (the "
                         "tabulated fit's moment conversion, thesis App. C; faster)")
     p.add_argument("--diffuse", choices=DIFFUSE, default="auto",
-                   help="Lambertian base of the least-squares fits: auto (fit with and without, keep "
-                        "the one of lower objective, see --albedo-weight; default), on, off")
+                   help="Lambertian base of the least-squares fits: auto (fit with a base, dropped where "
+                        "it fits to 0; default), on, off")
     p.add_argument("--fresnel", choices=FRESNELS, default="table",
                    help="Fresnel term of the least-squares fits, each bounded to [0, 1] per channel: "
                         "table (7 nodes in theta_d; default), schlick (F0) or conductor (eta, k; slower)")

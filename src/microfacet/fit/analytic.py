@@ -39,6 +39,7 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
+from .extract import box_qp, golden_section
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, compared_pairs, measured_mask,
                        measurement_directions, uniform_directions)
 
@@ -62,7 +63,7 @@ _CONDUCTOR_STARTS = np.array([(eta, k) for eta in np.geomspace(0.2, 5.0, 8) for 
 #: Default weight of the albedo term of :func:`fit_analytic`.
 ALBEDO_WEIGHT = 4.0
 #: Roughness values of the initial scan.
-_SCAN = np.geomspace(0.004, 1.5, 20)
+_SCAN = np.geomspace(0.004, 1.5, 12)
 
 
 class SumBRDF(BRDF):
@@ -169,19 +170,52 @@ class _Data:
         # every direction s(q) is evaluated on, and its Fresnel nodes
         self.wi = np.concatenate(wis + [wi_a])
         self.wo = np.concatenate(wos + [wo_a])
-        j, t = _node_weights(dot(self.wo, half_vector(self.wi, self.wo)))
+        oh = dot(self.wo, half_vector(self.wi, self.wo))
+        j, t = _node_weights(oh)
         m, n_nodes = self.m, len(FRESNEL_NODES)
-        self.j, self.t = j[:m], t[:m]
-        self.index = np.concatenate([j[:m], j[:m] + 1])                     # both hats of each pair
-        self.hat = np.concatenate([1.0 - t[:m], t[:m]])
-        self.albedo_index = np.concatenate([view * n_nodes + j[m:], view * n_nodes + j[m:] + 1])
-        self.albedo_hat = np.concatenate([1.0 - t[m:], t[m:]])
+        # pairs sorted by left node j (albedo pairs by view, then j): every sum of the
+        # quadratic form is then a sum over runs of rows (_Groups)
+        key_p, key_a = j[:m], view * n_nodes + j[m:]
+        order_p, order_a = np.argsort(key_p, kind="stable"), np.argsort(key_a, kind="stable")
+        order = np.concatenate([order_p, m + order_a])
+        self.wi, self.wo, oh, t = self.wi[order], self.wo[order], oh[order], t[order]
+        self.w, ref, view, w_a = self.w[order_p], ref[order_p], view[order_a], w_a[order_a]
+        self.pairs = _Groups(key_p[order_p], n_nodes)
+        self.albedo_nodes = _Groups(key_a[order_a], n_views * n_nodes)
+        hats = np.stack([1.0 - t, t], axis=-1)                      # hats of nodes j, j + 1
+        self.w_hat = self.w[:, None] * hats[:m]                               # w hat
+        self.w_hat2 = self.w[:, None] * np.stack([hats[:m, 0]**2, hats[:m, 1]**2, hats[:m, 0] * hats[:m, 1]], -1)
+        self.w_hat_ref = (self.w_hat[:, :, None] * ref[:, None, :]).reshape(m, 6)     # w hat f_ref
+        self.w_albedo_hat = w_a[:, None] * hats[m:]
         self.view, self.w_albedo = view, w_a
         self.lambert = np.clip(self.wi[:, 2], 0.0, None) / np.pi            # k_d cos theta_i / pi
-        self.m5 = (1.0 - np.clip(dot(self.wo, half_vector(self.wi, self.wo)), 0.0, 1.0)) ** 5    # Schlick's
+        self.m5 = (1.0 - np.clip(oh, 0.0, 1.0)) ** 5                        # Schlick's
         self.wref = self.w[:, None] * ref                                    # w f_ref
-        self.ref_hat = np.tile(ref, (2, 1))                 # f_ref, once per hat
         self.ref2 = np.sum(self.wref * ref, axis=0)         # sum w f_ref^2 per channel
+
+
+class _Groups:
+    """Row sums by a sorted integer key in ``[0, size)`` (``np.bincount`` of many columns
+    at once): one ``np.add.reduceat`` over the runs of equal keys."""
+
+    def __init__(self, sorted_key: np.ndarray, size: int):
+        self.keys, self.starts = np.unique(sorted_key, return_index=True)
+        self.size = int(size)
+
+    def sum(self, values: np.ndarray) -> np.ndarray:
+        """``(size, ...)``: the sums of ``values`` (rows as the keys) per key."""
+        out = np.zeros((self.size,) + values.shape[1:])
+        if len(self.keys):
+            out[self.keys] = np.add.reduceat(values, self.starts, axis=0)
+        return out
+
+
+def _spread(sums: np.ndarray) -> np.ndarray:
+    """Node values from sums per left node ``(size, 2, ...)`` of the two hats: the left
+    hat's at ``j``, the right hat's at ``j + 1`` (never past a view's last node)."""
+    out = sums[:, 0].copy()
+    out[1:] += sums[:-1, 1]
+    return out
 
 
 def _table_map() -> np.ndarray:
@@ -233,26 +267,25 @@ class _Problem:
         ``lambda^2 / (3 V) sum_{views} (a_fit / a_data - 1)^2``."""
         d, n = self.data, len(FRESNEL_NODES)
         s = self._s(self.distribution(q))
-        sp, sa = np.tile(s[:d.m], 2), np.tile(s[d.m:], 2)
-        ws = np.tile(d.w, 2) * sp * d.hat                               # w s hat, per hat
-        diag = np.bincount(d.index, ws * sp * d.hat, minlength=n)
-        off = np.bincount(d.j, (d.w * s[:d.m] ** 2) * (1.0 - d.t) * d.t, minlength=n)[:-1]
-        G = np.diag(diag) + np.diag(off, 1) + np.diag(off, -1)
-        g = np.stack([np.bincount(d.index, ws * d.ref_hat[:, c], minlength=n) for c in range(3)])
+        sp, sa = s[:d.m], s[d.m:]
+        s2 = d.pairs.sum(sp[:, None] ** 2 * d.w_hat2)                  # per left node: hat products
+        G = np.diag(_spread(s2[:, :2])) + np.diag(s2[:-1, 2], 1) + np.diag(s2[:-1, 2], -1)
+        g = _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T
         k = d.ref2.copy()
-        albedo_rows = np.bincount(d.albedo_index, np.tile(d.w_albedo, 2) * sa * d.albedo_hat,
-                                  minlength=len(ALBEDO_VIEWS_DEG) * n).reshape(-1, n)     # (V, n)
+        albedo_rows = _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n)   # (V, n)
         # the other columns, one value per pair: the coat's f0 and f90 terms, the base k_d L
         s_c = self._s(self.coat_distribution(q)) if self.coat else None
-        extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + \
-            ([d.lambert] if self.diffuse else [])
+        extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + ([d.lambert] if self.diffuse else [])
         if extras:
             E = np.stack(extras, axis=-1)
             Ep, Ea = E[:d.m], E[d.m:]
-            GE = np.stack([np.bincount(d.index, ws * np.tile(e, 2), minlength=n) for e in Ep.T], axis=-1)
-            G = np.block([[G, GE], [GE.T, Ep.T @ (d.w[:, None] * Ep)]])
-            g = np.concatenate([g, (Ep.T @ d.wref).T], axis=1)
-            rows = np.stack([np.bincount(d.view, d.w_albedo * e, minlength=len(ALBEDO_VIEWS_DEG)) for e in Ea.T],
+            e = E.shape[1]
+            GE = _spread(d.pairs.sum(((sp[:, None] * Ep)[:, None, :] * d.w_hat[:, :, None]).reshape(d.m, 2 * e))
+                         .reshape(n, 2, e))
+            # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
+            G = np.block([[G, GE], [GE.T, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep)]])
+            g = np.concatenate([g, np.einsum("me,mc->ce", Ep, d.wref)], axis=1)
+            rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
                             axis=-1)
             albedo_rows = np.concatenate([albedo_rows, rows], axis=1)
         H = np.repeat(G[None], 3, axis=0)
@@ -294,7 +327,6 @@ class _Problem:
         return out
 
     def _solve_linear(self, H, g, k):
-        from scipy.optimize import lsq_linear
         Q, x0 = self._linear_map()
         total, coef = 0.0, np.zeros((3, Q.shape[1]))
         for c in range(3):
@@ -303,12 +335,10 @@ class _Problem:
             hx0 = H[c] @ x0
             gy = Q.T @ (g[c] - hx0)
             ky = k[c] - 2.0 * g[c] @ x0 + x0 @ hx0
-            R = np.linalg.cholesky(Hy).T
-            z = np.linalg.solve(R.T, gy)
-            y = np.linalg.solve(R, z)
+            y = np.linalg.solve(Hy, gy)
             if np.any(y < 0.0) or np.any(y > 1.0):
-                y = lsq_linear(R, z, bounds=(0.0, 1.0), method="bvls").x
-            total += float(np.sum((R @ y - z) ** 2) + ky - z @ z)
+                y = box_qp(Hy, gy, np.zeros(len(y)), np.ones(len(y)))
+            total += float(y @ Hy @ y - 2.0 * gy @ y + ky)
             coef[c] = y
         return max(total, 0.0), coef
 
@@ -413,16 +443,15 @@ def _data(brdf, n: int, n_uniform: int, albedo_grid: tuple[int, int]) -> _Data:
 
 def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> float:
     """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``, then a
-    bounded Brent search between its neighbours."""
-    from scipy.optimize import minimize_scalar
+    golden-section search between its neighbours."""
     grid = np.unique(np.clip(np.asarray(candidates, dtype=np.float64), lo, hi))
     errors = [problem.error(la) for la in grid]
     b = int(np.argmin(errors))
     left, right = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
     if right - left <= 0:
         return float(grid[b])
-    r = minimize_scalar(problem.error, bounds=(left, right), method="bounded", options={"xatol": 1e-5})
-    return float(r.x) if r.fun <= errors[b] else float(grid[b])
+    x, fx = golden_section(problem.error, left, right, xatol=2e-3)
+    return float(x) if fx <= errors[b] else float(grid[b])
 
 
 def _minimize(problem: _Problem, q0, max_nfev: int) -> np.ndarray:
@@ -502,7 +531,7 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         raise ValueError(f"fresnel must be one of {FRESNELS}, got {fresnel!r}")
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
-    ax, ay, rho, mean_slope = _start_alpha(start) if start is not None else (_SCAN[10], _SCAN[10], 0.0, np.zeros(2))
+    ax, ay, rho, mean_slope = _start_alpha(start) if start is not None else (_SCAN[6], _SCAN[6], 0.0, np.zeros(2))
     gaf = gaf if gaf is not None else getattr(start, "gaf_model", "smith")
     data = _data(brdf, int(n), int(n_uniform), tuple(int(v) for v in albedo_grid))
     options = dict(gaf=gaf, shadowing=shadowing, mean_slope=mean_slope, albedo_weight=albedo_weight)
@@ -523,7 +552,7 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     # stage 3: the coat, from a scan of its roughness at that shape, then refined with it
     if coat:
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
-        scan = np.log(_SCAN[::2])
+        scan = np.log(_SCAN)
         best = min(scan, key=lambda lc: problem.error(np.append(q, lc)))
         q = _minimize(problem, np.append(q, best), max_nfev)
     # stage 4: a conductor, refined from that shape

@@ -351,6 +351,25 @@ def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
     return float(np.sum(np.sum((model - f) ** 2, axis=-1) / (y + eps)) / max(float(np.sum(y)), 1e-300))
 
 
+def golden_section(f, a: float, b: float, xatol: float) -> tuple[float, float]:
+    """``(x, f(x))`` minimizing a unimodal ``f`` on ``[a, b]`` by golden-section search
+    (Kiefer 1953) to ``|b - a| <= xatol`` (the ends are not evaluated): SciPy-free, so a
+    fit imports no optimizer it does not need."""
+    r = (np.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - r * (b - a), a + r * (b - a)
+    fc, fd = f(c), f(d)
+    while b - a > xatol:
+        if fc <= fd:
+            b, d, fd = d, c, fc
+            c = b - r * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + r * (b - a)
+            fd = f(d)
+    return (c, fc) if fc <= fd else (d, fd)
+
+
 def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-12,
            max_iter: int = 200) -> np.ndarray:
     """``argmin 1/2 x^T h x - g^T x`` over the box ``lo <= x <= hi`` (``h`` symmetric

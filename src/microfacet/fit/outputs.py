@@ -5,11 +5,11 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
 
 * ``NAME.npz`` — the tabulated fit (``fit.save``), loadable by :func:`microfacet.fit.load`;
 * ``NAME.json`` — ``"ggx"`` and ``"beckmann"``: the analytic fits of the chosen method
-  (``least_squares`` by default: the best of the fits with and without a diffuse base,
-  by the fit's own objective :func:`objective`, ``e_grid^2 + e_uniform^2`` plus the
-  weighted albedo term; ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``),
-  each ``{"alpha_x", "alpha_y", "rho", "fresnel", "diffuse"}`` (``diffuse``: the
-  Lambertian reflectance, RGB, or null); ``"moments"`` and ``"least_squares"``: every
+  (``least_squares`` by default: :func:`microfacet.fit.fit_analytic`, with a diffuse
+  base unless it fits to less than :data:`NEGLIGIBLE_BASE` for ``diffuse="auto"``, with a coat for ``coat=True``;
+  ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``), each ``{"alpha_x", "alpha_y",
+  "rho", "fresnel", "coat", "diffuse"}`` (``coat``: ``{"alpha", "fresnel"}`` or null;
+  ``diffuse``: the Lambertian reflectance, RGB, or null); ``"moments"`` and ``"least_squares"``: every
   fit of each method by name; ``"fresnel"`` (the tabulated fit's), ``"seconds"`` (fit
   times), ``"errors"`` (per fit name: the grid error of
   :func:`microfacet.metrics.fit_error`; ``"uniform"``: :func:`~microfacet.metrics.uniform_error`;
@@ -47,8 +47,10 @@ __all__ = ["material_name", "fit_material", "distribution_params",
 _SUFFIXES = (".binary.gz", ".bsdf.gz", ".bin.gz", ".binary", ".bsdf", ".bin", ".gz")
 #: Conversion methods of the analytic fits.
 METHODS = ("least_squares", "moments")
-#: Diffuse-base choices of the least-squares fits: both (keep the best), with, without.
+#: Diffuse-base choices of the least-squares fits: with, dropped where negligible; with; without.
 DIFFUSE = ("auto", "on", "off")
+#: ``diffuse="auto"`` drops a fitted base whose reflectance is below this in every channel.
+NEGLIGIBLE_BASE = 2e-3
 _KINDS = ("tabulated", "ggx", "beckmann")
 #: Columns of ``summary.csv`` (``summary.md`` shows the same, formatted).
 SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "method",
@@ -145,13 +147,20 @@ def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffu
 
 def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
                    coat: bool = False) -> dict:
-    """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann_coat_diffuse``, ...)."""
-    from .analytic import fit_analytic
-    bases = {"auto": (False, True), "on": (True,), "off": (False,)}[diffuse]
-    return {f"{model}{'_coat' if coat else ''}{'_diffuse' if d else ''}":
-            fit_analytic(brdf, model, diffuse=d, anisotropic=anisotropic, fresnel=fresnel, coat=coat, start=fit,
-                         albedo_weight=albedo_weight)
-            for model in ("ggx", "beckmann") for d in bases}
+    """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann_coat_diffuse``, ...).
+    ``diffuse="auto"``: one fit with a base per model, the base dropped where it fits to
+    less than :data:`NEGLIGIBLE_BASE` (the model without a base is the special case
+    ``k_d = 0`` of the one with, so fitting both is redundant)."""
+    from .analytic import SumBRDF, fit_analytic
+    fits = {}
+    for model in ("ggx", "beckmann"):
+        b = fit_analytic(brdf, model, diffuse=diffuse != "off", anisotropic=anisotropic, fresnel=fresnel, coat=coat,
+                         start=fit, albedo_weight=albedo_weight)
+        *lobes, base = _parts(b)
+        if diffuse == "auto" and base is not None and np.all(base.reflectance < NEGLIGIBLE_BASE):
+            b, base = (lobes[0] if lobes[1] is None else SumBRDF(*lobes)), None
+        fits[f"{model}{'_coat' if coat else ''}{'_diffuse' if base is not None else ''}"] = b
+    return fits
 
 
 def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -> float:
@@ -174,8 +183,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
     least-squares fits (:func:`microfacet.fit.fit_analytic`; ``coat``: each with a coat
     lobe), ``albedo_weight`` the weight
-    of their albedo term (default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`); with
-    ``diffuse="auto"`` the fit of least :func:`objective` is kept. ``tabulated_diffuse``
+    of their albedo term (default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`).
+    ``tabulated_diffuse``
     is forwarded to :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
     summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
     the least-squares fits (not of the errors, picture or files).
@@ -201,10 +210,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
              **{f"{k}_least_squares": b for k, b in least.items()}}
     grid, uniform, albedo = fit_error(brdf, named), uniform_error(brdf, named), albedo_ratios(brdf, named)
     chosen = moments if method == "moments" else {
-        family: min((b for k, b in least.items() if k.startswith(family)),
-                    key=lambda b: objective(grid[_name(least, b)], uniform[_name(least, b)],
-                                            albedo[_name(least, b)], albedo_weight))
-        for family in ("ggx", "beckmann")}
+        family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}
     fits = {"tabulated": fit, **chosen}
     names = {"tabulated": "tabulated", **{k: _key(named, b) for k, b in chosen.items()}}
     errors = {k: grid[names[k]] for k in fits}
@@ -238,11 +244,6 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
                             title=title or material_name(out_npz), planes_deg=(0, 90) if anisotropic else (0,),
                             notes=notes)
     return summary
-
-
-def _name(fits: dict, brdf) -> str:
-    """The name of ``brdf`` among ``fits`` as :func:`fit_material` names the least-squares ones."""
-    return next(f"{k}_least_squares" for k, b in fits.items() if b is brdf)
 
 
 def _key(named: dict, brdf) -> str:
