@@ -12,10 +12,10 @@ anisotropic fit of the RGL files) and reports
   32^3 grid of MERL coordinates, **grazing pairs with cos theta_i or cos theta_o < 0.1
   excluded**, and for MERL the pairs touching unmeasured samples);
 * the least-squares fits of :func:`microfacet.fit.fit_analytic` (GGX and Beckmann, with
-  and without a Lambertian base, Fresnel table, the default albedo weight; started from
-  the tabulated fit) and their fit time;
+  and without a Lambertian base, and with a coat lobe and a base; Fresnel table, the
+  default albedo weight; started from the tabulated fit) and their fit time;
 * the trade-off of the albedo weight: for each weight of ``--weights``, the least-squares
-  fit of least objective (:func:`microfacet.fit.outputs.objective`) among the four, its
+  fit of least objective (:func:`microfacet.fit.outputs.objective`) among the six, its
   grid error (and its ratio to the moment-converted GGX), uniform error and albedo ratio;
 * for every fit the error over uniformly distributed pairs
   (:func:`microfacet.metrics.uniform_error`) and the directional-albedo ratio fit/data at
@@ -63,9 +63,10 @@ def _alpha(brdf) -> str:
     return f"{ax:.4f}" if abs(ax - ay) < 1e-4 * ax and abs(rho) < 1e-6 else f"{ax:.4f}, {ay:.4f}, ρ {rho:+.3f}"
 
 
-#: Least-squares fits by column name: (model, diffuse).
-LEAST_SQUARES = {"LS GGX": ("ggx", False), "LS GGX+d": ("ggx", True),
-                 "LS Beck": ("beckmann", False), "LS Beck+d": ("beckmann", True)}
+#: Least-squares fits by column name: (model, diffuse, coat).
+LEAST_SQUARES = {"LS GGX": ("ggx", False, False), "LS GGX+d": ("ggx", True, False),
+                 "LS Beck": ("beckmann", False, False), "LS Beck+d": ("beckmann", True, False),
+                 "LS GGX+c+d": ("ggx", True, True), "LS Beck+c+d": ("beckmann", True, True)}
 
 
 def _worst(ratios) -> float:
@@ -77,6 +78,18 @@ def _lobe(brdf):
     return brdf.brdfs[0] if hasattr(brdf, "brdfs") else brdf
 
 
+def _describe(brdf) -> str:
+    """Roughness of the lobe, then the coat's roughness and the base's luminance if any."""
+    parts = getattr(brdf, "brdfs", (brdf,))
+    text = _alpha(parts[0])
+    for p in parts[1:]:
+        if isinstance(p, mf.Lambertian):
+            text += f", kd {float(p.reflectance @ [0.2126, 0.7152, 0.0722]):.3f}"
+        else:
+            text += f", coat {float(p.distribution.alpha_x):.4f}"
+    return text
+
+
 def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
     m = mf.measured.load(path)
     t0 = time.perf_counter()
@@ -84,13 +97,13 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
     seconds = time.perf_counter() - t0
     fits = {"tabulated": fit, "ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
     ls_seconds = {}
-    for name, (model, diffuse) in LEAST_SQUARES.items():
+    for name, (model, diffuse, coat) in LEAST_SQUARES.items():
         t0 = time.perf_counter()
-        fits[name] = mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, start=fit)
+        fits[name] = mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, coat=coat, start=fit)
         ls_seconds[name] = time.perf_counter() - t0
-    swept = {(w, name): mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, start=fit,
-                                            albedo_weight=w)
-             for w in weights if w != ALBEDO_WEIGHT for name, (model, diffuse) in LEAST_SQUARES.items()}
+    swept = {(w, name): mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, coat=coat,
+                                            start=fit, albedo_weight=w)
+             for w in weights if w != ALBEDO_WEIGHT for name, (model, diffuse, coat) in LEAST_SQUARES.items()}
     swept.update({(ALBEDO_WEIGHT, name): fits[name] for name in LEAST_SQUARES if ALBEDO_WEIGHT in weights})
     keys = {f"w{w:g} {name}": b for (w, name), b in swept.items()}
     all_fits = {**fits, **keys}
@@ -106,9 +119,7 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
            "errors": errors, "uniform": uniform, "best": best, "tradeoff": tradeoff,
            "albedo": {k: _worst(albedo[k]) for k in fits},
            "furnace": {k: white_furnace(b) for k, b in fits.items()},
-           "alpha": {k: _alpha(_lobe(b)) for k, b in fits.items() if k != "tabulated"},
-           "kd": {k: float(b.brdfs[1].reflectance @ [0.2126, 0.7152, 0.0722])
-                  for k, b in fits.items() if hasattr(b, "brdfs")}}
+           "alpha": {k: _describe(b) for k, b in fits.items() if k != "tabulated"}}
     if hasattr(m, "ndf_table"):
         row["ndf"] = {k: ndf_error(m.ndf, _ndf(_lobe(b)))["l2"] for k, b in fits.items()}
     return row
@@ -119,8 +130,8 @@ def format_tables(rows: list[dict], resolution: int) -> str:
     heads = ["tabulated", "GGX (moments)", "Beckmann (moments)", *LEAST_SQUARES]
     lines = [f"Fits at resolution {resolution} ({platform.processor() or platform.machine()}, "
              f"Python {platform.python_version()}, NumPy {np.__version__}); least-squares fits "
-             f"(LS) by `mf.fit.fit_analytic(m, model, diffuse=..., start=fit)` (Fresnel table, albedo weight "
-             f"{ALBEDO_WEIGHT:g}), `+d`: with a Lambertian base. Best: the LS fit of least objective "
+             f"(LS) by `mf.fit.fit_analytic(m, model, diffuse=..., coat=..., start=fit)` (Fresnel table, albedo "
+             f"weight {ALBEDO_WEIGHT:g}), `+d`: with a Lambertian base, `+c`: with a coat lobe. Best: the LS fit of least objective "
              "(grid² + uniform² + weight² · mean (albedo ratio − 1)²).", "",
              "Grid error (`fit_error`) / uniform-pairs error (`uniform_error`):", "",
              "| material | format | fit | " + " | ".join(heads) + " | best LS / GGX moments |",
@@ -135,12 +146,12 @@ def format_tables(rows: list[dict], resolution: int) -> str:
               "| material | fit | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
     lines += [f"| {r['material']} | {r['mode']} | "
               + " | ".join(f"{r['albedo'][k]:.3f} / {r['furnace'][k]:.3f}" for k in names) + " |" for r in rows]
-    lines += ["", "Fitted roughness (α, or αx, αy, ρ), diffuse luminance kd, fit times (s; tabulated "
+    lines += ["", "Fitted roughness (α, or αx, αy, ρ), coat roughness, diffuse luminance kd, fit times (s; tabulated "
               "fit, then each LS fit; `time.perf_counter`, one run):", "",
               "| material | fit | GGX mom | Beck mom | " + " | ".join(LEAST_SQUARES) + " | times |",
               "|---|---|---|---|" + "---|" * (len(LEAST_SQUARES) + 1)]
     for r in rows:
-        cells = [r["alpha"][k] + (f", kd {r['kd'][k]:.3f}" if k in r["kd"] else "") for k in names[1:]]
+        cells = [r["alpha"][k] for k in names[1:]]
         times = f"{r['seconds']:.2f}; " + ", ".join(f"{t:.2f}" for t in r["ls_seconds"].values())
         lines.append(f"| {r['material']} | {r['mode']} | " + " | ".join(cells) + f" | {times} |")
     sweep = [r for r in rows if r["tradeoff"]]

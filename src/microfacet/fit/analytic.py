@@ -62,6 +62,8 @@ FRESNEL_NODES = np.cos(np.radians(np.arange(90, -1, -1)))
 _CONDUCTOR_STARTS = np.array([(eta, k) for eta in np.geomspace(0.2, 5.0, 8) for k in (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)])
 #: Default weight of the albedo term of :func:`fit_analytic`.
 ALBEDO_WEIGHT = 4.0
+#: Starts of the joint search of the lobe and coat roughness (the best of the coat scan).
+COAT_STARTS = 3
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 12)
 
@@ -550,11 +552,11 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
             q0 = [q[0] - ratio, q[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
         q = _minimize(aniso, q0, max_nfev)
     # stage 3: the coat, from a scan of its roughness at that shape, then refined with it
+    # from the COAT_STARTS best scan values (the joint objective has several minima)
     if coat:
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
-        scan = np.log(_SCAN)
-        best = min(scan, key=lambda lc: problem.error(np.append(q, lc)))
-        q = _minimize(problem, np.append(q, best), max_nfev)
+        scan = sorted(np.log(_SCAN), key=lambda lc: problem.error(np.append(q, lc)))
+        q = min((_minimize(problem, np.append(q, lc), max_nfev) for lc in scan[:COAT_STARTS]), key=problem.error)
     # stage 4: a conductor, refined from that shape
     if fresnel == "conductor":
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)
