@@ -71,7 +71,8 @@ class MaskingModel(mf.BRDF):
 
     def eval(self, wi, wo):
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        val = self.rgl.ndf(half_vector(wi, wo)) / (4.0 * np.maximum(wi[..., 2], 1e-12)
+        h = np.where(up[..., None], half_vector(wi, wo), [0.0, 0.0, 1.0])    # wi = -wo has none
+        val = self.rgl.ndf(h) / (4.0 * np.maximum(wi[..., 2], 1e-12)
                                                      * np.maximum(self.rgl.sigma(wo), 1e-12))
         return np.where(up, val, 0.0)[..., None] * np.ones(3)
 

@@ -14,19 +14,24 @@ free; the uniform pairs pin the diffuse base; the albedo term makes the fit carr
 data's energy, not only its shape.
 
 Variable projection, in node space. For given shape parameters ``q`` (``log alpha_x``,
-``log alpha_y``, ``rho``) the model is ``s(q) F(cos theta_d) + k_d cos theta_i / pi`` with
-``s = D G / (4 cos theta_o)``; ``F`` enters only through its values ``v`` at the 91
-:data:`FRESNEL_NODES` (1 deg apart in ``theta_d``; piecewise linear in ``cos theta_d``: exact
-for the table, whose 7 nodes are among them, within 1e-3 for Schlick and conductors). So
-the objective is, per channel, a quadratic form in ``x = (v, k_d)`` whose matrix and vector
-are sums over pairs accumulated into the nodes (``np.bincount``, banded) once per ``q``:
-one evaluation of ``s`` on the pairs and the albedo nodes per ``q``, nothing else per pair.
-The linear coefficients (Schlick ``F0``, table values, ``k_d``, each in ``[0, 1]``) are
-then solved exactly on that small system (BVLS where a bound is active); a conductor's
-``eta, k`` (per channel, bounded) by a small nonlinear solve on it. ``q`` is found by a scan
-of the roughness and a bounded Brent search (isotropic), then ``L-BFGS-B`` over
-``(log alpha_x, log alpha_y, rho)`` (anisotropic), started from the moment conversion of
-the tabulated fit (thesis App. C); a conductor is fitted at the table fit's shape and
+``log alpha_y``, ``rho``; then ``log alpha_c`` of a coat) the model is
+``s(q) F(cos theta_d) [+ s_c(q) (f0_c (1 - m^5) + f90_c m^5)] + k_d cos theta_i / pi`` with
+``s = D G / (4 cos theta_o)``, ``m = 1 - cos theta_d``; ``F`` enters only through its values
+``v`` at the 91 :data:`FRESNEL_NODES` (1 deg apart in ``theta_d``; piecewise linear in
+``cos theta_d``: exact for the table, whose 7 nodes are among them, within 1e-3 for Schlick
+and conductors). So the objective is, per channel, a quadratic form in
+``x = (v, f0_c, f90_c, k_d)`` whose matrix and vector are sums over pairs accumulated into
+the nodes once per ``q`` (the pairs are sorted by Fresnel node, each sum one
+``np.add.reduceat``; the matrix is banded): one evaluation of ``s`` (and ``s_c``) on the
+pairs and the albedo nodes per ``q``, nothing else per pair. The linear coefficients
+(Schlick ``F0``, table values, the coat's ``f0, f90``, ``k_d``, each in ``[0, 1]``) are then
+solved exactly on that small system (a box QP, :func:`.extract.box_qp`, where a bound is
+active); a conductor's ``eta, k`` (per channel, bounded) by a small nonlinear solve on
+it. ``q`` is found by a scan of the roughness and a golden-section search
+(isotropic; no SciPy optimizer imported), then ``L-BFGS-B`` over ``(log alpha_x,
+log alpha_y, rho)`` (anisotropic), started from the moment conversion of the tabulated
+fit (thesis App. C); a coat's roughness by a scan at that shape, then ``L-BFGS-B`` over
+all from the :data:`COAT_STARTS` best; a conductor is fitted at the table fit's shape and
 both refined together.
 """
 from __future__ import annotations
