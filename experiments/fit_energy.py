@@ -106,7 +106,8 @@ def main(argv=None) -> int:
              "excess = fit - data albedo (max RGB) at 0/30/60/75/85°; ratio = max RGB |fit/data - 1| "
              "at 0/30/60/75°; reach = albedo of the lobe with F = 1 / data albedo (brightest channel) at "
              "0/30/60/75° (< 1: out of the lobe's reach).", "",
-             "| material | fit | k_d | excess 0/30/60/75/85° | ratio 0/30/60/75° | reach 0/30/60/75° | fit time (s) |",
+             "| material | fit | k_d | excess 0/30/60/75/85° | ratio 0/30/60/75° | reach 0/30/60/75° "
+             "| fit time (s) |",
              "|---|---|---|---|---|---|---|"]
     rgl = []
     for path in paths:

@@ -364,7 +364,8 @@ class _Problem:
             x = np.concatenate([v, np.zeros((len(v), e))], axis=1)
             if e:                                       # the best other coefficients of each start
                 Hee, Hev, ge = H[c][n:, n:], H[c][n:, :n], g[c][n:]
-                x[:, n:] = np.clip(np.linalg.solve(Hee + 1e-300 * np.eye(e), (ge[:, None] - Hev @ v.T)).T, 0.0, 1.0)
+                Hee = Hee + 1e-12 * max(float(np.max(np.diag(Hee))), 1e-300) * np.eye(e)
+                x[:, n:] = np.clip(np.linalg.solve(Hee, ge[:, None] - Hev @ v.T).T, 0.0, 1.0)
             best = int(np.argmin(np.einsum("sx,xy,sy->s", x, H[c], x) - 2.0 * x @ g[c]))
             Hc = H[c] + (1e-12 * max(float(np.max(np.diag(H[c]))), 1e-300)) * np.eye(len(H[c]))
             R = np.linalg.cholesky(Hc).T
@@ -394,7 +395,8 @@ class _Problem:
             fresnel = _fresnel.Conductor(eta=c[:, 0], k=c[:, 1])
         lobes = [MicrofacetBRDF(self.distribution(q), fresnel=fresnel, gaf=self.gaf, shadowing=self.shadowing)]
         if self.coat:
-            f0, f90 = np.clip(c[:, len(c[0]) - 2 - int(self.diffuse):][:, :2].T, 0.0, 1.0)
+            i = c.shape[1] - self.n_extra                          # coefficients: (F..., f0, f90[, k_d])
+            f0, f90 = np.clip(c[:, i:i + 2].T, 0.0, 1.0)
             lobes.append(MicrofacetBRDF(self.coat_distribution(q), fresnel=coat_fresnel(f0, f90), gaf=self.gaf,
                                         shadowing=self.shadowing))
         if self.diffuse:
@@ -475,8 +477,8 @@ def _minimize(problem: _Problem, q0, max_nfev: int) -> np.ndarray:
 
 
 def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: bool = False,
-                 fresnel: str = "table", *, coat: bool = False, start=None, gaf: str | None = None, shadowing: bool = True,
-                 albedo_weight: float = ALBEDO_WEIGHT, n: int = 32, n_uniform: int = 2**13,
+                 fresnel: str = "table", *, coat: bool = False, start=None, gaf: str | None = None,
+                 shadowing: bool = True, albedo_weight: float = ALBEDO_WEIGHT, n: int = 32, n_uniform: int = 2**13,
                  albedo_grid: tuple[int, int] = (64, 32), max_nfev: int = 200):
     """Least-squares fit of an analytic microfacet BRDF (with an optional clear coat and
     Lambertian base) to ``brdf``.
