@@ -6,11 +6,11 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
 * ``NAME.npz`` — the tabulated fit (``fit.save``), loadable by :func:`microfacet.fit.load`;
 * ``NAME.json`` — ``"ggx"`` and ``"beckmann"``: the analytic fits of the chosen method
   (``least_squares`` by default: :func:`microfacet.fit.fit_analytic`, with a diffuse
-  base unless it fits to less than :data:`NEGLIGIBLE_BASE` for ``diffuse="auto"``, with a coat for ``coat=True``;
-  ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``), each ``{"alpha_x", "alpha_y",
-  "rho", "fresnel", "coat", "diffuse"}`` (``coat``: ``{"alpha", "fresnel"}`` or null;
-  ``diffuse``: the Lambertian reflectance, RGB, or null); ``"moments"`` and ``"least_squares"``: every
-  fit of each method by name; ``"fresnel"`` (the tabulated fit's), ``"seconds"`` (fit
+  base unless it fits to less than :data:`NEGLIGIBLE_BASE` for ``diffuse="auto"``, with
+  a coat for ``coat=True``; ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``), each
+  ``{"alpha_x", "alpha_y", "rho", "fresnel", "coat", "diffuse"}`` (``coat``: ``{"alpha",
+  "fresnel"}`` or null; ``diffuse``: the Lambertian reflectance, RGB, or null);
+  ``"moments"`` and ``"least_squares"``: every fit of each method by name; ``"fresnel"`` (the tabulated fit's), ``"seconds"`` (fit
   times), ``"errors"`` (per fit name: the grid error of
   :func:`microfacet.metrics.fit_error`; ``"uniform"``: :func:`~microfacet.metrics.uniform_error`;
   ``"albedo_ratio"``: :func:`~microfacet.metrics.albedo_ratios`, views x RGB;
@@ -182,10 +182,9 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     ``method`` (:data:`METHODS`) chooses the ``"ggx"``/``"beckmann"`` fits of the JSON
     and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
     least-squares fits (:func:`microfacet.fit.fit_analytic`; ``coat``: each with a coat
-    lobe), ``albedo_weight`` the weight
-    of their albedo term (default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`).
-    ``tabulated_diffuse``
-    is forwarded to :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
+    lobe), ``albedo_weight`` the weight of their albedo term (default
+    :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`). ``tabulated_diffuse`` is forwarded to
+    :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
     summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
     the least-squares fits (not of the errors, picture or files).
     """
