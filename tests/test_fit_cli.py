@@ -198,3 +198,16 @@ def test_coat_fits_without_picture(inputs, tmp_path):
     rebuilt = analytic_from_json(summary["ggx"])
     assert len(rebuilt.brdfs) == 2 and fit_error(TRUTH, rebuilt)["fit"] < 0.02
     assert main(["fit", str(inputs), "-o", str(tmp_path / "folder"), "--no-picture"]) == 1
+
+
+def test_single_fit_imports_no_optimizer_statistics_or_plotting(inputs, tmp_path):
+    """The default single-file fit with --no-picture stays light: no SciPy optimize/stats
+    (NumPy Sobol, golden section, box QP) and no matplotlib."""
+    import subprocess
+    import sys
+    code = (f"from microfacet.cli import main\nimport sys\n"
+            f"assert main(['fit', {str(inputs / 'gold-ggx.binary')!r}, '-o', {str(tmp_path / 'x.npz')!r}, "
+            f"'--resolution', '{RESOLUTION}', '--no-picture']) == 0\nprint(' '.join(sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    loaded = set(out.stdout.split())
+    assert not loaded & {"scipy.optimize", "scipy.stats", "matplotlib"}
