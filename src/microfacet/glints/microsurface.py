@@ -453,6 +453,36 @@ def _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, params, W, x0, x1, y0, y1, out
         out[qi] += acc
 
 
+#: Side, in lobes, of the blocks of :meth:`LobeMixture._block_bounds` (the pruning grid of
+#: the compiled image kernel, :func:`microfacet.glints.pbrdf._footprint_sums`).
+BLOCK = 8
+
+
+@numba.njit(parallel=True, cache=True)
+def _block_bounds_compiled(E, B):  # pragma: no cover - compiled
+    """Per ``B x B`` block of the lobe grid ``E (ny, nx, 5)`` (raw moments, Eq. 5): the
+    bounds ``(min x~n, max x~n, min y~n, max y~n, max sigma_x, max sigma_y, max |c_xy|)``
+    of its lobes' mean slopes and slope covariances (blocks at the far edges may be
+    partial)."""
+    ny, nx = E.shape[0], E.shape[1]
+    nby, nbx = (ny + B - 1) // B, (nx + B - 1) // B
+    out = np.empty((nby, nbx, 7))
+    for by in numba.prange(nby):
+        for bx in range(nbx):
+            b = np.array([np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0, 0.0])
+            for iy in range(by * B, min(by * B + B, ny)):
+                for ix in range(bx * B, min(bx * B + B, nx)):
+                    m1, m2 = E[iy, ix, 0], E[iy, ix, 1]
+                    b[0], b[1] = min(b[0], m1), max(b[1], m1)
+                    b[2], b[3] = min(b[2], m2), max(b[3], m2)
+                    b[4] = max(b[4], E[iy, ix, 2] - m1 * m1)
+                    b[5] = max(b[5], E[iy, ix, 3] - m2 * m2)
+                    b[6] = max(b[6], abs(E[iy, ix, 4] - m1 * m2))
+            b[4], b[5] = math.sqrt(b[4]), math.sqrt(b[5])
+            out[by, bx] = b
+    return out
+
+
 # --------------------------------------------------------------------------- storage
 class _LazyPyramid(Sequence):
     """The lobe-moment MIP levels of Sec. 4.2.2 (:func:`~microfacet.leadr.mip.mip_pyramid`),
@@ -577,6 +607,12 @@ class LobeMixture:
     @cached_property
     def _flat(self):
         return _flatten(self._boxes)
+
+    @cached_property
+    def _block_bounds(self) -> np.ndarray:
+        """Mean-slope and covariance bounds of the lobes of each :data:`BLOCK` x :data:`BLOCK`
+        block (:func:`_block_bounds_compiled`), for pruning in the compiled image kernel."""
+        return _block_bounds_compiled(self._grid, BLOCK)
 
     @cached_property
     def _flat_params(self) -> np.ndarray:
