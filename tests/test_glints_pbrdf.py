@@ -393,7 +393,7 @@ def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
     fp = np.column_stack([uv, np.broadcast_to([cov[0, 0], cov[1, 1], cov[0, 1]], (len(uv), 3))])
     wo = np.broadcast_to(scene.wo, wi.shape)
     _, ai, vi, ao, vo = _footprint_sums(ms.lobe_moments, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1],
-                                        ms.cutoff, np.inf, fp, h, wi, np.ascontiguousarray(wo)).T
+                                        ms.cutoff, np.inf, fp, h, wi, np.ascontiguousarray(wo), np.zeros(0)).T
     factor = _g2_over_ao("correlated", ai, vi, ao, vo) / 4.0
     for k in (PRUNE_SIGMA, 3.0):
         got = eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=k)[:, 0]

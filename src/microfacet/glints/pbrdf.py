@@ -572,15 +572,31 @@ if _kernels.AVAILABLE:
         return 0.0
 
     @numba.njit(cache=True, inline="always")
-    def _lobe_terms(E, k, hz, xh, yh, ix, iy, iz, ox, oy, oz, qmax):  # pragma: no cover - compiled
+    def _lobe_terms(E, k, hz, xh, yh, ix, iy, iz, ox, oy, oz, qmax, exo):  # pragma: no cover - compiled
         """``(P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` of lobe ``k`` of raw moments ``E``
-        (the terms of Eq. 9, 13 and 17; ``P_i`` cut at ``qmax``, :func:`_p22`)."""
+        (the terms of Eq. 9, 13 and 17; ``P_i`` cut at ``qmax``, :func:`_p22`); ``exo >= 0``
+        is the lobe's tabulated ``V_i(o) - A_i(o)`` (:func:`_area_excess`), else computed."""
         mx, my = E[k, 0], E[k, 1]
         sxx, syy, sxy = E[k, 2] - mx * mx, E[k, 3] - my * my, E[k, 4] - mx * my
         d = _p22(xh, yh, mx, my, sxx, syy, sxy, qmax) if hz > 0 else 0.0
         ai, vi = _areas(ix, iy, iz, mx, my, sxx, syy, sxy)
+        if exo >= 0.0:
+            ao = max(oz - ox * mx - oy * my, 0.0)
+            return d, ai, vi, ao, ao + exo
         ao, vo = _areas(ox, oy, oz, mx, my, sxx, syy, sxy)
         return d, ai, vi, ao, vo
+
+    @numba.njit(cache=True, parallel=True, nogil=True)
+    def _area_excess(E, k):  # pragma: no cover - compiled
+        """``V_i(k) - A_i(k) = E[s+] - c+ >= 0`` (:func:`_areas`) of every lobe of ``E
+        (N, 5)`` toward one direction ``k``: the per-lobe part of the patch areas that is not
+        linear in the mean slopes, tabulated once when every pixel shares ``k``."""
+        out = np.empty(E.shape[0])
+        for n in numba.prange(E.shape[0]):
+            mx, my = E[n, 0], E[n, 1]
+            a, v = _areas(k[0], k[1], k[2], mx, my, E[n, 2] - mx * mx, E[n, 3] - my * my, E[n, 4] - mx * my)
+            out[n] = v - a
+        return out
 
     @numba.njit(cache=True, inline="always")
     def _half_slope(h):  # pragma: no cover - compiled
@@ -631,7 +647,7 @@ if _kernels.AVAILABLE:
         return min(e, s + min(blk * B + B, n) - 1 - w), w, blk
 
     @numba.njit(cache=True, parallel=True, nogil=True)
-    def _footprint_sums(E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo):  # pragma: no cover
+    def _footprint_sums(E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo):  # pragma: no cover
         """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
         of :func:`footprint_lobes` (same window, same weights), looping over the window
         instead of padding it; ``E`` the raw lobe moments ``(ny * nx, 5)`` (each lobe's
@@ -646,7 +662,9 @@ if _kernels.AVAILABLE:
         blocks, every lobe density whose Mahalanobis distance is at least ``prune``. So
         ``D_P`` is at most
         ``exp(-prune^2 / 2) / (2 pi sigma_eps^2 z_h^4)`` below the unpruned sum and the
-        areas are unchanged; ``prune = inf`` visits every lobe.
+        areas are unchanged; ``prune = inf`` visits every lobe. ``exo``: the lobes'
+        :func:`_area_excess` toward ``wo`` when every footprint has the same ``wo`` (an
+        orthographic view: one erfc per lobe instead of one per lobe and pixel), else empty.
 
         The same sums as the NumPy reference up to rounding otherwise: the footprint weight
         ``exp(-q/2)`` of an uncorrelated footprint is factored into per-column and per-row
@@ -677,8 +695,9 @@ if _kernels.AVAILABLE:
                 while xs <= x1:
                     xe, wxs, bx = _segment(xs, x1, nx, B)
                     b = bounds[by, bx]
-                    visit = not (_block_dark(b, hz, xh, yh, prune) and _block_linear(b, ix_, iy_, iz_)
-                                 and _block_linear(b, ox_, oy_, oz_))
+                    dark = _block_dark(b, hz, xh, yh, prune)
+                    visit = not (dark and _block_linear(b, ix_, iy_, iz_) and _block_linear(b, ox_, oy_, oz_))
+                    qb = 0.0 if dark else qmax          # dark blocks visited for their areas: no density
                     for iy in range(ys, ye + 1):
                         dv = (iy + 0.5) / ny - cv
                         ey = math.exp(ay * dv * dv)
@@ -693,7 +712,8 @@ if _kernels.AVAILABLE:
                             wsum += w
                             if visit:
                                 d, ai, vi, ao, vo = _lobe_terms(E, row + ix, hz, xh, yh, ix_, iy_, iz_,
-                                                                ox_, oy_, oz_, qmax)
+                                                                ox_, oy_, oz_, qb,
+                                                                exo[row + ix] if exo.size else -1.0)
                                 s0 += w * d
                                 s1 += w * ai
                                 s2 += w * vi
@@ -724,7 +744,7 @@ if _kernels.AVAILABLE:
             ix_, iy_, iz_, ox_, oy_, oz_ = wi[q, 0], wi[q, 1], wi[q, 2], wo[q, 0], wo[q, 1], wo[q, 2]
             s0 = s1 = s2 = s3 = s4 = 0.0
             for k in range(E.shape[0]):
-                d, ai, vi, ao, vo = _lobe_terms(E, k, hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_, _Q_MAX)
+                d, ai, vi, ao, vo = _lobe_terms(E, k, hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_, _Q_MAX, -1.0)
                 s0 += W[k] * d
                 s1 += W[k] * ai
                 s2 += W[k] * vi
@@ -756,7 +776,7 @@ if _kernels.AVAILABLE:
                     out[p, m] /= wsum
         return out
 else:  # pragma: no cover - without numba
-    _footprint_sums = _footprint_merge = _lobe_sums = None
+    _footprint_sums = _footprint_merge = _lobe_sums = _area_excess = None
 
 
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
@@ -790,7 +810,8 @@ def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, pr
     P = c.shape[0]
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
     wi = np.ascontiguousarray(np.broadcast_to(_dirs(wi, "wi"), (P, 3)))
-    wo = np.ascontiguousarray(np.broadcast_to(_dirs(wo, "wo"), (P, 3)))
+    wo1 = _dirs(wo, "wo")
+    wo = np.ascontiguousarray(np.broadcast_to(wo1, (P, 3)))
     ny, nx = ms.grid
     ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.ascontiguousarray(np.stack([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]], -1))
@@ -798,8 +819,13 @@ def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, pr
     oh, ih = dot(wo, h), dot(wi, h)
     ok = _local_ok(wi, wo, h, oh, ih)
     E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64)
+    # one view direction for all pixels: tabulate the lobes' area excess toward it once,
+    # when the image visits more (pixel, lobe) pairs than there are lobes
+    pairs = np.sum((2 * ms.cutoff * np.sqrt(fp[:, 2] + ks2[0]) * nx + 1)
+                   * (2 * ms.cutoff * np.sqrt(fp[:, 3] + ks2[1]) * ny + 1))
+    exo = _area_excess(E, wo1) if wo1.ndim == 1 and pairs > 2 * E.shape[0] else np.zeros(0)
     D, ai, vi, ao, vo = _footprint_sums(E, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1], float(ms.cutoff),
-                                        prune, fp, np.ascontiguousarray(h), wi, wo).T
+                                        prune, fp, np.ascontiguousarray(h), wi, wo, exo).T
     if not exact:
         merged = _merged_footprints(ms, c, cov, fast=True)
         ai, vi = _merged_area(vi, merged, wi)
