@@ -406,6 +406,29 @@ def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
         eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=0.0)
 
 
+def test_compiled_naive_render_matches_the_microfacet_brdf_reference():
+    """``render_naive`` compiled (one pass, :func:`_naive_sums`) equals the NumPy reference
+    (``MicrofacetBRDF`` of a Beckmann with array mean slopes) on the same counter-based
+    footprint positions, with a Fresnel term; the positions follow the footprint Gaussian."""
+    from microfacet.glints.figures import _footprint_normals, _naive_sums
+    if _naive_sums is None:
+        pytest.skip("compiled kernels disabled")
+    ms = Microsurface.from_normal_map(scratched_normal_map(64, scratches=12, width=1.5, seed=3), sigma_eps=0.01)
+    scene = PlaneScene(width=12, light=(0.2, 0.3, 0.7))
+    for fresnel in (None, mf.fresnel.Schlick(0.04)):
+        ref = render_naive(ms, scene, 48, seed=5, fresnel=fresnel, backend="numpy")
+        got = render_naive(ms, scene, 48, seed=5, fresnel=fresnel, backend="numba")
+        assert (ref[..., 0] > 0).mean() > 0.3
+        np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-13 * ref.max())
+    assert not np.allclose(render_naive(ms, scene, 48, seed=6), ref)
+    z = _footprint_normals(np.arange(200), 500, seed=1).reshape(-1, 2)
+    tol = 5.0 / np.sqrt(len(z))                                  # 5 standard errors
+    assert np.all(np.abs(z.mean(0)) < tol) and np.all(np.abs(z.std(0) - 1) < tol)
+    assert abs(np.corrcoef(z.T)[0, 1]) < tol
+    with pytest.raises(ValueError, match="backend"):
+        render_naive(ms, scene, 4, backend="gpu")
+
+
 # ------------------------------------------------------------------- structure, demo
 def test_glints_imports_flow_one_way():
     """microsurface <- (reference, pbrdf) <- figures: no glints module imports one that
