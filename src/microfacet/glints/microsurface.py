@@ -40,6 +40,7 @@ Conventions
 from __future__ import annotations
 
 import math
+import zipfile
 from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
@@ -222,8 +223,10 @@ def lobe_moments(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
     """Raw moments ``(ny, nx, 5)`` of the interpolated map under each seed's normalized
     kernel (Eq. 3-6), compiled: :func:`_lobe_moments_shared` when ``h * samples`` is an
     integer along both axes, else the direct sum :func:`_lobe_moments`. Both equal
-    :func:`lobe_moments_reference` to rounding."""
-    s = np.ascontiguousarray(slopes, dtype=np.float64)
+    :func:`lobe_moments_reference` to rounding. Float32 slopes are read as they are (the
+    arithmetic is float64), others as float64."""
+    s = np.asarray(slopes)
+    s = np.ascontiguousarray(s, dtype=np.float32 if s.dtype == np.float32 else np.float64)
     hgt, wid = s.shape[:2]
     o, g = _quadrature((wid / nx) / FWHM_PER_SIGMA, int(samples))
     px, py = wid * samples / nx, hgt * samples / ny
@@ -517,6 +520,17 @@ def _central_float32(E):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True)
+def _axis_alphas_float32(E):  # pragma: no cover - compiled
+    """Float32 Beckmann roughness ``alpha = sqrt(2 var)`` of both slope axes of every lobe of
+    raw moments ``E (N, 5)`` (Eq. 5; the std is ``alpha / sqrt(2)``), flat ``(2 N,)``."""
+    out = np.empty(2 * E.shape[0], np.float32)
+    for i in numba.prange(E.shape[0]):
+        out[2 * i] = math.sqrt(2.0 * max(E[i, 2] - E[i, 0] * E[i, 0], 0.0))
+        out[2 * i + 1] = math.sqrt(2.0 * max(E[i, 3] - E[i, 1] * E[i, 1], 0.0))
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
 def _raw_from_central(C):  # pragma: no cover - compiled
     """Float64 raw moments ``E1..E5`` of central moments ``C (ny, nx, 5)`` (inverse of
     :func:`_central_float32`: ``E3 = vxx + mx^2``, ``E4 = vyy + my^2``, ``E5 = cxy + mx my``)."""
@@ -658,6 +672,9 @@ class LobeMixture:
             raise ValueError(f"samples must be >= 1, got {samples!r}")
         hgt, wid = slopes.shape[:2]
         nx, ny = max(1, int(round(wid / h))), max(1, int(round(hgt / h)))
+        # the lobes of the float32 slopes the microsurface keeps (and files store), so that a
+        # built and a loaded one agree; the float64 input is released before the moments
+        slopes = np.asarray(slopes, dtype=np.float32)
         raw = lobe_moments(slopes, nx, ny, int(samples))
         return cls(raw, slopes, h=h, sigma_eps=sigma_eps, copy=False, **kwargs)
 
@@ -673,6 +690,16 @@ class LobeMixture:
         """The lobes ``indices`` as one :class:`microfacet.Beckmann` with array parameters."""
         E = self.lobe_moments if indices is None else self.lobe_moments[np.asarray(indices)]
         return from_moments(E, min_alpha=np.sqrt(2.0) * self.sigma_eps * 0.5, max_rho=MAX_RHO)
+
+    def alpha_summary(self) -> tuple[float, float]:
+        """Median and largest per-axis Beckmann roughness ``alpha = sqrt(2 var)`` of the
+        lobes (both axes pooled, as ``np.median`` would give them to float32 rounding),
+        from a float32 copy partitioned in place (4 bytes per lobe and axis)."""
+        a = _axis_alphas_float32(self.lobe_moments)
+        k = a.size // 2
+        a.partition([k - 1, k] if a.size > 1 else [0])
+        med = float(a[k]) if a.size % 2 else 0.5 * (float(a[k - 1]) + float(a[k]))
+        return med, float(a.max())
 
     def slopes_at(self, uv) -> np.ndarray:
         """Slopes ``(..., 2)`` of the interpolated normal map at ``uv (..., 2)``."""
@@ -867,11 +894,20 @@ class LobeMixture:
         float32 raw moments ``E3 = var + mean^2``) and float32 slopes, uncompressed (fast);
         loading refloors the lobes (the float32 rounding can sit 1 ulp below the floor)."""
         path = Path(path)
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                np.savez(f, magic=np.array(_MAGIC), version=np.array(FORMAT_VERSION),
-                         central=_central_float32(self._grid), slopes=self.slopes,
-                         params=np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff]))
+        small = {"magic": np.array(_MAGIC), "version": np.array(FORMAT_VERSION), "slopes": self.slopes,
+                 "params": np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff])}
+        with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for name, a in small.items():
+                with zf.open(f"{name}.npy", "w", force_zip64=True) as m:
+                    np.lib.format.write_array(m, a)
+            # the central moments streamed by blocks of rows (no full float32 copy in memory)
+            with zf.open("central.npy", "w", force_zip64=True) as m:
+                np.lib.format.write_array_header_1_0(
+                    m, {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)), "fortran_order": False,
+                        "shape": self._grid.shape})
+                rows = max(1, (16 << 20) // max(1, self._grid[0].nbytes))
+                for r in range(0, self._grid.shape[0], rows):
+                    m.write(_central_float32(self._grid[r:r + rows]).tobytes())
         return path
 
     @classmethod
