@@ -366,3 +366,17 @@ def test_central_moment_conversions_invert_each_other():
     np.testing.assert_allclose(C[..., 4], E[..., 4] - E[..., 0] * E[..., 1], rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(_raw_from_central(C), E, rtol=1e-6, atol=1e-9)
     assert np.array_equal(_raw_from_central(C.astype(np.float64))[..., :2], C[..., :2])
+
+
+def test_alpha_summary_is_the_median_and_max_of_both_axes():
+    """``alpha_summary`` (float32, partitioned in place) gives ``np.median`` and the
+    largest of the per-axis roughness ``sqrt(2 var)`` of the lobes, even and odd counts."""
+    from microfacet.glints.figures import scratched_normal_map
+    for size in (16, 9):
+        ms = Microsurface.from_normal_map(scratched_normal_map(16, scratches=3, seed=2)[:size, :9])
+        E = ms.lobe_moments
+        alpha = np.sqrt(2.0 * (E[:, 2:4] - E[:, :2] ** 2))
+        med, top = ms.alpha_summary()
+        assert med == pytest.approx(float(np.median(alpha)), rel=1e-6)
+        assert top == pytest.approx(float(alpha.max()), rel=1e-6)
+        assert alpha.min() < med < top

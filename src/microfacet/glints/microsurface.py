@@ -243,8 +243,12 @@ def _floor_moments_compiled(E, sigma_eps):  # pragma: no cover - compiled
         m1, m2 = E[i, 0], E[i, 1]
         vx = max(E[i, 2] - m1 * m1, 0.0)
         vy = max(E[i, 3] - m2 * m2, 0.0)
+        c0 = E[i, 4] - m1 * m2
+        if vx * vy - c0 * c0 >= e2 * (vx + vy) and c0 * c0 <= MAX_RHO * MAX_RHO * vx * vy \
+                and vx > 0.0 and vy > 0.0:
+            continue        # l2 >= det / (vx + vy) >= e2 and |rho| <= 0.99: already floored, unchanged
         lim = MAX_RHO * math.sqrt(vx * vy)
-        cxy = min(max(E[i, 4] - m1 * m2, -lim), lim)
+        cxy = min(max(c0, -lim), lim)
         half = 0.5 * (vx + vy)
         r = math.hypot(0.5 * (vx - vy), cxy)
         l2 = half - r
@@ -504,6 +508,15 @@ class _LazyPyramid(Sequence):
         return self._levels[i]
 
 
+@numba.njit(cache=True)
+def _all_finite(a) -> bool:  # pragma: no cover - compiled
+    """``np.isfinite(a).all()`` in one pass without a boolean temporary, stopping early."""
+    for v in a.flat:
+        if not np.isfinite(v):
+            return False
+    return True
+
+
 @numba.njit(parallel=True, cache=True)
 def _central_float32(E):  # pragma: no cover - compiled
     """Float32 central moments ``(mx, my, vxx, vyy, cxy)`` of raw moments ``E (ny, nx, 5)``
@@ -580,7 +593,7 @@ class LobeMixture:
         grid = np.asarray(moments, dtype=np.float64)
         if grid.ndim != 3 or grid.shape[2] != 5 or 0 in grid.shape:
             raise ValueError(f"moments must be an (ny, nx, 5) lobe grid, got shape {grid.shape}")
-        if not np.all(np.isfinite(grid)):
+        if not _all_finite(grid):
             raise ValueError("lobe moments must be finite")
         if not (cutoff > 0 and slope_cutoff > 0):
             raise ValueError(f"cutoff and slope_cutoff must be > 0, got {cutoff}, {slope_cutoff}")
@@ -927,15 +940,13 @@ class LobeMixture:
             moments = z["moments"] if version == 1 else z["central"]
         except (KeyError, TypeError, ValueError) as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({type(e).__name__}: {e})") from None
-        if version != 1:
-            if moments.ndim != 3 or moments.shape[2] != 5:
-                raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
-            moments = _raw_from_central(moments)
         if moments.ndim != 3 or moments.shape[2] != 5 or slopes.ndim != 3 or slopes.shape[2] != 2 \
-                or params.shape != (4,):
-            raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
-        if not (np.all(np.isfinite(moments)) and np.all(np.isfinite(slopes)) and np.all(np.isfinite(params))):
+                or params.shape != (4,) or not all(a.dtype.kind == "f" for a in (moments, slopes, params)):
+            raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes or types)")
+        if not (_all_finite(moments) and _all_finite(slopes) and _all_finite(params)):
             raise MicrofacetError(f"{path}: corrupt microsurface file (non-finite values)")
+        if version != 1:
+            moments = _raw_from_central(moments)
         h, eps, cutoff, scut = (float(v) for v in params)
         try:
             return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut, copy=False)
