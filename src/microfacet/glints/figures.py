@@ -140,7 +140,6 @@ def render_pbrdf(ms, scene: PlaneScene, exact: bool = True, fresnel=None, g2: st
 
 
 _GOLDEN, _MIX1, _MIX2 = 0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB
-_MASK64 = (1 << 64) - 1
 
 
 def _splitmix64(x: np.ndarray) -> np.ndarray:
@@ -222,6 +221,8 @@ if _kernels.AVAILABLE:
 
     import numba
 
+    from .microsurface import _bilinear_slopes
+
     _U53 = 2.0**-53
     _SQRT_PI = math.sqrt(math.pi)
 
@@ -276,16 +277,8 @@ if _kernels.AVAILABLE:
                 u2 = numba.float64(b >> numba.uint64(11)) * _U53
                 r = math.sqrt(-2.0 * math.log1p(-u1))
                 z1, z2 = r * math.cos(2.0 * math.pi * u2), r * math.sin(2.0 * math.pi * u2)
-                x = (uv[p, 0] + L[0, 0] * z1 + L[0, 1] * z2) * wid - 0.5
-                y = (uv[p, 1] + L[1, 0] * z1 + L[1, 1] * z2) * hgt - 0.5
-                x0f, y0f = math.floor(x), math.floor(y)
-                fx, fy = x - x0f, y - y0f
-                x0, y0 = int(x0f) % wid, int(y0f) % hgt
-                x1, y1 = (x0 + 1) % wid, (y0 + 1) % hgt
-                mx = ((slopes[y0, x0, 0] * (1 - fx) + slopes[y0, x1, 0] * fx) * (1 - fy)
-                      + (slopes[y1, x0, 0] * (1 - fx) + slopes[y1, x1, 0] * fx) * fy)
-                my = ((slopes[y0, x0, 1] * (1 - fx) + slopes[y0, x1, 1] * fx) * (1 - fy)
-                      + (slopes[y1, x0, 1] * (1 - fx) + slopes[y1, x1, 1] * fx) * fy)
+                mx, my = _bilinear_slopes(slopes, (uv[p, 0] + L[0, 0] * z1 + L[0, 1] * z2) * wid - 0.5,
+                                          (uv[p, 1] + L[1, 0] * z1 + L[1, 1] * z2) * hgt - 0.5)
                 co = wo[2] - wo[0] * mx - wo[1] * my
                 ci = wi[p, 2] - wi[p, 0] * mx - wi[p, 1] * my
                 if co <= 0.0 or ci <= 0.0:

@@ -120,6 +120,23 @@ def lobe_moments_reference(slopes, nx: int, ny: int, samples: int = 4) -> np.nda
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def _bilinear_slopes(s, x, y):  # pragma: no cover - compiled
+    """Slope ``(x~, y~)`` of the bilinearly interpolated, wrapped map ``s (H, W, 2)`` at the
+    continuous texel coordinates ``(x, y)`` (texel centres at integers; compiled
+    :func:`interpolate_slopes` at ``uv = ((x + 1/2) / W, (y + 1/2) / H)``)."""
+    hgt, wid = s.shape[0], s.shape[1]
+    x0f, y0f = np.floor(x), np.floor(y)
+    fx, fy = x - x0f, y - y0f
+    x0, y0 = int(x0f) % wid, int(y0f) % hgt
+    x1, y1 = (x0 + 1) % wid, (y0 + 1) % hgt
+    sx = ((s[y0, x0, 0] * (1 - fx) + s[y0, x1, 0] * fx) * (1 - fy)
+          + (s[y1, x0, 0] * (1 - fx) + s[y1, x1, 0] * fx) * fy)
+    sy = ((s[y0, x0, 1] * (1 - fx) + s[y0, x1, 1] * fx) * (1 - fy)
+          + (s[y1, x0, 1] * (1 - fx) + s[y1, x1, 1] * fx) * fy)
+    return sx, sy
+
+
 @numba.njit(parallel=True, cache=True)
 def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
     hgt, wid = s.shape[0], s.shape[1]
@@ -130,21 +147,9 @@ def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
             acc = np.zeros(5)
             for b in range(o.size):
                 y = (iy + 0.5) * hy + o[b] - 0.5
-                y0f = np.floor(y)
-                fy = y - y0f
-                y0 = int(y0f) % hgt
-                y1 = (y0 + 1) % hgt
                 for a in range(o.size):
-                    x = (ix + 0.5) * hx + o[a] - 0.5
-                    x0f = np.floor(x)
-                    fx = x - x0f
-                    x0 = int(x0f) % wid
-                    x1 = (x0 + 1) % wid
                     w = g[a] * g[b]
-                    sx = ((s[y0, x0, 0] * (1 - fx) + s[y0, x1, 0] * fx) * (1 - fy)
-                          + (s[y1, x0, 0] * (1 - fx) + s[y1, x1, 0] * fx) * fy)
-                    sy = ((s[y0, x0, 1] * (1 - fx) + s[y0, x1, 1] * fx) * (1 - fy)
-                          + (s[y1, x0, 1] * (1 - fx) + s[y1, x1, 1] * fx) * fy)
+                    sx, sy = _bilinear_slopes(s, (ix + 0.5) * hx + o[a] - 0.5, y)
                     acc[0] += w * sx
                     acc[1] += w * sy
                     acc[2] += w * sx * sx
