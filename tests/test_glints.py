@@ -380,3 +380,16 @@ def test_alpha_summary_is_the_median_and_max_of_both_axes():
         assert med == pytest.approx(float(np.median(alpha)), rel=1e-6)
         assert top == pytest.approx(float(alpha.max()), rel=1e-6)
         assert alpha.min() < med < top
+
+
+def test_load_rejects_arrays_of_other_types(tmp_path):
+    """A microsurface file whose arrays are not float32/float64 (here float16 moments, which
+    the compiled checks cannot read) is a clear error naming the file, not a traceback."""
+    ms = Microsurface.from_normal_map(np.dstack([np.zeros((8, 8, 2)), np.ones((8, 8))]))
+    ms.save(tmp_path / "ok.npz")
+    arrays = dict(np.load(tmp_path / "ok.npz"))
+    arrays["central"] = arrays["central"].astype(np.float16)
+    np.savez(tmp_path / "half.npz", **arrays)
+    with pytest.raises(MicrofacetError, match="half.npz.*types"):
+        Microsurface.load(tmp_path / "half.npz")
+    assert Microsurface.load(tmp_path / "ok.npz").n_lobes == 64

@@ -946,7 +946,7 @@ class LobeMixture:
         except (KeyError, TypeError, ValueError) as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({type(e).__name__}: {e})") from None
         if moments.ndim != 3 or moments.shape[2] != 5 or slopes.ndim != 3 or slopes.shape[2] != 2 \
-                or params.shape != (4,) or not all(a.dtype.kind == "f" for a in (moments, slopes, params)):
+                or params.shape != (4,) or not all(a.dtype in (np.float32, np.float64) for a in (moments, slopes, params)):
             raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes or types)")
         if not (_all_finite(moments) and _all_finite(slopes) and _all_finite(params)):
             raise MicrofacetError(f"{path}: corrupt microsurface file (non-finite values)")
