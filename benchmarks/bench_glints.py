@@ -18,7 +18,9 @@ processes (so each peak resident memory, ``ru_maxrss``, is its own): decoding th
 (``load_slopes``, not the lobe construction), building the microsurface from the
 slopes (``Microsurface.from_slopes``: moments, floor) and saving it, and loading it
 and rendering the 256-pixel-wide plane of ``microfacet glints render`` (exact and
-approximate P-BRDF). Then, in this process, milliseconds per ``PatchBRDF.eval_cos`` of
+approximate P-BRDF, and the exact one without pruning, ``prune=inf``, with the largest
+difference relative to the image's maximum); wall and CPU seconds (all threads) of each.
+Then, in this process, milliseconds per ``PatchBRDF.eval_cos`` of
 one direction pair (and per ``ms.pbrdf`` construction) for footprints of 32 texels
 (std ``sqrt(32) / 2`` texels, the convention above) and of std 32 texels.
 
@@ -69,38 +71,57 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+class _Clock:
+    """Wall and CPU seconds (all threads, ``time.process_time``) of a block, recorded as
+    ``KEY_s`` and ``KEY_cpu_s`` in ``out``: CPU time is the figure that survives a shared,
+    loaded machine."""
+
+    def __init__(self, out: dict, key: str):
+        self.out, self.key = out, key
+
+    def __enter__(self):
+        self.t, self.c = time.perf_counter(), time.process_time()
+
+    def __exit__(self, *exc):
+        self.out[f"{self.key}_s"] = time.perf_counter() - self.t
+        self.out[f"{self.key}_cpu_s"] = time.process_time() - self.c
+
+
 def _stage(stage: str, folder: Path) -> dict:
     """One production stage, run in a child process (its own peak memory)."""
     from microfacet.glints import load_slopes
     from microfacet.glints.figures import PlaneScene, render_pbrdf
+    from microfacet.glints.pbrdf import eval_cos_footprints
     Microsurface.from_slopes(np.zeros((8, 8, 2))).pbrdf((0.5, 0.5), np.eye(2) * 1e-3)   # compile
     render_pbrdf(Microsurface.from_slopes(np.zeros((8, 8, 2))), PlaneScene(width=2))
     render_pbrdf(Microsurface.from_slopes(np.zeros((8, 8, 2))), PlaneScene(width=2), exact=False)
     base = _peak_mb()
     out = {"baseline_mb": base}
-    t = time.perf_counter()
     if stage == "decode":
-        s = load_slopes(folder / "map.png")
-        out["decode_s"] = time.perf_counter() - t
+        with _Clock(out, "decode"):
+            s = load_slopes(folder / "map.png")
         np.save(folder / "slopes.npy", s)
     elif stage == "build":
         s = np.load(folder / "slopes.npy")
-        out["read_npy_s"] = time.perf_counter() - t
-        t = time.perf_counter()
-        ms = Microsurface.from_slopes(s)
-        out["build_s"] = time.perf_counter() - t
-        t = time.perf_counter()
-        ms.save(folder / "ms.npz")
-        out["save_s"] = time.perf_counter() - t
+        with _Clock(out, "build"):
+            ms = Microsurface.from_slopes(s)
+        with _Clock(out, "save"):
+            ms.save(folder / "ms.npz")
         out["file_mb"] = (folder / "ms.npz").stat().st_size / 2**20
     else:
-        ms = Microsurface.load(folder / "ms.npz")
-        out["load_s"] = time.perf_counter() - t
+        with _Clock(out, "load"):
+            ms = Microsurface.load(folder / "ms.npz")
         scene = PlaneScene(width=256, light=tuple(1.2 * np.array([0.0, 0.35, 0.9]) / np.hypot(0.35, 0.9)))
+        uv, cov, p = scene.pixels()
+        wi, irradiance = scene.lighting(p)
+        images = {}
         for exact in (True, False):
-            t = time.perf_counter()
-            render_pbrdf(ms, scene, exact)
-            out[f"render_{'exact' if exact else 'approx'}_s"] = time.perf_counter() - t
+            with _Clock(out, f"render_{'exact' if exact else 'approx'}"):
+                images[exact] = render_pbrdf(ms, scene, exact)
+        with _Clock(out, "render_exact_unpruned"):          # every lobe of every footprint
+            full = eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=np.inf)[:, 0]
+        pruned = images[True].reshape(-1, 3)[:, 0] / irradiance                   # eval_cos again
+        out["pruned_max_rel_diff"] = float(np.abs(pruned - full).max() / np.abs(full).max())
     out["peak_mb"] = _peak_mb()
     return out
 

@@ -366,3 +366,30 @@ def test_central_moment_conversions_invert_each_other():
     np.testing.assert_allclose(C[..., 4], E[..., 4] - E[..., 0] * E[..., 1], rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(_raw_from_central(C), E, rtol=1e-6, atol=1e-9)
     assert np.array_equal(_raw_from_central(C.astype(np.float64))[..., :2], C[..., :2])
+
+
+def test_alpha_summary_is_the_median_and_max_of_both_axes():
+    """``alpha_summary`` (float32, partitioned in place) gives ``np.median`` and the
+    largest of the per-axis roughness ``sqrt(2 var)`` of the lobes, even and odd counts."""
+    from microfacet.glints.figures import scratched_normal_map
+    for size in (16, 9):
+        ms = Microsurface.from_normal_map(scratched_normal_map(16, scratches=3, seed=2)[:size, :9])
+        E = ms.lobe_moments
+        alpha = np.sqrt(2.0 * (E[:, 2:4] - E[:, :2] ** 2))
+        med, top = ms.alpha_summary()
+        assert med == pytest.approx(float(np.median(alpha)), rel=1e-6)
+        assert top == pytest.approx(float(alpha.max()), rel=1e-6)
+        assert alpha.min() < med < top
+
+
+def test_load_rejects_arrays_of_other_types(tmp_path):
+    """A microsurface file whose arrays are not float32/float64 (here float16 moments, which
+    the compiled checks cannot read) is a clear error naming the file, not a traceback."""
+    ms = Microsurface.from_normal_map(np.dstack([np.zeros((8, 8, 2)), np.ones((8, 8))]))
+    ms.save(tmp_path / "ok.npz")
+    arrays = dict(np.load(tmp_path / "ok.npz"))
+    arrays["central"] = arrays["central"].astype(np.float16)
+    np.savez(tmp_path / "half.npz", **arrays)
+    with pytest.raises(MicrofacetError, match="half.npz.*types"):
+        Microsurface.load(tmp_path / "half.npz")
+    assert Microsurface.load(tmp_path / "ok.npz").n_lobes == 64

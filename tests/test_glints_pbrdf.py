@@ -297,8 +297,12 @@ def test_plane_image_matches_naive_sampling_on_a_smooth_map():
     one = mf.MicrofacetBRDF(mf.Beckmann(alpha=np.sqrt(2) * 0.03))
     uv, cov, p = scene.pixels()
     wi, e = scene.lighting(p)
-    np.testing.assert_allclose(render_pbrdf(flat, scene).reshape(-1, 3),
-                               e[:, None] * one.eval_cos(wi, scene.wo), rtol=1e-9, atol=1e-300)
+    expect = e[:, None] * one.eval_cos(wi, scene.wo)
+    np.testing.assert_allclose(e[:, None] * eval_cos_footprints(flat, uv, cov, wi, scene.wo, prune=np.inf),
+                               expect, rtol=1e-9, atol=1e-300)
+    # pruned (default): values below the pruning bound (1.3e-14 of the peak density) may drop
+    np.testing.assert_allclose(render_pbrdf(flat, scene).reshape(-1, 3), expect, rtol=1e-9,
+                               atol=1e-13 * expect.max())
 
 
 def test_scratched_map_is_deterministic_unit_and_wraps():
@@ -363,6 +367,66 @@ def test_footprint_kernel_matches_reference_on_near_mirror_lobes():
     assert _area(0.3, 0.0) == 0.3 and _area(-0.3, 0.0) == 0.0
     assert _area(1.0, 0.5) == pytest.approx(0.5 * erfc(-2 / np.sqrt(2)) + 0.5 * np.exp(-2) / np.sqrt(2 * np.pi),
                                             rel=1e-14)
+
+
+def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
+    """Block pruning (``prune`` deviations, default 8) changes only the P-NDF, by at most
+    ``exp(-prune^2 / 2) / (2 pi sigma_eps^2 z_h^4)`` per pixel (the areas are unchanged),
+    on a near-mirror map where most blocks are pruned; at 3 deviations the bound is
+    loose enough to be seen, and the pruned image stays within it."""
+    from microfacet.glints.microsurface import BLOCK, FWHM_PER_SIGMA
+    from microfacet.glints.pbrdf import PRUNE_SIGMA, _footprint_sums, _g2_over_ao
+    if _footprint_sums is None:
+        pytest.skip("compiled kernels disabled")
+    eps = 0.01
+    ms = Microsurface.from_normal_map(scratched_normal_map(128, scratches=20, roughness=0.02, seed=5), sigma_eps=eps)
+    scene = PlaneScene(width=32, view_deg=50, light=(0.0, 0.35, 0.9))
+    uv, cov, p = scene.pixels()
+    wi, _ = scene.lighting(p)
+    h = mf.geometry.half_vector(wi, scene.wo)
+    full = eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=np.inf)[:, 0]
+    ref = eval_cos_footprints(ms, uv, cov, wi, scene.wo, backend="numpy")[:, 0]
+    np.testing.assert_allclose(full, ref, rtol=1e-11, atol=1e-14 * ref.max())
+    # G2 / (4 A_P(o)) per pixel (the factor of D_P in eval_cos), from the kernel's areas
+    ny, nx = ms.grid
+    ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
+    fp = np.column_stack([uv, np.broadcast_to([cov[0, 0], cov[1, 1], cov[0, 1]], (len(uv), 3))])
+    wo = np.broadcast_to(scene.wo, wi.shape)
+    _, ai, vi, ao, vo = _footprint_sums(ms.lobe_moments, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1],
+                                        ms.cutoff, np.inf, fp, h, wi, np.ascontiguousarray(wo), np.zeros(0)).T
+    factor = _g2_over_ao("correlated", ai, vi, ao, vo) / 4.0
+    for k in (PRUNE_SIGMA, 3.0):
+        got = eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=k)[:, 0]
+        bound = np.exp(-k * k / 2) / (2 * np.pi * eps**2 * h[:, 2] ** 4)
+        diff = full - got
+        assert np.all(diff >= -1e-12 * full.max())                   # pruning only drops density
+        assert np.all(diff <= factor * bound * (1 + 1e-9) + 1e-12 * full.max())
+    assert np.abs(full - got).max() > 1e-9 * full.max()               # 3 deviations does prune
+    with pytest.raises(ValueError, match="prune"):
+        eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=0.0)
+
+
+def test_compiled_naive_render_matches_the_microfacet_brdf_reference():
+    """``render_naive`` compiled (one pass, :func:`_naive_sums`) equals the NumPy reference
+    (``MicrofacetBRDF`` of a Beckmann with array mean slopes) on the same counter-based
+    footprint positions, with a Fresnel term; the positions follow the footprint Gaussian."""
+    from microfacet.glints.figures import _footprint_normals, _naive_sums
+    if _naive_sums is None:
+        pytest.skip("compiled kernels disabled")
+    ms = Microsurface.from_normal_map(scratched_normal_map(64, scratches=12, width=1.5, seed=3), sigma_eps=0.01)
+    scene = PlaneScene(width=12, light=(0.2, 0.3, 0.7))
+    for fresnel in (None, mf.fresnel.Schlick(0.04)):
+        ref = render_naive(ms, scene, 48, seed=5, fresnel=fresnel, backend="numpy")
+        got = render_naive(ms, scene, 48, seed=5, fresnel=fresnel, backend="numba")
+        assert (ref[..., 0] > 0).mean() > 0.3
+        np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-13 * ref.max())
+    assert not np.allclose(render_naive(ms, scene, 48, seed=6), ref)
+    z = _footprint_normals(np.arange(200), 500, seed=1).reshape(-1, 2)
+    tol = 5.0 / np.sqrt(len(z))                                  # 5 standard errors
+    assert np.all(np.abs(z.mean(0)) < tol) and np.all(np.abs(z.std(0) - 1) < tol)
+    assert abs(np.corrcoef(z.T)[0, 1]) < tol
+    with pytest.raises(ValueError, match="backend"):
+        render_naive(ms, scene, 4, backend="gpu")
 
 
 # ------------------------------------------------------------------- structure, demo

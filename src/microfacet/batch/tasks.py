@@ -136,9 +136,9 @@ def glints_file(source: Path, out: Path, spacing: float = 1.0, sigma_eps: float 
     from ..glints import Microsurface
     ms = Microsurface.from_normal_map(source, h=spacing, sigma_eps=sigma_eps, encoding=encoding, z=z)
     ms.save(out)
-    alpha = np.sqrt(2.0 * (ms.lobe_moments[:, 2:4] - ms.lobe_moments[:, :2] ** 2))
+    median, largest = ms.alpha_summary()
     return {"width": ms.resolution[1], "height": ms.resolution[0], "lobes": ms.n_lobes,
-            "levels": len(ms.mip), "alpha_median": float(np.median(alpha)), "alpha_max": float(alpha.max())}
+            "levels": len(ms.mip), "alpha_median": median, "alpha_max": largest}
 
 
 # ----------------------------------------------------------------------------- fit

@@ -40,6 +40,7 @@ Conventions
 from __future__ import annotations
 
 import math
+import zipfile
 from collections.abc import Sequence
 from functools import cached_property
 from pathlib import Path
@@ -119,6 +120,23 @@ def lobe_moments_reference(slopes, nx: int, ny: int, samples: int = 4) -> np.nda
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def _bilinear_slopes(s, x, y):  # pragma: no cover - compiled
+    """Slope ``(x~, y~)`` of the bilinearly interpolated, wrapped map ``s (H, W, 2)`` at the
+    continuous texel coordinates ``(x, y)`` (texel centres at integers; compiled
+    :func:`interpolate_slopes` at ``uv = ((x + 1/2) / W, (y + 1/2) / H)``)."""
+    hgt, wid = s.shape[0], s.shape[1]
+    x0f, y0f = np.floor(x), np.floor(y)
+    fx, fy = x - x0f, y - y0f
+    x0, y0 = int(x0f) % wid, int(y0f) % hgt
+    x1, y1 = (x0 + 1) % wid, (y0 + 1) % hgt
+    sx = ((s[y0, x0, 0] * (1 - fx) + s[y0, x1, 0] * fx) * (1 - fy)
+          + (s[y1, x0, 0] * (1 - fx) + s[y1, x1, 0] * fx) * fy)
+    sy = ((s[y0, x0, 1] * (1 - fx) + s[y0, x1, 1] * fx) * (1 - fy)
+          + (s[y1, x0, 1] * (1 - fx) + s[y1, x1, 1] * fx) * fy)
+    return sx, sy
+
+
 @numba.njit(parallel=True, cache=True)
 def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
     hgt, wid = s.shape[0], s.shape[1]
@@ -129,21 +147,9 @@ def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
             acc = np.zeros(5)
             for b in range(o.size):
                 y = (iy + 0.5) * hy + o[b] - 0.5
-                y0f = np.floor(y)
-                fy = y - y0f
-                y0 = int(y0f) % hgt
-                y1 = (y0 + 1) % hgt
                 for a in range(o.size):
-                    x = (ix + 0.5) * hx + o[a] - 0.5
-                    x0f = np.floor(x)
-                    fx = x - x0f
-                    x0 = int(x0f) % wid
-                    x1 = (x0 + 1) % wid
                     w = g[a] * g[b]
-                    sx = ((s[y0, x0, 0] * (1 - fx) + s[y0, x1, 0] * fx) * (1 - fy)
-                          + (s[y1, x0, 0] * (1 - fx) + s[y1, x1, 0] * fx) * fy)
-                    sy = ((s[y0, x0, 1] * (1 - fx) + s[y0, x1, 1] * fx) * (1 - fy)
-                          + (s[y1, x0, 1] * (1 - fx) + s[y1, x1, 1] * fx) * fy)
+                    sx, sy = _bilinear_slopes(s, (ix + 0.5) * hx + o[a] - 0.5, y)
                     acc[0] += w * sx
                     acc[1] += w * sy
                     acc[2] += w * sx * sx
@@ -222,8 +228,10 @@ def lobe_moments(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
     """Raw moments ``(ny, nx, 5)`` of the interpolated map under each seed's normalized
     kernel (Eq. 3-6), compiled: :func:`_lobe_moments_shared` when ``h * samples`` is an
     integer along both axes, else the direct sum :func:`_lobe_moments`. Both equal
-    :func:`lobe_moments_reference` to rounding."""
-    s = np.ascontiguousarray(slopes, dtype=np.float64)
+    :func:`lobe_moments_reference` to rounding. Float32 slopes are read as they are (the
+    arithmetic is float64), others as float64."""
+    s = np.asarray(slopes)
+    s = np.ascontiguousarray(s, dtype=np.float32 if s.dtype == np.float32 else np.float64)
     hgt, wid = s.shape[:2]
     o, g = _quadrature((wid / nx) / FWHM_PER_SIGMA, int(samples))
     px, py = wid * samples / nx, hgt * samples / ny
@@ -240,8 +248,12 @@ def _floor_moments_compiled(E, sigma_eps):  # pragma: no cover - compiled
         m1, m2 = E[i, 0], E[i, 1]
         vx = max(E[i, 2] - m1 * m1, 0.0)
         vy = max(E[i, 3] - m2 * m2, 0.0)
+        c0 = E[i, 4] - m1 * m2
+        if vx * vy - c0 * c0 >= e2 * (vx + vy) and c0 * c0 <= MAX_RHO * MAX_RHO * vx * vy \
+                and vx > 0.0 and vy > 0.0:
+            continue        # l2 >= det / (vx + vy) >= e2 and |rho| <= 0.99: already floored, unchanged
         lim = MAX_RHO * math.sqrt(vx * vy)
-        cxy = min(max(E[i, 4] - m1 * m2, -lim), lim)
+        cxy = min(max(c0, -lim), lim)
         half = 0.5 * (vx + vy)
         r = math.hypot(0.5 * (vx - vy), cxy)
         l2 = half - r
@@ -453,6 +465,36 @@ def _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, params, W, x0, x1, y0, y1, out
         out[qi] += acc
 
 
+#: Side, in lobes, of the blocks of :meth:`LobeMixture._block_bounds` (the pruning grid of
+#: the compiled image kernel, :func:`microfacet.glints.pbrdf._footprint_sums`).
+BLOCK = 8
+
+
+@numba.njit(parallel=True, cache=True)
+def _block_bounds_compiled(E, B):  # pragma: no cover - compiled
+    """Per ``B x B`` block of the lobe grid ``E (ny, nx, 5)`` (raw moments, Eq. 5): the
+    bounds ``(min x~n, max x~n, min y~n, max y~n, max sigma_x, max sigma_y, max |c_xy|)``
+    of its lobes' mean slopes and slope covariances (blocks at the far edges may be
+    partial)."""
+    ny, nx = E.shape[0], E.shape[1]
+    nby, nbx = (ny + B - 1) // B, (nx + B - 1) // B
+    out = np.empty((nby, nbx, 7))
+    for by in numba.prange(nby):
+        for bx in range(nbx):
+            b = np.array([np.inf, -np.inf, np.inf, -np.inf, 0.0, 0.0, 0.0])
+            for iy in range(by * B, min(by * B + B, ny)):
+                for ix in range(bx * B, min(bx * B + B, nx)):
+                    m1, m2 = E[iy, ix, 0], E[iy, ix, 1]
+                    b[0], b[1] = min(b[0], m1), max(b[1], m1)
+                    b[2], b[3] = min(b[2], m2), max(b[3], m2)
+                    b[4] = max(b[4], E[iy, ix, 2] - m1 * m1)
+                    b[5] = max(b[5], E[iy, ix, 3] - m2 * m2)
+                    b[6] = max(b[6], abs(E[iy, ix, 4] - m1 * m2))
+            b[4], b[5] = math.sqrt(b[4]), math.sqrt(b[5])
+            out[by, bx] = b
+    return out
+
+
 # --------------------------------------------------------------------------- storage
 class _LazyPyramid(Sequence):
     """The lobe-moment MIP levels of Sec. 4.2.2 (:func:`~microfacet.leadr.mip.mip_pyramid`),
@@ -471,6 +513,15 @@ class _LazyPyramid(Sequence):
         return self._levels[i]
 
 
+@numba.njit(cache=True)
+def _all_finite(a) -> bool:  # pragma: no cover - compiled
+    """``np.isfinite(a).all()`` in one pass without a boolean temporary, stopping early."""
+    for v in a.flat:
+        if not np.isfinite(v):
+            return False
+    return True
+
+
 @numba.njit(parallel=True, cache=True)
 def _central_float32(E):  # pragma: no cover - compiled
     """Float32 central moments ``(mx, my, vxx, vyy, cxy)`` of raw moments ``E (ny, nx, 5)``
@@ -483,6 +534,17 @@ def _central_float32(E):  # pragma: no cover - compiled
             out[iy, ix, 2] = E[iy, ix, 2] - m1 * m1
             out[iy, ix, 3] = E[iy, ix, 3] - m2 * m2
             out[iy, ix, 4] = E[iy, ix, 4] - m1 * m2
+    return out
+
+
+@numba.njit(parallel=True, cache=True)
+def _axis_alphas_float32(E):  # pragma: no cover - compiled
+    """Float32 Beckmann roughness ``alpha = sqrt(2 var)`` of both slope axes of every lobe of
+    raw moments ``E (N, 5)`` (Eq. 5; the std is ``alpha / sqrt(2)``), flat ``(2 N,)``."""
+    out = np.empty(2 * E.shape[0], np.float32)
+    for i in numba.prange(E.shape[0]):
+        out[2 * i] = math.sqrt(2.0 * max(E[i, 2] - E[i, 0] * E[i, 0], 0.0))
+        out[2 * i + 1] = math.sqrt(2.0 * max(E[i, 3] - E[i, 1] * E[i, 1], 0.0))
     return out
 
 
@@ -536,7 +598,7 @@ class LobeMixture:
         grid = np.asarray(moments, dtype=np.float64)
         if grid.ndim != 3 or grid.shape[2] != 5 or 0 in grid.shape:
             raise ValueError(f"moments must be an (ny, nx, 5) lobe grid, got shape {grid.shape}")
-        if not np.all(np.isfinite(grid)):
+        if not _all_finite(grid):
             raise ValueError("lobe moments must be finite")
         if not (cutoff > 0 and slope_cutoff > 0):
             raise ValueError(f"cutoff and slope_cutoff must be > 0, got {cutoff}, {slope_cutoff}")
@@ -577,6 +639,12 @@ class LobeMixture:
     @cached_property
     def _flat(self):
         return _flatten(self._boxes)
+
+    @cached_property
+    def _block_bounds(self) -> np.ndarray:
+        """Mean-slope and covariance bounds of the lobes of each :data:`BLOCK` x :data:`BLOCK`
+        block (:func:`_block_bounds_compiled`), for pruning in the compiled image kernel."""
+        return _block_bounds_compiled(self._grid, BLOCK)
 
     @cached_property
     def _flat_params(self) -> np.ndarray:
@@ -622,6 +690,9 @@ class LobeMixture:
             raise ValueError(f"samples must be >= 1, got {samples!r}")
         hgt, wid = slopes.shape[:2]
         nx, ny = max(1, int(round(wid / h))), max(1, int(round(hgt / h)))
+        # the lobes of the float32 slopes the microsurface keeps (and files store), so that a
+        # built and a loaded one agree; the float64 input is released before the moments
+        slopes = np.asarray(slopes, dtype=np.float32)
         raw = lobe_moments(slopes, nx, ny, int(samples))
         return cls(raw, slopes, h=h, sigma_eps=sigma_eps, copy=False, **kwargs)
 
@@ -637,6 +708,16 @@ class LobeMixture:
         """The lobes ``indices`` as one :class:`microfacet.Beckmann` with array parameters."""
         E = self.lobe_moments if indices is None else self.lobe_moments[np.asarray(indices)]
         return from_moments(E, min_alpha=np.sqrt(2.0) * self.sigma_eps * 0.5, max_rho=MAX_RHO)
+
+    def alpha_summary(self) -> tuple[float, float]:
+        """Median and largest per-axis Beckmann roughness ``alpha = sqrt(2 var)`` of the
+        lobes (both axes pooled, as ``np.median`` would give them to float32 rounding),
+        from a float32 copy partitioned in place (4 bytes per lobe and axis)."""
+        a = _axis_alphas_float32(self.lobe_moments)
+        k = a.size // 2
+        a.partition([k - 1, k] if a.size > 1 else [0])
+        med = float(a[k]) if a.size % 2 else 0.5 * (float(a[k - 1]) + float(a[k]))
+        return med, float(a.max())
 
     def slopes_at(self, uv) -> np.ndarray:
         """Slopes ``(..., 2)`` of the interpolated normal map at ``uv (..., 2)``."""
@@ -831,11 +912,20 @@ class LobeMixture:
         float32 raw moments ``E3 = var + mean^2``) and float32 slopes, uncompressed (fast);
         loading refloors the lobes (the float32 rounding can sit 1 ulp below the floor)."""
         path = Path(path)
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                np.savez(f, magic=np.array(_MAGIC), version=np.array(FORMAT_VERSION),
-                         central=_central_float32(self._grid), slopes=self.slopes,
-                         params=np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff]))
+        small = {"magic": np.array(_MAGIC), "version": np.array(FORMAT_VERSION), "slopes": self.slopes,
+                 "params": np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff])}
+        with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for name, a in small.items():
+                with zf.open(f"{name}.npy", "w", force_zip64=True) as m:
+                    np.lib.format.write_array(m, a)
+            # the central moments streamed by blocks of rows (no full float32 copy in memory)
+            with zf.open("central.npy", "w", force_zip64=True) as m:
+                np.lib.format.write_array_header_1_0(
+                    m, {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)), "fortran_order": False,
+                        "shape": self._grid.shape})
+                rows = max(1, (16 << 20) // max(1, self._grid[0].nbytes))
+                for r in range(0, self._grid.shape[0], rows):
+                    m.write(_central_float32(self._grid[r:r + rows]).tobytes())
         return path
 
     @classmethod
@@ -855,15 +945,13 @@ class LobeMixture:
             moments = z["moments"] if version == 1 else z["central"]
         except (KeyError, TypeError, ValueError) as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({type(e).__name__}: {e})") from None
-        if version != 1:
-            if moments.ndim != 3 or moments.shape[2] != 5:
-                raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
-            moments = _raw_from_central(moments)
         if moments.ndim != 3 or moments.shape[2] != 5 or slopes.ndim != 3 or slopes.shape[2] != 2 \
-                or params.shape != (4,):
-            raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes)")
-        if not (np.all(np.isfinite(moments)) and np.all(np.isfinite(slopes)) and np.all(np.isfinite(params))):
+                or params.shape != (4,) or not all(a.dtype in (np.float32, np.float64) for a in (moments, slopes, params)):
+            raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes or types)")
+        if not (_all_finite(moments) and _all_finite(slopes) and _all_finite(params)):
             raise MicrofacetError(f"{path}: corrupt microsurface file (non-finite values)")
+        if version != 1:
+            moments = _raw_from_central(moments)
         h, eps, cutoff, scut = (float(v) for v in params)
         try:
             return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut, copy=False)

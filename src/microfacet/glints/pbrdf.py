@@ -66,7 +66,7 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, _dirs, _uniforms
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector, reflect
-from .microsurface import FWHM_PER_SIGMA, LobeMixture
+from .microsurface import BLOCK, FWHM_PER_SIGMA, LobeMixture
 
 __all__ = ["Microsurface", "PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
            "eval_cos_footprints", "G2_MODELS"]
@@ -75,6 +75,9 @@ G2_MODELS = ("correlated", "separable")
 
 _SQRT2 = np.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
+#: Default slope-box width, in standard deviations, of the image kernel's pruning
+#: (:func:`eval_cos_footprints`): ``exp(-8^2 / 2) = 1.3e-14``.
+PRUNE_SIGMA = 8.0
 #: lobes x directions evaluated per vectorized block (bounds memory to ~100 MB)
 _BLOCK = 1 << 21
 
@@ -460,7 +463,7 @@ def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
 
 def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | None = None,
                         exact: bool = True, g2: str = "correlated", block: int = 4096,
-                        backend: str = "auto") -> np.ndarray:
+                        backend: str = "auto", prune: float = PRUNE_SIGMA) -> np.ndarray:
     """``eval_cos`` of the P-BRDF of footprint ``p`` at ``(wi[p], wo[p])`` for many
     footprints (a rendered image's pixels): the same math as :class:`PatchBRDF`, batched
     over footprints (lobes gathered by :func:`footprint_lobes`; with ``exact=False`` the
@@ -470,7 +473,16 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
 
     ``backend``: ``"numpy"`` (the reference: lobes gathered into padded ``(P, K)``
     arrays), ``"numba"`` (a compiled loop over each footprint's window, the same sums;
-    tested against the reference) or ``"auto"`` (numba when available)."""
+    tested against the reference) or ``"auto"`` (numba when available).
+
+    ``prune`` (compiled backend): lobes are skipped by blocks whose slope box, ``prune``
+    standard deviations wide, misses the half vector's slope and whose projected areas
+    are linear in their mean slopes (:func:`_footprint_sums`): each pixel's ``D_P`` then
+    drops at most ``exp(-prune^2 / 2) / (2 pi sigma_eps^2 z_h^4)`` (``1.3e-14`` of the
+    largest lobe density at the default 8) and the areas are unchanged; ``np.inf``
+    visits every lobe. The NumPy backend sums every lobe."""
+    if not prune > 0:
+        raise ValueError(f"prune must be > 0 (standard deviations), got {prune!r}")
     if g2 not in G2_MODELS:
         raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
     if backend not in ("auto", "numpy", "numba"):
@@ -478,7 +490,7 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
     if backend == "numba" and _footprint_sums is None:
         raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
     if backend != "numpy" and _footprint_sums is not None:
-        return _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2)
+        return _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, float(prune))
     fresnel = _fresnel.Ideal() if fresnel is None else fresnel
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
@@ -549,25 +561,42 @@ if _kernels.AVAILABLE:
         return 0.0, _area(c, math.sqrt(max(var, 0.0)))
 
     @numba.njit(cache=True, inline="always")
-    def _p22(xh, yh, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
-        """Gaussian slope density ``P_i`` (Eq. 4) of one lobe at slope ``(xh, yh)``."""
+    def _p22(xh, yh, mx, my, sxx, syy, sxy, qmax):  # pragma: no cover - compiled
+        """Gaussian slope density ``P_i`` (Eq. 4) of one lobe at slope ``(xh, yh)``; 0 where
+        the Mahalanobis distance^2 ``q`` is at least ``qmax``."""
         det = sxx * syy - sxy * sxy
         gx, gy = xh - mx, yh - my
         qdet = syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy      # q det (det > 0)
-        if qdet < _Q_MAX * det:
+        if qdet < qmax * det:
             return math.exp(-0.5 * qdet / det) * _INV_2PI / math.sqrt(det)
         return 0.0
 
     @numba.njit(cache=True, inline="always")
-    def _lobe_terms(E, k, hz, xh, yh, ix, iy, iz, ox, oy, oz):  # pragma: no cover - compiled
+    def _lobe_terms(E, k, hz, xh, yh, ix, iy, iz, ox, oy, oz, qmax, exo):  # pragma: no cover - compiled
         """``(P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` of lobe ``k`` of raw moments ``E``
-        (the terms of Eq. 9, 13 and 17)."""
+        (the terms of Eq. 9, 13 and 17; ``P_i`` cut at ``qmax``, :func:`_p22`); ``exo >= 0``
+        is the lobe's tabulated ``V_i(o) - A_i(o)`` (:func:`_area_excess`), else computed."""
         mx, my = E[k, 0], E[k, 1]
         sxx, syy, sxy = E[k, 2] - mx * mx, E[k, 3] - my * my, E[k, 4] - mx * my
-        d = _p22(xh, yh, mx, my, sxx, syy, sxy) if hz > 0 else 0.0
+        d = _p22(xh, yh, mx, my, sxx, syy, sxy, qmax) if hz > 0 else 0.0
         ai, vi = _areas(ix, iy, iz, mx, my, sxx, syy, sxy)
+        if exo >= 0.0:
+            ao = max(oz - ox * mx - oy * my, 0.0)
+            return d, ai, vi, ao, ao + exo
         ao, vo = _areas(ox, oy, oz, mx, my, sxx, syy, sxy)
         return d, ai, vi, ao, vo
+
+    @numba.njit(cache=True, parallel=True, nogil=True)
+    def _area_excess(E, k):  # pragma: no cover - compiled
+        """``V_i(k) - A_i(k) = E[s+] - c+ >= 0`` (:func:`_areas`) of every lobe of ``E
+        (N, 5)`` toward one direction ``k``: the per-lobe part of the patch areas that is not
+        linear in the mean slopes, tabulated once when every pixel shares ``k``."""
+        out = np.empty(E.shape[0])
+        for n in numba.prange(E.shape[0]):
+            mx, my = E[n, 0], E[n, 1]
+            a, v = _areas(k[0], k[1], k[2], mx, my, E[n, 2] - mx * mx, E[n, 3] - my * my, E[n, 4] - mx * my)
+            out[n] = v - a
+        return out
 
     @numba.njit(cache=True, inline="always")
     def _half_slope(h):  # pragma: no cover - compiled
@@ -590,20 +619,61 @@ if _kernels.AVAILABLE:
         y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
         return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
 
+    @numba.njit(cache=True, inline="always")
+    def _block_linear(b, kx, ky, kz):  # pragma: no cover - compiled
+        """Whether every lobe of a block with bounds ``b`` (see
+        :func:`~microfacet.glints.microsurface._block_bounds_compiled`) has projected areas
+        ``(c, c)`` toward ``k`` in :func:`_areas`: the smallest ``c`` over the block's mean
+        slopes is positive and at least ``_AREA_T`` times the largest ``sigma``."""
+        c = kz - max(kx * b[0], kx * b[1]) - max(ky * b[2], ky * b[3])
+        var = kx * kx * b[4] * b[4] + ky * ky * b[5] * b[5] + 2.0 * abs(kx * ky) * b[6]
+        return c > 0.0 and c * c >= _AREA_T2 * var
+
+    @numba.njit(cache=True, inline="always")
+    def _block_dark(b, hz, xh, yh, prune):  # pragma: no cover - compiled
+        """Whether the half vector's slope lies outside the block's slope box (mean bounds
+        +- ``prune`` times the largest per-axis deviation): then every lobe of the block has
+        Mahalanobis distance ``> prune`` (at least the per-axis one) and ``P_i(h~) <=
+        exp(-prune^2 / 2) / (2 pi sqrt(det))``."""
+        return hz <= 0.0 or (xh < b[0] - prune * b[4] or xh > b[1] + prune * b[4]
+                             or yh < b[2] - prune * b[5] or yh > b[3] + prune * b[5])
+
+    @numba.njit(cache=True, inline="always")
+    def _segment(s, e, n, B):  # pragma: no cover - compiled
+        """The run of unwrapped seed indices from ``s`` (at most ``e``) that falls in one
+        ``B``-block of the wrapped grid of ``n`` seeds: ``(last index, wrapped s, block)``."""
+        w = s % n
+        blk = w // B
+        return min(e, s + min(blk * B + B, n) - 1 - w), w, blk
+
     @numba.njit(cache=True, parallel=True, nogil=True)
-    def _footprint_sums(E, nx, ny, ks2x, ks2y, cutoff, fp, h, wi, wo):  # pragma: no cover - compiled
+    def _footprint_sums(E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo):  # pragma: no cover
         """Per footprint ``p``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the lobes
         of :func:`footprint_lobes` (same window, same weights), looping over the window
         instead of padding it; ``E`` the raw lobe moments ``(ny * nx, 5)`` (each lobe's
         Gaussian is set up from them where it is used: no per-lobe table).
 
-        The same sums as the NumPy reference up to rounding: the footprint weight
+        Pruning by ``B x B`` blocks of lobes (``bounds``, :func:`_block_dark`,
+        :func:`_block_linear`): a block whose slope box (``prune`` deviations) misses the
+        half vector's slope and whose lobes all have projected areas ``(c, c)`` toward
+        ``i`` and ``o`` adds only its weights and weighted mean slopes, from which
+        ``sum W c`` (Eq. 13, 17) follows linearly; its slope densities, each below
+        ``exp(-prune^2 / 2) / (2 pi sigma_eps^2)``, are dropped, and so is, in the other
+        blocks, every lobe density whose Mahalanobis distance is at least ``prune``. So
+        ``D_P`` is at most
+        ``exp(-prune^2 / 2) / (2 pi sigma_eps^2 z_h^4)`` below the unpruned sum and the
+        areas are unchanged; ``prune = inf`` visits every lobe. ``exo``: the lobes'
+        :func:`_area_excess` toward ``wo`` when every footprint has the same ``wo`` (an
+        orthographic view: one erfc per lobe instead of one per lobe and pixel), else empty.
+
+        The same sums as the NumPy reference up to rounding otherwise: the footprint weight
         ``exp(-q/2)`` of an uncorrelated footprint is factored into per-column and per-row
         exponentials (one exp per lobe otherwise), the lobe's slope density is
         evaluated only where its exponent is above ``-700`` (``_Q_MAX``), and the
         projected areas skip erfc/exp where ``c / sigma >= 8`` (``_AREA_T``)."""
         P = fp.shape[0]
         out = np.zeros((P, 5))
+        qmax = min(prune * prune, _Q_MAX)
         for p in numba.prange(P):
             cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
             if x1 < x0 or y1 < y0:
@@ -611,35 +681,55 @@ if _kernels.AVAILABLE:
             # footprint weights exp(-q/2): ex[ix] ey[iy] when uncorrelated (sxy = 0)
             ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
             ex = np.empty(x1 - x0 + 1)
-            col = np.empty(x1 - x0 + 1, np.int64)
-            for ix in range(x0, x1 + 1):
-                du = (ix + 0.5) / nx - cu
-                ex[ix - x0] = math.exp(ax * du * du)
-                col[ix - x0] = ix % nx
+            for jx in range(x1 - x0 + 1):
+                du = (x0 + jx + 0.5) / nx - cu
+                ex[jx] = math.exp(ax * du * du)
             hz, xh, yh, inv4 = _half_slope(h[p])
             ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
             wsum = s0 = s1 = s2 = s3 = s4 = 0.0
-            for iy in range(y0, y1 + 1):
-                dv = (iy + 0.5) / ny - cv
-                ey = math.exp(ay * dv * dv)
-                cross = axy * dv
-                row = (iy % ny) * nx
-                for jx in range(x1 - x0 + 1):
-                    if cross == 0.0:
-                        w = ex[jx] * ey
-                    else:       # one exp: the factors may over/underflow for thin footprints
-                        du = (x0 + jx + 0.5) / nx - cu
-                        w = math.exp(ax * du * du + ay * dv * dv + cross * du)
-                    wsum += w
-                    d, ai, vi, ao, vo = _lobe_terms(E, row + col[jx], hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_)
-                    s0 += w * d
-                    s1 += w * ai
-                    s2 += w * vi
-                    s3 += w * ao
-                    s4 += w * vo
+            lw = lx = ly = 0.0                  # weights and weighted mean slopes of pruned blocks
+            ys = y0
+            while ys <= y1:
+                ye, wys, by = _segment(ys, y1, ny, B)
+                xs = x0
+                while xs <= x1:
+                    xe, wxs, bx = _segment(xs, x1, nx, B)
+                    b = bounds[by, bx]
+                    dark = _block_dark(b, hz, xh, yh, prune)
+                    visit = not (dark and _block_linear(b, ix_, iy_, iz_) and _block_linear(b, ox_, oy_, oz_))
+                    qb = 0.0 if dark else qmax          # dark blocks visited for their areas: no density
+                    for iy in range(ys, ye + 1):
+                        dv = (iy + 0.5) / ny - cv
+                        ey = math.exp(ay * dv * dv)
+                        cross = axy * dv
+                        row = (wys + iy - ys) * nx + wxs - xs
+                        for ix in range(xs, xe + 1):
+                            if cross == 0.0:
+                                w = ex[ix - x0] * ey
+                            else:       # one exp: the factors may over/underflow for thin footprints
+                                du = (ix + 0.5) / nx - cu
+                                w = math.exp(ax * du * du + ay * dv * dv + cross * du)
+                            wsum += w
+                            if visit:
+                                d, ai, vi, ao, vo = _lobe_terms(E, row + ix, hz, xh, yh, ix_, iy_, iz_,
+                                                                ox_, oy_, oz_, qb,
+                                                                exo[row + ix] if exo.size else -1.0)
+                                s0 += w * d
+                                s1 += w * ai
+                                s2 += w * vi
+                                s3 += w * ao
+                                s4 += w * vo
+                            else:
+                                lw += w
+                                lx += w * E[row + ix, 0]
+                                ly += w * E[row + ix, 1]
+                    xs = xe + 1
+                ys = ye + 1
+            ci = iz_ * lw - ix_ * lx - iy_ * ly           # sum W c(i) of the pruned blocks
+            co = oz_ * lw - ox_ * lx - oy_ * ly
             if wsum > 0:
-                out[p, 0], out[p, 1], out[p, 2] = s0 * inv4 / wsum, s1 / wsum, s2 / wsum
-                out[p, 3], out[p, 4] = s3 / wsum, s4 / wsum
+                out[p, 0], out[p, 1], out[p, 2] = s0 * inv4 / wsum, (s1 + ci) / wsum, (s2 + ci) / wsum
+                out[p, 3], out[p, 4] = (s3 + co) / wsum, (s4 + co) / wsum
         return out
 
     @numba.njit(cache=True, parallel=True, nogil=True)
@@ -654,7 +744,7 @@ if _kernels.AVAILABLE:
             ix_, iy_, iz_, ox_, oy_, oz_ = wi[q, 0], wi[q, 1], wi[q, 2], wo[q, 0], wo[q, 1], wo[q, 2]
             s0 = s1 = s2 = s3 = s4 = 0.0
             for k in range(E.shape[0]):
-                d, ai, vi, ao, vo = _lobe_terms(E, k, hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_)
+                d, ai, vi, ao, vo = _lobe_terms(E, k, hz, xh, yh, ix_, iy_, iz_, ox_, oy_, oz_, _Q_MAX, -1.0)
                 s0 += W[k] * d
                 s1 += W[k] * ai
                 s2 += W[k] * vi
@@ -686,7 +776,7 @@ if _kernels.AVAILABLE:
                     out[p, m] /= wsum
         return out
 else:  # pragma: no cover - without numba
-    _footprint_sums = _footprint_merge = _lobe_sums = None
+    _footprint_sums = _footprint_merge = _lobe_sums = _area_excess = None
 
 
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
@@ -714,13 +804,14 @@ def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
     return merged
 
 
-def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2) -> np.ndarray:
+def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, prune) -> np.ndarray:
     fresnel = _fresnel.Ideal() if fresnel is None else fresnel
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
     wi = np.ascontiguousarray(np.broadcast_to(_dirs(wi, "wi"), (P, 3)))
-    wo = np.ascontiguousarray(np.broadcast_to(_dirs(wo, "wo"), (P, 3)))
+    wo1 = _dirs(wo, "wo")
+    wo = np.ascontiguousarray(np.broadcast_to(wo1, (P, 3)))
     ny, nx = ms.grid
     ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.ascontiguousarray(np.stack([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]], -1))
@@ -728,8 +819,13 @@ def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2) ->
     oh, ih = dot(wo, h), dot(wi, h)
     ok = _local_ok(wi, wo, h, oh, ih)
     E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64)
-    D, ai, vi, ao, vo = _footprint_sums(E, nx, ny, ks2[0], ks2[1], float(ms.cutoff), fp,
-                                        np.ascontiguousarray(h), wi, wo).T
+    # one view direction for all pixels: tabulate the lobes' area excess toward it once,
+    # when the image visits more (pixel, lobe) pairs than there are lobes
+    pairs = np.sum((2 * ms.cutoff * np.sqrt(fp[:, 2] + ks2[0]) * nx + 1)
+                   * (2 * ms.cutoff * np.sqrt(fp[:, 3] + ks2[1]) * ny + 1))
+    exo = _area_excess(E, wo1) if wo1.ndim == 1 and pairs > 2 * E.shape[0] else np.zeros(0)
+    D, ai, vi, ao, vo = _footprint_sums(E, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1], float(ms.cutoff),
+                                        prune, fp, np.ascontiguousarray(h), wi, wo, exo).T
     if not exact:
         merged = _merged_footprints(ms, c, cov, fast=True)
         ai, vi = _merged_area(vi, merged, wi)
