@@ -48,6 +48,56 @@ def test_exr_threads_uses_the_cores_and_restores_the_count():
     assert OpenEXR.global_thread_count() == before
 
 
+def test_exr_threads_overlapping_blocks_in_threads_restore_once_at_the_end():
+    """Thread A enters, B enters, A leaves: B still has the cores; the count is restored
+    only when B leaves (a save/restore per block restored 0 while B ran, or leaked)."""
+    import threading
+    cores = len(os.sched_getaffinity(0))
+    original = OpenEXR.global_thread_count()
+    OpenEXR.set_global_thread_count(0)
+    a_in, b_in, a_out, b_checked = (threading.Event() for _ in range(4))
+    seen = {}
+
+    def a():
+        with exr_threads():
+            a_in.set()
+            b_in.wait(5)
+        a_out.set()
+
+    def b():
+        a_in.wait(5)
+        with exr_threads():
+            b_in.set()
+            a_out.wait(5)
+            seen["while b runs"] = OpenEXR.global_thread_count()
+        b_checked.set()
+
+    try:
+        threads = [threading.Thread(target=f) for f in (a, b)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(10)
+        assert b_checked.is_set()
+        assert seen["while b runs"] == cores
+        assert OpenEXR.global_thread_count() == 0
+    finally:
+        OpenEXR.set_global_thread_count(original)
+
+
+def test_exr_concurrent_writes_from_threads_round_trip(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+    before = OpenEXR.global_thread_count()
+    images = [np.random.default_rng(k).standard_normal((64, 48, 3)) for k in range(16)]
+    with ThreadPoolExecutor(8) as pool:
+        paths = list(pool.map(lambda k: write_exr(tmp_path / f"t{k}.exr", images[k]), range(16)))
+        backs = list(pool.map(read_exr, paths))
+    for img, back in zip(images, backs):
+        np.testing.assert_array_equal(back, img.astype(np.float32))
+    assert OpenEXR.global_thread_count() == before
+    assert leftovers(tmp_path) == []
+
+
 def test_exr_keeps_orientation_and_channels(tmp_path):
     img = np.zeros((4, 6, 3))
     img[0, 0] = (1.0, 2.0, 3.0)          # top-left pixel, distinct channels

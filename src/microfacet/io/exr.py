@@ -6,6 +6,7 @@ Images are ``(H, W)`` or ``(H, W, C)`` arrays, row 0 at the top, with ``C`` = 1 
 from __future__ import annotations
 
 import os
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -38,17 +39,31 @@ def exr_compression(name: str):
     return COMPRESSIONS[name]
 
 
+_threads_lock = threading.Lock()
+_threads_users = 0          # exr_threads() blocks now running, in any thread
+_threads_before = 0         # the global count the first of them found
+
+
 @contextmanager
 def exr_threads():
-    """Let OpenEXR (de)compress on every core this process may use, restoring its
-    global thread count afterwards (OpenEXR's default, 0, works on the calling thread only)."""
-    before = OpenEXR.global_thread_count()
+    """Let OpenEXR (de)compress on every core this process may use (OpenEXR's default, 0,
+    works on the calling thread only), restoring its process-global thread count when the
+    last concurrent user leaves: a lock and a count of users make overlapping blocks in
+    several threads safe (a save/restore per block would restore too early, or leak)."""
+    global _threads_users, _threads_before
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    OpenEXR.set_global_thread_count(cores)
+    with _threads_lock:
+        if _threads_users == 0:
+            _threads_before = OpenEXR.global_thread_count()
+            OpenEXR.set_global_thread_count(cores)
+        _threads_users += 1
     try:
         yield
     finally:
-        OpenEXR.set_global_thread_count(before)
+        with _threads_lock:
+            _threads_users -= 1
+            if _threads_users == 0:
+                OpenEXR.set_global_thread_count(_threads_before)
 
 
 def _as_channels(image) -> np.ndarray:
