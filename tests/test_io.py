@@ -286,3 +286,15 @@ def test_png_data_reader_errors_name_the_file(tmp_path):
             read_png_data(tmp_path / name)
     with pytest.raises(ValueError, match="uint8 or uint16"):
         write_png_data(tmp_path / "f.png", np.zeros((2, 2), np.float32))
+
+
+# ------------------------------------------------------------------------- names
+@pytest.mark.parametrize("path, material, stem", [
+    ("d/nickel.binary.gz", "nickel", "nickel"), ("a.bsdf", "a", "a"), ("M.BIN", "M", "M"),
+    ("h.png", "h.png", "h"), ("x/fit.npz", "fit.npz", "fit"), ("r.exr", "r.exr", "r"),
+    (".gz", ".gz", ".gz"), ("a.b.txt", "a.b.txt", "a.b.txt")])
+def test_material_and_input_names(path, material, stem):
+    from microfacet.batch import input_name as batch_input_name
+    from microfacet.fit.outputs import material_name as fit_material_name
+    assert mf.io.material_name(path) == material and mf.io.input_name(path) == stem
+    assert fit_material_name is mf.io.material_name and batch_input_name is mf.io.input_name

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MicrofacetError
+from ..io.names import input_name
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
@@ -158,7 +159,6 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     (:func:`microfacet.fit.outputs.fit_material`). Returns the summary figures."""
     from ..fit.outputs import fit_material, summary_row
     from ..measured import load
-    from .files import input_name
     brdf = load(source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,

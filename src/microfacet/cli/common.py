@@ -15,7 +15,7 @@ import argparse
 import os
 from pathlib import Path
 
-from ..batch.files import input_name
+from ..io.names import input_name
 from ..errors import MicrofacetError
 
 PROG = "microfacet"
