@@ -1,4 +1,6 @@
 """The output naming rule and checks before work, for every command (issue 11, defects 3-6)."""
+import os
+
 import numpy as np
 import pytest
 
@@ -58,6 +60,23 @@ def test_validate_output_is_checked_before_the_work(tmp_path, capsys):
     assert main(["validate", "--quick", "-o", str(folder)]) == 1
     one_error_line(capsys, "validate.md", "is a folder")
     assert ".tmp" not in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux /proc (a folder nobody can write in)")
+@pytest.mark.parametrize("command", ["validate", "bake", "glints"])
+def test_unwritable_output_folder_is_refused_before_the_work(command, normal_exr, monkeypatch, capsys):
+    import microfacet.batch.tasks
+    import microfacet.validation
+
+    def work(*args, **kwargs):
+        raise AssertionError("the work started")
+    for module, name in [(microfacet.validation, "core_report"), (microfacet.batch.tasks, "bake_file"),
+                         (microfacet.batch.tasks, "glints_file")]:
+        monkeypatch.setattr(module, name, work)
+    source = [] if command == "validate" else [str(normal_exr)]
+    extra = ["--normal-map"] if command == "bake" else []
+    assert main([command, *source, *extra, "-o", "/proc/microfacet-test-output"]) == 1
+    one_error_line(capsys, "/proc/microfacet-test-output", "cannot write here")
 
 
 @pytest.mark.parametrize("command, suffix", [("bake", ".exr"), ("glints", ".npz")])

@@ -5,7 +5,7 @@ Output naming rule (every command): ``-o OUT`` names the main output file. ``OUT
 with the command's suffix (``.npz``, ``.exr``, ``.png``, ``.md``) is used as it is; ``OUT``
 without a suffix gets it appended; an existing folder receives ``<input name><suffix>``.
 Any other suffix is an error, and so is an output (or a side output such as ``OUT.png``)
-that is the input itself. Outputs are checked, and their folder created, before the work.
+that is the input itself. Outputs are checked (their folder created, and writable), before the work.
 A folder input (``bake``, ``glints``) is a batch: ``-o`` is the output folder, whose tree
 mirrors the input's (:mod:`microfacet.batch`).
 """
@@ -15,6 +15,7 @@ import argparse
 import os
 from pathlib import Path
 
+from ..io.atomic import check_writable
 from ..io.names import input_name
 from ..errors import MicrofacetError
 
@@ -102,6 +103,7 @@ def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLik
     if out.parent.exists() and not out.parent.is_dir():
         raise MicrofacetError(f"{out.parent}: is not a folder")
     out.parent.mkdir(parents=True, exist_ok=True)
+    check_writable(out)
     return out
 
 
