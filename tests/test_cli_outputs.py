@@ -105,3 +105,15 @@ def test_bake_side_output_may_not_be_the_input(height_png, tmp_path, capsys):
     assert main(["bake", str(height_png), "-o", str(tmp_path / "h.exr")]) == 1
     one_error_line(capsys, "would overwrite the input")
     assert not (tmp_path / "h.exr").exists()
+
+
+def test_bake_interrupted_while_writing_the_preview_leaves_no_output(height_png, tmp_path, monkeypatch, capsys):
+    import microfacet.io
+
+    def interrupted(path, *args, **kwargs):
+        assert (tmp_path / "x.exr").exists()         # the pyramid was written first
+        raise KeyboardInterrupt
+    monkeypatch.setattr(microfacet.io, "write_png", interrupted)
+    assert main(["bake", str(height_png), "-o", str(tmp_path / "x.exr")]) == 130
+    assert capsys.readouterr().err == "microfacet: interrupted\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.png"]

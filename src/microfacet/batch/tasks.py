@@ -119,8 +119,13 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
         raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
                               f"{'' if roughness is None else f', roughness {roughness:g}'}); "
                               "use a smaller scale or roughness")
+    preview = preview_image(pyramid)                  # before any write: a failure leaves no file
     leadr.write_pyramid(out, pyramid, compression=compression)
-    write_png(out.with_suffix(".png"), preview_image(pyramid))
+    try:
+        write_png(out.with_suffix(".png"), preview)
+    except BaseException:                             # Ctrl-C, a full disk: no pyramid without its preview
+        out.unlink(missing_ok=True)
+        raise
     top = leadr.from_moments(pyramid[-1][0, 0])
     h, w = pyramid[0].shape[:2]
     return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(top.alpha_x),
