@@ -257,6 +257,28 @@ def test_height_maps_from_png_and_exr(tmp_path):
         load_height_map(tmp_path / "junk.png")
 
 
+def test_a_normal_map_read_as_heights_warns_and_height_maps_do_not(tmp_path, capsys):
+    import warnings
+    from microfacet.errors import HeightMapWarning
+    rng = np.random.default_rng(12)
+    slopes = rng.normal(0.0, 0.3, (40, 30, 2))
+    leadr.write_normal_map(tmp_path / "n.png", leadr.encode_normal_map(slopes, np.uint8))
+    leadr.write_normal_map(tmp_path / "n.exr", (leadr.encode_normal_map(slopes, np.float32) + 1) / 2)
+    for name in ("n.png", "n.exr"):
+        with pytest.warns(HeightMapWarning, match=f"{name}: looks like a tangent-space normal map.*--normal-map"):
+            load_height_map(tmp_path / name)
+    colour = rng.integers(0, 256, (40, 30, 3)).astype(np.uint8)          # a photo: no unit normals
+    write_png_data(tmp_path / "c.png", colour)
+    write_png_data(tmp_path / "g.png", np.repeat(colour[..., :1], 3, axis=2))   # gray stored as RGB
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name in ("c.png", "g.png"):
+            load_height_map(tmp_path / name)
+    assert main(["bake", str(tmp_path / "n.png"), "-o", str(tmp_path / "x.exr")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("microfacet: warning: ") and "n.png: looks like" in err and err.count("\n") == 1
+
+
 # ------------------------------------------------------------------------- MIP maps
 def _box_matrix(n_in, n_out):
     """Dense averaging matrix from uv-interval overlaps, computed with fractions."""

@@ -10,12 +10,13 @@ its own ``W_k x H_k``.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 import OpenEXR
 
-from ..errors import MicrofacetError
+from ..errors import HeightMapWarning, MicrofacetError
 from ..io.atomic import atomic_path
 from ..io.exr import EXR_MAGIC, exr_compression, exr_threads, write_exr
 from ..io.image import read_image
@@ -97,12 +98,29 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     return levels
 
 
+def _looks_like_normal_map(rgb: np.ndarray) -> bool:
+    """Whether colour samples ``(H, W, 3)`` (not gray) decode, on a grid of at most 128²
+    texels, into a normal map the decoder finds consistent: none repaired, unit length."""
+    from ..io.normalmap import decode_normals
+    step = max(1, max(rgb.shape[:2]) // 128)
+    sample = rgb[::step, ::step]
+    if np.ptp(sample.astype(np.float64), axis=2).max() == 0:        # gray
+        return False
+    return not decode_normals(sample, warn=False)[1].warnings
+
+
 def load_height_map(path: str | os.PathLike) -> np.ndarray:
     """Heights ``(H, W)`` float64 of a PNG (8/16-bit gray or RGB(A), scaled to ``[0, 1]``)
     or EXR (``Y``, or the mean of ``R, G, B``) image. Colour PNGs use the mean of R, G, B
-    (equal in a gray image); alpha is ignored."""
+    (equal in a gray image); alpha is ignored. A colour map that decodes as a normal map
+    (:func:`_looks_like_normal_map`) is read as heights all the same, with a
+    :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless)."""
     path = Path(path)
     a = read_image(path)
+    if a.ndim == 3 and a.shape[2] >= 3 and _looks_like_normal_map(a[..., :3]):
+        warnings.warn(f"{path}: looks like a tangent-space normal map (its colours decode to unit "
+                      "normals) but is read as heights (the mean of R, G, B); bake it with --normal-map "
+                      "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=2)
     if a.dtype in (np.uint8, np.uint16):
         a = a.astype(np.float64) / np.iinfo(a.dtype).max
     if a.ndim == 3:
