@@ -463,6 +463,9 @@ def test_bad_pyramid_files(tmp_path):
         leadr.read_pyramid(tmp_path / "rgb.exr")
     with pytest.raises(MicrofacetError, match="no such file"):
         leadr.read_pyramid(tmp_path / "missing.exr")
+    np.savez(tmp_path / "g.npz", x=np.zeros(2))              # e.g. a glints microsurface
+    with pytest.raises(MicrofacetError, match=r"g.npz: not a moment pyramid EXR \(from 'microfacet bake'\)"):
+        leadr.read_pyramid(tmp_path / "g.npz")
     pyr = leadr.bake(np.zeros((8, 8)))
     leadr.write_pyramid(tmp_path / "short.exr", pyr[:2])
     with pytest.raises(MicrofacetError, match="sizes"):

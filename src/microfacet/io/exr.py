@@ -17,7 +17,7 @@ from ..errors import MicrofacetError
 from .atomic import atomic_path
 from .read import read_bytes
 
-__all__ = ["read_exr", "write_exr", "EXR_MAGIC", "COMPRESSIONS", "exr_compression", "exr_threads"]
+__all__ = ["read_exr", "write_exr", "EXR_MAGIC", "check_exr_magic", "COMPRESSIONS", "exr_compression", "exr_threads"]
 
 #: First four bytes of every OpenEXR file (``20000630`` little-endian).
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -100,10 +100,11 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
     return Path(path)
 
 
-def _check_magic(path: Path) -> None:
-    magic = read_bytes(path, "an EXR file", 4)
+def check_exr_magic(path: Path, kind: str = "an OpenEXR file") -> None:
+    """Raise :class:`MicrofacetError` "``path``: not ``kind``" unless ``path`` starts with :data:`EXR_MAGIC`."""
+    magic = read_bytes(path, kind, 4)
     if magic != EXR_MAGIC:
-        raise MicrofacetError(f"{path}: not an OpenEXR file (bad magic number {magic.hex() or 'empty'})")
+        raise MicrofacetError(f"{path}: not {kind} (bad magic number {magic.hex() or 'empty'})")
 
 
 def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarray:
@@ -120,7 +121,7 @@ def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarr
         The message names the file and the problem.
     """
     path = Path(path)
-    _check_magic(path)
+    check_exr_magic(path)
     try:
         with exr_threads():
             channels = OpenEXR.File(str(path), separate_channels=True).channels()

@@ -18,10 +18,9 @@ import OpenEXR
 
 from ..errors import HeightMapWarning, MicrofacetError
 from ..io.atomic import atomic_path
-from ..io.exr import EXR_MAGIC, exr_compression, exr_threads, write_exr
+from ..io.exr import check_exr_magic, exr_compression, exr_threads, write_exr
 from ..io.image import read_image
 from ..io.png import write_png_data
-from ..io.read import read_bytes
 from .mip import mip_sizes
 
 __all__ = ["write_pyramid", "read_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
@@ -58,10 +57,8 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -
     return Path(path)
 
 
-def _check_magic(path: Path, magic: bytes, kind: str) -> None:
-    head = read_bytes(path, kind, len(magic))
-    if head != magic:
-        raise MicrofacetError(f"{path}: not {kind} (bad magic number {head.hex() or 'empty'})")
+#: What a pyramid is, in error messages.
+_PYRAMID = "a moment pyramid EXR (from 'microfacet bake')"
 
 
 def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
@@ -72,7 +69,7 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     level 0 and finite values.
     """
     path = Path(path)
-    _check_magic(path, EXR_MAGIC, "an OpenEXR file")
+    check_exr_magic(path, _PYRAMID)
     try:
         with exr_threads():
             parts = [(p.name(), {n: np.asarray(c.pixels) for n, c in p.channels.items()})
@@ -81,7 +78,7 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
         raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({e})") from None
     names = [name for name, _ in parts]
     if not parts or names != [f"mip{k}" for k in range(len(parts))]:
-        raise MicrofacetError(f"{path}: not a moment pyramid (parts {names[:4]}, expected mip0, mip1, ...)")
+        raise MicrofacetError(f"{path}: not {_PYRAMID}: parts {names[:4]}, expected mip0, mip1, ...")
     levels = []
     for name, channels in parts:
         missing = [c for c in CHANNELS if c not in channels]
