@@ -217,6 +217,22 @@ def test_a_corrupt_file_is_reported_and_the_others_done(inputs, tmp_path, capsys
     assert capsys.readouterr().out.count("| skipped |") == 3
 
 
+def test_warnings_go_to_the_row_and_one_line_each_to_stderr(tmp_path, capsys):
+    import csv
+    maps, out = tmp_path / "maps", tmp_path / "out"
+    write_normals(maps / "n.png", 16, 0)              # a normal map baked as heights: HeightMapWarning
+    write_height(maps / "h.png", 16, 1)
+    assert main(["bake", str(maps), "-o", str(out), "--jobs", "1"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(f"microfacet: warning: {maps / 'n.png'}: looks like a tangent-space")
+    rows = {r["file"]: r for r in csv.DictReader(open(out / "summary.csv", encoding="utf-8"))}
+    assert "looks like a tangent-space normal map" in rows["n.png"]["warnings"] and rows["h.png"]["warnings"] == ""
+    assert main(["bake", str(maps), "-o", str(out), "--jobs", "1"]) == 0       # skipped: kept, not printed again
+    assert capsys.readouterr().err == ""
+    rows = {r["file"]: r for r in csv.DictReader(open(out / "summary.csv", encoding="utf-8"))}
+    assert rows["n.png"]["status"] == "skipped" and "looks like" in rows["n.png"]["warnings"]
+
+
 def test_force_redoes_up_to_date_files(tmp_path):
     folder = tmp_path / "maps"
     write_height(folder / "h.png", 16, 0)

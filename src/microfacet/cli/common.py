@@ -127,10 +127,12 @@ def add_batch_options(parser) -> None:
 
 def run_batch(args, task: str, folder: str) -> int:
     """Run ``task`` on ``folder`` into the ``-o`` folder with the options of ``args`` that the
-    task takes; print the summary table; exit status 1 if a file failed."""
+    task takes; print the summary table and the warnings of the files done (one line each);
+    exit status 1 if a file failed."""
     import sys
 
     from ..batch import format_summary_markdown, get_task, run
+    from ..batch.runner import WARNING_SEPARATOR
     task = get_task(task)
     task = task.with_options(**{k: getattr(args, k) for k in task.option_names() if hasattr(args, k)})
     if args.jobs is not None and args.scheduler is not None:
@@ -138,6 +140,10 @@ def run_batch(args, task: str, folder: str) -> int:
     rows = run(task, folder, args.output, jobs=args.jobs, scheduler=args.scheduler, force=args.force,
                recursive=args.recursive, progress=sys.stderr.isatty())
     print(format_summary_markdown(task, rows), end="")
+    for r in rows:
+        if r["status"] != "skipped" and r.get("warnings"):
+            for message in r["warnings"].split(WARNING_SEPARATOR):
+                print(f"{PROG}: warning: {message}", file=sys.stderr)
     failed = [r for r in rows if r["status"] != "ok" and r["status"] != "skipped"]
     if failed:
         print(f"{PROG}: error: {len(failed)} of {len(rows)} files failed (see "
