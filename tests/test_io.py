@@ -167,10 +167,22 @@ def test_exr_reader_needs_colour_channels(tmp_path):
 def test_exr_reader_rejects_nonfinite_unless_allowed(tmp_path, rgb):
     rgb[1, 2, 0] = np.nan
     rgb[0, 0, 1] = np.inf
-    path = write_exr(tmp_path / "nan.exr", rgb)
+    path = write_exr(tmp_path / "nan.exr", rgb, allow_nonfinite=True)
     with pytest.raises(mf.MicrofacetError, match=r"nan\.exr: 2 NaN or infinite values"):
         read_exr(path)
     assert np.isnan(read_exr(path, allow_nonfinite=True)[1, 2, 0])
+
+
+def test_exr_writer_refuses_nonfinite_and_overflow_unless_allowed(tmp_path, rgb):
+    big = rgb.copy()
+    big[0, 0, 0] = 1e39                              # finite in float64, inf in float32
+    for image, half, count in ((big, False, 1), (rgb * 1e4, True, None)):
+        with pytest.raises(ValueError, match=r"x\.exr: \d+ NaN or infinite values .*nothing written"):
+            write_exr(tmp_path / "x.exr", image, half=half)
+        assert leftovers(tmp_path) == [] and not (tmp_path / "x.exr").exists()
+    rgb[2, 3, 1] = np.nan
+    with pytest.raises(ValueError, match=r"x\.exr: 1 NaN"):
+        write_exr(tmp_path / "x.exr", rgb)
 
 
 # ------------------------------------------------------------------------- PNG

@@ -549,6 +549,14 @@ def test_cli_bake_console_has_no_traceback(tmp_path):
     assert r.returncode == 1 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1
 
 
+def test_lookup_rejects_nonfinite_uv_and_footprints():
+    pyramid = leadr.bake(np.zeros((8, 8)))
+    for uv, footprint, word in (([[np.nan, 0.5]], 0.01, "uv"), ([[0.5, np.inf]], 0.01, "uv"),
+                                ([[0.5, 0.5]], np.nan, "footprint"), ([[0.5, 0.5]], [[[np.inf, 0], [0, 0.1]]], "footprint")):
+        with pytest.raises(ValueError, match=f"{word} must be finite"):
+            leadr.lookup(pyramid, np.array(uv), footprint)
+
+
 def test_lookup_wrap_and_clamp_borders():
     E = np.arange(4 * 4 * 5, dtype=np.float64).reshape(4, 4, 5)
     pyr = leadr.mip_pyramid(E)

@@ -78,7 +78,8 @@ def _as_channels(image) -> np.ndarray:
     return a
 
 
-def write_exr(path: str | os.PathLike, image, half: bool = False, compression: str = "zip") -> Path:
+def write_exr(path: str | os.PathLike, image, half: bool = False, compression: str = "zip",
+              allow_nonfinite: bool = False) -> Path:
     """Write a linear image as a scanline EXR (lossless ``compression``), atomically.
 
     Parameters
@@ -91,8 +92,16 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
         Store 16-bit half floats instead of 32-bit floats.
     compression : str
         A name in :data:`COMPRESSIONS`.
+    allow_nonfinite : bool
+        Write NaN/inf samples (and values beyond the float32/half range, which become inf)
+        instead of raising ``ValueError``, as :func:`read_exr` reads them only when asked.
     """
-    a = _as_channels(image).astype(np.float16 if half else np.float32)
+    with np.errstate(over="ignore"):                 # overflow to inf: counted below
+        a = _as_channels(image).astype(np.float16 if half else np.float32)
+    bad = np.count_nonzero(~np.isfinite(a))
+    if bad and not allow_nonfinite:
+        raise ValueError(f"{path}: {bad} NaN or infinite values (after conversion to "
+                         f"{'half' if half else 'float32'}); nothing written (allow_nonfinite=True writes them)")
     channels = {name: np.ascontiguousarray(a[..., c]) for c, name in enumerate(_NAMES[a.shape[2]])}
     header = {"compression": exr_compression(compression), "type": OpenEXR.scanlineimage}
     with atomic_path(path) as tmp, exr_threads():
