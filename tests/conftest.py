@@ -1,8 +1,13 @@
 """Test-suite options: ``@pytest.mark.slow`` marks the long validation sweeps, which run in
-CI (``CI=true``) or with ``pytest --slow`` and are skipped, with that reason, elsewhere."""
+CI (``CI=true``) or with ``pytest --slow`` and are skipped, with that reason, elsewhere.
+``DATA`` is the shared test data (``$MICROFACET_DATA``, else ``../shared/data`` beside the
+repository; absent from a user's clone: tests that need it skip)."""
 import os
+from pathlib import Path
 
 import pytest
+
+DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 
 
 def pytest_addoption(parser):

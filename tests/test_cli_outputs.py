@@ -1,4 +1,6 @@
 """The output naming rule and checks before work, for every command (issue 11, defects 3-6)."""
+import os
+
 import numpy as np
 import pytest
 
@@ -60,6 +62,23 @@ def test_validate_output_is_checked_before_the_work(tmp_path, capsys):
     assert ".tmp" not in capsys.readouterr().err
 
 
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux /proc (a folder nobody can write in)")
+@pytest.mark.parametrize("command", ["validate", "bake", "glints"])
+def test_unwritable_output_folder_is_refused_before_the_work(command, normal_exr, monkeypatch, capsys):
+    import microfacet.batch.tasks
+    import microfacet.validation
+
+    def work(*args, **kwargs):
+        raise AssertionError("the work started")
+    for module, name in [(microfacet.validation, "core_report"), (microfacet.batch.tasks, "bake_file"),
+                         (microfacet.batch.tasks, "glints_file")]:
+        monkeypatch.setattr(module, name, work)
+    source = [] if command == "validate" else [str(normal_exr)]
+    extra = ["--normal-map"] if command == "bake" else []
+    assert main([command, *source, *extra, "-o", "/proc/microfacet-test-output"]) == 1
+    one_error_line(capsys, "/proc/microfacet-test-output", "cannot write here")
+
+
 @pytest.mark.parametrize("command, suffix", [("bake", ".exr"), ("glints", ".npz")])
 def test_output_equal_to_the_input_is_refused(command, suffix, normal_exr, height_png, tmp_path, capsys):
     source = height_png if command == "bake" else normal_exr
@@ -86,3 +105,15 @@ def test_bake_side_output_may_not_be_the_input(height_png, tmp_path, capsys):
     assert main(["bake", str(height_png), "-o", str(tmp_path / "h.exr")]) == 1
     one_error_line(capsys, "would overwrite the input")
     assert not (tmp_path / "h.exr").exists()
+
+
+def test_bake_interrupted_while_writing_the_preview_leaves_no_output(height_png, tmp_path, monkeypatch, capsys):
+    import microfacet.io
+
+    def interrupted(path, *args, **kwargs):
+        assert (tmp_path / "x.exr").exists()         # the pyramid was written first
+        raise KeyboardInterrupt
+    monkeypatch.setattr(microfacet.io, "write_png", interrupted)
+    assert main(["bake", str(height_png), "-o", str(tmp_path / "x.exr")]) == 130
+    assert capsys.readouterr().err == "microfacet: interrupted\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.png"]

@@ -206,7 +206,7 @@ def _finite_heights(a) -> None:
 def _exr_bytes(folder: Path, image, half=False, channels=None) -> bytes:
     path = folder / "seed.exr"
     if channels is None:
-        write_exr(path, image, half=half)
+        write_exr(path, image, half=half, allow_nonfinite=True)    # NaN seeds too
     else:                                   # a channel set the readers do not expect
         import OpenEXR
         header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}

@@ -48,6 +48,56 @@ def test_exr_threads_uses_the_cores_and_restores_the_count():
     assert OpenEXR.global_thread_count() == before
 
 
+def test_exr_threads_overlapping_blocks_in_threads_restore_once_at_the_end():
+    """Thread A enters, B enters, A leaves: B still has the cores; the count is restored
+    only when B leaves (a save/restore per block restored 0 while B ran, or leaked)."""
+    import threading
+    cores = len(os.sched_getaffinity(0))
+    original = OpenEXR.global_thread_count()
+    OpenEXR.set_global_thread_count(0)
+    a_in, b_in, a_out, b_checked = (threading.Event() for _ in range(4))
+    seen = {}
+
+    def a():
+        with exr_threads():
+            a_in.set()
+            b_in.wait(5)
+        a_out.set()
+
+    def b():
+        a_in.wait(5)
+        with exr_threads():
+            b_in.set()
+            a_out.wait(5)
+            seen["while b runs"] = OpenEXR.global_thread_count()
+        b_checked.set()
+
+    try:
+        threads = [threading.Thread(target=f) for f in (a, b)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(10)
+        assert b_checked.is_set()
+        assert seen["while b runs"] == cores
+        assert OpenEXR.global_thread_count() == 0
+    finally:
+        OpenEXR.set_global_thread_count(original)
+
+
+def test_exr_concurrent_writes_from_threads_round_trip(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+    before = OpenEXR.global_thread_count()
+    images = [np.random.default_rng(k).standard_normal((64, 48, 3)) for k in range(16)]
+    with ThreadPoolExecutor(8) as pool:
+        paths = list(pool.map(lambda k: write_exr(tmp_path / f"t{k}.exr", images[k]), range(16)))
+        backs = list(pool.map(read_exr, paths))
+    for img, back in zip(images, backs):
+        np.testing.assert_array_equal(back, img.astype(np.float32))
+    assert OpenEXR.global_thread_count() == before
+    assert leftovers(tmp_path) == []
+
+
 def test_exr_keeps_orientation_and_channels(tmp_path):
     img = np.zeros((4, 6, 3))
     img[0, 0] = (1.0, 2.0, 3.0)          # top-left pixel, distinct channels
@@ -117,10 +167,22 @@ def test_exr_reader_needs_colour_channels(tmp_path):
 def test_exr_reader_rejects_nonfinite_unless_allowed(tmp_path, rgb):
     rgb[1, 2, 0] = np.nan
     rgb[0, 0, 1] = np.inf
-    path = write_exr(tmp_path / "nan.exr", rgb)
+    path = write_exr(tmp_path / "nan.exr", rgb, allow_nonfinite=True)
     with pytest.raises(mf.MicrofacetError, match=r"nan\.exr: 2 NaN or infinite values"):
         read_exr(path)
     assert np.isnan(read_exr(path, allow_nonfinite=True)[1, 2, 0])
+
+
+def test_exr_writer_refuses_nonfinite_and_overflow_unless_allowed(tmp_path, rgb):
+    big = rgb.copy()
+    big[0, 0, 0] = 1e39                              # finite in float64, inf in float32
+    for image, half, count in ((big, False, 1), (rgb * 1e4, True, None)):
+        with pytest.raises(ValueError, match=r"x\.exr: \d+ NaN or infinite values .*nothing written"):
+            write_exr(tmp_path / "x.exr", image, half=half)
+        assert leftovers(tmp_path) == [] and not (tmp_path / "x.exr").exists()
+    rgb[2, 3, 1] = np.nan
+    with pytest.raises(ValueError, match=r"x\.exr: 1 NaN"):
+        write_exr(tmp_path / "x.exr", rgb)
 
 
 # ------------------------------------------------------------------------- PNG
@@ -236,3 +298,15 @@ def test_png_data_reader_errors_name_the_file(tmp_path):
             read_png_data(tmp_path / name)
     with pytest.raises(ValueError, match="uint8 or uint16"):
         write_png_data(tmp_path / "f.png", np.zeros((2, 2), np.float32))
+
+
+# ------------------------------------------------------------------------- names
+@pytest.mark.parametrize("path, material, stem", [
+    ("d/nickel.binary.gz", "nickel", "nickel"), ("a.bsdf", "a", "a"), ("M.BIN", "M", "M"),
+    ("h.png", "h.png", "h"), ("x/fit.npz", "fit.npz", "fit"), ("r.exr", "r.exr", "r"),
+    (".gz", ".gz", ".gz"), ("a.b.txt", "a.b.txt", "a.b.txt")])
+def test_material_and_input_names(path, material, stem):
+    from microfacet.batch import input_name as batch_input_name
+    from microfacet.fit.outputs import material_name as fit_material_name
+    assert mf.io.material_name(path) == material and mf.io.input_name(path) == stem
+    assert fit_material_name is mf.io.material_name and batch_input_name is mf.io.input_name

@@ -257,6 +257,28 @@ def test_height_maps_from_png_and_exr(tmp_path):
         load_height_map(tmp_path / "junk.png")
 
 
+def test_a_normal_map_read_as_heights_warns_and_height_maps_do_not(tmp_path, capsys):
+    import warnings
+    from microfacet.errors import HeightMapWarning
+    rng = np.random.default_rng(12)
+    slopes = rng.normal(0.0, 0.3, (40, 30, 2))
+    leadr.write_normal_map(tmp_path / "n.png", leadr.encode_normal_map(slopes, np.uint8))
+    leadr.write_normal_map(tmp_path / "n.exr", (leadr.encode_normal_map(slopes, np.float32) + 1) / 2)
+    for name in ("n.png", "n.exr"):
+        with pytest.warns(HeightMapWarning, match=f"{name}: looks like a tangent-space normal map.*--normal-map"):
+            load_height_map(tmp_path / name)
+    colour = rng.integers(0, 256, (40, 30, 3)).astype(np.uint8)          # a photo: no unit normals
+    write_png_data(tmp_path / "c.png", colour)
+    write_png_data(tmp_path / "g.png", np.repeat(colour[..., :1], 3, axis=2))   # gray stored as RGB
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name in ("c.png", "g.png"):
+            load_height_map(tmp_path / name)
+    assert main(["bake", str(tmp_path / "n.png"), "-o", str(tmp_path / "x.exr")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("microfacet: warning: ") and "n.png: looks like" in err and err.count("\n") == 1
+
+
 # ------------------------------------------------------------------------- MIP maps
 def _box_matrix(n_in, n_out):
     """Dense averaging matrix from uv-interval overlaps, computed with fractions."""
@@ -441,6 +463,9 @@ def test_bad_pyramid_files(tmp_path):
         leadr.read_pyramid(tmp_path / "rgb.exr")
     with pytest.raises(MicrofacetError, match="no such file"):
         leadr.read_pyramid(tmp_path / "missing.exr")
+    np.savez(tmp_path / "g.npz", x=np.zeros(2))              # e.g. a glints microsurface
+    with pytest.raises(MicrofacetError, match=r"g.npz: not a moment pyramid EXR \(from 'microfacet bake'\)"):
+        leadr.read_pyramid(tmp_path / "g.npz")
     pyr = leadr.bake(np.zeros((8, 8)))
     leadr.write_pyramid(tmp_path / "short.exr", pyr[:2])
     with pytest.raises(MicrofacetError, match="sizes"):
@@ -522,6 +547,14 @@ def test_cli_bake_console_has_no_traceback(tmp_path):
     r = subprocess.run([sys.executable, "-m", "microfacet", "bake", str(tmp_path / "none.png"),
                         "-o", str(tmp_path / "o.exr")], capture_output=True, text=True)
     assert r.returncode == 1 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1
+
+
+def test_lookup_rejects_nonfinite_uv_and_footprints():
+    pyramid = leadr.bake(np.zeros((8, 8)))
+    for uv, footprint, word in (([[np.nan, 0.5]], 0.01, "uv"), ([[0.5, np.inf]], 0.01, "uv"),
+                                ([[0.5, 0.5]], np.nan, "footprint"), ([[0.5, 0.5]], [[[np.inf, 0], [0, 0.1]]], "footprint")):
+        with pytest.raises(ValueError, match=f"{word} must be finite"):
+            leadr.lookup(pyramid, np.array(uv), footprint)
 
 
 def test_lookup_wrap_and_clamp_borders():

@@ -1,10 +1,10 @@
 """The one normal-map decoder (microfacet.io.normalmap) and its use by ``bake`` and ``glints``:
 encodings by content or given, z stored or rebuilt, per-texel repair, warnings."""
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 
 from microfacet import leadr
 from microfacet.cli import main
@@ -13,7 +13,7 @@ from microfacet.glints import Microsurface, load_slopes
 from microfacet.io import write_exr, write_png_data
 from microfacet.io.normalmap import MAX_THETA_DEG, decode_normals, normals_to_slopes, read_normals, read_slopes
 
-MAPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "maps"
+MAPS = DATA / "maps"
 SHIPPED = ["glitterman_scratches.png", "glitterman_isotropic_large.png",
            "sms_normalmap_gaussian.exr", "sms_normalmap_waves.exr"]
 COS_MAX = np.cos(np.radians(MAX_THETA_DEG))
@@ -22,7 +22,7 @@ COS_MAX = np.cos(np.radians(MAX_THETA_DEG))
 def real_map(name):
     path = MAPS / name
     if not path.exists():
-        pytest.skip(f"test data {path} absent (../shared/data/maps is not part of a user's clone)")
+        pytest.skip(f"test data {path} absent (../shared/data or $MICROFACET_DATA; not part of a user's clone)")
     return path
 
 

@@ -278,3 +278,11 @@ def test_fit_comparison_picture_is_written(tmp_path):
     with Image.open(path) as im:
         assert im.format == "PNG" and im.size == (800, 620)
     assert [p.name for p in tmp_path.iterdir()] == ["cmp.png"]
+
+
+@pytest.mark.parametrize("kwargs, word", [({"direction": (0, 0, 0)}, "direction"), ({"direction": (0, np.nan, 1)}, "direction"),
+                                          ({"direction": (0, 1)}, "direction"), ({"irradiance": np.nan}, "irradiance"),
+                                          ({"irradiance": -1.0}, "irradiance"), ({"irradiance": (1, 2)}, "irradiance")])
+def test_directional_light_rejects_bad_parameters(kwargs, word):
+    with pytest.raises(ValueError, match=word):
+        DirectionalLight(**kwargs)

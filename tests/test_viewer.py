@@ -30,11 +30,22 @@ def _env():
     return dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""), NUMBA_NUM_THREADS="1")
 
 
-def view(*args, timeout=60):
-    """Run ``microfacet view`` expecting it to fail: (exit status, stderr)."""
-    r = subprocess.run([sys.executable, "-m", "microfacet", "view", *map(str, args)], capture_output=True,
-                       text=True, env=_env(), timeout=timeout)
-    return r.returncode, r.stderr
+@pytest.fixture
+def view(capsys, monkeypatch):
+    """``microfacet view ARGS`` in this process, expecting it to fail before serving:
+    returns (exit status, stderr); a server that starts fails the test instead of hanging."""
+    import socketserver
+
+    from microfacet.cli import main
+
+    def serve_forever(self, *args):
+        raise AssertionError("the server started")
+    monkeypatch.setattr(socketserver.BaseServer, "serve_forever", serve_forever)
+
+    def run(*args):
+        code = main(["view", *map(str, args)])
+        return code, capsys.readouterr().err
+    return run
 
 
 def _skip_or_fail(reason):
@@ -122,7 +133,7 @@ def test_no_console_errors(page, renders):
 
 
 # ------------------------------------------------------------------ bad input
-def test_missing_and_corrupt_pyramid(tmp_path):
+def test_missing_and_corrupt_pyramid(tmp_path, view):
     code, err = view(tmp_path / "missing.exr")
     assert code != 0 and err.count("\n") == 1 and "missing.exr: no such file" in err
     bad = tmp_path / "bad.exr"
@@ -131,7 +142,7 @@ def test_missing_and_corrupt_pyramid(tmp_path):
     assert code != 0 and err.count("\n") == 1 and "bad.exr" in err and "Traceback" not in err
 
 
-def test_glint_npz_refused(tmp_path, pyramid_file):
+def test_glint_npz_refused(tmp_path, pyramid_file, view):
     from microfacet.glints import Microsurface
     glint = Microsurface.from_normal_map(np.dstack([np.zeros((8, 8, 2)), np.ones((8, 8))])).save(tmp_path / "g.npz")
     for args in ([glint], [pyramid_file, "--material", glint]):
@@ -139,7 +150,7 @@ def test_glint_npz_refused(tmp_path, pyramid_file):
         assert code != 0 and err.count("\n") == 1 and "g.npz" in err, err
 
 
-def test_port_in_use(pyramid_file):
+def test_port_in_use(pyramid_file, view):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         s.listen()

@@ -417,7 +417,8 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     out_dir : path-like
         Output folder, created if needed; existing demo files in it are replaced.
     size, spp, seed : int
-        Sphere image side (pixels), environment samples per pixel, random seed.
+        Sphere image side (pixels), environment samples per pixel, random seed. Below 64
+        pixels (quick runs, tests) the LEADR and glints sections use small maps as well.
     workers : int
         Processes rendering panels in parallel (1: all in this process).
     progress : bool
@@ -490,7 +491,8 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
                                           progress=bar.update))
         if glints:
             from .glints.figures import glints_section
-            sections.append(glints_section(out, progress=bar.update))
+            small = {} if size >= 64 else {"map_size": 128, "width": 64, "reference_spp": 32, "naive_spp": 4}
+            sections.append(glints_section(out, progress=bar.update, **small))
         if mitsuba:
             sections.append(_mitsuba_section(out, progress=bar.update))
         if viewer:

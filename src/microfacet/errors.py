@@ -7,3 +7,7 @@ class MicrofacetError(Exception):
 
 class NormalMapWarning(UserWarning):
     """A normal map was decoded, but some texels were repaired or the map looks inconsistent."""
+
+
+class HeightMapWarning(UserWarning):
+    """A height map was read, but it looks like something else (a tangent-space normal map)."""

@@ -9,7 +9,7 @@ rows = mf.batch.run("glints", "maps/", "ms/", scheduler="tcp://10.0.0.1:8786")  
 See :func:`microfacet.batch.runner.run` for the guarantees (atomic outputs, resumable,
 failures reported per file, summary.csv/summary.md).
 """
-from .files import input_name
+from ..io.names import input_name
 from .runner import execute, format_summary_csv, format_summary_markdown, run
 from .tasks import TASKS, Task, bake_file, fit_file, get_task, glints_file
 

@@ -17,15 +17,9 @@ from pathlib import Path
 
 from ..errors import MicrofacetError
 from ..io.atomic import TMP_SUFFIX
+from ..io.names import input_name
 
 __all__ = ["input_name", "Item", "plan", "up_to_date", "remove_partials"]
-
-
-def input_name(source: str | os.PathLike) -> str:
-    """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``."""
-    from ..fit.outputs import material_name
-    name = material_name(source)
-    return name.rsplit(".", 1)[0] if Path(name).suffix.lower() in (".png", ".exr", ".npz") else name
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,6 +18,7 @@ import os
 import signal
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -33,20 +34,25 @@ __all__ = ["run", "execute", "summary_columns", "format_summary_csv", "format_su
 
 #: Errors that mean "this file cannot be done", reported in its row.
 FILE_ERRORS = (MicrofacetError, ValueError, OSError, ArithmeticError, MemoryError)
+#: Between the warnings of one file in its row's ``warnings``.
+WARNING_SEPARATOR = " / "
 
 
 def execute(task: Task, item: Item) -> dict:
     """Run ``task`` on one file (in whichever process or machine): remove what an earlier
     killed attempt left, reset the peak memory, run, and return the row's status
     (``ok`` or ``error: reason``), ``seconds`` (wall clock), ``cpu_seconds`` (this
-    process's CPU time: all its threads), ``peak_mb`` and figures. A failed file
-    leaves none of its outputs."""
+    process's CPU time: all its threads), ``peak_mb``, ``warnings`` (the task's warning
+    messages, e.g. repaired normal-map texels, joined by `` / ``) and figures. A failed
+    file leaves none of its outputs."""
     remove_partials(task, [item])
     item.out.parent.mkdir(parents=True, exist_ok=True)
     memory.reset_peak()
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        with threadpool_limits(limits=1, user_api="blas"):     # the same sums in every mode
+        with threadpool_limits(limits=1, user_api="blas"), \
+                warnings.catch_warnings(record=True) as caught:   # the same sums in every mode
+            warnings.simplefilter("always")
             figures, status = task(item.source, item.out), "ok"
     except FILE_ERRORS as e:
         reason = " ".join(str(e).split()) or type(e).__name__
@@ -55,7 +61,8 @@ def execute(task: Task, item: Item) -> dict:
             out.unlink(missing_ok=True)
     return {"status": status, "seconds": round(time.perf_counter() - t0, 4),
             "cpu_seconds": round(time.process_time() - cpu0, 4),
-            "peak_mb": round(memory.peak_bytes() / 2**20, 1), **figures}
+            "peak_mb": round(memory.peak_bytes() / 2**20, 1),
+            "warnings": WARNING_SEPARATOR.join(" ".join(str(w.message).split()) for w in caught), **figures}
 
 
 def _init_worker(threads: int) -> None:
@@ -139,8 +146,8 @@ def _run_dask(task, items, scheduler, report, progress: bool) -> None:
 
 def summary_columns(task: Task) -> tuple[str, ...]:
     """Columns of a batch summary: ``file``, ``status``, ``seconds``, ``cpu_seconds``,
-    ``peak_mb`` and the task's figures."""
-    return ("file", "status", "seconds", "cpu_seconds", "peak_mb", *task.columns)
+    ``peak_mb``, the task's figures and ``warnings``."""
+    return ("file", "status", "seconds", "cpu_seconds", "peak_mb", *task.columns, "warnings")
 
 
 def format_summary_csv(task: Task, rows: Sequence[dict]) -> str:
@@ -228,7 +235,7 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
     for item in items:
         if not force and up_to_date(task, item):
             old = previous.get(item.rel, {})
-            rows[item.rel] = {**{k: old.get(k, "") for k in task.columns}, "status": "skipped",
+            rows[item.rel] = {**{k: old.get(k, "") for k in (*task.columns, "warnings")}, "status": "skipped",
                               "seconds": "", "cpu_seconds": "", "peak_mb": ""}
         else:
             todo.append(item)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MicrofacetError
+from ..io.names import input_name
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
@@ -118,8 +119,13 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
         raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
                               f"{'' if roughness is None else f', roughness {roughness:g}'}); "
                               "use a smaller scale or roughness")
+    preview = preview_image(pyramid)                  # before any write: a failure leaves no file
     leadr.write_pyramid(out, pyramid, compression=compression)
-    write_png(out.with_suffix(".png"), preview_image(pyramid))
+    try:
+        write_png(out.with_suffix(".png"), preview)
+    except BaseException:                             # Ctrl-C, a full disk: no pyramid without its preview
+        out.unlink(missing_ok=True)
+        raise
     top = leadr.from_moments(pyramid[-1][0, 0])
     h, w = pyramid[0].shape[:2]
     return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(top.alpha_x),
@@ -159,7 +165,6 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     Returns the summary figures."""
     from ..fit.outputs import fit_material, summary_row
     from ..measured import load
-    from .files import input_name
     brdf = load(source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,

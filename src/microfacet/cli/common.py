@@ -5,7 +5,7 @@ Output naming rule (every command): ``-o OUT`` names the main output file. ``OUT
 with the command's suffix (``.npz``, ``.exr``, ``.png``, ``.md``) is used as it is; ``OUT``
 without a suffix gets it appended; an existing folder receives ``<input name><suffix>``.
 Any other suffix is an error, and so is an output (or a side output such as ``OUT.png``)
-that is the input itself. Outputs are checked, and their folder created, before the work.
+that is the input itself. Outputs are checked (their folder created, and writable), before the work.
 A folder input (``bake``, ``glints``) is a batch: ``-o`` is the output folder, whose tree
 mirrors the input's (:mod:`microfacet.batch`).
 """
@@ -15,7 +15,8 @@ import argparse
 import os
 from pathlib import Path
 
-from ..batch.files import input_name
+from ..io.atomic import check_writable
+from ..io.names import input_name
 from ..errors import MicrofacetError
 
 PROG = "microfacet"
@@ -102,6 +103,7 @@ def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLik
     if out.parent.exists() and not out.parent.is_dir():
         raise MicrofacetError(f"{out.parent}: is not a folder")
     out.parent.mkdir(parents=True, exist_ok=True)
+    check_writable(out)
     return out
 
 
@@ -125,10 +127,12 @@ def add_batch_options(parser) -> None:
 
 def run_batch(args, task: str, folder: str) -> int:
     """Run ``task`` on ``folder`` into the ``-o`` folder with the options of ``args`` that the
-    task takes; print the summary table; exit status 1 if a file failed."""
+    task takes; print the summary table and the warnings of the files done (one line each);
+    exit status 1 if a file failed."""
     import sys
 
     from ..batch import format_summary_markdown, get_task, run
+    from ..batch.runner import WARNING_SEPARATOR
     task = get_task(task)
     task = task.with_options(**{k: getattr(args, k) for k in task.option_names() if hasattr(args, k)})
     if args.jobs is not None and args.scheduler is not None:
@@ -136,6 +140,10 @@ def run_batch(args, task: str, folder: str) -> int:
     rows = run(task, folder, args.output, jobs=args.jobs, scheduler=args.scheduler, force=args.force,
                recursive=args.recursive, progress=sys.stderr.isatty())
     print(format_summary_markdown(task, rows), end="")
+    for r in rows:
+        if r["status"] != "skipped" and r.get("warnings"):
+            for message in r["warnings"].split(WARNING_SEPARATOR):
+                print(f"{PROG}: warning: {message}", file=sys.stderr)
     failed = [r for r in rows if r["status"] != "ok" and r["status"] != "skipped"]
     if failed:
         print(f"{PROG}: error: {len(failed)} of {len(rows)} files failed (see "

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from ..io import write_text
+from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, albedo_ratios, describe_albedo, describe_fit_error,
                        describe_uniform_error, fit_error, uniform_error, white_furnace)
 
@@ -43,8 +44,6 @@ __all__ = ["material_name", "fit_material", "distribution_params",
            "format_summary_markdown", "objective", "SUMMARY_COLUMNS", "METHODS",
            "DIFFUSE"]
 
-#: File suffixes dropped from a material's name (longest first).
-_SUFFIXES = (".binary.gz", ".bsdf.gz", ".bin.gz", ".binary", ".bsdf", ".bin", ".gz")
 #: Conversion methods of the analytic fits.
 METHODS = ("least_squares", "moments")
 #: Diffuse-base choices of the least-squares fits: with, dropped where negligible; with; without.
@@ -58,15 +57,6 @@ SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "method",
                    *(f"albedo_{k}" for k in _KINDS), "error_ggx_moments",
                    "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "ggx_diffuse",
                    "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
-
-
-def material_name(path: str | os.PathLike) -> str:
-    """File name without its measured-BRDF suffix: ``nickel.binary.gz`` -> ``nickel``."""
-    name = Path(path).name
-    for suffix in _SUFFIXES:
-        if name.lower().endswith(suffix) and len(name) > len(suffix):
-            return name[: -len(suffix)]
-    return name
 
 
 def distribution_params(brdf) -> dict[str, float]:

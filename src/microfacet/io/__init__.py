@@ -9,9 +9,11 @@ from .atomic import atomic_path, write_bytes, write_text
 from .exr import read_exr, write_exr
 from .html import html_figure, html_page, html_grid
 from .image import read_image
+from .names import input_name, material_name
 from .npz import load_npz
 from .png import read_png_data, srgb_encode, to_srgb8, tonemap, write_png, write_png_data
 
 __all__ = ["atomic_path", "write_bytes", "write_text", "read_exr", "write_exr", "load_npz",
+           "input_name", "material_name",
            "srgb_encode", "to_srgb8", "tonemap", "write_png", "read_png_data", "write_png_data", "read_image",
            "html_figure", "html_page", "html_grid"]

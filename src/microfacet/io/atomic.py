@@ -12,7 +12,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_bytes", "write_text"]
+__all__ = ["atomic_path", "check_writable", "write_bytes", "write_text"]
 
 TMP_SUFFIX = ".tmp"
 
@@ -22,6 +22,23 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+def _temporary(path: Path) -> Path:
+    """A new empty temporary file beside ``path``; the OSError if there is none names ``path``."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+    except OSError as e:        # name the destination, not the temporary file
+        raise OSError(e.errno, f"cannot write here: {e.strerror}", str(path)) from None
+    os.close(fd)
+    return Path(tmp)
+
+
+def check_writable(path: str | os.PathLike) -> None:
+    """Raise the ``OSError`` that :func:`atomic_path` would raise for ``path`` (its folder
+    missing, read-only, not a folder, ...), by creating and removing a temporary file there:
+    commands check their outputs before their work."""
+    _temporary(Path(path)).unlink()
 
 
 @contextlib.contextmanager
@@ -34,12 +51,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     any exception it is removed and the exception propagates, leaving ``path`` as it was.
     """
     path = Path(path)
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
-    except OSError as e:        # name the destination, not the temporary file
-        raise OSError(e.errno, f"cannot write here: {e.strerror}", str(path)) from None
-    os.close(fd)
-    tmp = Path(tmp)
+    tmp = _temporary(path)
     try:
         yield tmp
         with open(tmp, "rb+") as f:

@@ -6,6 +6,7 @@ Images are ``(H, W)`` or ``(H, W, C)`` arrays, row 0 at the top, with ``C`` = 1 
 from __future__ import annotations
 
 import os
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from ..errors import MicrofacetError
 from .atomic import atomic_path
 from .read import read_bytes
 
-__all__ = ["read_exr", "write_exr", "EXR_MAGIC", "COMPRESSIONS", "exr_compression", "exr_threads"]
+__all__ = ["read_exr", "write_exr", "EXR_MAGIC", "check_exr_magic", "COMPRESSIONS", "exr_compression", "exr_threads"]
 
 #: First four bytes of every OpenEXR file (``20000630`` little-endian).
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -38,17 +39,31 @@ def exr_compression(name: str):
     return COMPRESSIONS[name]
 
 
+_threads_lock = threading.Lock()
+_threads_users = 0          # exr_threads() blocks now running, in any thread
+_threads_before = 0         # the global count the first of them found
+
+
 @contextmanager
 def exr_threads():
-    """Let OpenEXR (de)compress on every core this process may use, restoring its
-    global thread count afterwards (OpenEXR's default, 0, works on the calling thread only)."""
-    before = OpenEXR.global_thread_count()
+    """Let OpenEXR (de)compress on every core this process may use (OpenEXR's default, 0,
+    works on the calling thread only), restoring its process-global thread count when the
+    last concurrent user leaves: a lock and a count of users make overlapping blocks in
+    several threads safe (a save/restore per block would restore too early, or leak)."""
+    global _threads_users, _threads_before
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    OpenEXR.set_global_thread_count(cores)
+    with _threads_lock:
+        if _threads_users == 0:
+            _threads_before = OpenEXR.global_thread_count()
+            OpenEXR.set_global_thread_count(cores)
+        _threads_users += 1
     try:
         yield
     finally:
-        OpenEXR.set_global_thread_count(before)
+        with _threads_lock:
+            _threads_users -= 1
+            if _threads_users == 0:
+                OpenEXR.set_global_thread_count(_threads_before)
 
 
 def _as_channels(image) -> np.ndarray:
@@ -63,7 +78,8 @@ def _as_channels(image) -> np.ndarray:
     return a
 
 
-def write_exr(path: str | os.PathLike, image, half: bool = False, compression: str = "zip") -> Path:
+def write_exr(path: str | os.PathLike, image, half: bool = False, compression: str = "zip",
+              allow_nonfinite: bool = False) -> Path:
     """Write a linear image as a scanline EXR (lossless ``compression``), atomically.
 
     Parameters
@@ -76,8 +92,16 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
         Store 16-bit half floats instead of 32-bit floats.
     compression : str
         A name in :data:`COMPRESSIONS`.
+    allow_nonfinite : bool
+        Write NaN/inf samples (and values beyond the float32/half range, which become inf)
+        instead of raising ``ValueError``, as :func:`read_exr` reads them only when asked.
     """
-    a = _as_channels(image).astype(np.float16 if half else np.float32)
+    with np.errstate(over="ignore"):                 # overflow to inf: counted below
+        a = _as_channels(image).astype(np.float16 if half else np.float32)
+    bad = np.count_nonzero(~np.isfinite(a))
+    if bad and not allow_nonfinite:
+        raise ValueError(f"{path}: {bad} NaN or infinite values (after conversion to "
+                         f"{'half' if half else 'float32'}); nothing written (allow_nonfinite=True writes them)")
     channels = {name: np.ascontiguousarray(a[..., c]) for c, name in enumerate(_NAMES[a.shape[2]])}
     header = {"compression": exr_compression(compression), "type": OpenEXR.scanlineimage}
     with atomic_path(path) as tmp, exr_threads():
@@ -85,10 +109,11 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
     return Path(path)
 
 
-def _check_magic(path: Path) -> None:
-    magic = read_bytes(path, "an EXR file", 4)
+def check_exr_magic(path: Path, kind: str = "an OpenEXR file") -> None:
+    """Raise :class:`MicrofacetError` "``path``: not ``kind``" unless ``path`` starts with :data:`EXR_MAGIC`."""
+    magic = read_bytes(path, kind, 4)
     if magic != EXR_MAGIC:
-        raise MicrofacetError(f"{path}: not an OpenEXR file (bad magic number {magic.hex() or 'empty'})")
+        raise MicrofacetError(f"{path}: not {kind} (bad magic number {magic.hex() or 'empty'})")
 
 
 def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarray:
@@ -105,7 +130,7 @@ def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarr
         The message names the file and the problem.
     """
     path = Path(path)
-    _check_magic(path)
+    check_exr_magic(path)
     try:
         with exr_threads():
             channels = OpenEXR.File(str(path), separate_channels=True).channels()

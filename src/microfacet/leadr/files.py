@@ -10,17 +10,17 @@ its own ``W_k x H_k``.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 import OpenEXR
 
-from ..errors import MicrofacetError
+from ..errors import HeightMapWarning, MicrofacetError
 from ..io.atomic import atomic_path
-from ..io.exr import EXR_MAGIC, exr_compression, exr_threads, write_exr
+from ..io.exr import check_exr_magic, exr_compression, exr_threads, write_exr
 from ..io.image import read_image
 from ..io.png import write_png_data
-from ..io.read import read_bytes
 from .mip import mip_sizes
 
 __all__ = ["write_pyramid", "read_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
@@ -57,10 +57,8 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -
     return Path(path)
 
 
-def _check_magic(path: Path, magic: bytes, kind: str) -> None:
-    head = read_bytes(path, kind, len(magic))
-    if head != magic:
-        raise MicrofacetError(f"{path}: not {kind} (bad magic number {head.hex() or 'empty'})")
+#: What a pyramid is, in error messages.
+_PYRAMID = "a moment pyramid EXR (from 'microfacet bake')"
 
 
 def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
@@ -71,7 +69,7 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     level 0 and finite values.
     """
     path = Path(path)
-    _check_magic(path, EXR_MAGIC, "an OpenEXR file")
+    check_exr_magic(path, _PYRAMID)
     try:
         with exr_threads():
             parts = [(p.name(), {n: np.asarray(c.pixels) for n, c in p.channels.items()})
@@ -80,7 +78,7 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
         raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({e})") from None
     names = [name for name, _ in parts]
     if not parts or names != [f"mip{k}" for k in range(len(parts))]:
-        raise MicrofacetError(f"{path}: not a moment pyramid (parts {names[:4]}, expected mip0, mip1, ...)")
+        raise MicrofacetError(f"{path}: not {_PYRAMID}: parts {names[:4]}, expected mip0, mip1, ...")
     levels = []
     for name, channels in parts:
         missing = [c for c in CHANNELS if c not in channels]
@@ -97,12 +95,29 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     return levels
 
 
+def _looks_like_normal_map(rgb: np.ndarray) -> bool:
+    """Whether colour samples ``(H, W, 3)`` (not gray) decode, on a grid of at most 128²
+    texels, into a normal map the decoder finds consistent: none repaired, unit length."""
+    from ..io.normalmap import decode_normals
+    step = max(1, max(rgb.shape[:2]) // 128)
+    sample = rgb[::step, ::step]
+    if np.ptp(sample.astype(np.float64), axis=2).max() == 0:        # gray
+        return False
+    return not decode_normals(sample, warn=False)[1].warnings
+
+
 def load_height_map(path: str | os.PathLike) -> np.ndarray:
     """Heights ``(H, W)`` float64 of a PNG (8/16-bit gray or RGB(A), scaled to ``[0, 1]``)
     or EXR (``Y``, or the mean of ``R, G, B``) image. Colour PNGs use the mean of R, G, B
-    (equal in a gray image); alpha is ignored."""
+    (equal in a gray image); alpha is ignored. A colour map that decodes as a normal map
+    (:func:`_looks_like_normal_map`) is read as heights all the same, with a
+    :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless)."""
     path = Path(path)
     a = read_image(path)
+    if a.ndim == 3 and a.shape[2] >= 3 and _looks_like_normal_map(a[..., :3]):
+        warnings.warn(f"{path}: looks like a tangent-space normal map (its colours decode to unit "
+                      "normals) but is read as heights (the mean of R, G, B); bake it with --normal-map "
+                      "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=2)
     if a.dtype in (np.uint8, np.uint16):
         a = a.astype(np.float64) / np.iinfo(a.dtype).max
     if a.ndim == 3:

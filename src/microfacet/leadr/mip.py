@@ -215,6 +215,9 @@ def lookup(pyramid, uv, footprint=0.0, *, wrap: bool = True,
         raise ValueError("empty pyramid")
     shape = uv.shape[:-1]
     a, b = _footprint_axes(footprint, shape)
+    for name, x in (("uv", uv), ("footprint", a), ("footprint", b)):
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"{name} must be finite, got NaN or infinite values")
     h0, w0 = pyramid[0].shape[:2]
     texels = np.array([w0, h0], dtype=np.float64)
     la, lb = np.linalg.norm(a * texels, axis=-1), np.linalg.norm(b * texels, axis=-1)

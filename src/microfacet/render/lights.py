@@ -30,6 +30,14 @@ class DirectionalLight:
     direction: tuple[float, float, float] = (-0.5, 0.5, 1.0)
     irradiance: float | tuple[float, float, float] = 1.0
 
+    def __post_init__(self):
+        d = np.asarray(self.direction, dtype=np.float64)
+        if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d):
+            raise ValueError(f"direction must be three finite numbers, not all 0, got {self.direction!r}")
+        e = np.asarray(self.irradiance, dtype=np.float64)
+        if e.shape not in ((), (3,)) or not np.all(np.isfinite(e)) or np.any(e < 0):
+            raise ValueError(f"irradiance must be a finite value >= 0 or three (RGB), got {self.irradiance!r}")
+
     @property
     def w(self) -> np.ndarray:
         """Unit world direction toward the light."""
