@@ -103,6 +103,56 @@ def test_fitted_scalar_variant_matches_numpy(files, name):
     assert_close("pdf", pdf, brdf.pdf(wi, wo))
 
 
+def _search_tables(rng):
+    """Sorted float32 tables as the plugins search them: a CDF with runs of tiny-mass and
+    empty intervals at both ends (as tabulated fits have), ``cos theta`` at uniform
+    ``theta`` (the Fresnel nodes, dense near 1), and random sorted values with ties."""
+    mass = np.concatenate([np.full(40, 1e-9), rng.random(60), np.zeros(5), np.full(50, 1e-8), [0.0] * 3])
+    cdf = np.concatenate([[0.0], np.cumsum(mass) / mass.sum()])
+    return {"cdf": (cdf, 1.0 - 2.0**-24), "cos": (np.cos(np.linspace(np.pi / 2, 0, 90)), np.inf),
+            "ties": (np.sort(np.round(rng.normal(size=300), 1)) + 0.25, np.inf)}   # no 0: its neighbours are denormal
+
+
+@pytest.mark.parametrize("kind", ["cdf", "cos", "ties"])
+def test_sorted_search_is_searchsorted(llvm, kind):
+    """The guided search returns ``searchsorted(x, v, "right") - 1`` clipped into the
+    intervals, for every node value, its float32 neighbours, the ends and random values."""
+    from microfacet.mitsuba.tabulated import SortedSearch
+    rng = np.random.default_rng(3)
+    x, v_max = _search_tables(rng)[kind]
+    x = x.astype(np.float32)
+    v = np.concatenate([x, np.nextafter(x, -np.inf), np.nextafter(x, np.inf),
+                        rng.uniform(x[0] - 0.1, x[-1] + 0.1, 20000).astype(np.float32), [x[0], x[-1]]])
+    v = np.minimum(v, np.float32(v_max)).astype(np.float32)
+    search = SortedSearch(x, v_max)
+    assert search.width < len(x) // 4                    # the guide narrows the bisection
+    ours = np.array(search(mi.Float(v)))
+    expected = np.clip(np.searchsorted(x, v, side="right") - 1, 0, len(x) - 2)
+    np.testing.assert_array_equal(ours, expected)
+    use("scalar_rgb")
+    scalar = SortedSearch(x, v_max)
+    assert [scalar(float(t)) for t in v[::97]] == list(expected[::97])
+
+
+def test_next_row_window_brackets_the_next_row(files):
+    """For every row ``k`` and ``v``, row ``k + 1``'s answer lies in the window that row
+    ``k``'s answer names (the fit's conditional CDFs of ``|y~|``)."""
+    from microfacet.mitsuba.tabulated import next_row_window
+    d = mf.fit.load(files["iso"]).distribution
+    cdf = np.asarray(d.y_cdf, dtype=np.float32).reshape(d.eta_nodes.shape)
+    v_max = np.float32(1.0 - 2.0**-24)
+    start, width = next_row_window(cdf, v_max)
+    assert width < cdf.shape[1] // 8
+    rng = np.random.default_rng(4)
+    v = np.concatenate([rng.random(4000, dtype=np.float32), cdf.ravel()[::7], [0.0, v_max]]).astype(np.float32)
+    v = v[v <= v_max]
+    n = cdf.shape[1]
+    for k in range(cdf.shape[0] - 1):
+        j0, j1 = (np.clip(np.searchsorted(cdf[r], v, side="right") - 1, 0, n - 2) for r in (k, k + 1))
+        lo = start[k, j0]
+        assert np.all((lo <= j1) & (j1 < lo + width)), k
+
+
 def _sample(bsdf, wo, u1, u):
     si = dr.zeros(mi.SurfaceInteraction3f, len(wo))
     si.wi = vec3(wo)

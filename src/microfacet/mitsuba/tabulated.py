@@ -80,36 +80,64 @@ def bisect_le(f, target, lo, hi, steps: int):
     return lo
 
 
+_T_MIN, _R_MIN = 2.0**-48, 2.0**-24       # t and 1 - t are clamped to these (octaves)
+_T_MIN_BITS, _R_MIN_BITS, _HALF_BITS = (int(np.float32(f).view(np.uint32)) for f in (_T_MIN, _R_MIN, 0.5))
+
+
 class SortedSearch:
     """``k(v)``, the largest ``k`` in ``[0, n - 2]`` with ``x[k] <= v`` (0 if none) for
-    sorted nodes ``x``: what ``np.searchsorted(x, v, "right") - 1`` clipped into the
-    intervals gives, found by the cutpoint method (Chen and Asau 1974; Devroye 1986,
-    Sec. III.2.4). A guide maps the cell ``floor(G (v - x_0) / (x_(n-1) - x_0))`` of
-    ``v`` (``G`` cells) to the first node that can answer; a bisection with the fixed step
-    count of the widest bracket (:attr:`width` nodes) finishes. Exact: the cells of the
-    nodes are computed with the kernel's float32 operations and each bracket is widened
-    by one cell on either side."""
+    sorted nodes ``x`` and ``v <= v_max``: what ``np.searchsorted(x, v, "right") - 1``
+    clipped into the intervals gives, found by the cutpoint method (Chen and Asau 1974;
+    Devroye 1986, Sec. III.2.4): a guide maps the cell of ``v`` to the first node that
+    can answer, and a bisection with the fixed step count of the widest bracket
+    (:attr:`width` nodes) finishes. The cells are the octaves of ``t`` below 1/2 (down to
+    ``2^-48``) and of ``1 - t`` above (down to ``2^-24``),
+    ``t = (v - x_0) / (x_(n-1) - x_0)`` (float32 exponent bits), each split into ``per_octave`` cells (high mantissa bits): fine at both
+    ends, where CDF tables crowd (runs of nodes of tiny mass) and ``cos theta`` tables
+    too. Exact: the nodes' cells are computed with the kernel's float32 operations, and
+    each bracket is widened by one cell on either side."""
 
-    def __init__(self, x, cells: int | None = None):
+    def __init__(self, x, v_max: float = math.inf):
         x = np.asarray(x, dtype=np.float32).ravel()
         self.n = n = x.size
-        self.cells = cells = cells or 1 << int(math.ceil(math.log2(4 * n)))
+        per_octave = 1 << min(10, max(4, int(math.ceil(math.log2(n))) - 1))
+        self.shift = 23 - int(math.log2(per_octave))
+        self.half = (_HALF_BITS - _T_MIN_BITS) >> self.shift     # cells below t = 1/2
+        self.cells = cells = self.half + ((_HALF_BITS - _R_MIN_BITS) >> self.shift) + 1
         self.x = Table(x)
         self.x0 = float(x[0])
-        self.scale = float(np.float32(cells / max(float(x[-1]) - float(x[0]), 1e-30)))
-        t = (x - np.float32(self.x0)) * np.float32(self.scale)
-        cell = np.minimum(np.where(t >= 0, t, 0), cells - 1).astype(np.int64)
+        self.inv_range = float(np.float32(1.0 / max(float(x[-1]) - float(x[0]), 1e-30)))
+        t = np.clip((x - np.float32(self.x0)) * np.float32(self.inv_range), np.float32(0), np.float32(1))
+        bits = lambda f: f.view(np.uint32).astype(np.int64)  # noqa: E731
+        cell = self._cell_of(t < 0.5, bits(np.maximum(t, np.float32(_T_MIN))),
+                             bits(np.maximum(np.float32(1) - t, np.float32(_R_MIN))), np.where, np.clip)
         g = np.arange(cells)
-        below = np.searchsorted(cell, np.maximum(g - 1, 0), side="left")       # nodes in cells < g - 1
+        below = np.searchsorted(cell, np.maximum(g - 1, 0), side="left")          # nodes in cells < g - 1
         upto = np.searchsorted(cell, np.minimum(g + 1, cells - 1), side="right")  # nodes in cells <= g + 1
-        lo = np.clip(below - 1, 0, n - 2)
-        hi = np.clip(upto - 1, lo, n - 2)
+        last = np.clip(np.searchsorted(x, np.float32(min(v_max, x[-1])), side="right") - 1, 0, n - 2)
+        lo = np.clip(below - 1, 0, last)
+        hi = np.clip(upto - 1, lo, last)
         self.width = int((hi - lo).max()) + 1
         self.steps = _steps(self.width)
         self.guide = Table(lo, "uint32")
 
+    def _cell_of(self, low, bits_t, bits_r, select, clip):
+        """Cell from the float32 bits of ``t`` (``low``: ``t < 1/2``) or of ``1 - t``."""
+        c = select(low, (bits_t - _T_MIN_BITS) >> self.shift, self.cells - 1 - ((bits_r - _R_MIN_BITS) >> self.shift))
+        return clip(c, 0, self.cells - 1)
+
+    def _cell(self, v):
+        """The cell of ``v``, as in ``__init__`` but with Dr.Jit's float32 operations."""
+        t = dr.clip((v - self.x0) * self.inv_range, 0.0, 1.0)
+        q, r = dr.maximum(t, _T_MIN), dr.maximum(1.0 - t, _R_MIN)
+        if self.x.scalar:
+            bits_t, bits_r = (int(np.float32(f).view(np.uint32)) for f in (q, r))
+        else:
+            bits_t, bits_r = (mi.Int32(dr.reinterpret_array(mi.UInt32, mi.Float(f))) for f in (q, r))
+        return self._cell_of(t < 0.5, bits_t, bits_r, dr.select, dr.clip)
+
     def __call__(self, v):
-        lo = mi.Int32(self.guide[index_of((v - self.x0) * self.scale, self.cells)])
+        lo = mi.Int32(self.guide[self._cell(v)])
         return bisect_le(lambda j: self.x[j], v, lo, dr.minimum(lo + self.width, self.n - 1), self.steps)
 
 
@@ -481,7 +509,7 @@ class _Tables:
             self.next_row_start = Table(start, "uint32")
             self.next_row_steps = _steps(self.next_row_width)
             self.mass_cdf = Table(dist._mass_cdf)
-            self.mass_search = SortedSearch(dist._mass_cdf)
+            self.mass_search = SortedSearch(dist._mass_cdf, 1.0 - U_MIN)
             self.lobe = TabulatedIsotropicLobe
         else:
             self.n_phi, self.dphi = dist.n_phi, float(dist.dphi)
@@ -493,8 +521,9 @@ class _Tables:
             self.n_lambda = len(dist.theta_k)
             self.area = Table(dist.area_table)
             self.cell_cdf = Table(dist._cell_cdf)
-            self.cell_search = SortedSearch(np.float32(dist._cell_cdf))
+
             self.cell_total = float(np.float32(dist._cell_cdf[-1]))
+            self.cell_search = SortedSearch(dist._cell_cdf, float(np.float32(1.0 - U_MIN) * np.float32(self.cell_total)))
             self.lobe = TabulatedAnisotropicLobe
 
 
