@@ -24,8 +24,8 @@ import microfacet as mf
 mi = pytest.importorskip("mitsuba", reason="the Mitsuba plugins need the optional `mitsuba` package "
                                            "(pip install 'microfacet[mitsuba]')")
 dr = pytest.importorskip("drjit", reason="the Mitsuba plugins need drjit (installed with mitsuba)")
-from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, plugin_eval_pdf,  # noqa: E402,F401
-                                  render_stats, sphere_scene, use, variant, vec3)
+from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, load_error,  # noqa: E402,F401
+                                  plugin_eval_pdf, render_stats, sphere_scene, use, variant, vec3)
 
 CU = mf.fresnel.Conductor.METALS["Cu"]
 
@@ -354,30 +354,23 @@ def _render_small(scene, renders=4, spp=16):
 
 
 # ----------------------------------------------------------------- errors
-def _last_line(d):
-    use("scalar_rgb")
-    with pytest.raises(Exception) as e:
-        mi.load_dict(d)
-    return str(e.value).strip().splitlines()[-1]
-
-
 @pytest.mark.parametrize("plugin", ["mf_fitted", "mf_leadr"])
 def test_missing_file_names_parameter_and_file(plugin, tmp_path):
     missing = str(tmp_path / "nope.bin")
-    last = _last_line({"type": plugin, "filename": missing})
+    last = load_error({"type": plugin, "filename": missing})
     assert f"{plugin}: parameter 'filename'" in last and "nope.bin" in last, last
-    last = _last_line({"type": plugin})
+    last = load_error({"type": plugin})
     assert f"{plugin}: parameter 'filename' is required" in last, last
 
 
 def test_corrupt_files_name_parameter_and_file(files, tmp_path):
     bad = tmp_path / "corrupt.npz"
     bad.write_bytes(b"PK\x03\x04 this is not a zip")
-    last = _last_line({"type": "mf_fitted", "filename": str(bad)})
+    last = load_error({"type": "mf_fitted", "filename": str(bad)})
     assert "mf_fitted: parameter 'filename'" in last and "corrupt.npz" in last and "not a microfacet fit" in last, last
     exr = tmp_path / "corrupt.exr"
     exr.write_bytes(open(files["pyramid"], "rb").read()[:200])
-    last = _last_line({"type": "mf_leadr", "filename": str(exr)})
+    last = load_error({"type": "mf_leadr", "filename": str(exr)})
     assert "mf_leadr: parameter 'filename'" in last and "corrupt.exr" in last, last
 
 
@@ -386,20 +379,20 @@ def test_wrong_kind_of_file_is_named(files, tmp_path):
     .npz given to mf_fitted."""
     glint = tmp_path / "glints.npz"
     np.savez(glint, format=np.array("microfacet.glints"), normals=np.zeros((4, 4, 3)))
-    last = _last_line({"type": "mf_leadr", "filename": str(glint)})
+    last = load_error({"type": "mf_leadr", "filename": str(glint)})
     assert "mf_leadr: parameter 'filename'" in last and "glints.npz" in last and ".npz archive" in last, last
-    last = _last_line({"type": "mf_fitted", "filename": files["pyramid"]})
+    last = load_error({"type": "mf_fitted", "filename": files["pyramid"]})
     assert "mf_fitted: parameter 'filename'" in last and "OpenEXR" in last and "mf_leadr" in last, last
-    last = _last_line({"type": "mf_fitted", "filename": str(glint)})
+    last = load_error({"type": "mf_fitted", "filename": str(glint)})
     assert "mf_fitted: parameter 'filename'" in last and "glints.npz" in last and "microfacet fit file" in last, last
-    last = _last_line({"type": "mf_leadr", "filename": files["pyramid"], "fit": files["pyramid"]})
+    last = load_error({"type": "mf_leadr", "filename": files["pyramid"], "fit": files["pyramid"]})
     assert "mf_leadr: parameter 'fit'" in last and "OpenEXR" in last, last
 
 
 @pytest.mark.parametrize("extra,name", [
     ({"use": "phong"}, "use"), ({"specular_reflectance": "red"}, "specular_reflectance")])
 def test_fitted_bad_parameters(files, extra, name):
-    last = _last_line({"type": "mf_fitted", "filename": files["iso"], **extra})
+    last = load_error({"type": "mf_fitted", "filename": files["iso"], **extra})
     assert f"mf_fitted: parameter '{name}'" in last, last
 
 
@@ -408,5 +401,5 @@ def test_fitted_bad_parameters(files, extra, name):
     ({"footprint": -1.0}, "footprint"), ({"shadowing": "often"}, "shadowing"),
     ({"material": "Unobtainium"}, "material")])
 def test_leadr_bad_parameters(files, extra, name):
-    last = _last_line({"type": "mf_leadr", "filename": files["pyramid"], **extra})
+    last = load_error({"type": "mf_leadr", "filename": files["pyramid"], **extra})
     assert f"mf_leadr: parameter '{name}'" in last, last

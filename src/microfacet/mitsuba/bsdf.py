@@ -16,10 +16,11 @@ import os
 import drjit as dr
 import mitsuba as mi
 
+from ..errors import MicrofacetError
 from . import fresnel as _fresnel
 from .slopes import BECKMANN, GGX, Lobe, ratio
 
-__all__ = ["PLUGIN", "bsdf_class", "GAFS"]
+__all__ = ["PLUGIN", "bsdf_class", "GAFS", "PluginParameterError"]
 
 PLUGIN = "mf_microfacet"
 GAFS = ("smith", "vgroove", "normal_map")
@@ -29,8 +30,13 @@ _ALPHA_MIN = 1e-4           # textured alpha is clamped here (as Mitsuba's rough
 _RHO_MAX = 1.0 - 1e-4       # textured rho is clamped into [-_RHO_MAX, _RHO_MAX]
 
 
-def _error(name: str, message: str, plugin: str = PLUGIN) -> ValueError:
-    return ValueError(f"{plugin}: parameter '{name}' {message}")
+class PluginParameterError(MicrofacetError, ValueError):
+    """A plugin parameter or the file it names is unusable; the one-line message names the
+    plugin, the parameter and the file."""
+
+
+def _error(name: str, message: str, plugin: str = PLUGIN) -> PluginParameterError:
+    return PluginParameterError(f"{plugin}: parameter '{name}' {message}")
 
 
 def _is_float(props, name: str) -> bool:
