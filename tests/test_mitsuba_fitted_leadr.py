@@ -403,3 +403,49 @@ def test_fitted_bad_parameters(files, extra, name):
 def test_leadr_bad_parameters(files, extra, name):
     last = load_error({"type": "mf_leadr", "filename": files["pyramid"], **extra})
     assert f"mf_leadr: parameter '{name}'" in last, last
+
+
+# ----------------------------------------------------------------- variants
+def grey_fit(path, tmp_path):
+    """The fit with a grey Fresnel table (0.5) and a grey base (0.2)."""
+    fit = mf.fit.load(path)
+    c = fit.fresnel.cos_theta_d
+    grey = mf.fit.FittedBRDF(fit.distribution, mf.fresnel.Tabulated(c, np.full((len(c), 3), 0.5)),
+                             gaf=fit.gaf_model, shadowing=fit.shadowing, f0=fit.f0, diffuse=[0.2, 0.2, 0.2])
+    return str(grey.save(tmp_path / "grey.npz"))
+
+
+def _eval_channels(variant_, bsdf: dict, wi, wo):
+    """``eval`` in ``variant_`` at 550 nm where spectral: ``(channels, n)``."""
+    use(variant_)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+    si.wi = vec3(wo)
+    si.uv = mi.Point2f(0.3, 0.6)
+    if mi.is_spectral:
+        si.wavelengths = dr.full(mi.Spectrum, 550.0, len(wi))
+    return np.array(mi.load_dict(bsdf).eval(mi.BSDFContext(), si, vec3(wi))).reshape(-1, len(wi))
+
+
+@pytest.mark.parametrize("variant_", ["llvm_ad_spectral", "llvm_ad_mono"])
+def test_spectral_and_mono_variants_match_rgb(llvm_ok, files, tmp_path, variant_):
+    """The table-based plugins (a fit's Fresnel table and base, LEADR over a fit, glints)
+    in a spectral and a monochrome variant: on grey tables each channel equals the RGB
+    variant's value; a coloured (copper) table gives finite, positive spectra."""
+    grey = grey_fit(files["diffuse"], tmp_path)
+    slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    glints = str(mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save(tmp_path / "g.npz"))
+    bsdfs = [{"type": "mf_fitted", "filename": grey}, {"type": "mf_fitted", "filename": grey, "use": "ggx"},
+             {"type": "mf_leadr", "filename": files["pyramid"], "fit": grey, "footprint": 0.05},
+             {"type": "mf_glints", "filename": glints, "schlick_f0": 0.5}]
+    rng = np.random.default_rng(6)
+    wo, wi = hemisphere(rng, 4000, grazing=False), hemisphere(rng, 4000, grazing=False)
+    for bsdf in bsdfs:
+        rgb = _eval_channels("llvm_ad_rgb", bsdf, wi, wo)
+        assert np.abs(rgb[0]).max() > 0 and np.allclose(rgb[0], rgb[1]) and np.allclose(rgb[0], rgb[2])
+        other = _eval_channels(variant_, bsdf, wi, wo)
+        for channel in other:
+            np.testing.assert_allclose(channel, rgb[0], rtol=1e-4, atol=1e-6 * np.abs(rgb[0]).max(),
+                                       err_msg=f"{bsdf['type']} in {variant_}")
+    copper = _eval_channels(variant_, {"type": "mf_fitted", "filename": files["iso"]}, wi, wo)
+    assert np.all(np.isfinite(copper)) and copper.max() > 0 and copper.min() >= 0
+    use("llvm_ad_rgb")

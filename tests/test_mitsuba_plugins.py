@@ -476,7 +476,7 @@ def test_unsupported_variant_is_refused_in_one_line():
         for plugin in mfm.PLUGINS:
             with pytest.raises(mfm.PluginParameterError) as e:
                 mfm.load_dict({"type": plugin})
-            assert str(e.value).startswith(f"{plugin} ") and "scalar_spectral_polarized" in str(e.value)
+            assert str(e.value).startswith(f"{plugin}: polarized") and "scalar_spectral_polarized" in str(e.value)
             assert len(str(e.value).splitlines()) == 1
     finally:
         use("scalar_rgb")

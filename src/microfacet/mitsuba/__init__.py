@@ -42,10 +42,9 @@ def _mitsuba():
 
 def register() -> tuple[str, ...]:
     """Register the plugins of :data:`PLUGINS` for the current Mitsuba variant; returns the
-    names of those that support it (``mf_fitted``, ``mf_leadr``, ``mf_glints``: RGB
-    variants). The others are registered too, as a factory that raises a one-line
-    :class:`PluginParameterError` naming the variant. Raises ``RuntimeError`` if Mitsuba
-    is missing or no variant is set."""
+    names of those that support it (all but the polarized variants). The others are
+    registered too, as a factory that raises a one-line :class:`PluginParameterError`
+    naming the variant. Raises ``RuntimeError`` if Mitsuba is missing or no variant is set."""
     mi = _mitsuba()
     if not mi.variant():
         raise RuntimeError("microfacet.mitsuba.register(): set a Mitsuba variant first "
@@ -56,8 +55,8 @@ def register() -> tuple[str, ...]:
         try:
             factory = _factory(module.bsdf_class())
             names.append(module.PLUGIN)
-        except RuntimeError as e:        # a variant the plugin does not support (e.g. spectral)
-            factory = _refusal(str(e))
+        except RuntimeError as e:        # a variant the plugin does not support (polarized)
+            factory = _refusal(f"{module.PLUGIN}: {e}")
         mi.register_bsdf(module.PLUGIN, factory)
     return tuple(names)
 

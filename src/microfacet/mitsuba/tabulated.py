@@ -26,7 +26,7 @@ from ..distributions.tabulated import _GL4_T, _GL4_W, _THETA_CAP, HALF_PI, Tabul
 from .slopes import Lobe, _slope_normal, ratio
 
 __all__ = ["Table", "SortedSearch", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
-           "InterpolatedRGB", "NEWTON_STEPS"]
+           "InterpolatedColor", "luminance", "NEWTON_STEPS"]
 
 #: Fixed Newton steps of the elevation sampling (safeguarded; float32 converges in < 8).
 NEWTON_STEPS = 12
@@ -563,23 +563,46 @@ def tabulated_lobe(dist):
     return lambda: tables.lobe(tables)
 
 
-class InterpolatedRGB:
-    """Piecewise-linear ``x -> RGB`` table clamped at its ends, as ``np.interp`` per
-    channel (:class:`microfacet.fresnel.Tabulated`); the node is found by bisection."""
+class InterpolatedColor:
+    """Piecewise-linear ``x -> colour`` table clamped at its ends, as ``np.interp`` per RGB
+    channel (:class:`microfacet.fresnel.Tabulated`), evaluated as the variant's spectrum:
+    RGB as is; spectral variants interpolate the spectra of the nodes' colours, each
+    upsampled by Mitsuba's sRGB model (``srgb_model_fetch`` at load, ``srgb_model_eval`` at
+    the wavelengths; colours above 1 scaled as Mitsuba's unbounded ``srgb`` texture does);
+    monochrome variants interpolate the nodes' luminance."""
 
     def __init__(self, x, rgb):
         x = np.asarray(x, dtype=np.float64).ravel()
         rgb = np.asarray(rgb, dtype=np.float64).reshape(len(x), 3)
         self.search = SortedSearch(x)
-        self.channels = [Table(rgb[:, c]) for c in range(3)]
+        if mi.is_spectral:
+            scale = np.where(rgb.max(axis=1) > 1.0, 2.0 * rgb.max(axis=1), 1.0)
+            coeff = np.array([np.array(mi.srgb_model_fetch(mi.ScalarColor3f(*(c / k)))).ravel()
+                              for c, k in zip(rgb, scale)])
+            self.channels = [Table(coeff[:, c]) for c in range(3)] + [Table(scale)]
+        elif mi.is_monochromatic:
+            self.channels = [Table([luminance(c) for c in rgb])]
+        else:
+            self.channels = [Table(rgb[:, c]) for c in range(3)]
 
-    def __call__(self, value):
+    def __call__(self, value, wavelengths=None):
+        """The colour at ``value`` (``wavelengths``: the spectral variants' ``si.wavelengths``)."""
         x = self.search.x
         i = self.search(value)
         x0, x1 = x[i], x[i + 1]
         t = dr.clip(ratio(value - x0, x1 - x0, x1 > x0), 0.0, 1.0)
+        if mi.is_spectral:
+            def node(j):
+                c = mi.Vector3f(*(ch[j] for ch in self.channels[:3]))
+                return mi.srgb_model_eval(c, wavelengths) * self.channels[3][j]
+            return (1.0 - t) * node(i) + t * node(i + 1)
         out = []
         for ch in self.channels:
             a = ch[i]
             out.append(a + t * (ch[i + 1] - a))
-        return mi.Color3f(*out)
+        return mi.UnpolarizedSpectrum(*out)
+
+
+def luminance(rgb) -> float:
+    """Mitsuba's luminance of a linear sRGB colour, as a Python float in any variant."""
+    return float(np.asarray(mi.luminance(mi.ScalarColor3f(*(float(c) for c in rgb)))).ravel()[0])
