@@ -25,11 +25,16 @@ from __future__ import annotations
 
 import re
 
-from .bsdf import PluginParameterError
+from ..errors import MicrofacetError
 
 __all__ = ["register", "load_dict", "load_file", "PLUGINS", "PluginParameterError"]
 
 PLUGINS = ("mf_microfacet", "mf_fitted", "mf_leadr", "mf_glints")
+
+
+class PluginParameterError(MicrofacetError, ValueError):
+    """A plugin parameter or the file it names is unusable; the one-line message names the
+    plugin, the parameter and the file."""
 
 
 def _mitsuba():
@@ -90,28 +95,25 @@ def _one_line(error: RuntimeError) -> PluginParameterError | None:
     return PluginParameterError(ours[-1] + (f" (at {where.group(1)})" if where else ""))
 
 
-def load_dict(scene: dict, **kwargs):
-    """``mi.load_dict(scene, **kwargs)``; a bad plugin parameter or file raises
-    :class:`PluginParameterError` with one line (ours, then Mitsuba's location, e.g.
-    ``(at dictionary node "sphere.bsdf")``), not Mitsuba's ``RuntimeError`` with a traceback."""
-    mi = _mitsuba()
+def _load(loader, *args, **kwargs):
+    """``loader(*args, **kwargs)``, our error inside Mitsuba's raised as one line."""
     try:
-        return mi.load_dict(scene, **kwargs)
+        return loader(*args, **kwargs)
     except RuntimeError as e:
         ours = _one_line(e)
         if ours is None:
             raise
     raise ours
+
+
+def load_dict(scene: dict, **kwargs):
+    """``mi.load_dict(scene, **kwargs)``; a bad plugin parameter or file raises
+    :class:`PluginParameterError` with one line (ours, then Mitsuba's location, e.g.
+    ``(at dictionary node "sphere.bsdf")``), not Mitsuba's ``RuntimeError`` with a traceback."""
+    return _load(_mitsuba().load_dict, scene, **kwargs)
 
 
 def load_file(path, **kwargs):
     """``mi.load_file(path, **kwargs)`` with the errors of :func:`load_dict` (location
     ``(at scene.xml (line 2, col 6))``)."""
-    mi = _mitsuba()
-    try:
-        return mi.load_file(str(path), **kwargs)
-    except RuntimeError as e:
-        ours = _one_line(e)
-        if ours is None:
-            raise
-    raise ours
+    return _load(_mitsuba().load_file, str(path), **kwargs)

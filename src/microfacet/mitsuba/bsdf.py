@@ -16,12 +16,12 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from ..errors import MicrofacetError
+from . import PluginParameterError
 from . import fresnel as _fresnel
 from .slopes import BECKMANN, GGX, Lobe, ratio
 from .tabulated import luminance
 
-__all__ = ["PLUGIN", "bsdf_class", "GAFS", "PluginParameterError"]
+__all__ = ["PLUGIN", "bsdf_class", "GAFS"]
 
 PLUGIN = "mf_microfacet"
 GAFS = ("smith", "vgroove", "normal_map")
@@ -29,11 +29,6 @@ _FRESNEL_KEYS = {"material": "conductor", "eta": "conductor", "k": "conductor",
                  "int_ior": "dielectric", "ext_ior": "dielectric", "schlick_f0": "schlick"}
 _ALPHA_MIN = 1e-4           # textured alpha is clamped here (as Mitsuba's roughconductor)
 _RHO_MAX = 1.0 - 1e-4       # textured rho is clamped into [-_RHO_MAX, _RHO_MAX]
-
-
-class PluginParameterError(MicrofacetError, ValueError):
-    """A plugin parameter or the file it names is unusable; the one-line message names the
-    plugin, the parameter and the file."""
 
 
 def _error(name: str, message: str, plugin: str = PLUGIN) -> PluginParameterError:

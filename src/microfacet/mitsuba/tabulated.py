@@ -91,11 +91,11 @@ class SortedSearch:
     Devroye 1986, Sec. III.2.4): a guide maps the cell of ``v`` to the first node that
     can answer, and a bisection with the fixed step count of the widest bracket
     (:attr:`width` nodes) finishes. The cells are the octaves of ``t`` below 1/2 (down to
-    ``2^-48``) and of ``1 - t`` above (down to ``2^-24``),
-    ``t = (v - x_0) / (x_(n-1) - x_0)`` (float32 exponent bits), each split into ``per_octave`` cells (high mantissa bits): fine at both
-    ends, where CDF tables crowd (runs of nodes of tiny mass) and ``cos theta`` tables
-    too. Exact: the nodes' cells are computed with the kernel's float32 operations, and
-    each bracket is widened by one cell on either side."""
+    ``2^-48``) and of ``1 - t`` above (down to ``2^-24``), ``t = (v - x_0) / (x_(n-1) - x_0)``
+    (float32 exponent bits), each split into ``per_octave`` cells (high mantissa bits):
+    fine at both ends, where CDF tables crowd (runs of nodes of tiny mass) and
+    ``cos theta`` tables too. Exact: the nodes' cells are computed with the kernel's
+    float32 operations, and each bracket is widened by one cell on either side."""
 
     def __init__(self, x, v_max: float = math.inf):
         x = np.asarray(x, dtype=np.float32).ravel()
@@ -497,7 +497,7 @@ class _Tables:
             self.log_ndf = Table(dist.log_ndf)
             self.m = len(dist.s_fine)
             h = dist.s_fine[1] - dist.s_fine[0]
-            self.xi, self.L0, self.L1 = Table(dist.xi), Table(dist.L0), Table(dist.L1)
+            self.L0, self.L1 = Table(dist.L0), Table(dist.L1)
             self.L1_0 = float(np.float32(dist.L1[0]))
             self.xiL0_L1 = Table(dist.xi * dist.L0 + dist.L1)
             self.dL1 = Table(-dist.L0 * dist.dxi_ds * h)
@@ -521,7 +521,6 @@ class _Tables:
             self.n_lambda = len(dist.theta_k)
             self.area = Table(dist.area_table)
             self.cell_cdf = Table(dist._cell_cdf)
-
             self.cell_total = float(np.float32(dist._cell_cdf[-1]))
             self.cell_search = SortedSearch(dist._cell_cdf, float(np.float32(1.0 - U_MIN) * np.float32(self.cell_total)))
             self.lobe = TabulatedAnisotropicLobe
