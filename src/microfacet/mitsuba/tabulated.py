@@ -447,10 +447,11 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         a0, a1 = ld[i * q + j], ld[(i + 1) * q + j]            # ln D at the cell's corners
         b0, b1 = ld[i * q + j1] - a0, ld[(i + 1) * q + j1] - a1
         ta, tb = t.theta_fine[i], t.theta_fine[i + 1]
+        inv_dt, da, db = 1.0 / (tb - ta), a1 - a0, b1 - b0
 
         def marginal(x):
-            w = (x - ta) / (tb - ta)
-            return dr.exp(a0 + w * (a1 - a0)) * exp_mean(b0 + w * (b1 - b0)) * 0.5 * dr.sin(2.0 * x)
+            w = (x - ta) * inv_dt
+            return dr.exp(a0 + w * da) * exp_mean(b0 + w * db) * 0.5 * dr.sin(2.0 * x)
 
         def partial(x):
             out = 0.0
@@ -480,9 +481,13 @@ def log1p(x):
 
 
 def exp_mean(b):
-    """``int_0^1 e^(w b) dw = expm1(b) / b`` (``1 + b / 2`` near 0), as the oracle's."""
-    small = dr.abs(b) < 1e-4
-    return dr.select(small, 1.0 + 0.5 * b, ratio(expm1(b), b, dr.abs(b) >= 1e-4))
+    """``int_0^1 e^(w b) dw = expm1(b) / b`` (``1 + b / 2`` near 0), as the oracle's; with
+    Kahan's ``expm1(b) = (u - 1) b / log u`` (:func:`expm1`) the ``b`` cancels:
+    ``(u - 1) / log u``, ``u = e^b`` (``-1 / b`` where ``u`` underflows)."""
+    u = dr.exp(b)
+    big = dr.abs(b) >= 1e-4
+    return dr.select(big, dr.select(u == 0.0, ratio(-1.0, b, big), ratio(u - 1.0, dr.log(u), big & (u > 0.0))),
+                     1.0 + 0.5 * b)
 
 
 class _Tables:
