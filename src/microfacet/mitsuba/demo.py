@@ -119,7 +119,8 @@ def _material_sources() -> tuple[list[tuple[str, str, dict, object]], str]:
     from .. import measured
     files = shared_rgl_files()
     if files:
-        return ([(f.stem, f.stem, {"type": "measured", "filename": str(f)}, measured.load(f)) for f in files],
+        return ([(f.stem, f.stem, {"type": "measured", "filename": str(f)}, measured.load(f))
+                 for f in files[:MATERIALS]],
                 "rgl")
     from ..demo import fit_examples
     return [(ex.key, ex.label, _truth_dict(ex.brdf), ex.brdf) for ex in fit_examples()], "builtin"
