@@ -24,8 +24,8 @@ import microfacet as mf
 mi = pytest.importorskip("mitsuba", reason="the Mitsuba plugins need the optional `mitsuba` package "
                                            "(pip install 'microfacet[mitsuba]')")
 dr = pytest.importorskip("drjit", reason="the Mitsuba plugins need drjit (installed with mitsuba)")
-from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, plugin_eval_pdf,  # noqa: E402,F401
-                                  render_stats, sphere_scene, use, variant, vec3)
+from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, load_error,  # noqa: E402,F401
+                                  plugin_eval_pdf, render_stats, sphere_scene, use, variant, vec3)
 
 CU = mf.fresnel.Conductor.METALS["Cu"]
 
@@ -101,6 +101,56 @@ def test_fitted_scalar_variant_matches_numpy(files, name):
     f, pdf = plugin_eval_pdf(mi.load_dict({"type": "mf_fitted", "filename": files[name]}), "scalar_rgb", wi, wo)
     assert_close("eval", f, brdf.eval_cos(wi, wo))
     assert_close("pdf", pdf, brdf.pdf(wi, wo))
+
+
+def _search_tables(rng):
+    """Sorted float32 tables as the plugins search them: a CDF with runs of tiny-mass and
+    empty intervals at both ends (as tabulated fits have), ``cos theta`` at uniform
+    ``theta`` (the Fresnel nodes, dense near 1), and random sorted values with ties."""
+    mass = np.concatenate([np.full(40, 1e-9), rng.random(60), np.zeros(5), np.full(50, 1e-8), [0.0] * 3])
+    cdf = np.concatenate([[0.0], np.cumsum(mass) / mass.sum()])
+    return {"cdf": (cdf, 1.0 - 2.0**-24), "cos": (np.cos(np.linspace(np.pi / 2, 0, 90)), np.inf),
+            "ties": (np.sort(np.round(rng.normal(size=300), 1)) + 0.25, np.inf)}   # no 0: its neighbours are denormal
+
+
+@pytest.mark.parametrize("kind", ["cdf", "cos", "ties"])
+def test_sorted_search_is_searchsorted(llvm, kind):
+    """The guided search returns ``searchsorted(x, v, "right") - 1`` clipped into the
+    intervals, for every node value, its float32 neighbours, the ends and random values."""
+    from microfacet.mitsuba.tabulated import SortedSearch
+    rng = np.random.default_rng(3)
+    x, v_max = _search_tables(rng)[kind]
+    x = x.astype(np.float32)
+    v = np.concatenate([x, np.nextafter(x, -np.inf), np.nextafter(x, np.inf),
+                        rng.uniform(x[0] - 0.1, x[-1] + 0.1, 20000).astype(np.float32), [x[0], x[-1]]])
+    v = np.minimum(v, np.float32(v_max)).astype(np.float32)
+    search = SortedSearch(x, v_max)
+    assert search.width < len(x) // 4                    # the guide narrows the bisection
+    ours = np.array(search(mi.Float(v)))
+    expected = np.clip(np.searchsorted(x, v, side="right") - 1, 0, len(x) - 2)
+    np.testing.assert_array_equal(ours, expected)
+    use("scalar_rgb")
+    scalar = SortedSearch(x, v_max)
+    assert [scalar(float(t)) for t in v[::97]] == list(expected[::97])
+
+
+def test_next_row_window_brackets_the_next_row(files):
+    """For every row ``k`` and ``v``, row ``k + 1``'s answer lies in the window that row
+    ``k``'s answer names (the fit's conditional CDFs of ``|y~|``)."""
+    from microfacet.mitsuba.tabulated import next_row_window
+    d = mf.fit.load(files["iso"]).distribution
+    cdf = np.asarray(d.y_cdf, dtype=np.float32).reshape(d.eta_nodes.shape)
+    v_max = np.float32(1.0 - 2.0**-24)
+    start, width = next_row_window(cdf, v_max)
+    assert width < cdf.shape[1] // 8
+    rng = np.random.default_rng(4)
+    v = np.concatenate([rng.random(4000, dtype=np.float32), cdf.ravel()[::7], [0.0, v_max]]).astype(np.float32)
+    v = v[v <= v_max]
+    n = cdf.shape[1]
+    for k in range(cdf.shape[0] - 1):
+        j0, j1 = (np.clip(np.searchsorted(cdf[r], v, side="right") - 1, 0, n - 2) for r in (k, k + 1))
+        lo = start[k, j0]
+        assert np.all((lo <= j1) & (j1 < lo + width)), k
 
 
 def _sample(bsdf, wo, u1, u):
@@ -304,30 +354,23 @@ def _render_small(scene, renders=4, spp=16):
 
 
 # ----------------------------------------------------------------- errors
-def _last_line(d):
-    use("scalar_rgb")
-    with pytest.raises(Exception) as e:
-        mi.load_dict(d)
-    return str(e.value).strip().splitlines()[-1]
-
-
 @pytest.mark.parametrize("plugin", ["mf_fitted", "mf_leadr"])
 def test_missing_file_names_parameter_and_file(plugin, tmp_path):
     missing = str(tmp_path / "nope.bin")
-    last = _last_line({"type": plugin, "filename": missing})
+    last = load_error({"type": plugin, "filename": missing})
     assert f"{plugin}: parameter 'filename'" in last and "nope.bin" in last, last
-    last = _last_line({"type": plugin})
+    last = load_error({"type": plugin})
     assert f"{plugin}: parameter 'filename' is required" in last, last
 
 
 def test_corrupt_files_name_parameter_and_file(files, tmp_path):
     bad = tmp_path / "corrupt.npz"
     bad.write_bytes(b"PK\x03\x04 this is not a zip")
-    last = _last_line({"type": "mf_fitted", "filename": str(bad)})
+    last = load_error({"type": "mf_fitted", "filename": str(bad)})
     assert "mf_fitted: parameter 'filename'" in last and "corrupt.npz" in last and "not a microfacet fit" in last, last
     exr = tmp_path / "corrupt.exr"
     exr.write_bytes(open(files["pyramid"], "rb").read()[:200])
-    last = _last_line({"type": "mf_leadr", "filename": str(exr)})
+    last = load_error({"type": "mf_leadr", "filename": str(exr)})
     assert "mf_leadr: parameter 'filename'" in last and "corrupt.exr" in last, last
 
 
@@ -336,20 +379,20 @@ def test_wrong_kind_of_file_is_named(files, tmp_path):
     .npz given to mf_fitted."""
     glint = tmp_path / "glints.npz"
     np.savez(glint, format=np.array("microfacet.glints"), normals=np.zeros((4, 4, 3)))
-    last = _last_line({"type": "mf_leadr", "filename": str(glint)})
+    last = load_error({"type": "mf_leadr", "filename": str(glint)})
     assert "mf_leadr: parameter 'filename'" in last and "glints.npz" in last and ".npz archive" in last, last
-    last = _last_line({"type": "mf_fitted", "filename": files["pyramid"]})
+    last = load_error({"type": "mf_fitted", "filename": files["pyramid"]})
     assert "mf_fitted: parameter 'filename'" in last and "OpenEXR" in last and "mf_leadr" in last, last
-    last = _last_line({"type": "mf_fitted", "filename": str(glint)})
+    last = load_error({"type": "mf_fitted", "filename": str(glint)})
     assert "mf_fitted: parameter 'filename'" in last and "glints.npz" in last and "microfacet fit file" in last, last
-    last = _last_line({"type": "mf_leadr", "filename": files["pyramid"], "fit": files["pyramid"]})
+    last = load_error({"type": "mf_leadr", "filename": files["pyramid"], "fit": files["pyramid"]})
     assert "mf_leadr: parameter 'fit'" in last and "OpenEXR" in last, last
 
 
 @pytest.mark.parametrize("extra,name", [
     ({"use": "phong"}, "use"), ({"specular_reflectance": "red"}, "specular_reflectance")])
 def test_fitted_bad_parameters(files, extra, name):
-    last = _last_line({"type": "mf_fitted", "filename": files["iso"], **extra})
+    last = load_error({"type": "mf_fitted", "filename": files["iso"], **extra})
     assert f"mf_fitted: parameter '{name}'" in last, last
 
 
@@ -358,5 +401,51 @@ def test_fitted_bad_parameters(files, extra, name):
     ({"footprint": -1.0}, "footprint"), ({"shadowing": "often"}, "shadowing"),
     ({"material": "Unobtainium"}, "material")])
 def test_leadr_bad_parameters(files, extra, name):
-    last = _last_line({"type": "mf_leadr", "filename": files["pyramid"], **extra})
+    last = load_error({"type": "mf_leadr", "filename": files["pyramid"], **extra})
     assert f"mf_leadr: parameter '{name}'" in last, last
+
+
+# ----------------------------------------------------------------- variants
+def grey_fit(path, tmp_path):
+    """The fit with a grey Fresnel table (0.5) and a grey base (0.2)."""
+    fit = mf.fit.load(path)
+    c = fit.fresnel.cos_theta_d
+    grey = mf.fit.FittedBRDF(fit.distribution, mf.fresnel.Tabulated(c, np.full((len(c), 3), 0.5)),
+                             gaf=fit.gaf_model, shadowing=fit.shadowing, f0=fit.f0, diffuse=[0.2, 0.2, 0.2])
+    return str(grey.save(tmp_path / "grey.npz"))
+
+
+def _eval_channels(variant_, bsdf: dict, wi, wo):
+    """``eval`` in ``variant_`` at 550 nm where spectral: ``(channels, n)``."""
+    use(variant_)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+    si.wi = vec3(wo)
+    si.uv = mi.Point2f(0.3, 0.6)
+    if mi.is_spectral:
+        si.wavelengths = dr.full(mi.Spectrum, 550.0, len(wi))
+    return np.array(mi.load_dict(bsdf).eval(mi.BSDFContext(), si, vec3(wi))).reshape(-1, len(wi))
+
+
+@pytest.mark.parametrize("variant_", ["llvm_ad_spectral", "llvm_ad_mono"])
+def test_spectral_and_mono_variants_match_rgb(llvm_ok, files, tmp_path, variant_):
+    """The table-based plugins (a fit's Fresnel table and base, LEADR over a fit, glints)
+    in a spectral and a monochrome variant: on grey tables each channel equals the RGB
+    variant's value; a coloured (copper) table gives finite, positive spectra."""
+    grey = grey_fit(files["diffuse"], tmp_path)
+    slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    glints = str(mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save(tmp_path / "g.npz"))
+    bsdfs = [{"type": "mf_fitted", "filename": grey}, {"type": "mf_fitted", "filename": grey, "use": "ggx"},
+             {"type": "mf_leadr", "filename": files["pyramid"], "fit": grey, "footprint": 0.05},
+             {"type": "mf_glints", "filename": glints, "schlick_f0": 0.5}]
+    rng = np.random.default_rng(6)
+    wo, wi = hemisphere(rng, 4000, grazing=False), hemisphere(rng, 4000, grazing=False)
+    for bsdf in bsdfs:
+        rgb = _eval_channels("llvm_ad_rgb", bsdf, wi, wo)
+        assert np.abs(rgb[0]).max() > 0 and np.allclose(rgb[0], rgb[1]) and np.allclose(rgb[0], rgb[2])
+        other = _eval_channels(variant_, bsdf, wi, wo)
+        for channel in other:
+            np.testing.assert_allclose(channel, rgb[0], rtol=1e-4, atol=1e-6 * np.abs(rgb[0]).max(),
+                                       err_msg=f"{bsdf['type']} in {variant_}")
+    copper = _eval_channels(variant_, {"type": "mf_fitted", "filename": files["iso"]}, wi, wo)
+    assert np.all(np.isfinite(copper)) and copper.max() > 0 and copper.min() >= 0
+    use("llvm_ad_rgb")

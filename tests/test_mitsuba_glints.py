@@ -20,8 +20,8 @@ import microfacet as mf
 mi = pytest.importorskip("mitsuba", reason="the Mitsuba plugins need the optional `mitsuba` package "
                                            "(pip install 'microfacet[mitsuba]')")
 dr = pytest.importorskip("drjit", reason="the Mitsuba plugins need drjit (installed with mitsuba)")
-from test_mitsuba_fitted_leadr import _chi2, _last_line  # noqa: E402
-from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, plugin_eval_pdf,  # noqa: E402,F401
+from test_mitsuba_fitted_leadr import _chi2  # noqa: E402
+from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, load_error, plugin_eval_pdf,  # noqa: E402,F401
                                   render_stats, sphere_scene, use, vec3)
 
 from microfacet.glints.figures import PIXEL_SIGMA  # noqa: E402
@@ -188,17 +188,17 @@ def test_glints_white_furnace(llvm, glint_file, exact):
 # ----------------------------------------------------------------- errors
 def test_glints_file_errors_name_parameter_and_file(tmp_path):
     missing = str(tmp_path / "nope.npz")
-    last = _last_line({"type": "mf_glints", "filename": missing})
+    last = load_error({"type": "mf_glints", "filename": missing})
     assert "mf_glints: parameter 'filename'" in last and "nope.npz" in last, last
-    last = _last_line({"type": "mf_glints"})
+    last = load_error({"type": "mf_glints"})
     assert "mf_glints: parameter 'filename' is required" in last, last
     h = mf.leadr.gaussian_heightfield((16, 16), 0.3, 0.3, seed=1)
     exr = str(mf.leadr.write_pyramid(tmp_path / "pyramid.exr", mf.leadr.bake(h)))
-    last = _last_line({"type": "mf_glints", "filename": exr})
+    last = load_error({"type": "mf_glints", "filename": exr})
     assert "mf_glints: parameter 'filename'" in last and "pyramid.exr" in last and "OpenEXR" in last, last
     fit = tmp_path / "fit.npz"
     np.savez(fit, magic=np.array("something else"))
-    last = _last_line({"type": "mf_glints", "filename": str(fit)})
+    last = load_error({"type": "mf_glints", "filename": str(fit)})
     assert "mf_glints: parameter 'filename'" in last and "fit.npz" in last and "glints" in last, last
 
 
@@ -206,7 +206,7 @@ def test_glints_file_errors_name_parameter_and_file(tmp_path):
     ({"footprint": -1.0}, "footprint"), ({"uv_scale": 0.0}, "uv_scale"), ({"max_lobes": 4}, "max_lobes"),
     ({"exact": "maybe"}, "exact"), ({"g2": "smith"}, "g2"), ({"material": "Unobtainium"}, "material")])
 def test_glints_bad_parameters(glint_file, extra, name):
-    last = _last_line({"type": "mf_glints", "filename": glint_file[0], **extra})
+    last = load_error({"type": "mf_glints", "filename": glint_file[0], **extra})
     assert f"mf_glints: parameter '{name}'" in last, last
 
 

@@ -324,11 +324,38 @@ def test_traverse_exposes_and_updates_parameters(variant):
     ({"gaf": "vgroove", "mean_slope_u": 0.3}, "gaf"),
 ])
 def test_bad_parameters_name_the_parameter(extra, name):
+    line = load_error({"type": "mf_microfacet", **extra})
+    assert line.startswith(f"mf_microfacet: parameter '{name}'"), line
+
+
+def load_error(scene: dict) -> str:
+    """The error of loading ``scene`` in ``scalar_rgb``: ``mfm.load_dict`` raises one line
+    (ours, then Mitsuba's location); ``mi.load_dict``'s ``RuntimeError`` ends with our line."""
     use("scalar_rgb")
-    with pytest.raises(Exception) as e:
-        mi.load_dict({"type": "mf_microfacet", **extra})
-    last = str(e.value).strip().splitlines()[-1]
-    assert f"mf_microfacet: parameter '{name}'" in last, last
+    with pytest.raises(mfm.PluginParameterError) as e:
+        mfm.load_dict(scene)
+    line = str(e.value)
+    assert len(line.splitlines()) == 1 and line.endswith('(at dictionary node "root")'), line
+    with pytest.raises(RuntimeError) as e:
+        mi.load_dict(scene)
+    ours = line.removesuffix(' (at dictionary node "root")')
+    assert str(e.value).splitlines()[-1] == f"PluginParameterError: {ours}", str(e.value)
+    return ours
+
+
+def test_load_file_error_is_one_line_with_the_location(tmp_path):
+    """An XML scene with a bad parameter: one line naming the parameter and the file's line."""
+    use("scalar_rgb")
+    xml = tmp_path / "scene.xml"
+    xml.write_text('<scene version="3.0.0">\n  <shape type="sphere">\n    <bsdf type="mf_microfacet">\n'
+                   '      <float name="rho" value="1.5"/>\n    </bsdf>\n  </shape>\n</scene>\n')
+    with pytest.raises(mfm.PluginParameterError) as e:
+        mfm.load_file(xml)
+    assert str(e.value).startswith("mf_microfacet: parameter 'rho' must lie in (-1, 1), got 1.5 (at ")
+    assert "scene.xml (line 3" in str(e.value) and len(str(e.value).splitlines()) == 1, str(e.value)
+    with pytest.raises(RuntimeError) as e:          # Mitsuba's own errors pass through unchanged
+        mfm.load_dict({"type": "mf_microfacet", "alpha": 0.1, "no_such_parameter": 1.0})
+    assert not isinstance(e.value, mfm.PluginParameterError) and "no_such_parameter" in str(e.value)
 
 
 def test_named_material_uses_mitsuba_ior(variant):
@@ -438,3 +465,18 @@ def test_white_furnace(llvm, params):
                                         np.array([0.0, 0.0, 1.0]))[1][:, 0]
     c = slice(RES // 2 - 1, RES // 2 + 1)
     assert abs(mean[c, c].mean() - weight.mean()) < 0.02, (mean[c, c].mean(), weight.mean())
+
+
+def test_unsupported_variant_is_refused_in_one_line():
+    """In a variant a plugin does not support (polarized), ``register`` still registers
+    its name, as a one-line refusal that names the variant."""
+    mi.set_variant("scalar_spectral_polarized")
+    try:
+        assert mfm.register() == ()
+        for plugin in mfm.PLUGINS:
+            with pytest.raises(mfm.PluginParameterError) as e:
+                mfm.load_dict({"type": plugin})
+            assert str(e.value).startswith(f"{plugin}: polarized") and "scalar_spectral_polarized" in str(e.value)
+            assert len(str(e.value).splitlines()) == 1
+    finally:
+        use("scalar_rgb")

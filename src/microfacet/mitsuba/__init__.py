@@ -4,9 +4,9 @@
     mi.set_variant("llvm_ad_rgb")          # or scalar_rgb, *_spectral, *_mono, cuda_*
     import microfacet.mitsuba as mfm
     mfm.register()                         # registers the plugins for the current variant
-    bsdf = mi.load_dict({"type": "mf_microfacet", "distribution": "ggx",
-                         "alpha_u": 0.2, "alpha_v": 0.4, "rho": 0.3,
-                         "mean_slope_u": 0.1, "material": "Au"})
+    bsdf = mfm.load_dict({"type": "mf_microfacet", "distribution": "ggx",
+                          "alpha_u": 0.2, "alpha_v": 0.4, "rho": 0.3,
+                          "mean_slope_u": 0.1, "material": "Au"})
 
 Plugins: ``mf_microfacet`` (:mod:`microfacet.mitsuba.bsdf`), the noncentral microfacet BRDF
 of :class:`microfacet.MicrofacetBRDF`; ``mf_fitted`` (:mod:`microfacet.mitsuba.fitted`), a
@@ -14,21 +14,43 @@ fit of :mod:`microfacet.fit`; ``mf_leadr`` (:mod:`microfacet.mitsuba.leadr`), a 
 pyramid of :mod:`microfacet.leadr` over a base material; ``mf_glints``
 (:mod:`microfacet.mitsuba.glints`), the patch BRDF of a glint microsurface. ``mi.set_variant`` is global and plugins are
 registered per variant: call :func:`register` again after switching variants.
+
+A bad parameter or file raises :class:`PluginParameterError` in the plugin. Mitsuba's
+``mi.load_dict`` / ``mi.load_file`` wrap it in a ``RuntimeError`` whose text is Mitsuba's
+location, the Python traceback (nanobind formats it into the message) and, last, our
+line; :func:`load_dict` and :func:`load_file` are the same loaders that raise our one
+line instead, with Mitsuba's location appended.
 """
 from __future__ import annotations
 
-__all__ = ["register", "PLUGINS"]
+import re
+
+from ..errors import MicrofacetError
+
+__all__ = ["register", "load_dict", "load_file", "PLUGINS", "PluginParameterError"]
 
 PLUGINS = ("mf_microfacet", "mf_fitted", "mf_leadr", "mf_glints")
 
 
-def register() -> tuple[str, ...]:
-    """Register the plugins of :data:`PLUGINS` that support the current Mitsuba variant
-    (``mf_fitted``, ``mf_leadr``, ``mf_glints``: RGB variants); returns their names. Raises ``RuntimeError`` if Mitsuba is missing or no variant is set."""
+class PluginParameterError(MicrofacetError, ValueError):
+    """A plugin parameter or the file it names is unusable; the one-line message names the
+    plugin, the parameter and the file."""
+
+
+def _mitsuba():
     try:
         import mitsuba as mi
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise RuntimeError("microfacet.mitsuba needs Mitsuba 3: pip install 'microfacet[mitsuba]'") from e
+    return mi
+
+
+def register() -> tuple[str, ...]:
+    """Register the plugins of :data:`PLUGINS` for the current Mitsuba variant; returns the
+    names of those that support it (all but the polarized variants). The others are
+    registered too, as a factory that raises a one-line :class:`PluginParameterError`
+    naming the variant. Raises ``RuntimeError`` if Mitsuba is missing or no variant is set."""
+    mi = _mitsuba()
     if not mi.variant():
         raise RuntimeError("microfacet.mitsuba.register(): set a Mitsuba variant first "
                            "(mi.set_variant('llvm_ad_rgb'))")
@@ -36,9 +58,62 @@ def register() -> tuple[str, ...]:
     names = []
     for module in (bsdf, fitted, leadr, glints):
         try:
-            cls = module.bsdf_class()
-        except RuntimeError:        # a variant the plugin does not support (e.g. spectral)
-            continue
-        mi.register_bsdf(module.PLUGIN, lambda props, cls=cls: cls(props))
-        names.append(module.PLUGIN)
+            factory = _factory(module.bsdf_class())
+            names.append(module.PLUGIN)
+        except RuntimeError as e:        # a variant the plugin does not support (polarized)
+            factory = _refusal(f"{module.PLUGIN}: {e}")
+        mi.register_bsdf(module.PLUGIN, factory)
     return tuple(names)
+
+
+def _factory(cls):
+    def construct(props):
+        try:
+            return cls(props)
+        except PluginParameterError as e:   # drop our frames from the traceback Mitsuba prints
+            raise PluginParameterError(str(e)) from None
+    return construct
+
+
+def _refusal(reason: str):
+    def construct(props):
+        raise PluginParameterError(reason)
+    return construct
+
+
+_LOCATION = re.compile(r"^\[[^\]]*\] At (.*?): failed to instantiate", re.S)
+_OURS = re.compile(rf"^{PluginParameterError.__name__}: (.*)$", re.M)
+
+
+def _one_line(error: RuntimeError) -> PluginParameterError | None:
+    """Our error inside Mitsuba's ``RuntimeError``: our line plus Mitsuba's location."""
+    text = str(error)
+    ours = _OURS.findall(text)
+    if not ours:
+        return None
+    where = _LOCATION.match(text)
+    return PluginParameterError(ours[-1] + (f" (at {where.group(1)})" if where else ""))
+
+
+def _load(loader, *args, **kwargs):
+    """``loader(*args, **kwargs)``, our error inside Mitsuba's raised as one line."""
+    try:
+        return loader(*args, **kwargs)
+    except RuntimeError as e:
+        ours = _one_line(e)
+        if ours is None:
+            raise
+    raise ours
+
+
+def load_dict(scene: dict, **kwargs):
+    """``mi.load_dict(scene, **kwargs)``; a bad plugin parameter or file raises
+    :class:`PluginParameterError` with one line (ours, then Mitsuba's location, e.g.
+    ``(at dictionary node "sphere.bsdf")``), not Mitsuba's ``RuntimeError`` with a traceback."""
+    return _load(_mitsuba().load_dict, scene, **kwargs)
+
+
+def load_file(path, **kwargs):
+    """``mi.load_file(path, **kwargs)`` with the errors of :func:`load_dict` (location
+    ``(at scene.xml (line 2, col 6))``)."""
+    return _load(_mitsuba().load_file, str(path), **kwargs)

@@ -16,8 +16,10 @@ import os
 import drjit as dr
 import mitsuba as mi
 
+from . import PluginParameterError
 from . import fresnel as _fresnel
 from .slopes import BECKMANN, GGX, Lobe, ratio
+from .tabulated import luminance
 
 __all__ = ["PLUGIN", "bsdf_class", "GAFS"]
 
@@ -29,8 +31,8 @@ _ALPHA_MIN = 1e-4           # textured alpha is clamped here (as Mitsuba's rough
 _RHO_MAX = 1.0 - 1e-4       # textured rho is clamped into [-_RHO_MAX, _RHO_MAX]
 
 
-def _error(name: str, message: str, plugin: str = PLUGIN) -> ValueError:
-    return ValueError(f"{plugin}: parameter '{name}' {message}")
+def _error(name: str, message: str, plugin: str = PLUGIN) -> PluginParameterError:
+    return PluginParameterError(f"{plugin}: parameter '{name}' {message}")
 
 
 def _is_float(props, name: str) -> bool:
@@ -95,24 +97,21 @@ def _ior_textures(material: str, plugin: str = PLUGIN):
         else:
             rgb = mi.spectrum_list_to_srgb(wavelengths, values, False, False)
             if mi.is_monochromatic:
-                textures.append(mi.load_dict({"type": "uniform",
-                                              "value": float(mi.luminance(mi.ScalarColor3f(rgb)))}))
+                textures.append(mi.load_dict({"type": "uniform", "value": luminance(rgb)}))
             else:
                 textures.append(mi.load_dict({"type": "srgb", "color": rgb, "unbounded": True}))
     return tuple(textures)
 
 
-def per_variant(make, plugin: str = "", rgb: str = ""):
+def per_variant(make):
     """``bsdf_class()``: the plugin class ``make()`` builds for the current Mitsuba variant
-    (``mi.BSDF`` differs per variant, so each class is built once per variant). With
-    ``rgb`` (the reason), non-RGB and polarized variants raise ``RuntimeError``."""
+    (``mi.BSDF`` differs per variant, so each class is built once per variant); ``make``
+    raises ``RuntimeError`` for a variant it does not support."""
     classes: dict[str, type] = {}
 
     def bsdf_class() -> type:
         variant = mi.variant()
         if variant not in classes:
-            if rgb and (not mi.is_rgb or mi.is_polarized):
-                raise RuntimeError(f"{plugin} needs an RGB variant ({rgb}), not {variant}")
             classes[variant] = make()
         return classes[variant]
     return bsdf_class
@@ -120,7 +119,7 @@ def per_variant(make, plugin: str = "", rgb: str = ""):
 
 def _make_class() -> type:
     if mi.is_polarized:
-        raise RuntimeError(f"{PLUGIN} does not support polarized variants ({mi.variant()})")
+        raise RuntimeError(f"polarized variants are not supported ({mi.variant()})")
 
     class MicrofacetBSDF(mi.BSDF):
         """Mitsuba BSDF of :class:`microfacet.MicrofacetBRDF` (see the module docstring)."""

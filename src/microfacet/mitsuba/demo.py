@@ -3,16 +3,18 @@
 Three scenes, each render timed (wall clock of ``mi.render``, kernel compilation included
 for the first render of each plugin in ``llvm_ad_rgb``):
 
-1. the demo's built-in materials (:func:`microfacet.demo.fit_examples`) fitted by power
-   iterations (``mf.fit.fit``) on spheres under an environment: ``mf_microfacet`` (the
-   material itself: the truth) vs ``mf_fitted`` tabulated vs ``mf_fitted use=ggx``
-   (``to_ggx()``, App. C), with the relative RMS error against the truth;
+1. measured materials fitted by power iterations (``mf.fit.fit``) on spheres under an
+   environment: with the shared data (``$MICROFACET_DATA``, else ``../shared/data`` beside
+   the repository; :func:`shared_rgl_files`), the RGL files rendered by Mitsuba's
+   ``measured`` (the reference) vs ``mf_fitted`` tabulated vs ``mf_fitted use=ggx``
+   (``to_ggx()``, App. C); without them the demo's built-in materials
+   (:func:`microfacet.demo.fit_examples`), ``mf_microfacet`` being the reference. Each
+   with the relative RMS error against the reference at more samples per pixel;
 2. a LEADR-mapped plane receding to the horizon (``mf.leadr.bake`` of
    :func:`microfacet.leadr.figures.default_heightfield`): naive MIP mapping (each level a
    single facet of the averaged normal, :func:`microfacet.leadr.naive_pyramid`) vs
-   ``mf_leadr`` vs a supersampled reference (the LEADR pyramid at many samples per pixel:
-   Mitsuba scales ray differentials by ``1/sqrt(spp)``, so its lookups stay near the
-   finest level and the pixel is integrated by sampling);
+   ``mf_leadr``, both filtered over each pixel's footprint (camera ray differentials) vs a
+   supersampled reference (the LEADR pyramid's finest level at many samples per pixel);
 3. a glint plane (``mf.glints.Microsurface.from_normal_map`` of
    :func:`microfacet.glints.figures.scratched_normal_map`) under a small point light,
    rendered by ``mf_glints``.
@@ -22,6 +24,8 @@ subprocess: a too-old libLLVM aborts the process), else ``scalar_rgb``.
 """
 from __future__ import annotations
 
+import math
+import os
 import subprocess
 import sys
 import time
@@ -32,12 +36,14 @@ import numpy as np
 
 from ..io import html_grid, write_exr, write_png
 
-__all__ = ["demo_section", "choose_variant", "relative_rms"]
+__all__ = ["demo_section", "choose_variant", "relative_rms", "shared_rgl_files"]
 
 _LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); import drjit as dr; "
                "x = dr.arange(mi.Float, 4); dr.eval(x * x); print(dr.sum(x))")
 #: Elevation resolution of the section's tabulated fits.
 FIT_RESOLUTION = 32
+#: Materials rendered (the first ones of :func:`_material_sources`).
+MATERIALS = 2
 
 
 def choose_variant() -> str:
@@ -49,6 +55,13 @@ def choose_variant() -> str:
         if probe.returncode == 0:
             return "llvm_ad_rgb"
     return "scalar_rgb"
+
+
+def shared_rgl_files() -> list[Path]:
+    """The RGL ``.bsdf`` files of the shared data (``$MICROFACET_DATA``, else
+    ``../shared/data`` beside the repository), sorted; empty where there are none."""
+    root = os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[3].parent / "shared" / "data"
+    return sorted((Path(root) / "rgl").glob("*.bsdf"))
 
 
 def relative_rms(image, reference) -> float:
@@ -99,18 +112,35 @@ def _truth_dict(brdf) -> dict:
             "eta": _rgb(brdf.fresnel.eta), "k": _rgb(brdf.fresnel.k)}
 
 
-def _materials(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) -> str:
-    """Scene 1: each demo material, its tabulated fit and the fit's GGX conversion on spheres."""
-    from .. import fit as fitting
+def _material_sources() -> tuple[list[tuple[str, str, dict, object]], str]:
+    """``(key, label, reference BSDF dict, BRDF to fit)`` of each material, and what they are:
+    the shared RGL files (Mitsuba's ``measured``; fitted with a Lambertian base) or the
+    demo's built-in materials (single lobes)."""
+    from .. import measured
+    files = shared_rgl_files()
+    if files:
+        return ([(f.stem, f.stem, {"type": "measured", "filename": str(f)}, measured.load(f))
+                 for f in files[:MATERIALS]],
+                "rgl")
     from ..demo import fit_examples
+    return [(ex.key, ex.label, _truth_dict(ex.brdf), ex.brdf) for ex in fit_examples()], "builtin"
+
+
+def _materials(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) -> str:
+    """Scene 1: each material (reference BSDF), its tabulated fit and the fit's GGX
+    conversion on spheres; errors against the reference at ``reference_spp``."""
+    from .. import fit as fitting
     from ..render import procedural_sky
     env = write_exr(folder / "environment.exr", procedural_sky())
+    sources, kind = _material_sources()
+    reference_label = {"rgl": "Mitsuba measured (the data)", "builtin": "mf_microfacet (the material)"}[kind]
     rows, table = [], []
-    for ex in fit_examples():
+    for key, label, reference, brdf in sources[:MATERIALS]:
         t = time.perf_counter()
-        fit_path = fitting.fit(ex.brdf, resolution=FIT_RESOLUTION).save(folder / f"{ex.key}_fit.npz")
+        fit = fitting.fit(brdf, resolution=FIT_RESOLUTION, diffuse=kind == "rgl")
+        fit_path = fit.save(folder / f"{key}_fit.npz")
         t_fit = time.perf_counter() - t
-        bsdfs = {"reference": _truth_dict(ex.brdf), "truth": _truth_dict(ex.brdf),
+        bsdfs = {"reference": reference, "truth": reference,
                  "tabulated": {"type": "mf_fitted", "filename": str(fit_path), "use": "tabulated"},
                  "ggx": {"type": "mf_fitted", "filename": str(fit_path), "use": "ggx"}}
         images, cells = {}, []
@@ -124,27 +154,34 @@ def _materials(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) 
             tick(1)
             if name == "reference":
                 continue
-            label = {"truth": "mf_microfacet (the material)", "tabulated": "mf_fitted tabulated",
-                     "ggx": "mf_fitted use=ggx"}[name]
+            caption = {"truth": reference_label, "tabulated": "mf_fitted tabulated", "ggx": "mf_fitted use=ggx"}[name]
             err = relative_rms(images[name], images["reference"])
-            cells.append((_save(folder, f"{ex.key}_{name}", images[name]),
-                          f"{label}, {n} spp: {seconds:.2f} s, rel. error {err:.3f}"))
-        rows.append((ex.label, cells))
-        table.append((ex.label, t_fit))
+            cells.append((_save(folder, f"{key}_{name}", images[name]),
+                          f"{caption}, {n} spp: {seconds:.2f} s, rel. error {err:.3f}"))
+        rows.append((label, cells))
+        table.append((label, t_fit))
+    tick(4 * (MATERIALS - len(rows)))
     notes = "".join(f"<li>{escape(label)}: fitted in {t:.2f} s (resolution {FIT_RESOLUTION})</li>"
                     for label, t in table)
-    return (f"<h3>Fitted materials on spheres</h3><p>{escape(_MATERIALS_TEXT.format(size=size, spp=spp, ref=reference_spp))}</p>"
-            f"{html_grid(rows)}<ul>{notes}</ul>")
+    text = _MATERIALS_TEXT[kind].format(size=size, spp=spp, ref=reference_spp)
+    return f"<h3>Fitted materials on spheres</h3><p>{escape(text)}</p>{html_grid(rows)}<ul>{notes}</ul>"
 
 
-_MATERIALS_TEXT = (
-    "The demo's built-in materials stand in for measured ones (a user's demo has no shared "
-    "measured data; with an RGL file, mf_fitted renders microfacet fit's output the same way): "
-    "each is fitted by power iterations (mf.fit.fit) and rendered on a sphere under the demo's "
-    "environment ({size}×{size} px, {spp} spp, path tracer) as the material itself "
-    "(mf_microfacet, the truth), the tabulated fit (mf_fitted) and its GGX conversion by "
-    "moments (mf_fitted use=ggx). Errors: relative RMS against the material rendered at "
-    "{ref} spp (another seed); the material's own error is the Monte Carlo noise floor.")
+_MATERIALS_TEXT = {
+    "rgl": ("The RGL materials of the shared data, each fitted by power iterations with a Lambertian "
+            "base (mf.fit.fit(..., diffuse=True); the GGX conversion carries no base) and rendered on a sphere under the demo's environment ({size}×{size} "
+            "px, {spp} spp, path tracer) by Mitsuba's own measured plugin (the data), by the tabulated "
+            "fit (mf_fitted) and by its GGX conversion by moments (mf_fitted use=ggx). Errors: relative "
+            "RMS against measured at {ref} spp (another seed); measured's own error is the Monte Carlo "
+            "noise floor."),
+    "builtin": ("The demo's built-in materials stand in for measured ones (no shared data here: set "
+                "MICROFACET_DATA to a folder with rgl/*.bsdf to render those beside Mitsuba's measured): "
+                "each is fitted by power iterations (mf.fit.fit) and rendered on a sphere under the demo's "
+                "environment ({size}×{size} px, {spp} spp, path tracer) as the material itself "
+                "(mf_microfacet, the truth), the tabulated fit (mf_fitted) and its GGX conversion by "
+                "moments (mf_fitted use=ggx). Errors: relative RMS against the material rendered at "
+                "{ref} spp (another seed); the material's own error is the Monte Carlo noise floor."),
+}
 
 
 _INTEGRATORS: dict[str, type] = {}
@@ -154,8 +191,10 @@ def _footprint_integrator(mi) -> str:
     """Register (once per variant) and name ``mf_demo_direct``: direct lighting (emitter
     sampling, delta lights) plus the background, that sets ``si.duv_dx``, ``si.duv_dy`` from
     the camera ray's differentials (``compute_uv_partials``; Mitsuba 3's path tracer leaves
-    them zero, so ``mf_leadr`` would fall back to its fixed ``footprint``). With
-    ``footprint = false`` the partials stay zero: lookups of the finest level."""
+    them zero, so ``mf_leadr`` would fall back to its fixed ``footprint``). Mitsuba hands
+    the integrator differentials scaled by ``1/sqrt(spp)``; they are scaled back, so that
+    the footprint is the pixel's at any sample count. With ``footprint = false`` the
+    partials stay zero: lookups of the finest level."""
     import drjit as dr
     name = "mf_demo_direct"
     if mi.variant() in _INTEGRATORS:
@@ -169,6 +208,7 @@ def _footprint_integrator(mi) -> str:
         def sample(self, scene, sampler, ray, medium=None, active=True):
             si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.All, coherent=True)
             if self.footprint:
+                ray.scale_differential(math.sqrt(sampler.sample_count()))   # in place: ours
                 si.compute_uv_partials(ray)
             hit = si.is_valid()
             scalar = isinstance(hit, bool)                   # scalar variants: one ray per call
@@ -193,7 +233,8 @@ def _footprint_integrator(mi) -> str:
 
 
 def _leadr(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) -> str:
-    """Scene 2: a LEADR plane receding to the horizon: naive MIP vs mf_leadr vs reference."""
+    """Scene 2: a LEADR plane receding to the horizon (``size`` pixels wide): naive MIP vs
+    mf_leadr vs reference."""
     from ..leadr import bake, naive_pyramid, write_pyramid
     from ..leadr.figures import default_heightfield
     side = 256 if size >= 64 else 64
@@ -216,7 +257,8 @@ def _leadr(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) -> s
                                     "uv_scale": 40.0}}}
         images[name], seconds[name] = _render(mi, scene, n)
         tick(1)
-    cells = [(_save(folder, f"leadr_{name}", images[name]),
+    exposure = -math.log2(max(float(np.quantile(images["reference"], 0.99)), 1e-6))
+    cells = [(_save(folder, f"leadr_{name}", images[name], exposure),
               f"{label}, {n} spp: {seconds[name]:.2f} s"
               + ("" if name == "reference" else f", rel. error {relative_rms(images[name], images['reference']):.3f}"))
              for name, label, n in (("naive", "naive MIP (averaged normal)", spp), ("leadr", "mf_leadr", spp),
@@ -263,26 +305,33 @@ def _glints(mi, folder: Path, size: int, spp: int, tick) -> str:
 STEPS = 2 * 4 + 3 + 1   # microfacet.demo.MITSUBA_STEPS (tested equal)
 
 
-#: ``(size, spp, reference_spp)`` defaults of :func:`demo_section`: vectorized (llvm) and
-#: scalar variants (Python runs per ray there: a few 10^4 rays per second).
-DEFAULTS = {"llvm": (96, 64, 1024), "scalar": (32, 4, 32)}
+#: Defaults of :func:`demo_section`: vectorized (llvm) and scalar variants (Python runs
+#: per ray there: a few 10^4 rays per second).
+DEFAULTS = {"llvm": {"size": 96, "leadr_width": 256, "spp": 64, "reference_spp": 1024},
+            "scalar": {"size": 32, "leadr_width": 32, "spp": 4, "reference_spp": 32}}
 
 
 def demo_section(out, size: int | None = None, spp: int | None = None, reference_spp: int | None = None,
-                 variant: str | None = None, progress=None) -> str:
+                 variant: str | None = None, progress=None, leadr_width: int | None = None) -> str:
     """Render the Mitsuba scenes under ``out/mitsuba/`` and return the HTML section.
 
-    ``size``: image side in pixels (the LEADR plane is ``size × size/2``); ``spp``: samples
+    ``size``: side in pixels of the sphere and glint images; ``leadr_width``: width of the
+    LEADR plane (``× width/2``; default ``size`` where ``size`` is given); ``spp``: samples
     per pixel (``reference_spp`` for the references); ``None`` takes :data:`DEFAULTS` of
     the variant; ``variant``: a Mitsuba RGB variant, default :func:`choose_variant`.
     ``progress(n)`` is called as renders complete. Raises ``ImportError`` without Mitsuba.
     """
     variant = choose_variant() if variant is None else variant
-    defaults = DEFAULTS["scalar" if variant.startswith("scalar") else "llvm"]
-    size, spp, reference_spp = (d if v is None else v for v, d in zip((size, spp, reference_spp), defaults))
-    for name, v, lo in (("size", size, 8), ("spp", spp, 1), ("reference_spp", reference_spp, 1)):
+    defaults = dict(DEFAULTS["scalar" if variant.startswith("scalar") else "llvm"])
+    if size is not None:
+        defaults["leadr_width"] = size
+    given = {"size": size, "leadr_width": leadr_width, "spp": spp, "reference_spp": reference_spp}
+    n = {name: defaults[name] if v is None else v for name, v in given.items()}
+    for name, v in n.items():
+        lo = 8 if name in ("size", "leadr_width") else 1
         if isinstance(v, bool) or int(v) != v or v < lo:
             raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
+    size, leadr_width, spp, reference_spp = (int(n[k]) for k in ("size", "leadr_width", "spp", "reference_spp"))
     import mitsuba as mi
 
     from . import register
@@ -292,9 +341,9 @@ def demo_section(out, size: int | None = None, spp: int | None = None, reference
     folder = Path(out) / "mitsuba"
     folder.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
-    parts = [_materials(mi, folder, int(size), int(spp), int(reference_spp), tick),
-             _leadr(mi, folder, int(size), int(spp), int(reference_spp), tick),
-             _glints(mi, folder, int(size), int(spp), tick)]
+    parts = [_materials(mi, folder, size, spp, reference_spp, tick),
+             _leadr(mi, folder, leadr_width, spp, reference_spp, tick),
+             _glints(mi, folder, size, spp, tick)]
     total = time.perf_counter() - t
     intro = (f"The plugins of microfacet.mitsuba (import microfacet.mitsuba as mfm; mfm.register()) in "
              f"Mitsuba {mi.__version__}, variant {variant}. Times: wall clock of mi.render (the first "

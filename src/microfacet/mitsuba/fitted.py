@@ -23,7 +23,7 @@ from ..fit import load as load_fit
 from ..io.exr import EXR_MAGIC
 from . import bsdf as _bsdf
 from .slopes import BECKMANN, GGX, Lobe
-from .tabulated import InterpolatedRGB, tabulated_lobe
+from .tabulated import InterpolatedColor, tabulated_lobe
 
 __all__ = ["PLUGIN", "bsdf_class", "load_fit_parameter", "USES"]
 
@@ -69,12 +69,13 @@ def _make_class() -> type:
             self.shadowing = fit.shadowing
             self.separable = False
             self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
-            self.fresnel_table = InterpolatedRGB(fit.fresnel.cos_theta_d, fit.fresnel.values)
+            self.fresnel_table = InterpolatedColor(fit.fresnel.cos_theta_d, fit.fresnel.values)
             if self.use == "tabulated":
                 self.kind = "tabulated"
                 self.make_lobe = tabulated_lobe(fit.distribution)
                 self.samples_visible = self.gaf == "smith" and fit.distribution.supports_visible_sampling
-                self.diffuse = mi.Color3f(*(float(v) for v in fit.diffuse)) if fit.has_diffuse else None
+                self.diffuse = (mi.load_dict({"type": "srgb", "color": [float(v) for v in fit.diffuse],
+                                              "unbounded": True}) if fit.has_diffuse else None)
                 self.p_lobe = float(fit._lobe_probability())
                 dist = fit.distribution
             else:
@@ -103,14 +104,15 @@ def _make_class() -> type:
 
         def _fresnel(self, si, oh, active):
             """The fit's Fresnel table ``F(o.h)`` (Eq. 4.11), times ``specular_reflectance``."""
-            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0))
+            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0),
+                                                                                   si.wavelengths)
 
         # ------------------------------------------------------ diffuse base
         def _base(self, ctx, si, light, active):
             """``(k_d z_i / pi, z_i / pi)`` of the Lambertian base (Eq. 1.9), 0 below the horizons."""
             ok = active & (si.wi.z > 0) & (light.z > 0) & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
             cos_pdf = dr.select(ok, light.z * (1.0 / dr.pi), 0.0)
-            return self.diffuse * cos_pdf, cos_pdf
+            return self.diffuse.eval(si, ok) * cos_pdf, cos_pdf
 
         def eval_pdf(self, ctx, si, wo, active=True):
             """The lobe (Listing 2.2) plus the base; pdf ``p pdf_lobe + (1 - p) z_i / pi``."""
@@ -154,4 +156,4 @@ def _make_class() -> type:
     return FittedBSDF
 
 
-bsdf_class = _bsdf.per_variant(_make_class, PLUGIN, rgb="its Fresnel table and base are RGB")
+bsdf_class = _bsdf.per_variant(_make_class)

@@ -315,4 +315,4 @@ def _make_class() -> type:
     return GlintsBSDF
 
 
-bsdf_class = _bsdf.per_variant(_make_class, PLUGIN, rgb="its Fresnel term is RGB")
+bsdf_class = _bsdf.per_variant(_make_class)

@@ -28,7 +28,7 @@ from ..leadr.moments import MAX_RHO, MIN_ALPHA
 from . import bsdf as _bsdf
 from .fitted import load_fit_parameter
 from .slopes import BECKMANN, Lobe
-from .tabulated import InterpolatedRGB, Table, index_of
+from .tabulated import InterpolatedColor, Table, index_of
 
 __all__ = ["PLUGIN", "bsdf_class", "Pyramid"]
 
@@ -166,7 +166,7 @@ def _make_class() -> type:
                     raise _bsdf._error("fit", "brings its own Fresnel table: drop the Fresnel parameters",
                                        PLUGIN)
                 base = fit.to_beckmann()
-                self.fresnel_table = InterpolatedRGB(fit.fresnel.cos_theta_d, fit.fresnel.values)
+                self.fresnel_table = InterpolatedColor(fit.fresnel.cos_theta_d, fit.fresnel.values)
             else:
                 if "alpha" in props and props.type("alpha") not in (mi.Properties.Type.Float,
                                                                       mi.Properties.Type.Integer):
@@ -217,7 +217,8 @@ def _make_class() -> type:
         def _fresnel(self, si, oh, active):
             if self.fresnel_table is None:
                 return Base._fresnel(self, si, oh, active)
-            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0))
+            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0),
+                                                                                   si.wavelengths)
 
         def traverse(self, callback):
             callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
@@ -230,4 +231,4 @@ def _make_class() -> type:
     return LeadrBSDF
 
 
-bsdf_class = _bsdf.per_variant(_make_class, PLUGIN, rgb="its Fresnel term is RGB")
+bsdf_class = _bsdf.per_variant(_make_class)

@@ -25,8 +25,8 @@ import numpy as np
 from ..distributions.tabulated import _GL4_T, _GL4_W, _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
 from .slopes import Lobe, _slope_normal, ratio
 
-__all__ = ["Table", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
-           "InterpolatedRGB", "NEWTON_STEPS"]
+__all__ = ["Table", "SortedSearch", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
+           "InterpolatedColor", "luminance", "NEWTON_STEPS"]
 
 #: Fixed Newton steps of the elevation sampling (safeguarded; float32 converges in < 8).
 NEWTON_STEPS = 12
@@ -36,9 +36,10 @@ CELL_NEWTON_STEPS = 6
 U_MIN = 2.0**-24
 
 
-def _steps(n: int) -> int:
-    """Bisection steps that shrink ``[0, n)`` to one cell."""
-    return max(1, int(math.ceil(math.log2(max(n, 2)))) + 1)
+def _steps(width: int) -> int:
+    """Bisection steps that shrink a bracket ``[lo, lo + width)`` to one index:
+    ``ceil(log2(width))`` (each step leaves at most ``ceil(width / 2)``)."""
+    return int(math.ceil(math.log2(width))) if width > 1 else 0
 
 
 class Table:
@@ -77,6 +78,67 @@ def bisect_le(f, target, lo, hi, steps: int):
         lo = dr.select(go & (value <= target), mid, lo)
         hi = dr.select(go & (value > target), mid, hi)
     return lo
+
+
+_T_MIN, _R_MIN = 2.0**-48, 2.0**-24       # t and 1 - t are clamped to these (octaves)
+_T_MIN_BITS, _R_MIN_BITS, _HALF_BITS = (int(np.float32(f).view(np.uint32)) for f in (_T_MIN, _R_MIN, 0.5))
+
+
+class SortedSearch:
+    """``k(v)``, the largest ``k`` in ``[0, n - 2]`` with ``x[k] <= v`` (0 if none) for
+    sorted nodes ``x`` and ``v <= v_max``: what ``np.searchsorted(x, v, "right") - 1``
+    clipped into the intervals gives, found by the cutpoint method (Chen and Asau 1974;
+    Devroye 1986, Sec. III.2.4): a guide maps the cell of ``v`` to the first node that
+    can answer, and a bisection with the fixed step count of the widest bracket
+    (:attr:`width` nodes) finishes. The cells are the octaves of ``t`` below 1/2 (down to
+    ``2^-48``) and of ``1 - t`` above (down to ``2^-24``), ``t = (v - x_0) / (x_(n-1) - x_0)``
+    (float32 exponent bits), each split into ``per_octave`` cells (high mantissa bits):
+    fine at both ends, where CDF tables crowd (runs of nodes of tiny mass) and
+    ``cos theta`` tables too. Exact: the nodes' cells are computed with the kernel's
+    float32 operations, and each bracket is widened by one cell on either side."""
+
+    def __init__(self, x, v_max: float = math.inf):
+        x = np.asarray(x, dtype=np.float32).ravel()
+        self.n = n = x.size
+        per_octave = 1 << min(10, max(4, int(math.ceil(math.log2(n))) - 1))
+        self.shift = 23 - int(math.log2(per_octave))
+        self.half = (_HALF_BITS - _T_MIN_BITS) >> self.shift     # cells below t = 1/2
+        self.cells = cells = self.half + ((_HALF_BITS - _R_MIN_BITS) >> self.shift) + 1
+        self.x = Table(x)
+        self.x0 = float(x[0])
+        self.inv_range = float(np.float32(1.0 / max(float(x[-1]) - float(x[0]), 1e-30)))
+        t = np.clip((x - np.float32(self.x0)) * np.float32(self.inv_range), np.float32(0), np.float32(1))
+        bits = lambda f: f.view(np.uint32).astype(np.int64)  # noqa: E731
+        cell = self._cell_of(t < 0.5, bits(np.maximum(t, np.float32(_T_MIN))),
+                             bits(np.maximum(np.float32(1) - t, np.float32(_R_MIN))), np.where, np.clip)
+        g = np.arange(cells)
+        below = np.searchsorted(cell, np.maximum(g - 1, 0), side="left")          # nodes in cells < g - 1
+        upto = np.searchsorted(cell, np.minimum(g + 1, cells - 1), side="right")  # nodes in cells <= g + 1
+        last = np.clip(np.searchsorted(x, np.float32(min(v_max, x[-1])), side="right") - 1, 0, n - 2)
+        lo = np.clip(below - 1, 0, last)
+        hi = np.clip(upto - 1, lo, last)
+        self.width = int((hi - lo).max()) + 1
+        self.steps = _steps(self.width)
+        self.guide = Table(lo, "uint32")
+
+    def _cell_of(self, low, bits_t, bits_r, select, clip):
+        """Cell from the float32 bits of ``t`` (``low``: ``t < 1/2``) or of ``1 - t``."""
+        c = select(low, (bits_t - _T_MIN_BITS) >> self.shift, self.cells - 1 - ((bits_r - _R_MIN_BITS) >> self.shift))
+        return clip(c, 0, self.cells - 1)
+
+    def _cell(self, v):
+        """The cell of ``v``, as in ``__init__`` but with Dr.Jit's float32 operations."""
+        t = dr.clip((v - self.x0) * self.inv_range, 0.0, 1.0)
+        q, r = dr.maximum(t, _T_MIN), dr.maximum(1.0 - t, _R_MIN)
+        if self.x.scalar:
+            bits_t, bits_r = (int(np.float32(f).view(np.uint32)) for f in (q, r))
+        else:
+            bits_t, bits_r = (mi.Int32(dr.reinterpret_array(mi.UInt32, mi.Float(f))) for f in (q, r))
+        return self._cell_of(t < 0.5, bits_t, bits_r, dr.select, dr.clip)
+
+    def __call__(self, v):
+        lo = mi.Int32(self.guide[self._cell(v)])
+        return bisect_le(lambda j: self.x[j], v, lo, dr.minimum(lo + self.width, self.n - 1), self.steps)
 
 
 def expm1(x):
@@ -232,12 +294,13 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         t, m = self.t, self.t.m
         l1a = self._l1(a)
         z = a + l1a
-        left = u1 * z <= 0.5 * a + t.L1[0]          # x~ <= 0: F(0) Z = a / 2 + L1(0)
+        half = 0.5 * a + t.L1_0                     # x~ <= 0: F(0) Z = a / 2 + L1(0)
+        left = u1 * z <= half
         target = dr.select(left, u1 * z, (1.0 - u1) * z)
 
         def f(k):    # decreasing: (a + xi) L0 + L1 left, (a - xi) L0 - L1 + L1(a) right
-            xi, l0, l1 = t.xi[k], t.L0[k], t.L1[k]
-            return dr.select(left, (a + xi) * l0 + l1, (a - xi) * l0 - l1 + l1a)
+            l0, q = t.L0[k], t.xiL0_L1[k]
+            return dr.select(left, a * l0 + q, a * l0 - q + l1a)
 
         s_a = self._fine(a)
         kmax = index_of(s_a * (m - 1), m)
@@ -247,7 +310,7 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         k = bisect_le(lambda j: -f(j), -target, lo, hi, _steps(m))
         k = dr.select(left, dr.minimum(k, m - 2), k)
         kn = dr.minimum(k + 1, m - 1)
-        at_end = (u1 * z > 0.5 * a + t.L1[0]) & (k + 1 > kmax)
+        at_end = (u1 * z > half) & (k + 1 > kmax)
         f0 = f(k)
         f1 = dr.select(at_end, 0.0, f(kn))
         s0 = mi.Float(k) / (m - 1)
@@ -266,13 +329,21 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         f = self._fine(xi) * (m - 1)
         k = dr.minimum(index_of(f, m), m - 2)
         w = dr.clip(f - mi.Float(k), 0.0, 1.0)
-        return sign * ((1.0 - w) * self._row_quantile(k, v) + w * self._row_quantile(k + 1, v))
+        t, n = self.t, self.t.n_eta
+        j0 = self._row_search(k, v, 0 * k, n - 1, _steps(n - 1))
+        start = mi.Int32(t.next_row_start[k * n + j0])
+        j1 = self._row_search(k + 1, v, start, dr.minimum(start + t.next_row_width, n - 1), t.next_row_steps)
+        return sign * ((1.0 - w) * self._row_quantile(k, v, j0) + w * self._row_quantile(k + 1, v, j1))
 
-    def _row_quantile(self, k, v):
+    def _row_search(self, k, v, lo, hi, steps: int):
+        """Largest ``j`` in ``[lo, hi)`` with ``y_cdf[k, j] <= v``, ``steps`` halvings."""
+        row = k * self.t.n_eta
+        return bisect_le(lambda j: self.t.y_cdf[row + j], v, lo, hi, steps)
+
+    def _row_quantile(self, k, v, lo):
+        """``tan eta`` at ``v`` in row ``k``, linear in ``eta`` within the interval ``lo``."""
         t = self.t
-        n = t.n_eta
-        row = k * n
-        lo = bisect_le(lambda j: t.y_cdf[row + j], v, 0 * k, 0 * k + (n - 1), _steps(n))
+        row = k * t.n_eta
         c0, c1 = t.y_cdf[row + lo], t.y_cdf[row + lo + 1]
         w = dr.clip(ratio(v - c0, c1 - c0, c1 > c0), 0.0, 1.0)
         e0 = t.eta[lo]
@@ -282,10 +353,8 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         """Normal with slopes distributed as ``P``: ``theta`` from the marginal
         ``2 pi D cos sin`` (interval by its mass, then the closed-form CDF), ``phi = 2 pi u2``."""
         t = self.t
-        n = t.n_theta
         v = dr.clip(u.x, U_MIN, 1.0 - U_MIN)
-        i = bisect_le(lambda j: t.mass_cdf[j], v, 0 * index_of(v, 1), 0 * index_of(v, 1) + (n - 1),
-                      _steps(n))
+        i = t.mass_search(v)
         c0 = t.mass_cdf[i]
         mass = t.mass_cdf[i + 1] - c0
         r = dr.clip(dr.select(mass > 0, ratio(v - c0, mass, mass > 0), 0.5), 0.0, 1.0)
@@ -364,10 +433,9 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         ``w = log1p(v expm1(b)) / b``, ``b = ln D_(j+1) - ln D_j`` at ``theta``."""
         t = self.t
         cdf = t.cell_cdf
-        ncell = cdf.size - 1
         v = dr.clip(u.x, U_MIN, 1.0 - U_MIN) * t.cell_total
-        zero = 0 * index_of(v, 1)
-        c = bisect_le(lambda j: cdf[j], v, zero, zero + ncell, _steps(ncell + 1))
+        c = t.cell_search(v)
+        zero = 0 * c
         c0 = cdf[c]
         mass = cdf[c + 1] - c0
         r = dr.clip(dr.select(mass > 0, ratio(v - c0, mass, mass > 0), 0.5), 0.0, 1.0)
@@ -379,10 +447,11 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         a0, a1 = ld[i * q + j], ld[(i + 1) * q + j]            # ln D at the cell's corners
         b0, b1 = ld[i * q + j1] - a0, ld[(i + 1) * q + j1] - a1
         ta, tb = t.theta_fine[i], t.theta_fine[i + 1]
+        inv_dt, da, db = 1.0 / (tb - ta), a1 - a0, b1 - b0
 
         def marginal(x):
-            w = (x - ta) / (tb - ta)
-            return dr.exp(a0 + w * (a1 - a0)) * exp_mean(b0 + w * (b1 - b0)) * 0.5 * dr.sin(2.0 * x)
+            w = (x - ta) * inv_dt
+            return dr.exp(a0 + w * da) * exp_mean(b0 + w * db) * 0.5 * dr.sin(2.0 * x)
 
         def partial(x):
             out = 0.0
@@ -412,9 +481,13 @@ def log1p(x):
 
 
 def exp_mean(b):
-    """``int_0^1 e^(w b) dw = expm1(b) / b`` (``1 + b / 2`` near 0), as the oracle's."""
-    small = dr.abs(b) < 1e-4
-    return dr.select(small, 1.0 + 0.5 * b, ratio(expm1(b), b, dr.abs(b) >= 1e-4))
+    """``int_0^1 e^(w b) dw = expm1(b) / b`` (``1 + b / 2`` near 0), as the oracle's; with
+    Kahan's ``expm1(b) = (u - 1) b / log u`` (:func:`expm1`) the ``b`` cancels:
+    ``(u - 1) / log u``, ``u = e^b`` (``-1 / b`` where ``u`` underflows)."""
+    u = dr.exp(b)
+    big = dr.abs(b) >= 1e-4
+    return dr.select(big, dr.select(u == 0.0, ratio(-1.0, b, big), ratio(u - 1.0, dr.log(u), big & (u > 0.0))),
+                     1.0 + 0.5 * b)
 
 
 class _Tables:
@@ -429,12 +502,19 @@ class _Tables:
             self.log_ndf = Table(dist.log_ndf)
             self.m = len(dist.s_fine)
             h = dist.s_fine[1] - dist.s_fine[0]
-            self.xi, self.L0, self.L1 = Table(dist.xi), Table(dist.L0), Table(dist.L1)
+            self.L0, self.L1 = Table(dist.L0), Table(dist.L1)
+            self.L1_0 = float(np.float32(dist.L1[0]))
+            self.xiL0_L1 = Table(dist.xi * dist.L0 + dist.L1)
             self.dL1 = Table(-dist.L0 * dist.dxi_ds * h)
             self.eta = Table(dist.eta_nodes[0])
             self.n_eta = dist.eta_nodes.shape[1]
             self.y_cdf = Table(dist.y_cdf)
+            start, self.next_row_width = next_row_window(np.asarray(dist.y_cdf, dtype=np.float32)
+                                                         .reshape(dist.eta_nodes.shape), 1.0 - U_MIN)
+            self.next_row_start = Table(start, "uint32")
+            self.next_row_steps = _steps(self.next_row_width)
             self.mass_cdf = Table(dist._mass_cdf)
+            self.mass_search = SortedSearch(dist._mass_cdf, 1.0 - U_MIN)
             self.lobe = TabulatedIsotropicLobe
         else:
             self.n_phi, self.dphi = dist.n_phi, float(dist.dphi)
@@ -447,7 +527,35 @@ class _Tables:
             self.area = Table(dist.area_table)
             self.cell_cdf = Table(dist._cell_cdf)
             self.cell_total = float(np.float32(dist._cell_cdf[-1]))
+            self.cell_search = SortedSearch(dist._cell_cdf, float(np.float32(1.0 - U_MIN) * np.float32(self.cell_total)))
             self.lobe = TabulatedAnisotropicLobe
+
+
+def next_row_window(cdf: np.ndarray, v_max: float) -> tuple[np.ndarray, int]:
+    """``(start, width)``: where ``j`` is row ``k``'s answer (the largest ``j <= n - 2`` with
+    ``cdf[k, j] <= v``, ``0 <= v <= v_max``), row ``k + 1``'s answer lies in
+    ``[start[k, j], start[k, j] + width)``, for the conditional CDF rows (as float32)
+    of neighbouring fine nodes, which differ little: a short bisection there instead of
+    one over the whole row. Empty intervals (never an answer) are skipped."""
+    m, n = cdf.shape
+    c = cdf.astype(np.float64)
+    v_max = float(np.float32(v_max))
+
+    def answer(row, v):                    # the largest j <= n - 2 with row[j] <= v, >= 0
+        return np.clip(np.searchsorted(row, v, side="right") - 1, 0, n - 2)
+
+    start = np.zeros((m, n), dtype=np.int64)
+    width = 1
+    for k in range(m - 1):
+        a, b = c[k], c[k + 1]
+        lo = np.where(np.arange(n - 1) == 0, 0, answer(b, a[:-1]))
+        top = np.append(np.minimum(a[1:-1], v_max), v_max)       # v < a[j + 1] (or v_max at the end)
+        hi = answer(b, top)
+        live = ((a[:-1] < a[1:]) | (np.arange(n - 1) == n - 2)) & (a[:-1] <= v_max)
+        start[k, :-1] = lo
+        if live.any():
+            width = max(width, int((hi - lo)[live].max()) + 1)
+    return start, width
 
 
 def tabulated_lobe(dist):
@@ -459,25 +567,46 @@ def tabulated_lobe(dist):
     return lambda: tables.lobe(tables)
 
 
-class InterpolatedRGB:
-    """Piecewise-linear ``x -> RGB`` table clamped at its ends, as ``np.interp`` per
-    channel (:class:`microfacet.fresnel.Tabulated`); the node is found by bisection."""
+class InterpolatedColor:
+    """Piecewise-linear ``x -> colour`` table clamped at its ends, as ``np.interp`` per RGB
+    channel (:class:`microfacet.fresnel.Tabulated`), evaluated as the variant's spectrum:
+    RGB as is; spectral variants interpolate the spectra of the nodes' colours, each
+    upsampled by Mitsuba's sRGB model (``srgb_model_fetch`` at load, ``srgb_model_eval`` at
+    the wavelengths; colours above 1 scaled as Mitsuba's unbounded ``srgb`` texture does);
+    monochrome variants interpolate the nodes' luminance."""
 
     def __init__(self, x, rgb):
         x = np.asarray(x, dtype=np.float64).ravel()
         rgb = np.asarray(rgb, dtype=np.float64).reshape(len(x), 3)
-        self.n = len(x)
-        self.x = Table(x)
-        self.channels = [Table(rgb[:, c]) for c in range(3)]
+        self.search = SortedSearch(x)
+        if mi.is_spectral:
+            scale = np.where(rgb.max(axis=1) > 1.0, 2.0 * rgb.max(axis=1), 1.0)
+            coeff = np.array([np.array(mi.srgb_model_fetch(mi.ScalarColor3f(*(c / k)))).ravel()
+                              for c, k in zip(rgb, scale)])
+            self.channels = [Table(coeff[:, c]) for c in range(3)] + [Table(scale)]
+        elif mi.is_monochromatic:
+            self.channels = [Table([luminance(c) for c in rgb])]
+        else:
+            self.channels = [Table(rgb[:, c]) for c in range(3)]
 
-    def __call__(self, value):
-        x = self.x
-        zero = 0 * index_of(value, 1)
-        i = bisect_le(lambda j: x[j], value, zero, zero + (self.n - 1), _steps(self.n))
+    def __call__(self, value, wavelengths=None):
+        """The colour at ``value`` (``wavelengths``: the spectral variants' ``si.wavelengths``)."""
+        x = self.search.x
+        i = self.search(value)
         x0, x1 = x[i], x[i + 1]
         t = dr.clip(ratio(value - x0, x1 - x0, x1 > x0), 0.0, 1.0)
+        if mi.is_spectral:
+            def node(j):
+                c = mi.Vector3f(*(ch[j] for ch in self.channels[:3]))
+                return mi.srgb_model_eval(c, wavelengths) * self.channels[3][j]
+            return (1.0 - t) * node(i) + t * node(i + 1)
         out = []
         for ch in self.channels:
             a = ch[i]
             out.append(a + t * (ch[i + 1] - a))
-        return mi.Color3f(*out)
+        return mi.UnpolarizedSpectrum(*out)
+
+
+def luminance(rgb) -> float:
+    """Mitsuba's luminance of a linear sRGB colour, as a Python float in any variant."""
+    return float(np.asarray(mi.luminance(mi.ScalarColor3f(*(float(c) for c in rgb)))).ravel()[0])
