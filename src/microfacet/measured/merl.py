@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import half_vector
-from .base import MeasuredBRDF, as_dirs, check_finite, file_error
+from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_error
 
 __all__ = ["MERLBRDF", "SHAPE", "SCALE", "is_merl", "read_merl"]
 
@@ -166,11 +166,15 @@ class MERLBRDF(MeasuredBRDF):
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         return np.where(up[..., None], f, 0.0), np.where(up, cover, 0.0)
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def _eval_numpy(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo)``, RGB ``(..., 3)``: trilinear interpolation of the measured
         samples around the Rusinkiewicz coordinates of ``(wi, wo)``; 0 below either horizon
         or where no surrounding sample was measured."""
         return self._interpolate(wi, wo)[0]
+
+    def _kernel(self):
+        k = compiled_kernels()
+        return None if k is None else (k.eval_table, k.sample_table, (k.MERL, self._table))
 
     def coverage(self, wi, wo) -> np.ndarray:
         """Share of the trilinear weight on measured samples, in ``[0, 1]`` (0 below the
