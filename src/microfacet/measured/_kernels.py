@@ -93,33 +93,52 @@ def _cell(u, n):
 
 
 @_jit
-def _look(table, s, w, j, i):
-    """Blend of ``table[s[c], j, i]`` over the 4 parameter corners (``Marginal2D._lookup``)."""
-    return w[0] * table[s[0], j, i] + w[1] * table[s[1], j, i] + w[2] * table[s[2], j, i] \
-        + w[3] * table[s[3], j, i]
+def _corners(phi_nodes, theta_nodes, phi, theta):
+    """Slices, weights and count of the parameter corners of ``Marginal2D._slices``:
+    ``(s, w, nc)``, the ``nc`` (2 or 4) corners of nonzero weight first (a file with
+    one ``phi_i`` node has 2: skipping the zero terms of the reference's sum is exact)."""
+    p0, p1, tp = _node(phi_nodes, phi)
+    q0, q1, tq = _node(theta_nodes, theta)
+    n = len(theta_nodes)
+    if len(phi_nodes) == 1:
+        return (q0, q1, q0, q1), (1.0 - tq, tq, 0.0, 0.0), 2
+    return ((p0 * n + q0, p1 * n + q0, p0 * n + q1, p1 * n + q1),
+            ((1.0 - tp) * (1.0 - tq), tp * (1.0 - tq), (1.0 - tp) * tq, tp * tq), 4)
 
 
 @_jit
-def _look_row(table, s, w, j):
-    return w[0] * table[s[0], j] + w[1] * table[s[1], j] + w[2] * table[s[2], j] + w[3] * table[s[3], j]
+def _look(table, s, w, nc, j, i):
+    """Blend of ``table[s[c], j, i]`` over the parameter corners (``Marginal2D._lookup``)."""
+    v = w[0] * table[s[0], j, i]
+    for c in range(1, nc):
+        v += w[c] * table[s[c], j, i]
+    return v
 
 
 @_jit
-def _invert(data, cond, marg, normalized, s, w, x, y):
+def _look_row(table, s, w, nc, j):
+    v = w[0] * table[s[0], j]
+    for c in range(1, nc):
+        v += w[c] * table[s[c], j]
+    return v
+
+
+@_jit
+def _invert(data, cond, marg, normalized, s, w, nc, x, y):
     """``Marginal2D.invert`` (u1, u2) at ``(x, y)``: the conditional and marginal CDFs of
     the bilinear patch, blended over the parameter corners."""
     H, W = data.shape[1], data.shape[2]
     i, fx = _cell(x, W)
     j, fy = _cell(y, H)
-    c0 = _lerp(_look(data, s, w, j, i), _look(data, s, w, j + 1, i), fy)
-    c1 = _lerp(_look(data, s, w, j, i + 1), _look(data, s, w, j + 1, i + 1), fy)
+    c0 = _lerp(_look(data, s, w, nc, j, i), _look(data, s, w, nc, j + 1, i), fy)
+    c1 = _lerp(_look(data, s, w, nc, j, i + 1), _look(data, s, w, nc, j + 1, i + 1), fy)
     u1 = fx * _lerp(c0, c1, 0.5 * fx) / (W - 1)
-    u1 = u1 + _lerp(_look(cond, s, w, j, i), _look(cond, s, w, j + 1, i), fy)
-    r0, r1 = _look(cond, s, w, j, W - 1), _look(cond, s, w, j + 1, W - 1)
+    u1 = u1 + _lerp(_look(cond, s, w, nc, j, i), _look(cond, s, w, nc, j + 1, i), fy)
+    r0, r1 = _look(cond, s, w, nc, j, W - 1), _look(cond, s, w, nc, j + 1, W - 1)
     u1 = u1 / _lerp(r0, r1, fy)
-    u2 = fy * _lerp(r0, r1, 0.5 * fy) / (H - 1) + _look_row(marg, s, w, j)
+    u2 = fy * _lerp(r0, r1, 0.5 * fy) / (H - 1) + _look_row(marg, s, w, nc, j)
     if not normalized:
-        u2 = u2 / _look_row(marg, s, w, H - 1)
+        u2 = u2 / _look_row(marg, s, w, nc, H - 1)
     return u1, u2
 
 
@@ -155,27 +174,18 @@ def _rgl_eval_cos(wi, wo, out, phi_nodes, theta_nodes, vndf, cond, marg, normali
     um_x = _theta2u(theta_m)
     um_y = _phi2u(phi_m - phi_v if isotropic else phi_m)
     um_y = um_y - math.floor(um_y)
-    p0, p1, tp = _node(phi_nodes, phi_v)
-    q0, q1, tq = _node(theta_nodes, theta_v)
-    n = len(theta_nodes)
-    s = (p0 * n + q0, p1 * n + q0, p0 * n + q1, p1 * n + q1)
-    w = ((1.0 - tp) * (1.0 - tq), tp * (1.0 - tq), (1.0 - tp) * tq, tp * tq)
-    s1, s2 = _invert(vndf, cond, marg, normalized, s, w, um_x, um_y)
-    H, W = rgb.shape[1], rgb.shape[2]
+    s, w, nc = _corners(phi_nodes, theta_nodes, phi_v, theta_v)
+    s1, s2 = _invert(vndf, cond, marg, normalized, s, w, nc, um_x, um_y)
+    H, W = rgb.shape[2], rgb.shape[3]
     i, fx = _cell(s1, W)
     j, fy = _cell(s2, H)
     scale = 1.0
     if jacobian:
         scale = _bilinear(ndf, um_x, um_y) / (4.0 * _bilinear(sigma, _theta2u(theta_v), _phi2u(phi_v)))
     for c in range(3):
-        v00 = w[0] * rgb[s[0], j, i, c] + w[1] * rgb[s[1], j, i, c] + w[2] * rgb[s[2], j, i, c] \
-            + w[3] * rgb[s[3], j, i, c]
-        v10 = w[0] * rgb[s[0], j, i + 1, c] + w[1] * rgb[s[1], j, i + 1, c] + w[2] * rgb[s[2], j, i + 1, c] \
-            + w[3] * rgb[s[3], j, i + 1, c]
-        v01 = w[0] * rgb[s[0], j + 1, i, c] + w[1] * rgb[s[1], j + 1, i, c] + w[2] * rgb[s[2], j + 1, i, c] \
-            + w[3] * rgb[s[3], j + 1, i, c]
-        v11 = w[0] * rgb[s[0], j + 1, i + 1, c] + w[1] * rgb[s[1], j + 1, i + 1, c] \
-            + w[2] * rgb[s[2], j + 1, i + 1, c] + w[3] * rgb[s[3], j + 1, i + 1, c]
+        t = rgb[c]
+        v00, v10 = _look(t, s, w, nc, j, i), _look(t, s, w, nc, j, i + 1)
+        v01, v11 = _look(t, s, w, nc, j + 1, i), _look(t, s, w, nc, j + 1, i + 1)
         v = _lerp(_lerp(v00, v10, fx), _lerp(v01, v11, fx), fy)
         if clip_negative:
             v = max(v, 0.0)

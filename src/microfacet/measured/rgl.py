@@ -152,10 +152,11 @@ class RGLBRDF(MeasuredBRDF):
 
     @functools.cached_property
     def _tables(self) -> tuple:
-        """The arrays of the compiled loop: parameter nodes, VNDF data and CDFs, RGB, NDF, sigma."""
+        """The arrays of the compiled loop: parameter nodes, VNDF data and CDFs, RGB
+        (channels first), NDF, sigma."""
         v = self._vndf
         return (v.params[0], v.params[1], np.ascontiguousarray(v.data[..., 0]), v.cond, v.marg, v.normalized,
-                np.ascontiguousarray(self._rgb.data), self._ndf.data[0, :, :, 0].copy(),
+                np.ascontiguousarray(np.moveaxis(self._rgb.data, -1, 0)), self._ndf.data[0, :, :, 0].copy(),
                 self._sigma.data[0, :, :, 0].copy())
 
     def _kernel(self):
