@@ -152,12 +152,12 @@ class RGLBRDF(MeasuredBRDF):
 
     @functools.cached_property
     def _tables(self) -> tuple:
-        """The arrays of the compiled loop: parameter nodes, VNDF data and CDFs, RGB
-        (channels first), NDF, sigma."""
+        """The arrays of the compiled loop (:func:`._kernels._invert`): parameter nodes,
+        VNDF ``(value, conditional CDF)`` pairs, row integrals, marginal CDF, RGB, NDF, sigma."""
         v = self._vndf
-        return (v.params[0], v.params[1], np.ascontiguousarray(v.data[..., 0]), v.cond, v.marg, v.normalized,
-                np.ascontiguousarray(np.moveaxis(self._rgb.data, -1, 0)), self._ndf.data[0, :, :, 0].copy(),
-                self._sigma.data[0, :, :, 0].copy())
+        vc = np.stack([v.data[..., 0], v.cond], axis=-1)
+        return (v.params[0], v.params[1], vc, np.ascontiguousarray(v.cond[..., -1]), v.marg, v.normalized,
+                self._rgb.data, self._ndf.data[0, :, :, 0].copy(), self._sigma.data[0, :, :, 0].copy())
 
     def _kernel(self):
         k = compiled_kernels()
