@@ -269,7 +269,8 @@ def _clamped(u, n):
 
 @_jit
 def _periodic(u, n):
-    """Nodes and upper weight on a periodic axis of ``n`` nodes (``u`` already in [0, n))."""
+    """Nodes and upper weight on a periodic axis of ``n`` nodes, ``u`` in ``[0, n]`` (``n``
+    is node 0 with weight 0, as ``np.mod(u, n) = 0``)."""
     fl = math.floor(u)
     i0 = int(fl) % n
     return i0, (i0 + 1) % n, u - fl
@@ -283,17 +284,18 @@ def _merl_corners(ix, iy, iz, ox, oy, oz, rows, weights, k):
     n2 = hx * hx + hy * hy + hz * hz
     inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
     hx, hy, hz = hx * inv, hy * inv, hz * inv
-    r = math.hypot(hx, hy)
+    r = math.sqrt(hx * hx + hy * hy)                 # hypot of unit vectors (to an ulp)
     cos_ph, sin_ph = (1.0, 0.0) if r == 0.0 else (hx / r, hy / r)
     a = cos_ph * ix + sin_ph * iy
     b = cos_ph * iy - sin_ph * ix
     dx, dz = hz * a - r * iz, r * a + hz * iz
     theta_h = math.atan2(r, hz)
-    theta_d = math.atan2(math.hypot(dx, b), dz)
-    phi_d = math.atan2(b, dx) % math.pi              # Python's % is np.mod
+    theta_d = math.atan2(math.sqrt(dx * dx + b * b), dz)
+    phi_d = math.atan2(b, dx)
+    phi_d = phi_d + math.pi if phi_d < 0.0 else phi_d   # np.mod(phi_d, pi), up to pi itself
     h0, h1, th = _clamped(_NH * math.sqrt(max(theta_h, 0.0) / _HALF_PI), _NH)
     d0, d1, td = _clamped(_ND * (theta_d / _HALF_PI), _ND)
-    p0, p1, tp = _periodic((_NP * ((phi_d % math.pi) / math.pi)) % _NP, _NP)
+    p0, p1, tp = _periodic(_NP * (phi_d / math.pi), _NP)
     q = 0
     for ih, wh in ((h0, 1 - th), (h1, th)):
         for jd, wd in ((d0, 1 - td), (d1, td)):
@@ -303,12 +305,19 @@ def _merl_corners(ix, iy, iz, ox, oy, oz, rows, weights, k):
 
 
 @_jit
+def _phi_unit(phi):
+    """``np.mod(phi / PHI_STEP, 48)`` for ``phi`` in ``[-pi, pi]`` (up to 48 itself)."""
+    u = phi / _PHI_STEP
+    return u + _NF if u < 0.0 else u
+
+
+@_jit
 def _utia_corners(ix, iy, iz, ox, oy, oz, rows, weights, k):
     """The 16 quadrilinear corners of ``UTIABRDF.eval`` in ``(theta_i, phi_i, theta_v, phi_v)``."""
-    lo0, hi0, t0 = _clamped(math.atan2(math.hypot(ix, iy), iz) / _THETA_STEP, _NT)
-    lo1, hi1, t1 = _periodic((math.atan2(iy, ix) / _PHI_STEP) % _NF, _NF)
-    lo2, hi2, t2 = _clamped(math.atan2(math.hypot(ox, oy), oz) / _THETA_STEP, _NT)
-    lo3, hi3, t3 = _periodic((math.atan2(oy, ox) / _PHI_STEP) % _NF, _NF)
+    lo0, hi0, t0 = _clamped(math.atan2(math.sqrt(ix * ix + iy * iy), iz) / _THETA_STEP, _NT)
+    lo1, hi1, t1 = _periodic(_phi_unit(math.atan2(iy, ix)), _NF)
+    lo2, hi2, t2 = _clamped(math.atan2(math.sqrt(ox * ox + oy * oy), oz) / _THETA_STEP, _NT)
+    lo3, hi3, t3 = _periodic(_phi_unit(math.atan2(oy, ox)), _NF)
     lo, hi, t = (lo0, lo1, lo2, lo3), (hi0, hi1, hi2, hi3), (t0, t1, t2, t3)
     for corner in range(16):                        # axis bits as in UTIABRDF.eval
         idx, w = 0, 1.0
