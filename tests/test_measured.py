@@ -475,14 +475,16 @@ KERNEL_RTOL = 1e-10
 
 def kernel_pairs(rng, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(wi, wo, u)``: ``n`` pairs over the whole sphere (a quarter of each below the
-    horizon), a tenth grazing (``|cos theta|`` down to 1e-12), some at the pole and
-    some mirror pairs (``wi = -wo``: zero half vector)."""
+    horizon), a tenth grazing (``|cos theta|`` down to 1e-12), some at the pole, some at
+    the azimuth seam (``phi = +-pi`` and just below) and some mirror pairs (``wi = -wo``:
+    zero half vector)."""
     def dirs():
         cos = rng.uniform(-1, 1, n)
         graze = rng.random(n) < 0.1
         cos[graze] = np.copysign(10.0 ** rng.uniform(-12, -2, graze.sum()), cos[graze])
         w = spherical_to_cartesian(np.arccos(cos), rng.uniform(-np.pi, np.pi, n))
         w[:20] = [0.0, 0.0, 1.0]
+        w[40:60] = [[-0.6, 0.0, 0.8], [-0.6, -0.0, 0.8], [-0.6, -1e-300, 0.8], [-0.6, 1e-17, 0.8]] * 5
         return w
     wi, wo = dirs(), dirs()
     wi[20:40] = -wo[20:40]
