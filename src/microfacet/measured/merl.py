@@ -138,7 +138,9 @@ class MERLBRDF(MeasuredBRDF):
         self.theta_d = np.arange(SHAPE[1]) / SHAPE[1] * (np.pi / 2)
         self.phi_d = np.arange(SHAPE[2]) / SHAPE[2] * np.pi
         # one gather per corner: [R, G, B, 1] on measured samples, 0 on unmeasured ones
-        self._table = np.concatenate([values, np.ones(SHAPE + (1,))], axis=-1).reshape(-1, 4)
+        table = np.empty(SHAPE + (4,))          # C order: a sample's 4 values share a cache line
+        table[..., :3], table[..., 3] = values, 1.0
+        self._table = table.reshape(-1, 4)
         self._table *= valid.reshape(-1, 1)
 
     def _corners(self, wi, wo):
