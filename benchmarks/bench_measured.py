@@ -21,7 +21,8 @@ sampling (see :mod:`microfacet.measured.base`).
 
 Usage::
 
-    python benchmarks/bench_measured.py [--n 1000000] [--repeats 3] [--numpy] [--json out.json]
+    python benchmarks/bench_measured.py [--data ../shared/data] [--n 1000000] [--repeats 3]
+                                        [--numpy] [--mitsuba auto|llvm_ad_rgb|none] [--json out.json]
 """
 from __future__ import annotations
 
@@ -79,15 +80,15 @@ def synthetic_utia(folder: Path) -> Path:
 
 
 def bench_ours(path: Path, wi, wo, u, repeats: int, numpy: bool) -> list[dict]:
-    """Rows ``{file, format, impl, op, best_s, median_s, first_s}`` for load, eval, pdf,
-    sample (compiled) and, with ``numpy``, eval and sample of the NumPy reference."""
+    """Rows ``{file, format, impl, op, best_s, median_s, first_s, cpu_s}`` for load, eval,
+    pdf, sample (compiled) and, with ``numpy``, eval and sample of the NumPy reference."""
     m = mf.measured.load(path)
     ops = {"load": lambda: mf.measured.load(path), "eval": lambda: m.eval(wi, wo),
            "pdf": lambda: m.pdf(wi, wo), "sample": lambda: m.sample(u, wo)}
     rows = [{"file": path.name, "format": m.format, "impl": "microfacet", "op": op,
              **time_it(fn, repeats)} for op, fn in ops.items()]
     if numpy:
-        kernels.AVAILABLE, available = False, kernels.AVAILABLE
+        available, kernels.AVAILABLE = kernels.AVAILABLE, False     # the NumPy path
         try:
             rows += [{"file": path.name, "format": m.format, "impl": "microfacet numpy", "op": op,
                       **time_it(ops[op], repeats)} for op in ("eval", "sample")]

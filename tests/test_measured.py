@@ -562,3 +562,24 @@ def test_kernels_rgl_synthetic(tmp_path, phi_i, clip, monkeypatch):
 def test_kernels_rgl_real(name, monkeypatch):
     assert_kernels_match(mf.measured.load(needs_data("rgl", name)), np.random.default_rng(24), monkeypatch,
                          atol=1e-13)
+
+
+def test_kernels_parallel_batches(tmp_path, smooth_file):
+    """A batch above ``PARALLEL_MIN`` (Numba's threads, blocks split among them) gives the
+    values of the same pairs evaluated in small single-threaded batches."""
+    pytest.importorskip("numba")
+    from microfacet import kernels
+    if not kernels.AVAILABLE:
+        pytest.skip("Numba disabled (MICROFACET_NUMBA=0)")
+    rng = np.random.default_rng(25)
+    path = tmp_path / "synthetic.bsdf"
+    path.write_bytes(write_tensor_file(synthetic_rgl(rng)))
+    n = kernels.PARALLEL_MIN + 37                          # not a multiple of the block size
+    wi, wo, u = kernel_pairs(rng, n)
+    for m in (mf.measured.load(path), mf.measured.load(smooth_file)):
+        chunks = range(0, n, 4096)
+        np.testing.assert_array_equal(m.eval(wi, wo), np.concatenate([m.eval(wi[i:i + 4096], wo[i:i + 4096])
+                                                                      for i in chunks]))
+        big = m.sample(u, wo)
+        for part, whole in zip(zip(*(m.sample(u[i:i + 4096], wo[i:i + 4096]) for i in chunks)), big):
+            np.testing.assert_array_equal(np.concatenate(part), whole)

@@ -6,8 +6,9 @@ and ``weight = eval_cos / pdf = pi f_r``. Directions follow the package conventi
 ``wi`` is the light, ``wo`` the view, ``(..., 3)`` float64 in the local frame.
 
 ``eval``, ``eval_cos`` and ``sample`` run one compiled parallel loop (:mod:`._kernels`,
-Numba, compiled on first use) when Numba is available (:data:`microfacet.kernels.AVAILABLE`);
-the NumPy code of each reader is the reference they are tested against.
+Numba, compiled on first use; batches below ``microfacet.kernels.PARALLEL_MIN`` on one
+thread) when Numba is available (:data:`microfacet.kernels.AVAILABLE`); the NumPy code of
+each reader is the reference they are tested against.
 """
 from __future__ import annotations
 
@@ -105,8 +106,8 @@ class MeasuredBRDF(BRDF):
             return self._eval_cos_numpy(wi, wo) if cosine else self._eval_numpy(wi, wo)
         shape = np.broadcast_shapes(wi.shape, wo.shape)
         out = np.empty(shape)
-        k[0](_rows(np.broadcast_to(wi, shape), 3), _rows(np.broadcast_to(wo, shape), 3), cosine,
-             out.reshape(-1, 3), *k[2])
+        kernels._launch(k[0], out.size // 3, _rows(np.broadcast_to(wi, shape), 3),
+                        _rows(np.broadcast_to(wo, shape), 3), cosine, out.reshape(-1, 3), *k[2])
         return out
 
     def eval(self, wi, wo) -> np.ndarray:
@@ -131,8 +132,9 @@ class MeasuredBRDF(BRDF):
         k = self._kernel()
         if k is not None:
             wi, weight, pdf = np.empty(shape + (3,)), np.empty(shape + (3,)), np.empty(shape)
-            k[1](_rows(np.broadcast_to(u, shape + (2,)), 2), _rows(np.broadcast_to(wo, shape + (3,)), 3),
-                 wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1), *k[2])
+            kernels._launch(k[1], pdf.size, _rows(np.broadcast_to(u, shape + (2,)), 2),
+                            _rows(np.broadcast_to(wo, shape + (3,)), 3), wi.reshape(-1, 3), weight.reshape(-1, 3),
+                            pdf.reshape(-1), *k[2])
             return wi, weight, pdf
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         wo = np.broadcast_to(wo, shape + (3,))
