@@ -60,6 +60,7 @@ def _cosine_warp(u0, u1):
 # ------------------------------------------------------------------- RGL (Marginal2D)
 @_jit
 def _lerp(a, b, t):
+    """``a + (b - a) t`` (``marginal2d._lerp``)."""
     return a + (b - a) * t
 
 
@@ -71,11 +72,13 @@ def _elevation(x, y, z):
 
 @_jit
 def _theta2u(theta):
+    """``sqrt(2 theta / pi)`` (:func:`.rgl.theta2u`)."""
     return math.sqrt(max(theta, 0.0) * _TWO_OVER_PI)
 
 
 @_jit
 def _phi2u(phi):
+    """``(phi + pi) / (2 pi)`` (:func:`.rgl.phi2u`)."""
     return (phi + math.pi) / _TWO_PI
 
 
