@@ -460,3 +460,126 @@ if __name__ == "__main__":                          # print the Mitsuba cross-ch
             worst_abs, worst_rel, used = check_against_mitsuba(mi, path, np.random.default_rng(8), 300)
             print(f"{name}: max |ours - mitsuba| / max|mitsuba| = {worst_abs:.2e}, max relative "
                   f"error (values > 1 % of max) = {worst_rel:.2e}, share of tolerance used {used:.2f}")
+
+
+# ================================================= compiled loops against the NumPy reference
+#: The compiled loops repeat the reference's operations in its order; they differ only where
+#: NumPy's SIMD arcsin / arctan2 differ from libm's (by an ulp, in ~8 % of the inputs).
+#: MERL and UTIA interpolate linearly in those angles: relative error ~1e-14. RGL's VNDF
+#: warp amplifies a coordinate error by up to ~1e5 at grazing angles, where the values are
+#: also cancellations (interpolants crossing zero, D ~ 1e-11): there the tolerance has an
+#: absolute part, 1e-13 of the largest value (measured: <= 6e-15 of it; relative error
+#: <= 1.1e-11 on values above 1e-6 of the largest, on 1e5 pairs of the real files).
+KERNEL_RTOL = 1e-10
+
+
+def kernel_pairs(rng, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(wi, wo, u)``: ``n`` pairs over the whole sphere (a quarter of each below the
+    horizon), a tenth grazing (``|cos theta|`` down to 1e-12), some at the pole, some at
+    the azimuth seam (``phi = +-pi`` and just below) and some mirror pairs (``wi = -wo``:
+    zero half vector)."""
+    def dirs():
+        cos = rng.uniform(-1, 1, n)
+        graze = rng.random(n) < 0.1
+        cos[graze] = np.copysign(10.0 ** rng.uniform(-12, -2, graze.sum()), cos[graze])
+        w = spherical_to_cartesian(np.arccos(cos), rng.uniform(-np.pi, np.pi, n))
+        w[:20] = [0.0, 0.0, 1.0]
+        w[40:60] = [[-0.6, 0.0, 0.8], [-0.6, -0.0, 0.8], [-0.6, -1e-300, 0.8], [-0.6, 1e-17, 0.8]] * 5
+        return w
+    wi, wo = dirs(), dirs()
+    wi[20:40] = -wo[20:40]
+    u = rng.random((n, 2))
+    u[:10] = [[0.5, 0.5], [0, 0], [1, 1], [0, 1], [1, 0], [0.5, 0], [0, 0.5], [1, 0.5], [0.5, 1], [0.25, 0.75]]
+    return wi, wo, u
+
+
+def assert_kernels_match(m, rng, monkeypatch, n=10_000, atol=0.0):
+    """eval, eval_cos and sample of the compiled loops equal the NumPy reference:
+    ``KERNEL_RTOL`` relative to each value plus ``atol`` times the largest one, and
+    ``KERNEL_RTOL`` relative on values above 1e-6 of the largest."""
+    pytest.importorskip("numba")
+    from microfacet import kernels
+    if not kernels.AVAILABLE:
+        pytest.skip("Numba disabled (MICROFACET_NUMBA=0)")
+    wi, wo, u = kernel_pairs(rng, n)
+    ours = [m.eval(wi, wo), m.eval_cos(wi, wo), *m.sample(u, wo)]
+    monkeypatch.setattr(kernels, "AVAILABLE", False)
+    assert m._kernel() is None
+    ref = [m.eval(wi, wo), m.eval_cos(wi, wo), *m.sample(u, wo)]
+    monkeypatch.undo()
+    for name, a, b in zip(("eval", "eval_cos", "wi", "weight", "pdf"), ours, ref):
+        assert a.shape == b.shape and np.all(np.isfinite(a)), name
+        scale = np.abs(b).max()
+        np.testing.assert_allclose(a, b, rtol=KERNEL_RTOL, atol=atol * scale, err_msg=name)
+        big = np.abs(b) > 1e-6 * scale
+        np.testing.assert_allclose(a[big], b[big], rtol=KERNEL_RTOL, atol=0, err_msg=name)
+    assert np.count_nonzero(ref[0]) > n // 3          # not vacuous: most upper pairs are nonzero
+    # leading axes broadcast: the (5, 4) grid of pairs is the flat batch of the same pairs
+    grid = m.eval(wi[:5, None], wo[None, :4])
+    flat = m.eval(np.repeat(wi[:5], 4, axis=0), np.tile(wo[:4], (5, 1)))
+    np.testing.assert_array_equal(grid.reshape(-1, 3), flat)
+
+
+def test_kernels_merl(tmp_path, linear_raw, smooth_file, monkeypatch):
+    rng = np.random.default_rng(20)
+    assert_kernels_match(mf.measured.load(smooth_file), rng, monkeypatch)
+    raw = linear_raw.copy()
+    raw[:, 40:50] = -1.0                           # unmeasured samples: renormalized weights, zeros
+    raw[2, 10, 20:40] = -1.0
+    path = tmp_path / "holes.binary"
+    path.write_bytes(merl_bytes(raw))
+    assert_kernels_match(mf.measured.load(path), rng, monkeypatch)
+
+
+@pytest.mark.parametrize("name", ["nickel.binary.gz", "violet-acrylic.binary.gz"])
+def test_kernels_merl_real(name, monkeypatch):
+    assert_kernels_match(mf.measured.load(needs_data("merl", name)), np.random.default_rng(21), monkeypatch)
+
+
+def test_kernels_utia(tmp_path, monkeypatch):
+    path = tmp_path / "synthetic.bin"
+    path.write_bytes(utia_bytes(utia_function))
+    assert_kernels_match(mf.measured.load(path), np.random.default_rng(22), monkeypatch)
+
+
+@pytest.mark.parametrize("phi_i, clip", [((0.0,), False), ((0.0, np.pi), True),
+                                         (np.linspace(-np.pi, 0, 5), False), (np.linspace(-np.pi / 2, 0, 3), True)])
+def test_kernels_rgl_synthetic(tmp_path, phi_i, clip, monkeypatch):
+    rng = np.random.default_rng(23)
+    fields = synthetic_rgl(rng, phi_i=phi_i)
+    path = tmp_path / "synthetic.bsdf"
+    path.write_bytes(write_tensor_file(fields))
+    m = mf.measured.load(path)
+    m.clip_negative = clip
+    assert m.reduction == {1: 0, 2: 0, 5: 2, 3: 4}[len(phi_i)]
+    assert_kernels_match(m, rng, monkeypatch, atol=1e-13)
+    fields["jacobian"] = np.array([0], np.uint8)          # tables without the NDF / sigma factor
+    path.write_bytes(write_tensor_file(fields))
+    assert_kernels_match(mf.measured.load(path), rng, monkeypatch, atol=1e-13)
+
+
+@pytest.mark.parametrize("name", ["cc_ibiza_sunset_rgb.bsdf", "paper_white_rgb.bsdf"])
+def test_kernels_rgl_real(name, monkeypatch):
+    assert_kernels_match(mf.measured.load(needs_data("rgl", name)), np.random.default_rng(24), monkeypatch,
+                         atol=1e-13)
+
+
+def test_kernels_parallel_batches(tmp_path, smooth_file):
+    """A batch above ``PARALLEL_MIN`` (Numba's threads, blocks split among them) gives the
+    values of the same pairs evaluated in small single-threaded batches."""
+    pytest.importorskip("numba")
+    from microfacet import kernels
+    if not kernels.AVAILABLE:
+        pytest.skip("Numba disabled (MICROFACET_NUMBA=0)")
+    rng = np.random.default_rng(25)
+    path = tmp_path / "synthetic.bsdf"
+    path.write_bytes(write_tensor_file(synthetic_rgl(rng)))
+    n = kernels.PARALLEL_MIN + 37                          # not a multiple of the block size
+    wi, wo, u = kernel_pairs(rng, n)
+    for m in (mf.measured.load(path), mf.measured.load(smooth_file)):
+        chunks = range(0, n, 4096)
+        np.testing.assert_array_equal(m.eval(wi, wo), np.concatenate([m.eval(wi[i:i + 4096], wo[i:i + 4096])
+                                                                      for i in chunks]))
+        big = m.sample(u, wo)
+        for part, whole in zip(zip(*(m.sample(u[i:i + 4096], wo[i:i + 4096]) for i in chunks)), big):
+            np.testing.assert_array_equal(np.concatenate(part), whole)

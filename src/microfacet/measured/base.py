@@ -4,6 +4,11 @@ Measured data are tables, not lobes: every reader's BRDF is importance-sampled b
 cosine-weighted hemisphere (Malley's method), so ``pdf(wi, wo) = max(0, cos theta_i) / pi``
 and ``weight = eval_cos / pdf = pi f_r``. Directions follow the package convention:
 ``wi`` is the light, ``wo`` the view, ``(..., 3)`` float64 in the local frame.
+
+``eval``, ``eval_cos`` and ``sample`` run one compiled parallel loop (:mod:`._kernels`,
+Numba, compiled on first use; batches below ``microfacet.kernels.PARALLEL_MIN`` on one
+thread) when Numba is available (:data:`microfacet.kernels.AVAILABLE`); the NumPy code of
+each reader is the reference they are tested against.
 """
 from __future__ import annotations
 
@@ -12,12 +17,28 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import kernels
 from ..brdf import BRDF, _uniforms
 from ..brdf import _dirs as as_dirs   # the one direction check of every BRDF
 from ..errors import MicrofacetError
 from ..geometry import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 
-__all__ = ["MeasuredBRDF", "read_bytes", "file_error", "check_finite", "as_dirs"]
+__all__ = ["MeasuredBRDF", "read_bytes", "file_error", "check_finite", "as_dirs", "compiled_kernels"]
+
+
+def compiled_kernels():
+    """The module of compiled loops (:mod:`._kernels`, imports Numba on first use), or
+    ``None`` without Numba, with ``MICROFACET_NUMBA=0`` or while
+    ``microfacet.kernels.AVAILABLE`` is False: then every reader runs its NumPy reference."""
+    if not kernels.AVAILABLE:
+        return None
+    from . import _kernels
+    return _kernels
+
+
+def _rows(a, k: int) -> np.ndarray:
+    """``a`` as a C-contiguous ``(N, k)`` float64 array (a copy only if needed)."""
+    return np.ascontiguousarray(np.reshape(a, (-1, k)), dtype=np.float64)
 
 
 def file_error(path, what: str) -> MicrofacetError:
@@ -43,8 +64,9 @@ def check_finite(path, values: np.ndarray, what: str) -> None:
 class MeasuredBRDF(BRDF):
     """Base of the tabulated readers: the BRDF protocol with cosine-hemisphere sampling.
 
-    Subclasses implement :meth:`eval` (``f_r``, RGB) or :meth:`eval_cos`; the other one
-    follows by the factor ``cos theta_i`` (0 below either horizon).
+    Subclasses implement the NumPy reference of ``f_r`` (``_eval_numpy``) or of ``f_r cos
+    theta_i`` (``_eval_cos_numpy``), the other one following by the factor ``cos theta_i``
+    (0 below either horizon), and ``_kernel``, the compiled loops of the same.
 
     Attributes
     ----------
@@ -62,10 +84,39 @@ class MeasuredBRDF(BRDF):
     def __repr__(self) -> str:
         return f"{type(self).__name__}({os.fspath(self.path)!r})"
 
+    def _kernel(self):
+        """``(eval loop, sample loop, tables)`` of the compiled path, or ``None``: then
+        :meth:`eval`, :meth:`eval_cos` and :meth:`sample` run the NumPy reference."""
+        return None
+
+    def _eval_numpy(self, wi, wo) -> np.ndarray:
+        """NumPy reference of ``f_r`` (unit, broadcastable ``wi``, ``wo``): ``f_r cos theta_i /
+        cos theta_i``, 0 below the horizon."""
+        fc, zi = self._eval_cos_numpy(wi, wo), wi[..., 2:3]
+        return np.divide(fc, zi, out=np.zeros(np.broadcast_shapes(fc.shape, zi.shape)), where=zi > 0)
+
+    def _eval_cos_numpy(self, wi, wo) -> np.ndarray:
+        """NumPy reference of ``f_r cos theta_i``: ``f_r max(cos theta_i, 0)``."""
+        return self._eval_numpy(wi, wo) * np.maximum(wi[..., 2:3], 0.0)
+
+    def _eval(self, wi, wo, cosine: bool) -> np.ndarray:
+        wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
+        k = self._kernel()
+        if k is None:
+            return self._eval_cos_numpy(wi, wo) if cosine else self._eval_numpy(wi, wo)
+        shape = np.broadcast_shapes(wi.shape, wo.shape)
+        out = np.empty(shape)
+        kernels._launch(k[0], out.size // 3, _rows(np.broadcast_to(wi, shape), 3),
+                        _rows(np.broadcast_to(wo, shape), 3), cosine, out.reshape(-1, 3), *k[2])
+        return out
+
+    def eval(self, wi, wo) -> np.ndarray:
+        """``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
+        return self._eval(wi, wo, False)
+
     def eval_cos(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (thesis: ``evalp``)."""
-        wi = as_dirs(wi, "wi")
-        return self.eval(wi, wo) * np.maximum(wi[..., 2:3], 0.0)
+        return self._eval(wi, wo, True)
 
     def pdf(self, wi, wo) -> np.ndarray:
         """Density of :meth:`sample`: ``cos theta_i / pi`` (0 if ``wo`` is below the horizon)."""
@@ -78,6 +129,13 @@ class MeasuredBRDF(BRDF):
         wo = as_dirs(wo, "wo")
         u = _uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
+        k = self._kernel()
+        if k is not None:
+            wi, weight, pdf = np.empty(shape + (3,)), np.empty(shape + (3,)), np.empty(shape)
+            kernels._launch(k[1], pdf.size, _rows(np.broadcast_to(u, shape + (2,)), 2),
+                            _rows(np.broadcast_to(wo, shape + (3,)), 3), wi.reshape(-1, 3), weight.reshape(-1, 3),
+                            pdf.reshape(-1), *k[2])
+            return wi, weight, pdf
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         wo = np.broadcast_to(wo, shape + (3,))
         pdf = self.pdf(wi, wo)

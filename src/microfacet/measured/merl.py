@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import half_vector
-from .base import MeasuredBRDF, as_dirs, check_finite, file_error
+from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_error
 
 __all__ = ["MERLBRDF", "SHAPE", "SCALE", "is_merl", "read_merl"]
 
@@ -138,7 +138,9 @@ class MERLBRDF(MeasuredBRDF):
         self.theta_d = np.arange(SHAPE[1]) / SHAPE[1] * (np.pi / 2)
         self.phi_d = np.arange(SHAPE[2]) / SHAPE[2] * np.pi
         # one gather per corner: [R, G, B, 1] on measured samples, 0 on unmeasured ones
-        self._table = np.concatenate([values, np.ones(SHAPE + (1,))], axis=-1).reshape(-1, 4)
+        table = np.empty(SHAPE + (4,))          # C order: a sample's 4 values share a cache line
+        table[..., :3], table[..., 3] = values, 1.0
+        self._table = table.reshape(-1, 4)
         self._table *= valid.reshape(-1, 1)
 
     def _corners(self, wi, wo):
@@ -166,11 +168,15 @@ class MERLBRDF(MeasuredBRDF):
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         return np.where(up[..., None], f, 0.0), np.where(up, cover, 0.0)
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def _eval_numpy(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo)``, RGB ``(..., 3)``: trilinear interpolation of the measured
         samples around the Rusinkiewicz coordinates of ``(wi, wo)``; 0 below either horizon
         or where no surrounding sample was measured."""
         return self._interpolate(wi, wo)[0]
+
+    def _kernel(self):
+        k = compiled_kernels()
+        return None if k is None else (k.eval_table, k.sample_table, (k.MERL, self._table))
 
     def coverage(self, wi, wo) -> np.ndarray:
         """Share of the trilinear weight on measured samples, in ``[0, 1]`` (0 below the

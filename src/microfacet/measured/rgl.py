@@ -25,9 +25,11 @@ plugin (``eval``) and rgl-epfl/brdf-loader (``powitacq_rgb``), with their conven
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
-from .base import MeasuredBRDF, as_dirs, check_finite, file_error
+from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_error
 from .marginal2d import Marginal2D
 from .tensor_file import read_tensor_file
 
@@ -148,10 +150,25 @@ class RGLBRDF(MeasuredBRDF):
                          np.ones_like(sx)], axis=-1)
         return wi * flip, wo * flip
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
+    @functools.cached_property
+    def _tables(self) -> tuple:
+        """The arrays of the compiled loop (:func:`._kernels._invert`): parameter nodes,
+        VNDF ``(value, conditional CDF)`` pairs, row integrals, marginal CDF, RGB, NDF, sigma."""
+        v = self._vndf
+        vc = np.stack([v.data[..., 0], v.cond], axis=-1)
+        return (v.params[0], v.params[1], vc, np.ascontiguousarray(v.cond[..., -1]), v.marg, v.normalized,
+                self._rgb.data, self._ndf.data[0, :, :, 0].copy(), self._sigma.data[0, :, :, 0].copy())
+
+    def _kernel(self):
+        k = compiled_kernels()
+        if k is None:
+            return None
+        return k.eval_rgl, k.sample_rgl, self._tables + (self.isotropic, self.reduction, self.jacobian,
+                                                         self.clip_negative)
+
+    def _eval_cos_numpy(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (Mitsuba's ``eval`` with
         ``si.wi = wo``); 0 below either horizon."""
-        wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         wi, wo = np.broadcast_arrays(wi, wo)
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         with np.errstate(divide="ignore", invalid="ignore"):     # masked by `up` below

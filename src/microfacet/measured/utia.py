@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import cartesian_to_spherical
-from .base import MeasuredBRDF, as_dirs, check_finite, file_error
+from .base import MeasuredBRDF, check_finite, compiled_kernels, file_error
 
 __all__ = ["UTIABRDF", "SHAPE", "N_BYTES", "is_utia", "read_utia", "srgb_decode"]
 
@@ -77,12 +77,15 @@ class UTIABRDF(MeasuredBRDF):
     def __init__(self, values: np.ndarray, path=""):
         super().__init__(path)
         self.values = values
-        self._flat = values.reshape(-1, 3)
+        self._flat = np.ascontiguousarray(values.reshape(-1, 3))
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def _kernel(self):
+        k = compiled_kernels()
+        return None if k is None else (k.eval_table, k.sample_table, (k.UTIA, self._flat))
+
+    def _eval_numpy(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo)``, RGB ``(..., 3)``: quadrilinear interpolation of the samples
         (``wi`` is UTIA's illumination, ``wo`` its view); 0 below either horizon."""
-        wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         wi, wo = np.broadcast_arrays(wi, wo)
         (ti, pi_), (tv, pv) = cartesian_to_spherical(wi), cartesian_to_spherical(wo)
         axes = (_theta_axis(ti), _phi_axis(pi_), _theta_axis(tv), _phi_axis(pv))
