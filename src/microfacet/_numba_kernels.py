@@ -8,6 +8,7 @@ possible. ``error_model="numpy"``: a division by zero gives inf/NaN (then masked
 NumPy, instead of raising; fastmath is off (the kernels equal the reference to 1e-12)."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -27,120 +28,190 @@ _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1], as in distribu
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 _pjit = numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 # ------------------------------------------------------------------------ helpers
-@_jit
-def _lambda(kind, r2, c):
-    """Smith Lambda of the warped direction ``(a, b, c)``, ``r2 = a^2 + b^2``, ``c > 0``
-    (Table 2.III; see ``lambda_warped``; Beckmann at ``v = c / sqrt(r2)``, 0 for ``r2 = 0``)."""
+@_inline
+def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
+    """``(a^2 + b^2, c)`` of the warped direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3)."""
+    a = ax * kx + rho * ay * ky
+    b = ay * s1 * ky
+    return a * a + b * b, kz - kx * xn - ky * yn
+
+
+@_inline
+def _lambda_pre(kind, r2, c):
+    """Smith Lambda of ``k' = (a, b, c)``, ``r2 = a^2 + b^2`` (Table 2.III; ``lambda_warped``),
+    at ``c = 1`` where ``c <= 0`` (callers mask those): GGX's in full, Beckmann's argument
+    ``v = c / sqrt(r2)`` only, which :func:`_lambda_post` finishes (its ``erfc``/``exp`` are
+    library calls that would keep the loop around them scalar)."""
+    c = c if c > 0.0 else 1.0
     if kind == GGX:
         return r2 / (2.0 * c * (math.sqrt(r2 + c * c) + c))
-    v = c / math.sqrt(r2)
+    return c / math.sqrt(r2)
+
+
+@_inline
+def _lambda_post(kind, v):
+    """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
+    ``v = inf``) of :func:`_lambda_pre`'s ``v``; GGX's value unchanged."""
+    if kind == GGX:
+        return v
     return max(0.5 * (math.exp(-v * v) / (v * _SQRT_PI) - math.erfc(v)), 0.0)
 
 
-@_jit
-def _ndf_std(kind, x, y, z):
-    """``P_std(x / z, y / z) / z^4`` for ``z > 0`` (Eq. 2.11, Table 2.II, division-free form)."""
-    if kind == GGX:
-        r = z * z + x * x + y * y
-        return 1.0 / (math.pi * r * r)
-    return math.exp(-(x * x + y * y) / (z * z) - 4.0 * math.log(z)) / math.pi
-
-
-@_jit
-def _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
-    """``D(h)`` (Eq. 2.11, 3.2) for ``hz > 0``: the standard NDF at the unsheared slope."""
+@_inline
+def _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
+    """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
+    (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)``, ``D = _ndf(kind, _ndf_post(e), scale)``:
+    GGX ``(1 / (pi r^2), 1 / det)``, ``r = z^2 + x^2 + y^2``; Beckmann ``((x^2 + y^2) / (2 z^2),
+    1 / (pi z^4 det))``, whose ``exp`` :func:`_ndf_post` takes."""
     x = (-hx - xn * hz) / ax
     y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) / (ax * ay * s1)
-    return _ndf_std(kind, x, y, hz) / (ax * ay * s1)
+    det = ax * ay * s1
+    if kind == GGX:
+        r = hz * hz + x * x + y * y
+        return 1.0 / (math.pi * r * r), 1.0 / det
+    z2 = hz * hz
+    return 0.5 * (x * x + y * y) / z2, 1.0 / (math.pi * z2 * z2 * det)
 
 
-@_jit
-def _lambda_c(kind, ax, ay, rho, s1, xn, yn, kx, ky, kz):
-    """``(Lambda(k), c_k)`` of the warped direction ``k' = (a, b, c)`` (Eq. 3.3); Lambda is
-    computed at ``c = 1`` where ``c_k <= 0`` (callers mask those)."""
-    a = ax * kx + rho * ay * ky
-    b = ay * s1 * ky
-    c = kz - kx * xn - ky * yn
-    return _lambda(kind, a * a + b * b, c if c > 0.0 else 1.0), c
+@_inline
+def _ndf_post(kind, e):
+    """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)``; GGX ``e``)."""
+    if kind == GGX:
+        return e
+    return math.exp(-e)
 
 
-@_jit
-def _fresnel(fk, p0, p1, c):
-    """One channel of an analytic Fresnel term at ``c = cos theta_d`` (Table 2.I; the formulas
-    of :mod:`microfacet.fresnel`): ``p0`` is ``f0`` (Schlick) or ``eta``, ``p1`` ``k`` (conductor)."""
-    if fk == IDEAL:
-        return 1.0
+@_inline
+def _ndf(kind, e, scale):
+    """``D`` (times any factor in ``scale``) from :func:`_ndf_post`'s ``e``; Beckmann's
+    ``exp(-(x^2 + y^2) / z^2)`` is taken as the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
+    so that ``D`` stays representable where the exponential alone underflows but ``/ z^4``
+    brings it back (as the reference's ``exp(-(x^2 + y^2) / z^2 - 4 log z)`` does)."""
+    if kind == GGX:
+        return e * scale
+    return e * scale * e
+
+
+@_inline
+def _schlick(f0, c):
+    """Schlick's ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I; :class:`~microfacet.fresnel.Schlick`)."""
+    m = 1.0 - min(max(c, 0.0), 1.0)
+    m2 = m * m
+    return f0 + (1.0 - f0) * (m2 * m2 * m)
+
+
+@_inline
+def _dielectric(eta, c):
+    """Dielectric Fresnel reflectance (Table 2.I; :class:`~microfacet.fresnel.Dielectric`),
+    1 under total internal reflection."""
     c = min(max(c, 0.0), 1.0)
-    if fk == SCHLICK:
-        m = 1.0 - c
-        m2 = m * m
-        return p0 + (1.0 - p0) * (m2 * m2 * m)
+    g2 = eta * eta + c * c - 1.0
+    g = math.sqrt(max(g2, 0.0))
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    f = 0.5 * a * a * (1.0 + b * b)
+    return 1.0 if (g2 < 0.0) | (not abs(f) < math.inf) else f
+
+
+@_inline
+def _conductor(eta, k, c):
+    """Conductor Fresnel reflectance (:func:`microfacet.fresnel.conductor_reflectance`) with
+    its two quotients in one: ``(R_s + R_p) / 2 = R_s t3 / (t3 + t4)``, ``R_s = (A - B) / (A + B)``."""
+    c = min(max(c, 0.0), 1.0)
     c2 = c * c
-    if fk == DIELECTRIC:
-        g2 = p0 * p0 + c2 - 1.0
-        g = math.sqrt(max(g2, 0.0))
-        a = (g - c) / (g + c)
-        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-        f = 0.5 * a * a * (1.0 + b * b)
-        return 1.0 if (g2 < 0.0 or not abs(f) < math.inf) else f
-    s2 = 1.0 - c2                                    # CONDUCTOR: conductor_reflectance
-    t1 = p0 * p0 - p1 * p1 - s2
-    a2b2 = math.sqrt(t1 * t1 + 4.0 * p0 * p0 * p1 * p1)
+    s2 = 1.0 - c2
+    t1 = eta * eta - k * k - s2
+    a2b2 = math.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
     ac2 = 2.0 * c * math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
-    rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
     t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
-    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _fresnel_rgb(fk, fp, tx, tv, c, out, j, scale):
-    """``out[j] = F(c) * scale`` per RGB channel: :func:`_fresnel`, or ``np.interp`` of the
-    :class:`~microfacet.fresnel.Tabulated` grid ``tx`` and values ``tv`` (clamped at the ends).
-    Inlined (Numba IR), so that the arrays are not passed, and reference-counted, per element."""
-    if fk == TABULATED:
-        n = tx.shape[0]
-        lo, hi = 0, n - 1
-        while hi - lo > 1:
-            mid = (lo + hi) >> 1
-            if tx[mid] <= c:
-                lo = mid
-            else:
-                hi = mid
-        for ch in range(3):
-            if c <= tx[0]:
-                f = tv[0, ch]
-            elif c >= tx[n - 1]:
-                f = tv[n - 1, ch]
-            else:
-                f = (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
-            out[j, ch] = f * scale
-    else:
-        for ch in range(3):
-            out[j, ch] = _fresnel(fk, fp[0, ch], fp[1, ch], c) * scale
+    return (a2b2 + c2 - ac2) * t3 / ((a2b2 + c2 + ac2) * (t3 + t4))
 
 
 @_jit
-def _smith(kind, ax, ay, rho, s1, xn, yn, shadowing, ix, iy, iz, ox, oy, oz):
-    """``(o.h, D G / (4 z_o))`` of one pair (Eq. 2.1 with F = 1; NDF Eq. 3.2, height-correlated
-    Smith G with the warped directions of Eq. 3.3), 0 where invalid (see ``_projected_numpy``)."""
-    hx, hy, hz = ix + ox, iy + oy, iz + oz
-    n2 = hx * hx + hy * hy + hz * hz
-    inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
-    hx, hy, hz = hx * inv, hy * inv, hz * inv
-    oh = ox * hx + oy * hy + oz * hz
-    lam, co = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ox, oy, oz)
-    ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
-    if shadowing:
-        lam_i, ci = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ix, iy, iz)
-        lam += lam_i
-        ok &= ci > 0.0
-    g = oz / (co * (1.0 + lam))
-    d = _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-    s = d * g / (4.0 * oz)
-    return oh, (s if ok else 0.0)
+def _interp(tx, tv, ch, c):
+    """``np.interp(c, tx, tv[:, ch])`` (clamped at the ends): one channel of
+    :class:`~microfacet.fresnel.Tabulated`."""
+    n = tx.shape[0]
+    if c <= tx[0]:
+        return tv[0, ch]
+    if c >= tx[n - 1]:
+        return tv[n - 1, ch]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if tx[mid] <= c:
+            lo = mid
+        else:
+            hi = mid
+    return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
+
+
+@_inline
+def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
+    """``buf[out_row + ch, k] = F_ch(buf[c_row, k]) * buf[s_row, k]`` for ``k < m``: the
+    Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv``
+    the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop per RGB channel
+    with the choice of the term outside it, so that the analytic terms vectorize."""
+    for ch in range(3):
+        p0, p1 = fp[0, ch], fp[1, ch]
+        if fk == IDEAL:
+            for k in range(m):
+                buf[out_row + ch, k] = buf[s_row, k]
+        elif fk == SCHLICK:
+            for k in range(m):
+                buf[out_row + ch, k] = _schlick(p0, buf[c_row, k]) * buf[s_row, k]
+        elif fk == DIELECTRIC:
+            for k in range(m):
+                buf[out_row + ch, k] = _dielectric(p0, buf[c_row, k]) * buf[s_row, k]
+        elif fk == CONDUCTOR:
+            for k in range(m):
+                buf[out_row + ch, k] = _conductor(p0, p1, buf[c_row, k]) * buf[s_row, k]
+        else:
+            for k in range(m):
+                buf[out_row + ch, k] = _interp(tx, tv, ch, buf[c_row, k]) * buf[s_row, k]
+
+
+@_inline
+def _projected_block(kind, shadowing, divide_cos_i, wi, wo, j0, m, ax, ay, rho, xn, yn, buf):
+    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``j0 + k``,
+    ``k < m`` (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
+    and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
+    without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
+    0 where invalid (see ``_projected_numpy``). Uses rows 0-4 of ``buf``."""
+    s1 = math.sqrt(1.0 - rho * rho)
+    for k in range(m):
+        j = j0 + k
+        ix, iy, iz = wi[j, 0], wi[j, 1], wi[j, 2]
+        ox, oy, oz = wo[j, 0], wo[j, 1], wo[j, 2]
+        hx, hy, hz = ix + ox, iy + oy, iz + oz
+        n2 = hx * hx + hy * hy + hz * hz
+        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
+        hx, hy, hz = hx * inv, hy * inv, hz * inv
+        oh = ox * hx + oy * hy + oz * hz
+        r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
+        r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
+        ok &= (ci > 0.0) | (not shadowing)
+        e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
+        f = scale / (4.0 * co * (iz if divide_cos_i else 1.0))
+        buf[0, k] = oh
+        buf[1, k] = _lambda_pre(kind, r2, co)
+        buf[2, k] = _lambda_pre(kind, r2_i, ci) if shadowing else 0.0
+        buf[3, k] = e
+        buf[4, k] = f if ok else 0.0
+    if kind != GGX:                                  # the library calls, in their own loop
+        for k in range(m):
+            buf[1, k] = _lambda_post(kind, buf[1, k])
+            buf[3, k] = _ndf_post(kind, buf[3, k])
+            if shadowing:
+                buf[2, k] = _lambda_post(kind, buf[2, k])
+    for k in range(m):
+        e, f = buf[3, k], buf[4, k]
+        buf[1, k] = _ndf(kind, e, f) / (1.0 + buf[1, k] + buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
 
 
 @_jit
@@ -273,90 +344,144 @@ def _unit_deviation(w):
     return m
 
 
-@_pjit
-def _smith_projected(wi, wo, kind, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-    """``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair into ``oh_out``, ``s_out`` (Eq. 2.1 with F = 1)."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wi.shape[0]):
-        oh, s = _smith(kind, ax, ay, rho, s1, xn, yn, shadowing,
-                       wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
-        oh_out[j] = oh
-        s_out[j] = s / wi[j, 2] if (divide_cos_i and s > 0.0) else s
+# ------------------------------------------------------------------------ kernels
+#: Directions per block: each thread works through blocks of this many pairs in a
+#: ``(rows, BLOCK)`` scratch array (cache-resident), one loop per stage, so that the
+#: stages without library calls vectorize and the extra memory is independent of N.
+BLOCK = 256
 
 
-@_pjit
-def _smith_eval(wi, wo, kind, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-    """``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wi.shape[0]):
-        oh, s = _smith(kind, ax, ay, rho, s1, xn, yn, shadowing,
-                       wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
-        if divide_cos_i and s > 0.0:
-            s = s / wi[j, 2]
-        _fresnel_rgb(fk, fp, tx, tv, oh, out, j, s)
+@_jit
+def _unit_deviation(w):
+    """``max | |w|^2 - 1 |`` over the rows of ``w (n, 3)``; ``inf`` at the first NaN/inf."""
+    m = 0.0
+    for j in range(w.shape[0]):
+        e = abs(w[j, 0] * w[j, 0] + w[j, 1] * w[j, 1] + w[j, 2] * w[j, 2] - 1.0)
+        if not e < math.inf:                  # NaN or inf
+            return math.inf
+        m = max(m, e)
+    return m
 
 
-@_pjit
-def _smith_pdf(wi, wo, kind, ax, ay, rho, xn, yn, out):
-    """Density of visible-normal sampling, ``D_o(h) / (4 o.h) = D(h) / (4 A(o))`` (Eq. 2.17,
-    ``A(o) = c_o (1 + Lambda(o))``), per pair into ``out``."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wi.shape[0]):
-        ix, iy, iz = wi[j, 0], wi[j, 1], wi[j, 2]
-        ox, oy, oz = wo[j, 0], wo[j, 1], wo[j, 2]
-        hx, hy, hz = ix + ox, iy + oy, iz + oz
-        n2 = hx * hx + hy * hy + hz * hz
-        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
-        hx, hy, hz = hx * inv, hy * inv, hz * inv
-        oh = ox * hx + oy * hy + oz * hz
-        lam, co = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ox, oy, oz)
-        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
-        d = _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-        p = d / (4.0 * co * (1.0 + lam))
-        out[j] = p if ok else 0.0
+@functools.cache
+def projected_kernel(kind):
+    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
+    ``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair (:func:`_projected_block`) of the
+    distribution ``kind`` (the kernels are compiled per kind, which is a constant in them)."""
+    @_pjit
+    def kernel(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
+        n = wi.shape[0]
+        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
+            j0 = blk * BLOCK
+            m = min(BLOCK, n - j0)
+            buf = np.empty((5, BLOCK))
+            _projected_block(kind, shadowing, divide_cos_i, wi, wo, j0, m, ax, ay, rho, xn, yn, buf)
+            for k in range(m):
+                oh_out[j0 + k] = buf[0, k]
+                s_out[j0 + k] = buf[1, k]
+    return kernel
 
 
-@_pjit
-def _smith_sample(u, wo, kind, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
-    """Visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
+@functools.cache
+def pdf_kernel(kind):
+    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
+    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
+    @_pjit
+    def kernel(wi, wo, ax, ay, rho, xn, yn, out):
+        n = wi.shape[0]
+        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
+            j0 = blk * BLOCK
+            m = min(BLOCK, n - j0)
+            buf = np.empty((5, BLOCK))
+            _projected_block(kind, False, False, wi, wo, j0, m, ax, ay, rho, xn, yn, buf)
+            for k in range(m):
+                out[j0 + k] = buf[1, k]
+    return kernel
+
+
+@functools.cache
+def eval_kernel(kind):
+    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
+    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
+    @_pjit
+    def kernel(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
+        n = wi.shape[0]
+        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
+            j0 = blk * BLOCK
+            m = min(BLOCK, n - j0)
+            buf = np.empty((5, BLOCK))
+            _projected_block(kind, shadowing, divide_cos_i, wi, wo, j0, m, ax, ay, rho, xn, yn, buf)
+            _fresnel_block(fk, fp, tx, tv, buf, m, 0, 1, 2)
+            for k in range(m):
+                out[j0 + k, 0] = buf[2, k]
+                out[j0 + k, 1] = buf[3, k]
+                out[j0 + k, 2] = buf[4, k]
+    return kernel
+
+
+@functools.cache
+def sample_kernel(kind):
+    """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
+    visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wo.shape[0]):
-        ox, oy, oz = wo[j, 0], wo[j, 1], wo[j, 2]
-        # warped view k' = (a, b, c) (Eq. 3.3) and its polar angle / azimuth
-        a = ax * ox + rho * ay * oy
-        b = ay * s1 * oy
-        c = max(oz - ox * xn - oy * yn, 0.0)
-        r2 = a * a + b * b
-        if r2 > 0.0:
-            inv_r = 1.0 / math.sqrt(r2)
-            cos_t, cp, sp = c / math.sqrt(r2 + c * c), a * inv_r, b * inv_r
-        else:
-            cos_t, cp, sp = 1.0, 1.0, 0.0
-        mx, my, mz = _visible_std(kind, u[j, 0], u[j, 1], cos_t)
-        mx, my = cp * mx - sp * my, sp * mx + cp * my
-        # slope map of Eq. 3.4 on the normal, then normalize
-        hx = ax * mx - xn * mz
-        hy = ay * (rho * mx + s1 * my) - yn * mz
-        hz = mz
-        n2 = hx * hx + hy * hy + hz * hz
-        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
-        hx, hy, hz = hx * inv, hy * inv, hz * inv
-        oh = ox * hx + oy * hy + oz * hz
-        ix, iy, iz = 2.0 * oh * hx - ox, 2.0 * oh * hy - oy, 2.0 * oh * hz - oz
-        wi_out[j, 0], wi_out[j, 1], wi_out[j, 2] = ix, iy, iz
-        lam_o, co = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ox, oy, oz)
-        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
-        area = co * (1.0 + lam_o)                    # A(o) = z_o / G1(o)
-        d = _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-        p = d / (4.0 * area)
-        ok &= p > 0.0
-        lam = lam_o
-        visible = ok                                 # G > 0: wi is not shadowed below its horizon
-        if shadowing:
-            lam_i, ci = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ix, iy, iz)
-            lam += lam_i
-            visible &= ci > 0.0
-        ratio = area / (co * (1.0 + lam))            # G / G1(o)
-        pdf_out[j] = p if ok else 0.0
-        _fresnel_rgb(fk, fp, tx, tv, oh, weight_out, j, ratio if visible else 0.0)
+    @_pjit
+    def kernel(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
+        n = wo.shape[0]
+        s1 = math.sqrt(1.0 - rho * rho)
+        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
+            j0 = blk * BLOCK
+            m = min(BLOCK, n - j0)
+            buf = np.empty((11, BLOCK))
+            for k in range(m):                       # polar angle and azimuth of the warped view
+                ox, oy, oz = wo[j0 + k, 0], wo[j0 + k, 1], wo[j0 + k, 2]
+                a = ax * ox + rho * ay * oy
+                b = ay * s1 * oy
+                c = max(oz - ox * xn - oy * yn, 0.0)
+                r2 = a * a + b * b
+                inv_r = 1.0 / math.sqrt(r2)
+                buf[0, k] = c / math.sqrt(r2 + c * c) if r2 > 0.0 else 1.0
+                buf[1, k] = a * inv_r if r2 > 0.0 else 1.0
+                buf[2, k] = b * inv_r if r2 > 0.0 else 0.0
+            for k in range(m):                       # the standard visible normal (library calls)
+                buf[3, k], buf[4, k], buf[5, k] = _visible_std(kind, u[j0 + k, 0], u[j0 + k, 1], buf[0, k])
+            for k in range(m):
+                ox, oy, oz = wo[j0 + k, 0], wo[j0 + k, 1], wo[j0 + k, 2]
+                cp, sp = buf[1, k], buf[2, k]
+                mx, my, mz = cp * buf[3, k] - sp * buf[4, k], sp * buf[3, k] + cp * buf[4, k], buf[5, k]
+                hx = ax * mx - xn * mz                # slope map of Eq. 3.4 on the normal
+                hy = ay * (rho * mx + s1 * my) - yn * mz
+                hz = mz
+                n2 = hx * hx + hy * hy + hz * hz
+                inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
+                hx, hy, hz = hx * inv, hy * inv, hz * inv
+                oh = ox * hx + oy * hy + oz * hz
+                ix, iy, iz = 2.0 * oh * hx - ox, 2.0 * oh * hy - oy, 2.0 * oh * hz - oz
+                r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+                ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
+                r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
+                e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
+                f = scale / (4.0 * co)
+                buf[0, k] = oh
+                buf[1, k] = _lambda_pre(kind, r2, co)
+                buf[2, k] = _lambda_pre(kind, r2_i, ci) if shadowing else 0.0
+                buf[3, k] = e
+                buf[4, k] = f if ok else 0.0
+                buf[5, k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
+                buf[6, k], buf[7, k], buf[8, k] = ix, iy, iz
+            if kind != GGX:                          # the library calls, in their own loop
+                for k in range(m):
+                    buf[1, k] = _lambda_post(kind, buf[1, k])
+                    buf[3, k] = _ndf_post(kind, buf[3, k])
+                    if shadowing:
+                        buf[2, k] = _lambda_post(kind, buf[2, k])
+            for k in range(m):
+                lam_o, e, f = buf[1, k], buf[3, k], buf[4, k]
+                p = _ndf(kind, e, f) / (1.0 + lam_o) if (f > 0.0) & (e > 0.0) else 0.0
+                ratio = (1.0 + lam_o) / (1.0 + lam_o + buf[2, k])     # G / G1(o)
+                pdf_out[j0 + k] = p
+                buf[2, k] = ratio if (p > 0.0) & (buf[5, k] > 0.0) else 0.0
+            _fresnel_block(fk, fp, tx, tv, buf, m, 0, 2, 3)
+            for k in range(m):
+                wi_out[j0 + k, 0], wi_out[j0 + k, 1], wi_out[j0 + k, 2] = buf[6, k], buf[7, k], buf[8, k]
+                weight_out[j0 + k, 0], weight_out[j0 + k, 1], weight_out[j0 + k, 2] = buf[3, k], buf[4, k], buf[5, k]
+    return kernel

@@ -114,55 +114,61 @@ def _brdf_params(brdf):
     return None if d is None or f is None else (d, f)
 
 
+def _shape_n(a, b):
+    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    return shape, int(np.prod(shape))
+
+
 def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
     """``(o.h, D G / (4 z_o) [/ z_i])`` by the compiled kernel, or ``None`` when it does
     not apply (no Numba, array parameters, another distribution)."""
     d = _smith_params(distribution)
     if d is None:
         return None
-    shape = np.broadcast_shapes(wi.shape[:-1], wo.shape[:-1])
-    n = int(np.prod(shape))
+    shape, n = _shape_n(wi, wo)
     oh, s = np.empty(n), np.empty(n)
-    _launch(_kernels()._smith_projected, n, _rows(wi, shape), _rows(wo, shape), *d, bool(shadowing),
+    _launch(_kernels().projected_kernel(d[0]), n, _rows(wi, shape), _rows(wo, shape), *d[1:], bool(shadowing),
             bool(divide_cos_i), oh, s)
     return oh.reshape(shape), s.reshape(shape)
 
 
-def smith_eval(brdf, wi, wo, divide_cos_i: bool):
+def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64):
     """``F D G / (4 z_o) [/ z_i]`` RGB ``(..., 3)`` of a Smith ``brdf`` (Eq. 2.1) by one
-    compiled pass with the Fresnel term inside, or ``None`` when the kernel does not apply
-    (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
+    compiled pass with the Fresnel term inside, written as ``dtype``, or ``None`` when the
+    kernel does not apply (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
     p = _brdf_params(brdf)
     if p is None:
         return None
-    shape = np.broadcast_shapes(wi.shape[:-1], wo.shape[:-1])
-    out = np.empty(shape + (3,))
-    _launch(_kernels()._smith_eval, out.size // 3, _rows(wi, shape), _rows(wo, shape), *p[0], brdf.shadowing,
-            bool(divide_cos_i), *p[1], out.reshape(-1, 3))
+    (kind, *d), (fk, *f) = p
+    shape, n = _shape_n(wi, wo)
+    out = np.empty(shape + (3,), dtype)
+    _launch(_kernels().eval_kernel(kind), n, _rows(wi, shape), _rows(wo, shape), *d, brdf.shadowing,
+            bool(divide_cos_i), fk, *f, out.reshape(-1, 3))
     return out
 
 
-def smith_pdf(brdf, wi, wo):
+def smith_pdf(brdf, wi, wo, dtype=np.float64):
     """Visible-normal sampling density ``D(h) / (4 A(o))`` (Eq. 2.17) of a Smith ``brdf`` by
-    one compiled pass, or ``None`` when the kernel does not apply."""
+    one compiled pass, written as ``dtype``, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
-    shape = np.broadcast_shapes(wi.shape[:-1], wo.shape[:-1])
-    out = np.empty(shape)
-    _launch(_kernels()._smith_pdf, out.size, _rows(wi, shape), _rows(wo, shape), *p[0], out.reshape(-1))
+    shape, n = _shape_n(wi, wo)
+    out = np.empty(shape, dtype)
+    _launch(_kernels().pdf_kernel(p[0][0]), n, _rows(wi, shape), _rows(wo, shape), *p[0][1:], out.reshape(-1))
     return out
 
 
-def smith_sample(brdf, u, wo):
+def smith_sample(brdf, u, wo, dtype=np.float64):
     """``(wi, weight, pdf)`` of visible-normal sampling (Sec. 2.2, 3.2, Eq. 2.23) of a Smith
-    ``brdf`` by one compiled pass, or ``None`` when the kernel does not apply."""
+    ``brdf`` by one compiled pass, written as ``dtype``, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
-    shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
-    wi, weight, pdf = np.empty(shape + (3,)), np.empty(shape + (3,)), np.empty(shape)
-    _launch(_kernels()._smith_sample, pdf.size, _rows(u, shape), _rows(wo, shape), *p[0], brdf.shadowing, *p[1],
+    (kind, *d), (fk, *f) = p
+    shape, n = _shape_n(u, wo)
+    wi, weight, pdf = np.empty(shape + (3,), dtype), np.empty(shape + (3,), dtype), np.empty(shape, dtype)
+    _launch(_kernels().sample_kernel(kind), n, _rows(u, shape), _rows(wo, shape), *d, brdf.shadowing, fk, *f,
             wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
     return wi, weight, pdf
 
