@@ -27,7 +27,6 @@ _GL_T, _GL_W = np.polynomial.legendre.leggauss(12)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1], as in distributions.beckmann
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-_pjit = numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
 _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
@@ -41,24 +40,39 @@ def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
 
 
 @_inline
-def _lambda_pre(kind, r2, c):
-    """Smith Lambda of ``k' = (a, b, c)``, ``r2 = a^2 + b^2`` (Table 2.III; ``lambda_warped``),
-    at ``c = 1`` where ``c <= 0`` (callers mask those): GGX's in full, Beckmann's argument
-    ``v = c / sqrt(r2)`` only, which :func:`_lambda_post` finishes (its ``erfc``/``exp`` are
-    library calls that would keep the loop around them scalar)."""
-    c = c if c > 0.0 else 1.0
+def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
+    """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
+    (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
+    mask those): ``(A, W, c)`` with ``A = 2 c_o (1 + Lambda_o)``, ``W / c = 2 c_o (1 + Lambda_o +
+    Lambda_i)`` (``Lambda_i = 0`` without shadowing), so that ``D / (4 A(o)) = D / (2 A)``,
+    ``D G / (4 z_o) = D c / (2 W)`` and ``G / G1(o) = c A / W``. GGX: ``1 + Lambda_k =
+    (c_k + q_k) / (2 c_k)``, ``q_k = sqrt(c_k^2 + r2_k)``, so ``A = c_o + q_o``, ``W = c_i q_o +
+    c_o q_i``, ``c = c_i`` (no quotient). Beckmann: the arguments ``v_k = c_k / sqrt(r2_k)`` of
+    Lambda and ``c = 1``; :func:`_smith_post` finishes them (``erfc``/``exp`` are library calls,
+    which keep a loop scalar)."""
+    co = co if co > 0.0 else 1.0
+    lit = shadowing & (ci > 0.0)
+    ci = ci if lit else 1.0
     if kind == GGX:
-        return r2 / (2.0 * c * (math.sqrt(r2 + c * c) + c))
-    return c / math.sqrt(r2)
+        qo = math.sqrt(co * co + r2)
+        qi = math.sqrt(ci * ci + r2_i) if lit else 1.0
+        return co + qo, ci * qo + co * qi, ci
+    return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else math.inf), 1.0
 
 
 @_inline
-def _lambda_post(kind, v):
+def _beckmann_lambda(v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
-    ``v = inf``) of :func:`_lambda_pre`'s ``v``; GGX's value unchanged."""
-    if kind == GGX:
-        return v
+    ``v = inf``)."""
     return max(0.5 * (math.exp(-v * v) / (v * _SQRT_PI) - math.erfc(v)), 0.0)
+
+
+@_inline
+def _smith_post(v_o, v_i, co):
+    """Beckmann ``(A, W)`` of :func:`_smith_pre` from its ``v_o``, ``v_i`` and ``c_o``."""
+    co = co if co > 0.0 else 1.0
+    lam_o = _beckmann_lambda(v_o)
+    return 2.0 * co * (1.0 + lam_o), 2.0 * co * (1.0 + lam_o + _beckmann_lambda(v_i))
 
 
 @_inline
@@ -176,42 +190,43 @@ def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
 
 
 @_inline
-def _projected_block(kind, shadowing, divide_cos_i, wi, wo, j0, m, ax, ay, rho, xn, yn, buf):
-    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``j0 + k``,
-    ``k < m`` (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
+def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
+    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m`` (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
-    0 where invalid (see ``_projected_numpy``). Uses rows 0-4 of ``buf``."""
+    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``."""
     s1 = math.sqrt(1.0 - rho * rho)
     for k in range(m):
-        j = j0 + k
-        ix, iy, iz = wi[j, 0], wi[j, 1], wi[j, 2]
-        ox, oy, oz = wo[j, 0], wo[j, 1], wo[j, 2]
+        ix, iy, iz = wi[k, 0], wi[k, 1], wi[k, 2]
+        ox, oy, oz = wo[k, 0], wo[k, 1], wo[k, 2]
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
         hx, hy, hz = hx * inv, hy * inv, hz * inv
         oh = ox * hx + oy * hy + oz * hz
         r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
-        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
         r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
-        ok &= (ci > 0.0) | (not shadowing)
+        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0) & ((ci > 0.0) | (not shadowing))
         e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-        f = scale / (4.0 * co * (iz if divide_cos_i else 1.0))
         buf[0, k] = oh
-        buf[1, k] = _lambda_pre(kind, r2, co)
-        buf[2, k] = _lambda_pre(kind, r2_i, ci) if shadowing else 0.0
+        buf[1, k], buf[2, k], buf[5, k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
         buf[3, k] = e
-        buf[4, k] = f if ok else 0.0
-    if kind != GGX:                                  # the library calls, in their own loop
-        for k in range(m):
-            buf[1, k] = _lambda_post(kind, buf[1, k])
-            buf[3, k] = _ndf_post(kind, buf[3, k])
-            if shadowing:
-                buf[2, k] = _lambda_post(kind, buf[2, k])
+        buf[4, k] = scale / (iz if divide_cos_i else 1.0) if ok else 0.0
+        buf[6, k] = co
+    _smith_block_post(kind, buf, m)
     for k in range(m):
         e, f = buf[3, k], buf[4, k]
-        buf[1, k] = _ndf(kind, e, f) / (1.0 + buf[1, k] + buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
+        buf[1, k] = _ndf(kind, e, f) * buf[5, k] / (2.0 * buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
+
+
+@_inline
+def _smith_block_post(kind, buf, m):
+    """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
+    (library calls, in a loop of their own); nothing for GGX."""
+    if kind != GGX:
+        for k in range(m):
+            buf[1, k], buf[2, k] = _smith_post(buf[1, k], buf[2, k], buf[6, k])
+            buf[3, k] = _ndf_post(kind, buf[3, k])
 
 
 @_jit
@@ -345,9 +360,12 @@ def _unit_deviation(w):
 
 
 # ------------------------------------------------------------------------ kernels
-#: Directions per block: each thread works through blocks of this many pairs in a
-#: ``(rows, BLOCK)`` scratch array (cache-resident), one loop per stage, so that the
-#: stages without library calls vectorize and the extra memory is independent of N.
+#: Directions per block: a kernel call ``kernel(start, stop, ...)`` works through the pairs
+#: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
+#: one loop per stage, so that the stages without library calls vectorize (a stage with
+#: ``erfc``/``exp``/``cos`` calls stays scalar) and the extra memory is independent of N.
+#: The caller runs ranges on threads (:func:`microfacet.kernels._launch`): Numba's
+#: ``prange`` keeps these loops from vectorizing.
 BLOCK = 256
 
 
@@ -368,17 +386,14 @@ def projected_kernel(kind):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
     ``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair (:func:`_projected_block`) of the
     distribution ``kind`` (the kernels are compiled per kind, which is a constant in them)."""
-    @_pjit
-    def kernel(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        n = wi.shape[0]
-        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
-            j0 = blk * BLOCK
-            m = min(BLOCK, n - j0)
-            buf = np.empty((5, BLOCK))
-            _projected_block(kind, shadowing, divide_cos_i, wi, wo, j0, m, ax, ay, rho, xn, yn, buf)
-            for k in range(m):
-                oh_out[j0 + k] = buf[0, k]
-                s_out[j0 + k] = buf[1, k]
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
+        buf = np.empty((7, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            _projected_block(kind, shadowing, divide_cos_i, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            oh_out[j0:j0 + m] = buf[0, :m]
+            s_out[j0:j0 + m] = buf[1, :m]
     return kernel
 
 
@@ -386,16 +401,13 @@ def projected_kernel(kind):
 def pdf_kernel(kind):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
-    @_pjit
-    def kernel(wi, wo, ax, ay, rho, xn, yn, out):
-        n = wi.shape[0]
-        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
-            j0 = blk * BLOCK
-            m = min(BLOCK, n - j0)
-            buf = np.empty((5, BLOCK))
-            _projected_block(kind, False, False, wi, wo, j0, m, ax, ay, rho, xn, yn, buf)
-            for k in range(m):
-                out[j0 + k] = buf[1, k]
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
+        buf = np.empty((7, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            _projected_block(kind, False, False, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            out[j0:j0 + m] = buf[1, :m]
     return kernel
 
 
@@ -403,19 +415,14 @@ def pdf_kernel(kind):
 def eval_kernel(kind):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
-    @_pjit
-    def kernel(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        n = wi.shape[0]
-        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
-            j0 = blk * BLOCK
-            m = min(BLOCK, n - j0)
-            buf = np.empty((5, BLOCK))
-            _projected_block(kind, shadowing, divide_cos_i, wi, wo, j0, m, ax, ay, rho, xn, yn, buf)
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
+        buf = np.empty((7, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            _projected_block(kind, shadowing, divide_cos_i, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
             _fresnel_block(fk, fp, tx, tv, buf, m, 0, 1, 2)
-            for k in range(m):
-                out[j0 + k, 0] = buf[2, k]
-                out[j0 + k, 1] = buf[3, k]
-                out[j0 + k, 2] = buf[4, k]
+            out[j0:j0 + m] = buf[2:5, :m].T
     return kernel
 
 
@@ -424,16 +431,15 @@ def sample_kernel(kind):
     """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
     visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
-    @_pjit
-    def kernel(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
-        n = wo.shape[0]
+    @_jit
+    def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(1.0 - rho * rho)
-        for blk in numba.prange((n + BLOCK - 1) // BLOCK):
-            j0 = blk * BLOCK
-            m = min(BLOCK, n - j0)
-            buf = np.empty((11, BLOCK))
+        buf = np.empty((11, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            u_b, wo_b, wi_b, weight_b, pdf_b = u[j0:], wo[j0:], wi_out[j0:], weight_out[j0:], pdf_out[j0:]
             for k in range(m):                       # polar angle and azimuth of the warped view
-                ox, oy, oz = wo[j0 + k, 0], wo[j0 + k, 1], wo[j0 + k, 2]
+                ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
                 a = ax * ox + rho * ay * oy
                 b = ay * s1 * oy
                 c = max(oz - ox * xn - oy * yn, 0.0)
@@ -443,9 +449,9 @@ def sample_kernel(kind):
                 buf[1, k] = a * inv_r if r2 > 0.0 else 1.0
                 buf[2, k] = b * inv_r if r2 > 0.0 else 0.0
             for k in range(m):                       # the standard visible normal (library calls)
-                buf[3, k], buf[4, k], buf[5, k] = _visible_std(kind, u[j0 + k, 0], u[j0 + k, 1], buf[0, k])
+                buf[3, k], buf[4, k], buf[5, k] = _visible_std(kind, u_b[k, 0], u_b[k, 1], buf[0, k])
             for k in range(m):
-                ox, oy, oz = wo[j0 + k, 0], wo[j0 + k, 1], wo[j0 + k, 2]
+                ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
                 cp, sp = buf[1, k], buf[2, k]
                 mx, my, mz = cp * buf[3, k] - sp * buf[4, k], sp * buf[3, k] + cp * buf[4, k], buf[5, k]
                 hx = ax * mx - xn * mz                # slope map of Eq. 3.4 on the normal
@@ -460,28 +466,21 @@ def sample_kernel(kind):
                 ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
                 r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
                 e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-                f = scale / (4.0 * co)
                 buf[0, k] = oh
-                buf[1, k] = _lambda_pre(kind, r2, co)
-                buf[2, k] = _lambda_pre(kind, r2_i, ci) if shadowing else 0.0
+                buf[1, k], buf[2, k], buf[5, k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
                 buf[3, k] = e
-                buf[4, k] = f if ok else 0.0
-                buf[5, k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
-                buf[6, k], buf[7, k], buf[8, k] = ix, iy, iz
-            if kind != GGX:                          # the library calls, in their own loop
-                for k in range(m):
-                    buf[1, k] = _lambda_post(kind, buf[1, k])
-                    buf[3, k] = _ndf_post(kind, buf[3, k])
-                    if shadowing:
-                        buf[2, k] = _lambda_post(kind, buf[2, k])
+                buf[4, k] = scale if ok else 0.0
+                buf[6, k] = co
+                buf[7, k], buf[8, k], buf[9, k] = ix, iy, iz
+                buf[10, k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
+            _smith_block_post(kind, buf, m)
             for k in range(m):
-                lam_o, e, f = buf[1, k], buf[3, k], buf[4, k]
-                p = _ndf(kind, e, f) / (1.0 + lam_o) if (f > 0.0) & (e > 0.0) else 0.0
-                ratio = (1.0 + lam_o) / (1.0 + lam_o + buf[2, k])     # G / G1(o)
-                pdf_out[j0 + k] = p
-                buf[2, k] = ratio if (p > 0.0) & (buf[5, k] > 0.0) else 0.0
+                area, e, f = buf[1, k], buf[3, k], buf[4, k]
+                p = _ndf(kind, e, f) / (2.0 * area) if (f > 0.0) & (e > 0.0) else 0.0
+                pdf_b[k] = p
+                buf[2, k] = buf[5, k] * area / buf[2, k] if (p > 0.0) & (buf[10, k] > 0.0) else 0.0   # G / G1(o)
             _fresnel_block(fk, fp, tx, tv, buf, m, 0, 2, 3)
             for k in range(m):
-                wi_out[j0 + k, 0], wi_out[j0 + k, 1], wi_out[j0 + k, 2] = buf[6, k], buf[7, k], buf[8, k]
-                weight_out[j0 + k, 0], weight_out[j0 + k, 1], weight_out[j0 + k, 2] = buf[3, k], buf[4, k], buf[5, k]
+                wi_b[k, 0], wi_b[k, 1], wi_b[k, 2] = buf[7, k], buf[8, k], buf[9, k]
+                weight_b[k, 0], weight_b[k, 1], weight_b[k, 2] = buf[3, k], buf[4, k], buf[5, k]
     return kernel

@@ -57,24 +57,36 @@ def _smith_params(distribution):
 
 _NO_TABLE = (np.zeros(2), np.zeros((2, 3)))
 
-#: Batches smaller than this run on the calling thread only: waking Numba's worker threads
-#: costs 4-8 ms on a loaded machine (measured: eval of 1e4 directions 0.27 ms on one
-#: thread, 4-7 ms on two, 2 cores at load 4-5), more than the work.
-PARALLEL_MIN = 1 << 16
+#: Pairs per task: a batch is cut into tasks of at least this many pairs, run on
+#: :func:`threads` threads (a batch of fewer runs on the calling thread: starting a task
+#: costs ~0.1 ms, more than the work below this size).
+TASK_MIN = 1 << 15
+
+
+def threads() -> int:
+    """Threads the kernels use: Numba's (``NUMBA_NUM_THREADS``, default: the CPU count)."""
+    import numba
+    return numba.get_num_threads()
+
+
+@functools.cache
+def _pool(n: int):
+    from concurrent.futures import ThreadPoolExecutor
+    return ThreadPoolExecutor(n, thread_name_prefix="microfacet")
 
 
 def _launch(kernel, n: int, *args) -> None:
-    """``kernel(*args)`` over ``n`` elements, on one thread below :data:`PARALLEL_MIN`."""
-    if n >= PARALLEL_MIN:
-        kernel(*args)
+    """``kernel(start, stop, *args)`` over ``0:n``: on the calling thread below 2
+    :data:`TASK_MIN`, else as up to 4 tasks per thread (so that a thread slowed by the
+    machine's load hands work to the others) on a pool of :func:`threads` threads (the
+    kernels release the GIL)."""
+    t = threads()
+    tasks = min(4 * t, n // TASK_MIN)
+    if t < 2 or tasks < 2:
+        kernel(0, n, *args)
         return
-    import numba
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)            # per calling thread
-    try:
-        kernel(*args)
-    finally:
-        numba.set_num_threads(threads)
+    bounds = np.linspace(0, n, tasks + 1).astype(np.int64)
+    list(_pool(t).map(lambda i: kernel(bounds[i], bounds[i + 1], *args), range(tasks)))
 
 
 def _fresnel_params(fresnel):
