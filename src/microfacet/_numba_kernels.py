@@ -78,17 +78,17 @@ def _smith_post(v_o, v_i, co):
 @_inline
 def _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
     """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
-    (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)``, ``D = _ndf(kind, _ndf_post(e), scale)``:
-    GGX ``(1 / (pi r^2), 1 / det)``, ``r = z^2 + x^2 + y^2``; Beckmann ``((x^2 + y^2) / (2 z^2),
+    (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)`` for :func:`_ndf_over`: GGX
+    ``(pi r^2, 1 / det)``, ``r = z^2 + x^2 + y^2``; Beckmann ``((x^2 + y^2) / (2 z^2),
     1 / (pi z^4 det))``, whose ``exp`` :func:`_ndf_post` takes."""
-    x = (-hx - xn * hz) / ax
-    y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) / (ax * ay * s1)
-    det = ax * ay * s1
+    inv_det = 1.0 / (ax * ay * s1)                   # loop invariants: hoisted
+    x = (-hx - xn * hz) * (1.0 / ax)
+    y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) * inv_det
     if kind == GGX:
         r = hz * hz + x * x + y * y
-        return 1.0 / (math.pi * r * r), 1.0 / det
+        return math.pi * r * r, inv_det
     z2 = hz * hz
-    return 0.5 * (x * x + y * y) / z2, 1.0 / (math.pi * z2 * z2 * det)
+    return 0.5 * (x * x + y * y) / z2, inv_det / (math.pi * z2 * z2)
 
 
 @_inline
@@ -100,14 +100,14 @@ def _ndf_post(kind, e):
 
 
 @_inline
-def _ndf(kind, e, scale):
-    """``D`` (times any factor in ``scale``) from :func:`_ndf_post`'s ``e``; Beckmann's
-    ``exp(-(x^2 + y^2) / z^2)`` is taken as the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
+def _ndf_over(kind, e, scale, den):
+    """``D scale / den`` from :func:`_ndf_post`'s ``e`` (one quotient): GGX ``scale / (e den)``;
+    Beckmann's ``exp(-(x^2 + y^2) / z^2)`` is the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
     so that ``D`` stays representable where the exponential alone underflows but ``/ z^4``
     brings it back (as the reference's ``exp(-(x^2 + y^2) / z^2 - 4 log z)`` does)."""
     if kind == GGX:
-        return e * scale
-    return e * scale * e
+        return scale / (e * den)
+    return e * scale * e / den
 
 
 @_inline
@@ -216,7 +216,7 @@ def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, 
     _smith_block_post(kind, buf, m)
     for k in range(m):
         e, f = buf[3, k], buf[4, k]
-        buf[1, k] = _ndf(kind, e, f) * buf[5, k] / (2.0 * buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
+        buf[1, k] = _ndf_over(kind, e, f * buf[5, k], 2.0 * buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
 
 
 @_inline
@@ -476,7 +476,7 @@ def sample_kernel(kind):
             _smith_block_post(kind, buf, m)
             for k in range(m):
                 area, e, f = buf[1, k], buf[3, k], buf[4, k]
-                p = _ndf(kind, e, f) / (2.0 * area) if (f > 0.0) & (e > 0.0) else 0.0
+                p = _ndf_over(kind, e, f, 2.0 * area) if (f > 0.0) & (e > 0.0) else 0.0
                 pdf_b[k] = p
                 buf[2, k] = buf[5, k] * area / buf[2, k] if (p > 0.0) & (buf[10, k] > 0.0) else 0.0   # G / G1(o)
             _fresnel_block(fk, fp, tx, tv, buf, m, 0, 2, 3)
