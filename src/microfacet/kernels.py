@@ -187,9 +187,9 @@ def smith_sample(brdf, u, wo, dtype=np.float64):
 
 def unit_deviation(w: np.ndarray) -> float:
     """:func:`microfacet.geometry.unit_deviation` (``max | |w|^2 - 1 |``, ``inf`` on NaN/inf)
-    in one compiled pass over a C-contiguous float64 ``w (..., 3)``; the NumPy reference
+    in one compiled pass over a C-contiguous float64 or float32 ``w (..., 3)``; the NumPy reference
     for other arrays or without Numba."""
     from .geometry import unit_deviation as reference
-    if not AVAILABLE or w.dtype != np.float64 or not w.flags.c_contiguous or w.size == 0:
+    if not AVAILABLE or w.dtype not in (np.float64, np.float32) or not w.flags.c_contiguous or w.size == 0:
         return reference(w)
     return float(_kernels()._unit_deviation(w.reshape(-1, 3)))
