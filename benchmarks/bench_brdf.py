@@ -2,7 +2,7 @@
 """Throughput of ``MicrofacetBRDF.eval``, ``pdf`` and ``sample`` against Mitsuba 3.
 
 For ``--n`` fixed-seed random direction pairs (uniform in the upper hemisphere) this
-times our BRDF (float64; Smith eval, pdf and sample by the fused Numba kernels of
+times our BRDF (float64, and float32 mode for the non-sheared ones; Smith eval, pdf and sample by the fused Numba kernels of
 :mod:`microfacet.kernels`, on Numba's threads) for anisotropic GGX and Beckmann, with
 and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
 same directions with the same parameters (rho = 0, zero mean slope: the only case both
@@ -89,25 +89,32 @@ def make_inputs(n: int, seed: int = 0) -> dict[str, np.ndarray]:
 
 
 # ------------------------------------------------------------------------ our BRDF
+F32 = " float32"  # suffix of the configurations in float32 mode
+
+
 def our_configs() -> dict[str, mf.MicrofacetBRDF]:
+    """The benchmarked BRDFs; names ending in :data:`F32` use ``dtype=np.float32`` (and get
+    float32 inputs, as a renderer's)."""
     fresnel = mf.fresnel.Conductor.metal(METAL)
     aniso = {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y}
     sheared = dict(aniso, rho=RHO, mean_slope=MEAN_SLOPE)
     return {
         "ggx": mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel),
         "beckmann": mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel),
+        "ggx" + F32: mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel, dtype=np.float32),
+        "beckmann" + F32: mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel, dtype=np.float32),
         "ggx sheared": mf.MicrofacetBRDF(mf.GGX(**sheared), fresnel=fresnel),
         "beckmann sheared": mf.MicrofacetBRDF(mf.Beckmann(**sheared), fresnel=fresnel),
     }
 
 
 def bench_ours(inputs, repeats: int) -> list[dict]:
-    wi, wo, u = inputs["wi"], inputs["wo"], inputs["u"]
+    f32 = {k: v.astype(np.float32) for k, v in inputs.items()}
     rows = []
     for name, brdf in our_configs().items():
-        ops = {"eval": lambda b=brdf: b.eval(wi, wo),
-               "pdf": lambda b=brdf: b.pdf(wi, wo),
-               "sample": lambda b=brdf: b.sample(u, wo)}
+        src = f32 if name.endswith(F32) else inputs
+        wi, wo, u = src["wi"], src["wo"], src["u"]
+        ops = {"eval": lambda: brdf.eval(wi, wo), "pdf": lambda: brdf.pdf(wi, wo), "sample": lambda: brdf.sample(u, wo)}
         for op, fn in ops.items():
             rows.append({"impl": "microfacet", "op": op, "distribution": name, "n": len(wi),
                          "extrapolated": False, **time_it(fn, repeats)})
@@ -264,13 +271,16 @@ def print_table(rows: list[dict]) -> None:
 
 
 def ratios(rows: list[dict]) -> list[dict]:
-    """Our best time / Mitsuba's best time for each (op, distribution) both measured."""
+    """Our best time / Mitsuba's best time for each (op, distribution) both measured (ours in
+    float64 and in float32 mode against the same Mitsuba row)."""
     ours = {(r["op"], r["distribution"]): r for r in rows if r["impl"] == "microfacet"}
     out = []
     for r in rows:
-        if r["impl"].startswith("mitsuba") and (r["op"], r["distribution"]) in ours:
-            o = ours[r["op"], r["distribution"]]
-            out.append({"op": r["op"], "distribution": r["distribution"], "mitsuba": r["impl"],
+        for name in (r["distribution"], r["distribution"] + F32):
+            if not (r["impl"].startswith("mitsuba") and (r["op"], name) in ours):
+                continue
+            o = ours[r["op"], name]
+            out.append({"op": r["op"], "distribution": name, "mitsuba": r["impl"],
                         "ours_s": o["best_s"], "mitsuba_s": r["best_s"],
                         "ratio": o["best_s"] / r["best_s"],
                         "mitsuba_first_call_s": r["first_s"]})
@@ -338,14 +348,15 @@ def main(argv: list[str] | None = None) -> int:
     print_table(rows)
     rat = ratios(rows)
     if rat:
-        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64; "
-              f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads). "
+        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64 unless named float32; "
+              f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads; "
+              f"'{F32.strip()}': dtype=np.float32, float32 inputs and outputs, float64 arithmetic). "
               f"Mitsuba {variant}: float32"
               + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
         for r in rat:
             first = (f"   (Mitsuba's first call, tracing + kernel compile or cache load, not counted: "
                      f"{r['mitsuba_first_call_s']:.3f} s)" if variant == "llvm_ad_rgb" else "")
-            print(f"  {r['op']:7s} {r['distribution']:9s} {r['ours_s'] * 1e3:9.3f} ms / "
+            print(f"  {r['op']:7s} {r['distribution']:17s} {r['ours_s'] * 1e3:9.3f} ms / "
                   f"{r['mitsuba_s'] * 1e3:9.3f} ms = {r['ratio']:7.1f}{first}")
     goal = [(r["distribution"], r["best_s"] * 1e6 / r["n"]) for r in rows
             if r["impl"] == "microfacet" and r["op"] == "eval"]

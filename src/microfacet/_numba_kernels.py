@@ -26,6 +26,10 @@ _UPPER = 0.99
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(12)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1], as in distributions.beckmann
 
+#: ``1/15!, 1/13!, ..., 1/1!`` and ``1/16!, 1/14!, ..., 1/2!`` (Horner order, :func:`_sin_cos`).
+_SIN_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(15, 0, -2)])
+_COS_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(16, 1, -2)])
+
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
@@ -321,25 +325,42 @@ def _visible_slope_quantile(u, cos_theta):
     return x
 
 
+@_inline
+def _sin_cos(x):
+    """``(sin x, cos x)`` for ``|x| <= pi/4``: Taylor series to ``x^15`` and ``x^16``
+    (truncation below 5e-17), arithmetic only, so that a loop calling it vectorizes."""
+    x2 = x * x
+    sn, cs = _SIN_TAYLOR[0], _COS_TAYLOR[0]
+    for j in range(1, 8):                            # Horner
+        sn = _SIN_TAYLOR[j] - x2 * sn
+        cs = _COS_TAYLOR[j] - x2 * cs
+    return x * sn, 1.0 - x2 * cs
+
+
+@_inline
+def _ggx_visible_std(u0, u1, cos_t):
+    """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
+    form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
+    ``r cos phi``, ``r sin phi`` with ``phi = pi/2 - psi`` as ``r sin psi``, ``r cos psi``), with
+    selects instead of branches."""
+    c = min(max(cos_t, 0.0), 1.0)
+    s = math.sqrt(1.0 - c * c)
+    a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0
+    first = abs(a) > abs(b)                          # phi = pi/4 b/a; else phi = pi/2 - pi/4 a/b
+    r = a if first else b
+    q = (b if first else a) / (r if r != 0.0 else 1.0)
+    sn, cs = _sin_cos((math.pi / 4) * q)
+    t1, t2 = r * (cs if first else sn), r * (sn if first else cs)
+    w = 0.5 * (1.0 + c)
+    t2 = (1.0 - w) * math.sqrt(max(0.0, 1.0 - t1 * t1)) + w * t2
+    tz = math.sqrt(max(0.0, 1.0 - t1 * t1 - t2 * t2))
+    return s * tz - c * t2, t1, c * tz + s * t2
+
+
 @_jit
-def _visible_std(kind, u0, u1, cos_t):
-    """Standard visible normal for a view at ``theta`` in the xz plane (``sample_visible_std``:
-    Heitz's closed form for GGX; ``x~ = Q2(u0)``, ``y~ = erfinv(2 u1 - 1)`` for Beckmann)."""
-    if kind == GGX:
-        c = min(max(cos_t, 0.0), 1.0)
-        s = math.sqrt(1.0 - c * c)
-        a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0      # concentric disk (geometry)
-        if abs(a) > abs(b):
-            r, phi = a, (math.pi / 4) * (b / a)
-        elif a == 0.0 and b == 0.0:
-            r, phi = b, 0.0
-        else:
-            r, phi = b, math.pi / 2 - (math.pi / 4) * (a / b)
-        t1, t2 = r * math.cos(phi), r * math.sin(phi)
-        w = 0.5 * (1.0 + c)
-        t2 = (1.0 - w) * math.sqrt(max(0.0, 1.0 - t1 * t1)) + w * t2
-        tz = math.sqrt(max(0.0, 1.0 - t1 * t1 - t2 * t2))
-        return s * tz - c * t2, t1, c * tz + s * t2
+def _beckmann_visible_std(u0, u1, cos_t):
+    """Standard Beckmann visible normal for a view at ``theta`` in the xz plane
+    (``Beckmann.sample_visible_std``: ``x~ = Q2(u0)``, ``y~ = erfinv(2 u1 - 1)``)."""
     x = _visible_slope_quantile(u0, cos_t)
     y = _erfinv(2.0 * min(max(u1, _U_MIN), 1.0 - _U_MIN) - 1.0)
     inv = 1.0 / math.sqrt(1.0 + x * x + y * y)
@@ -448,8 +469,12 @@ def sample_kernel(kind):
                 buf[0, k] = c / math.sqrt(r2 + c * c) if r2 > 0.0 else 1.0
                 buf[1, k] = a * inv_r if r2 > 0.0 else 1.0
                 buf[2, k] = b * inv_r if r2 > 0.0 else 0.0
-            for k in range(m):                       # the standard visible normal (library calls)
-                buf[3, k], buf[4, k], buf[5, k] = _visible_std(kind, u_b[k, 0], u_b[k, 1], buf[0, k])
+            if kind == GGX:                          # the standard visible normal
+                for k in range(m):
+                    buf[3, k], buf[4, k], buf[5, k] = _ggx_visible_std(u_b[k, 0], u_b[k, 1], buf[0, k])
+            else:                                    # (library calls: a loop of its own)
+                for k in range(m):
+                    buf[3, k], buf[4, k], buf[5, k] = _beckmann_visible_std(u_b[k, 0], u_b[k, 1], buf[0, k])
             for k in range(m):
                 ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
                 cp, sp = buf[1, k], buf[2, k]
