@@ -1,10 +1,15 @@
 """Single-pass compiled kernels (Numba) for the hot path of the Smith microfacet BRDF.
 
 The NumPy code of :mod:`microfacet.distributions` and :mod:`microfacet.brdf` is the
-reference; these kernels fuse the same equations into one loop over directions (the
+reference; these kernels fuse the same equations into one pass over directions (the
 NumPy version makes ~40 passes over memory) and are tested against it. They cover
-``gaf="smith"`` with scalar Beckmann or GGX parameters; everything else takes the NumPy
-path. Set ``MICROFACET_NUMBA=0`` to disable them.
+``gaf="smith"`` with scalar Beckmann or GGX parameters and every :mod:`microfacet.fresnel`
+term; everything else takes the NumPy path. Set ``MICROFACET_NUMBA=0`` to disable them.
+
+A batch runs as a few tasks on a thread pool of :func:`threads` threads (the kernels
+release the GIL), each working through its range in cache-sized blocks, so the only
+memory a call allocates is its outputs. Outputs are float64, or float32 for
+``MicrofacetBRDF(..., dtype=np.float32)`` (float32 inputs are read as they are).
 
 Numba is imported, and each kernel compiled (or loaded from Numba's on-disk cache,
 ``cache=True``), on first use, not when :mod:`microfacet` is imported: the kernels live
