@@ -39,11 +39,10 @@ _SIN_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(15, 0, -2)])
 _COS_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(16, 1, -2)])
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 # ------------------------------------------------------------------------ helpers
-@_inline
+@_jit
 def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
     """``(a^2 + b^2, c)`` of the warped direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3)."""
     a = ax * kx + rho * ay * ky
@@ -51,7 +50,7 @@ def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
     return a * a + b * b, kz - kx * xn - ky * yn
 
 
-@_inline
+@_jit
 def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
     """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
     (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
@@ -72,14 +71,14 @@ def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
     return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else math.inf), 1.0
 
 
-@_inline
+@_jit
 def _beckmann_lambda(v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
     ``v = inf``)."""
     return max(0.5 * (math.exp(-v * v) / (v * _SQRT_PI) - math.erfc(v)), 0.0)
 
 
-@_inline
+@_jit
 def _smith_post(v_o, v_i, co):
     """Beckmann ``(A, W)`` of :func:`_smith_pre` from its ``v_o``, ``v_i`` and ``c_o``."""
     co = co if co > 0.0 else 1.0
@@ -87,7 +86,7 @@ def _smith_post(v_o, v_i, co):
     return 2.0 * co * (1.0 + lam_o), 2.0 * co * (1.0 + lam_o + _beckmann_lambda(v_i))
 
 
-@_inline
+@_jit
 def _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
     """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
     (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)`` for :func:`_ndf_over`: GGX
@@ -103,7 +102,7 @@ def _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
     return 0.5 * (x * x + y * y) / z2, inv_det / (math.pi * z2 * z2)
 
 
-@_inline
+@_jit
 def _ndf_post(kind, e):
     """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)``; GGX ``e``)."""
     if kind == GGX:
@@ -111,7 +110,7 @@ def _ndf_post(kind, e):
     return math.exp(-e)
 
 
-@_inline
+@_jit
 def _ndf_over(kind, e, scale, den):
     """``D scale / den`` from :func:`_ndf_post`'s ``e`` (one quotient): GGX ``scale / (e den)``;
     Beckmann's ``exp(-(x^2 + y^2) / z^2)`` is the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
@@ -122,7 +121,7 @@ def _ndf_over(kind, e, scale, den):
     return e * scale * e / den
 
 
-@_inline
+@_jit
 def _schlick(f0, c):
     """Schlick's ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I; :class:`~microfacet.fresnel.Schlick`)."""
     m = 1.0 - min(max(c, 0.0), 1.0)
@@ -130,7 +129,7 @@ def _schlick(f0, c):
     return f0 + (1.0 - f0) * (m2 * m2 * m)
 
 
-@_inline
+@_jit
 def _dielectric(eta, c):
     """Dielectric Fresnel reflectance (Table 2.I; :class:`~microfacet.fresnel.Dielectric`),
     1 under total internal reflection."""
@@ -143,7 +142,7 @@ def _dielectric(eta, c):
     return 1.0 if (g2 < 0.0) | (not abs(f) < math.inf) else f
 
 
-@_inline
+@_jit
 def _conductor(eta, k, c):
     """Conductor Fresnel reflectance (:func:`microfacet.fresnel.conductor_reflectance`) with
     its two quotients in one: ``(R_s + R_p) / 2 = R_s t3 / (t3 + t4)``, ``R_s = (A - B) / (A + B)``."""
@@ -176,7 +175,7 @@ def _interp(tx, tv, ch, c):
     return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
 
 
-@_inline
+@_jit
 def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
     """``buf[out_row + ch, k] = F_ch(buf[c_row, k]) * buf[s_row, k]`` for ``k < m``: the
     Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv``
@@ -201,7 +200,7 @@ def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
                 buf[out_row + ch, k] = _interp(tx, tv, ch, buf[c_row, k]) * buf[s_row, k]
 
 
-@_inline
+@_jit
 def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
     """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m`` (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
@@ -231,7 +230,7 @@ def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, 
         buf[1, k] = _ndf_over(kind, e, f * buf[5, k], 2.0 * buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
 
 
-@_inline
+@_jit
 def _smith_block_post(kind, buf, m):
     """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
     (library calls, in a loop of their own); nothing for GGX."""
@@ -333,7 +332,7 @@ def _visible_slope_quantile(u, cos_theta):
     return x
 
 
-@_inline
+@_jit
 def _sin_cos(x):
     """``(sin x, cos x)`` for ``|x| <= pi/4``: Taylor series to ``x^15`` and ``x^16``
     (truncation below 5e-17), arithmetic only, so that a loop calling it vectorizes."""
@@ -345,7 +344,7 @@ def _sin_cos(x):
     return x * sn, 1.0 - x2 * cs
 
 
-@_inline
+@_jit
 def _ggx_visible_std(u0, u1, cos_t):
     """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
     form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
