@@ -5,8 +5,9 @@ Each public kernel, ``kernel(start, stop, ...)``, works through the pairs ``star
 in blocks of :data:`BLOCK` and writes its outputs in place, with the Fresnel term inside.
 A block runs as a few loops over a small scratch array, one per stage, written with
 selects instead of branches and with contiguous per-channel rows, so that LLVM
-vectorizes each stage that makes no library call (GGX throughout; Beckmann's ``erfc``,
-``exp`` and visible-slope Newton solve stay in scalar loops of their own). Kernels are
+vectorizes each stage that makes no library call (all of GGX; Beckmann's ``exp`` and
+``erfc`` are the kernels' own, :func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table
+loads; its visible-slope Newton solve and ``erfinv`` stay in a scalar loop). Kernels are
 compiled per distribution kind (a constant in them: :func:`eval_kernel` etc.); the
 Fresnel kind, shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
@@ -38,7 +39,30 @@ _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1], as in distribu
 _SIN_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(15, 0, -2)])
 _COS_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(16, 1, -2)])
 
+#: ``exp`` of :func:`_exp_neg`: ``ln 2`` split so that ``n ln2_hi`` is exact, the table of
+#: ``2^n``, ``n = -1074 ... 0``, and ``1/13!, ..., 1/1!, 1`` (Horner order).
+_LN2_HI, _LN2_LO = 6.93147180369123816490e-01, 1.90821492927058770002e-10
+_EXP2 = 2.0 ** np.arange(-1074.0, 1.0)
+_EXP_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(13, -1, -1)])
+
+
+def _erfc_taylor(c, degree=15):
+    """Taylor coefficients of ``erfc`` at ``c`` up to ``degree`` (Horner order):
+    ``erfc^(n)(c) = -2/sqrt(pi) (-1)^(n-1) H_(n-1)(c) exp(-c^2)`` (physicists' Hermite)."""
+    from numpy.polynomial.hermite import hermval
+    a = [math.erfc(c)] + [-2.0 / math.sqrt(math.pi) * (-1) ** (n - 1) * hermval(c, [0] * (n - 1) + [1])
+                          * math.exp(-c * c) / math.factorial(n) for n in range(1, degree + 1)]
+    return a[::-1]
+
+
+#: ``erfc`` of :func:`_erfc_pos`: 16 Taylor coefficients at the centre of each
+#: ``[k/4, (k+1)/4]``, ``k = 0 ... 23``.
+_ERFC_TAYLOR = np.array([_erfc_taylor(0.25 * k + 0.125) for k in range(24)]).ravel()
+
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+#: For the helpers called two calls deep in a loop that must vectorize (LLVM would not
+#: inline them that far): Numba inlines them into its own IR.
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 # ------------------------------------------------------------------------ helpers
@@ -59,8 +83,7 @@ def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
     ``D G / (4 z_o) = D c / (2 W)`` and ``G / G1(o) = c A / W``. GGX: ``1 + Lambda_k =
     (c_k + q_k) / (2 c_k)``, ``q_k = sqrt(c_k^2 + r2_k)``, so ``A = c_o + q_o``, ``W = c_i q_o +
     c_o q_i``, ``c = c_i`` (no quotient). Beckmann: the arguments ``v_k = c_k / sqrt(r2_k)`` of
-    Lambda and ``c = 1``; :func:`_smith_post` finishes them (``erfc``/``exp`` are library calls,
-    which keep a loop scalar)."""
+    Lambda and ``c = 1``; :func:`_smith_post` finishes them in a loop of its own."""
     co = co if co > 0.0 else 1.0
     lit = shadowing & (ci > 0.0)
     ci = ci if lit else 1.0
@@ -71,14 +94,48 @@ def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
     return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else math.inf), 1.0
 
 
-@_jit
+@_inline
 def _beckmann_lambda(v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
-    ``v = inf``)."""
-    return max(0.5 * (math.exp(-v * v) / (v * _SQRT_PI) - math.erfc(v)), 0.0)
+    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_pos` (absolute errors ~1e-16: only
+    ``1 + Lambda`` is used)."""
+    lam = 0.5 * (_exp_neg(-v * v) / (v * _SQRT_PI) - _erfc_pos(v))
+    return lam if lam > 0.0 else 0.0
 
 
-@_jit
+@_inline
+def _exp_neg(x):
+    """``exp(x)`` for ``x <= 0`` (0 below -744, where it is < 1e-323, and for NaN) with
+    arithmetic and one table load, so that a loop calling it vectorizes: ``x = n ln 2 + r``,
+    ``|r| <= ln 2 / 2``, ``exp(r)`` by its Taylor series to ``r^13`` (truncation below
+    5e-18), times ``2^n`` (``n >= -1073``: inside the table)."""
+    xc = x if x > -744.0 else -744.0
+    xc = xc if xc < 0.0 else 0.0
+    n = math.floor(xc * (1.0 / math.log(2.0)) + 0.5)
+    r = (xc - n * _LN2_HI) - n * _LN2_LO
+    p = _EXP_TAYLOR[0]
+    for j in range(1, 14):
+        p = _EXP_TAYLOR[j] + r * p
+    return p * _EXP2[np.uint64(n + 1074.0)] if x > -744.0 else 0.0
+
+
+@_inline
+def _erfc_pos(v):
+    """``erfc(v)`` for ``v >= 0`` to an absolute 3e-16 (0 from ``v = 6``, where it is below
+    2.2e-17): the degree-15 Taylor polynomial of :data:`_ERFC_TAYLOR` on ``v``'s quarter
+    interval (``|s| <= 1/8``), with arithmetic and table loads (unsigned indices: no
+    wraparound test), so that a loop calling it vectorizes."""
+    vc = v if v < 6.0 else 0.0                       # NaN too; those give 0 below
+    vc = vc if vc > 0.0 else 0.0
+    k = np.uint64(4.0 * vc)
+    s = vc - 0.25 * k - 0.125
+    p = 0.0
+    for j in range(16):
+        p = p * s + _ERFC_TAYLOR[np.uint64(16) * k + np.uint64(j)]
+    return p if v < 6.0 else 0.0
+
+
+@_inline
 def _smith_post(v_o, v_i, co):
     """Beckmann ``(A, W)`` of :func:`_smith_pre` from its ``v_o``, ``v_i`` and ``c_o``."""
     co = co if co > 0.0 else 1.0
@@ -107,7 +164,7 @@ def _ndf_post(kind, e):
     """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)``; GGX ``e``)."""
     if kind == GGX:
         return e
-    return math.exp(-e)
+    return _exp_neg(-e)
 
 
 @_jit
@@ -233,11 +290,13 @@ def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, 
 @_jit
 def _smith_block_post(kind, buf, m):
     """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
-    (library calls, in a loop of their own); nothing for GGX."""
+    (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
+    loop vectorizes); nothing for GGX."""
     if kind != GGX:
+        v_o, v_i, e, co = buf[1], buf[2], buf[3], buf[6]
         for k in range(m):
-            buf[1, k], buf[2, k] = _smith_post(buf[1, k], buf[2, k], buf[6, k])
-            buf[3, k] = _ndf_post(kind, buf[3, k])
+            v_o[k], v_i[k] = _smith_post(v_o[k], v_i[k], co[k])
+            e[k] = _ndf_post(kind, e[k])
 
 
 @_jit
@@ -390,8 +449,8 @@ def _unit_deviation(w):
 # ------------------------------------------------------------------------ kernels
 #: Directions per block: a kernel call ``kernel(start, stop, ...)`` works through the pairs
 #: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
-#: one loop per stage, so that the stages without library calls vectorize (a stage with
-#: ``erfc``/``exp``/``cos`` calls stays scalar) and the extra memory is independent of N.
+#: one loop per stage, so that the stages without library calls vectorize (Beckmann's
+#: visible-slope solve stays scalar) and the extra memory is independent of N.
 #: The caller runs ranges on threads (:func:`microfacet.kernels._launch`): Numba's
 #: ``prange`` keeps these loops from vectorizing.
 BLOCK = 256
