@@ -434,19 +434,6 @@ def _beckmann_visible_std(u0, u1, cos_t):
 
 
 # ------------------------------------------------------------------------ kernels
-@_jit
-def _unit_deviation(w):
-    """``max | |w|^2 - 1 |`` over the rows of ``w (n, 3)``; ``inf`` at the first NaN/inf."""
-    m = 0.0
-    for j in range(w.shape[0]):
-        e = abs(w[j, 0] * w[j, 0] + w[j, 1] * w[j, 1] + w[j, 2] * w[j, 2] - 1.0)
-        if not e < math.inf:                  # NaN or inf
-            return math.inf
-        m = max(m, e)
-    return m
-
-
-# ------------------------------------------------------------------------ kernels
 #: Directions per block: a kernel call ``kernel(start, stop, ...)`` works through the pairs
 #: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
 #: one loop per stage, so that the stages without library calls vectorize (Beckmann's
