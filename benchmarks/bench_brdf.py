@@ -2,8 +2,9 @@
 """Throughput of ``MicrofacetBRDF.eval``, ``pdf`` and ``sample`` against Mitsuba 3.
 
 For ``--n`` fixed-seed random direction pairs (uniform in the upper hemisphere) this
-times our BRDF (float64, and float32 mode for the non-sheared ones; Smith eval, pdf and sample by the fused Numba kernels of
-:mod:`microfacet.kernels`, on Numba's threads) for anisotropic GGX and Beckmann, with
+times our BRDF (float64, and float32 mode for the non-sheared ones; Smith eval, pdf and
+sample by the Numba kernels of :mod:`microfacet.kernels`, on Numba's thread count) for
+anisotropic GGX and Beckmann, with
 and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
 same directions with the same parameters (rho = 0, zero mean slope: the only case both
 models share) and the same conductor Fresnel term. Each timing is the best and the

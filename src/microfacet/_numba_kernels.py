@@ -259,7 +259,8 @@ def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
 
 @_jit
 def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
-    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m`` (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
+    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+    (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``."""
@@ -438,7 +439,7 @@ def _beckmann_visible_std(u0, u1, cos_t):
 #: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
 #: one loop per stage, so that the stages without library calls vectorize (Beckmann's
 #: visible-slope solve stays scalar) and the extra memory is independent of N.
-#: The caller runs ranges on threads (:func:`microfacet.kernels._launch`): Numba's
+#: The caller runs ranges on threads (:func:`microfacet.kernels._launch_ranges`): Numba's
 #: ``prange`` keeps these loops from vectorizing.
 BLOCK = 256
 

@@ -62,9 +62,11 @@ def _smith_params(distribution):
 
 _NO_TABLE = (np.zeros(2), np.zeros((2, 3)))
 
-#: Pairs per task: a batch is cut into tasks of at least this many pairs, run on
-#: :func:`threads` threads (a batch of fewer runs on the calling thread: starting a task
-#: costs ~0.1 ms, more than the work below this size).
+#: Batches smaller than this run on the calling thread only: waking worker threads costs
+#: 4-8 ms on a loaded machine (measured: eval of 1e4 directions 0.27 ms on one thread,
+#: 4-7 ms on two, 2 cores at load 4-5), more than the work.
+PARALLEL_MIN = 1 << 16
+#: Pairs per task of :func:`_launch_ranges` (at least).
 TASK_MIN = 1 << 15
 
 
@@ -74,20 +76,35 @@ def threads() -> int:
     return numba.get_num_threads()
 
 
+def _launch(kernel, n: int, *args) -> None:
+    """``kernel(*args)`` of a Numba ``parallel=True`` (``prange``) kernel over ``n`` elements,
+    on one thread below :data:`PARALLEL_MIN` (for kernels that are not range kernels)."""
+    if n >= PARALLEL_MIN:
+        kernel(*args)
+        return
+    import numba
+    t = numba.get_num_threads()
+    numba.set_num_threads(1)            # per calling thread
+    try:
+        kernel(*args)
+    finally:
+        numba.set_num_threads(t)
+
+
 @functools.cache
 def _pool(n: int):
     from concurrent.futures import ThreadPoolExecutor
     return ThreadPoolExecutor(n, thread_name_prefix="microfacet")
 
 
-def _launch(kernel, n: int, *args) -> None:
-    """``kernel(start, stop, *args)`` over ``0:n``: on the calling thread below 2
-    :data:`TASK_MIN`, else as up to 4 tasks per thread (so that a thread slowed by the
-    machine's load hands work to the others) on a pool of :func:`threads` threads (the
-    kernels release the GIL)."""
+def _launch_ranges(kernel, n: int, *args) -> None:
+    """``kernel(start, stop, *args)`` over ``0:n`` (the Smith kernels, which work through a
+    range): on the calling thread below :data:`PARALLEL_MIN`, else as up to 4 tasks of at
+    least :data:`TASK_MIN` per thread (so that a thread slowed by the machine's load hands
+    work to the others) on a pool of :func:`threads` threads (the kernels release the GIL)."""
     t = threads()
     tasks = min(4 * t, n // TASK_MIN)
-    if t < 2 or tasks < 2:
+    if t < 2 or n < PARALLEL_MIN:
         kernel(0, n, *args)
         return
     bounds = np.linspace(0, n, tasks + 1).astype(np.int64)
@@ -144,8 +161,8 @@ def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
         return None
     shape, n = _shape_n(wi, wo)
     oh, s = np.empty(n), np.empty(n)
-    _launch(_kernels().projected_kernel(d[0]), n, _rows(wi, shape), _rows(wo, shape), *d[1:], bool(shadowing),
-            bool(divide_cos_i), oh, s)
+    _launch_ranges(_kernels().projected_kernel(d[0]), n, _rows(wi, shape), _rows(wo, shape), *d[1:],
+                   bool(shadowing), bool(divide_cos_i), oh, s)
     return oh.reshape(shape), s.reshape(shape)
 
 
@@ -159,8 +176,8 @@ def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64):
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(wi, wo)
     out = np.empty(shape + (3,), dtype)
-    _launch(_kernels().eval_kernel(kind), n, _rows(wi, shape), _rows(wo, shape), *d, brdf.shadowing,
-            bool(divide_cos_i), fk, *f, out.reshape(-1, 3))
+    _launch_ranges(_kernels().eval_kernel(kind), n, _rows(wi, shape), _rows(wo, shape), *d, brdf.shadowing,
+                   bool(divide_cos_i), fk, *f, out.reshape(-1, 3))
     return out
 
 
@@ -172,7 +189,8 @@ def smith_pdf(brdf, wi, wo, dtype=np.float64):
         return None
     shape, n = _shape_n(wi, wo)
     out = np.empty(shape, dtype)
-    _launch(_kernels().pdf_kernel(p[0][0]), n, _rows(wi, shape), _rows(wo, shape), *p[0][1:], out.reshape(-1))
+    _launch_ranges(_kernels().pdf_kernel(p[0][0]), n, _rows(wi, shape), _rows(wo, shape), *p[0][1:],
+                   out.reshape(-1))
     return out
 
 
@@ -185,8 +203,8 @@ def smith_sample(brdf, u, wo, dtype=np.float64):
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(u, wo)
     wi, weight, pdf = np.empty(shape + (3,), dtype), np.empty(shape + (3,), dtype), np.empty(shape, dtype)
-    _launch(_kernels().sample_kernel(kind), n, _rows(u, shape), _rows(wo, shape), *d, brdf.shadowing, fk, *f,
-            wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
+    _launch_ranges(_kernels().sample_kernel(kind), n, _rows(u, shape), _rows(wo, shape), *d, brdf.shadowing,
+                   fk, *f, wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
     return wi, weight, pdf
 
 
