@@ -2,8 +2,9 @@
 """Throughput of ``MicrofacetBRDF.eval``, ``pdf`` and ``sample`` against Mitsuba 3.
 
 For ``--n`` fixed-seed random direction pairs (uniform in the upper hemisphere) this
-times our BRDF (float64; Smith eval, pdf and sample by the fused Numba kernels of
-:mod:`microfacet.kernels`, on Numba's threads) for anisotropic GGX and Beckmann, with
+times our BRDF (float64, and float32 mode for the non-sheared ones; Smith eval, pdf and
+sample by the Numba kernels of :mod:`microfacet.kernels`, on Numba's thread count) for
+anisotropic GGX and Beckmann, with
 and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
 same directions with the same parameters (rho = 0, zero mean slope: the only case both
 models share) and the same conductor Fresnel term. Each timing is the best and the
@@ -61,17 +62,20 @@ def _numba_threads() -> int:
 
 
 def time_it(fn: Callable[[], object], repeats: int) -> dict:
-    """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run."""
+    """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run, and
+    the best CPU time of the process (all its threads: ``time.process_time``), which a
+    loaded machine inflates less than wall time (a thread waiting for a core is not counted)."""
     t0 = time.perf_counter()
     fn()
     first = time.perf_counter() - t0
-    times = []
+    times, cpu = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     return {"best_s": min(times), "median_s": statistics.median(times), "first_s": first,
-            "times_s": times}
+            "times_s": times, "cpu_s": min(cpu)}
 
 
 # --------------------------------------------------------------------------- inputs
@@ -89,25 +93,32 @@ def make_inputs(n: int, seed: int = 0) -> dict[str, np.ndarray]:
 
 
 # ------------------------------------------------------------------------ our BRDF
+F32 = " float32"  # suffix of the configurations in float32 mode
+
+
 def our_configs() -> dict[str, mf.MicrofacetBRDF]:
+    """The benchmarked BRDFs; names ending in :data:`F32` use ``dtype=np.float32`` (and get
+    float32 inputs, as a renderer's)."""
     fresnel = mf.fresnel.Conductor.metal(METAL)
     aniso = {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y}
     sheared = dict(aniso, rho=RHO, mean_slope=MEAN_SLOPE)
     return {
         "ggx": mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel),
         "beckmann": mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel),
+        "ggx" + F32: mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel, dtype=np.float32),
+        "beckmann" + F32: mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel, dtype=np.float32),
         "ggx sheared": mf.MicrofacetBRDF(mf.GGX(**sheared), fresnel=fresnel),
         "beckmann sheared": mf.MicrofacetBRDF(mf.Beckmann(**sheared), fresnel=fresnel),
     }
 
 
 def bench_ours(inputs, repeats: int) -> list[dict]:
-    wi, wo, u = inputs["wi"], inputs["wo"], inputs["u"]
+    f32 = {k: v.astype(np.float32) for k, v in inputs.items()}
     rows = []
     for name, brdf in our_configs().items():
-        ops = {"eval": lambda b=brdf: b.eval(wi, wo),
-               "pdf": lambda b=brdf: b.pdf(wi, wo),
-               "sample": lambda b=brdf: b.sample(u, wo)}
+        src = f32 if name.endswith(F32) else inputs
+        wi, wo, u = src["wi"], src["wo"], src["u"]
+        ops = {"eval": lambda: brdf.eval(wi, wo), "pdf": lambda: brdf.pdf(wi, wo), "sample": lambda: brdf.sample(u, wo)}
         for op, fn in ops.items():
             rows.append({"impl": "microfacet", "op": op, "distribution": name, "n": len(wi),
                          "extrapolated": False, **time_it(fn, repeats)})
@@ -264,15 +275,18 @@ def print_table(rows: list[dict]) -> None:
 
 
 def ratios(rows: list[dict]) -> list[dict]:
-    """Our best time / Mitsuba's best time for each (op, distribution) both measured."""
+    """Our best time / Mitsuba's best time for each (op, distribution) both measured (ours in
+    float64 and in float32 mode against the same Mitsuba row)."""
     ours = {(r["op"], r["distribution"]): r for r in rows if r["impl"] == "microfacet"}
     out = []
     for r in rows:
-        if r["impl"].startswith("mitsuba") and (r["op"], r["distribution"]) in ours:
-            o = ours[r["op"], r["distribution"]]
-            out.append({"op": r["op"], "distribution": r["distribution"], "mitsuba": r["impl"],
+        for name in (r["distribution"], r["distribution"] + F32):
+            if not (r["impl"].startswith("mitsuba") and (r["op"], name) in ours):
+                continue
+            o = ours[r["op"], name]
+            out.append({"op": r["op"], "distribution": name, "mitsuba": r["impl"],
                         "ours_s": o["best_s"], "mitsuba_s": r["best_s"],
-                        "ratio": o["best_s"] / r["best_s"],
+                        "ratio": o["best_s"] / r["best_s"], "cpu_ratio": o["cpu_s"] / r["cpu_s"],
                         "mitsuba_first_call_s": r["first_s"]})
     return out
 
@@ -338,15 +352,17 @@ def main(argv: list[str] | None = None) -> int:
     print_table(rows)
     rat = ratios(rows)
     if rat:
-        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64; "
-              f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads). "
+        print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64 unless named float32; "
+              f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads; "
+              f"'{F32.strip()}': dtype=np.float32, float32 inputs and outputs, float64 arithmetic). "
               f"Mitsuba {variant}: float32"
               + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
+        print("  (wall-time ratio, then the ratio of process CPU times, which the machine's load "
+              "inflates less; Mitsuba's first call, tracing + kernel compile or cache load, not counted)")
         for r in rat:
-            first = (f"   (Mitsuba's first call, tracing + kernel compile or cache load, not counted: "
-                     f"{r['mitsuba_first_call_s']:.3f} s)" if variant == "llvm_ad_rgb" else "")
-            print(f"  {r['op']:7s} {r['distribution']:9s} {r['ours_s'] * 1e3:9.3f} ms / "
-                  f"{r['mitsuba_s'] * 1e3:9.3f} ms = {r['ratio']:7.1f}{first}")
+            first = f"   (first call {r['mitsuba_first_call_s']:.3f} s)" if variant == "llvm_ad_rgb" else ""
+            print(f"  {r['op']:7s} {r['distribution']:17s} {r['ours_s'] * 1e3:9.3f} ms / "
+                  f"{r['mitsuba_s'] * 1e3:9.3f} ms = {r['ratio']:7.1f}   CPU {r['cpu_ratio']:7.1f}{first}")
     goal = [(r["distribution"], r["best_s"] * 1e6 / r["n"]) for r in rows
             if r["impl"] == "microfacet" and r["op"] == "eval"]
     scaled = "" if args.n == 1_000_000 else f", measured at N = {args.n} and scaled to 1e6"

@@ -1,13 +1,23 @@
 """The Numba kernels of :mod:`microfacet.kernels` (imported, and compiled or loaded from
 Numba's on-disk cache, on first use; see that module).
 
-Each public kernel is one parallel loop over directions that writes its outputs in place
-(no temporaries), with the Fresnel term inside; the per-element helpers are the NumPy
-reference's equations, evaluated with selects instead of early exits where that is
-possible. ``error_model="numpy"``: a division by zero gives inf/NaN (then masked), as in
-NumPy, instead of raising; fastmath is off (the kernels equal the reference to 1e-12)."""
+Each public kernel, ``kernel(start, stop, ...)``, works through the pairs ``start:stop``
+in blocks of :data:`BLOCK` and writes its outputs in place, with the Fresnel term inside.
+A block runs as a few loops over a small scratch array, one per stage, written with
+selects instead of branches and with contiguous per-channel rows, so that LLVM
+vectorizes each stage that makes no library call (all of GGX; Beckmann's ``exp`` and
+``erfc`` are the kernels' own, :func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table
+loads; its visible-slope Newton solve and ``erfinv`` stay in a scalar loop). Kernels are
+compiled per distribution kind (a constant in them: :func:`eval_kernel` etc.); the
+Fresnel kind, shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
+The per-element helpers are the NumPy reference's equations, rearranged to save
+quotients where that is exact algebra (each docstring says how). ``error_model="numpy"``:
+a division by zero gives inf/NaN (then masked), as in NumPy, instead of raising; fastmath
+is off (the kernels equal the reference to 1e-12; ``contract``/``arcp``/``nsz`` moved some
+sampled GGX directions by 2e-8 and saved ~10 %)."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -25,122 +35,269 @@ _UPPER = 0.99
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(12)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1], as in distributions.beckmann
 
+#: ``1/15!, 1/13!, ..., 1/1!`` and ``1/16!, 1/14!, ..., 1/2!`` (Horner order, :func:`_sin_cos`).
+_SIN_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(15, 0, -2)])
+_COS_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(16, 1, -2)])
+
+#: ``exp`` of :func:`_exp_neg`: ``ln 2`` split so that ``n ln2_hi`` is exact, the table of
+#: ``2^n``, ``n = -1074 ... 0``, and ``1/13!, ..., 1/1!, 1`` (Horner order).
+_LN2_HI, _LN2_LO = 6.93147180369123816490e-01, 1.90821492927058770002e-10
+_EXP2 = 2.0 ** np.arange(-1074.0, 1.0)
+_EXP_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(13, -1, -1)])
+
+
+def _erfc_taylor(c, degree=15):
+    """Taylor coefficients of ``erfc`` at ``c`` up to ``degree`` (Horner order):
+    ``erfc^(n)(c) = -2/sqrt(pi) (-1)^(n-1) H_(n-1)(c) exp(-c^2)`` (physicists' Hermite)."""
+    from numpy.polynomial.hermite import hermval
+    a = [math.erfc(c)] + [-2.0 / math.sqrt(math.pi) * (-1) ** (n - 1) * hermval(c, [0] * (n - 1) + [1])
+                          * math.exp(-c * c) / math.factorial(n) for n in range(1, degree + 1)]
+    return a[::-1]
+
+
+#: ``erfc`` of :func:`_erfc_pos`: 16 Taylor coefficients at the centre of each
+#: ``[k/4, (k+1)/4]``, ``k = 0 ... 23``.
+_ERFC_TAYLOR = np.array([_erfc_taylor(0.25 * k + 0.125) for k in range(24)]).ravel()
+
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-_pjit = numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+#: For the helpers called two calls deep in a loop that must vectorize (LLVM would not
+#: inline them that far): Numba inlines them into its own IR.
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 # ------------------------------------------------------------------------ helpers
 @_jit
-def _lambda(kind, r2, c):
-    """Smith Lambda of the warped direction ``(a, b, c)``, ``r2 = a^2 + b^2``, ``c > 0``
-    (Table 2.III; see ``lambda_warped``; Beckmann at ``v = c / sqrt(r2)``, 0 for ``r2 = 0``)."""
-    if kind == GGX:
-        return r2 / (2.0 * c * (math.sqrt(r2 + c * c) + c))
-    v = c / math.sqrt(r2)
-    return max(0.5 * (math.exp(-v * v) / (v * _SQRT_PI) - math.erfc(v)), 0.0)
-
-
-@_jit
-def _ndf_std(kind, x, y, z):
-    """``P_std(x / z, y / z) / z^4`` for ``z > 0`` (Eq. 2.11, Table 2.II, division-free form)."""
-    if kind == GGX:
-        r = z * z + x * x + y * y
-        return 1.0 / (math.pi * r * r)
-    return math.exp(-(x * x + y * y) / (z * z) - 4.0 * math.log(z)) / math.pi
-
-
-@_jit
-def _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
-    """``D(h)`` (Eq. 2.11, 3.2) for ``hz > 0``: the standard NDF at the unsheared slope."""
-    x = (-hx - xn * hz) / ax
-    y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) / (ax * ay * s1)
-    return _ndf_std(kind, x, y, hz) / (ax * ay * s1)
-
-
-@_jit
-def _lambda_c(kind, ax, ay, rho, s1, xn, yn, kx, ky, kz):
-    """``(Lambda(k), c_k)`` of the warped direction ``k' = (a, b, c)`` (Eq. 3.3); Lambda is
-    computed at ``c = 1`` where ``c_k <= 0`` (callers mask those)."""
+def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
+    """``(a^2 + b^2, c)`` of the warped direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3)."""
     a = ax * kx + rho * ay * ky
     b = ay * s1 * ky
-    c = kz - kx * xn - ky * yn
-    return _lambda(kind, a * a + b * b, c if c > 0.0 else 1.0), c
+    return a * a + b * b, kz - kx * xn - ky * yn
 
 
 @_jit
-def _fresnel(fk, p0, p1, c):
-    """One channel of an analytic Fresnel term at ``c = cos theta_d`` (Table 2.I; the formulas
-    of :mod:`microfacet.fresnel`): ``p0`` is ``f0`` (Schlick) or ``eta``, ``p1`` ``k`` (conductor)."""
-    if fk == IDEAL:
-        return 1.0
+def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
+    """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
+    (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
+    mask those): ``(A, W, c)`` with ``A = 2 c_o (1 + Lambda_o)``, ``W / c = 2 c_o (1 + Lambda_o +
+    Lambda_i)`` (``Lambda_i = 0`` without shadowing), so that ``D / (4 A(o)) = D / (2 A)``,
+    ``D G / (4 z_o) = D c / (2 W)`` and ``G / G1(o) = c A / W``. GGX: ``1 + Lambda_k =
+    (c_k + q_k) / (2 c_k)``, ``q_k = sqrt(c_k^2 + r2_k)``, so ``A = c_o + q_o``, ``W = c_i q_o +
+    c_o q_i``, ``c = c_i`` (no quotient). Beckmann: the arguments ``v_k = c_k / sqrt(r2_k)`` of
+    Lambda and ``c = 1``; :func:`_smith_post` finishes them in a loop of its own."""
+    co = co if co > 0.0 else 1.0
+    lit = shadowing & (ci > 0.0)
+    ci = ci if lit else 1.0
+    if kind == GGX:
+        qo = math.sqrt(co * co + r2)
+        qi = math.sqrt(ci * ci + r2_i) if lit else 1.0
+        return co + qo, ci * qo + co * qi, ci
+    return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else math.inf), 1.0
+
+
+@_inline
+def _beckmann_lambda(v):
+    """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
+    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_pos` (absolute errors ~1e-16: only
+    ``1 + Lambda`` is used)."""
+    lam = 0.5 * (_exp_neg(-v * v) / (v * _SQRT_PI) - _erfc_pos(v))
+    return lam if lam > 0.0 else 0.0
+
+
+@_inline
+def _exp_neg(x):
+    """``exp(x)`` for ``x <= 0`` (0 below -744, where it is < 1e-323, and for NaN) with
+    arithmetic and one table load, so that a loop calling it vectorizes: ``x = n ln 2 + r``,
+    ``|r| <= ln 2 / 2``, ``exp(r)`` by its Taylor series to ``r^13`` (truncation below
+    5e-18), times ``2^n`` (``n >= -1073``: inside the table)."""
+    xc = x if x > -744.0 else -744.0
+    xc = xc if xc < 0.0 else 0.0
+    n = math.floor(xc * (1.0 / math.log(2.0)) + 0.5)
+    r = (xc - n * _LN2_HI) - n * _LN2_LO
+    p = _EXP_TAYLOR[0]
+    for j in range(1, 14):
+        p = _EXP_TAYLOR[j] + r * p
+    return p * _EXP2[np.uint64(n + 1074.0)] if x > -744.0 else 0.0
+
+
+@_inline
+def _erfc_pos(v):
+    """``erfc(v)`` for ``v >= 0`` to an absolute 3e-16 (0 from ``v = 6``, where it is below
+    2.2e-17): the degree-15 Taylor polynomial of :data:`_ERFC_TAYLOR` on ``v``'s quarter
+    interval (``|s| <= 1/8``), with arithmetic and table loads (unsigned indices: no
+    wraparound test), so that a loop calling it vectorizes."""
+    vc = v if v < 6.0 else 0.0                       # NaN too; those give 0 below
+    vc = vc if vc > 0.0 else 0.0
+    k = np.uint64(4.0 * vc)
+    s = vc - 0.25 * k - 0.125
+    p = 0.0
+    for j in range(16):
+        p = p * s + _ERFC_TAYLOR[np.uint64(16) * k + np.uint64(j)]
+    return p if v < 6.0 else 0.0
+
+
+@_inline
+def _smith_post(v_o, v_i, co):
+    """Beckmann ``(A, W)`` of :func:`_smith_pre` from its ``v_o``, ``v_i`` and ``c_o``."""
+    co = co if co > 0.0 else 1.0
+    lam_o = _beckmann_lambda(v_o)
+    return 2.0 * co * (1.0 + lam_o), 2.0 * co * (1.0 + lam_o + _beckmann_lambda(v_i))
+
+
+@_jit
+def _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
+    """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
+    (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)`` for :func:`_ndf_over`: GGX
+    ``(pi r^2, 1 / det)``, ``r = z^2 + x^2 + y^2``; Beckmann ``((x^2 + y^2) / (2 z^2),
+    1 / (pi z^4 det))``, whose ``exp`` :func:`_ndf_post` takes."""
+    inv_det = 1.0 / (ax * ay * s1)                   # loop invariants: hoisted
+    x = (-hx - xn * hz) * (1.0 / ax)
+    y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) * inv_det
+    if kind == GGX:
+        r = hz * hz + x * x + y * y
+        return math.pi * r * r, inv_det
+    z2 = hz * hz
+    return 0.5 * (x * x + y * y) / z2, inv_det / (math.pi * z2 * z2)
+
+
+@_jit
+def _ndf_post(kind, e):
+    """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)``; GGX ``e``)."""
+    if kind == GGX:
+        return e
+    return _exp_neg(-e)
+
+
+@_jit
+def _ndf_over(kind, e, scale, den):
+    """``D scale / den`` from :func:`_ndf_post`'s ``e`` (one quotient): GGX ``scale / (e den)``;
+    Beckmann's ``exp(-(x^2 + y^2) / z^2)`` is the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
+    so that ``D`` stays representable where the exponential alone underflows but ``/ z^4``
+    brings it back (as the reference's ``exp(-(x^2 + y^2) / z^2 - 4 log z)`` does)."""
+    if kind == GGX:
+        return scale / (e * den)
+    return e * scale * e / den
+
+
+@_jit
+def _schlick(f0, c):
+    """Schlick's ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I; :class:`~microfacet.fresnel.Schlick`)."""
+    m = 1.0 - min(max(c, 0.0), 1.0)
+    m2 = m * m
+    return f0 + (1.0 - f0) * (m2 * m2 * m)
+
+
+@_jit
+def _dielectric(eta, c):
+    """Dielectric Fresnel reflectance (Table 2.I; :class:`~microfacet.fresnel.Dielectric`),
+    1 under total internal reflection."""
     c = min(max(c, 0.0), 1.0)
-    if fk == SCHLICK:
-        m = 1.0 - c
-        m2 = m * m
-        return p0 + (1.0 - p0) * (m2 * m2 * m)
-    c2 = c * c
-    if fk == DIELECTRIC:
-        g2 = p0 * p0 + c2 - 1.0
-        g = math.sqrt(max(g2, 0.0))
-        a = (g - c) / (g + c)
-        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-        f = 0.5 * a * a * (1.0 + b * b)
-        return 1.0 if (g2 < 0.0 or not abs(f) < math.inf) else f
-    s2 = 1.0 - c2                                    # CONDUCTOR: conductor_reflectance
-    t1 = p0 * p0 - p1 * p1 - s2
-    a2b2 = math.sqrt(t1 * t1 + 4.0 * p0 * p0 * p1 * p1)
-    ac2 = 2.0 * c * math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
-    rs = (a2b2 + c2 - ac2) / (a2b2 + c2 + ac2)
-    t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
-    return 0.5 * (rs + rs * (t3 - t4) / (t3 + t4))
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _fresnel_rgb(fk, fp, tx, tv, c, out, j, scale):
-    """``out[j] = F(c) * scale`` per RGB channel: :func:`_fresnel`, or ``np.interp`` of the
-    :class:`~microfacet.fresnel.Tabulated` grid ``tx`` and values ``tv`` (clamped at the ends).
-    Inlined (Numba IR), so that the arrays are not passed, and reference-counted, per element."""
-    if fk == TABULATED:
-        n = tx.shape[0]
-        lo, hi = 0, n - 1
-        while hi - lo > 1:
-            mid = (lo + hi) >> 1
-            if tx[mid] <= c:
-                lo = mid
-            else:
-                hi = mid
-        for ch in range(3):
-            if c <= tx[0]:
-                f = tv[0, ch]
-            elif c >= tx[n - 1]:
-                f = tv[n - 1, ch]
-            else:
-                f = (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
-            out[j, ch] = f * scale
-    else:
-        for ch in range(3):
-            out[j, ch] = _fresnel(fk, fp[0, ch], fp[1, ch], c) * scale
+    g2 = eta * eta + c * c - 1.0
+    g = math.sqrt(max(g2, 0.0))
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    f = 0.5 * a * a * (1.0 + b * b)
+    return 1.0 if (g2 < 0.0) | (not abs(f) < math.inf) else f
 
 
 @_jit
-def _smith(kind, ax, ay, rho, s1, xn, yn, shadowing, ix, iy, iz, ox, oy, oz):
-    """``(o.h, D G / (4 z_o))`` of one pair (Eq. 2.1 with F = 1; NDF Eq. 3.2, height-correlated
-    Smith G with the warped directions of Eq. 3.3), 0 where invalid (see ``_projected_numpy``)."""
-    hx, hy, hz = ix + ox, iy + oy, iz + oz
-    n2 = hx * hx + hy * hy + hz * hz
-    inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
-    hx, hy, hz = hx * inv, hy * inv, hz * inv
-    oh = ox * hx + oy * hy + oz * hz
-    lam, co = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ox, oy, oz)
-    ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
-    if shadowing:
-        lam_i, ci = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ix, iy, iz)
-        lam += lam_i
-        ok &= ci > 0.0
-    g = oz / (co * (1.0 + lam))
-    d = _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-    s = d * g / (4.0 * oz)
-    return oh, (s if ok else 0.0)
+def _conductor(eta, k, c):
+    """Conductor Fresnel reflectance (:func:`microfacet.fresnel.conductor_reflectance`) with
+    its two quotients in one: ``(R_s + R_p) / 2 = R_s t3 / (t3 + t4)``, ``R_s = (A - B) / (A + B)``."""
+    c = min(max(c, 0.0), 1.0)
+    c2 = c * c
+    s2 = 1.0 - c2
+    t1 = eta * eta - k * k - s2
+    a2b2 = math.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
+    ac2 = 2.0 * c * math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
+    t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
+    return (a2b2 + c2 - ac2) * t3 / ((a2b2 + c2 + ac2) * (t3 + t4))
+
+
+@_jit
+def _interp(tx, tv, ch, c):
+    """``np.interp(c, tx, tv[:, ch])`` (clamped at the ends): one channel of
+    :class:`~microfacet.fresnel.Tabulated`."""
+    n = tx.shape[0]
+    if c <= tx[0]:
+        return tv[0, ch]
+    if c >= tx[n - 1]:
+        return tv[n - 1, ch]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if tx[mid] <= c:
+            lo = mid
+        else:
+            hi = mid
+    return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
+
+
+@_jit
+def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
+    """``buf[out_row + ch, k] = F_ch(buf[c_row, k]) * buf[s_row, k]`` for ``k < m``: the
+    Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv``
+    the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop per RGB channel
+    with the choice of the term outside it, so that the analytic terms vectorize."""
+    for ch in range(3):
+        p0, p1 = fp[0, ch], fp[1, ch]
+        if fk == IDEAL:
+            for k in range(m):
+                buf[out_row + ch, k] = buf[s_row, k]
+        elif fk == SCHLICK:
+            for k in range(m):
+                buf[out_row + ch, k] = _schlick(p0, buf[c_row, k]) * buf[s_row, k]
+        elif fk == DIELECTRIC:
+            for k in range(m):
+                buf[out_row + ch, k] = _dielectric(p0, buf[c_row, k]) * buf[s_row, k]
+        elif fk == CONDUCTOR:
+            for k in range(m):
+                buf[out_row + ch, k] = _conductor(p0, p1, buf[c_row, k]) * buf[s_row, k]
+        else:
+            for k in range(m):
+                buf[out_row + ch, k] = _interp(tx, tv, ch, buf[c_row, k]) * buf[s_row, k]
+
+
+@_jit
+def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
+    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+    (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
+    and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
+    without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
+    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``."""
+    s1 = math.sqrt(1.0 - rho * rho)
+    for k in range(m):
+        ix, iy, iz = wi[k, 0], wi[k, 1], wi[k, 2]
+        ox, oy, oz = wo[k, 0], wo[k, 1], wo[k, 2]
+        hx, hy, hz = ix + ox, iy + oy, iz + oz
+        n2 = hx * hx + hy * hy + hz * hz
+        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
+        hx, hy, hz = hx * inv, hy * inv, hz * inv
+        oh = ox * hx + oy * hy + oz * hz
+        r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+        r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
+        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0) & ((ci > 0.0) | (not shadowing))
+        e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
+        buf[0, k] = oh
+        buf[1, k], buf[2, k], buf[5, k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
+        buf[3, k] = e
+        buf[4, k] = scale / (iz if divide_cos_i else 1.0) if ok else 0.0
+        buf[6, k] = co
+    _smith_block_post(kind, buf, m)
+    for k in range(m):
+        e, f = buf[3, k], buf[4, k]
+        buf[1, k] = _ndf_over(kind, e, f * buf[5, k], 2.0 * buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
+
+
+@_jit
+def _smith_block_post(kind, buf, m):
+    """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
+    (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
+    loop vectorizes); nothing for GGX."""
+    if kind != GGX:
+        v_o, v_i, e, co = buf[1], buf[2], buf[3], buf[6]
+        for k in range(m):
+            v_o[k], v_i[k] = _smith_post(v_o[k], v_i[k], co[k])
+            e[k] = _ndf_post(kind, e[k])
 
 
 @_jit
@@ -236,24 +393,41 @@ def _visible_slope_quantile(u, cos_theta):
 
 
 @_jit
-def _visible_std(kind, u0, u1, cos_t):
-    """Standard visible normal for a view at ``theta`` in the xz plane (``sample_visible_std``:
-    Heitz's closed form for GGX; ``x~ = Q2(u0)``, ``y~ = erfinv(2 u1 - 1)`` for Beckmann)."""
-    if kind == GGX:
-        c = min(max(cos_t, 0.0), 1.0)
-        s = math.sqrt(1.0 - c * c)
-        a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0      # concentric disk (geometry)
-        if abs(a) > abs(b):
-            r, phi = a, (math.pi / 4) * (b / a)
-        elif a == 0.0 and b == 0.0:
-            r, phi = b, 0.0
-        else:
-            r, phi = b, math.pi / 2 - (math.pi / 4) * (a / b)
-        t1, t2 = r * math.cos(phi), r * math.sin(phi)
-        w = 0.5 * (1.0 + c)
-        t2 = (1.0 - w) * math.sqrt(max(0.0, 1.0 - t1 * t1)) + w * t2
-        tz = math.sqrt(max(0.0, 1.0 - t1 * t1 - t2 * t2))
-        return s * tz - c * t2, t1, c * tz + s * t2
+def _sin_cos(x):
+    """``(sin x, cos x)`` for ``|x| <= pi/4``: Taylor series to ``x^15`` and ``x^16``
+    (truncation below 5e-17), arithmetic only, so that a loop calling it vectorizes."""
+    x2 = x * x
+    sn, cs = _SIN_TAYLOR[0], _COS_TAYLOR[0]
+    for j in range(1, 8):                            # Horner
+        sn = _SIN_TAYLOR[j] - x2 * sn
+        cs = _COS_TAYLOR[j] - x2 * cs
+    return x * sn, 1.0 - x2 * cs
+
+
+@_jit
+def _ggx_visible_std(u0, u1, cos_t):
+    """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
+    form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
+    ``r cos phi``, ``r sin phi`` with ``phi = pi/2 - psi`` as ``r sin psi``, ``r cos psi``), with
+    selects instead of branches."""
+    c = min(max(cos_t, 0.0), 1.0)
+    s = math.sqrt(1.0 - c * c)
+    a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0
+    first = abs(a) > abs(b)                          # phi = pi/4 b/a; else phi = pi/2 - pi/4 a/b
+    r = a if first else b
+    q = (b if first else a) / (r if r != 0.0 else 1.0)
+    sn, cs = _sin_cos((math.pi / 4) * q)
+    t1, t2 = r * (cs if first else sn), r * (sn if first else cs)
+    w = 0.5 * (1.0 + c)
+    t2 = (1.0 - w) * math.sqrt(max(0.0, 1.0 - t1 * t1)) + w * t2
+    tz = math.sqrt(max(0.0, 1.0 - t1 * t1 - t2 * t2))
+    return s * tz - c * t2, t1, c * tz + s * t2
+
+
+@_jit
+def _beckmann_visible_std(u0, u1, cos_t):
+    """Standard Beckmann visible normal for a view at ``theta`` in the xz plane
+    (``Beckmann.sample_visible_std``: ``x~ = Q2(u0)``, ``y~ = erfinv(2 u1 - 1)``)."""
     x = _visible_slope_quantile(u0, cos_t)
     y = _erfinv(2.0 * min(max(u1, _U_MIN), 1.0 - _U_MIN) - 1.0)
     inv = 1.0 / math.sqrt(1.0 + x * x + y * y)
@@ -261,6 +435,15 @@ def _visible_std(kind, u0, u1, cos_t):
 
 
 # ------------------------------------------------------------------------ kernels
+#: Directions per block: a kernel call ``kernel(start, stop, ...)`` works through the pairs
+#: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
+#: one loop per stage, so that the stages without library calls vectorize (Beckmann's
+#: visible-slope solve stays scalar) and the extra memory is independent of N.
+#: The caller runs ranges on threads (:func:`microfacet.kernels._launch_ranges`): Numba's
+#: ``prange`` keeps these loops from vectorizing.
+BLOCK = 256
+
+
 @_jit
 def _unit_deviation(w):
     """``max | |w|^2 - 1 |`` over the rows of ``w (n, 3)``; ``inf`` at the first NaN/inf."""
@@ -273,90 +456,110 @@ def _unit_deviation(w):
     return m
 
 
-@_pjit
-def _smith_projected(wi, wo, kind, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-    """``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair into ``oh_out``, ``s_out`` (Eq. 2.1 with F = 1)."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wi.shape[0]):
-        oh, s = _smith(kind, ax, ay, rho, s1, xn, yn, shadowing,
-                       wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
-        oh_out[j] = oh
-        s_out[j] = s / wi[j, 2] if (divide_cos_i and s > 0.0) else s
+@functools.cache
+def projected_kernel(kind):
+    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
+    ``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair (:func:`_projected_block`) of the
+    distribution ``kind`` (the kernels are compiled per kind, which is a constant in them)."""
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
+        buf = np.empty((7, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            _projected_block(kind, shadowing, divide_cos_i, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            oh_out[j0:j0 + m] = buf[0, :m]
+            s_out[j0:j0 + m] = buf[1, :m]
+    return kernel
 
 
-@_pjit
-def _smith_eval(wi, wo, kind, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-    """``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wi.shape[0]):
-        oh, s = _smith(kind, ax, ay, rho, s1, xn, yn, shadowing,
-                       wi[j, 0], wi[j, 1], wi[j, 2], wo[j, 0], wo[j, 1], wo[j, 2])
-        if divide_cos_i and s > 0.0:
-            s = s / wi[j, 2]
-        _fresnel_rgb(fk, fp, tx, tv, oh, out, j, s)
+@functools.cache
+def pdf_kernel(kind):
+    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
+    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
+        buf = np.empty((7, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            _projected_block(kind, False, False, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            out[j0:j0 + m] = buf[1, :m]
+    return kernel
 
 
-@_pjit
-def _smith_pdf(wi, wo, kind, ax, ay, rho, xn, yn, out):
-    """Density of visible-normal sampling, ``D_o(h) / (4 o.h) = D(h) / (4 A(o))`` (Eq. 2.17,
-    ``A(o) = c_o (1 + Lambda(o))``), per pair into ``out``."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wi.shape[0]):
-        ix, iy, iz = wi[j, 0], wi[j, 1], wi[j, 2]
-        ox, oy, oz = wo[j, 0], wo[j, 1], wo[j, 2]
-        hx, hy, hz = ix + ox, iy + oy, iz + oz
-        n2 = hx * hx + hy * hy + hz * hz
-        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
-        hx, hy, hz = hx * inv, hy * inv, hz * inv
-        oh = ox * hx + oy * hy + oz * hz
-        lam, co = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ox, oy, oz)
-        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
-        d = _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-        p = d / (4.0 * co * (1.0 + lam))
-        out[j] = p if ok else 0.0
+@functools.cache
+def eval_kernel(kind):
+    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
+    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
+        buf = np.empty((7, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            _projected_block(kind, shadowing, divide_cos_i, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            _fresnel_block(fk, fp, tx, tv, buf, m, 0, 1, 2)
+            out[j0:j0 + m] = buf[2:5, :m].T
+    return kernel
 
 
-@_pjit
-def _smith_sample(u, wo, kind, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
-    """Visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
+@functools.cache
+def sample_kernel(kind):
+    """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
+    visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
-    s1 = math.sqrt(1.0 - rho * rho)
-    for j in numba.prange(wo.shape[0]):
-        ox, oy, oz = wo[j, 0], wo[j, 1], wo[j, 2]
-        # warped view k' = (a, b, c) (Eq. 3.3) and its polar angle / azimuth
-        a = ax * ox + rho * ay * oy
-        b = ay * s1 * oy
-        c = max(oz - ox * xn - oy * yn, 0.0)
-        r2 = a * a + b * b
-        if r2 > 0.0:
-            inv_r = 1.0 / math.sqrt(r2)
-            cos_t, cp, sp = c / math.sqrt(r2 + c * c), a * inv_r, b * inv_r
-        else:
-            cos_t, cp, sp = 1.0, 1.0, 0.0
-        mx, my, mz = _visible_std(kind, u[j, 0], u[j, 1], cos_t)
-        mx, my = cp * mx - sp * my, sp * mx + cp * my
-        # slope map of Eq. 3.4 on the normal, then normalize
-        hx = ax * mx - xn * mz
-        hy = ay * (rho * mx + s1 * my) - yn * mz
-        hz = mz
-        n2 = hx * hx + hy * hy + hz * hz
-        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
-        hx, hy, hz = hx * inv, hy * inv, hz * inv
-        oh = ox * hx + oy * hy + oz * hz
-        ix, iy, iz = 2.0 * oh * hx - ox, 2.0 * oh * hy - oy, 2.0 * oh * hz - oz
-        wi_out[j, 0], wi_out[j, 1], wi_out[j, 2] = ix, iy, iz
-        lam_o, co = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ox, oy, oz)
-        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
-        area = co * (1.0 + lam_o)                    # A(o) = z_o / G1(o)
-        d = _ndf(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-        p = d / (4.0 * area)
-        ok &= p > 0.0
-        lam = lam_o
-        visible = ok                                 # G > 0: wi is not shadowed below its horizon
-        if shadowing:
-            lam_i, ci = _lambda_c(kind, ax, ay, rho, s1, xn, yn, ix, iy, iz)
-            lam += lam_i
-            visible &= ci > 0.0
-        ratio = area / (co * (1.0 + lam))            # G / G1(o)
-        pdf_out[j] = p if ok else 0.0
-        _fresnel_rgb(fk, fp, tx, tv, oh, weight_out, j, ratio if visible else 0.0)
+    @_jit
+    def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
+        s1 = math.sqrt(1.0 - rho * rho)
+        buf = np.empty((11, BLOCK))
+        for j0 in range(start, stop, BLOCK):
+            m = min(BLOCK, stop - j0)
+            u_b, wo_b, wi_b, weight_b, pdf_b = u[j0:], wo[j0:], wi_out[j0:], weight_out[j0:], pdf_out[j0:]
+            for k in range(m):                       # polar angle and azimuth of the warped view
+                ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
+                a = ax * ox + rho * ay * oy
+                b = ay * s1 * oy
+                c = max(oz - ox * xn - oy * yn, 0.0)
+                r2 = a * a + b * b
+                inv_r = 1.0 / math.sqrt(r2)
+                buf[0, k] = c / math.sqrt(r2 + c * c) if r2 > 0.0 else 1.0
+                buf[1, k] = a * inv_r if r2 > 0.0 else 1.0
+                buf[2, k] = b * inv_r if r2 > 0.0 else 0.0
+            if kind == GGX:                          # the standard visible normal
+                for k in range(m):
+                    buf[3, k], buf[4, k], buf[5, k] = _ggx_visible_std(u_b[k, 0], u_b[k, 1], buf[0, k])
+            else:                                    # (library calls: a loop of its own)
+                for k in range(m):
+                    buf[3, k], buf[4, k], buf[5, k] = _beckmann_visible_std(u_b[k, 0], u_b[k, 1], buf[0, k])
+            for k in range(m):
+                ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
+                cp, sp = buf[1, k], buf[2, k]
+                mx, my, mz = cp * buf[3, k] - sp * buf[4, k], sp * buf[3, k] + cp * buf[4, k], buf[5, k]
+                hx = ax * mx - xn * mz                # slope map of Eq. 3.4 on the normal
+                hy = ay * (rho * mx + s1 * my) - yn * mz
+                hz = mz
+                n2 = hx * hx + hy * hy + hz * hz
+                inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
+                hx, hy, hz = hx * inv, hy * inv, hz * inv
+                oh = ox * hx + oy * hy + oz * hz
+                ix, iy, iz = 2.0 * oh * hx - ox, 2.0 * oh * hy - oy, 2.0 * oh * hz - oz
+                r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+                ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
+                r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
+                e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
+                buf[0, k] = oh
+                buf[1, k], buf[2, k], buf[5, k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
+                buf[3, k] = e
+                buf[4, k] = scale if ok else 0.0
+                buf[6, k] = co
+                buf[7, k], buf[8, k], buf[9, k] = ix, iy, iz
+                buf[10, k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
+            _smith_block_post(kind, buf, m)
+            for k in range(m):
+                area, e, f = buf[1, k], buf[3, k], buf[4, k]
+                p = _ndf_over(kind, e, f, 2.0 * area) if (f > 0.0) & (e > 0.0) else 0.0
+                pdf_b[k] = p
+                buf[2, k] = buf[5, k] * area / buf[2, k] if (p > 0.0) & (buf[10, k] > 0.0) else 0.0   # G / G1(o)
+            _fresnel_block(fk, fp, tx, tv, buf, m, 0, 2, 3)
+            for k in range(m):
+                wi_b[k, 0], wi_b[k, 1], wi_b[k, 2] = buf[7, k], buf[8, k], buf[9, k]
+                weight_b[k, 0], weight_b[k, 1], weight_b[k, 2] = buf[3, k], buf[4, k], buf[5, k]
+    return kernel

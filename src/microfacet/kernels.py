@@ -1,10 +1,15 @@
 """Single-pass compiled kernels (Numba) for the hot path of the Smith microfacet BRDF.
 
 The NumPy code of :mod:`microfacet.distributions` and :mod:`microfacet.brdf` is the
-reference; these kernels fuse the same equations into one loop over directions (the
+reference; these kernels fuse the same equations into one pass over directions (the
 NumPy version makes ~40 passes over memory) and are tested against it. They cover
-``gaf="smith"`` with scalar Beckmann or GGX parameters; everything else takes the NumPy
-path. Set ``MICROFACET_NUMBA=0`` to disable them.
+``gaf="smith"`` with scalar Beckmann or GGX parameters and every :mod:`microfacet.fresnel`
+term; everything else takes the NumPy path. Set ``MICROFACET_NUMBA=0`` to disable them.
+
+A batch runs as a few tasks on a thread pool of :func:`threads` threads (the kernels
+release the GIL), each working through its range in cache-sized blocks, so the only
+memory a call allocates is its outputs. Outputs are float64, or float32 for
+``MicrofacetBRDF(..., dtype=np.float32)`` (float32 inputs are read as they are).
 
 Numba is imported, and each kernel compiled (or loaded from Numba's on-disk cache,
 ``cache=True``), on first use, not when :mod:`microfacet` is imported: the kernels live
@@ -57,24 +62,53 @@ def _smith_params(distribution):
 
 _NO_TABLE = (np.zeros(2), np.zeros((2, 3)))
 
-#: Batches smaller than this run on the calling thread only: waking Numba's worker threads
-#: costs 4-8 ms on a loaded machine (measured: eval of 1e4 directions 0.27 ms on one
-#: thread, 4-7 ms on two, 2 cores at load 4-5), more than the work.
+#: Batches smaller than this run on the calling thread only: waking worker threads costs
+#: 4-8 ms on a loaded machine (measured: eval of 1e4 directions 0.27 ms on one thread,
+#: 4-7 ms on two, 2 cores at load 4-5), more than the work.
 PARALLEL_MIN = 1 << 16
+#: Pairs per task of :func:`_launch_ranges` (at least).
+TASK_MIN = 1 << 15
+
+
+def threads() -> int:
+    """Threads the kernels use: Numba's (``NUMBA_NUM_THREADS``, default: the CPU count)."""
+    import numba
+    return numba.get_num_threads()
 
 
 def _launch(kernel, n: int, *args) -> None:
-    """``kernel(*args)`` over ``n`` elements, on one thread below :data:`PARALLEL_MIN`."""
+    """``kernel(*args)`` of a Numba ``parallel=True`` (``prange``) kernel over ``n`` elements,
+    on one thread below :data:`PARALLEL_MIN` (for kernels that are not range kernels)."""
     if n >= PARALLEL_MIN:
         kernel(*args)
         return
     import numba
-    threads = numba.get_num_threads()
+    t = numba.get_num_threads()
     numba.set_num_threads(1)            # per calling thread
     try:
         kernel(*args)
     finally:
-        numba.set_num_threads(threads)
+        numba.set_num_threads(t)
+
+
+@functools.cache
+def _pool(n: int):
+    from concurrent.futures import ThreadPoolExecutor
+    return ThreadPoolExecutor(n, thread_name_prefix="microfacet")
+
+
+def _launch_ranges(kernel, n: int, *args) -> None:
+    """``kernel(start, stop, *args)`` over ``0:n`` (the Smith kernels, which work through a
+    range): on the calling thread below :data:`PARALLEL_MIN`, else as up to 4 tasks of at
+    least :data:`TASK_MIN` per thread (so that a thread slowed by the machine's load hands
+    work to the others) on a pool of :func:`threads` threads (the kernels release the GIL)."""
+    t = threads()
+    tasks = min(4 * t, n // TASK_MIN)
+    if t < 2 or n < PARALLEL_MIN:
+        kernel(0, n, *args)
+        return
+    bounds = np.linspace(0, n, tasks + 1).astype(np.int64)
+    list(_pool(t).map(lambda i: kernel(bounds[i], bounds[i + 1], *args), range(tasks)))
 
 
 def _fresnel_params(fresnel):
@@ -114,64 +148,71 @@ def _brdf_params(brdf):
     return None if d is None or f is None else (d, f)
 
 
+def _shape_n(a, b):
+    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    return shape, int(np.prod(shape))
+
+
 def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
     """``(o.h, D G / (4 z_o) [/ z_i])`` by the compiled kernel, or ``None`` when it does
     not apply (no Numba, array parameters, another distribution)."""
     d = _smith_params(distribution)
     if d is None:
         return None
-    shape = np.broadcast_shapes(wi.shape[:-1], wo.shape[:-1])
-    n = int(np.prod(shape))
+    shape, n = _shape_n(wi, wo)
     oh, s = np.empty(n), np.empty(n)
-    _launch(_kernels()._smith_projected, n, _rows(wi, shape), _rows(wo, shape), *d, bool(shadowing),
-            bool(divide_cos_i), oh, s)
+    _launch_ranges(_kernels().projected_kernel(d[0]), n, _rows(wi, shape), _rows(wo, shape), *d[1:],
+                   bool(shadowing), bool(divide_cos_i), oh, s)
     return oh.reshape(shape), s.reshape(shape)
 
 
-def smith_eval(brdf, wi, wo, divide_cos_i: bool):
+def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64):
     """``F D G / (4 z_o) [/ z_i]`` RGB ``(..., 3)`` of a Smith ``brdf`` (Eq. 2.1) by one
-    compiled pass with the Fresnel term inside, or ``None`` when the kernel does not apply
-    (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
+    compiled pass with the Fresnel term inside, written as ``dtype``, or ``None`` when the
+    kernel does not apply (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
     p = _brdf_params(brdf)
     if p is None:
         return None
-    shape = np.broadcast_shapes(wi.shape[:-1], wo.shape[:-1])
-    out = np.empty(shape + (3,))
-    _launch(_kernels()._smith_eval, out.size // 3, _rows(wi, shape), _rows(wo, shape), *p[0], brdf.shadowing,
-            bool(divide_cos_i), *p[1], out.reshape(-1, 3))
+    (kind, *d), (fk, *f) = p
+    shape, n = _shape_n(wi, wo)
+    out = np.empty(shape + (3,), dtype)
+    _launch_ranges(_kernels().eval_kernel(kind), n, _rows(wi, shape), _rows(wo, shape), *d, brdf.shadowing,
+                   bool(divide_cos_i), fk, *f, out.reshape(-1, 3))
     return out
 
 
-def smith_pdf(brdf, wi, wo):
+def smith_pdf(brdf, wi, wo, dtype=np.float64):
     """Visible-normal sampling density ``D(h) / (4 A(o))`` (Eq. 2.17) of a Smith ``brdf`` by
-    one compiled pass, or ``None`` when the kernel does not apply."""
+    one compiled pass, written as ``dtype``, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
-    shape = np.broadcast_shapes(wi.shape[:-1], wo.shape[:-1])
-    out = np.empty(shape)
-    _launch(_kernels()._smith_pdf, out.size, _rows(wi, shape), _rows(wo, shape), *p[0], out.reshape(-1))
+    shape, n = _shape_n(wi, wo)
+    out = np.empty(shape, dtype)
+    _launch_ranges(_kernels().pdf_kernel(p[0][0]), n, _rows(wi, shape), _rows(wo, shape), *p[0][1:],
+                   out.reshape(-1))
     return out
 
 
-def smith_sample(brdf, u, wo):
+def smith_sample(brdf, u, wo, dtype=np.float64):
     """``(wi, weight, pdf)`` of visible-normal sampling (Sec. 2.2, 3.2, Eq. 2.23) of a Smith
-    ``brdf`` by one compiled pass, or ``None`` when the kernel does not apply."""
+    ``brdf`` by one compiled pass, written as ``dtype``, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
-    shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
-    wi, weight, pdf = np.empty(shape + (3,)), np.empty(shape + (3,)), np.empty(shape)
-    _launch(_kernels()._smith_sample, pdf.size, _rows(u, shape), _rows(wo, shape), *p[0], brdf.shadowing, *p[1],
-            wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
+    (kind, *d), (fk, *f) = p
+    shape, n = _shape_n(u, wo)
+    wi, weight, pdf = np.empty(shape + (3,), dtype), np.empty(shape + (3,), dtype), np.empty(shape, dtype)
+    _launch_ranges(_kernels().sample_kernel(kind), n, _rows(u, shape), _rows(wo, shape), *d, brdf.shadowing,
+                   fk, *f, wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
     return wi, weight, pdf
 
 
 def unit_deviation(w: np.ndarray) -> float:
     """:func:`microfacet.geometry.unit_deviation` (``max | |w|^2 - 1 |``, ``inf`` on NaN/inf)
-    in one compiled pass over a C-contiguous float64 ``w (..., 3)``; the NumPy reference
+    in one compiled pass over a C-contiguous float64 or float32 ``w (..., 3)``; the NumPy reference
     for other arrays or without Numba."""
     from .geometry import unit_deviation as reference
-    if not AVAILABLE or w.dtype != np.float64 or not w.flags.c_contiguous or w.size == 0:
+    if not AVAILABLE or w.dtype not in (np.float64, np.float32) or not w.flags.c_contiguous or w.size == 0:
         return reference(w)
     return float(_kernels()._unit_deviation(w.reshape(-1, 3)))
