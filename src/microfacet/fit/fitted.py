@@ -24,6 +24,8 @@ __all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION", "READABLE_VERSIONS"
 
 #: slack of the energy constraint: fit albedo <= data albedo + ENERGY_MARGIN at each view
 ENERGY_MARGIN = 0.01
+#: default weight of the directional-albedo term of the Fresnel solve (:func:`fit`)
+ALBEDO_WEIGHT = 4.0
 FORMAT = "microfacet.fit"
 VERSION = 2
 #: versions :func:`load` reads (version 1: no diffuse base, Eq. 4.3 backscattering)
@@ -301,7 +303,8 @@ def _fit_ndf(f_back, theta, phi, gaf, model, tol, max_iter):
 def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith", *,
         resolution_phi: int | None = None, shadowing: bool = True, tol: float = 1e-10,
         max_iter: int = 1000, backscatter_gaf: str | None = None, diffuse: bool = False,
-        diffuse_iterations: int = 16, energy_constraint: bool = True) -> FittedBRDF:
+        diffuse_iterations: int = 16, energy_constraint: bool = True,
+        albedo_weight: float = ALBEDO_WEIGHT) -> FittedBRDF:
     """Fit ``brdf`` (anything with ``eval(wi, wo) -> RGB``) with a tabulated microfacet BRDF.
 
     Parameters
@@ -342,6 +345,14 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         term then reflects more than the data. Inactive (no cost but the albedo rows)
         when the fit already conserves the data's energy. The Fresnel table is always
         bounded to ``[0, 1]`` (white furnace <= 1).
+    albedo_weight : float
+        Weight ``lambda`` of the data's directional albedo at the same views in the
+        Fresnel (and ``k_d``) solve, ``lambda^2 / V sum_v (a_fit / a_data - 1)^2`` added
+        to the relative misfit (:func:`extract.solve_fresnel`): with the constraint alone
+        the albedo is only bounded from above and falls short of the data's where the
+        lobe's shape misses it; the term makes the fit carry the data's energy (as
+        :func:`~microfacet.fit.analytic.fit_analytic`'s albedo term). 0: shape only.
+        Needs ``energy_constraint`` (ignored without it).
     tol, max_iter
         Stopping rule of the power iterations (relative change of the eigenvector).
 
@@ -351,6 +362,8 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     """
     if gaf not in GAFS:
         raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
+    if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
+        raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
     model = _backscatter_model(backscatter_gaf, shadowing)
     n = int(resolution)
     if n < 4:
@@ -373,9 +386,10 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         table (and ``k_d``) against it: ``(dist, f0, its, (cos_d, rgb, k_d, residual))``."""
         dist, f0, its = _fit_ndf(np.maximum(f_back - base / np.pi, 0.0), theta, phi, gaf, model, tol, max_iter)
         ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
-        energy = extract.albedo_rows(brdf, ideal, n, views, n_u=20, margin=ENERGY_MARGIN) if energy_constraint else None
+        energy = extract.albedo_rows(brdf, ideal, n, views, n_u=20) if energy_constraint else None
         return dist, f0, its, extract.solve_fresnel(samples, ideal, diffuse=diffuse, albedo=energy, kd_max=kd_max,
-                                                    return_residual=diffuse)
+                                                    return_residual=diffuse, albedo_weight=albedo_weight,
+                                                    energy_margin=ENERGY_MARGIN)
 
     kd_max = None
     if diffuse:    # the base may not exceed the backscattering (up to 70 degrees), per channel
