@@ -2,6 +2,7 @@
 2015), its conversion to Beckmann / GGX (App. C) and its file format."""
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
@@ -12,7 +13,7 @@ from ..brdf import GAFS, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic, theta_grid
 from ..errors import MicrofacetError
-from ..io.atomic import atomic_path
+from ..io.atomic import write_bytes
 from ..io.npz import load_npz
 from . import extract
 from .analytic import fit_analytic
@@ -210,8 +211,13 @@ class FittedBRDF(MicrofacetBRDF):
 
     # ------------------------------------------------------------------- files
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the fit to ``path`` (``.npz``, format :data:`FORMAT` version :data:`VERSION`)
-        atomically (:mod:`microfacet.io.atomic`); returns ``path``.
+        """Write the fit to ``path`` (the ``.npz`` of :meth:`to_bytes`) atomically
+        (:mod:`microfacet.io.atomic`); returns ``path``."""
+        return write_bytes(path, self.to_bytes())
+
+    def to_bytes(self) -> bytes:
+        """The fit as the bytes of an ``.npz`` file, format :data:`FORMAT` version
+        :data:`VERSION` (:meth:`save` writes them, :func:`load` reads them).
 
         Fields: ``format``, ``version``, ``kind`` (``isotropic`` | ``anisotropic``), ``gaf``,
         ``shadowing``, ``ndf`` (the normalized standard ``D`` at the nodes), ``fresnel_cos``
@@ -234,10 +240,9 @@ class FittedBRDF(MicrofacetBRDF):
                       diffuse=self.diffuse)
         if self.anisotropic:
             arrays["projected_area"] = d.area_table
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as f:
-                np.savez(f, **arrays)
-        return Path(path)
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        return buf.getvalue()
 
 
 # ------------------------------------------------------------------------ fitting
