@@ -489,6 +489,17 @@ def test_load_rejects_non_npz_and_missing(tmp_path):
         mf.fit.load(tmp_path / "absent.npz")
 
 
+def test_load_names_a_glints_file(tmp_path):
+    """A glint microsurface (``microfacet glints``'s .npz) is named as such, not reported
+    as a fit file with missing fields (issue 10)."""
+    from microfacet.glints import Microsurface
+    slopes = np.zeros((8, 8, 2))
+    path = Microsurface.from_normal_map(mf.leadr.slopes_to_normals(slopes)).save(tmp_path / "ms.npz")
+    with pytest.raises(MicrofacetError, match="glint microsurface written by 'microfacet glints'") as e:
+        mf.fit.load(path)
+    assert "ms.npz" in str(e.value) and "missing" not in str(e.value)
+
+
 def test_save_samples_a_non_tabulated_fresnel(fits, tmp_path):
     f = mf.fit.FittedBRDF(fits["iso_ggx"].distribution, SCHLICK)
     g = mf.fit.load(f.save(tmp_path / "schlick.npz"))

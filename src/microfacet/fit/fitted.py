@@ -437,9 +437,16 @@ _KEYS = ("format", "version", "kind", "gaf", "shadowing", "ndf", "fresnel_cos", 
 def load(path: str | os.PathLike) -> FittedBRDF:
     """Read a fit written by :meth:`FittedBRDF.save` (any of :data:`READABLE_VERSIONS`);
     raises :class:`MicrofacetError` naming the file when it is not a valid fit file of a
-    supported version."""
+    supported version, and saying what it is when it is another microfacet ``.npz``
+    (a glint microsurface of ``microfacet glints``)."""
     path = Path(path)
     data = load_npz(path, "a microfacet fit file")
+    if "format" not in data and "magic" in data:
+        from ..glints.microsurface import _MAGIC as GLINTS_MAGIC
+        if str(data["magic"]) == GLINTS_MAGIC:
+            raise MicrofacetError(f"{path}: a glint microsurface written by 'microfacet glints' "
+                                  "(read it with microfacet.glints.Microsurface.load), not a microfacet fit file "
+                                  "(written by 'microfacet fit' or FittedBRDF.save)")
     try:
         return _from_arrays(data)
     except (KeyError, ValueError, TypeError, IndexError) as e:
