@@ -722,9 +722,17 @@ def test_albedo_objective_is_the_weighted_ratio_term():
     assert np.all(np.abs(rows[:, -1] - 1.0) < 0.1)           # an estimate of 1 (8 x 8 samples), not 1
 
 
-def test_albedo_weight_must_be_nonnegative():
+def test_albedo_weight_defaults_and_validation():
+    """A negative weight is refused; the default is ``ALBEDO_WEIGHT`` for isotropic fits and
+    0 for anisotropic ones (README: the term oscillates the anisotropic table)."""
+    brdf = _input(mf.GGX, alpha=0.3)
     with pytest.raises(ValueError, match="albedo_weight"):
-        mf.fit.fit(_input(mf.GGX, alpha=0.3), 16, albedo_weight=-1.0)
+        mf.fit.fit(brdf, 16, albedo_weight=-1.0)
+    same = [mf.fit.fit(brdf, 16, anisotropic=True, resolution_phi=8, **kw).fresnel.values
+            for kw in ({}, dict(albedo_weight=0.0))]
+    np.testing.assert_array_equal(*same)
+    same = [mf.fit.fit(brdf, 16, **kw).fresnel.values for kw in ({}, dict(albedo_weight=mf.fit.fitted.ALBEDO_WEIGHT))]
+    np.testing.assert_array_equal(*same)
 
 
 @pytest.mark.skipif(not SHARED, reason="no ../shared/data (MERL / RGL files) in this checkout")

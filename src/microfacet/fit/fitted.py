@@ -309,7 +309,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         resolution_phi: int | None = None, shadowing: bool = True, tol: float = 1e-10,
         max_iter: int = 1000, backscatter_gaf: str | None = None, diffuse: bool = False,
         diffuse_iterations: int = 16, energy_constraint: bool = True,
-        albedo_weight: float = ALBEDO_WEIGHT) -> FittedBRDF:
+        albedo_weight: float | None = None) -> FittedBRDF:
     """Fit ``brdf`` (anything with ``eval(wi, wo) -> RGB``) with a tabulated microfacet BRDF.
 
     Parameters
@@ -357,7 +357,11 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         the albedo is only bounded from above and falls short of the data's where the
         lobe's shape misses it; the term makes the fit carry the data's energy (as
         :func:`~microfacet.fit.analytic.fit_analytic`'s albedo term). 0: shape only.
-        Needs ``energy_constraint`` (ignored without it).
+        Needs ``energy_constraint`` (ignored without it). None (the default):
+        :data:`ALBEDO_WEIGHT` for isotropic fits, 0 for anisotropic ones, where the
+        term (32 views) drives the table into oscillation on the sampling noise of the
+        albedo rows and misses the data's albedo anyway (README: ibiza's anisotropic
+        fit, grid error 0.19 -> 0.58, worst albedo ratio 0.59 -> 0.78).
     tol, max_iter
         Stopping rule of the power iterations (relative change of the eigenvector).
 
@@ -367,6 +371,8 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     """
     if gaf not in GAFS:
         raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
+    if albedo_weight is None:
+        albedo_weight = 0.0 if anisotropic else ALBEDO_WEIGHT
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
     model = _backscatter_model(backscatter_gaf, shadowing)

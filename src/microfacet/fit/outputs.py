@@ -131,7 +131,7 @@ def analytic_from_json(entry: dict):
 def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffuse: bool, albedo_weight: float):
     from .fitted import fit
     return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf, diffuse=tabulated_diffuse,
-               albedo_weight=albedo_weight)
+               albedo_weight=None if anisotropic else albedo_weight)       # anisotropic: fit's default 0
 
 
 def _write_all(files: dict) -> None:
@@ -187,8 +187,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     ``method`` (:data:`METHODS`) chooses the ``"ggx"``/``"beckmann"`` fits of the JSON
     and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
     least-squares fits (:func:`microfacet.fit.fit_analytic`; ``coat``: each with a coat
-    lobe), ``albedo_weight`` the weight of their albedo term and of the tabulated fit's
-    (default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`, equal to
+    lobe), ``albedo_weight`` the weight of their albedo term and of the isotropic
+    tabulated fit's (an anisotropic one keeps :func:`microfacet.fit.fit`'s 0; default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`, equal to
     :data:`microfacet.fit.fitted.ALBEDO_WEIGHT`). ``tabulated_diffuse`` is forwarded to
     :func:`microfacet.fit.fit` as ``diffuse``. The picture is rendered in memory first,
     then the three files are written, each atomically; if a write fails or is interrupted
