@@ -279,7 +279,7 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     backscattering, which the base may not exceed).
 
     ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
-    ``sum_k F_k a[v, k] + k_d <= a_data[v] + energy_margin`` at each view ``v`` (the fit
+    ``sum_k F_k a[v, k] + k_d a[v, n_d] <= a_data[v] + energy_margin`` at each view ``v`` (the fit
     reflects no more than the data); when the bounded solution violates them, the linearly
     constrained problem is solved by :func:`_energy_constrained`. With ``albedo_weight =
     lambda > 0`` the albedo also enters the objective, as in
@@ -287,7 +287,7 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     divided by the data's own weighted energy ``S_c = sum_j w_j f_jc^2`` (so that it is a
     relative squared error), plus
 
-    ``lambda^2 / V sum_v ((sum_k F_k a[v, k] + k_d) / a_data[v, c] - 1)^2``
+    ``lambda^2 / V sum_v ((sum_k F_k a[v, k] + k_d a[v, n_d]) / a_data[v, c] - 1)^2``
 
     (:func:`_albedo_objective`): the fit's albedo is pulled towards the data's, from below
     as well, while the constraint still bounds it from above.

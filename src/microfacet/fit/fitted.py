@@ -350,7 +350,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         term then reflects more than the data. Inactive (no cost but the albedo rows)
         when the fit already conserves the data's energy. The Fresnel table is always
         bounded to ``[0, 1]`` (white furnace <= 1).
-    albedo_weight : float
+    albedo_weight : float or None
         Weight ``lambda`` of the data's directional albedo at the same views in the
         Fresnel (and ``k_d``) solve, ``lambda^2 / V sum_v (a_fit / a_data - 1)^2`` added
         to the relative misfit (:func:`extract.solve_fresnel`): with the constraint alone
