@@ -20,6 +20,13 @@ Both albedos (Eq. 2.1's ``int f cos theta_i dw_i``) use the same estimator: the
 balance-heuristic mixture of the fit's own sampler and the cosine lobe, each on a
 stratified ``128 x 128`` grid, so the comparison is like with like.
 
+With ``--weights`` it also tabulates the trade-off of the albedo term of the Fresnel solve
+(``mf.fit.fit(m, N, albedo_weight=w)``, plain and with ``diffuse=True``) for each weight:
+the grid and uniform errors (:func:`microfacet.metrics.fit_error`, :func:`~microfacet.metrics.uniform_error`),
+the albedo ratio farthest from 1 (:func:`microfacet.metrics.albedo_ratios`, the metric of
+the issue's goal: views 0/30/60/75 degrees, RGB, ``cos theta_i >= 0.1``) and the white
+furnace (:func:`microfacet.metrics.white_furnace`).
+
 For RGL files it also reports why the fitted NDF differs from the file's ``ndf``: the
 file's reconstruction at retro-reflection is ``f(v, v) = rgb(v) D(v) / (4 sigma(v) cos
 theta_v)`` (the masking model, ``G1 = cos / sigma``, with the file's D and sigma), so the
@@ -30,7 +37,8 @@ the masking-model BRDF of the file's own ``D`` and ``sigma`` (constant ``rgb``).
 
 Usage::
 
-    python experiments/fit_energy.py [--data ../shared/data] [--resolution 90] [--out table.md]
+    python experiments/fit_energy.py [--data ../shared/data] [--resolution 90] [--weights 0,2,4,8]
+                                     [--out table.md]
 """
 from __future__ import annotations
 
@@ -43,9 +51,10 @@ import numpy as np
 
 import microfacet as mf
 from microfacet.fit import extract
+from microfacet.fit.fitted import ALBEDO_WEIGHT
 from microfacet.geometry import half_vector
 from microfacet.io import write_text
-from microfacet.metrics import ndf_error
+from microfacet.metrics import albedo_ratios, fit_error, ndf_error, uniform_error, white_furnace
 from microfacet.validation import sampled_albedo
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,6 +89,18 @@ class MaskingModel(mf.BRDF):
         return self.eval(wi, wo) * np.maximum(wi[..., 2:], 0.0)
 
 
+def weight_rows(m, resolution: int, weights) -> list[str]:
+    """Cells ``grid / uniform / worst albedo ratio / furnace`` per weight, plain and diffuse."""
+    cells = []
+    for kw in ({}, dict(diffuse=True)):
+        fits = {w: mf.fit.fit(m, resolution, albedo_weight=w, **kw) for w in weights}
+        grid, uniform, albedo = fit_error(m, fits), uniform_error(m, fits), albedo_ratios(m, fits)
+        cells.append(["{:.3f} / {:.3f} / {:.3f} / {:.3f}".format(
+            grid[w], uniform[w], float(np.nanmax(np.abs(albedo[w] - 1.0))), white_furnace(fits[w]))
+            for w in weights])
+    return cells
+
+
 def rgl_rows(m, resolution: int) -> dict:
     th = np.radians(np.array([0.0, 10.0, 30.0, 50.0, 70.0]))
     v = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
@@ -97,21 +118,26 @@ def main(argv=None) -> int:
     default = Path(os.environ.get("MICROFACET_DATA") or ROOT / ".." / "shared" / "data")
     ap.add_argument("--data", type=Path, default=default)
     ap.add_argument("--resolution", type=int, default=90)
+    ap.add_argument("--weights", default="", help="albedo weights of the trade-off table, e.g. 0,2,4,8")
     ap.add_argument("--out", help="also write the Markdown tables here (atomically)")
     args = ap.parse_args(argv)
     paths = sorted((args.data / "merl").glob("*.binary*")) + sorted((args.data / "rgl").glob("*.bsdf"))
     if not paths:
         raise SystemExit(f"no MERL / RGL files under {args.data}")
-    lines = [f"Energy of `fit(m, {args.resolution})` (energy constraint on) and with `diffuse=True`: "
+    weights = [float(w) for w in args.weights.split(",") if w.strip()]
+    lines = [f"Energy of `fit(m, {args.resolution})` (energy constraint on, default albedo weight "
+             f"{ALBEDO_WEIGHT:g}) and with `diffuse=True`: "
              "excess = fit - data albedo (max RGB) at 0/30/60/75/85°; ratio = max RGB |fit/data - 1| "
              "at 0/30/60/75°; reach = albedo of the lobe with F = 1 / data albedo (brightest channel) at "
              "0/30/60/75° (< 1: out of the lobe's reach).", "",
              "| material | fit | k_d | excess 0/30/60/75/85° | ratio 0/30/60/75° | reach 0/30/60/75° "
              "| fit time (s) |",
              "|---|---|---|---|---|---|---|"]
-    rgl = []
+    rgl, traded = [], []
     for path in paths:
         m = mf.measured.load(path)
+        if weights:
+            traded.append((path.name.split(".")[0], weight_rows(m, args.resolution, weights)))
         for label, kw in (("plain", {}), ("diffuse", dict(diffuse=True))):
             t0 = time.perf_counter()
             fit = mf.fit.fit(m, args.resolution, **kw)
@@ -123,6 +149,15 @@ def main(argv=None) -> int:
                          + " / ".join(f"{r:.2f}" for r in row["reach"]) + f" | {seconds:.2f} |")
         if m.format == "rgl":
             rgl.append((path.name.split(".")[0], rgl_rows(m, args.resolution)))
+    if traded:
+        lines += ["", f"Albedo weight of the Fresnel solve, `fit(m, {args.resolution}, albedo_weight=w)`: "
+                  "grid error / uniform error / albedo ratio farthest from 1 (|ratio - 1|, views 0/30/60/75°, "
+                  "RGB, `metrics.albedo_ratios`) / white furnace:", "",
+                  "| material | fit | " + " | ".join(f"w = {w:g}" for w in weights) + " |",
+                  "|---|---|" + "---|" * len(weights)]
+        for name, (plain, diffuse) in traded:
+            lines.append(f"| {name} | plain | " + " | ".join(plain) + " |")
+            lines.append(f"| {name} | diffuse | " + " | ".join(diffuse) + " |")
     if rgl:
         lines += ["", "RGL `ndf` vs fits (relative L2 of D cos θh; masking / height-correlated "
                   "backscattering), and the file's rgb factor at retro-reflection "

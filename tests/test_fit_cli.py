@@ -211,3 +211,43 @@ def test_single_fit_imports_no_optimizer_statistics_or_plotting(inputs, tmp_path
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(out.stdout.split())
     assert not loaded & {"scipy.optimize", "scipy.stats", "matplotlib"}
+
+
+@pytest.mark.parametrize("failing", ["picture", "png write", "json write"])
+def test_fit_material_writes_all_or_nothing(tmp_path, monkeypatch, failing):
+    """The picture is rendered before any file is written, and a failed (or interrupted)
+    write removes the files already written: a failure leaves neither NAME.npz nor
+    NAME.json without NAME.png (issue 10)."""
+    import microfacet.io
+    import microfacet.render
+    from microfacet.fit.outputs import fit_material
+    written = []
+    real_write = microfacet.io.write_bytes
+
+    def write_bytes(path, data):
+        if (failing == "png write" and str(path).endswith(".png")) or \
+                (failing == "json write" and str(path).endswith(".json")):
+            raise KeyboardInterrupt
+        written.append(path)
+        return real_write(path, data)
+
+    def picture(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(microfacet.io, "write_bytes", write_bytes)
+    if failing == "picture":
+        monkeypatch.setattr(microfacet.render, "fit_comparison_png", picture)
+    out = tmp_path / "gold.npz"
+    with pytest.raises(KeyboardInterrupt):
+        fit_material(TRUTH, out, resolution=16, method="moments")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    assert len(written) == {"picture": 0, "png write": 2, "json write": 1}[failing]     # what was undone
+
+
+def test_fit_material_writes_the_three_files(tmp_path):
+    """Without a failure the three files are there, the .npz loads and the .png is a PNG."""
+    from microfacet.fit.outputs import fit_material
+    fit_material(TRUTH, tmp_path / "gold.npz", resolution=16, method="moments")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["gold.json", "gold.npz", "gold.png"]
+    assert mf.fit.load(tmp_path / "gold.npz").distribution.n_theta == 16
+    assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

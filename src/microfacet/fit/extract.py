@@ -260,7 +260,8 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
 
 
 def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6, albedo=None,
-                  kd_max=None, return_residual: bool = False):
+                  kd_max=None, return_residual: bool = False, albedo_weight: float = 0.0,
+                  energy_margin: float = 0.01):
     """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2) bounded to
     ``[0, 1]``, and optionally a Lambertian base ``k_d``, by a box-constrained linear
     least-squares solve over the configurations ``samples`` (:func:`fresnel_samples`):
@@ -278,16 +279,30 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     backscattering, which the base may not exceed).
 
     ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
-    ``sum_k F_k a[v, k] + k_d <= a_data[v]`` at each view ``v`` (the fit reflects no more
-    than the data); when the bounded solution violates them, the linearly constrained
-    problem is solved by :func:`_energy_constrained`.
+    ``sum_k F_k a[v, k] + k_d a[v, n_d] <= a_data[v] + energy_margin`` at each view ``v`` (the fit
+    reflects no more than the data); when the bounded solution violates them, the linearly
+    constrained problem is solved by :func:`_energy_constrained`. With ``albedo_weight =
+    lambda > 0`` the albedo also enters the objective, as in
+    :func:`~microfacet.fit.analytic.fit_analytic`: per channel ``c`` the objective above,
+    divided by the data's own weighted energy ``S_c = sum_j w_j f_jc^2`` (so that it is a
+    relative squared error), plus
+
+    ``lambda^2 / V sum_v ((sum_k F_k a[v, k] + k_d a[v, n_d]) / a_data[v, c] - 1)^2``
+
+    (:func:`_albedo_objective`): the fit's albedo is pulled towards the data's, from below
+    as well, while the constraint still bounds it from above.
 
     Returns ``(cos_theta_d, rgb, k_d)``: increasing ``cos theta_d`` of the ``n_d`` nodes,
     ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``),
     and with ``return_residual`` also the model's misfit :func:`chi2_residual` over the
     usable configurations (a weighting that does not depend on ``ideal``, so that fits
-    with different NDFs compare).
+    with different NDFs compare), plus, with ``albedo_weight``, the albedo term
+    ``lambda^2 mean_{v, c} (a_fit / a_data - 1)^2`` at the solution.
     """
+    if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
+        raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
+    if not (np.isfinite(energy_margin) and energy_margin >= 0):
+        raise ValueError(f"energy_margin must be a finite number >= 0, got {energy_margin!r}")
     n_d = samples["n_d"]
     f = samples["f"]
     f_id = np.asarray(ideal.eval(samples["wi"], samples["wo"]), dtype=np.float64)[..., 0]
@@ -325,13 +340,19 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
         h[n_d, n_d] += 1e-14 * np.trace(h)
     lo = np.zeros(n_var)
     x = np.empty((n_var, 3))
+    energy = None if albedo is None else (albedo[0], np.asarray(albedo[1], np.float64) + energy_margin)
     for c in range(3):
         hi = np.ones(n_var)
         if diffuse and kd_max is not None:
             hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
-        x[:, c] = box_qp(h, b[:, c], lo, hi)
-        if albedo is not None:
-            x[:, c] = _energy_constrained(h, b[:, c], x[:, c], (lo, hi), albedo, c, diffuse)
+        hc, bc = h, b[:, c]
+        if albedo is not None and albedo_weight > 0:
+            energy_c = max(float(np.sum(w * f[:, c] ** 2)), 1e-300)
+            ha, ba = _albedo_objective(albedo, c, diffuse, albedo_weight)
+            hc, bc = hc + energy_c * ha, bc + energy_c * ba
+        x[:, c] = box_qp(hc, bc, lo, hi)
+        if energy is not None:
+            x[:, c] = _energy_constrained(hc, bc, x[:, c], (lo, hi), energy, c, diffuse)
     rgb = x[:n_d]
     kd = x[n_d] if diffuse else np.zeros(3)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
@@ -339,7 +360,33 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     if not return_residual:
         return out
     model = f_id[:, None] * ((1.0 - t)[:, None] * rgb[k0] + t[:, None] * rgb[k0 + 1]) + kd / np.pi
-    return out + (chi2_residual(model, f),)
+    misfit = chi2_residual(model, f)
+    if albedo is not None and albedo_weight > 0:
+        a_fit, a_data = _albedo_rows_of(albedo[0], diffuse) @ x, np.asarray(albedo[1], np.float64)
+        seen = a_data > 0
+        misfit += albedo_weight**2 * float(np.mean((a_fit[seen] / a_data[seen] - 1.0) ** 2))
+    return out + (misfit,)
+
+
+def _albedo_rows_of(a, diffuse: bool) -> np.ndarray:
+    """The albedo rows over the unknowns of :func:`solve_fresnel` from the ``(V, n_d + 1)``
+    rows of :func:`albedo_rows` (the last column: the base's albedo per unit ``k_d``),
+    without that column when there is no base."""
+    return a if diffuse else a[:, :-1]
+
+
+def _albedo_objective(albedo, c: int, diffuse: bool, weight: float):
+    """Normal equations ``(H, g)`` of the albedo term of :func:`solve_fresnel` for channel
+    ``c``, ``weight^2 / V sum_v (r_v x / a_data[v, c] - 1)^2 = x^T H x - 2 g^T x + const``
+    (``r_v`` the albedo rows, :func:`_albedo_rows_of`); views where the data reflect
+    nothing are left out."""
+    a, a_data = albedo
+    rows = _albedo_rows_of(a, diffuse)
+    target = np.asarray(a_data, np.float64)[:, c]
+    seen = target > 0
+    scaled = rows[seen] / target[seen, None]
+    c2 = weight**2 / max(len(rows), 1)
+    return c2 * scaled.T @ scaled, c2 * scaled.sum(axis=0)
 
 
 def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
@@ -423,7 +470,7 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     from scipy.linalg import cho_factor, cho_solve
 
     a, a_data = albedo
-    rows = np.concatenate([a, np.ones((len(a), 1))], axis=1) if diffuse else a
+    rows = _albedo_rows_of(a, diffuse)
     limit = a_data[:, c]
     if np.all(rows @ x0 <= limit + 1e-9):
         return x0
@@ -458,14 +505,17 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     return x / excess if excess > 1.0 else x
 
 
-def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.01):
+def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     """Linear directional-albedo model of the fit and the data's albedo at ``views``
     (``(V, 3)`` view directions): ``a[v, k] = int f_id(i, o_v) hat_k(cos theta_d) cos
-    theta_i dw_i`` (the fit's albedo is ``sum_k F_k a[v, k] + k_d``, Eq. 2.1 with the
-    table's hats) and ``a_data[v] = int f(i, o_v) cos theta_i dw_i + margin``, both by the
-    same stratified ``n_u x n_u`` importance sampling of the defensive mixture ``1/2``
-    visible normals of ``ideal`` + ``1/2`` cosine lobe (each on the whole grid, weights of
-    the balance heuristic). Returns ``(a, a_data)``."""
+    theta_i dw_i`` for the ``n_d`` Fresnel nodes ``k`` and ``a[v, n_d] = int cos theta_i /
+    pi dw_i`` (the fit's albedo is ``sum_k F_k a[v, k] + k_d a[v, n_d]``, Eq. 2.1 with the
+    table's hats and a Lambertian base) and ``a_data[v] = int f(i, o_v) cos theta_i dw_i``,
+    all by the same stratified ``n_u x n_u`` importance sampling of the defensive mixture
+    ``1/2`` visible normals of ``ideal`` + ``1/2`` cosine lobe (each on the whole grid,
+    weights of the balance heuristic), so that a model equal to the data has exactly the
+    data's estimate (the base's column is the estimate of 1, not 1). Returns ``(a,
+    a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``."""
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
 
@@ -485,11 +535,12 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48, margin: float = 0.0
     f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
     f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
-    a = np.zeros((len(views), n_d))
+    a = np.zeros((len(views), n_d + 1))
     for v in range(len(views)):
-        a[v] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
-                + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
-    return a, f.sum(axis=1) + margin
+        a[v, :n_d] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
+                      + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
+    a[:, n_d] = np.sum(np.maximum(wi[..., 2], 0.0) / np.pi * inv, axis=1)
+    return a, f.sum(axis=1)
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,

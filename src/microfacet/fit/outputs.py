@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MicrofacetError
-from ..io import write_text
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, albedo_ratios, describe_albedo, describe_fit_error,
                        describe_uniform_error, fit_error, uniform_error, white_furnace)
@@ -129,10 +128,26 @@ def analytic_from_json(entry: dict):
     return parts[0] if len(parts) == 1 else SumBRDF(*parts)
 
 
-def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffuse: bool):
+def _run_fit(brdf, resolution: int, anisotropic: bool, gaf: str, tabulated_diffuse: bool, albedo_weight: float):
     from .fitted import fit
-    extra = {"diffuse": True} if tabulated_diffuse else {}     # forwarded once mf.fit.fit has it
-    return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf, **extra)
+    return fit(brdf, resolution=resolution, anisotropic=anisotropic, gaf=gaf, diffuse=tabulated_diffuse,
+               albedo_weight=None if anisotropic else albedo_weight)       # anisotropic: fit's default 0
+
+
+def _write_all(files: dict) -> None:
+    """Write ``{path: bytes}`` in order, each atomically; if one write fails (or is
+    interrupted), the files already written are removed, so a fit never leaves part of
+    its outputs (as ``microfacet bake``)."""
+    from ..io import write_bytes
+    written = []
+    try:
+        for path, data in files.items():
+            write_bytes(path, data)
+            written.append(Path(path))
+    except BaseException:                          # Ctrl-C, a full disk: all or nothing
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
 
 
 def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
@@ -172,9 +187,13 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     ``method`` (:data:`METHODS`) chooses the ``"ggx"``/``"beckmann"`` fits of the JSON
     and picture; ``diffuse`` (:data:`DIFFUSE`) and ``fresnel`` are those of the
     least-squares fits (:func:`microfacet.fit.fit_analytic`; ``coat``: each with a coat
-    lobe), ``albedo_weight`` the weight of their albedo term (default
-    :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`). ``tabulated_diffuse`` is forwarded to
-    :func:`microfacet.fit.fit` as ``diffuse=True``. Returns the JSON
+    lobe), ``albedo_weight`` the weight of their albedo term and of the isotropic
+    tabulated fit's (an anisotropic one keeps :func:`microfacet.fit.fit`'s 0; default :data:`microfacet.fit.analytic.ALBEDO_WEIGHT`, equal to
+    :data:`microfacet.fit.fitted.ALBEDO_WEIGHT`). ``tabulated_diffuse`` is forwarded to
+    :func:`microfacet.fit.fit` as ``diffuse``. The picture is rendered in memory first,
+    then the three files are written, each atomically; if a write fails or is interrupted
+    the ones already written are removed (no ``.npz`` without its ``.json`` and
+    ``.png``). Returns the JSON
     summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
     the least-squares fits (not of the errors, picture or files).
     """
@@ -189,7 +208,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         raise MicrofacetError(f"{out_npz}: is a folder")
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
     t0 = time.perf_counter()
-    fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse)
+    fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
     t1 = time.perf_counter()
     moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
     least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel, albedo_weight, coat) \
@@ -222,16 +241,16 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
         "tabulated_diffuse": bool(tabulated_diffuse),
     }
-    fit.save(out_npz)                               # atomic (FittedBRDF.save)
-    write_text(out_npz.with_suffix(".json"), json.dumps(summary, indent=2) + "\n")
-    if picture:
-        from ..render import save_fit_comparison
+    files = {out_npz: fit.to_bytes(), out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
+    if picture:                                     # rendered before any file is written (1.5-3 s)
+        from ..render import fit_comparison_png
         labels = {"tabulated": "tabulated fit", "ggx": f"GGX ({_label(names['ggx'])})",
                   "beckmann": f"Beckmann ({_label(names['beckmann'])})"}
         notes = {labels[k]: _note(grid[names[k]], uniform[names[k]], albedo[names[k]]) for k in fits}
-        save_fit_comparison(out_npz.with_suffix(".png"), {"data": brdf, **{labels[k]: b for k, b in fits.items()}},
-                            title=title or material_name(out_npz), planes_deg=(0, 90) if anisotropic else (0,),
-                            notes=notes)
+        files[out_npz.with_suffix(".png")] = fit_comparison_png(
+            {"data": brdf, **{labels[k]: b for k, b in fits.items()}}, title=title or material_name(out_npz),
+            planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
+    _write_all(files)
     return summary
 
 

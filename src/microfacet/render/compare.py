@@ -32,7 +32,7 @@ from .lights import DirectionalLight
 from .lobes import LUMINANCE, lobe_curve
 from .sphere import Sphere
 
-__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "COMPARE_LIGHT"]
+__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "COMPARE_LIGHT"]
 
 #: Light of the comparison spheres: up-left of the view, 35 deg from it, unit irradiance.
 COMPARE_LIGHT = DirectionalLight(direction=(-0.5, 0.5, 1.0), irradiance=1.0)
@@ -117,12 +117,19 @@ def _plot_slices(ax, brdfs: Mapping, views_deg: Sequence[float]) -> None:
 def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = "",
                         views_deg: Sequence[float] = (0, 30, 60), planes_deg: Sequence[float] = (0,),
                         size: int = 96, dpi: int = 100, notes: Mapping[str, str] | None = None) -> Path:
-    """Write the comparison picture (module docstring) of ``brdfs`` as a PNG, atomically.
+    """Write the comparison picture of :func:`fit_comparison_png` to ``path``, atomically;
+    return ``path``."""
+    return write_bytes(path, fit_comparison_png(brdfs, title, views_deg, planes_deg, size, dpi, notes))
+
+
+def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[float] = (0, 30, 60),
+                       planes_deg: Sequence[float] = (0,), size: int = 96, dpi: int = 100,
+                       notes: Mapping[str, str] | None = None) -> bytes:
+    """The comparison picture (module docstring) of ``brdfs`` as PNG bytes, in memory (so
+    that a caller can render it before writing any of its files).
 
     Parameters
     ----------
-    path : path-like
-        Destination PNG.
     brdfs : mapping of str -> BRDF
         Label and BRDF, the reference (data) first, e.g. ``{"data": m, "tabulated fit":
         fit, "GGX": fit.to_ggx(), "Beckmann": fit.to_beckmann()}``.
@@ -175,4 +182,4 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
                         wspace=0.35, hspace=0.3)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
-    return write_bytes(path, buf.getvalue())
+    return buf.getvalue()
