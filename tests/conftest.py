@@ -3,6 +3,7 @@ CI (``CI=true``) or with ``pytest --slow`` and are skipped, with that reason, el
 ``DATA`` is the shared test data (``$MICROFACET_DATA``, else ``../shared/data`` beside the
 repository; absent from a user's clone: tests that need it skip)."""
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -29,3 +30,10 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+def default_sigint() -> None:
+    """``preexec_fn`` for a child process that a test stops with Ctrl-C (SIGINT): a shell
+    starts background jobs with SIGINT ignored and children inherit that, so such a child
+    would never see the signal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import default_sigint
 from test_fit_cli import merl_file_bytes
 
 import microfacet as mf
@@ -172,7 +173,7 @@ def test_killing_a_worker_mid_batch_loses_nothing(inputs, client, tmp_path):
 def cli(*args) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(Path(mf.__file__).parents[1]), "NUMBA_NUM_THREADS": "1"}
     return subprocess.Popen([sys.executable, "-m", "microfacet", *map(str, args)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
 
 
 def test_an_interrupted_local_batch_resumes(tmp_path):

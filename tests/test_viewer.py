@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import default_sigint
 
 from microfacet.leadr import bake, figures, read_pyramid, write_pyramid
 from microfacet.leadr.downsample import base_lobe, downsample_operator, naive_pyramid
@@ -170,7 +171,7 @@ def test_server_binds_localhost_only(pyramid_file):
 def test_ctrl_c_stops_the_server(pyramid_file):
     import signal
     proc = subprocess.Popen([sys.executable, "-m", "microfacet", "view", str(pyramid_file)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=_env())
+                            stderr=subprocess.PIPE, text=True, env=_env(), preexec_fn=default_sigint)
     url = proc.stdout.readline().strip()
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
