@@ -201,8 +201,9 @@ def test_coat_fits_without_picture(inputs, tmp_path):
 
 
 def test_single_fit_imports_no_optimizer_statistics_or_plotting(inputs, tmp_path):
-    """The default single-file fit with --no-picture stays light: no SciPy optimize/stats
-    (NumPy Sobol, golden section, box QP) and no matplotlib."""
+    """The default single-file fit with --no-picture stays light: no SciPy optimize/stats/linalg
+    (NumPy Sobol, golden section, box QP with a NumPy Cholesky solve), no matplotlib and no
+    Numba (NumPy references for its small batches)."""
     import subprocess
     import sys
     code = (f"from microfacet.cli import main\nimport sys\n"
@@ -210,7 +211,7 @@ def test_single_fit_imports_no_optimizer_statistics_or_plotting(inputs, tmp_path
             f"'--resolution', '{RESOLUTION}', '--no-picture']) == 0\nprint(' '.join(sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(out.stdout.split())
-    assert not loaded & {"scipy.optimize", "scipy.stats", "matplotlib", "numba"}
+    assert not loaded & {"scipy.optimize", "scipy.stats", "scipy.linalg", "matplotlib", "numba"}
 
 
 def test_single_fit_numpy_path_gives_the_library_numbers(inputs, single, tmp_path):
