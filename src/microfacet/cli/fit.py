@@ -76,7 +76,7 @@ def add(sub) -> None:
                         "Fresnel term of free normal and grazing reflectance (clear coats, varnished paints; "
                         "slower: ~2 s per fit)")
     p.add_argument("--no-picture", dest="picture", action="store_false",
-                   help="do not draw OUT.png (saves ~2 s of matplotlib per file; single files only: a "
+                   help="do not draw OUT.png (saves ~0.7 s of matplotlib per file; single files only: a "
                         "folder's up-to-date check wants the picture)")
     add_batch_options(p)
     p.set_defaults(run=run)
