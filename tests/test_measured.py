@@ -216,6 +216,10 @@ def test_merl_interpolation_cache(smooth_file, monkeypatch):
         m.coverage(wi[k + 1:], wo[k + 1:])
     m.coverage(wi, wo)
     assert len(calls) == 3 + merl.CACHE_SIZE and len(m._cache) == merl.CACHE_SIZE
+    monkeypatch.setattr(merl, "CACHE_MAX_PAIRS", 100)       # larger sets are not kept
+    m._cache.clear()
+    m.coverage(wi, wo), m.coverage(wi, wo)
+    assert len(calls) == 5 + merl.CACHE_SIZE and not m._cache
 
 
 def test_merl_bad_files(tmp_path, smooth_raw):

@@ -25,6 +25,7 @@ the reader returns them as stored: weighting or clipping them is the fitter's ch
 from __future__ import annotations
 
 import hashlib
+import threading
 
 import numpy as np
 
@@ -117,8 +118,9 @@ def _axis_periodic(u, n: int):
     return i0, (i0 + 1) % n, u - np.floor(u)
 
 
-#: Direction sets whose interpolation :class:`MERLBRDF` remembers.
-CACHE_SIZE = 4
+#: Direction sets whose interpolation :class:`MERLBRDF` remembers, and the most pairs a
+#: remembered set may hold (2^18 pairs: 8 MiB of results; a fit's sets hold at most 131,072).
+CACHE_SIZE, CACHE_MAX_PAIRS = 4, 1 << 18
 
 
 def _digest(wi: np.ndarray, wo: np.ndarray) -> tuple:
@@ -158,6 +160,7 @@ class MERLBRDF(MeasuredBRDF):
         self._table = table.reshape(-1, 4)
         self._table *= valid.reshape(-1, 1)
         self._cache = {}                        # digest of (wi, wo) -> (f_r, coverage)
+        self._cache_lock = threading.Lock()
 
     def _corners(self, wi, wo):
         """Flat indices ``(8, ...)`` and trilinear weights ``(8, ...)`` of the samples
@@ -175,18 +178,23 @@ class MERLBRDF(MeasuredBRDF):
 
     def _interpolate(self, wi, wo):
         """``(f_r, coverage)``: the validity-weighted trilinear interpolation, remembered for
-        the last :data:`CACHE_SIZE` direction sets (by content: a fit evaluates the data and
-        their coverage on the same pairs, and its metrics revisit the same grid). Returns
-        new arrays."""
+        the last :data:`CACHE_SIZE` direction sets of at most :data:`CACHE_MAX_PAIRS` pairs
+        (by content: a fit evaluates the data and their coverage on the same pairs, and its
+        metrics revisit the same grid). Returns new arrays."""
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         wi, wo = np.broadcast_arrays(wi, wo)
+        if wi.size > 3 * CACHE_MAX_PAIRS:
+            return self._interpolate_uncached(wi, wo)
         key = _digest(wi, wo)
-        hit = self._cache.pop(key, None)
+        with self._cache_lock:
+            hit = self._cache.pop(key, None)
         if hit is None:
             hit = self._interpolate_uncached(wi, wo)
+        with self._cache_lock:
+            self._cache.pop(key, None)
             while len(self._cache) >= CACHE_SIZE:
                 self._cache.pop(next(iter(self._cache)))
-        self._cache[key] = hit                          # most recent last
+            self._cache[key] = hit                      # most recent last
         return hit[0].copy(), hit[1].copy()
 
     def _interpolate_uncached(self, wi, wo):
