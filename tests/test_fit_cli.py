@@ -201,8 +201,9 @@ def test_coat_fits_without_picture(inputs, tmp_path):
 
 
 def test_single_fit_imports_no_optimizer_statistics_or_plotting(inputs, tmp_path):
-    """The default single-file fit with --no-picture stays light: no SciPy optimize/stats
-    (NumPy Sobol, golden section, box QP) and no matplotlib."""
+    """The default single-file fit with --no-picture stays light: no SciPy optimize/stats/linalg
+    (NumPy Sobol, golden section, box QP with a NumPy Cholesky solve), no matplotlib and no
+    Numba (NumPy references for its small batches)."""
     import subprocess
     import sys
     code = (f"from microfacet.cli import main\nimport sys\n"
@@ -210,7 +211,44 @@ def test_single_fit_imports_no_optimizer_statistics_or_plotting(inputs, tmp_path
             f"'--resolution', '{RESOLUTION}', '--no-picture']) == 0\nprint(' '.join(sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     loaded = set(out.stdout.split())
-    assert not loaded & {"scipy.optimize", "scipy.stats", "matplotlib"}
+    assert not loaded & {"scipy.optimize", "scipy.stats", "scipy.linalg", "matplotlib", "numba"}
+
+
+def test_single_fit_numpy_path_gives_the_library_numbers(inputs, single, tmp_path):
+    """The command's single-file fit (NumPy references, no Numba) writes the numbers of the
+    library's fit (compiled kernels where Numba is available) to float rounding."""
+    import importlib.util
+    import os
+
+    from microfacet import kernels
+    from microfacet.batch.tasks import fit_file
+    _, npz = single                                         # the command, run first
+    assert kernels.AVAILABLE == (os.environ.get("MICROFACET_NUMBA", "1") != "0"
+                                 and importlib.util.find_spec("numba") is not None)   # restored
+    out = tmp_path / "lib.npz"
+    fit_file(inputs / "gold-ggx.binary", out, resolution=int(RESOLUTION), picture=False)
+    a, b = np.load(npz), np.load(out)
+    assert a.files == b.files
+    for k in a.files:
+        if a[k].dtype.kind == "f":
+            np.testing.assert_allclose(a[k], b[k], rtol=1e-9, atol=1e-12, err_msg=k)
+        else:
+            assert np.array_equal(a[k], b[k]), k
+
+    def numbers(x, path=""):
+        if isinstance(x, dict):
+            return {k2: v for k, v in x.items() if "second" not in k for k2, v in numbers(v, f"{path}.{k}").items()}
+        if isinstance(x, list):
+            return {k2: v for i, v in enumerate(x) for k2, v in numbers(v, f"{path}[{i}]").items()}
+        return {path: x}
+    ja = numbers(json.loads(npz.with_suffix(".json").read_text()))
+    jb = numbers(json.loads(out.with_suffix(".json").read_text()))
+    assert ja.keys() == jb.keys()
+    for k in ja:
+        if isinstance(ja[k], float):
+            assert ja[k] == pytest.approx(jb[k], rel=1e-9, abs=1e-12), k
+        else:
+            assert ja[k] == jb[k], k
 
 
 @pytest.mark.parametrize("failing", ["picture", "png write", "json write"])

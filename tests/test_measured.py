@@ -192,6 +192,36 @@ def test_merl_unmeasured_samples(tmp_path, linear_raw):
     np.testing.assert_allclose(m.coverage(wi, wo)[up], 1.0)
 
 
+def test_merl_interpolation_cache(smooth_file, monkeypatch):
+    """Data and coverage on the same pairs interpolate once; a cached answer equals the
+    computed one, is a fresh array (mutating it changes nothing), and other pairs miss."""
+    m = mf.measured.load(smooth_file)
+    rng = np.random.default_rng(7)
+    wi, wo, _ = hd_directions(rng, rng.uniform(0, 1.4, 500), rng.uniform(0, 1.4, 500), rng.uniform(0, 3, 500))
+    expected = m._interpolate_uncached(*np.broadcast_arrays(wi, wo))
+    calls = []
+    compute = m._interpolate_uncached
+    monkeypatch.setattr(m, "_interpolate_uncached", lambda a, b: calls.append(len(a)) or compute(a, b))
+    cover = m.coverage(wi, wo)
+    f = m._eval_numpy(wi, wo)
+    assert calls == [500]
+    np.testing.assert_array_equal(cover, expected[1])
+    np.testing.assert_array_equal(f, expected[0])
+    f[:] = -1.0
+    np.testing.assert_array_equal(m._eval_numpy(wi.copy(), wo.copy()), expected[0])   # by content
+    assert calls == [500]
+    m._eval_numpy(wo, wi)                                   # other pairs
+    assert calls == [500, 500]
+    for k in range(merl.CACHE_SIZE):                        # evicts the oldest
+        m.coverage(wi[k + 1:], wo[k + 1:])
+    m.coverage(wi, wo)
+    assert len(calls) == 3 + merl.CACHE_SIZE and len(m._cache) == merl.CACHE_SIZE
+    monkeypatch.setattr(merl, "CACHE_MAX_PAIRS", 100)       # larger sets are not kept
+    m._cache.clear()
+    m.coverage(wi, wo), m.coverage(wi, wo)
+    assert len(calls) == 5 + merl.CACHE_SIZE and not m._cache
+
+
 def test_merl_bad_files(tmp_path, smooth_raw):
     good = merl_bytes(smooth_raw)
     cases = {

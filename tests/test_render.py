@@ -280,6 +280,25 @@ def test_fit_comparison_picture_is_written(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["cmp.png"]
 
 
+@pytest.mark.parametrize("notes", [None, {"GGX": "err 0.1\nunif 0.2"}])
+def test_fit_comparison_titles_sit_where_automatic_placement_puts_them(monkeypatch, notes):
+    """The explicit title height of the comparison picture (it saves measuring the tick
+    labels twice) gives the pixels of Matplotlib's automatic title placement."""
+    import io
+
+    from PIL import Image
+
+    from microfacet.render import compare
+    brdfs = {"data": mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), "GGX": mf.MicrofacetBRDF(mf.GGX(alpha=0.3)),
+             "Beckmann": mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3))}
+
+    def pixels():
+        return np.asarray(Image.open(io.BytesIO(compare.fit_comparison_png(brdfs, "title", size=24, notes=notes))))
+    explicit = pixels()
+    monkeypatch.setattr(compare, "_TITLE_Y", None)                      # Matplotlib's automatic placement
+    np.testing.assert_array_equal(explicit, pixels())
+
+
 @pytest.mark.parametrize("kwargs, word", [({"direction": (0, 0, 0)}, "direction"), ({"direction": (0, np.nan, 1)}, "direction"),
                                           ({"direction": (0, 1)}, "direction"), ({"irradiance": np.nan}, "irradiance"),
                                           ({"irradiance": -1.0}, "irradiance"), ({"irradiance": (1, 2)}, "irradiance")])

@@ -144,8 +144,9 @@ def _brdf_params(brdf):
     """Kernel parameters of a Smith :class:`~microfacet.brdf.MicrofacetBRDF`, or ``None``."""
     if brdf.gaf_model != "smith":
         return None
-    d, f = _smith_params(brdf.distribution), _fresnel_params(brdf.fresnel)
-    return None if d is None or f is None else (d, f)
+    d = _smith_params(brdf.distribution)          # None without Numba: do not import it
+    f = None if d is None else _fresnel_params(brdf.fresnel)
+    return None if f is None else (d, f)
 
 
 def _shape_n(a, b):

@@ -1,6 +1,7 @@
 """``microfacet fit INPUT -o OUT``: fits of measured BRDFs (thesis Ch. 4, least squares)."""
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from .common import add_batch_options, float_in, input_name, int_at_least, output_path, run_batch
@@ -14,6 +15,24 @@ DIFFUSE = ("auto", "on", "off")
 FRESNELS = ("table", "schlick", "conductor")
 #: microfacet.fit.analytic.ALBEDO_WEIGHT (tested).
 ALBEDO_WEIGHT = 4.0
+
+
+@contextlib.contextmanager
+def numpy_kernels(enabled: bool = True):
+    """Within the block, with ``enabled``, every evaluation runs its NumPy reference
+    (``microfacet.kernels.AVAILABLE`` False, restored after), so Numba is never imported.
+    A single isotropic fit evaluates batches of at most 131,072 pairs, for which importing
+    Numba and loading its cached kernels (~0.2 s CPU) costs more than it saves (README, Fitting)."""
+    if not enabled:
+        yield
+        return
+    from .. import kernels
+    saved = kernels.AVAILABLE
+    kernels.AVAILABLE = False
+    try:
+        yield
+    finally:
+        kernels.AVAILABLE = saved
 
 
 def add(sub) -> None:
@@ -57,7 +76,7 @@ def add(sub) -> None:
                         "Fresnel term of free normal and grazing reflectance (clear coats, varnished paints; "
                         "slower: ~2 s per fit)")
     p.add_argument("--no-picture", dest="picture", action="store_false",
-                   help="do not draw OUT.png (saves ~2 s of matplotlib per file; single files only: a "
+                   help="do not draw OUT.png (saves ~0.7 s of matplotlib per file; single files only: a "
                         "folder's up-to-date check wants the picture)")
     add_batch_options(p)
     p.set_defaults(run=run)
@@ -73,9 +92,10 @@ def run(args) -> int:
     from ..fit.outputs import format_summary_markdown
     source = Path(args.input)
     target = output_path(args.output, ".npz", source, side=(".json", ".png"))
-    row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
-                   method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
-                   albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture)
+    with numpy_kernels(not (args.anisotropic or args.coat or args.fresnel == "conductor")):
+        row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
+                       method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
+                       albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture)
     print(format_summary_markdown([{"material": input_name(source), "file": source.name, "status": "ok",
                                     "seconds": row["fit_seconds"], **row}]), end="")
     return 0

@@ -417,6 +417,14 @@ def golden_section(f, a: float, b: float, xatol: float) -> tuple[float, float]:
     return (c, fc) if fc <= fd else (d, fd)
 
 
+def spd_solve(h: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``h^-1 b`` for a symmetric positive definite ``h`` by its Cholesky factor
+    ``h = L L^T`` (``L^T x = L^-1 b``; NumPy only, so a fit does not import
+    ``scipy.linalg``, ~0.03 s); ``numpy.linalg.LinAlgError`` if ``h`` is not positive definite."""
+    el = np.linalg.cholesky(h)
+    return np.linalg.solve(el.T, np.linalg.solve(el, b))
+
+
 def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-12,
            max_iter: int = 200) -> np.ndarray:
     """``argmin 1/2 x^T h x - g^T x`` over the box ``lo <= x <= hi`` (``h`` symmetric
@@ -426,10 +434,8 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     (``|x - P(x - grad)| <= tol |g|``). Exact for the final active set (one Cholesky solve
     per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
     ``g = r^T y``."""
-    from scipy.linalg import cho_factor, cho_solve
-
     scale = max(float(np.max(np.abs(g))), 1e-300)
-    x = np.clip(cho_solve(cho_factor(h), g), lo, hi)
+    x = np.clip(spd_solve(h, g), lo, hi)
     for _ in range(max_iter):
         grad = h @ x - g
         step = x - np.clip(x - grad, lo, hi)
@@ -440,7 +446,7 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
         free = ~held
         d = np.where(held, -grad, 0.0)
         if np.any(free):
-            d[free] = -cho_solve(cho_factor(h[np.ix_(free, free)]), grad[free])
+            d[free] = -spd_solve(h[np.ix_(free, free)], grad[free])
         s = 1.0
         for _ in range(60):
             xn = np.clip(x + s * d, lo, hi)
@@ -467,8 +473,6 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     exact once the free set settles. A remaining
     violation is removed by scaling ``x`` down (all rows are nonnegative), so the result
     is feasible."""
-    from scipy.linalg import cho_factor, cho_solve
-
     a, a_data = albedo
     rows = _albedo_rows_of(a, diffuse)
     limit = a_data[:, c]
@@ -476,7 +480,7 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
         return x0
     lo, hi = bounds
     v = len(rows)
-    delta = 1e-8 * max(float(np.trace(rows @ cho_solve(cho_factor(h), rows.T))), 1e-300)
+    delta = 1e-8 * max(float(np.trace(rows @ spd_solve(h, rows.T))), 1e-300)
     dual = lambda x, lam: 0.5 * x @ h @ x - g @ x + lam @ (rows @ x - limit)   # noqa: E731
     lam, x = np.zeros(v), x0
     value = dual(x, lam)
@@ -488,7 +492,7 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
         m = np.zeros((v, v))
         if np.any(free):
             af = rows[:, free]
-            m = af @ cho_solve(cho_factor(h[np.ix_(free, free)]), af.T)
+            m = af @ spd_solve(h[np.ix_(free, free)], af.T)
         target = box_qp(m + delta * np.eye(v), gap + m @ lam, np.zeros(v), np.full(v, np.inf))
         step = 1.0
         for _ in range(40):                        # the dual may only increase
