@@ -609,7 +609,7 @@ def test_refine_radial_keeps_nodes_and_is_third_order():
     tf = theta_grid(179)[1:40:2]
     exact = -np.tan(tf) ** 2 / 1e-4
     assert np.max(np.abs(np.log(fine[1:40:2]) - exact)) < 3e-3
-    assert np.max(np.abs(np.interp(tf, th, np.log(d)) - exact)) > 2e-2
+    assert np.max(np.abs(np.interp(tf, th[:21], np.log(d[:21])) - exact)) > 2e-2
     z = np.array([1.0, 0.5, 0.2, 0.0, 0.0, 0.1])
     zf = refine_radial(z, 2)
     assert zf[7] == 0.0 and zf[5] > 0 and zf[9] > 0
