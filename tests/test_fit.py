@@ -616,6 +616,9 @@ def test_refine_radial_keeps_nodes_and_is_third_order():
     np.testing.assert_allclose(zf[::2], z)
     with pytest.raises(ValueError, match="r must"):
         refine_radial(z, 0)
+    # fits refine up to 513 nodes (N = 257), where the sampling tables stay small
+    from microfacet.fit.fitted import radial_refinement
+    assert (radial_refinement(90), radial_refinement(257), radial_refinement(258)) == (2, 2, 1)
 
 
 @pytest.mark.parametrize("D", [mf.GGX, mf.Beckmann])
