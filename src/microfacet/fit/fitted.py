@@ -273,7 +273,7 @@ def _energy_views(anisotropic: bool) -> np.ndarray:
     return np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], axis=-1).reshape(-1, 3)
 
 
-#: Largest isotropic table that :func:`fit` refines to: from ``N = 257`` on the grid itself
+#: Largest isotropic table that :func:`fit` refines to: above ``N = 257`` the grid itself
 #: resolves sharp lobes (Beckmann 0.01: 0.02 % pair error at ``N = 180``), while the
 #: sampling tables of :class:`TabulatedIsotropic` grow as the square of its nodes.
 MAX_REFINED_NODES = 513
