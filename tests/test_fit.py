@@ -599,8 +599,8 @@ def test_narrow_lobe_round_trip_at_90_nodes(D, tol):
 
 def test_refine_radial_keeps_nodes_and_is_third_order():
     """``refine_radial``: the nodes are kept, zeros (below ``log_table``'s floor) stay zeros
-    (and their neighbours log-linear), and between the nodes of a Beckmann 0.01 lobe ln D errs by < 3e-3 (the
-    log-linear interpolation: 2.9e-2)."""
+    (and their neighbours log-linear), and between the nodes of a Beckmann 0.01 lobe ln D
+    errs by < 3e-3 (the log-linear interpolation: 2.9e-2)."""
     from microfacet.distributions.tabulated import refine_radial
     th = theta_grid(90)
     d = np.exp(-np.tan(th) ** 2 / 1e-4)
