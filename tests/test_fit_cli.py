@@ -146,7 +146,9 @@ def test_fit_recursive_folder_mirrors_the_tree_and_reports_all_metrics(inputs, t
     assert [r["file"] for r in rows] == ["metals/gold/deep.binary", "top.binary"]
     for r in rows:
         assert r["method"] == "least_squares" and r["ggx_diffuse"] == ""
-        assert float(r["error_ggx"]) <= float(r["error_ggx_moments"])
+        # Schlick cannot follow Au: 1.1 %, while the moment GGX keeps the tabulated fit's
+        # Fresnel table (0.9 % since isotropic tables are refined, 1.7 % before)
+        assert float(r["error_ggx"]) < 0.015
         assert 0 < float(r["uniform_ggx"]) < 0.1 and abs(float(r["albedo_ggx"]) - 1) < 0.1
     summary = json.loads((out / "metals" / "gold" / "deep.json").read_text())
     assert set(summary["least_squares"]) == {"ggx", "beckmann"}
@@ -287,5 +289,5 @@ def test_fit_material_writes_the_three_files(tmp_path):
     from microfacet.fit.outputs import fit_material
     fit_material(TRUTH, tmp_path / "gold.npz", resolution=16, method="moments")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gold.json", "gold.npz", "gold.png"]
-    assert mf.fit.load(tmp_path / "gold.npz").distribution.n_theta == 16
+    assert mf.fit.load(tmp_path / "gold.npz").distribution.n_theta == 31   # 2 N - 1 (refined)
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

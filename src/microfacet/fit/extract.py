@@ -168,13 +168,15 @@ def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndar
     return k, (scale * cos_o, v)
 
 
-def rule_area_at_normal(dist) -> float:
+def rule_area_at_normal(dist, refine: int = 1) -> float:
     """``A(z) = int cos theta D dw`` of the normalized table ``dist`` by the kernel's rule
     (1 for an exact rule): the eigenvalue of the discrete kernel divided by it is ``F0``
-    (Eq. 4.9) for the exactly normalized ``D``."""
+    (Eq. 4.9) for the exactly normalized ``D``. ``refine``: a radial table resampled from
+    the kernel's nodes (:func:`~microfacet.distributions.tabulated.refine_radial`), whose
+    every ``refine``-th node is one of the kernel's."""
     d = dist.ndf_table
     if d.ndim == 1:
-        return float(projected_area_matrix_isotropic(dist.theta, np.zeros(1))[0] @ d)
+        return float(projected_area_matrix_isotropic(dist.theta[::refine], np.zeros(1))[0] @ d[::refine])
     w = hat_weights(dist.theta, np.sin) * (2.0 * np.pi / d.shape[1])
     return float(np.sum(w[:, None] * np.cos(dist.theta)[:, None] * d))
 
