@@ -354,12 +354,45 @@ def _ccdf(x, t, a, erfc_a, exp_a):
     return math.erfc(x) - erfc_a + t * (exp_a - math.exp(-x * x)) / _SQRT_PI
 
 
+def _q2_table(n_cos=64, n_s=256):
+    """Nodes ``s`` and table ``Q2(u(s), cos theta)`` (:func:`distributions.beckmann.visible_slope_quantile`,
+    the NumPy reference) on ``cos theta = 0, 1/(n_cos-1), ..., 1`` and ``n_s`` uniform ``s``, with
+    ``s = sign(2u - 1) sqrt(-ln(4 u (1 - u)))`` (Giles' ``w`` of :func:`_erfinv`: ``s ~ x~`` in
+    both Gaussian tails, ``~ 2u - 1`` near ``1/2``), ``|s| <= S = s(2^-53)``; ``u(s) = q / (2 (1 +
+    sqrt(1 - q)))``, ``q = exp(-s^2)``, below ``1/2`` and ``1 - u(|s|)`` above."""
+    from .distributions.beckmann import visible_slope_quantile
+    s_max = math.sqrt(-math.log(4.0 * _U_MIN * (1.0 - _U_MIN)))
+    s = np.linspace(-s_max, s_max, n_s)
+    q = np.exp(-s * s)
+    um = q / (2.0 * (1.0 + np.sqrt(1.0 - q)))
+    u = np.where(s < 0.0, um, 1.0 - um)
+    return s_max, np.ascontiguousarray(visible_slope_quantile(u[None, :], np.linspace(0.0, 1.0, n_cos)[:, None]))
+
+
+#: Initial guesses of :func:`_visible_slope_quantile` (:func:`_q2_table`, 64 x 256, built on import).
+_Q2_S, _Q2_TAB = _q2_table()
+
+
+@_jit
+def _visible_slope_guess(u, c):
+    """Bilinear interpolation of :data:`_Q2_TAB` at ``(cos theta, s(u))`` (:func:`_q2_table`): an
+    initial guess for ``Q2(u)`` (median error 3e-5, worst 0.12 on 10^6 samples with tails)."""
+    y = 2.0 * u - 1.0
+    s = math.sqrt(-math.log((1.0 - y) * (1.0 + y)))
+    n_c, n_s = _Q2_TAB.shape
+    fc = c * (n_c - 1)
+    fs = (min(max(s if y >= 0.0 else -s, -_Q2_S), _Q2_S) + _Q2_S) * ((n_s - 1) / (2.0 * _Q2_S))
+    ic, js = min(int(fc), n_c - 2), min(int(fs), n_s - 2)
+    wc, ws = fc - ic, fs - js
+    return ((1.0 - wc) * ((1.0 - ws) * _Q2_TAB[ic, js] + ws * _Q2_TAB[ic, js + 1])
+            + wc * ((1.0 - ws) * _Q2_TAB[ic + 1, js] + ws * _Q2_TAB[ic + 1, js + 1]))
+
+
 @_jit
 def _visible_slope_quantile(u, cos_theta):
     """``Q2(u)`` of the standard Beckmann visible x-slope (Table 2.V): the safeguarded
     Newton-bisection of ``distributions.beckmann.visible_slope_quantile``, per element (no
-    compaction), from Mitsuba's fitted initial guess in the erf domain,
-    ``erf(x0) = erf(a) - (1 + erf(a)) (1 - u)^(1 - 0.876 th + 0.4265 th^2 - 0.0594 th^3)``."""
+    compaction), from the tabulated guess of :func:`_visible_slope_guess`."""
     u = min(max(u, _U_MIN), 1.0 - _U_MIN)
     c = min(max(cos_theta, 1e-12), 1.0)
     s = math.sqrt(max(0.0, 1.0 - c * c))
@@ -370,10 +403,7 @@ def _visible_slope_quantile(u, cos_theta):
     upper = u >= _UPPER                              # the upper tail: residual of 1 - F
     target = ((1.0 - u) if upper else u) * z
     lo, hi = -8.0, min(a, 8.0)
-    th = math.acos(c)
-    b_max = 1.0 - erfc_a
-    b = b_max - (1.0 + b_max) * (1.0 - u) ** (1.0 + th * (-0.876 + th * (0.4265 - 0.0594 * th)))
-    x = min(max(_erfinv(min(max(b, -1.0 + 2.0**-52), 1.0 - 2.0**-52)), lo), hi)
+    x = min(max(_visible_slope_guess(u, c), lo), hi)
     for _ in range(64):
         r = target - _ccdf(x, t, a, erfc_a, exp_a) if upper else _cdf(x, t) - target
         if r < 0.0:
