@@ -7,7 +7,7 @@ A block runs as a few loops over a small scratch array, one per stage, written w
 selects instead of branches and with contiguous per-channel rows, so that LLVM
 vectorizes each stage that makes no library call (all of GGX; Beckmann's ``exp`` and
 ``erfc`` are the kernels' own, :func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table
-loads; its visible-slope Newton solve and ``erfinv`` stay in a scalar loop). Kernels are
+loads; its visible-slope Halley solve and ``erfinv`` stay in a scalar loop). Kernels are
 compiled per distribution kind (a constant in them: :func:`eval_kernel` etc.); the
 Fresnel kind, shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
