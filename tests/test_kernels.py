@@ -125,8 +125,8 @@ def test_erfinv_matches_scipy():
 
 def test_beckmann_quantile_matches_numpy_at_the_extremes():
     """The compiled Q2 (tabulated guess, safeguarded Halley) equals the NumPy reference's
-    Newton-bisection to 1e-13 (absolute, relative above 1) for ``u`` from 2^-53 to 1 - 2^-53
-    and views from normal to 1e-12 from grazing, beyond the table's nodes (``u`` past 2^-53)."""
+    Newton-bisection to 1e-13 (absolute, relative above 1) for ``u`` from 0 to 1 (clamped to
+    ``[2^-53, 1 - 2^-53]``) and views from normal to 1e-12 from grazing."""
     from microfacet.distributions.beckmann import visible_slope_quantile
     q = kernels._kernels()._visible_slope_quantile
     u = np.concatenate([[0.0, 2.0**-53], np.geomspace(1e-15, 0.5, 40), 1.0 - np.geomspace(1e-15, 0.5, 40),
