@@ -7,7 +7,7 @@ A block runs as a few loops over a small scratch array, one per stage, written w
 selects instead of branches and with contiguous per-channel rows, so that LLVM
 vectorizes each stage that makes no library call (all of GGX; Beckmann's ``exp`` and
 ``erfc`` are the kernels' own, :func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table
-loads; its visible-slope Newton solve and ``erfinv`` stay in a scalar loop). Kernels are
+loads; its visible-slope Halley solve and ``erfinv`` stay in a scalar loop). Kernels are
 compiled per distribution kind (a constant in them: :func:`eval_kernel` etc.); the
 Fresnel kind, shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
@@ -303,9 +303,12 @@ def _smith_block_post(kind, buf, m):
 @_jit
 def _erfinv(y):
     """``erfinv(y)`` for ``|y| < 1``: Giles' single-precision approximation ("Approximating
-    the erfinv function", GPU Computing Gems 2011) and Halley steps on ``erf(x) = y`` (two,
-    more where ``1 - |y| < 2^-24``, outside the approximation's range)
-    (on ``erfc(|x|) = 1 - |y|`` for ``|y| > 1/2``, exact there, so the tails keep precision)."""
+    the erfinv function", GPU Computing Gems 2011; relative error <= 1.25e-7 measured on 10^6
+    uniform ``y``) and Halley steps on ``erf(x) = y`` (on ``erfc(|x|) = 1 - |y|`` for ``|y| > 1/2``,
+    exact there, so the tails keep precision): one, more where ``1 - |y| < 2^-24``, outside the
+    approximation's range. A step of ``d`` leaves an error ``~ K d^3``, Halley's constant
+    ``K = (f2 / 2 f1)^2 - f3 / 6 f1 = (x^2 + 1) / 3`` (``f_n`` the derivatives of ``erf``), below
+    4e-18 relative for ``|d| <= 2e-7 |x|``, ``|x| <= 6``."""
     w = -math.log((1.0 - y) * (1.0 + y))
     if w < 5.0:
         w -= 2.5
@@ -321,7 +324,7 @@ def _erfinv(y):
             p = q + p * w
     x = p * y
     sign = 1.0 if y >= 0.0 else -1.0
-    for _ in range(6):                                # 2 steps, more beyond float32's range
+    for _ in range(6):                                # 1 step, more beyond float32's range
         ax = abs(x)
         if abs(y) > 0.5:                              # f = (1 - |y|) - erfc(|x|), increasing in |x|
             f = (1.0 - abs(y)) - math.erfc(ax)
@@ -329,21 +332,21 @@ def _erfinv(y):
             f = math.erf(ax) - abs(y)
         d = f * (0.5 * _SQRT_PI) * math.exp(ax * ax)   # f / f'
         x = sign * (ax - d / (1.0 + ax * d))          # Halley: f'' / f' = -2 |x|
-        if abs(d) <= 1e-9 * ax:                       # the next step would be below 1e-27
+        if abs(d) <= 2e-7 * ax:                       # this step left < 4e-18 relative
             break
     return x
 
 
 @_jit
-def _cdf(x, t):
-    """Unnormalized visible-slope CDF (``distributions.beckmann._cdf``)."""
-    return math.erfc(-x) + t * math.exp(-x * x) / _SQRT_PI
+def _cdf(x, t, exp_x):
+    """Unnormalized visible-slope CDF (``distributions.beckmann._cdf``), given ``exp_x = exp(-x^2)``."""
+    return math.erfc(-x) + t * exp_x / _SQRT_PI
 
 
 @_jit
-def _ccdf(x, t, a, erfc_a, exp_a):
+def _ccdf(x, t, a, erfc_a, exp_a, exp_x):
     """Unnormalized complementary CDF (``distributions.beckmann._ccdf``: closed form, or the
-    12-point Gauss-Legendre rule where ``a - x < 1``)."""
+    12-point Gauss-Legendre rule where ``a - x < 1``), given ``exp_x = exp(-x^2)``."""
     if a - x < 1.0:
         dn = a - x
         acc = 0.0
@@ -351,38 +354,74 @@ def _ccdf(x, t, a, erfc_a, exp_a):
             s = dn * _GL_T[j]
             acc += _GL_W[j] * s * math.exp(-(a - s) ** 2)
         return 2.0 * t / _SQRT_PI * dn * acc
-    return math.erfc(x) - erfc_a + t * (exp_a - math.exp(-x * x)) / _SQRT_PI
+    return math.erfc(x) - erfc_a + t * (exp_a - exp_x) / _SQRT_PI
+
+
+def _q2_table(n_cos=64, n_s=256):
+    """Nodes ``s`` and table ``Q2(u(s), cos theta)`` (:func:`distributions.beckmann.visible_slope_quantile`,
+    the NumPy reference) on ``cos theta = 0, 1/(n_cos-1), ..., 1`` and ``n_s`` uniform ``s``, with
+    ``s = sign(2u - 1) sqrt(-ln(4 u (1 - u)))`` (Giles' ``w`` of :func:`_erfinv`: ``s ~ x~`` in
+    both Gaussian tails, ``~ 2u - 1`` near ``1/2``), ``|s| <= S = s(2^-53)``; ``u(s) = q / (2 (1 +
+    sqrt(1 - q)))``, ``q = exp(-s^2)``, below ``1/2`` and ``1 - u(|s|)`` above."""
+    from .distributions.beckmann import visible_slope_quantile
+    s_max = math.sqrt(-math.log(4.0 * _U_MIN * (1.0 - _U_MIN)))
+    s = np.linspace(-s_max, s_max, n_s)
+    q = np.exp(-s * s)
+    um = q / (2.0 * (1.0 + np.sqrt(1.0 - q)))
+    u = np.where(s < 0.0, um, 1.0 - um)
+    return s_max, np.ascontiguousarray(visible_slope_quantile(u[None, :], np.linspace(0.0, 1.0, n_cos)[:, None]))
+
+
+#: Initial guesses of :func:`_visible_slope_quantile` (:func:`_q2_table`, 64 x 256, built on import).
+_Q2_S, _Q2_TAB = _q2_table()
+
+
+@_jit
+def _visible_slope_guess(u, c):
+    """Bilinear interpolation of :data:`_Q2_TAB` at ``(cos theta, s(u))`` (:func:`_q2_table`): an
+    initial guess for ``Q2(u)`` (median error 3e-5, worst 0.12 on 10^6 samples with tails)."""
+    y = 2.0 * u - 1.0
+    s = math.sqrt(-math.log((1.0 - y) * (1.0 + y)))
+    n_c, n_s = _Q2_TAB.shape
+    fc = c * (n_c - 1)
+    fs = (min(max(s if y >= 0.0 else -s, -_Q2_S), _Q2_S) + _Q2_S) * ((n_s - 1) / (2.0 * _Q2_S))
+    ic, js = min(int(fc), n_c - 2), min(int(fs), n_s - 2)
+    wc, ws = fc - ic, fs - js
+    return ((1.0 - wc) * ((1.0 - ws) * _Q2_TAB[ic, js] + ws * _Q2_TAB[ic, js + 1])
+            + wc * ((1.0 - ws) * _Q2_TAB[ic + 1, js] + ws * _Q2_TAB[ic + 1, js + 1]))
 
 
 @_jit
 def _visible_slope_quantile(u, cos_theta):
     """``Q2(u)`` of the standard Beckmann visible x-slope (Table 2.V): the safeguarded
     Newton-bisection of ``distributions.beckmann.visible_slope_quantile``, per element (no
-    compaction), from Mitsuba's fitted initial guess in the erf domain,
-    ``erf(x0) = erf(a) - (1 + erf(a)) (1 - u)^(1 - 0.876 th + 0.4265 th^2 - 0.0594 th^3)``."""
+    compaction), from the tabulated guess of :func:`_visible_slope_guess`, with Halley's
+    step ``f / f' / (1 - f f'' / (2 f'^2))`` where its denominator exceeds 1/2 (else
+    Newton's) and the stopping test on the Newton step ``f / f'``: 2.1 iterations on
+    average over uniform ``(u, cos theta)`` (the Newton-bisection from Mitsuba's fitted
+    guess took 4.3)."""
     u = min(max(u, _U_MIN), 1.0 - _U_MIN)
     c = min(max(cos_theta, 1e-12), 1.0)
     s = math.sqrt(max(0.0, 1.0 - c * c))
     a = c / s
     t = s / c
     erfc_a, exp_a = math.erfc(a), math.exp(-a * a)
-    z = math.erfc(-a) + t * exp_a / _SQRT_PI
+    z = (2.0 - erfc_a) + t * exp_a / _SQRT_PI        # erfc(-a) = 2 - erfc(a), a >= 0
     upper = u >= _UPPER                              # the upper tail: residual of 1 - F
     target = ((1.0 - u) if upper else u) * z
     lo, hi = -8.0, min(a, 8.0)
-    th = math.acos(c)
-    b_max = 1.0 - erfc_a
-    b = b_max - (1.0 + b_max) * (1.0 - u) ** (1.0 + th * (-0.876 + th * (0.4265 - 0.0594 * th)))
-    x = min(max(_erfinv(min(max(b, -1.0 + 2.0**-52), 1.0 - 2.0**-52)), lo), hi)
+    x = min(max(_visible_slope_guess(u, c), lo), hi)
     for _ in range(64):
-        r = target - _ccdf(x, t, a, erfc_a, exp_a) if upper else _cdf(x, t) - target
+        e = math.exp(-x * x)
+        r = target - _ccdf(x, t, a, erfc_a, exp_a, e) if upper else _cdf(x, t, e) - target
         if r < 0.0:
             lo = x
         if r > 0.0:
             hi = x
-        step = r / (2.0 * math.exp(-x * x) * (1.0 - x * t) / _SQRT_PI)
-        xn = x - step
-        converged = (abs(step) <= 1e-12 * max(1.0, abs(x))) or r == 0.0
+        step = r / (2.0 * e * (1.0 - x * t) / _SQRT_PI)    # Newton: f / f', f' the density
+        den = 1.0 - 0.5 * step * (-2.0 * x - t / (1.0 - x * t))   # Halley: f'' / f' = -2x - t / (1 - x t)
+        xn = x - (step / den if den > 0.5 else step)
+        converged = (abs(step) <= 1e-12 * max(1.0, abs(x))) or r == 0.0   # on the Newton step
         if not converged and not (lo < xn < hi):
             xn = 0.5 * (lo + hi)
         done = converged or hi - lo <= 4e-16 * max(1.0, abs(x))
