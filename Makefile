@@ -31,7 +31,7 @@ demo: setup
 	$(VENV)/bin/microfacet demo -o $(OUT)
 
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --maxprocesses 4
 
 bench: setup
 	$(PY) benchmarks/bench_brdf.py
