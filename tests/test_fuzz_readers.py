@@ -372,6 +372,32 @@ def test_load_npz_names_the_file_and_what_it_is_not(folder):
         load_npz(folder / "missing.npz", "a test file")
 
 
+def test_load_npz_stored_members_equal_np_load_and_check_the_crc(folder):
+    """Uncompressed members are views of a private memory map (:func:`microfacet.io.npz._read_stored`):
+    the same arrays as ``np.load`` (C and Fortran order, 0-d, empty, several dtypes),
+    writeable without touching the file, and a flipped data byte (finite floats, no
+    other check sees it) is still refused by the member's CRC-32, naming the file."""
+    from microfacet.io import load_npz
+    arrays = {"c": np.arange(24, dtype=np.float32).reshape(2, 3, 4), "f": np.asfortranarray(np.eye(3)[:, :2] + 0.5),
+              "s": np.array(7), "e": np.zeros((0, 5)), "t": np.array("text"), "u": np.arange(5, dtype=np.uint16)}
+    path = folder / "stored.npz"
+    np.savez(path, **arrays)
+    data = path.read_bytes()
+    got = load_npz(path, "a test file")
+    with np.load(path) as z:
+        assert sorted(got) == sorted(z.files)
+        for k in z.files:
+            assert got[k].dtype == z[k].dtype and got[k].shape == z[k].shape and np.array_equal(got[k], z[k]), k
+    assert got["f"].flags.f_contiguous
+    got["c"][...] = -1.0
+    assert path.read_bytes() == data, "writing into a loaded array changed the file"
+    at = data.index(np.arange(24, dtype=np.float32).tobytes()) + 5       # inside float 1.0: 1.0000001
+    path.write_bytes(data[:at] + bytes([data[at] ^ 1]) + data[at + 1:])
+    with pytest.raises(MicrofacetError, match="not a test file.*CRC") as e:
+        load_npz(path, "a test file")
+    assert str(path) in str(e.value)
+
+
 def test_fuzz_load_npz(folder):
     arrays = {"ndf": np.linspace(1, 2, 9), "kind": np.array("isotropic")}
     seeds = [_npz_bytes(folder, arrays), _npz_bytes(folder, arrays, compressed=True)]

@@ -1,7 +1,12 @@
 """Reading ``.npz`` archives written by microfacet, with errors that name the file."""
 from __future__ import annotations
 
+import math
+import mmap
 import os
+import struct
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +34,51 @@ def load_npz(path: str | os.PathLike, kind: str) -> dict[str, np.ndarray]:
         raise MicrofacetError(f"{path}: not {kind} (not a .npz archive: starts with "
                               f"{head.hex() or 'nothing, empty file'})")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            return {name: z[name] for name in z.files}
+        with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
+            mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_COPY)    # private, writeable pages
+            out = {}
+            for info in zf.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                name = info.filename[:-4]
+                if info.compress_type == zipfile.ZIP_STORED:
+                    out[name] = _read_stored(f, mm, info)
+                else:
+                    with zf.open(info) as m:
+                        out[name] = np.lib.format.read_array(m, allow_pickle=False)
+            return out
     except Exception as e:    # zipfile, zlib, EOFError, ValueError of np.load on corrupt archives
         why = "holds object arrays" if "pickle" in str(e) else f"{type(e).__name__}: {e}"
         raise MicrofacetError(f"{path}: not {kind} (corrupt .npz archive: {why})") from None
+
+
+def _read_stored(f, mm: mmap.mmap, info: zipfile.ZipInfo) -> np.ndarray:
+    """The array of the uncompressed (``ZIP_STORED``) archive member ``info``: a view of the
+    archive's private (copy-on-write) memory map ``mm`` of the open file ``f``, so that no
+    bytes are copied (:class:`zipfile.ZipExtFile`, which ``np.load`` reads through, copies
+    every chunk twice); the ``.npy`` header is read as :func:`numpy.lib.format.read_array`
+    reads it and the member's CRC-32 is checked as :mod:`zipfile` checks it (APPNOTE.TXT
+    4.3.7: the 30-byte local file header, with the name and extra-field lengths at offsets
+    26 and 28, precedes the data)."""
+    f.seek(info.header_offset)
+    local = f.read(30)
+    if len(local) != 30 or local[:4] != b"PK\x03\x04":
+        raise zipfile.BadZipFile(f"bad local file header of {info.filename}")
+    start = info.header_offset + 30 + sum(struct.unpack("<HH", local[26:30]))
+    f.seek(start)
+    version = np.lib.format.read_magic(f)
+    shape, fortran, dtype = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                             else np.lib.format.read_array_header_2_0)(f)
+    if dtype.hasobject:
+        raise ValueError(f"{info.filename}: object arrays cannot be loaded without pickle")
+    nhead = f.tell() - start
+    count = math.prod(shape)
+    if nhead + count * dtype.itemsize != info.file_size:
+        raise ValueError(f"{info.filename}: array size does not match the archive member")
+    a = np.frombuffer(mm, dtype, count, start + nhead) if count else np.empty(0, dtype)
+    a = a.reshape(shape[::-1]).T if fortran else a.reshape(shape)
+    with memoryview(mm) as view:
+        crc = zlib.crc32(view[start:start + info.file_size])
+    if crc != info.CRC:
+        raise zipfile.BadZipFile(f"Bad CRC-32 for file {info.filename!r}")
+    return a
