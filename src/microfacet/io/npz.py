@@ -35,14 +35,13 @@ def load_npz(path: str | os.PathLike, kind: str) -> dict[str, np.ndarray]:
                               f"{head.hex() or 'nothing, empty file'})")
     try:
         with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
-            mm = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_COPY)    # private, writeable pages
             out = {}
             for info in zf.infolist():
                 if not info.filename.endswith(".npy"):
                     continue
                 name = info.filename[:-4]
                 if info.compress_type == zipfile.ZIP_STORED:
-                    out[name] = _read_stored(f, mm, info)
+                    out[name] = _read_stored(f, info)
                 else:
                     with zf.open(info) as m:
                         out[name] = np.lib.format.read_array(m, allow_pickle=False)
@@ -52,11 +51,12 @@ def load_npz(path: str | os.PathLike, kind: str) -> dict[str, np.ndarray]:
         raise MicrofacetError(f"{path}: not {kind} (corrupt .npz archive: {why})") from None
 
 
-def _read_stored(f, mm: mmap.mmap, info: zipfile.ZipInfo) -> np.ndarray:
-    """The array of the uncompressed (``ZIP_STORED``) archive member ``info``: a view of the
-    archive's private (copy-on-write) memory map ``mm`` of the open file ``f``, so that no
-    bytes are copied (:class:`zipfile.ZipExtFile`, which ``np.load`` reads through, copies
-    every chunk twice); the ``.npy`` header is read as :func:`numpy.lib.format.read_array`
+def _read_stored(f, info: zipfile.ZipInfo) -> np.ndarray:
+    """The array of the uncompressed (``ZIP_STORED``) archive member ``info`` of the open
+    archive file ``f``: a view of a private (copy-on-write, so writeable) memory map of the
+    member alone, unmapped with the array, so that no bytes are copied
+    (:class:`zipfile.ZipExtFile`, which ``np.load`` reads through, copies every chunk
+    twice); the ``.npy`` header is read as :func:`numpy.lib.format.read_array`
     reads it and the member's CRC-32 is checked as :mod:`zipfile` checks it (APPNOTE.TXT
     4.3.7: the 30-byte local file header, with the name and extra-field lengths at offsets
     26 and 28, precedes the data)."""
@@ -73,12 +73,19 @@ def _read_stored(f, mm: mmap.mmap, info: zipfile.ZipInfo) -> np.ndarray:
         raise ValueError(f"{info.filename}: object arrays cannot be loaded without pickle")
     nhead = f.tell() - start
     count = math.prod(shape)
-    if nhead + count * dtype.itemsize != info.file_size:
+    nbytes = count * dtype.itemsize
+    if nhead + nbytes != info.file_size:
         raise ValueError(f"{info.filename}: array size does not match the archive member")
-    a = np.frombuffer(mm, dtype, count, start + nhead) if count else np.empty(0, dtype)
+    data = start + nhead
+    skip = data % mmap.ALLOCATIONGRANULARITY                       # map offsets are aligned
+    mm = mmap.mmap(f.fileno(), skip + nbytes, access=mmap.ACCESS_COPY, offset=data - skip) if nbytes else None
+    a = np.frombuffer(mm, dtype, count, skip) if nbytes else np.empty(count, dtype)
     a = a.reshape(shape[::-1]).T if fortran else a.reshape(shape)
-    with memoryview(mm) as view:
-        crc = zlib.crc32(view[start:start + info.file_size])
+    f.seek(start)
+    crc = zlib.crc32(f.read(nhead))
+    if nbytes:
+        with memoryview(mm) as view, view[skip:] as body:
+            crc = zlib.crc32(body, crc)
     if crc != info.CRC:
         raise zipfile.BadZipFile(f"Bad CRC-32 for file {info.filename!r}")
     return a
