@@ -368,6 +368,41 @@ def test_central_moment_conversions_invert_each_other():
     assert np.array_equal(_raw_from_central(C.astype(np.float64))[..., :2], C[..., :2])
 
 
+def test_load_floors_in_the_conversion_pass_bit_for_bit(ms, tmp_path):
+    """``_raw_from_central(C, sigma_eps)`` floors each lobe as ``_floor_moments_compiled``
+    does afterwards (same numbers, steep and thin lobes included), and a loaded format-2
+    file holds exactly the lobes of the constructor on its raw moments; bad parameters,
+    an empty lobe grid and float64 central moments still load or fail as before."""
+    rng = np.random.default_rng(5)
+    C = _central_float32(lobe_moments(random_slopes((12, 10)) * 3.0, 10, 12))
+    C[0, :, 2:4] = 1e-7                     # thinner than sigma_eps: changed by the floor
+    C[1, :, 4] = np.sqrt(C[1, :, 2] * C[1, :, 3])            # |rho| = 1: clamped
+    C[2, :, :2] = rng.normal(0, 50, (10, 2))                 # steep means
+    for eps in (0.01, 0.3):
+        sep = _raw_from_central(C)
+        _floor_moments_compiled(sep.reshape(-1, 5), eps)
+        fused = _raw_from_central(C, eps)
+        assert np.array_equal(fused, sep) and not np.array_equal(fused, _raw_from_central(C))
+    path = ms.save(tmp_path / "ms.npz")
+    back = Microsurface.load(path)
+    with np.load(path) as z:
+        ref = Microsurface(_raw_from_central(z["central"]), z["slopes"], ms.h, ms.sigma_eps, ms.cutoff,
+                           ms.slope_cutoff)
+    assert np.array_equal(back.lobe_moments, ref.lobe_moments) and back._grid.flags.c_contiguous
+    assert (back.grid, back.resolution, back.cutoff, back.slope_cutoff) == (ref.grid, ref.resolution, ms.cutoff,
+                                                                            ms.slope_cutoff)
+    assert np.array_equal(back.kernel_sigma, ref.kernel_sigma) and back.slopes.dtype == np.float32
+    arrays = dict(np.load(path))
+    for name, change, why in [("eps", {"params": np.array([1.0, 0.0, 3.0, 4.0])}, "sigma_eps must be > 0"),
+                              ("cut", {"params": np.array([1.0, 0.01, -3.0, 4.0])}, "cutoff and slope_cutoff"),
+                              ("empty", {"central": np.zeros((0, 4, 5), np.float32)}, "bad array shapes")]:
+        np.savez(tmp_path / f"{name}.npz", **dict(arrays, **change))
+        with pytest.raises(MicrofacetError, match=f"{name}.npz: corrupt microsurface file.*{why}"):
+            Microsurface.load(tmp_path / f"{name}.npz")
+    np.savez(tmp_path / "f64.npz", **dict(arrays, central=arrays["central"].astype(np.float64)))
+    assert np.array_equal(Microsurface.load(tmp_path / "f64.npz").lobe_moments, back.lobe_moments)
+
+
 def test_alpha_summary_is_the_median_and_max_of_both_axes():
     """``alpha_summary`` (float32, partitioned in place) gives ``np.median`` and the
     largest of the per-axis roughness ``sqrt(2 var)`` of the lobes, even and odd counts."""

@@ -240,32 +240,38 @@ def lobe_moments(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
     return _lobe_moments(s, nx, ny, o, g)
 
 
+@numba.njit(cache=True)
+def _floor_lobe(E, i, e2):  # pragma: no cover - compiled
+    """:func:`_floor_moments` of lobe ``i`` of ``E (N, 5)`` in place (``e2 = sigma_eps^2``)."""
+    m1, m2 = E[i, 0], E[i, 1]
+    vx = max(E[i, 2] - m1 * m1, 0.0)
+    vy = max(E[i, 3] - m2 * m2, 0.0)
+    c0 = E[i, 4] - m1 * m2
+    if vx * vy - c0 * c0 >= e2 * (vx + vy) and c0 * c0 <= MAX_RHO * MAX_RHO * vx * vy \
+            and vx > 0.0 and vy > 0.0:
+        return          # l2 >= det / (vx + vy) >= e2 and |rho| <= 0.99: already floored, unchanged
+    lim = MAX_RHO * math.sqrt(vx * vy)
+    cxy = min(max(c0, -lim), lim)
+    half = 0.5 * (vx + vy)
+    r = math.hypot(0.5 * (vx - vy), cxy)
+    l2 = half - r
+    if l2 < e2 * (1.0 - 1e-10):
+        f1, f2 = max(half + r, e2), max(l2, e2)
+        t = 0.5 * math.atan2(2.0 * cxy, vx - vy)
+        c, sn = math.cos(t), math.sin(t)
+        vx = max(f1 * c * c + f2 * sn * sn, e2)
+        vy = max(f1 * sn * sn + f2 * c * c, e2)
+        lim = MAX_RHO * math.sqrt(vx * vy)
+        cxy = min(max((f1 - f2) * c * sn, -lim), lim)
+    E[i, 2], E[i, 3], E[i, 4] = vx + m1 * m1, vy + m2 * m2, cxy + m1 * m2
+
+
 @numba.njit(parallel=True, cache=True)
 def _floor_moments_compiled(E, sigma_eps):  # pragma: no cover - compiled
     """:func:`_floor_moments` in place on ``E (N, 5)``, one lobe at a time (no temporaries)."""
     e2 = sigma_eps * sigma_eps
     for i in numba.prange(E.shape[0]):
-        m1, m2 = E[i, 0], E[i, 1]
-        vx = max(E[i, 2] - m1 * m1, 0.0)
-        vy = max(E[i, 3] - m2 * m2, 0.0)
-        c0 = E[i, 4] - m1 * m2
-        if vx * vy - c0 * c0 >= e2 * (vx + vy) and c0 * c0 <= MAX_RHO * MAX_RHO * vx * vy \
-                and vx > 0.0 and vy > 0.0:
-            continue        # l2 >= det / (vx + vy) >= e2 and |rho| <= 0.99: already floored, unchanged
-        lim = MAX_RHO * math.sqrt(vx * vy)
-        cxy = min(max(c0, -lim), lim)
-        half = 0.5 * (vx + vy)
-        r = math.hypot(0.5 * (vx - vy), cxy)
-        l2 = half - r
-        if l2 < e2 * (1.0 - 1e-10):
-            f1, f2 = max(half + r, e2), max(l2, e2)
-            t = 0.5 * math.atan2(2.0 * cxy, vx - vy)
-            c, sn = math.cos(t), math.sin(t)
-            vx = max(f1 * c * c + f2 * sn * sn, e2)
-            vy = max(f1 * sn * sn + f2 * c * c, e2)
-            lim = MAX_RHO * math.sqrt(vx * vy)
-            cxy = min(max((f1 - f2) * c * sn, -lim), lim)
-        E[i, 2], E[i, 3], E[i, 4] = vx + m1 * m1, vy + m2 * m2, cxy + m1 * m2
+        _floor_lobe(E, i, e2)
 
 
 def _floor_moments(E: np.ndarray, sigma_eps: float) -> np.ndarray:
@@ -549,10 +555,14 @@ def _axis_alphas_float32(E):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, cache=True)
-def _raw_from_central(C):  # pragma: no cover - compiled
+def _raw_from_central(C, sigma_eps=0.0):  # pragma: no cover - compiled
     """Float64 raw moments ``E1..E5`` of central moments ``C (ny, nx, 5)`` (inverse of
-    :func:`_central_float32`: ``E3 = vxx + mx^2``, ``E4 = vyy + my^2``, ``E5 = cxy + mx my``)."""
+    :func:`_central_float32`: ``E3 = vxx + mx^2``, ``E4 = vyy + my^2``, ``E5 = cxy + mx my``),
+    floored as :func:`_floor_moments_compiled` floors them when ``sigma_eps > 0``, in the
+    same pass (one lobe at a time: the same numbers as flooring afterwards)."""
     out = np.empty(C.shape, np.float64)
+    flat = out.reshape(-1, 5)
+    e2 = sigma_eps * sigma_eps
     for iy in numba.prange(C.shape[0]):
         for ix in range(C.shape[1]):
             m1, m2 = np.float64(C[iy, ix, 0]), np.float64(C[iy, ix, 1])
@@ -560,6 +570,8 @@ def _raw_from_central(C):  # pragma: no cover - compiled
             out[iy, ix, 2] = C[iy, ix, 2] + m1 * m1
             out[iy, ix, 3] = C[iy, ix, 3] + m2 * m2
             out[iy, ix, 4] = C[iy, ix, 4] + m1 * m2
+            if sigma_eps > 0.0:
+                _floor_lobe(flat, iy * C.shape[1] + ix, e2)
     return out
 
 
@@ -600,13 +612,21 @@ class LobeMixture:
             raise ValueError(f"moments must be an (ny, nx, 5) lobe grid, got shape {grid.shape}")
         if not _all_finite(grid):
             raise ValueError("lobe moments must be finite")
+        self._check_params(sigma_eps, cutoff, slope_cutoff)
+        if copy or not (grid.flags.c_contiguous and grid.flags.writeable):
+            grid = np.array(grid, dtype=np.float64, order="C")
+        _floor_moments_compiled(grid.reshape(-1, 5), float(sigma_eps))     # in place
+        self._set(grid, slopes, h, sigma_eps, cutoff, slope_cutoff)
+
+    @staticmethod
+    def _check_params(sigma_eps, cutoff, slope_cutoff) -> None:
         if not (cutoff > 0 and slope_cutoff > 0):
             raise ValueError(f"cutoff and slope_cutoff must be > 0, got {cutoff}, {slope_cutoff}")
         if not (np.isfinite(sigma_eps) and sigma_eps > 0):
             raise ValueError(f"sigma_eps must be > 0, got {sigma_eps!r}")
-        if copy or not (grid.flags.c_contiguous and grid.flags.writeable):
-            grid = np.array(grid, dtype=np.float64, order="C")
-        _floor_moments_compiled(grid.reshape(-1, 5), float(sigma_eps))     # in place
+
+    def _set(self, grid, slopes, h, sigma_eps, cutoff, slope_cutoff) -> None:
+        """The attributes of a microsurface of floored, finite, C-ordered raw moments ``grid``."""
         self._grid = grid
         self.slopes = np.asarray(slopes, dtype=np.float32)       # as files store them
         self.h, self.sigma_eps = float(h), float(sigma_eps)
@@ -945,15 +965,20 @@ class LobeMixture:
             moments = z["moments"] if version == 1 else z["central"]
         except (KeyError, TypeError, ValueError) as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({type(e).__name__}: {e})") from None
-        if moments.ndim != 3 or moments.shape[2] != 5 or slopes.ndim != 3 or slopes.shape[2] != 2 \
+        if moments.ndim != 3 or moments.shape[2] != 5 or 0 in moments.shape or slopes.ndim != 3 or slopes.shape[2] != 2 \
                 or params.shape != (4,) or not all(a.dtype in (np.float32, np.float64) for a in (moments, slopes, params)):
             raise MicrofacetError(f"{path}: corrupt microsurface file (bad array shapes or types)")
         if not (_all_finite(moments) and _all_finite(slopes) and _all_finite(params)):
             raise MicrofacetError(f"{path}: corrupt microsurface file (non-finite values)")
-        if version != 1:
-            moments = _raw_from_central(moments)
         h, eps, cutoff, scut = (float(v) for v in params)
         try:
-            return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut, copy=False)
+            if version == 1:
+                return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut, copy=False)
+            cls._check_params(eps, cutoff, scut)
         except ValueError as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({e})") from None
+        # format 2: raw moments floored in the same pass (finite: float32 squares in float64;
+        # the lobes of the constructor's floor, without its second pass and finiteness scan)
+        self = cls.__new__(cls)
+        self._set(_raw_from_central(moments, eps), slopes, h, eps, cutoff, scut)
+        return self
