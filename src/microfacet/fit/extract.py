@@ -521,7 +521,8 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     ``1/2`` visible normals of ``ideal`` + ``1/2`` cosine lobe (each on the whole grid,
     weights of the balance heuristic), so that a model equal to the data has exactly the
     data's estimate (the base's column is the estimate of 1, not 1). Returns ``(a,
-    a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``."""
+    a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``; ``brdf=None``: the model's rows alone
+    (``a_data`` None), e.g. to bound a fit's own albedo."""
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
 
@@ -538,14 +539,16 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     ok = (pdf > 0) & (wi[..., 2] > 0)
     inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
-    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
-    f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
     a = np.zeros((len(views), n_d + 1))
     for v in range(len(views)):
         a[v, :n_d] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
                       + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
     a[:, n_d] = np.sum(np.maximum(wi[..., 2], 0.0) / np.pi * inv, axis=1)
+    if brdf is None:
+        return a, None
+    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
+    f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     return a, f.sum(axis=1)
 
 
