@@ -415,7 +415,7 @@ class _Problem:
         solved again under it at that ``eta, k``."""
         from scipy.optimize import least_squares
         e = self.n_extra
-        lo, hi = [ETA_BOUNDS[0], K_BOUNDS[0]] + [0.0] * e, [ETA_BOUNDS[1], K_BOUNDS[1]] + [1.0] * e
+        lo, hi = np.array([ETA_BOUNDS[0], K_BOUNDS[0]] + [0.0] * e), np.array([ETA_BOUNDS[1], K_BOUNDS[1]] + [1.0] * e)
         n = len(FRESNEL_NODES)
         v = _fresnel.conductor_reflectance(FRESNEL_NODES[None, :], _CONDUCTOR_STARTS[:, :1], _CONDUCTOR_STARTS[:, 1:])
         total, params = 0.0, np.zeros((3, len(lo)))
