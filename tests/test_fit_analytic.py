@@ -1,4 +1,5 @@
 """mf.fit.fit_analytic (least-squares analytic fits) and SumBRDF (mixture sampling)."""
+import itertools
 import os
 from pathlib import Path
 
@@ -222,10 +223,16 @@ def max_albedo(brdf, n: int = 256) -> float:
     return max(float(np.max(sampled_albedo(brdf, brdf, t, n=n))) for t in FURNACE_VIEWS)
 
 
-@pytest.mark.parametrize("model", ["ggx", "beckmann"])
-@pytest.mark.parametrize("diffuse, coat", [(True, False), pytest.param(True, True, marks=pytest.mark.slow),
-                                           pytest.param(False, True, marks=pytest.mark.slow)])
-@pytest.mark.parametrize("fresnel", ["table", "schlick", "conductor"])
+#: Every model x Fresnel x (base, coat + base, coat); ``make test`` runs three base-only
+#: cases that cover both models and every Fresnel, the rest run under ``--slow`` / CI.
+NO_GAIN_FAST = {("ggx", True, False, "table"), ("beckmann", True, False, "schlick"), ("ggx", True, False, "conductor")}
+NO_GAIN_CASES = [pytest.param(*c, marks=() if c in NO_GAIN_FAST else pytest.mark.slow)
+                 for c in itertools.product(["ggx", "beckmann"], [True], [False], ["table", "schlick", "conductor"])]
+NO_GAIN_CASES += [pytest.param(m, d, True, f, marks=pytest.mark.slow)
+                  for m in ("ggx", "beckmann") for d in (True, False) for f in ("table", "schlick", "conductor")]
+
+
+@pytest.mark.parametrize("model, diffuse, coat, fresnel", NO_GAIN_CASES)
 def test_fit_never_reflects_more_than_it_receives(model, diffuse, coat, fresnel):
     """Issue 10: data brighter than a white furnace (a lobe of F0 = 0.3 over a base of
     0.95, albedo ~1.2) is fitted with every term's linear unknowns constrained so that the
