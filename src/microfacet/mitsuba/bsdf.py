@@ -103,6 +103,18 @@ def _ior_textures(material: str, plugin: str = PLUGIN):
     return tuple(textures)
 
 
+def glossy_sample(wo, pdf, active):
+    """The ``mi.BSDFSample3f`` of a glossy reflection toward ``wo`` with density ``pdf``
+    (0 where not ``active``), component 0."""
+    bs = dr.zeros(mi.BSDFSample3f)
+    bs.wo = wo
+    bs.pdf = dr.select(active, pdf, 0.0)
+    bs.eta = 1.0
+    bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+    bs.sampled_component = mi.UInt32(0)
+    return bs
+
+
 def per_variant(make):
     """``bsdf_class()``: the plugin class ``make()`` builds for the current Mitsuba variant
     (``mi.BSDF`` differs per variant, so each class is built once per variant); ``make``
@@ -299,12 +311,7 @@ def _make_class() -> type:
             else:
                 weight = ratio(g * oh, view.z * h.z, active & (h.z > 0))
             active &= pdf > 0
-            bs = dr.zeros(mi.BSDFSample3f)
-            bs.wo = light
-            bs.pdf = dr.select(active, pdf, 0.0)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
+            bs = glossy_sample(light, pdf, active)
             return bs, dr.select(active, self._fresnel(si, oh, active) * weight, 0.0)
 
         def traverse(self, callback):

@@ -295,12 +295,7 @@ def _make_class() -> type:
             light = 2.0 * oh * h - view
             value, pdf = self._eval_pdf(ctx, si, light, active & (light.z > 0))
             active &= (pdf > 0) & (light.z > 0)
-            bs = dr.zeros(mi.BSDFSample3f)
-            bs.wo = light
-            bs.pdf = dr.select(active, pdf, 0.0)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
+            bs = _bsdf.glossy_sample(light, pdf, active)
             return bs, dr.select(active, value / dr.select(active, pdf, 1.0), 0.0)
 
         def traverse(self, callback):
