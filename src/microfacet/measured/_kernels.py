@@ -10,14 +10,18 @@ form gives the same value on unit vectors it says so (``sqrt`` for ``hypot``, on
 comparison for ``np.mod`` of an ``atan2``). Below either horizon the value is 0.
 ``error_model="numpy"``: a division by zero gives inf/NaN, as in the reference.
 
-The loops run over blocks of :data:`BLOCK` pairs: first the coordinates of every pair of
-the block, then the table lookups, so that the cache misses of many pairs overlap (the
-MERL table is 46 MB, RGL's VNDF and CDF 2 MB; measured 1.5-1.8x less CPU time than one
-pair at a time).
+The loops run over blocks of :data:`BLOCK` pairs, in passes through 1-D scratch rows:
+first the coordinates of every pair of the block, then the table lookups, so that the
+cache misses of many pairs overlap (the MERL table is 46 MB, RGL's VNDF and CDF 2 MB).
+Arrays are read through flat 1-D views of the block (``w[3 k + c]``): loops that index
+2-D arrays with runtime strides, or at offsets ``3 (k0 + k)``, do not vectorize. The
+coordinate passes call no libm function (:func:`_atan2`, a Cephes polynomial within 2 ulp
+of libm, stands for ``atan2`` and ``asin``), so LLVM vectorizes them (AVX2 / AVX-512).
 
 Loop signatures: ``eval_*(wi, wo, cosine, out, *tables)`` writes ``f_r cos theta_i`` if
 ``cosine`` else ``f_r``; ``sample_*(u, wo, wi, weight, pdf, *tables)``; directions
-``(N, 3)``, uniforms ``(N, 2)``, RGB ``(N, 3)``, all float64 C-contiguous.
+``(N, 3)``, uniforms ``(N, 2)``, RGB ``(N, 3)``, all float64 C-contiguous (read through
+their flat views).
 """
 from __future__ import annotations
 
@@ -56,6 +60,56 @@ def _cosine_warp(u0, u1):
     x, y = r * math.cos(phi), r * math.sin(phi)
     return x, y, math.sqrt(max(0.0, 1.0 - (x * x + y * y)))
 
+@_inline
+def _warp_block(u, wo, wi, pdf):
+    """Cosine-weighted ``wi`` (:func:`_cosine_warp`) and ``pdf = cos theta_i / pi`` (0 if
+    ``wo`` is below the horizon) of a block, flat."""
+    for k in range(len(pdf)):
+        wi[3 * k], wi[3 * k + 1], wi[3 * k + 2] = _cosine_warp(u[2 * k], u[2 * k + 1])
+        pdf[k] = max(0.0, wi[3 * k + 2]) / math.pi if wo[3 * k + 2] > 0.0 else 0.0
+
+
+@_inline
+def _divide_by_pdf(weight, pdf):
+    """``weight = eval_cos / pdf`` in place (0 where ``pdf`` is 0), flat RGB."""
+    for j in range(len(weight)):
+        p = pdf[j // 3]
+        weight[j] = weight[j] / p if p > 0.0 else 0.0
+
+
+# Cephes atan.c (S. Moshier): tan(3 pi / 8), the low bits of pi / 2, and the rational
+# approximation atan(t) = t + t z P(z) / Q(z), z = t^2, |t| <= 0.66.
+_TAN_3PI_8 = 2.41421356237309504880
+_PI_2_LOW = 6.123233995736765886130e-17
+_ATAN_P = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
+           -1.228866684490136173410e2, -6.485021904942025371773e1)
+_ATAN_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
+           4.853903996359136964868e2, 1.945506571482613964425e2)
+
+
+@_inline
+def _atan(x):
+    """``atan(x)`` for ``x >= 0`` (Cephes ``atan``: ``x`` reduced to ``|t| <= 0.66`` by
+    ``atan(x) = pi/2 + atan(-1/x)`` above ``tan(3 pi / 8)`` and ``pi/4 + atan((x-1)/(x+1))``
+    above 0.66; within 2 ulp of libm). Selects, no calls: loops that use it vectorize."""
+    big, mid = x > _TAN_3PI_8, x > 0.66
+    t = -1.0 / x if big else ((x - 1.0) / (x + 1.0) if mid else x)
+    base = (math.pi / 2 if big else math.pi / 4) if mid else 0.0
+    low = (_PI_2_LOW if big else 0.5 * _PI_2_LOW) if mid else 0.0
+    z = t * t
+    p = (((_ATAN_P[0] * z + _ATAN_P[1]) * z + _ATAN_P[2]) * z + _ATAN_P[3]) * z + _ATAN_P[4]
+    q = ((((z + _ATAN_Q[0]) * z + _ATAN_Q[1]) * z + _ATAN_Q[2]) * z + _ATAN_Q[3]) * z + _ATAN_Q[4]
+    return base + ((t * (z * p / q) + t) + low)
+
+
+@_inline
+def _atan2(y, x):
+    """``math.atan2(y, x)`` of finite ``y``, ``x`` (signed zeros included) by :func:`_atan`
+    of ``|y| / |x|`` (within 2 ulp of libm)."""
+    ay, ax = abs(y), abs(x)
+    r = _atan(ay / ax) if ax > 0.0 else (_HALF_PI if ay > 0.0 else 0.0)
+    return math.copysign(math.pi - r if math.copysign(1.0, x) < 0.0 else r, y)
+
 
 # ------------------------------------------------------------------- RGL (Marginal2D)
 @_jit
@@ -64,34 +118,40 @@ def _lerp(a, b, t):
     return a + (b - a) * t
 
 
-@_jit
+@_inline
 def _elevation(x, y, z):
-    """``2 asin(|w - z| / 2)`` (:func:`.rgl.elevation`)."""
-    return 2.0 * math.asin(min(0.5 * math.sqrt(x * x + y * y + (z - 1.0) ** 2), 1.0))
+    """``2 asin(a)``, ``a = min(|w - z| / 2, 1)`` (:func:`.rgl.elevation`), as
+    ``2 atan2(a, sqrt((1 - a)(1 + a)))``."""
+    a = min(0.5 * math.sqrt(x * x + y * y + (z - 1.0) ** 2), 1.0)
+    return 2.0 * _atan2(a, math.sqrt((1.0 - a) * (1.0 + a)))
 
 
-@_jit
+@_inline
 def _theta2u(theta):
     """``sqrt(2 theta / pi)`` (:func:`.rgl.theta2u`)."""
     return math.sqrt(max(theta, 0.0) * _TWO_OVER_PI)
 
 
-@_jit
+@_inline
 def _phi2u(phi):
     """``(phi + pi) / (2 pi)`` (:func:`.rgl.phi2u`)."""
     return (phi + math.pi) / _TWO_PI
 
 
-@_jit
+@_inline
 def _node(nodes, p):
-    """``(i0, i1, t)`` of one parameter (``Marginal2D._slices``): the last node below ``p``
-    (``searchsorted`` left, minus 1, clipped) and ``clip((p - p0) / (p1 - p0), 0, 1)``."""
+    """``(i0, t)`` of one (finite) parameter (``Marginal2D._slices``): the last node
+    below ``p`` (``searchsorted`` left, i.e. the count of nodes below ``p``, minus 1,
+    clipped) and ``clip((p - p0) / (p1 - p0), 0, 1)``."""
     n = len(nodes)
     if n == 1:
-        return 0, 0, 0.0
-    i0 = min(max(np.searchsorted(nodes, p) - 1, 0), n - 2)
+        return 0, 0.0
+    below = 0
+    for node in nodes:
+        below += node < p
+    i0 = min(max(below - 1, 0), n - 2)
     t = min(max((p - nodes[i0]) / (nodes[i0 + 1] - nodes[i0]), 0.0), 1.0)
-    return i0, i0 + 1, t
+    return i0, t
 
 
 @_jit
@@ -104,31 +164,35 @@ def _cell(u, n):
     return i, s - i
 
 
-@_jit
-def _param_corners(phi_nodes, theta_nodes, phi, theta):
-    """Slices, weights and count of the parameter corners of ``Marginal2D._slices``:
-    ``(s, w, nc)``, the ``nc`` (2 or 4) corners of nonzero weight first (a file with
-    one ``phi_i`` node has 2: skipping the zero terms of the reference's sum is exact)."""
-    p0, p1, tp = _node(phi_nodes, phi)
-    q0, q1, tq = _node(theta_nodes, theta)
-    n = len(theta_nodes)
-    if len(phi_nodes) == 1:
-        return (q0, q1, q0, q1), (1.0 - tq, tq, 0.0, 0.0), 2
-    return ((p0 * n + q0, p1 * n + q0, p0 * n + q1, p1 * n + q1),
-            ((1.0 - tp) * (1.0 - tq), tp * (1.0 - tq), (1.0 - tp) * tq, tp * tq), 4)
+@_inline
+def _param_corners(p0, tp, q0, tq, n_theta, one_phi, s, w, o):
+    """Slices ``s[o:o + 4]`` and weights ``w[o:o + 4]`` of the parameter corners of
+    ``Marginal2D._slices`` from the nodes and weights ``(p0, tp)``, ``(q0, tq)`` of
+    ``phi_v``, ``theta_v`` (:func:`_node`); the corners of nonzero weight first: 4, or 2
+    for a file with one ``phi_i`` node (skipping the zero terms of the reference's sum is
+    exact)."""
+    if one_phi:
+        s[o], s[o + 1], s[o + 2], s[o + 3] = q0, q0 + 1, q0, q0 + 1
+        w[o], w[o + 1], w[o + 2], w[o + 3] = 1.0 - tq, tq, 0.0, 0.0
+    else:
+        s[o], s[o + 1] = p0 * n_theta + q0, (p0 + 1) * n_theta + q0
+        s[o + 2], s[o + 3] = p0 * n_theta + q0 + 1, (p0 + 1) * n_theta + q0 + 1
+        w[o], w[o + 1] = (1.0 - tp) * (1.0 - tq), tp * (1.0 - tq)
+        w[o + 2], w[o + 3] = (1.0 - tp) * tq, tp * tq
 
 
 @_inline
-def _invert(vc, rows, marg, normalized, s, w, nc, x, y):
+def _invert(vc, rows, marg, normalized, s, w, o, nc, x, y):
     """``Marginal2D.invert`` (u1, u2) at ``(x, y)``: the conditional and marginal CDFs of
     the bilinear patch. ``vc[s, j, i] = (value, conditional CDF)``, ``rows[s, j]`` the row
     integrals (the CDF's last column), ``marg[s, j]`` the marginal CDF; each lookup is the
-    blend over the parameter corners (``Marginal2D._lookup``), summed in the same order."""
+    blend over the parameter corners ``s[o:o + nc], w[o:o + nc]`` (``Marginal2D._lookup``),
+    summed in the same order."""
     H, W = vc.shape[1], vc.shape[2]
     i, fx = _cell(x, W)
     j, fy = _cell(y, H)
     d00 = d01 = d10 = d11 = q0 = q1 = r0 = r1 = m = m_end = 0.0
-    for c in range(nc):
+    for c in range(o, o + nc):
         sc, wc = s[c], w[c]
         d00 += wc * vc[sc, j, i, 0]
         d01 += wc * vc[sc, j + 1, i, 0]
@@ -148,11 +212,11 @@ def _invert(vc, rows, marg, normalized, s, w, nc, x, y):
 
 
 @_inline
-def _rgb_channel(rgb, s, w, nc, j, i, fx, fy, ch):
+def _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, ch):
     """Channel ``ch`` of ``Marginal2D.eval`` of the RGB table ``rgb[s, j, i, channel]``
     in cell ``(j, i)`` at local coordinates ``(fx, fy)``."""
     v00 = v01 = v10 = v11 = 0.0
-    for c in range(nc):
+    for c in range(o, o + nc):
         sc, wc = s[c], w[c]
         v00 += wc * rgb[sc, j, i, ch]
         v10 += wc * rgb[sc, j, i + 1, ch]
@@ -162,15 +226,15 @@ def _rgb_channel(rgb, s, w, nc, j, i, fx, fy, ch):
 
 
 @_inline
-def _rgb_eval(rgb, s, w, nc, x, y):
+def _rgb_eval(rgb, s, w, o, nc, x, y):
     """``Marginal2D.eval`` of the RGB table at ``(x, y)``."""
     i, fx = _cell(x, rgb.shape[2])
     j, fy = _cell(y, rgb.shape[1])
-    return (_rgb_channel(rgb, s, w, nc, j, i, fx, fy, 0), _rgb_channel(rgb, s, w, nc, j, i, fx, fy, 1),
-            _rgb_channel(rgb, s, w, nc, j, i, fx, fy, 2))
+    return (_rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, 0), _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, 1),
+            _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, 2))
 
 
-@_jit
+@_inline
 def _bilinear(table, x, y):
     """``Marginal2D.eval`` of a table without parameters or channels, ``(H, W)``."""
     H, W = table.shape
@@ -193,83 +257,90 @@ def _rgl_coordinates(ix, iy, iz, ox, oy, oz, isotropic, reduction):
     mx, my, mz = ix + ox, iy + oy, iz + oz
     norm = max(math.sqrt(mx * mx + my * my + mz * mz), 1e-300)
     mx, my, mz = mx / norm, my / norm, mz / norm
-    theta_v, phi_v = _elevation(ox, oy, oz), math.atan2(oy, ox)
-    theta_m, phi_m = _elevation(mx, my, mz), math.atan2(my, mx)
+    theta_v, phi_v = _elevation(ox, oy, oz), _atan2(oy, ox)
+    theta_m, phi_m = _elevation(mx, my, mz), _atan2(my, mx)
     um_y = _phi2u(phi_m - phi_v if isotropic else phi_m)
     return _theta2u(theta_m), um_y - math.floor(um_y), theta_v, phi_v
 
 
 @_jit
-def _rgl_block(wi, wo, k0, k1, out, phi_nodes, theta_nodes, vc, rows, marg, normalized, rgb, ndf, sigma,
+def _rgl_block(wi, wo, out, phi_nodes, theta_nodes, vc, rows, marg, normalized, rgb, ndf, sigma,
                isotropic, reduction, jacobian, clip_negative):
     """``RGLBRDF.eval_cos`` (Dupuy & Jakob 2018: ``rgb(s) D(u_m) / (4 sigma(u_v))`` at the
-    VNDF-warped half vector ``s``) of pairs ``k0 .. k1 - 1`` into ``out``, in three passes
-    over the block (coordinates, VNDF inversion, RGB lookup) so that the table lookups of
-    different pairs overlap; 0 below either horizon."""
-    n = k1 - k0
-    geo, st = np.empty((n, 4)), np.empty((n, 2))
-    cs, cw = np.empty((n, 4), np.int64), np.empty((n, 4))
-    up = np.empty(n, np.bool_)
+    VNDF-warped half vector ``s``) of the flat pairs ``wi``, ``wo`` (one block) into the
+    flat ``out``, in passes over the block through 1-D scratch rows: coordinates and
+    parameter nodes (vectorized), parameter corners, VNDF inversion, RGB lookup (so that
+    the table lookups of different pairs overlap); 0 below either horizon."""
+    n = len(out) // 3
+    scratch = np.empty((8, n))
+    um_x, um_y, theta_v, phi_v, t_theta, t_phi, s1, s2 = (scratch[0], scratch[1], scratch[2], scratch[3],
+                                                          scratch[4], scratch[5], scratch[6], scratch[7])
+    nodes, cs, cw = np.empty(2 * n, np.int64), np.empty(4 * n, np.int64), np.empty(4 * n)
     for k in range(n):
-        ix, iy, iz, ox, oy, oz = wi[k0 + k, 0], wi[k0 + k, 1], wi[k0 + k, 2], wo[k0 + k, 0], wo[k0 + k, 1], wo[k0 + k, 2]
-        up[k] = iz > 0.0 and oz > 0.0
-        geo[k, 0], geo[k, 1], geo[k, 2], geo[k, 3] = _rgl_coordinates(ix, iy, iz, ox, oy, oz, isotropic, reduction)
-        s, w, nc = _param_corners(phi_nodes, theta_nodes, geo[k, 3], geo[k, 2])
-        for c in range(4):
-            cs[k, c], cw[k, c] = s[c], w[c]
-    nc = 2 if len(phi_nodes) == 1 else 4
+        j = 3 * k
+        um_x[k], um_y[k], theta_v[k], phi_v[k] = _rgl_coordinates(wi[j], wi[j + 1], wi[j + 2], wo[j], wo[j + 1],
+                                                                  wo[j + 2], isotropic, reduction)
     for k in range(n):
-        st[k, 0], st[k, 1] = _invert(vc, rows, marg, normalized, cs[k], cw[k], nc, geo[k, 0], geo[k, 1])
+        nodes[k], t_theta[k] = _node(theta_nodes, theta_v[k])
     for k in range(n):
-        if not up[k]:
-            out[k0 + k, 0] = out[k0 + k, 1] = out[k0 + k, 2] = 0.0
+        nodes[n + k], t_phi[k] = _node(phi_nodes, phi_v[k])
+    one_phi, n_theta = len(phi_nodes) == 1, len(theta_nodes)
+    for k in range(n):
+        _param_corners(nodes[n + k], t_phi[k], nodes[k], t_theta[k], n_theta, one_phi, cs, cw, 4 * k)
+    nc = 2 if one_phi else 4
+    for k in range(n):
+        s1[k], s2[k] = _invert(vc, rows, marg, normalized, cs, cw, 4 * k, nc, um_x[k], um_y[k])
+    for k in range(n):
+        j = 3 * k
+        if not (wi[j + 2] > 0.0 and wo[j + 2] > 0.0):
+            out[j] = out[j + 1] = out[j + 2] = 0.0
             continue
-        r, g, b = _rgb_eval(rgb, cs[k], cw[k], nc, st[k, 0], st[k, 1])
+        r, g, b = _rgb_eval(rgb, cs, cw, 4 * k, nc, s1[k], s2[k])
         if clip_negative:
             r, g, b = max(r, 0.0), max(g, 0.0), max(b, 0.0)
         if jacobian:
-            um_x, um_y, theta_v, phi_v = geo[k, 0], geo[k, 1], geo[k, 2], geo[k, 3]
-            scale = _bilinear(ndf, um_x, um_y) / (4.0 * _bilinear(sigma, _theta2u(theta_v), _phi2u(phi_v)))
+            scale = _bilinear(ndf, um_x[k], um_y[k]) / (4.0 * _bilinear(sigma, _theta2u(theta_v[k]),
+                                                                         _phi2u(phi_v[k])))
             r, g, b = r * scale, g * scale, b * scale
-        out[k0 + k, 0], out[k0 + k, 1], out[k0 + k, 2] = r, g, b
+        out[j], out[j + 1], out[j + 2] = r, g, b
 
 
 @_pjit
 def eval_rgl(wi, wo, cosine, out, *tables):
     """``f_r cos theta_i`` (or ``f_r``) of an RGL BRDF for each pair."""
     n = len(out)
+    wi, wo, out = wi.reshape(-1), wo.reshape(-1), out.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):
         k0, k1 = block * BLOCK, min(block * BLOCK + BLOCK, n)
-        _rgl_block(wi, wo, k0, k1, out, *tables)
+        a, o = wi[3 * k0:3 * k1], out[3 * k0:3 * k1]
+        _rgl_block(a, wo[3 * k0:3 * k1], o, *tables)
         if not cosine:
-            for k in range(k0, k1):
-                z = wi[k, 2]
-                for c in range(3):
-                    out[k, c] = out[k, c] / z if z > 0.0 else 0.0
+            for j in range(len(o)):
+                z = a[j - j % 3 + 2]
+                o[j] = o[j] / z if z > 0.0 else 0.0
 
 
 @_pjit
 def sample_rgl(u, wo, wi, weight, pdf, *tables):
     """Cosine-weighted ``wi``, ``weight = eval_cos / pdf`` and ``pdf`` (``MeasuredBRDF.sample``)."""
     n = len(wo)
+    u, wo, wi, weight = u.reshape(-1), wo.reshape(-1), wi.reshape(-1), weight.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):
         k0, k1 = block * BLOCK, min(block * BLOCK + BLOCK, n)
-        for k in range(k0, k1):
-            wi[k, 0], wi[k, 1], wi[k, 2] = _cosine_warp(u[k, 0], u[k, 1])
-            pdf[k] = max(0.0, wi[k, 2]) / math.pi if wo[k, 2] > 0.0 else 0.0
-        _rgl_block(wi, wo, k0, k1, weight, *tables)
-        for k in range(k0, k1):
-            p = pdf[k]
-            for c in range(3):
-                weight[k, c] = weight[k, c] / p if p > 0.0 else 0.0
+        a, b, f, p = wi[3 * k0:3 * k1], wo[3 * k0:3 * k1], weight[3 * k0:3 * k1], pdf[k0:k1]
+        _warp_block(u[2 * k0:2 * k1], b, a, p)
+        _rgl_block(a, b, f, *tables)
+        _divide_by_pdf(f, p)
 
 
 # --------------------------------------------- MERL and UTIA: corners of one table, blended
-# Each pair gives 8 (MERL) or 16 (UTIA) (row, weight) corners of a table (rows, channels).
+# Each pair gives the nodes and weights of 3 (MERL) or 4 (UTIA) axes: the 8 or 16 corners
+# of its cell in a table (rows, channels).
 MERL, UTIA = 0, 1
+_MERL_STRIDES = (_NP * _ND, _NP, 1)                     # (theta_h, theta_d, phi_d)
 
 
-@_jit
+@_inline
 def _clamped(u, n):
     """Nodes and upper weight on ``0..n-1``, clamped (``merl._axis_clamped``, ``utia._theta_axis``)."""
     u = min(max(u, 0.0), n - 1.0)
@@ -277,7 +348,7 @@ def _clamped(u, n):
     return i0, i0 + 1, u - i0
 
 
-@_jit
+@_inline
 def _periodic(u, n):
     """Nodes and upper weight on a periodic axis of ``n`` nodes, ``u`` in ``[0, n]`` (``n``
     is node 0 with weight 0, as ``np.mod(u, n) = 0``)."""
@@ -287,9 +358,9 @@ def _periodic(u, n):
 
 
 @_inline
-def _merl_corners(ix, iy, iz, ox, oy, oz, rows, weights, k):
-    """The 8 trilinear corners of ``MERLBRDF._corners``: Rusinkiewicz coordinates
-    (``merl.hd_coordinates``), bin coordinates, flat rows and weights."""
+def _merl_axes(ix, iy, iz, ox, oy, oz):
+    """The axes of the trilinear cell of ``MERLBRDF._corners``: Rusinkiewicz coordinates
+    (``merl.hd_coordinates``), then the nodes and weights of ``(u_h, u_d, u_phi)``."""
     hx, hy, hz = ix + ox, iy + oy, iz + oz
     n2 = hx * hx + hy * hy + hz * hz
     inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
@@ -299,75 +370,77 @@ def _merl_corners(ix, iy, iz, ox, oy, oz, rows, weights, k):
     a = cos_ph * ix + sin_ph * iy
     b = cos_ph * iy - sin_ph * ix
     dx, dz = hz * a - r * iz, r * a + hz * iz
-    theta_h = math.atan2(r, hz)
-    theta_d = math.atan2(math.sqrt(dx * dx + b * b), dz)
-    phi_d = math.atan2(b, dx)
+    theta_h = _atan2(r, hz)
+    theta_d = _atan2(math.sqrt(dx * dx + b * b), dz)
+    phi_d = _atan2(b, dx)
     phi_d = phi_d + math.pi if phi_d < 0.0 else phi_d   # np.mod(phi_d, pi), up to pi itself
-    h0, h1, th = _clamped(_NH * math.sqrt(max(theta_h, 0.0) / _HALF_PI), _NH)
-    d0, d1, td = _clamped(_ND * (theta_d / _HALF_PI), _ND)
-    p0, p1, tp = _periodic(_NP * (phi_d / math.pi), _NP)
-    q = 0
-    for ih, wh in ((h0, 1 - th), (h1, th)):
-        for jd, wd in ((d0, 1 - td), (d1, td)):
-            for kp, wp in ((p0, 1 - tp), (p1, tp)):
-                rows[k, q], weights[k, q] = kp + _NP * (jd + _ND * ih), wh * wd * wp
-                q += 1
+    return (_clamped(_NH * math.sqrt(max(theta_h, 0.0) / _HALF_PI), _NH), _clamped(_ND * (theta_d / _HALF_PI), _ND),
+            _periodic(_NP * (phi_d / math.pi), _NP))
 
 
-@_jit
+@_inline
 def _phi_unit(phi):
     """``np.mod(phi / PHI_STEP, 48)`` for ``phi`` in ``[-pi, pi]`` (up to 48 itself)."""
     u = phi / _PHI_STEP
     return u + _NF if u < 0.0 else u
 
 
-@_jit
-def _utia_corners(ix, iy, iz, ox, oy, oz, rows, weights, k):
-    """The 16 quadrilinear corners of ``UTIABRDF.eval`` in ``(theta_i, phi_i, theta_v, phi_v)``."""
-    lo0, hi0, t0 = _clamped(math.atan2(math.sqrt(ix * ix + iy * iy), iz) / _THETA_STEP, _NT)
-    lo1, hi1, t1 = _periodic(_phi_unit(math.atan2(iy, ix)), _NF)
-    lo2, hi2, t2 = _clamped(math.atan2(math.sqrt(ox * ox + oy * oy), oz) / _THETA_STEP, _NT)
-    lo3, hi3, t3 = _periodic(_phi_unit(math.atan2(oy, ox)), _NF)
-    lo, hi, t = (lo0, lo1, lo2, lo3), (hi0, hi1, hi2, hi3), (t0, t1, t2, t3)
-    for corner in range(16):                        # axis bits as in UTIABRDF.eval
-        idx, w = 0, 1.0
-        for axis in range(4):
-            if (corner >> axis) & 1:
-                idx, w = idx + _UTIA_STRIDES[axis] * hi[axis], w * t[axis]
-            else:
-                idx, w = idx + _UTIA_STRIDES[axis] * lo[axis], w * (1.0 - t[axis])
-        rows[k, corner], weights[k, corner] = idx, w
+@_inline
+def _utia_axes(ix, iy, iz, ox, oy, oz):
+    """The axes of the quadrilinear cell of ``UTIABRDF.eval``: ``(theta_i, phi_i, theta_v, phi_v)``."""
+    return (_clamped(_atan2(math.sqrt(ix * ix + iy * iy), iz) / _THETA_STEP, _NT),
+            _periodic(_phi_unit(_atan2(iy, ix)), _NF),
+            _clamped(_atan2(math.sqrt(ox * ox + oy * oy), oz) / _THETA_STEP, _NT),
+            _periodic(_phi_unit(_atan2(oy, ox)), _NF))
 
 
 @_inline
-def _corners(kind, ix, iy, iz, ox, oy, oz, rows, weights, k):
-    """Corners of a pair into ``rows[k], weights[k]``; all weights 0 below either horizon
-    (then the value is 0)."""
-    if not (iz > 0.0 and oz > 0.0):
-        for c in range(16):
-            rows[k, c], weights[k, c] = 0, 0.0
-    elif kind == MERL:
-        _merl_corners(ix, iy, iz, ox, oy, oz, rows, weights, k)
-    else:
-        _utia_corners(ix, iy, iz, ox, oy, oz, rows, weights, k)
+def _table_axes(kind, wi, wo, lo, hi, t):
+    """Nodes ``lo[a, k]``, ``hi[a, k]`` and upper weights ``t[a, k]`` of the axes ``a`` of
+    each pair ``k`` of the flat block ``wi``, ``wo`` (vectorized)."""
+    for k in range(len(wi) // 3):
+        j = 3 * k
+        if kind == MERL:
+            (lo[0, k], hi[0, k], t[0, k]), (lo[1, k], hi[1, k], t[1, k]), (lo[2, k], hi[2, k], t[2, k]) = \
+                _merl_axes(wi[j], wi[j + 1], wi[j + 2], wo[j], wo[j + 1], wo[j + 2])
+        else:
+            ((lo[0, k], hi[0, k], t[0, k]), (lo[1, k], hi[1, k], t[1, k]), (lo[2, k], hi[2, k], t[2, k]),
+             (lo[3, k], hi[3, k], t[3, k])) = _utia_axes(wi[j], wi[j + 1], wi[j + 2], wo[j], wo[j + 1], wo[j + 2])
 
 
 @_inline
-def _blend(kind, table, rows, weights, k):
-    """``sum_c w_c table[row_c]``, RGB, over the corners ``rows[k], weights[k]``; MERL
-    divides by the weight on measured samples (its table's 4th column, 0 on unmeasured
-    ones) and is 0 where there is none."""
+def _cell_corners(n_axes, strides, lo, hi, t, rows, weights):
+    """Rows ``rows[m k + c] = sum_a stride_a node_a`` and weights ``weights[m k + c] =
+    prod_a (t_a or 1 - t_a)`` of the ``m = 2^n_axes`` corners ``c`` of the cell of each
+    pair ``k`` (axis ``a`` is bit ``a`` of ``c``, as in ``UTIABRDF.eval``)."""
+    m = 1 << n_axes
+    for k in range(lo.shape[1]):
+        for c in range(m):
+            row, w = 0, 1.0
+            for a in range(n_axes):
+                if (c >> a) & 1:
+                    row, w = row + strides[a] * hi[a, k], w * t[a, k]
+                else:
+                    row, w = row + strides[a] * lo[a, k], w * (1.0 - t[a, k])
+            rows[m * k + c], weights[m * k + c] = row, w
+
+
+@_inline
+def _blend(kind, table, rows, weights, o):
+    """``sum_c w_c table[row_c]``, RGB, over the corners ``rows[o:o + m], weights[o:o + m]``
+    (``m`` = 8 for MERL, 16 for UTIA); MERL divides by the weight on measured samples (its
+    table's 4th column, 0 on unmeasured ones) and is 0 where there is none."""
     if kind != MERL:
         f0 = f1 = f2 = 0.0
-        for c in range(16):
-            row, w = rows[k, c], weights[k, c]
+        for c in range(o, o + 16):
+            row, w = rows[c], weights[c]
             f0 += w * table[row, 0]
             f1 += w * table[row, 1]
             f2 += w * table[row, 2]
         return f0, f1, f2
     f0 = f1 = f2 = cover = 0.0
-    for c in range(8):
-        row, w = rows[k, c], weights[k, c]
+    for c in range(o, o + 8):
+        row, w = rows[c], weights[c]
         f0 += w * table[row, 0]
         f1 += w * table[row, 1]
         f2 += w * table[row, 2]
@@ -375,37 +448,48 @@ def _blend(kind, table, rows, weights, k):
     return (f0 / cover, f1 / cover, f2 / cover) if cover > 0.0 else (0.0, 0.0, 0.0)
 
 
+@_jit
+def _table_block(kind, table, wi, wo, cosine, out):
+    """``f_r`` (or ``f_r cos theta_i``) of a MERL or UTIA BRDF (``kind``) of the flat pairs
+    ``wi``, ``wo`` of one block into the flat ``out``: the axes of every pair, the corners
+    of their cells, then the table lookups; 0 below either horizon."""
+    n = len(out) // 3
+    lo, hi, t = np.empty((4, n), np.int64), np.empty((4, n), np.int64), np.empty((4, n))
+    rows, weights = np.empty(16 * n, np.int64), np.empty(16 * n)
+    _table_axes(kind, wi, wo, lo, hi, t)
+    if kind == MERL:
+        _cell_corners(3, _MERL_STRIDES, lo, hi, t, rows, weights)
+    else:
+        _cell_corners(4, _UTIA_STRIDES, lo, hi, t, rows, weights)
+    m = 8 if kind == MERL else 16
+    for k in range(n):
+        j = 3 * k
+        if not (wi[j + 2] > 0.0 and wo[j + 2] > 0.0):
+            out[j] = out[j + 1] = out[j + 2] = 0.0
+            continue
+        r, g, b = _blend(kind, table, rows, weights, m * k)
+        z = wi[j + 2] if cosine else 1.0
+        out[j], out[j + 1], out[j + 2] = r * z, g * z, b * z
+
+
 @_pjit
 def eval_table(wi, wo, cosine, out, kind, table):
     """``f_r`` (or ``f_r cos theta_i``) of a MERL or UTIA BRDF (``kind``) for each pair."""
     n = len(out)
+    wi, wo, out = wi.reshape(-1), wo.reshape(-1), out.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):
         k0, k1 = block * BLOCK, min(block * BLOCK + BLOCK, n)
-        rows, weights = np.empty((BLOCK, 16), np.int64), np.empty((BLOCK, 16))
-        for k in range(k0, k1):
-            _corners(kind, wi[k, 0], wi[k, 1], wi[k, 2], wo[k, 0], wo[k, 1], wo[k, 2], rows, weights, k - k0)
-        for k in range(k0, k1):
-            r, g, b = _blend(kind, table, rows, weights, k - k0)
-            if cosine:
-                z = max(wi[k, 2], 0.0)
-                r, g, b = r * z, g * z, b * z
-            out[k, 0], out[k, 1], out[k, 2] = r, g, b
+        _table_block(kind, table, wi[3 * k0:3 * k1], wo[3 * k0:3 * k1], cosine, out[3 * k0:3 * k1])
 
 
 @_pjit
 def sample_table(u, wo, wi, weight, pdf, kind, table):
     """Cosine-weighted ``wi``, ``weight = f_r cos theta_i / pdf`` and ``pdf``."""
     n = len(wo)
+    u, wo, wi, weight = u.reshape(-1), wo.reshape(-1), wi.reshape(-1), weight.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):
         k0, k1 = block * BLOCK, min(block * BLOCK + BLOCK, n)
-        rows, weights = np.empty((BLOCK, 16), np.int64), np.empty((BLOCK, 16))
-        for k in range(k0, k1):
-            x, y, z = _cosine_warp(u[k, 0], u[k, 1])
-            wi[k, 0], wi[k, 1], wi[k, 2] = x, y, z
-            pdf[k] = max(0.0, z) / math.pi if wo[k, 2] > 0.0 else 0.0
-            _corners(kind, x, y, z, wo[k, 0], wo[k, 1], wo[k, 2], rows, weights, k - k0)
-        for k in range(k0, k1):
-            r, g, b = _blend(kind, table, rows, weights, k - k0)
-            cos_i, p = max(0.0, wi[k, 2]), pdf[k]
-            weight[k, 0], weight[k, 1], weight[k, 2] = \
-                (r * cos_i / p, g * cos_i / p, b * cos_i / p) if p > 0.0 else (0.0, 0.0, 0.0)
+        a, f, p = wi[3 * k0:3 * k1], weight[3 * k0:3 * k1], pdf[k0:k1]
+        _warp_block(u[2 * k0:2 * k1], wo[3 * k0:3 * k1], a, p)
+        _table_block(kind, table, a, wo[3 * k0:3 * k1], True, f)
+        _divide_by_pdf(f, p)

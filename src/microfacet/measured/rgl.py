@@ -157,7 +157,7 @@ class RGLBRDF(MeasuredBRDF):
         v = self._vndf
         vc = np.stack([v.data[..., 0], v.cond], axis=-1)
         return (v.params[0], v.params[1], vc, np.ascontiguousarray(v.cond[..., -1]), v.marg, v.normalized,
-                self._rgb.data, self._ndf.data[0, :, :, 0].copy(), self._sigma.data[0, :, :, 0].copy())
+                np.ascontiguousarray(self._rgb.data), self._ndf.data[0, :, :, 0].copy(), self._sigma.data[0, :, :, 0].copy())
 
     def _kernel(self):
         k = compiled_kernels()
