@@ -115,7 +115,7 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
             pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
         else:
             pyramid = leadr.bake(load_height_map(source), scale, base, border=border)
-    if not all(np.isfinite(level).all() for level in pyramid):
+    if not all(np.isfinite(level.min()) and np.isfinite(level.max()) for level in pyramid):   # NaN propagates
         raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
                               f"{'' if roughness is None else f', roughness {roughness:g}'}); "
                               "use a smaller scale or roughness")

@@ -119,7 +119,7 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
                       "normals) but is read as heights (the mean of R, G, B); bake it with --normal-map "
                       "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=2)
     if a.dtype in (np.uint8, np.uint16):
-        a = a.astype(np.float64) / np.iinfo(a.dtype).max
+        a = np.divide(a, float(np.iinfo(a.dtype).max), dtype=np.float64)      # one pass
     if a.ndim == 3:
         a = a[..., :1] if a.shape[2] in (1, 2) else a[..., :3]
         a = a.mean(axis=2)

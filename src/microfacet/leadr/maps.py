@@ -129,23 +129,41 @@ def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0, *, encoding:
     return slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
 
 
+@numba.njit(inline="always")
+def _neighbours(i, n, wrap):  # pragma: no cover - compiled
+    """The texels before and after ``i`` of ``n`` for the central differences (wrapped or clamped)."""
+    return (i - 1 if i > 0 else (n - 1 if wrap else 0)), (i + 1 if i < n - 1 else (0 if wrap else n - 1))
+
+
+@numba.njit(inline="always")
+def _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e):  # pragma: no cover - compiled
+    """Moments ``e[c][i]`` (the slopes' E1..E5 convolved with the base moments ``b``,
+    Listing 5.1) of the central-difference slopes ``x~ = sx_scale (row[ir] - row[il])``,
+    ``y~ = sy_scale (up[i] - down[i])``, computed in float64."""
+    x = sx_scale * (np.float64(row[ir]) - np.float64(row[il]))
+    y = sy_scale * (np.float64(up[i]) - np.float64(down[i]))
+    e[0][i] = x + b[0]
+    e[1][i] = y + b[1]
+    e[2][i] = x * x + b[2] + 2.0 * x * b[0]
+    e[3][i] = y * y + b[3] + 2.0 * y * b[1]
+    e[4][i] = x * y + b[4] + x * b[1] + y * b[0]
+
+
 @numba.njit(parallel=True, cache=True)
 def _height_moments(xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
+    """Level-0 moments into the planar ``out (5, H, W)``, row by row through 1-D row views:
+    the two border texels, then the inner ones (no index select: that loop vectorizes)."""
     h, w = xi.shape
-    b1, b2, b3, b4, b5 = base[0], base[1], base[2], base[3], base[4]
+    b = (base[0], base[1], base[2], base[3], base[4])
     for j in numba.prange(h):
-        jt = j - 1 if j > 0 else (h - 1 if wrap else 0)
-        jb = j + 1 if j < h - 1 else (0 if wrap else h - 1)
-        for i in range(w):
-            il = i - 1 if i > 0 else (w - 1 if wrap else 0)
-            ir = i + 1 if i < w - 1 else (0 if wrap else w - 1)
-            x = sx_scale * (np.float64(xi[j, ir]) - np.float64(xi[j, il]))
-            y = sy_scale * (np.float64(xi[jt, i]) - np.float64(xi[jb, i]))
-            out[j, i, 0] = x + b1
-            out[j, i, 1] = y + b2
-            out[j, i, 2] = x * x + b3 + 2.0 * x * b1
-            out[j, i, 3] = y * y + b4 + 2.0 * y * b2
-            out[j, i, 4] = x * y + b5 + x * b2 + y * b1
+        jt, jb = _neighbours(j, h, wrap)
+        row, up, down = xi[j], xi[jt], xi[jb]
+        e = (out[0, j], out[1, j], out[2, j], out[3, j], out[4, j])
+        for i in (0, w - 1):
+            il, ir = _neighbours(i, w, wrap)
+            _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e)
+        for i in range(1, w - 1):
+            _texel_moments(row, up, down, i - 1, i, i + 1, sx_scale, sy_scale, b, e)
 
 
 def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
@@ -156,7 +174,9 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") ->
     units of the unit uv square (Sec. 3.4, Listing 3.6), convolved with the base
     ``roughness`` (Listing 5.1; ``None``, ``alpha``, ``(alpha_x, alpha_y)`` or a Beckmann
     lobe); the other levels are exact averages (:func:`microfacet.leadr.mip_pyramid`).
-    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage).
+    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage). The
+    levels are ``(H_k, W_k, 5)`` views of channels-first storage: each ``level[..., c]``
+    is contiguous, as the EXR writer stores it (:func:`~microfacet.leadr.mip_pyramid`).
     """
     xi = _check_height(height)
     _check_border(border)
@@ -167,10 +187,10 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") ->
     base = base_moments(roughness)
     base = np.zeros(5) if base is None else base
     h, w = xi.shape
-    level0 = np.empty((h, w, 5), dtype=np.float32)
+    planar = np.empty((5, h, w), dtype=np.float32)
     _height_moments(np.ascontiguousarray(xi), 0.5 * w * float(scale), 0.5 * h * float(scale),
-                    border == "wrap", base, level0)
-    return mip_pyramid(level0)
+                    border == "wrap", base, planar)
+    return mip_pyramid(planar.transpose(1, 2, 0))
 
 
 def bake_reference(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:

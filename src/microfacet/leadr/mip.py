@@ -60,66 +60,79 @@ def downsample_weights(n_in: int, n_out: int) -> tuple[np.ndarray, np.ndarray]:
 
 @numba.njit(parallel=True, cache=True, fastmath=False)
 def _downsample(src, iy, wy, ix, wx, out):  # pragma: no cover - compiled
-    ho, wo, nc = out.shape
+    """Box filter of channels-first ``src (C, H, W)`` into ``out (C, H_o, W_o)`` by the
+    taps of :func:`downsample_weights` (zero weights skipped), summed in float64."""
+    nc, ho, wo = out.shape
     ty, tx = iy.shape[1], ix.shape[1]
     for oy in numba.prange(ho):
-        acc = np.zeros(nc, dtype=np.float64)
-        for ox in range(wo):
-            acc[:] = 0.0
-            for a in range(ty):
-                w_a = wy[oy, a]
-                if w_a == 0.0:
-                    continue
-                row = iy[oy, a]
-                for b in range(tx):
-                    w = w_a * wx[ox, b]
-                    if w == 0.0:
+        for c in range(nc):
+            for ox in range(wo):
+                acc = 0.0
+                for a in range(ty):
+                    w_a = wy[oy, a]
+                    if w_a == 0.0:
                         continue
-                    col = ix[ox, b]
-                    for c in range(nc):
-                        acc[c] += w * src[row, col, c]
-            for c in range(nc):
-                out[oy, ox, c] = acc[c]
+                    row = iy[oy, a]
+                    for b in range(tx):
+                        w = w_a * wx[ox, b]
+                        if w != 0.0:
+                            acc += w * src[c, row, ix[ox, b]]
+                out[c, oy, ox] = acc
 
 
 @numba.njit(parallel=True, cache=True)
 def _downsample_2x2(src, out):  # pragma: no cover - compiled
-    ho, wo, nc = out.shape
+    """2x2 average of channels-first ``src (C, 2 H_o, 2 W_o)`` into ``out (C, H_o, W_o)``,
+    summed in float64, through 1-D row views (the loop over columns vectorizes)."""
+    nc, ho, wo = out.shape
     for oy in numba.prange(ho):
-        for ox in range(wo):
-            for c in range(nc):
-                s = (np.float64(src[2 * oy, 2 * ox, c]) + np.float64(src[2 * oy, 2 * ox + 1, c])
-                     + np.float64(src[2 * oy + 1, 2 * ox, c]) + np.float64(src[2 * oy + 1, 2 * ox + 1, c]))
-                out[oy, ox, c] = 0.25 * s
+        for c in range(nc):
+            top, bottom, o = src[c, 2 * oy], src[c, 2 * oy + 1], out[c, oy]
+            for ox in range(wo):
+                s = (np.float64(top[2 * ox]) + np.float64(top[2 * ox + 1])
+                     + np.float64(bottom[2 * ox]) + np.float64(bottom[2 * ox + 1]))
+                o[ox] = 0.25 * s
+
+
+def _channels_first(a: np.ndarray) -> bool:
+    """Whether ``(H, W, C)`` ``a`` is a view of C-contiguous ``(C, H, W)`` storage."""
+    return np.moveaxis(a, -1, 0).flags.c_contiguous
 
 
 def downsample(level: np.ndarray, size: tuple[int, int] | None = None) -> np.ndarray:
-    """Next MIP level of an ``(H, W, C)`` map (see the module docstring for the weights)."""
-    a = np.ascontiguousarray(level)
+    """Next MIP level of an ``(H, W, C)`` map (see the module docstring for the weights),
+    in the layout of ``level``: channels last (C-contiguous), or channels first (a view of
+    C-contiguous ``(C, H, W)`` storage, :func:`microfacet.leadr.bake`'s)."""
+    a = np.asarray(level)
     if a.ndim != 3:
         raise ValueError(f"a MIP level must be (H, W, C), got shape {a.shape}")
-    h, w = a.shape[:2]
+    planar = _channels_first(a)
+    if not (planar or a.flags.c_contiguous):
+        a = np.ascontiguousarray(a)
+    h, w, nc = a.shape
     ho, wo = size if size is not None else (max(1, h // 2), max(1, w // 2))
-    out = np.empty((ho, wo, a.shape[2]), dtype=a.dtype)
+    out = np.empty((nc, ho, wo), a.dtype).transpose(1, 2, 0) if planar else np.empty((ho, wo, nc), a.dtype)
+    src, dst = np.moveaxis(a, -1, 0), np.moveaxis(out, -1, 0)        # (C, H, W) views
     if (h, w) == (2 * ho, 2 * wo):                      # even sizes: the plain 2x2 average
-        _downsample_2x2(a, out)
+        _downsample_2x2(src, dst)
         return out
     iy, wy = downsample_weights(h, ho)
     ix, wx = downsample_weights(w, wo)
-    _downsample(a, iy, wy, ix, wx, out)
+    _downsample(src, iy, wy, ix, wx, dst)
     return out
 
 
 def mip_pyramid(moments) -> list[np.ndarray]:
     """MIP pyramid ``[level 0, level 1, ..., 1 x 1]`` of an ``(H, W, C)`` map (C = 5 for
-    LEAN moments) by exact averaging; level 0 is the input (as a contiguous array).
-    The dtype (float32 or float64) is kept; sums are accumulated in float64."""
+    LEAN moments) by exact averaging; level 0 is the input (as a contiguous array, or the
+    input itself if it is a channels-first view, see :func:`downsample`, whose layout the
+    levels keep). The dtype (float32 or float64) is kept; sums are accumulated in float64."""
     a = np.asarray(moments)
     if a.ndim != 3 or 0 in a.shape:
         raise ValueError(f"moments must be a non-empty (H, W, C) array, got shape {a.shape}")
     if a.dtype not in (np.float32, np.float64):
         a = a.astype(np.float64)
-    levels = [np.ascontiguousarray(a)]
+    levels = [a if _channels_first(a) else np.ascontiguousarray(a)]
     for size in mip_sizes(*a.shape[:2])[1:]:
         levels.append(downsample(levels[-1], size))
     return levels
