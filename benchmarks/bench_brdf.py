@@ -22,11 +22,14 @@ the figures.
 Usage::
 
     python benchmarks/bench_brdf.py [--n 1000000] [--repeats 5] [--json results.json]
-                                    [--scaling 1e4,1e5,1e6,1e7]
+                                    [--scaling 1e4,1e5,1e6,1e7,1e8]
 
 ``--scaling`` adds a table of time per element and peak extra memory per element
-(``tracemalloc``: NumPy's allocations made by the call, outputs included, inputs not) of
-eval, pdf and sample over the given batch sizes.
+(``tracemalloc``: NumPy's allocations made by the call, outputs included, inputs not; and
+the rise of the process's peak RSS during the call, Linux) of eval, pdf and sample over
+the given batch sizes, with the process's peak RSS. Inputs take 64 bytes per element
+(float64 ``wi``, ``wo``, ``u``), built without large temporaries, so ``1e8`` fits in
+about 16 GB (6.4 GB of inputs, at most 5.6 GB of outputs: sample's ``wi``, weight, pdf).
 """
 from __future__ import annotations
 
@@ -79,17 +82,68 @@ def time_it(fn: Callable[[], object], repeats: int) -> dict:
 
 
 # --------------------------------------------------------------------------- inputs
+CHUNK = 1 << 20     # elements per step when filling large inputs (keeps temporaries small)
+
+
 def upper_hemisphere(rng: np.random.Generator, n: int) -> np.ndarray:
-    """``n`` directions uniform in solid angle over the upper hemisphere, ``(n, 3)``."""
-    z = rng.random(n)
-    phi = 2.0 * np.pi * rng.random(n)
-    r = np.sqrt(1.0 - z * z)
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+    """``n`` directions uniform in solid angle over the upper hemisphere, ``(n, 3)``:
+    ``(r cos phi, r sin phi, z)``, ``r = sqrt(1 - z^2)``, ``z`` and ``phi / 2 pi`` uniform.
+    Built in chunks of :data:`CHUNK` into the output: besides it, only the ``n`` draws of
+    ``z`` and of ``phi`` are held (16 bytes per direction; the values do not depend on the
+    chunking)."""
+    z, phi = rng.random(n), rng.random(n)
+    w = np.empty((n, 3))
+    for s in range(0, n, CHUNK):
+        zc, pc = z[s:s + CHUNK], 2.0 * np.pi * phi[s:s + CHUNK]
+        r = np.sqrt(1.0 - zc * zc)
+        w[s:s + CHUNK, 0] = r * np.cos(pc)
+        w[s:s + CHUNK, 1] = r * np.sin(pc)
+        w[s:s + CHUNK, 2] = zc
+    return w
 
 
 def make_inputs(n: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """Fixed-seed ``wi``, ``wo`` (:func:`upper_hemisphere`) and uniforms ``u`` ``(n, 2)``,
+    float64: 64 bytes per element, 6.4 GB at ``n = 10^8``."""
     rng = np.random.default_rng(seed)
     return {"wi": upper_hemisphere(rng, n), "wo": upper_hemisphere(rng, n), "u": rng.random((n, 2))}
+
+
+def _rss() -> tuple[int, int] | None:
+    """``(current, peak)`` resident set size of this process in bytes (Linux
+    ``/proc/self/status``: ``VmRSS``, ``VmHWM``), or ``None`` elsewhere."""
+    try:
+        with open("/proc/self/status") as f:
+            kb = {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in f) if k in ("VmRSS", "VmHWM")}
+        return 1024 * kb["VmRSS"], 1024 * kb["VmHWM"]
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def _reset_peak_rss() -> bool:
+    """Reset this process's peak RSS (``VmHWM``) to its current RSS (Linux ``clear_refs``)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_memory(fn: Callable[[], object]) -> dict:
+    """One call of ``fn`` (result dropped): the peak of the bytes it allocated through
+    ``tracemalloc`` (NumPy's allocations, outputs included, inputs not), the rise of the
+    process's peak RSS above its RSS before the call and that peak (``None`` where the
+    peak cannot be reset)."""
+    rss = _rss() if _reset_peak_rss() else None
+    tracemalloc.start()
+    try:
+        fn()
+        traced = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    after = _rss() if rss else None
+    return {"traced": traced, "rss": after[1] - rss[0] if after else None, "peak_rss": after[1] if after else None}
 
 
 # ------------------------------------------------------------------------ our BRDF
@@ -126,26 +180,37 @@ def bench_ours(inputs, repeats: int) -> list[dict]:
 
 
 def scaling(sizes: list[int], repeats: int) -> list[dict]:
-    """Best time per element and peak extra bytes per element of eval, pdf and sample
-    (GGX and Beckmann, non-sheared) for each batch size."""
-    rows = []
+    """Best time per element, peak extra bytes per element (:func:`peak_memory`, whose
+    call is also the warm-up) and the process's peak RSS so far (the largest peak seen
+    since the peak is reset before each traced call) of eval, pdf and sample (GGX and
+    Beckmann, non-sheared) for each batch size; above ``10^6`` elements one timed run."""
+    rows, process_peak = [], None
     configs = our_configs()
     for n in sizes:
         inputs = make_inputs(n, seed=1)
         wi, wo, u = inputs["wi"], inputs["wo"], inputs["u"]
+        runs = repeats if n <= 1_000_000 else 1
         for name in ("ggx", "beckmann"):
             b = configs[name]
             ops = {"eval": lambda: b.eval(wi, wo), "pdf": lambda: b.pdf(wi, wo), "sample": lambda: b.sample(u, wo)}
             for op, fn in ops.items():
-                t = time_it(fn, repeats)
-                tracemalloc.start()
-                fn()
-                peak = tracemalloc.get_traced_memory()[1]
-                tracemalloc.stop()
-                rows.append({"op": op, "distribution": name, "n": n, "ns_per_element": t["best_s"] / n * 1e9,
-                             "peak_bytes_per_element": peak / n})
+                mem = peak_memory(fn)
+                best = min(_timed(fn) for _ in range(runs))
+                if mem["peak_rss"] is not None:
+                    process_peak = max(process_peak or 0, mem["peak_rss"], _rss()[1])
+                rows.append({"op": op, "distribution": name, "n": n, "runs": runs, "ns_per_element": best / n * 1e9,
+                             "peak_bytes_per_element": mem["traced"] / n,
+                             "peak_rss_bytes_per_element": None if mem["rss"] is None else mem["rss"] / n,
+                             "process_peak_rss_bytes": process_peak})
         del inputs, wi, wo, u
     return rows
+
+
+def _timed(fn: Callable[[], object]) -> float:
+    """Wall time of one call of ``fn``."""
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
 
 
 # ------------------------------------------------------------------------- Mitsuba
@@ -372,11 +437,15 @@ def main(argv: list[str] | None = None) -> int:
 
     scale_rows = scaling(sizes, args.repeats) if sizes else []
     if scale_rows:
-        print("\nscaling (best time per element, peak extra memory per element incl. the outputs):")
-        print(f"  {'op':7s} {'distribution':9s} {'N':>10s} {'ns/elem':>9s} {'bytes/elem':>11s}")
+        print("\nscaling (best time per element; peak extra memory per element incl. the outputs: "
+              "tracemalloc, and the rise of the peak RSS; the process's peak RSS so far):")
+        print(f"  {'op':7s} {'distribution':9s} {'N':>10s} {'runs':>4s} {'ns/elem':>9s} {'bytes/elem':>11s} "
+              f"{'RSS B/elem':>11s} {'peak RSS':>10s}")
         for r in scale_rows:
-            print(f"  {r['op']:7s} {r['distribution']:9s} {r['n']:10d} {r['ns_per_element']:9.1f} "
-                  f"{r['peak_bytes_per_element']:11.1f}")
+            rss = "n/a" if r["peak_rss_bytes_per_element"] is None else f"{r['peak_rss_bytes_per_element']:.1f}"
+            peak = "n/a" if r["process_peak_rss_bytes"] is None else f"{r['process_peak_rss_bytes'] / 2**30:.2f} GiB"
+            print(f"  {r['op']:7s} {r['distribution']:9s} {r['n']:10d} {r['runs']:4d} {r['ns_per_element']:9.1f} "
+                  f"{r['peak_bytes_per_element']:11.1f} {rss:>11s} {peak:>10s}")
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
     if load:
         print(f"\nload average at the end: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} CPUs)")
