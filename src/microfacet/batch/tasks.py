@@ -95,6 +95,17 @@ class Task:
 
 
 # ---------------------------------------------------------------------------- bake
+def _in_background(fn: Callable, *args):
+    """``fn(*args)`` started on a new thread: a ``Future`` of its result. For work that
+    releases the GIL (an image decode) while this thread imports modules."""
+    from concurrent.futures import ThreadPoolExecutor
+    pool = ThreadPoolExecutor(1, thread_name_prefix="microfacet-read")
+    try:
+        return pool.submit(fn, *args)
+    finally:
+        pool.shutdown(wait=False)
+
+
 def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = False, border: str = "wrap",
               roughness: float | None = None, material: str | os.PathLike | None = None,
               encoding: str = "auto", z: str = "auto", compression: str = "none") -> dict:
@@ -102,9 +113,11 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     (E1..E5, thesis Eq. 3.5-3.9, merged with a base roughness by Listing 5.1) as
     ``out`` (.exr, lossless ``compression``, see ``leadr.write_pyramid``) and its filtered-appearance preview ``out.png``. Returns the size, the
     number of MIP levels and the top level's Beckmann lobe."""
+    from ..io.image import read_image
+    reading = None if normal_map else _in_background(read_image, source)   # the decode overlaps the imports
     from .. import leadr
     from ..io import write_png
-    from ..leadr.files import load_height_map
+    from ..leadr.files import heights_of_image
     from ..leadr.preview import preview_image
     base = roughness
     if material is not None:
@@ -114,7 +127,7 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
         if normal_map:
             pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
         else:
-            pyramid = leadr.bake(load_height_map(source), scale, base, border=border)
+            pyramid = leadr.bake(heights_of_image(reading.result(), source), scale, base, border=border)
     if not all(np.isfinite(level.min()) and np.isfinite(level.max()) for level in pyramid):   # NaN propagates
         raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
                               f"{'' if roughness is None else f', roughness {roughness:g}'}); "

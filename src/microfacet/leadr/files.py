@@ -112,12 +112,17 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
     (equal in a gray image); alpha is ignored. A colour map that decodes as a normal map
     (:func:`_looks_like_normal_map`) is read as heights all the same, with a
     :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless)."""
+    return heights_of_image(read_image(Path(path)), path)
+
+
+def heights_of_image(a: np.ndarray, path: str | os.PathLike) -> np.ndarray:
+    """:func:`load_height_map` of the image ``a`` read from ``path`` (by
+    :func:`~microfacet.io.image.read_image`; ``path`` names it in messages)."""
     path = Path(path)
-    a = read_image(path)
     if a.ndim == 3 and a.shape[2] >= 3 and _looks_like_normal_map(a[..., :3]):
         warnings.warn(f"{path}: looks like a tangent-space normal map (its colours decode to unit "
                       "normals) but is read as heights (the mean of R, G, B); bake it with --normal-map "
-                      "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=2)
+                      "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=3)
     if a.dtype in (np.uint8, np.uint16):
         a = np.divide(a, float(np.iinfo(a.dtype).max), dtype=np.float64)      # one pass
     if a.ndim == 3:
