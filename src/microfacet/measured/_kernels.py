@@ -39,7 +39,7 @@ _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always
 _HALF_PI = math.pi / 2
 _TWO_OVER_PI = 2.0 / math.pi
 _TWO_PI = 2.0 * math.pi
-BLOCK = 256                               # pairs per block of the loops
+BLOCK = 256                              # pairs per block of the loops
 _NH, _ND, _NP = merl.SHAPE
 _NT, _NF = utia.SHAPE[1:3]                              # UTIA theta and phi nodes
 _THETA_STEP, _PHI_STEP = float(utia.THETA_STEP), float(utia.PHI_STEP)
@@ -59,6 +59,7 @@ def _cosine_warp(u0, u1):
         r, phi = b, math.pi / 2 - (math.pi / 4) * (a / b)
     x, y = r * math.cos(phi), r * math.sin(phi)
     return x, y, math.sqrt(max(0.0, 1.0 - (x * x + y * y)))
+
 
 @_inline
 def _warp_block(u, wo, wi, pdf):
