@@ -103,10 +103,10 @@ def main() -> None:
     from microfacet.leadr.maps import _height_moments
     base = np.zeros(5)
 
-    def level_zero():
-        out = np.empty((n, n, 5), np.float32)
+    def level_zero():                             # channels-first, as bake stores it
+        out = np.empty((5, n, n), np.float32)
         _height_moments(height, 0.5 * n, 0.5 * n, True, base, out)
-        return out
+        return out.transpose(1, 2, 0)
     res["level0"] = time_it(level_zero, args.repeats)
     level0 = level_zero()
 
