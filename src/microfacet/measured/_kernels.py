@@ -15,9 +15,8 @@ first the coordinates of every pair of the block, then the table lookups, so tha
 cache misses of many pairs overlap (the MERL table is 46 MB, RGL's VNDF and CDF 2 MB).
 Arrays are read through flat 1-D views of the block (``w[3 k + c]``): loops that index
 2-D arrays with runtime strides, or at offsets ``3 (k0 + k)``, do not vectorize. The
-coordinate passes and the cosine warp call no libm function (Cephes polynomials within 2
-ulp of libm stand for ``atan2``, ``asin``, ``sin`` and ``cos``), so LLVM vectorizes them
-(AVX2 / AVX-512).
+coordinate passes call no libm function (:func:`_atan2`, a Cephes polynomial within 2 ulp
+of libm, stands for ``atan2`` and ``asin``), so LLVM vectorizes them (AVX2 / AVX-512).
 
 Loop signatures: ``eval_*(wi, wo, cosine, out, *tables)`` writes ``f_r cos theta_i`` if
 ``cosine`` else ``f_r``; ``sample_*(u, wo, wi, weight, pdf, *tables)``; directions
@@ -48,68 +47,17 @@ _UTIA_STRIDES = (_NF * _NT * _NF, _NT * _NF, _NF, 1)
 
 
 # ----------------------------------------------------------------- shared helpers
-# Polynomials without calls (selects only), so that the loops using them vectorize:
-# Cephes (S. Moshier) atan.c, sin.c, cos.c, each within 2 ulp of libm.
-_TAN_3PI_8 = 2.41421356237309504880                  # tan(3 pi / 8)
-_PI_2_LOW = 6.123233995736765886130e-17              # pi / 2 - float(pi / 2)
-_ATAN_P = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
-           -1.228866684490136173410e2, -6.485021904942025371773e1)
-_ATAN_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
-           4.853903996359136964868e2, 1.945506571482613964425e2)
-_SIN_P = (1.58962301576546568060e-10, -2.50507477628578072866e-8, 2.75573136213857245213e-6,
-          -1.98412698295895385996e-4, 8.33333333332211858878e-3, -1.66666666666666307295e-1)
-_COS_P = (-1.13585365213876817300e-11, 2.08757008419747316778e-9, -2.75573141792967388112e-7,
-          2.48015872888517045348e-5, -1.38888888888730564116e-3, 4.16666666666665929218e-2)
-
-
-@_inline
-def _atan(x):
-    """``atan(x)`` for ``x >= 0``: ``x`` reduced to ``|t| <= 0.66`` by ``atan(x) = pi/2 +
-    atan(-1/x)`` above ``tan(3 pi / 8)`` and ``pi/4 + atan((x-1)/(x+1))`` above 0.66, then
-    ``atan(t) = t + t z P(z) / Q(z)``, ``z = t^2``."""
-    big, mid = x > _TAN_3PI_8, x > 0.66
-    t = -1.0 / x if big else ((x - 1.0) / (x + 1.0) if mid else x)
-    base = (math.pi / 2 if big else math.pi / 4) if mid else 0.0
-    low = (_PI_2_LOW if big else 0.5 * _PI_2_LOW) if mid else 0.0
-    z = t * t
-    p = (((_ATAN_P[0] * z + _ATAN_P[1]) * z + _ATAN_P[2]) * z + _ATAN_P[3]) * z + _ATAN_P[4]
-    q = ((((z + _ATAN_Q[0]) * z + _ATAN_Q[1]) * z + _ATAN_Q[2]) * z + _ATAN_Q[3]) * z + _ATAN_Q[4]
-    return base + ((t * (z * p / q) + t) + low)
-
-
-@_inline
-def _atan2(y, x):
-    """``math.atan2(y, x)`` of finite ``y``, ``x`` (signed zeros included) by :func:`_atan`
-    of ``|y| / |x|``."""
-    ay, ax = abs(y), abs(x)
-    r = _atan(ay / ax) if ax > 0.0 else (_HALF_PI if ay > 0.0 else 0.0)
-    return math.copysign(math.pi - r if math.copysign(1.0, x) < 0.0 else r, y)
-
-
-@_inline
-def _sincos(t):
-    """``(sin t, cos t)`` for ``|t| <= pi/4``: ``t + t z S(z)`` and ``1 - z/2 + z^2 C(z)``,
-    ``z = t^2``."""
-    z = t * t
-    s = ((((_SIN_P[0] * z + _SIN_P[1]) * z + _SIN_P[2]) * z + _SIN_P[3]) * z + _SIN_P[4]) * z + _SIN_P[5]
-    c = ((((_COS_P[0] * z + _COS_P[1]) * z + _COS_P[2]) * z + _COS_P[3]) * z + _COS_P[4]) * z + _COS_P[5]
-    return t + t * z * s, 1.0 - 0.5 * z + z * z * c
-
-
-@_inline
+@_jit
 def _cosine_warp(u0, u1):
-    """Malley's method on the Shirley-Chiu concentric disk (``square_to_cosine_hemisphere``):
-    ``phi`` as the reference computes it, its cosine and sine by :func:`_sincos` of ``phi``
-    in ``[-pi/4, pi/4]``, else of ``pi/2 - phi`` (Cody-Waite: the difference of the floats
-    is exact, plus the low bits of ``pi/2``)."""
+    """Malley's method on the Shirley-Chiu concentric disk (``square_to_cosine_hemisphere``)."""
     a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0
-    first = abs(a) > abs(b)
-    r = a if first else b
-    phi = (math.pi / 4) * (b / a) if first else math.pi / 2 - (math.pi / 4) * (a / b)
-    s, c = _sincos(phi if first else (_HALF_PI - phi) + _PI_2_LOW)
-    centre = a == 0.0 and b == 0.0
-    x = 0.0 if centre else (r * c if first else r * s)
-    y = 0.0 if centre else (r * s if first else r * c)
+    if a == 0.0 and b == 0.0:
+        return 0.0, 0.0, 1.0
+    if abs(a) > abs(b):
+        r, phi = a, (math.pi / 4) * (b / a)
+    else:
+        r, phi = b, math.pi / 2 - (math.pi / 4) * (a / b)
+    x, y = r * math.cos(phi), r * math.sin(phi)
     return x, y, math.sqrt(max(0.0, 1.0 - (x * x + y * y)))
 
 
@@ -128,6 +76,40 @@ def _divide_by_pdf(weight, pdf):
     for j in range(len(weight)):
         p = pdf[j // 3]
         weight[j] = weight[j] / p if p > 0.0 else 0.0
+
+
+# Cephes atan.c (S. Moshier): tan(3 pi / 8), the low bits of pi / 2, and the rational
+# approximation atan(t) = t + t z P(z) / Q(z), z = t^2, |t| <= 0.66.
+_TAN_3PI_8 = 2.41421356237309504880
+_PI_2_LOW = 6.123233995736765886130e-17
+_ATAN_P = (-8.750608600031904122785e-1, -1.615753718733365076637e1, -7.500855792314704667340e1,
+           -1.228866684490136173410e2, -6.485021904942025371773e1)
+_ATAN_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.328810604912902668951e2,
+           4.853903996359136964868e2, 1.945506571482613964425e2)
+
+
+@_inline
+def _atan(x):
+    """``atan(x)`` for ``x >= 0`` (Cephes ``atan``: ``x`` reduced to ``|t| <= 0.66`` by
+    ``atan(x) = pi/2 + atan(-1/x)`` above ``tan(3 pi / 8)`` and ``pi/4 + atan((x-1)/(x+1))``
+    above 0.66; within 2 ulp of libm). Selects, no calls: loops that use it vectorize."""
+    big, mid = x > _TAN_3PI_8, x > 0.66
+    t = -1.0 / x if big else ((x - 1.0) / (x + 1.0) if mid else x)
+    base = (math.pi / 2 if big else math.pi / 4) if mid else 0.0
+    low = (_PI_2_LOW if big else 0.5 * _PI_2_LOW) if mid else 0.0
+    z = t * t
+    p = (((_ATAN_P[0] * z + _ATAN_P[1]) * z + _ATAN_P[2]) * z + _ATAN_P[3]) * z + _ATAN_P[4]
+    q = ((((z + _ATAN_Q[0]) * z + _ATAN_Q[1]) * z + _ATAN_Q[2]) * z + _ATAN_Q[3]) * z + _ATAN_Q[4]
+    return base + ((t * (z * p / q) + t) + low)
+
+
+@_inline
+def _atan2(y, x):
+    """``math.atan2(y, x)`` of finite ``y``, ``x`` (signed zeros included) by :func:`_atan`
+    of ``|y| / |x|`` (within 2 ulp of libm)."""
+    ay, ax = abs(y), abs(x)
+    r = _atan(ay / ax) if ax > 0.0 else (_HALF_PI if ay > 0.0 else 0.0)
+    return math.copysign(math.pi - r if math.copysign(1.0, x) < 0.0 else r, y)
 
 
 # ------------------------------------------------------------------- RGL (Marginal2D)
