@@ -64,13 +64,16 @@ def _numba_threads() -> int:
         return 0
 
 
-def time_it(fn: Callable[[], object], repeats: int) -> dict:
-    """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run, and
-    the best CPU time of the process (all its threads: ``time.process_time``), which a
-    loaded machine inflates less than wall time (a thread waiting for a core is not counted)."""
-    t0 = time.perf_counter()
-    fn()
-    first = time.perf_counter() - t0
+def time_it(fn: Callable[[], object], repeats: int, warm_up: bool = True) -> dict:
+    """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run
+    (unless ``warm_up`` is False: ``first_s`` is then None), and the best CPU time of the
+    process (all its threads: ``time.process_time``), which a loaded machine inflates less
+    than wall time (a thread waiting for a core is not counted)."""
+    first = None
+    if warm_up:
+        t0 = time.perf_counter()
+        fn()
+        first = time.perf_counter() - t0
     times, cpu = [], []
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
@@ -195,7 +198,7 @@ def scaling(sizes: list[int], repeats: int) -> list[dict]:
             ops = {"eval": lambda: b.eval(wi, wo), "pdf": lambda: b.pdf(wi, wo), "sample": lambda: b.sample(u, wo)}
             for op, fn in ops.items():
                 mem = peak_memory(fn)
-                best = min(_timed(fn) for _ in range(runs))
+                best = time_it(fn, runs, warm_up=False)["best_s"]
                 if mem["peak_rss"] is not None:
                     process_peak = max(process_peak or 0, mem["peak_rss"], _rss()[1])
                 rows.append({"op": op, "distribution": name, "n": n, "runs": runs, "ns_per_element": best / n * 1e9,
@@ -204,13 +207,6 @@ def scaling(sizes: list[int], repeats: int) -> list[dict]:
                              "process_peak_rss_bytes": process_peak})
         del inputs, wi, wo, u
     return rows
-
-
-def _timed(fn: Callable[[], object]) -> float:
-    """Wall time of one call of ``fn``."""
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
 
 
 # ------------------------------------------------------------------------- Mitsuba
