@@ -1,9 +1,10 @@
 """Glints microsurface: lobe mixture of a normal map, footprint weights, P-NDF and its
 acceleration hierarchy (Chermain, Claux and Mérillou 2019, Sec. 3, 4.1, 4.2.2, 5)."""
-from pathlib import Path
 
 import numpy as np
 import pytest
+
+from conftest import DATA
 
 import microfacet as mf
 from microfacet import leadr
@@ -19,13 +20,13 @@ from microfacet.io import write_exr
 from microfacet.io.png import write_png_data
 from microfacet.validation import integrate_hemisphere
 
-MAPS = Path(__file__).resolve().parents[2] / "shared" / "data" / "maps"
+MAPS = DATA / "maps"
 
 
 def real_map(name):
     path = MAPS / name
     if not path.exists():
-        pytest.skip(f"test data {path} absent (../shared/data/maps is not part of a user's clone)")
+        pytest.skip(f"test data {path} absent ($MICROFACET_DATA or ../shared/data: not part of a user's clone)")
     return path
 
 

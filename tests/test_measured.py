@@ -34,19 +34,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import DATA
+
 import microfacet as mf
 from microfacet.geometry import hd_to_io, spherical_to_cartesian
 from microfacet.measured import merl, utia
 from microfacet.measured.tensor_file import read_tensor_file, write_tensor_file
 
-DATA = Path(__file__).parents[1] / ".." / "shared" / "data"
 RTOL, ATOL = 1e-4, 1e-6        # Mitsuba cross-check, see the module docstring
 
 
 def needs_data(*parts) -> Path:
     path = DATA.joinpath(*parts)
     if not path.exists():
-        pytest.skip(f"test data {path} absent (../shared/data is not part of a user's clone)")
+        pytest.skip(f"test data {path} absent ($MICROFACET_DATA or ../shared/data: not part of a user's clone)")
     return path
 
 
