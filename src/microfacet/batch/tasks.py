@@ -25,11 +25,11 @@ __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", 
 #: Peak resident memory of a task in a worker process: a fixed part (interpreter, NumPy,
 #: SciPy, OpenEXR, Numba, matplotlib) plus bytes per input pixel, the least-squares line
 #: through peaks measured in fresh processes (``python benchmarks/bench_batch.py
-#: --memory``: bake 239/257/404/1036 MB at 512^2/1024^2/2048^2/4096^2 -> 51.4 B/px +
-#: 211 MB; glints 192/249/474 MB at 256^2/512^2/1024^2 -> 300 B/px + 174 MB), rounded up.
+#: --memory``: bake 216/243/327/750 MB at 512^2/1024^2/2048^2/4096^2 -> 34.0 B/px +
+#: 204 MB; glints 172/190/235 MB at 256^2/512^2/1024^2 -> 65.9 B/px + 170 MB), rounded up.
 WORKER_BYTES = 220e6
-BAKE_BYTES_PER_PIXEL = 55.0
-GLINTS_BYTES_PER_PIXEL = 310.0
+BAKE_BYTES_PER_PIXEL = 36.0
+GLINTS_BYTES_PER_PIXEL = 70.0
 #: Peak of one fit, fixed-size inputs (measured: 315 MB for MERL nickel, 216 MB for an
 #: RGL file, isotropic N = 90), with a margin.
 FIT_PEAK_BYTES = 400e6
