@@ -192,6 +192,60 @@ def test_fits_of_one_material_share_its_data():
     assert len(analytic._DATA_CACHE[truth]) == 1
 
 
+
+def test_golden_section_with_a_lower_bound_takes_the_same_steps():
+    """A lower bound only spares evaluations: the same minimizer and value, bitwise."""
+    from microfacet.fit.extract import golden_section
+    calls = []
+
+    def f(x):
+        calls.append(x)
+        return (x - 0.3) ** 2 + 0.1 * abs(np.sin(7.0 * x))
+
+    def lower(x):                      # equal to f in places (an inactive constraint)
+        return (x - 0.3) ** 2 + (0.0 if x < 0.25 else 0.05 * abs(np.sin(7.0 * x)))
+    plain = golden_section(f, -1.0, 2.0, xatol=1e-3)
+    n_plain = len(calls)
+    calls.clear()
+    assert golden_section(f, -1.0, 2.0, xatol=1e-3, lower=lower) == plain
+    assert len(calls) < n_plain
+
+
+def test_roughness_search_skips_candidates_by_their_lower_bound():
+    """Data brighter than a white furnace (the energy constraint active): the search
+    that evaluates candidates by their box-only lower bound chooses the same roughness,
+    to the bit, as evaluating every candidate and the golden section without it, and builds
+    fewer energy rows."""
+    from microfacet.fit import analytic
+    from microfacet.fit.extract import golden_section
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.3)),
+                    mf.Lambertian([0.95, 0.9, 0.6]))
+    data = analytic._Data(truth, 14, 2**10, (64, 32))
+
+    def problem():
+        p = analytic._Problem(data, "ggx", True, False, "table", gaf="smith", shadowing=True,
+                              mean_slope=np.zeros(2), albedo_weight=4.0)
+        p.rows_built = 0
+        energy_rows = p.energy_rows
+
+        def counted(q):
+            p.rows_built += 1
+            return energy_rows(q)
+        p.energy_rows = counted
+        return p
+    candidates = np.log(analytic._SCAN)
+    lo, hi = np.log(analytic.ALPHA_BOUNDS)
+    pruned = problem()
+    chosen = analytic._minimize_log_alpha(pruned, candidates, lo, hi)
+    full = problem()
+    errors = [full.error(la) for la in candidates]
+    assert all(full.lower_bound(la) <= e for la, e in zip(candidates, errors, strict=True))
+    b = int(np.argmin(errors))
+    x, fx = golden_section(full.error, candidates[b - 1], candidates[b + 1], xatol=2e-3)
+    assert chosen == (float(x) if fx <= errors[b] else float(candidates[b]))
+    assert 0 < pruned.rows_built < full.rows_built
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not SHARED, reason="../shared/data (or $MICROFACET_DATA) not present")
 @pytest.mark.parametrize("path", SHARED, ids=lambda p: p.name.split(".")[0])

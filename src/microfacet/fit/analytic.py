@@ -84,6 +84,8 @@ ENERGY_SAMPLES = 48
 ENERGY_MARGIN = 2e-3
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 12)
+#: Quadratic forms a :class:`_Problem` keeps (at least the scan's, :func:`_minimize_log_alpha`).
+_KEPT_QUADRATICS = 16
 
 
 class SumBRDF(BRDF):
@@ -255,6 +257,7 @@ class _Problem:
         self.albedo_weight = float(albedo_weight)
         self.coat = bool(coat)
         self._last = (None, None)
+        self._quadratics = {}
 
     def distribution(self, q):
         if self.anisotropic:
@@ -342,12 +345,32 @@ class _Problem:
         coefficients ``(3, J)``."""
         if self._last[0] is not None and np.array_equal(self._last[0], q):
             return self._last[1]
-        H, g, k = self.quadratic(q)
+        H, g, k = self._quadratic_kept(q)
         rows = _Lazy(lambda: self.energy_rows(q))
         out = (self._solve_conductor(H, g, k, rows) if self.fresnel == "conductor"
                else self._solve_linear(H, g, k, rows))
         self._last = (np.array(q, dtype=np.float64), out)
         return out
+
+    def _quadratic_kept(self, q):
+        """:meth:`quadratic`, kept for the last :data:`_KEPT_QUADRATICS` ``q`` (a
+        :meth:`lower_bound` is followed by the :meth:`solve` of the same ``q``)."""
+        key = np.asarray(q, dtype=np.float64).tobytes()
+        if key not in self._quadratics:
+            if len(self._quadratics) >= _KEPT_QUADRATICS:
+                del self._quadratics[next(iter(self._quadratics))]
+            self._quadratics[key] = self.quadratic(q)
+        return self._quadratics[key]
+
+    def lower_bound(self, q) -> float:
+        """A lower bound of :meth:`error` (linear Fresnel models): ``E(q)`` with the
+        coefficients in their box but without the energy constraint, whose solution is
+        feasible for the box alone (no energy rows built). Equal to ``E(q)`` where the
+        constraint is inactive. A conductor has none (``-inf``)."""
+        if self.fresnel == "conductor":
+            return -np.inf
+        q = np.atleast_1d(np.asarray(q, dtype=np.float64))
+        return self._solve_linear(*self._quadratic_kept(q), None)[0]
 
     def energy_rows(self, q) -> np.ndarray:
         """``(V, X)``: the fit's directional albedo (Eq. 1.8) per unit linear unknown
@@ -376,7 +399,7 @@ class _Problem:
     def _solve_linear(self, H, g, k, rows):
         """Per channel, ``y`` in ``[0, 1]`` (``x = Q y + x0``, :meth:`_linear_map`) minimizing
         ``E_c`` under ``rows x <= 1 - ENERGY_MARGIN`` (:meth:`energy_rows`; computed only when
-        :meth:`_may_gain`)."""
+        :meth:`_may_gain`; ``rows=None``: the box alone)."""
         Q, x0 = self._linear_map()
         total, coef = 0.0, np.zeros((3, Q.shape[1]))
         for c in range(3):
@@ -389,7 +412,7 @@ class _Problem:
             y = np.linalg.solve(Hy, gy)
             if np.any(y < 0.0) or np.any(y > 1.0):
                 y = box_qp(Hy, gy, lo, hi)
-            if self._may_gain(Q @ y + x0):
+            if rows is not None and self._may_gain(Q @ y + x0):
                 r = rows() @ Q
                 limit = 1.0 - ENERGY_MARGIN - rows() @ x0
                 y = _energy_constrained(Hy, gy, y, (lo, hi), (r, np.repeat(limit[:, None], 3, 1)), c, True)
@@ -531,14 +554,22 @@ def _data(brdf, n: int, n_uniform: int, albedo_grid: tuple[int, int]) -> _Data:
 
 def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> float:
     """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``, then a
-    golden-section search between its neighbours."""
+    golden-section search between its neighbours. The candidates are evaluated in the order
+    of their :meth:`_Problem.lower_bound` until it exceeds the least error found: the
+    others cannot be the best (same choice as evaluating all, ties included), and their
+    energy rows are never built; so in the golden section."""
     grid = np.unique(np.clip(np.asarray(candidates, dtype=np.float64), lo, hi))
-    errors = [problem.error(la) for la in grid]
+    bounds = [problem.lower_bound(la) for la in grid]
+    errors = np.full(len(grid), np.inf)
+    for i in np.argsort(bounds, kind="stable"):
+        if bounds[i] > np.min(errors):
+            break
+        errors[i] = problem.error(grid[i])
     b = int(np.argmin(errors))
     left, right = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
     if right - left <= 0:
         return float(grid[b])
-    x, fx = golden_section(problem.error, left, right, xatol=2e-3)
+    x, fx = golden_section(problem.error, left, right, xatol=2e-3, lower=problem.lower_bound)
     return float(x) if fx <= errors[b] else float(grid[b])
 
 
