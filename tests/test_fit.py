@@ -756,6 +756,32 @@ def test_albedo_objective_is_the_weighted_ratio_term():
     assert np.all(np.abs(rows[:, -1] - 1.0) < 0.1)           # an estimate of 1 (8 x 8 samples), not 1
 
 
+
+def test_albedo_rows_equal_the_written_out_estimator_for_every_kept_strategy():
+    """``albedo_rows`` (whose cosine strategy is kept per ``n_u``, views and nodes) equals
+    the mixture estimator written out view by view, ``a[v, k] = sum_j f_id,j hat_k(cos
+    theta_d,j) / (2 n_u^2 (pdf_id,j + pdf_cos,j) / 2)`` over both strategies' samples, for
+    views and node counts requested in turn (and again)."""
+    from microfacet.geometry import half_vector
+    ideal = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    cosine = mf.Lambertian(1.0)
+    g = (np.arange(6) + 0.5) / 6
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    first, second = (spherical_to_cartesian(np.radians(t), 0.3) for t in ([0.0, 50.0], [20.0, 70.0, 85.0]))
+    for views, n_d in ((first, 8), (second, 8), (first, 5), (first, 8)):
+        a, none = extract.albedo_rows(None, ideal, n_d, views, n_u=6)
+        assert none is None
+        nodes = np.cos(np.linspace(0.0, np.pi / 2, n_d))[::-1]
+        for v, o in enumerate(views):
+            wi = np.concatenate([ideal.sample(u, o)[0], cosine.sample(u, o)[0]])
+            pdf = 0.5 * ideal.pdf(wi, o) + 0.5 * cosine.pdf(wi, o)
+            w = ideal.eval_cos(wi, o)[:, 0] / pdf / (2 * len(u))
+            cos_d = dot(np.broadcast_to(o, wi.shape), half_vector(wi, o))
+            hats = np.stack([np.interp(cos_d, nodes, e) for e in np.eye(n_d)[::-1]], axis=-1)
+            np.testing.assert_allclose(a[v, :n_d], w @ hats, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(a[v, n_d], np.sum(wi[:, 2] / np.pi / pdf) / (2 * len(u)), rtol=1e-12)
+
+
 def test_albedo_weight_defaults_and_validation():
     """A negative weight is refused; the default is ``ALBEDO_WEIGHT`` for isotropic fits and
     0 for anisotropic ones (README: the term oscillates the anisotropic table)."""

@@ -544,30 +544,58 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
 
-    g = (np.arange(n_u) + 0.5) / n_u
-    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
-    views = np.asarray(views, dtype=np.float64)
-    wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
-    cosine = Lambertian(1.0)
+    u, wo_v, wi_c, pdf_c, k0_c, t_c = _cosine_strategy(n_u, views, n_d)     # the cosine lobe's, kept
+    v_count = len(wo_v)
+    wi_s = ideal.sample(u, wo_v)[0]
     # both strategies on the whole stratified grid (a split of the grid would sample
     # each from half its domain), balance-heuristic weights
-    wi = np.concatenate([ideal.sample(u, wo)[0], cosine.sample(u, wo)[0]], axis=1)
-    wo = np.concatenate([wo, wo], axis=1)
-    pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    wi = np.concatenate([wi_s, wi_c], axis=1)
+    wo = np.concatenate([wo_v, wo_v], axis=1)
+    pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * np.concatenate([Lambertian(1.0).pdf(wi_s, wo_v), pdf_c], axis=1)
     ok = (pdf > 0) & (wi[..., 2] > 0)
     inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
-    k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
-    a = np.zeros((len(views), n_d + 1))
-    for v in range(len(views)):
-        a[v, :n_d] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
-                      + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
+    k0_s, t_s = _hats(dot(wo_v, half_vector(wi_s, wo_v)), n_d)
+    k0, t = np.concatenate([k0_s, k0_c], axis=1), np.concatenate([t_s, t_c], axis=1)
+    key = (k0 + n_d * np.arange(v_count)[:, None]).ravel()           # node k of view v: v n_d + k
+    size = v_count * n_d
+    a = np.zeros((v_count, n_d + 1))
+    a[:, :n_d] = (np.bincount(key, weights=(fid * (1.0 - t)).ravel(), minlength=size)
+                  + np.bincount(key + 1, weights=(fid * t).ravel(), minlength=size)).reshape(v_count, n_d)
     a[:, n_d] = np.sum(np.maximum(wi[..., 2], 0.0) / np.pi * inv, axis=1)
     if brdf is None:
         return a, None
     f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
     f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     return a, f.sum(axis=1)
+
+
+#: The cosine strategy of :func:`albedo_rows` per ``(n_u, views, n_d)``, which no fit changes.
+_COSINE_STRATEGY: dict = {}
+
+
+def _cosine_strategy(n_u: int, views, n_d: int):
+    """``(u, wo, wi, pdf, k0, t)`` of :func:`albedo_rows`'s cosine-lobe strategy at ``views``,
+    none of which depends on the fitted lobe: the stratified uniforms ``(n_u^2, 2)``, the
+    views broadcast ``(V, n_u^2, 3)``, the sampled directions, their cosine density and the
+    hats of their half vectors in the ``n_d`` nodes (computed once, then kept)."""
+    from ..brdf import Lambertian
+    from ..geometry import dot, half_vector
+    views = np.asarray(views, dtype=np.float64)
+    key = (int(n_u), views.tobytes(), int(n_d))
+    if key not in _COSINE_STRATEGY:
+        if len(_COSINE_STRATEGY) >= 8:
+            del _COSINE_STRATEGY[next(iter(_COSINE_STRATEGY))]
+        g = (np.arange(n_u) + 0.5) / n_u
+        u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+        wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
+        cosine = Lambertian(1.0)
+        wi = cosine.sample(u, wo)[0]
+        kept = (u, wo, wi, cosine.pdf(wi, wo), *_hats(dot(wo, half_vector(wi, wo)), n_d))
+        for array in kept:
+            array.flags.writeable = False
+        _COSINE_STRATEGY[key] = kept
+    return _COSINE_STRATEGY[key]
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
