@@ -74,10 +74,29 @@ def azimuthal_cosine_integral(theta_o, theta_h) -> np.ndarray:
     return np.where(q <= p, 2.0 * np.pi * p, partial)
 
 
+#: The last :func:`projected_area_matrix_isotropic` results (key: nodes, views, order).
+_PROJECTED_AREA: dict = {}
+
+
 def projected_area_matrix_isotropic(theta: np.ndarray, theta_o: np.ndarray, order: int = 8) -> np.ndarray:
     """``M[i, j]`` with ``A(o_i) = int <o_i,h>+ D(h) dw_h = sum_j M[i, j] D_j`` for ``D``
     linear in ``theta`` between the nodes ``theta`` (product integration: Gauss-Legendre of
-    ``order`` points per interval of ``hat_j(theta) E(theta_o, theta) sin theta``)."""
+    ``order`` points per interval of ``hat_j(theta) E(theta_o, theta) sin theta``). It
+    depends on the nodes alone, not on the table: the last few are kept (read-only; a fit
+    with a base solves ~17 kernels on one grid)."""
+    theta, theta_o = np.asarray(theta, dtype=np.float64), np.asarray(theta_o, dtype=np.float64)
+    key = (theta.tobytes(), theta_o.tobytes(), int(order))
+    if key not in _PROJECTED_AREA:
+        if len(_PROJECTED_AREA) >= 4:
+            del _PROJECTED_AREA[next(iter(_PROJECTED_AREA))]
+        m = _projected_area_matrix(theta, theta_o, order)
+        m.flags.writeable = False
+        _PROJECTED_AREA[key] = m
+    return _PROJECTED_AREA[key]
+
+
+def _projected_area_matrix(theta: np.ndarray, theta_o: np.ndarray, order: int) -> np.ndarray:
+    """:func:`projected_area_matrix_isotropic`, computed."""
     t, w = np.polynomial.legendre.leggauss(order)
     t, w = 0.5 * (t + 1.0), 0.5 * w
     a, b = theta[:-1], theta[1:]
@@ -101,7 +120,7 @@ def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray, model: str = "
     (the row of ``A`` at the normal): ``F0 D = 2 K' D - u (v . D)`` (module docstring).
     """
     _check_model(model)
-    m = projected_area_matrix_isotropic(theta, theta[:-1])
+    m = projected_area_matrix_isotropic(theta, theta[:-1]).copy()
     m[:, -2] += m[:, -1]
     m = m[:, :-1]
     scale = 4.0 * f_back * np.cos(theta[:-1])
@@ -565,7 +584,9 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     a[:, n_d] = np.sum(np.maximum(wi[..., 2], 0.0) / np.pi * inv, axis=1)
     if brdf is None:
         return a, None
-    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
+    # per strategy: the data's values on the cosine samples repeat from fit to fit (a
+    # measured BRDF remembers its last direction sets)
+    f = np.concatenate([np.asarray(brdf.eval(w, wo_v), dtype=np.float64) for w in (wi_s, wi_c)], axis=1) * wi[..., 2:]
     f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     return a, f.sum(axis=1)
 
