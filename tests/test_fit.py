@@ -782,6 +782,30 @@ def test_albedo_rows_equal_the_written_out_estimator_for_every_kept_strategy():
             np.testing.assert_allclose(a[v, n_d], np.sum(wi[:, 2] / np.pi / pdf) / (2 * len(u)), rtol=1e-12)
 
 
+
+def test_grid_terms_kept_across_tables_of_other_sizes():
+    """What a fit with a base keeps from table to table (the row geometry of the sampling
+    tables, the projected-area matrix) depends on the grid alone: a table built after
+    tables of other sizes equals one built first, and the kept arrays are read-only."""
+    from microfacet.distributions import tabulated
+    beckmann = mf.Beckmann(alpha=0.4)
+
+    def table(n):
+        return TabulatedIsotropic(beckmann.ndf(spherical_to_cartesian(theta_grid(n), 0.0)))
+    first = table(20)
+    table(31)
+    again = table(20)
+    for name in ("y_cdf", "p1_fine", "L0", "L1"):
+        np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
+    assert not any(a.flags.writeable for a in tabulated._ROW_GEOMETRY[1])
+    theta = theta_grid(12)
+    kept = extract.projected_area_matrix_isotropic(theta, theta[:-1])
+    extract.projected_area_matrix_isotropic(theta_grid(9), np.zeros(1))
+    np.testing.assert_array_equal(extract.projected_area_matrix_isotropic(theta, theta[:-1]),
+                                  extract._projected_area_matrix(theta, theta[:-1], 8))
+    assert not kept.flags.writeable
+
+
 def test_albedo_weight_defaults_and_validation():
     """A negative weight is refused; the default is ``ALBEDO_WEIGHT`` for isotropic fits and
     0 for anisotropic ones (README: the term oscillates the anisotropic table)."""

@@ -211,6 +211,26 @@ def test_golden_section_with_a_lower_bound_takes_the_same_steps():
     assert len(calls) < n_plain
 
 
+@pytest.mark.parametrize("coat", [False, True])
+def test_kept_lobes_and_sums_give_the_objective_of_a_fresh_problem(coat):
+    """A problem that keeps each lobe's ``s``, the coat-only sums and the quadratic forms
+    returns, along a path that moves one lobe at a time and comes back, bitwise the
+    objective and coefficients of a fresh problem at each point."""
+    from microfacet.fit import analytic
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=GOLD), mf.Lambertian((0.1, 0.2, 0.3)))
+    data = analytic._Data(truth, 10, 2**9, (24, 12))
+
+    def problem():
+        return analytic._Problem(data, "ggx", True, False, "table", gaf="smith", shadowing=True,
+                                 mean_slope=np.zeros(2), albedo_weight=4.0, coat=coat)
+    kept = problem()
+    path = [[0.2, 0.05], [0.25, 0.05], [0.25, 0.04], [0.2, 0.05]] if coat else [[0.2], [0.25], [0.2]]
+    for q in np.log(path):
+        e, c = kept.solve(q)
+        e_fresh, c_fresh = problem().solve(q)
+        assert e == e_fresh and np.array_equal(c, c_fresh)
+
+
 def test_roughness_search_skips_candidates_by_their_lower_bound():
     """Data brighter than a white furnace (the energy constraint active): the search
     that evaluates candidates by their box-only lower bound chooses the same roughness,

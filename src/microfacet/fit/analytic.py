@@ -257,7 +257,7 @@ class _Problem:
         self.albedo_weight = float(albedo_weight)
         self.coat = bool(coat)
         self._last = (None, None)
-        self._quadratics = {}
+        self._quadratics, self._lobes, self._extras = {}, {}, {}
 
     def distribution(self, q):
         if self.anisotropic:
@@ -276,10 +276,18 @@ class _Problem:
         return np.array(lo), np.array(hi)
 
     def _s(self, distribution) -> np.ndarray:
-        """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid."""
-        d = self.data
-        s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected(d.wi, d.wo)[1]
-        return np.where(np.isfinite(s), s, 0.0)
+        """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid;
+        kept for the last :data:`_KEPT_QUADRATICS` distributions (a coat fit's finite
+        differences move one lobe at a time)."""
+        key = (type(distribution),) + tuple(np.asarray(getattr(distribution, a), dtype=np.float64).tobytes()
+                                            for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
+        if key not in self._lobes:
+            if len(self._lobes) >= _KEPT_QUADRATICS:
+                del self._lobes[next(iter(self._lobes))]
+            d = self.data
+            s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected(d.wi, d.wo)[1]
+            self._lobes[key] = np.where(np.isfinite(s), s, 0.0)
+        return self._lobes[key]
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
@@ -296,20 +304,13 @@ class _Problem:
         g = _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T
         k = d.ref2.copy()
         albedo_rows = _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n)   # (V, n)
-        # the other columns, one value per pair: the coat's f0 and f90 terms, the base k_d L
-        s_c = self._s(self.coat_distribution(q)) if self.coat else None
-        extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + ([d.lambert] if self.diffuse else [])
-        if extras:
-            E = np.stack(extras, axis=-1)
-            Ep, Ea = E[:d.m], E[d.m:]
-            e = E.shape[1]
+        if self.n_extra:
+            Ep, EE, gE, rows = self._extra_sums(self._s(self.coat_distribution(q)) if self.coat else None)
+            e = Ep.shape[1]
             GE = _spread(d.pairs.sum(((sp[:, None] * Ep)[:, None, :] * d.w_hat[:, :, None]).reshape(d.m, 2 * e))
                          .reshape(n, 2, e))
-            # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
-            G = np.block([[G, GE], [GE.T, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep)]])
-            g = np.concatenate([g, np.einsum("me,mc->ce", Ep, d.wref)], axis=1)
-            rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
-                            axis=-1)
+            G = np.block([[G, GE], [GE.T, EE]])
+            g = np.concatenate([g, gE], axis=1)
             albedo_rows = np.concatenate([albedo_rows, rows], axis=1)
         H = np.repeat(G[None], 3, axis=0)
         if self.albedo_weight > 0:
@@ -321,6 +322,26 @@ class _Problem:
             g = g + c2 * np.einsum("cvx,cv->cx", scaled, (inv > 0).astype(float))
             k = k + c2 * np.sum(inv > 0, axis=1)
         return H, g, k
+
+    def _extra_sums(self, s_c):
+        """The terms of :meth:`quadratic` in the other columns alone, one value per pair (the
+        coat's ``f0`` and ``f90`` terms of its ``s_c``, the base's ``k_d L``): ``E`` on the
+        pairs, ``sum w E E^T``, ``sum w E f_ref`` and their albedo rows. They depend on the
+        coat only (the base's on nothing): kept per ``s_c`` (:meth:`_s` returns one array
+        per coat)."""
+        if id(s_c) not in self._extras:
+            if len(self._extras) >= _KEPT_QUADRATICS:
+                del self._extras[next(iter(self._extras))]
+            d = self.data
+            extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + ([d.lambert] if self.diffuse else [])
+            E = np.stack(extras, axis=-1)
+            Ep, Ea = E[:d.m], E[d.m:]
+            rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
+                            axis=-1)
+            # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
+            self._extras[id(s_c)] = (s_c, Ep, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep),
+                                     np.einsum("me,mc->ce", Ep, d.wref), rows)
+        return self._extras[id(s_c)][1:]
 
     @property
     def n_extra(self) -> int:
