@@ -380,6 +380,23 @@ def test_to_beckmann_and_to_ggx_recover_the_input(D, fits):
     np.testing.assert_allclose([d.alpha_x, d.alpha_y, d.rho], expect, rtol=1.5e-2)
 
 
+def test_slope_moments_are_kept_per_distribution_and_roughness(fits):
+    """``slope_moments`` is computed once per distribution and roughness: asked again it
+    returns the same moments without recomputing them; a new roughness or table
+    recomputes them."""
+    table = fits["iso_ggx"].distribution.ndf_table
+    fit = mf.fit.FittedBRDF(TabulatedIsotropic(table), fits["iso_ggx"].fresnel)
+    computed = []
+    compute = fit._slope_moments
+    fit._slope_moments = lambda: computed.append(1) or compute()
+    first = fit.slope_moments()
+    assert fit.slope_moments() == first and len(computed) == 1
+    fit.distribution.alpha_x = 2.0
+    assert fit.slope_moments()["abs_x"] == pytest.approx(2.0 * first["abs_x"], rel=1e-9) and len(computed) == 2
+    fit.distribution = TabulatedIsotropic(table)
+    assert fit.slope_moments() == pytest.approx(first, rel=1e-12) and len(computed) == 3
+
+
 def test_ggx_rho_formula_is_exact_for_elliptic_distributions():
     """rho from beta1, beta2 (App. C) of a tabulated standard GGX under correlated maps."""
     th = theta_grid(150)
