@@ -213,11 +213,13 @@ def test_golden_section_with_a_lower_bound_takes_the_same_steps():
 
 @pytest.mark.parametrize("coat", [False, True])
 def test_kept_lobes_and_sums_give_the_objective_of_a_fresh_problem(coat):
-    """A problem that keeps each lobe's ``s``, the coat-only sums and the quadratic forms
-    returns, along a path that moves one lobe at a time and comes back, bitwise the
-    objective and coefficients of a fresh problem at each point."""
+    """A problem that keeps each lobe's ``s`` and energy rows, the coat-only sums and the
+    quadratic forms returns, along a path that moves one lobe at a time and comes back,
+    bitwise the objective and coefficients of a fresh problem at each point (data
+    brighter than a white furnace: the energy constraint is active)."""
     from microfacet.fit import analytic
-    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=GOLD), mf.Lambertian((0.1, 0.2, 0.3)))
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=mf.fresnel.Schlick(0.3)),
+                    mf.Lambertian([0.95, 0.9, 0.6]))
     data = analytic._Data(truth, 10, 2**9, (24, 12))
 
     def problem():
@@ -229,6 +231,7 @@ def test_kept_lobes_and_sums_give_the_objective_of_a_fresh_problem(coat):
         e, c = kept.solve(q)
         e_fresh, c_fresh = problem().solve(q)
         assert e == e_fresh and np.array_equal(c, c_fresh)
+    assert len(kept._lobe_rows) == (4 if coat else 2)              # built once per lobe
 
 
 def test_roughness_search_skips_candidates_by_their_lower_bound():

@@ -84,8 +84,26 @@ ENERGY_SAMPLES = 48
 ENERGY_MARGIN = 2e-3
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 12)
-#: Quadratic forms a :class:`_Problem` keeps (at least the scan's, :func:`_minimize_log_alpha`).
-_KEPT_QUADRATICS = 16
+#: Entries of each kind a :class:`_Problem` keeps (:func:`_kept`): at least the scan's
+#: quadratic forms (:func:`_minimize_log_alpha`).
+_KEPT = 16
+
+
+def _kept(store: dict, key, make):
+    """``store[key]``, made by ``make()`` when missing; the oldest entry is dropped beyond
+    :data:`_KEPT`."""
+    if key not in store:
+        if len(store) >= _KEPT:
+            del store[next(iter(store))]
+        store[key] = make()
+    return store[key]
+
+
+def _lobe_key(distribution) -> tuple:
+    """A distribution's family and parameters: what a :class:`_Problem` keeps per lobe is
+    keyed by them."""
+    return (type(distribution),) + tuple(np.asarray(getattr(distribution, a), dtype=np.float64).tobytes()
+                                         for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
 
 
 class SumBRDF(BRDF):
@@ -257,7 +275,7 @@ class _Problem:
         self.albedo_weight = float(albedo_weight)
         self.coat = bool(coat)
         self._last = (None, None)
-        self._quadratics, self._lobes, self._extras = {}, {}, {}
+        self._quadratics, self._lobes, self._extras, self._lobe_rows = {}, {}, {}, {}
 
     def distribution(self, q):
         if self.anisotropic:
@@ -277,17 +295,13 @@ class _Problem:
 
     def _s(self, distribution) -> np.ndarray:
         """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid;
-        kept for the last :data:`_KEPT_QUADRATICS` distributions (a coat fit's finite
-        differences move one lobe at a time)."""
-        key = (type(distribution),) + tuple(np.asarray(getattr(distribution, a), dtype=np.float64).tobytes()
-                                            for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
-        if key not in self._lobes:
-            if len(self._lobes) >= _KEPT_QUADRATICS:
-                del self._lobes[next(iter(self._lobes))]
+        kept per lobe (:func:`_kept`; a coat fit's finite differences move one lobe at a time)."""
+        def make():
             d = self.data
-            s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected(d.wi, d.wo)[1]
-            self._lobes[key] = np.where(np.isfinite(s), s, 0.0)
-        return self._lobes[key]
+            # unit directions by construction (metrics' direction sets): no check per lobe
+            s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected_unit(d.wi, d.wo)[1]
+            return np.where(np.isfinite(s), s, 0.0)
+        return _kept(self._lobes, _lobe_key(distribution), make)
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
@@ -328,10 +342,8 @@ class _Problem:
         coat's ``f0`` and ``f90`` terms of its ``s_c``, the base's ``k_d L``): ``E`` on the
         pairs, ``sum w E E^T``, ``sum w E f_ref`` and their albedo rows. They depend on the
         coat only (the base's on nothing): kept per ``s_c`` (:meth:`_s` returns one array
-        per coat)."""
-        if id(s_c) not in self._extras:
-            if len(self._extras) >= _KEPT_QUADRATICS:
-                del self._extras[next(iter(self._extras))]
+        per coat, which the entry holds, so its ``id`` stays its own)."""
+        def make():
             d = self.data
             extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + ([d.lambert] if self.diffuse else [])
             E = np.stack(extras, axis=-1)
@@ -339,9 +351,8 @@ class _Problem:
             rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
                             axis=-1)
             # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
-            self._extras[id(s_c)] = (s_c, Ep, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep),
-                                     np.einsum("me,mc->ce", Ep, d.wref), rows)
-        return self._extras[id(s_c)][1:]
+            return s_c, Ep, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep), np.einsum("me,mc->ce", Ep, d.wref), rows
+        return _kept(self._extras, id(s_c), make)[1:]
 
     @property
     def n_extra(self) -> int:
@@ -374,14 +385,9 @@ class _Problem:
         return out
 
     def _quadratic_kept(self, q):
-        """:meth:`quadratic`, kept for the last :data:`_KEPT_QUADRATICS` ``q`` (a
-        :meth:`lower_bound` is followed by the :meth:`solve` of the same ``q``)."""
-        key = np.asarray(q, dtype=np.float64).tobytes()
-        if key not in self._quadratics:
-            if len(self._quadratics) >= _KEPT_QUADRATICS:
-                del self._quadratics[next(iter(self._quadratics))]
-            self._quadratics[key] = self.quadratic(q)
-        return self._quadratics[key]
+        """:meth:`quadratic`, kept per ``q`` (:func:`_kept`; a :meth:`lower_bound` is
+        followed by the :meth:`solve` of the same ``q``)."""
+        return _kept(self._quadratics, np.asarray(q, dtype=np.float64).tobytes(), lambda: self.quadratic(q))
 
     def lower_bound(self, q) -> float:
         """A lower bound of :meth:`error` (linear Fresnel models): ``E(q)`` with the
@@ -399,7 +405,8 @@ class _Problem:
         albedo with ``F`` the hat of each Fresnel node (:func:`.extract.albedo_rows`, whose
         nodes are :data:`FRESNEL_NODES` reversed), the coat's with ``F = 1 - m^5`` and
         ``m^5`` (:func:`coat_fresnel`), and 1 for ``k_d`` (a Lambertian's albedo is
-        ``k_d``). The fit's albedo at view ``v`` is ``rows[v] @ x``."""
+        ``k_d``). The fit's albedo at view ``v`` is ``rows[v] @ x``. Each lobe's rows are
+        kept per lobe (:func:`_kept`; a coat fit moves one lobe at a time)."""
         t = np.radians(ENERGY_VIEWS_DEG)
         phis = np.radians([0.0, 45.0, 90.0]) if self.anisotropic else np.zeros(1)
         views = np.concatenate([np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
@@ -408,7 +415,8 @@ class _Problem:
 
         def lobe(distribution):
             ideal = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)
-            return albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1]
+            return _kept(self._lobe_rows, _lobe_key(distribution),
+                         lambda: albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1])
         cols = [lobe(self.distribution(q))]
         if self.coat:
             m5 = (1.0 - FRESNEL_NODES) ** 5
