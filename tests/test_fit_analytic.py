@@ -234,6 +234,26 @@ def test_kept_lobes_and_sums_give_the_objective_of_a_fresh_problem(coat):
     assert len(kept._lobe_rows) == (4 if coat else 2)              # built once per lobe
 
 
+def test_least_coat_candidates_are_those_of_a_full_sort():
+    """The coat scan's best starts (``_least``, by lower bounds) are those of sorting every
+    candidate by its error, in the same order, with fewer energy rows built."""
+    from microfacet.fit import analytic
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=GOLD),
+                    mf.MicrofacetBRDF(mf.GGX(alpha=0.05), fresnel=mf.fresnel.Schlick(0.04)),
+                    mf.Lambertian([0.1, 0.1, 0.1]))
+    data = analytic._Data(truth, 12, 2**9, (24, 12))
+
+    def problem():
+        return analytic._Problem(data, "ggx", True, False, "table", gaf="smith", shadowing=True,
+                                 mean_slope=np.zeros(2), albedo_weight=4.0, coat=True)
+    scan = [np.append(np.log(0.3), lc) for lc in np.log(analytic._SCAN)]
+    pruned, full = problem(), problem()
+    order, _ = analytic._least(pruned, scan, analytic.COAT_STARTS)
+    expected = sorted(range(len(scan)), key=lambda i: full.error(scan[i]))[:analytic.COAT_STARTS]
+    assert list(order) == expected
+    assert len(pruned._lobe_rows) < len(full._lobe_rows)
+
+
 def test_roughness_search_skips_candidates_by_their_lower_bound():
     """Data brighter than a white furnace (the energy constraint active): the search
     that evaluates candidates by their box-only lower bound chooses the same roughness,

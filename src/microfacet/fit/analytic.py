@@ -581,20 +581,27 @@ def _data(brdf, n: int, n_uniform: int, albedo_grid: tuple[int, int]) -> _Data:
     return per_brdf[key]
 
 
-def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> float:
-    """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``, then a
-    golden-section search between its neighbours. The candidates are evaluated in the order
-    of their :meth:`_Problem.lower_bound` until it exceeds the least error found: the
-    others cannot be the best (same choice as evaluating all, ties included), and their
-    energy rows are never built; so in the golden section."""
-    grid = np.unique(np.clip(np.asarray(candidates, dtype=np.float64), lo, hi))
-    bounds = [problem.lower_bound(la) for la in grid]
-    errors = np.full(len(grid), np.inf)
+def _least(problem: _Problem, candidates, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(order, errors)``: the indices of the ``k`` candidates of least ``problem.error``,
+    least first (ties in the given order, as ``sorted``), and the errors, evaluated in the
+    order of the candidates' :meth:`_Problem.lower_bound` until it exceeds the ``k``-th
+    least error found: the others (``inf``) cannot be among them, and their energy rows
+    are never built."""
+    bounds = [problem.lower_bound(c) for c in candidates]
+    errors = np.full(len(candidates), np.inf)
     for i in np.argsort(bounds, kind="stable"):
-        if bounds[i] > np.min(errors):
+        if bounds[i] > np.sort(errors)[k - 1]:
             break
-        errors[i] = problem.error(grid[i])
-    b = int(np.argmin(errors))
+        errors[i] = problem.error(candidates[i])
+    return np.argsort(errors, kind="stable")[:k], errors
+
+
+def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> float:
+    """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``
+    (:func:`_least`), then a golden-section search between its neighbours, which also
+    evaluates the error only where the lower bound does not decide."""
+    grid = np.unique(np.clip(np.asarray(candidates, dtype=np.float64), lo, hi))
+    (b,), errors = _least(problem, grid, 1)
     left, right = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
     if right - left <= 0:
         return float(grid[b])
@@ -701,8 +708,9 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     # from the COAT_STARTS best scan values (the joint objective has several minima)
     if coat:
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
-        scan = sorted(np.log(_SCAN), key=lambda lc: problem.error(np.append(q, lc)))
-        q = min((_minimize(problem, np.append(q, lc), max_nfev) for lc in scan[:COAT_STARTS]), key=problem.error)
+        scan = [np.append(q, lc) for lc in np.log(_SCAN)]
+        q = min((_minimize(problem, scan[i], max_nfev) for i in _least(problem, scan, COAT_STARTS)[0]),
+                key=problem.error)
     # stage 4: a conductor, refined from that shape
     if fresnel == "conductor":
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)
