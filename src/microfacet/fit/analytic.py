@@ -49,7 +49,7 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
-from .extract import _energy_constrained, albedo_rows, box_qp, golden_section
+from .extract import _energy_constrained, _kept, albedo_rows, box_qp, golden_section
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, compared_pairs, measured_mask,
                        measurement_directions, uniform_directions)
 
@@ -84,19 +84,6 @@ ENERGY_SAMPLES = 48
 ENERGY_MARGIN = 2e-3
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 12)
-#: Entries of each kind a :class:`_Problem` keeps (:func:`_kept`): at least the scan's
-#: quadratic forms (:func:`_minimize_log_alpha`).
-_KEPT = 16
-
-
-def _kept(store: dict, key, make):
-    """``store[key]``, made by ``make()`` when missing; the oldest entry is dropped beyond
-    :data:`_KEPT`."""
-    if key not in store:
-        if len(store) >= _KEPT:
-            del store[next(iter(store))]
-        store[key] = make()
-    return store[key]
 
 
 def _lobe_key(distribution) -> tuple:
@@ -295,7 +282,8 @@ class _Problem:
 
     def _s(self, distribution) -> np.ndarray:
         """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid;
-        kept per lobe (:func:`_kept`; a coat fit's finite differences move one lobe at a time)."""
+        kept per lobe (:func:`.extract._kept`, 16 of each kind: at least the scan's; a coat
+        fit's finite differences move one lobe at a time)."""
         def make():
             d = self.data
             # unit directions by construction (metrics' direction sets): no check per lobe
@@ -385,7 +373,7 @@ class _Problem:
         return out
 
     def _quadratic_kept(self, q):
-        """:meth:`quadratic`, kept per ``q`` (:func:`_kept`; a :meth:`lower_bound` is
+        """:meth:`quadratic`, kept per ``q`` (:func:`.extract._kept`; a :meth:`lower_bound` is
         followed by the :meth:`solve` of the same ``q``)."""
         return _kept(self._quadratics, np.asarray(q, dtype=np.float64).tobytes(), lambda: self.quadratic(q))
 
@@ -406,7 +394,7 @@ class _Problem:
         nodes are :data:`FRESNEL_NODES` reversed), the coat's with ``F = 1 - m^5`` and
         ``m^5`` (:func:`coat_fresnel`), and 1 for ``k_d`` (a Lambertian's albedo is
         ``k_d``). The fit's albedo at view ``v`` is ``rows[v] @ x``. Each lobe's rows are
-        kept per lobe (:func:`_kept`; a coat fit moves one lobe at a time)."""
+        kept per lobe (:func:`.extract._kept`; a coat fit moves one lobe at a time)."""
         t = np.radians(ENERGY_VIEWS_DEG)
         phis = np.radians([0.0, 45.0, 90.0]) if self.anisotropic else np.zeros(1)
         views = np.concatenate([np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)

@@ -74,6 +74,23 @@ def azimuthal_cosine_integral(theta_o, theta_h) -> np.ndarray:
     return np.where(q <= p, 2.0 * np.pi * p, partial)
 
 
+def _kept(store: dict, key, make, size: int = 16):
+    """``store[key]``, made by ``make()`` when missing; the oldest entry is dropped beyond
+    ``size`` (what a fit computes again and again with the same inputs)."""
+    if key not in store:
+        if len(store) >= size:
+            del store[next(iter(store))]
+        store[key] = make()
+    return store[key]
+
+
+def _read_only(*arrays) -> tuple:
+    """``arrays``, made read-only (they are kept and shared)."""
+    for array in arrays:
+        array.flags.writeable = False
+    return arrays
+
+
 #: The last :func:`projected_area_matrix_isotropic` results (key: nodes, views, order).
 _PROJECTED_AREA: dict = {}
 
@@ -85,14 +102,8 @@ def projected_area_matrix_isotropic(theta: np.ndarray, theta_o: np.ndarray, orde
     depends on the nodes alone, not on the table: the last few are kept (read-only; a fit
     with a base solves ~17 kernels on one grid)."""
     theta, theta_o = np.asarray(theta, dtype=np.float64), np.asarray(theta_o, dtype=np.float64)
-    key = (theta.tobytes(), theta_o.tobytes(), int(order))
-    if key not in _PROJECTED_AREA:
-        if len(_PROJECTED_AREA) >= 4:
-            del _PROJECTED_AREA[next(iter(_PROJECTED_AREA))]
-        m = _projected_area_matrix(theta, theta_o, order)
-        m.flags.writeable = False
-        _PROJECTED_AREA[key] = m
-    return _PROJECTED_AREA[key]
+    return _kept(_PROJECTED_AREA, (theta.tobytes(), theta_o.tobytes(), int(order)),
+                 lambda: _read_only(_projected_area_matrix(theta, theta_o, order))[0], size=4)
 
 
 def _projected_area_matrix(theta: np.ndarray, theta_o: np.ndarray, order: int) -> np.ndarray:
@@ -605,20 +616,15 @@ def _cosine_strategy(n_u: int, views, n_d: int):
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
     views = np.asarray(views, dtype=np.float64)
-    key = (int(n_u), views.tobytes(), int(n_d))
-    if key not in _COSINE_STRATEGY:
-        if len(_COSINE_STRATEGY) >= 8:
-            del _COSINE_STRATEGY[next(iter(_COSINE_STRATEGY))]
+
+    def make():
         g = (np.arange(n_u) + 0.5) / n_u
         u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
         wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
         cosine = Lambertian(1.0)
         wi = cosine.sample(u, wo)[0]
-        kept = (u, wo, wi, cosine.pdf(wi, wo), *_hats(dot(wo, half_vector(wi, wo)), n_d))
-        for array in kept:
-            array.flags.writeable = False
-        _COSINE_STRATEGY[key] = kept
-    return _COSINE_STRATEGY[key]
+        return _read_only(u, wo, wi, cosine.pdf(wi, wo), *_hats(dot(wo, half_vector(wi, wo)), n_d))
+    return _kept(_COSINE_STRATEGY, (int(n_u), views.tobytes(), int(n_d)), make, size=8)
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
