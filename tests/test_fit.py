@@ -814,13 +814,28 @@ def test_grid_terms_kept_across_tables_of_other_sizes():
     again = table(20)
     for name in ("y_cdf", "p1_fine", "L0", "L1"):
         np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
-    assert not any(a.flags.writeable for a in tabulated._ROW_GEOMETRY[1])
+    assert not any(a.flags.writeable for a in tabulated._ROW_GEOMETRY[0][1])
     theta = theta_grid(12)
     kept = extract.projected_area_matrix_isotropic(theta, theta[:-1])
     extract.projected_area_matrix_isotropic(theta_grid(9), np.zeros(1))
     np.testing.assert_array_equal(extract.projected_area_matrix_isotropic(theta, theta[:-1]),
                                   extract._projected_area_matrix(theta, theta[:-1], 8))
     assert not kept.flags.writeable
+
+
+
+def test_kept_values_are_those_of_their_key_across_threads():
+    """``extract._kept`` (the fits' kept terms, some shared by the whole process) returns
+    the value made for the key asked, with threads evicting each other's entries."""
+    from concurrent.futures import ThreadPoolExecutor
+    store = {}
+
+    def work(k):
+        return all(extract._kept(store, (k + j) % 5, lambda k=k, j=j: ("made", (k + j) % 5), size=2)
+                   == ("made", (k + j) % 5) for j in range(300))
+    with ThreadPoolExecutor(4) as pool:
+        assert all(pool.map(work, range(16)))
+    assert len(store) <= 2
 
 
 def test_albedo_weight_defaults_and_validation():

@@ -250,8 +250,9 @@ def row_masses(xi, y2, w, log_d) -> np.ndarray:
     return vals.reshape(len(xi), -1, 4).sum(axis=-1)
 
 
-#: The last :func:`_row_geometry` (its key and value): every table of one size shares it.
-_ROW_GEOMETRY: list = [None, None]
+#: The last :func:`_row_geometry` as one ``(key, value)`` (read at once: safe for threads);
+#: every table of one size shares it.
+_ROW_GEOMETRY: list = [None]
 
 
 def _row_geometry(xi, y2, n: int):
@@ -261,14 +262,15 @@ def _row_geometry(xi, y2, n: int):
     ~17 tables of one size)."""
     xi, y2 = np.asarray(xi, dtype=np.float64), np.asarray(y2, dtype=np.float64)
     key = (int(n), xi.tobytes(), y2.tobytes())
-    if _ROW_GEOMETRY[0] != key:
+    entry = _ROW_GEOMETRY[0]
+    if entry is None or entry[0] != key:
         r2 = xi[:, None] ** 2 + y2
         i, t = locate(np.arctan(np.sqrt(r2)), n)
-        value = (i, t, (1.0 + r2) ** 2)
-        for array in value:
+        entry = (key, (i, t, (1.0 + r2) ** 2))
+        for array in entry[1]:
             array.flags.writeable = False
-        _ROW_GEOMETRY[:] = [key, value]
-    return _ROW_GEOMETRY[1]
+        _ROW_GEOMETRY[0] = entry
+    return entry[1]
 
 
 class _Tabulated(SlopeDistribution):

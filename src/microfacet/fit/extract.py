@@ -24,6 +24,8 @@ keeps the eigenproblem linear and nonnegative).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
@@ -74,14 +76,21 @@ def azimuthal_cosine_integral(theta_o, theta_h) -> np.ndarray:
     return np.where(q <= p, 2.0 * np.pi * p, partial)
 
 
+_KEPT_LOCK = threading.Lock()
+
+
 def _kept(store: dict, key, make, size: int = 16):
-    """``store[key]``, made by ``make()`` when missing; the oldest entry is dropped beyond
-    ``size`` (what a fit computes again and again with the same inputs)."""
-    if key not in store:
-        if len(store) >= size:
-            del store[next(iter(store))]
-        store[key] = make()
-    return store[key]
+    """``store[key]``, made by ``make()`` (never None) when missing; the oldest entry is
+    dropped beyond ``size`` (what a fit computes again and again with the same inputs).
+    Safe for stores shared by threads."""
+    value = store.get(key)
+    if value is None:
+        value = make()
+        with _KEPT_LOCK:
+            while len(store) >= size:
+                del store[next(iter(store))]
+            store[key] = value
+    return value
 
 
 def _read_only(*arrays) -> tuple:
