@@ -773,7 +773,6 @@ def test_albedo_objective_is_the_weighted_ratio_term():
     assert np.all(np.abs(rows[:, -1] - 1.0) < 0.1)           # an estimate of 1 (8 x 8 samples), not 1
 
 
-
 def test_albedo_rows_equal_the_written_out_estimator_for_every_kept_strategy():
     """``albedo_rows`` (whose cosine strategy is kept per ``n_u``, views and nodes) equals
     the mixture estimator written out view by view, ``a[v, k] = sum_j f_id,j hat_k(cos
@@ -799,7 +798,6 @@ def test_albedo_rows_equal_the_written_out_estimator_for_every_kept_strategy():
             np.testing.assert_allclose(a[v, n_d], np.sum(wi[:, 2] / np.pi / pdf) / (2 * len(u)), rtol=1e-12)
 
 
-
 def test_grid_terms_kept_across_tables_of_other_sizes():
     """What a fit with a base keeps from table to table (the row geometry of the sampling
     tables, the projected-area matrix) depends on the grid alone: a table built after
@@ -821,7 +819,6 @@ def test_grid_terms_kept_across_tables_of_other_sizes():
     np.testing.assert_array_equal(extract.projected_area_matrix_isotropic(theta, theta[:-1]),
                                   extract._projected_area_matrix(theta, theta[:-1], 8))
     assert not kept.flags.writeable
-
 
 
 def test_kept_values_are_those_of_their_key_across_threads():

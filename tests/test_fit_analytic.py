@@ -192,7 +192,6 @@ def test_fits_of_one_material_share_its_data():
     assert len(analytic._DATA_CACHE[truth]) == 1
 
 
-
 def test_golden_section_with_a_lower_bound_takes_the_same_steps():
     """A lower bound only spares evaluations: the same minimizer and value, bitwise."""
     from microfacet.fit.extract import golden_section
