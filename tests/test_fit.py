@@ -380,6 +380,23 @@ def test_to_beckmann_and_to_ggx_recover_the_input(D, fits):
     np.testing.assert_allclose([d.alpha_x, d.alpha_y, d.rho], expect, rtol=1.5e-2)
 
 
+def test_slope_moments_are_kept_per_distribution_and_roughness(fits):
+    """``slope_moments`` is computed once per distribution and roughness: asked again it
+    returns the same moments without recomputing them; a new roughness or table
+    recomputes them."""
+    table = fits["iso_ggx"].distribution.ndf_table
+    fit = mf.fit.FittedBRDF(TabulatedIsotropic(table), fits["iso_ggx"].fresnel)
+    computed = []
+    compute = fit._slope_moments
+    fit._slope_moments = lambda: computed.append(1) or compute()
+    first = fit.slope_moments()
+    assert fit.slope_moments() == first and len(computed) == 1
+    fit.distribution.alpha_x = 2.0
+    assert fit.slope_moments()["abs_x"] == pytest.approx(2.0 * first["abs_x"], rel=1e-9) and len(computed) == 2
+    fit.distribution = TabulatedIsotropic(table)
+    assert fit.slope_moments() == pytest.approx(first, rel=1e-12) and len(computed) == 3
+
+
 def test_ggx_rho_formula_is_exact_for_elliptic_distributions():
     """rho from beta1, beta2 (App. C) of a tabulated standard GGX under correlated maps."""
     th = theta_grid(150)
@@ -754,6 +771,68 @@ def test_albedo_objective_is_the_weighted_ratio_term():
     rows, data = extract.albedo_rows(lam, ideal, 8, views, n_u=8)
     np.testing.assert_allclose(0.5 * rows[:, -1], data[:, 0], rtol=1e-12)
     assert np.all(np.abs(rows[:, -1] - 1.0) < 0.1)           # an estimate of 1 (8 x 8 samples), not 1
+
+
+def test_albedo_rows_equal_the_written_out_estimator_for_every_kept_strategy():
+    """``albedo_rows`` (whose cosine strategy is kept per ``n_u``, views and nodes) equals
+    the mixture estimator written out view by view, ``a[v, k] = sum_j f_id,j hat_k(cos
+    theta_d,j) / (2 n_u^2 (pdf_id,j + pdf_cos,j) / 2)`` over both strategies' samples, for
+    views and node counts requested in turn (and again)."""
+    from microfacet.geometry import half_vector
+    ideal = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    cosine = mf.Lambertian(1.0)
+    g = (np.arange(6) + 0.5) / 6
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    first, second = (spherical_to_cartesian(np.radians(t), 0.3) for t in ([0.0, 50.0], [20.0, 70.0, 85.0]))
+    for views, n_d in ((first, 8), (second, 8), (first, 5), (first, 8)):
+        a, none = extract.albedo_rows(None, ideal, n_d, views, n_u=6)
+        assert none is None
+        nodes = np.cos(np.linspace(0.0, np.pi / 2, n_d))[::-1]
+        for v, o in enumerate(views):
+            wi = np.concatenate([ideal.sample(u, o)[0], cosine.sample(u, o)[0]])
+            pdf = 0.5 * ideal.pdf(wi, o) + 0.5 * cosine.pdf(wi, o)
+            w = ideal.eval_cos(wi, o)[:, 0] / pdf / (2 * len(u))
+            cos_d = dot(np.broadcast_to(o, wi.shape), half_vector(wi, o))
+            hats = np.stack([np.interp(cos_d, nodes, e) for e in np.eye(n_d)[::-1]], axis=-1)
+            np.testing.assert_allclose(a[v, :n_d], w @ hats, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(a[v, n_d], np.sum(wi[:, 2] / np.pi / pdf) / (2 * len(u)), rtol=1e-12)
+
+
+def test_grid_terms_kept_across_tables_of_other_sizes():
+    """What a fit with a base keeps from table to table (the row geometry of the sampling
+    tables, the projected-area matrix) depends on the grid alone: a table built after
+    tables of other sizes equals one built first, and the kept arrays are read-only."""
+    from microfacet.distributions import tabulated
+    beckmann = mf.Beckmann(alpha=0.4)
+
+    def table(n):
+        return TabulatedIsotropic(beckmann.ndf(spherical_to_cartesian(theta_grid(n), 0.0)))
+    first = table(20)
+    table(31)
+    again = table(20)
+    for name in ("y_cdf", "p1_fine", "L0", "L1"):
+        np.testing.assert_array_equal(getattr(first, name), getattr(again, name))
+    assert not any(a.flags.writeable for a in tabulated._ROW_GEOMETRY[0][1])
+    theta = theta_grid(12)
+    kept = extract.projected_area_matrix_isotropic(theta, theta[:-1])
+    extract.projected_area_matrix_isotropic(theta_grid(9), np.zeros(1))
+    np.testing.assert_array_equal(extract.projected_area_matrix_isotropic(theta, theta[:-1]),
+                                  extract._projected_area_matrix(theta, theta[:-1], 8))
+    assert not kept.flags.writeable
+
+
+def test_kept_values_are_those_of_their_key_across_threads():
+    """``extract._kept`` (the fits' kept terms, some shared by the whole process) returns
+    the value made for the key asked, with threads evicting each other's entries."""
+    from concurrent.futures import ThreadPoolExecutor
+    store = {}
+
+    def work(k):
+        return all(extract._kept(store, (k + j) % 5, lambda k=k, j=j: ("made", (k + j) % 5), size=2)
+                   == ("made", (k + j) % 5) for j in range(300))
+    with ThreadPoolExecutor(4) as pool:
+        assert all(pool.map(work, range(16)))
+    assert len(store) <= 2
 
 
 def test_albedo_weight_defaults_and_validation():

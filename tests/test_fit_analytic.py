@@ -192,6 +192,102 @@ def test_fits_of_one_material_share_its_data():
     assert len(analytic._DATA_CACHE[truth]) == 1
 
 
+def test_golden_section_with_a_lower_bound_takes_the_same_steps():
+    """A lower bound only spares evaluations: the same minimizer and value, bitwise."""
+    from microfacet.fit.extract import golden_section
+    calls = []
+
+    def f(x):
+        calls.append(x)
+        return (x - 0.3) ** 2 + 0.1 * abs(np.sin(7.0 * x))
+
+    def lower(x):                      # equal to f in places (an inactive constraint)
+        return (x - 0.3) ** 2 + (0.0 if x < 0.25 else 0.05 * abs(np.sin(7.0 * x)))
+    plain = golden_section(f, -1.0, 2.0, xatol=1e-3)
+    n_plain = len(calls)
+    calls.clear()
+    assert golden_section(f, -1.0, 2.0, xatol=1e-3, lower=lower) == plain
+    assert len(calls) < n_plain
+
+
+@pytest.mark.parametrize("coat", [False, True])
+def test_kept_lobes_and_sums_give_the_objective_of_a_fresh_problem(coat):
+    """A problem that keeps each lobe's ``s`` and energy rows, the coat-only sums and the
+    quadratic forms returns, along a path that moves one lobe at a time and comes back,
+    bitwise the objective and coefficients of a fresh problem at each point (data
+    brighter than a white furnace: the energy constraint is active)."""
+    from microfacet.fit import analytic
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=mf.fresnel.Schlick(0.3)),
+                    mf.Lambertian([0.95, 0.9, 0.6]))
+    data = analytic._Data(truth, 10, 2**9, (24, 12))
+
+    def problem():
+        return analytic._Problem(data, "ggx", True, False, "table", gaf="smith", shadowing=True,
+                                 mean_slope=np.zeros(2), albedo_weight=4.0, coat=coat)
+    kept = problem()
+    path = [[0.2, 0.05], [0.25, 0.05], [0.25, 0.04], [0.2, 0.05]] if coat else [[0.2], [0.25], [0.2]]
+    for q in np.log(path):
+        e, c = kept.solve(q)
+        e_fresh, c_fresh = problem().solve(q)
+        assert e == e_fresh and np.array_equal(c, c_fresh)
+    assert len(kept._lobe_rows) == (4 if coat else 2)              # built once per lobe
+
+
+def test_least_coat_candidates_are_those_of_a_full_sort():
+    """The coat scan's best starts (``_least``, by lower bounds) are those of sorting every
+    candidate by its error, in the same order, with fewer energy rows built."""
+    from microfacet.fit import analytic
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=GOLD),
+                    mf.MicrofacetBRDF(mf.GGX(alpha=0.05), fresnel=mf.fresnel.Schlick(0.04)),
+                    mf.Lambertian([0.1, 0.1, 0.1]))
+    data = analytic._Data(truth, 12, 2**9, (24, 12))
+
+    def problem():
+        return analytic._Problem(data, "ggx", True, False, "table", gaf="smith", shadowing=True,
+                                 mean_slope=np.zeros(2), albedo_weight=4.0, coat=True)
+    scan = [np.append(np.log(0.3), lc) for lc in np.log(analytic._SCAN)]
+    pruned, full = problem(), problem()
+    order, _ = analytic._least(pruned, scan, analytic.COAT_STARTS)
+    expected = sorted(range(len(scan)), key=lambda i: full.error(scan[i]))[:analytic.COAT_STARTS]
+    assert list(order) == expected
+    assert len(pruned._lobe_rows) < len(full._lobe_rows)
+
+
+def test_roughness_search_skips_candidates_by_their_lower_bound():
+    """Data brighter than a white furnace (the energy constraint active): the search
+    that evaluates candidates by their box-only lower bound chooses the same roughness,
+    to the bit, as evaluating every candidate and the golden section without it, and builds
+    fewer energy rows."""
+    from microfacet.fit import analytic
+    from microfacet.fit.extract import golden_section
+    truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.3)),
+                    mf.Lambertian([0.95, 0.9, 0.6]))
+    data = analytic._Data(truth, 14, 2**10, (64, 32))
+
+    def problem():
+        p = analytic._Problem(data, "ggx", True, False, "table", gaf="smith", shadowing=True,
+                              mean_slope=np.zeros(2), albedo_weight=4.0)
+        p.rows_built = 0
+        energy_rows = p.energy_rows
+
+        def counted(q):
+            p.rows_built += 1
+            return energy_rows(q)
+        p.energy_rows = counted
+        return p
+    candidates = np.log(analytic._SCAN)
+    lo, hi = np.log(analytic.ALPHA_BOUNDS)
+    pruned = problem()
+    chosen = analytic._minimize_log_alpha(pruned, candidates, lo, hi)
+    full = problem()
+    errors = [full.error(la) for la in candidates]
+    assert all(full.lower_bound(la) <= e for la, e in zip(candidates, errors, strict=True))
+    b = int(np.argmin(errors))
+    x, fx = golden_section(full.error, candidates[b - 1], candidates[b + 1], xatol=2e-3)
+    assert chosen == (float(x) if fx <= errors[b] else float(candidates[b]))
+    assert 0 < pruned.rows_built < full.rows_built
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not SHARED, reason="../shared/data (or $MICROFACET_DATA) not present")
 @pytest.mark.parametrize("path", SHARED, ids=lambda p: p.name.split(".")[0])

@@ -116,8 +116,7 @@ def sobol(n: int, seed: int | None = 0) -> np.ndarray:
     v = _sobol_directions()
     x = np.zeros((int(n), 4), dtype=np.uint64)
     for b in range(max(int(n) - 1, 1).bit_length()):
-        on = ((i >> np.uint64(b)) & np.uint64(1)).astype(bool)
-        x[on] ^= v[:, b]
+        x ^= ((i >> np.uint64(b)) & np.uint64(1))[:, None] * v[:, b]          # bit b set: XOR v[:, b]
     if seed is not None:
         x ^= np.random.default_rng(seed).integers(0, 2**32, size=4, dtype=np.uint64)
     return x.astype(np.float64) / 2.0**32

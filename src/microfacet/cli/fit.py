@@ -74,7 +74,7 @@ def add(sub) -> None:
     p.add_argument("--coat", action="store_true",
                    help="add a coat to the least-squares fits: a second GGX/Beckmann lobe with a Schlick "
                         "Fresnel term of free normal and grazing reflectance (clear coats, varnished paints; "
-                        "slower: ~2 s per fit)")
+                        "slower: 1-7 s per fit)")
     p.add_argument("--no-picture", dest="picture", action="store_false",
                    help="do not draw OUT.png (saves ~0.7 s of matplotlib per file; single files only: a "
                         "folder's up-to-date check wants the picture)")

@@ -245,10 +245,32 @@ def row_masses(xi, y2, w, log_d) -> np.ndarray:
     2.11) and ``D`` log-linear in ``theta`` on the nodes of :func:`theta_grid`
     (``log_d``): the ``y`` masses of the radial ``P`` behind ``P1`` and the conditional
     CDFs."""
-    r2 = xi[:, None] ** 2 + y2
-    i, t = locate(np.arctan(np.sqrt(r2)), len(log_d))
-    vals = np.exp(log_d[i] + t * (log_d[i + 1] - log_d[i])) * w / (1.0 + r2) ** 2
+    i, t, denominator = _row_geometry(xi, y2, len(log_d))
+    vals = np.exp(log_d[i] + t * (log_d[i + 1] - log_d[i])) * w / denominator
     return vals.reshape(len(xi), -1, 4).sum(axis=-1)
+
+
+#: The last :func:`_row_geometry` as one ``(key, value)`` (read at once: safe for threads);
+#: every table of one size shares it.
+_ROW_GEOMETRY: list = [None]
+
+
+def _row_geometry(xi, y2, n: int):
+    """``(i, t, (1 + r^2)^2)`` of :func:`row_masses` at ``r^2 = xi^2 + y^2``: the interval and
+    weight of ``theta = arctan r`` in :func:`theta_grid` ``(n)`` (:func:`locate`), which
+    depend on the grid, not on the table; the last one is kept (a fit with a base builds
+    ~17 tables of one size)."""
+    xi, y2 = np.asarray(xi, dtype=np.float64), np.asarray(y2, dtype=np.float64)
+    key = (int(n), xi.tobytes(), y2.tobytes())
+    entry = _ROW_GEOMETRY[0]
+    if entry is None or entry[0] != key:
+        r2 = xi[:, None] ** 2 + y2
+        i, t = locate(np.arctan(np.sqrt(r2)), n)
+        entry = (key, (i, t, (1.0 + r2) ** 2))
+        for array in entry[1]:
+            array.flags.writeable = False
+        _ROW_GEOMETRY[0] = entry
+    return entry[1]
 
 
 class _Tabulated(SlopeDistribution):

@@ -49,7 +49,7 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
-from .extract import _energy_constrained, albedo_rows, box_qp, golden_section
+from .extract import _energy_constrained, _kept, albedo_rows, box_qp, golden_section
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, compared_pairs, measured_mask,
                        measurement_directions, uniform_directions)
 
@@ -84,6 +84,13 @@ ENERGY_SAMPLES = 48
 ENERGY_MARGIN = 2e-3
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 12)
+
+
+def _lobe_key(distribution) -> tuple:
+    """A distribution's family and parameters: what a :class:`_Problem` keeps per lobe is
+    keyed by them."""
+    return (type(distribution),) + tuple(np.asarray(getattr(distribution, a), dtype=np.float64).tobytes()
+                                         for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
 
 
 class SumBRDF(BRDF):
@@ -255,6 +262,7 @@ class _Problem:
         self.albedo_weight = float(albedo_weight)
         self.coat = bool(coat)
         self._last = (None, None)
+        self._quadratics, self._lobes, self._extras, self._lobe_rows = {}, {}, {}, {}
 
     def distribution(self, q):
         if self.anisotropic:
@@ -273,10 +281,15 @@ class _Problem:
         return np.array(lo), np.array(hi)
 
     def _s(self, distribution) -> np.ndarray:
-        """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid."""
-        d = self.data
-        s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected(d.wi, d.wo)[1]
-        return np.where(np.isfinite(s), s, 0.0)
+        """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid;
+        kept per lobe (:func:`.extract._kept`, 16 of each kind: at least the scan's; a coat
+        fit's finite differences move one lobe at a time)."""
+        def make():
+            d = self.data
+            # unit directions by construction (metrics' direction sets): no check per lobe
+            s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected_unit(d.wi, d.wo)[1]
+            return np.where(np.isfinite(s), s, 0.0)
+        return _kept(self._lobes, _lobe_key(distribution), make)
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
@@ -293,20 +306,13 @@ class _Problem:
         g = _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T
         k = d.ref2.copy()
         albedo_rows = _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n)   # (V, n)
-        # the other columns, one value per pair: the coat's f0 and f90 terms, the base k_d L
-        s_c = self._s(self.coat_distribution(q)) if self.coat else None
-        extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + ([d.lambert] if self.diffuse else [])
-        if extras:
-            E = np.stack(extras, axis=-1)
-            Ep, Ea = E[:d.m], E[d.m:]
-            e = E.shape[1]
+        if self.n_extra:
+            Ep, EE, gE, rows = self._extra_sums(self._s(self.coat_distribution(q)) if self.coat else None)
+            e = Ep.shape[1]
             GE = _spread(d.pairs.sum(((sp[:, None] * Ep)[:, None, :] * d.w_hat[:, :, None]).reshape(d.m, 2 * e))
                          .reshape(n, 2, e))
-            # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
-            G = np.block([[G, GE], [GE.T, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep)]])
-            g = np.concatenate([g, np.einsum("me,mc->ce", Ep, d.wref)], axis=1)
-            rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
-                            axis=-1)
+            G = np.block([[G, GE], [GE.T, EE]])
+            g = np.concatenate([g, gE], axis=1)
             albedo_rows = np.concatenate([albedo_rows, rows], axis=1)
         H = np.repeat(G[None], 3, axis=0)
         if self.albedo_weight > 0:
@@ -318,6 +324,23 @@ class _Problem:
             g = g + c2 * np.einsum("cvx,cv->cx", scaled, (inv > 0).astype(float))
             k = k + c2 * np.sum(inv > 0, axis=1)
         return H, g, k
+
+    def _extra_sums(self, s_c):
+        """The terms of :meth:`quadratic` in the other columns alone, one value per pair (the
+        coat's ``f0`` and ``f90`` terms of its ``s_c``, the base's ``k_d L``): ``E`` on the
+        pairs, ``sum w E E^T``, ``sum w E f_ref`` and their albedo rows. They depend on the
+        coat only (the base's on nothing): kept per ``s_c`` (:meth:`_s` returns one array
+        per coat, which the entry holds, so its ``id`` stays its own)."""
+        def make():
+            d = self.data
+            extras = ([s_c * (1.0 - d.m5), s_c * d.m5] if self.coat else []) + ([d.lambert] if self.diffuse else [])
+            E = np.stack(extras, axis=-1)
+            Ep, Ea = E[:d.m], E[d.m:]
+            rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
+                            axis=-1)
+            # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
+            return s_c, Ep, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep), np.einsum("me,mc->ce", Ep, d.wref), rows
+        return _kept(self._extras, id(s_c), make)[1:]
 
     @property
     def n_extra(self) -> int:
@@ -342,12 +365,27 @@ class _Problem:
         coefficients ``(3, J)``."""
         if self._last[0] is not None and np.array_equal(self._last[0], q):
             return self._last[1]
-        H, g, k = self.quadratic(q)
+        H, g, k = self._quadratic_kept(q)
         rows = _Lazy(lambda: self.energy_rows(q))
         out = (self._solve_conductor(H, g, k, rows) if self.fresnel == "conductor"
                else self._solve_linear(H, g, k, rows))
         self._last = (np.array(q, dtype=np.float64), out)
         return out
+
+    def _quadratic_kept(self, q):
+        """:meth:`quadratic`, kept per ``q`` (:func:`.extract._kept`; a :meth:`lower_bound` is
+        followed by the :meth:`solve` of the same ``q``)."""
+        return _kept(self._quadratics, np.asarray(q, dtype=np.float64).tobytes(), lambda: self.quadratic(q))
+
+    def lower_bound(self, q) -> float:
+        """A lower bound of :meth:`error` (linear Fresnel models): ``E(q)`` with the
+        coefficients in their box but without the energy constraint, whose solution is
+        feasible for the box alone (no energy rows built). Equal to ``E(q)`` where the
+        constraint is inactive. A conductor has none (``-inf``)."""
+        if self.fresnel == "conductor":
+            return -np.inf
+        q = np.atleast_1d(np.asarray(q, dtype=np.float64))
+        return self._solve_linear(*self._quadratic_kept(q), None)[0]
 
     def energy_rows(self, q) -> np.ndarray:
         """``(V, X)``: the fit's directional albedo (Eq. 1.8) per unit linear unknown
@@ -355,7 +393,8 @@ class _Problem:
         albedo with ``F`` the hat of each Fresnel node (:func:`.extract.albedo_rows`, whose
         nodes are :data:`FRESNEL_NODES` reversed), the coat's with ``F = 1 - m^5`` and
         ``m^5`` (:func:`coat_fresnel`), and 1 for ``k_d`` (a Lambertian's albedo is
-        ``k_d``). The fit's albedo at view ``v`` is ``rows[v] @ x``."""
+        ``k_d``). The fit's albedo at view ``v`` is ``rows[v] @ x``. Each lobe's rows are
+        kept per lobe (:func:`.extract._kept`; a coat fit moves one lobe at a time)."""
         t = np.radians(ENERGY_VIEWS_DEG)
         phis = np.radians([0.0, 45.0, 90.0]) if self.anisotropic else np.zeros(1)
         views = np.concatenate([np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
@@ -364,7 +403,8 @@ class _Problem:
 
         def lobe(distribution):
             ideal = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)
-            return albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1]
+            return _kept(self._lobe_rows, _lobe_key(distribution),
+                         lambda: albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1])
         cols = [lobe(self.distribution(q))]
         if self.coat:
             m5 = (1.0 - FRESNEL_NODES) ** 5
@@ -376,7 +416,7 @@ class _Problem:
     def _solve_linear(self, H, g, k, rows):
         """Per channel, ``y`` in ``[0, 1]`` (``x = Q y + x0``, :meth:`_linear_map`) minimizing
         ``E_c`` under ``rows x <= 1 - ENERGY_MARGIN`` (:meth:`energy_rows`; computed only when
-        :meth:`_may_gain`)."""
+        :meth:`_may_gain`; ``rows=None``: the box alone)."""
         Q, x0 = self._linear_map()
         total, coef = 0.0, np.zeros((3, Q.shape[1]))
         for c in range(3):
@@ -389,7 +429,7 @@ class _Problem:
             y = np.linalg.solve(Hy, gy)
             if np.any(y < 0.0) or np.any(y > 1.0):
                 y = box_qp(Hy, gy, lo, hi)
-            if self._may_gain(Q @ y + x0):
+            if rows is not None and self._may_gain(Q @ y + x0):
                 r = rows() @ Q
                 limit = 1.0 - ENERGY_MARGIN - rows() @ x0
                 y = _energy_constrained(Hy, gy, y, (lo, hi), (r, np.repeat(limit[:, None], 3, 1)), c, True)
@@ -529,16 +569,31 @@ def _data(brdf, n: int, n_uniform: int, albedo_grid: tuple[int, int]) -> _Data:
     return per_brdf[key]
 
 
+def _least(problem: _Problem, candidates, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(order, errors)``: the indices of the ``k`` candidates of least ``problem.error``,
+    least first (ties in the given order, as ``sorted``), and the errors, evaluated in the
+    order of the candidates' :meth:`_Problem.lower_bound` until it exceeds the ``k``-th
+    least error found: the others (``inf``) cannot be among them, and their energy rows
+    are never built."""
+    bounds = [problem.lower_bound(c) for c in candidates]
+    errors = np.full(len(candidates), np.inf)
+    for i in np.argsort(bounds, kind="stable"):
+        if bounds[i] > np.sort(errors)[k - 1]:
+            break
+        errors[i] = problem.error(candidates[i])
+    return np.argsort(errors, kind="stable")[:k], errors
+
+
 def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> float:
-    """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``, then a
-    golden-section search between its neighbours."""
+    """``log alpha`` minimizing the isotropic ``problem``: the best of ``candidates``
+    (:func:`_least`), then a golden-section search between its neighbours, which also
+    evaluates the error only where the lower bound does not decide."""
     grid = np.unique(np.clip(np.asarray(candidates, dtype=np.float64), lo, hi))
-    errors = [problem.error(la) for la in grid]
-    b = int(np.argmin(errors))
+    (b,), errors = _least(problem, grid, 1)
     left, right = grid[max(b - 1, 0)], grid[min(b + 1, len(grid) - 1)]
     if right - left <= 0:
         return float(grid[b])
-    x, fx = golden_section(problem.error, left, right, xatol=2e-3)
+    x, fx = golden_section(problem.error, left, right, xatol=2e-3, lower=problem.lower_bound)
     return float(x) if fx <= errors[b] else float(grid[b])
 
 
@@ -641,8 +696,9 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     # from the COAT_STARTS best scan values (the joint objective has several minima)
     if coat:
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
-        scan = sorted(np.log(_SCAN), key=lambda lc: problem.error(np.append(q, lc)))
-        q = min((_minimize(problem, np.append(q, lc), max_nfev) for lc in scan[:COAT_STARTS]), key=problem.error)
+        scan = [np.append(q, lc) for lc in np.log(_SCAN)]
+        q = min((_minimize(problem, scan[i], max_nfev) for i in _least(problem, scan, COAT_STARTS)[0]),
+                key=problem.error)
     # stage 4: a conductor, refined from that shape
     if fresnel == "conductor":
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)

@@ -24,6 +24,8 @@ keeps the eigenproblem linear and nonnegative).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
@@ -74,10 +76,47 @@ def azimuthal_cosine_integral(theta_o, theta_h) -> np.ndarray:
     return np.where(q <= p, 2.0 * np.pi * p, partial)
 
 
+_KEPT_LOCK = threading.Lock()
+
+
+def _kept(store: dict, key, make, size: int = 16):
+    """``store[key]``, made by ``make()`` (never None) when missing; the oldest entry is
+    dropped beyond ``size`` (what a fit computes again and again with the same inputs).
+    Safe for stores shared by threads."""
+    value = store.get(key)
+    if value is None:
+        value = make()
+        with _KEPT_LOCK:
+            while len(store) >= size:
+                del store[next(iter(store))]
+            store[key] = value
+    return value
+
+
+def _read_only(*arrays) -> tuple:
+    """``arrays``, made read-only (they are kept and shared)."""
+    for array in arrays:
+        array.flags.writeable = False
+    return arrays
+
+
+#: The last :func:`projected_area_matrix_isotropic` results (key: nodes, views, order).
+_PROJECTED_AREA: dict = {}
+
+
 def projected_area_matrix_isotropic(theta: np.ndarray, theta_o: np.ndarray, order: int = 8) -> np.ndarray:
     """``M[i, j]`` with ``A(o_i) = int <o_i,h>+ D(h) dw_h = sum_j M[i, j] D_j`` for ``D``
     linear in ``theta`` between the nodes ``theta`` (product integration: Gauss-Legendre of
-    ``order`` points per interval of ``hat_j(theta) E(theta_o, theta) sin theta``)."""
+    ``order`` points per interval of ``hat_j(theta) E(theta_o, theta) sin theta``). It
+    depends on the nodes alone, not on the table: the last few are kept (read-only; a fit
+    with a base solves ~17 kernels on one grid)."""
+    theta, theta_o = np.asarray(theta, dtype=np.float64), np.asarray(theta_o, dtype=np.float64)
+    return _kept(_PROJECTED_AREA, (theta.tobytes(), theta_o.tobytes(), int(order)),
+                 lambda: _read_only(_projected_area_matrix(theta, theta_o, order))[0], size=4)
+
+
+def _projected_area_matrix(theta: np.ndarray, theta_o: np.ndarray, order: int) -> np.ndarray:
+    """:func:`projected_area_matrix_isotropic`, computed."""
     t, w = np.polynomial.legendre.leggauss(order)
     t, w = 0.5 * (t + 1.0), 0.5 * w
     a, b = theta[:-1], theta[1:]
@@ -101,7 +140,7 @@ def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray, model: str = "
     (the row of ``A`` at the normal): ``F0 D = 2 K' D - u (v . D)`` (module docstring).
     """
     _check_model(model)
-    m = projected_area_matrix_isotropic(theta, theta[:-1])
+    m = projected_area_matrix_isotropic(theta, theta[:-1]).copy()
     m[:, -2] += m[:, -1]
     m = m[:, :-1]
     scale = 4.0 * f_back * np.cos(theta[:-1])
@@ -400,23 +439,41 @@ def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
     return float(np.sum(np.sum((model - f) ** 2, axis=-1) / (y + eps)) / max(float(np.sum(y)), 1e-300))
 
 
-def golden_section(f, a: float, b: float, xatol: float) -> tuple[float, float]:
+def golden_section(f, a: float, b: float, xatol: float, lower=None) -> tuple[float, float]:
     """``(x, f(x))`` minimizing a unimodal ``f`` on ``[a, b]`` by golden-section search
     (Kiefer 1953) to ``|b - a| <= xatol`` (the ends are not evaluated): SciPy-free, so a
-    fit imports no optimizer it does not need."""
+    fit imports no optimizer it does not need. ``lower``: a cheaper lower bound of ``f``;
+    ``f`` is then evaluated only where the bound does not decide a comparison (the same
+    steps and result as without it)."""
     r = (np.sqrt(5.0) - 1.0) / 2.0
-    c, d = b - r * (b - a), a + r * (b - a)
-    fc, fd = f(c), f(d)
+
+    def point(x):                                  # [x, f(x) or a bound of it, exact]
+        return [x, f(x), True] if lower is None else [x, lower(x), False]
+
+    def exact(p):
+        if not p[2]:
+            p[1], p[2] = f(p[0]), True
+        return p[1]
+
+    def le(pc, pd) -> bool:
+        """``f(c) <= f(d)``."""
+        while not (pc[2] and pd[2]):
+            if pd[2] and pc[1] > pd[1]:
+                return False
+            if pc[2] and pd[1] > pc[1]:
+                return True
+            exact(min((p for p in (pc, pd) if not p[2]), key=lambda p: p[1]))
+        return pc[1] <= pd[1]
+
+    pc, pd = point(b - r * (b - a)), point(a + r * (b - a))
     while b - a > xatol:
-        if fc <= fd:
-            b, d, fd = d, c, fc
-            c = b - r * (b - a)
-            fc = f(c)
+        if le(pc, pd):
+            b, pd = pd[0], pc
+            pc = point(b - r * (b - a))
         else:
-            a, c, fc = c, d, fd
-            d = a + r * (b - a)
-            fd = f(d)
-    return (c, fc) if fc <= fd else (d, fd)
+            a, pc = pc[0], pd
+            pd = point(a + r * (b - a))
+    return (pc[0], exact(pc)) if le(pc, pd) else (pd[0], exact(pd))
 
 
 def spd_solve(h: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -437,26 +494,28 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
     ``g = r^T y``."""
     scale = max(float(np.max(np.abs(g))), 1e-300)
-    x = np.clip(spd_solve(h, g), lo, hi)
+    # np.clip, np.ix_, np.linalg.norm and np.array_equal spelled with ufuncs and masks (the
+    # same values): this loop runs ~10^5 times in a coat fit's energy-constrained solves
+    x = np.minimum(np.maximum(spd_solve(h, g), lo), hi)
     for _ in range(max_iter):
         grad = h @ x - g
-        step = x - np.clip(x - grad, lo, hi)
+        step = x - np.minimum(np.maximum(x - grad, lo), hi)
         if np.max(np.abs(step)) <= tol * scale:
             break
-        eps = min(float(np.linalg.norm(step)), 1e-3)
+        eps = min(float(np.sqrt(step.dot(step))), 1e-3)
         held = ((x <= lo + eps) & (grad > 0)) | ((x >= hi - eps) & (grad < 0))
         free = ~held
         d = np.where(held, -grad, 0.0)
         if np.any(free):
-            d[free] = -spd_solve(h[np.ix_(free, free)], grad[free])
+            d[free] = -spd_solve(h[free][:, free], grad[free])
         s = 1.0
         for _ in range(60):
-            xn = np.clip(x + s * d, lo, hi)
+            xn = np.minimum(np.maximum(x + s * d, lo), hi)
             dx = xn - x                            # q(xn) - q(x) without cancellation
             if grad @ dx + 0.5 * dx @ h @ dx <= 1e-4 * grad @ dx:
                 break
             s *= 0.5
-        if np.array_equal(xn, x):
+        if (xn == x).all():
             break
         x = xn
     return x
@@ -526,30 +585,55 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     from ..brdf import Lambertian
     from ..geometry import dot, half_vector
 
-    g = (np.arange(n_u) + 0.5) / n_u
-    u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
-    views = np.asarray(views, dtype=np.float64)
-    wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
-    cosine = Lambertian(1.0)
+    u, wo_v, wi_c, pdf_c, k0_c, t_c = _cosine_strategy(n_u, views, n_d)     # the cosine lobe's, kept
+    v_count = len(wo_v)
+    wi_s = ideal.sample(u, wo_v)[0]
     # both strategies on the whole stratified grid (a split of the grid would sample
     # each from half its domain), balance-heuristic weights
-    wi = np.concatenate([ideal.sample(u, wo)[0], cosine.sample(u, wo)[0]], axis=1)
-    wo = np.concatenate([wo, wo], axis=1)
-    pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * cosine.pdf(wi, wo)
+    wi = np.concatenate([wi_s, wi_c], axis=1)
+    wo = np.concatenate([wo_v, wo_v], axis=1)
+    pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * np.concatenate([Lambertian(1.0).pdf(wi_s, wo_v), pdf_c], axis=1)
     ok = (pdf > 0) & (wi[..., 2] > 0)
     inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
-    k0, t = _hats(dot(wo, half_vector(wi, wo)), n_d)
-    a = np.zeros((len(views), n_d + 1))
-    for v in range(len(views)):
-        a[v, :n_d] = (np.bincount(k0[v], weights=fid[v] * (1.0 - t[v]), minlength=n_d)
-                      + np.bincount(k0[v] + 1, weights=fid[v] * t[v], minlength=n_d))
+    k0_s, t_s = _hats(dot(wo_v, half_vector(wi_s, wo_v)), n_d)
+    k0, t = np.concatenate([k0_s, k0_c], axis=1), np.concatenate([t_s, t_c], axis=1)
+    key = (k0 + n_d * np.arange(v_count)[:, None]).ravel()           # node k of view v: v n_d + k
+    size = v_count * n_d
+    a = np.zeros((v_count, n_d + 1))
+    a[:, :n_d] = (np.bincount(key, weights=(fid * (1.0 - t)).ravel(), minlength=size)
+                  + np.bincount(key + 1, weights=(fid * t).ravel(), minlength=size)).reshape(v_count, n_d)
     a[:, n_d] = np.sum(np.maximum(wi[..., 2], 0.0) / np.pi * inv, axis=1)
     if brdf is None:
         return a, None
-    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64) * wi[..., 2:]
+    # per strategy: the data's values on the cosine samples repeat from fit to fit (a
+    # measured BRDF remembers its last direction sets)
+    f = np.concatenate([np.asarray(brdf.eval(w, wo_v), dtype=np.float64) for w in (wi_s, wi_c)], axis=1) * wi[..., 2:]
     f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
     return a, f.sum(axis=1)
+
+
+#: The cosine strategy of :func:`albedo_rows` per ``(n_u, views, n_d)``, which no fit changes.
+_COSINE_STRATEGY: dict = {}
+
+
+def _cosine_strategy(n_u: int, views, n_d: int):
+    """``(u, wo, wi, pdf, k0, t)`` of :func:`albedo_rows`'s cosine-lobe strategy at ``views``,
+    none of which depends on the fitted lobe: the stratified uniforms ``(n_u^2, 2)``, the
+    views broadcast ``(V, n_u^2, 3)``, the sampled directions, their cosine density and the
+    hats of their half vectors in the ``n_d`` nodes (computed once, then kept)."""
+    from ..brdf import Lambertian
+    from ..geometry import dot, half_vector
+    views = np.asarray(views, dtype=np.float64)
+
+    def make():
+        g = (np.arange(n_u) + 0.5) / n_u
+        u = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+        wo = np.broadcast_to(views[:, None, :], (len(views), len(u), 3))
+        cosine = Lambertian(1.0)
+        wi = cosine.sample(u, wo)[0]
+        return _read_only(u, wo, wi, cosine.pdf(wi, wo), *_hats(dot(wo, half_vector(wi, wo)), n_d))
+    return _kept(_COSINE_STRATEGY, (int(n_u), views.tobytes(), int(n_d)), make, size=8)
 
 
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,

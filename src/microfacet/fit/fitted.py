@@ -149,7 +149,19 @@ class FittedBRDF(MicrofacetBRDF):
     def slope_moments(self) -> dict:
         """Slope moments of the fitted distribution (with its alpha, rho, mean slope):
         ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~y~]`` and, about the mean, ``E|x~|, E|y~|``,
-        ``beta1 = E[x~y~/(x~^2+y~^2)]``, ``beta2 = E[y~^2/(x~^2+y~^2)]`` (App. C)."""
+        ``beta1 = E[x~y~/(x~^2+y~^2)]``, ``beta2 = E[y~^2/(x~^2+y~^2)]`` (App. C). Kept for
+        the distribution and roughness they were computed for (the moment conversions and
+        the least-squares fits started from them ask ~4 times)."""
+        d = self.distribution
+        params = tuple(np.asarray(getattr(d, a), dtype=np.float64).tobytes()
+                       for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
+        kept = getattr(self, "_kept_moments", None)
+        if kept is None or kept[0] is not d or kept[1] != params:
+            self._kept_moments = kept = (d, params, self._slope_moments())
+        return dict(kept[2])
+
+    def _slope_moments(self) -> dict:
+        """:meth:`slope_moments`, computed."""
         d = self.distribution
         x, y, w = d.standard_quadrature()
         if any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
