@@ -233,41 +233,44 @@ def _interp(tx, tv, ch, c):
 
 
 @_jit
-def _fresnel_block(fk, fp, tx, tv, buf, m, c_row, s_row, out_row):
-    """``buf[out_row + ch, k] = F_ch(buf[c_row, k]) * buf[s_row, k]`` for ``k < m``: the
-    Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv``
-    the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop per RGB channel
-    with the choice of the term outside it, so that the analytic terms vectorize."""
+def _fresnel_block(fk, fp, tx, tv, c_row, s_row, out_rows, m):
+    """``out_rows[ch, k] = F_ch(c_row[k]) * s_row[k]`` for ``k < m``: the Fresnel term of kind
+    ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv`` the
+    :class:`~microfacet.fresnel.Tabulated` grid and values), one loop per RGB channel over
+    1-D rows with the choice of the term outside it, so that the analytic terms vectorize."""
     for ch in range(3):
         p0, p1 = fp[0, ch], fp[1, ch]
+        o = out_rows[ch]
         if fk == IDEAL:
             for k in range(m):
-                buf[out_row + ch, k] = buf[s_row, k]
+                o[k] = s_row[k]
         elif fk == SCHLICK:
             for k in range(m):
-                buf[out_row + ch, k] = _schlick(p0, buf[c_row, k]) * buf[s_row, k]
+                o[k] = _schlick(p0, c_row[k]) * s_row[k]
         elif fk == DIELECTRIC:
             for k in range(m):
-                buf[out_row + ch, k] = _dielectric(p0, buf[c_row, k]) * buf[s_row, k]
+                o[k] = _dielectric(p0, c_row[k]) * s_row[k]
         elif fk == CONDUCTOR:
             for k in range(m):
-                buf[out_row + ch, k] = _conductor(p0, p1, buf[c_row, k]) * buf[s_row, k]
+                o[k] = _conductor(p0, p1, c_row[k]) * s_row[k]
         else:
             for k in range(m):
-                buf[out_row + ch, k] = _interp(tx, tv, ch, buf[c_row, k]) * buf[s_row, k]
+                o[k] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
 
 
 @_jit
 def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
     """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+    of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
-    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``."""
+    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays."""
     s1 = math.sqrt(1.0 - rho * rho)
+    oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     for k in range(m):
-        ix, iy, iz = wi[k, 0], wi[k, 1], wi[k, 2]
-        ox, oy, oz = wo[k, 0], wo[k, 1], wo[k, 2]
+        ix, iy, iz = wi[3 * k], wi[3 * k + 1], wi[3 * k + 2]
+        ox, oy, oz = wo[3 * k], wo[3 * k + 1], wo[3 * k + 2]
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
@@ -277,15 +280,15 @@ def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, 
         r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
         ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0) & ((ci > 0.0) | (not shadowing))
         e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-        buf[0, k] = oh
-        buf[1, k], buf[2, k], buf[5, k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
-        buf[3, k] = e
-        buf[4, k] = scale / (iz if divide_cos_i else 1.0) if ok else 0.0
-        buf[6, k] = co
+        oh_r[k] = oh
+        a_r[k], w_r[k], c_r[k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
+        e_r[k] = e
+        f_r[k] = scale / (iz if divide_cos_i else 1.0) if ok else 0.0
+        co_r[k] = co
     _smith_block_post(kind, buf, m)
     for k in range(m):
-        e, f = buf[3, k], buf[4, k]
-        buf[1, k] = _ndf_over(kind, e, f * buf[5, k], 2.0 * buf[2, k]) if (f > 0.0) & (e > 0.0) else 0.0
+        e, f = e_r[k], f_r[k]
+        a_r[k] = _ndf_over(kind, e, f * c_r[k], 2.0 * w_r[k]) if (f > 0.0) & (e > 0.0) else 0.0
 
 
 @_jit
@@ -495,6 +498,39 @@ def _unit_deviation(w):
     return m
 
 
+def _flat_rows(a, j0, m, scratch):
+    """Rows ``j0:j0 + m`` of ``a (n, w)`` as a flat C-contiguous array (``w k + axis``): a
+    view of a C-contiguous ``a``, else (a broadcast or strided ``a``) a copy into ``scratch``
+    (``w BLOCK`` elements). The loops index the result with a constant stride, which LLVM
+    vectorizes (interleaved loads); ``a[k, axis]`` has runtime strides, which it does not."""
+    return np.ascontiguousarray(a[j0:j0 + m]).reshape(-1)      # compiled: the overload below
+
+
+@numba.extending.overload(_flat_rows, inline="always")
+def _flat_rows_impl(a, j0, m, scratch):
+    if a.layout == "C":
+        def view(a, j0, m, scratch):
+            w = a.shape[1]
+            return a.reshape(a.size)[w * j0:w * (j0 + m)]
+        return view
+
+    def copy(a, j0, m, scratch):
+        w = a.shape[1]
+        for k in range(m):
+            for c in range(w):
+                scratch[w * k + c] = a[j0 + k, c]
+        return scratch[:w * m]
+    return copy
+
+
+@_jit
+def _interleave(rows, m, out):
+    """``out[3 k + ch] = rows[ch, k]`` for ``k < m`` (a flat output block, :func:`_flat_rows`)."""
+    r0, r1, r2 = rows[0], rows[1], rows[2]
+    for k in range(m):
+        out[3 * k], out[3 * k + 1], out[3 * k + 2] = r0[k], r1[k], r2[k]
+
+
 @functools.cache
 def projected_kernel(kind):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
@@ -503,9 +539,11 @@ def projected_kernel(kind):
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
         buf = np.empty((7, BLOCK))
+        si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(kind, shadowing, divide_cos_i, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            _projected_block(kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
+                             m, ax, ay, rho, xn, yn, buf)
             oh_out[j0:j0 + m] = buf[0, :m]
             s_out[j0:j0 + m] = buf[1, :m]
     return kernel
@@ -518,9 +556,11 @@ def pdf_kernel(kind):
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
         buf = np.empty((7, BLOCK))
+        si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(kind, False, False, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
+            _projected_block(kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
+                             m, ax, ay, rho, xn, yn, buf)
             out[j0:j0 + m] = buf[1, :m]
     return kernel
 
@@ -532,11 +572,14 @@ def eval_kernel(kind):
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
         buf = np.empty((7, BLOCK))
+        si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
+        out_flat = out.reshape(out.size)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(kind, shadowing, divide_cos_i, wi[j0:], wo[j0:], m, ax, ay, rho, xn, yn, buf)
-            _fresnel_block(fk, fp, tx, tv, buf, m, 0, 1, 2)
-            out[j0:j0 + m] = buf[2:5, :m].T
+            _projected_block(kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
+                             m, ax, ay, rho, xn, yn, buf)
+            _fresnel_block(fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
+            _interleave(buf[2:5], m, out_flat[3 * j0:3 * (j0 + m)])
     return kernel
 
 
@@ -549,29 +592,33 @@ def sample_kernel(kind):
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(1.0 - rho * rho)
         buf = np.empty((11, BLOCK))
+        su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
+        wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
+        r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
+        r7, r8, r9, r10 = buf[7], buf[8], buf[9], buf[10]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            u_b, wo_b, wi_b, weight_b, pdf_b = u[j0:], wo[j0:], wi_out[j0:], weight_out[j0:], pdf_out[j0:]
+            u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
             for k in range(m):                       # polar angle and azimuth of the warped view
-                ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
+                ox, oy, oz = wo_b[3 * k], wo_b[3 * k + 1], wo_b[3 * k + 2]
                 a = ax * ox + rho * ay * oy
                 b = ay * s1 * oy
                 c = max(oz - ox * xn - oy * yn, 0.0)
-                r2 = a * a + b * b
-                inv_r = 1.0 / math.sqrt(r2)
-                buf[0, k] = c / math.sqrt(r2 + c * c) if r2 > 0.0 else 1.0
-                buf[1, k] = a * inv_r if r2 > 0.0 else 1.0
-                buf[2, k] = b * inv_r if r2 > 0.0 else 0.0
+                r2_o = a * a + b * b
+                inv_r = 1.0 / math.sqrt(r2_o)
+                r0[k] = c / math.sqrt(r2_o + c * c) if r2_o > 0.0 else 1.0
+                r1[k] = a * inv_r if r2_o > 0.0 else 1.0
+                r2[k] = b * inv_r if r2_o > 0.0 else 0.0
             if kind == GGX:                          # the standard visible normal
                 for k in range(m):
-                    buf[3, k], buf[4, k], buf[5, k] = _ggx_visible_std(u_b[k, 0], u_b[k, 1], buf[0, k])
+                    r3[k], r4[k], r5[k] = _ggx_visible_std(u_b[2 * k], u_b[2 * k + 1], r0[k])
             else:                                    # (library calls: a loop of its own)
                 for k in range(m):
-                    buf[3, k], buf[4, k], buf[5, k] = _beckmann_visible_std(u_b[k, 0], u_b[k, 1], buf[0, k])
+                    r3[k], r4[k], r5[k] = _beckmann_visible_std(u_b[2 * k], u_b[2 * k + 1], r0[k])
             for k in range(m):
-                ox, oy, oz = wo_b[k, 0], wo_b[k, 1], wo_b[k, 2]
-                cp, sp = buf[1, k], buf[2, k]
-                mx, my, mz = cp * buf[3, k] - sp * buf[4, k], sp * buf[3, k] + cp * buf[4, k], buf[5, k]
+                ox, oy, oz = wo_b[3 * k], wo_b[3 * k + 1], wo_b[3 * k + 2]
+                cp, sp = r1[k], r2[k]
+                mx, my, mz = cp * r3[k] - sp * r4[k], sp * r3[k] + cp * r4[k], r5[k]
                 hx = ax * mx - xn * mz                # slope map of Eq. 3.4 on the normal
                 hy = ay * (rho * mx + s1 * my) - yn * mz
                 hz = mz
@@ -580,25 +627,24 @@ def sample_kernel(kind):
                 hx, hy, hz = hx * inv, hy * inv, hz * inv
                 oh = ox * hx + oy * hy + oz * hz
                 ix, iy, iz = 2.0 * oh * hx - ox, 2.0 * oh * hy - oy, 2.0 * oh * hz - oz
-                r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+                r2_o, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
                 ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
                 r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
                 e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
-                buf[0, k] = oh
-                buf[1, k], buf[2, k], buf[5, k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
-                buf[3, k] = e
-                buf[4, k] = scale if ok else 0.0
-                buf[6, k] = co
-                buf[7, k], buf[8, k], buf[9, k] = ix, iy, iz
-                buf[10, k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
+                r0[k] = oh
+                r1[k], r2[k], r5[k] = _smith_pre(kind, shadowing, r2_o, co, r2_i, ci)
+                r3[k] = e
+                r4[k] = scale if ok else 0.0
+                r6[k] = co
+                r7[k], r8[k], r9[k] = ix, iy, iz
+                r10[k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
             _smith_block_post(kind, buf, m)
             for k in range(m):
-                area, e, f = buf[1, k], buf[3, k], buf[4, k]
+                area, e, f = r1[k], r3[k], r4[k]
                 p = _ndf_over(kind, e, f, 2.0 * area) if (f > 0.0) & (e > 0.0) else 0.0
                 pdf_b[k] = p
-                buf[2, k] = buf[5, k] * area / buf[2, k] if (p > 0.0) & (buf[10, k] > 0.0) else 0.0   # G / G1(o)
-            _fresnel_block(fk, fp, tx, tv, buf, m, 0, 2, 3)
-            for k in range(m):
-                wi_b[k, 0], wi_b[k, 1], wi_b[k, 2] = buf[7, k], buf[8, k], buf[9, k]
-                weight_b[k, 0], weight_b[k, 1], weight_b[k, 2] = buf[3, k], buf[4, k], buf[5, k]
+                r2[k] = r5[k] * area / r2[k] if (p > 0.0) & (r10[k] > 0.0) else 0.0   # G / G1(o)
+            _fresnel_block(fk, fp, tx, tv, r0, r2, buf[3:6], m)
+            _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
+            _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
     return kernel
