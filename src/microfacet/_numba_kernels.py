@@ -75,7 +75,7 @@ def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
 
 
 @_jit
-def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
+def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
     """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
     (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
     mask those): ``(A, W, c)`` with ``A = 2 c_o (1 + Lambda_o)``, ``W / c = 2 c_o (1 + Lambda_o +
@@ -84,14 +84,14 @@ def _smith_pre(kind, shadowing, r2, co, r2_i, ci):
     (c_k + q_k) / (2 c_k)``, ``q_k = sqrt(c_k^2 + r2_k)``, so ``A = c_o + q_o``, ``W = c_i q_o +
     c_o q_i``, ``c = c_i`` (no quotient). Beckmann: the arguments ``v_k = c_k / sqrt(r2_k)`` of
     Lambda and ``c = 1``; :func:`_smith_post` finishes them in a loop of its own."""
-    co = co if co > 0.0 else 1.0
-    lit = shadowing & (ci > 0.0)
-    ci = ci if lit else 1.0
+    co = co if co > F(0.0) else F(1.0)
+    lit = shadowing & (ci > F(0.0))
+    ci = ci if lit else F(1.0)
     if kind == GGX:
         qo = math.sqrt(co * co + r2)
-        qi = math.sqrt(ci * ci + r2_i) if lit else 1.0
+        qi = math.sqrt(ci * ci + r2_i) if lit else F(1.0)
         return co + qo, ci * qo + co * qi, ci
-    return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else math.inf), 1.0
+    return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else F(math.inf)), F(1.0)
 
 
 @_inline
@@ -144,19 +144,19 @@ def _smith_post(v_o, v_i, co):
 
 
 @_jit
-def _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
+def _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
     """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
     (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)`` for :func:`_ndf_over`: GGX
     ``(pi r^2, 1 / det)``, ``r = z^2 + x^2 + y^2``; Beckmann ``((x^2 + y^2) / (2 z^2),
     1 / (pi z^4 det))``, whose ``exp`` :func:`_ndf_post` takes."""
-    inv_det = 1.0 / (ax * ay * s1)                   # loop invariants: hoisted
-    x = (-hx - xn * hz) * (1.0 / ax)
+    inv_det = F(1.0) / (ax * ay * s1)                   # loop invariants: hoisted
+    x = (-hx - xn * hz) * (F(1.0) / ax)
     y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) * inv_det
     if kind == GGX:
         r = hz * hz + x * x + y * y
-        return math.pi * r * r, inv_det
+        return F(math.pi) * r * r, inv_det
     z2 = hz * hz
-    return 0.5 * (x * x + y * y) / z2, inv_det / (math.pi * z2 * z2)
+    return F(0.5) * (x * x + y * y) / z2, inv_det / (F(math.pi) * z2 * z2)
 
 
 @_jit
@@ -168,7 +168,7 @@ def _ndf_post(kind, e):
 
 
 @_jit
-def _ndf_over(kind, e, scale, den):
+def _ndf_over(F, kind, e, scale, den):
     """``D scale / den`` from :func:`_ndf_post`'s ``e`` (one quotient): GGX ``scale / (e den)``;
     Beckmann's ``exp(-(x^2 + y^2) / z^2)`` is the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
     so that ``D`` stays representable where the exponential alone underflows but ``/ z^4``
@@ -179,36 +179,36 @@ def _ndf_over(kind, e, scale, den):
 
 
 @_jit
-def _schlick(f0, c):
+def _schlick(F, f0, c):
     """Schlick's ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I; :class:`~microfacet.fresnel.Schlick`)."""
-    m = 1.0 - min(max(c, 0.0), 1.0)
+    m = F(1.0) - min(max(c, F(0.0)), F(1.0))
     m2 = m * m
-    return f0 + (1.0 - f0) * (m2 * m2 * m)
+    return f0 + (F(1.0) - f0) * (m2 * m2 * m)
 
 
 @_jit
-def _dielectric(eta, c):
+def _dielectric(F, eta, c):
     """Dielectric Fresnel reflectance (Table 2.I; :class:`~microfacet.fresnel.Dielectric`),
     1 under total internal reflection."""
-    c = min(max(c, 0.0), 1.0)
-    g2 = eta * eta + c * c - 1.0
-    g = math.sqrt(max(g2, 0.0))
+    c = min(max(c, F(0.0)), F(1.0))
+    g2 = eta * eta + c * c - F(1.0)
+    g = math.sqrt(max(g2, F(0.0)))
     a = (g - c) / (g + c)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    f = 0.5 * a * a * (1.0 + b * b)
-    return 1.0 if (g2 < 0.0) | (not abs(f) < math.inf) else f
+    b = (c * (g + c) - F(1.0)) / (c * (g - c) + F(1.0))
+    f = F(0.5) * a * a * (F(1.0) + b * b)
+    return F(1.0) if (g2 < F(0.0)) | (not abs(f) < F(math.inf)) else f
 
 
 @_jit
-def _conductor(eta, k, c):
+def _conductor(F, eta, k, c):
     """Conductor Fresnel reflectance (:func:`microfacet.fresnel.conductor_reflectance`) with
     its two quotients in one: ``(R_s + R_p) / 2 = R_s t3 / (t3 + t4)``, ``R_s = (A - B) / (A + B)``."""
-    c = min(max(c, 0.0), 1.0)
+    c = min(max(c, F(0.0)), F(1.0))
     c2 = c * c
-    s2 = 1.0 - c2
+    s2 = F(1.0) - c2
     t1 = eta * eta - k * k - s2
-    a2b2 = math.sqrt(t1 * t1 + 4.0 * eta * eta * k * k)
-    ac2 = 2.0 * c * math.sqrt(max(0.5 * (a2b2 + t1), 0.0))
+    a2b2 = math.sqrt(t1 * t1 + F(4.0) * eta * eta * k * k)
+    ac2 = F(2.0) * c * math.sqrt(max(F(0.5) * (a2b2 + t1), F(0.0)))
     t3, t4 = a2b2 * c2 + s2 * s2, ac2 * s2
     return (a2b2 + c2 - ac2) * t3 / ((a2b2 + c2 + ac2) * (t3 + t4))
 
@@ -233,7 +233,7 @@ def _interp(tx, tv, ch, c):
 
 
 @_jit
-def _fresnel_block(fk, fp, tx, tv, c_row, s_row, out_rows, m):
+def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out_rows, m):
     """``out_rows[ch, k] = F_ch(c_row[k]) * s_row[k]`` for ``k < m``: the Fresnel term of kind
     ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv`` the
     :class:`~microfacet.fresnel.Tabulated` grid and values), one loop per RGB channel over
@@ -246,49 +246,49 @@ def _fresnel_block(fk, fp, tx, tv, c_row, s_row, out_rows, m):
                 o[k] = s_row[k]
         elif fk == SCHLICK:
             for k in range(m):
-                o[k] = _schlick(p0, c_row[k]) * s_row[k]
+                o[k] = _schlick(F, p0, c_row[k]) * s_row[k]
         elif fk == DIELECTRIC:
             for k in range(m):
-                o[k] = _dielectric(p0, c_row[k]) * s_row[k]
+                o[k] = _dielectric(F, p0, c_row[k]) * s_row[k]
         elif fk == CONDUCTOR:
             for k in range(m):
-                o[k] = _conductor(p0, p1, c_row[k]) * s_row[k]
+                o[k] = _conductor(F, p0, p1, c_row[k]) * s_row[k]
         else:
             for k in range(m):
                 o[k] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
 
 
 @_jit
-def _projected_block(kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
     """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays."""
-    s1 = math.sqrt(1.0 - rho * rho)
+    s1 = math.sqrt(F(1.0) - rho * rho)
     oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     for k in range(m):
-        ix, iy, iz = wi[3 * k], wi[3 * k + 1], wi[3 * k + 2]
-        ox, oy, oz = wo[3 * k], wo[3 * k + 1], wo[3 * k + 2]
+        ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
+        ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
-        inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
+        inv = F(1.0) / math.sqrt(n2) if n2 > F(0.0) else F(0.0)
         hx, hy, hz = hx * inv, hy * inv, hz * inv
         oh = ox * hx + oy * hy + oz * hz
         r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
         r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
-        ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0) & ((ci > 0.0) | (not shadowing))
-        e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
+        ok = (iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0)) & ((ci > F(0.0)) | (not shadowing))
+        e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
         oh_r[k] = oh
-        a_r[k], w_r[k], c_r[k] = _smith_pre(kind, shadowing, r2, co, r2_i, ci)
+        a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, r2, co, r2_i, ci)
         e_r[k] = e
-        f_r[k] = scale / (iz if divide_cos_i else 1.0) if ok else 0.0
+        f_r[k] = scale / (iz if divide_cos_i else F(1.0)) if ok else F(0.0)
         co_r[k] = co
     _smith_block_post(kind, buf, m)
     for k in range(m):
         e, f = e_r[k], f_r[k]
-        a_r[k] = _ndf_over(kind, e, f * c_r[k], 2.0 * w_r[k]) if (f > 0.0) & (e > 0.0) else 0.0
+        a_r[k] = _ndf_over(F, kind, e, f * c_r[k], F(2.0) * w_r[k]) if (f > F(0.0)) & (e > F(0.0)) else F(0.0)
 
 
 @_jit
@@ -435,34 +435,34 @@ def _visible_slope_quantile(u, cos_theta):
 
 
 @_jit
-def _sin_cos(x):
+def _sin_cos(F, x):
     """``(sin x, cos x)`` for ``|x| <= pi/4``: Taylor series to ``x^15`` and ``x^16``
     (truncation below 5e-17), arithmetic only, so that a loop calling it vectorizes."""
     x2 = x * x
-    sn, cs = _SIN_TAYLOR[0], _COS_TAYLOR[0]
+    sn, cs = F(_SIN_TAYLOR[0]), F(_COS_TAYLOR[0])
     for j in range(1, 8):                            # Horner
-        sn = _SIN_TAYLOR[j] - x2 * sn
-        cs = _COS_TAYLOR[j] - x2 * cs
-    return x * sn, 1.0 - x2 * cs
+        sn = F(_SIN_TAYLOR[j]) - x2 * sn
+        cs = F(_COS_TAYLOR[j]) - x2 * cs
+    return x * sn, F(1.0) - x2 * cs
 
 
 @_jit
-def _ggx_visible_std(u0, u1, cos_t):
+def _ggx_visible_std(F, u0, u1, cos_t):
     """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
     form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
     ``r cos phi``, ``r sin phi`` with ``phi = pi/2 - psi`` as ``r sin psi``, ``r cos psi``), with
     selects instead of branches."""
-    c = min(max(cos_t, 0.0), 1.0)
-    s = math.sqrt(1.0 - c * c)
-    a, b = 2.0 * u0 - 1.0, 2.0 * u1 - 1.0
+    c = min(max(cos_t, F(0.0)), F(1.0))
+    s = math.sqrt(F(1.0) - c * c)
+    a, b = F(2.0) * u0 - F(1.0), F(2.0) * u1 - F(1.0)
     first = abs(a) > abs(b)                          # phi = pi/4 b/a; else phi = pi/2 - pi/4 a/b
     r = a if first else b
-    q = (b if first else a) / (r if r != 0.0 else 1.0)
-    sn, cs = _sin_cos((math.pi / 4) * q)
+    q = (b if first else a) / (r if r != F(0.0) else F(1.0))
+    sn, cs = _sin_cos(F, F(math.pi / 4) * q)
     t1, t2 = r * (cs if first else sn), r * (sn if first else cs)
-    w = 0.5 * (1.0 + c)
-    t2 = (1.0 - w) * math.sqrt(max(0.0, 1.0 - t1 * t1)) + w * t2
-    tz = math.sqrt(max(0.0, 1.0 - t1 * t1 - t2 * t2))
+    w = F(0.5) * (F(1.0) + c)
+    t2 = (F(1.0) - w) * math.sqrt(max(F(0.0), F(1.0) - t1 * t1)) + w * t2
+    tz = math.sqrt(max(F(0.0), F(1.0) - t1 * t1 - t2 * t2))
     return s * tz - c * t2, t1, c * tz + s * t2
 
 
@@ -532,17 +532,19 @@ def _interleave(rows, m, out):
 
 
 @functools.cache
-def projected_kernel(kind):
+def projected_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
     ``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair (:func:`_projected_block`) of the
     distribution ``kind`` (the kernels are compiled per kind, which is a constant in them)."""
+    F = np.dtype(dtype).type
+
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        buf = np.empty((7, BLOCK))
+        buf = np.empty((7, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
+            _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
                              m, ax, ay, rho, xn, yn, buf)
             oh_out[j0:j0 + m] = buf[0, :m]
             s_out[j0:j0 + m] = buf[1, :m]
@@ -550,48 +552,54 @@ def projected_kernel(kind):
 
 
 @functools.cache
-def pdf_kernel(kind):
+def pdf_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
+    F = np.dtype(dtype).type
+
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        buf = np.empty((7, BLOCK))
+        buf = np.empty((7, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
+            _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
                              m, ax, ay, rho, xn, yn, buf)
             out[j0:j0 + m] = buf[1, :m]
     return kernel
 
 
 @functools.cache
-def eval_kernel(kind):
+def eval_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
+    F = np.dtype(dtype).type
+
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        buf = np.empty((7, BLOCK))
+        buf = np.empty((7, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         out_flat = out.reshape(out.size)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
+            _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
                              m, ax, ay, rho, xn, yn, buf)
-            _fresnel_block(fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
+            _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
             _interleave(buf[2:5], m, out_flat[3 * j0:3 * (j0 + m)])
     return kernel
 
 
 @functools.cache
-def sample_kernel(kind):
+def sample_kernel(kind, dtype=np.float64):
     """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
     visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
+    F = np.dtype(dtype).type
+
     @_jit
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
-        s1 = math.sqrt(1.0 - rho * rho)
-        buf = np.empty((11, BLOCK))
+        s1 = math.sqrt(F(1.0) - rho * rho)
+        buf = np.empty((11, BLOCK), F)
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
@@ -600,51 +608,51 @@ def sample_kernel(kind):
             m = min(BLOCK, stop - j0)
             u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
             for k in range(m):                       # polar angle and azimuth of the warped view
-                ox, oy, oz = wo_b[3 * k], wo_b[3 * k + 1], wo_b[3 * k + 2]
+                ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 a = ax * ox + rho * ay * oy
                 b = ay * s1 * oy
-                c = max(oz - ox * xn - oy * yn, 0.0)
+                c = max(oz - ox * xn - oy * yn, F(0.0))
                 r2_o = a * a + b * b
-                inv_r = 1.0 / math.sqrt(r2_o)
-                r0[k] = c / math.sqrt(r2_o + c * c) if r2_o > 0.0 else 1.0
-                r1[k] = a * inv_r if r2_o > 0.0 else 1.0
-                r2[k] = b * inv_r if r2_o > 0.0 else 0.0
+                inv_r = F(1.0) / math.sqrt(r2_o)
+                r0[k] = c / math.sqrt(r2_o + c * c) if r2_o > F(0.0) else F(1.0)
+                r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
+                r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
             if kind == GGX:                          # the standard visible normal
                 for k in range(m):
-                    r3[k], r4[k], r5[k] = _ggx_visible_std(u_b[2 * k], u_b[2 * k + 1], r0[k])
+                    r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u_b[2 * k]), F(u_b[2 * k + 1]), r0[k])
             else:                                    # (library calls: a loop of its own)
                 for k in range(m):
-                    r3[k], r4[k], r5[k] = _beckmann_visible_std(u_b[2 * k], u_b[2 * k + 1], r0[k])
+                    r3[k], r4[k], r5[k] = _beckmann_visible_std(float(u_b[2 * k]), float(u_b[2 * k + 1]), float(r0[k]))
             for k in range(m):
-                ox, oy, oz = wo_b[3 * k], wo_b[3 * k + 1], wo_b[3 * k + 2]
+                ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 cp, sp = r1[k], r2[k]
                 mx, my, mz = cp * r3[k] - sp * r4[k], sp * r3[k] + cp * r4[k], r5[k]
                 hx = ax * mx - xn * mz                # slope map of Eq. 3.4 on the normal
                 hy = ay * (rho * mx + s1 * my) - yn * mz
                 hz = mz
                 n2 = hx * hx + hy * hy + hz * hz
-                inv = 1.0 / math.sqrt(n2) if n2 > 0.0 else 0.0
+                inv = F(1.0) / math.sqrt(n2) if n2 > F(0.0) else F(0.0)
                 hx, hy, hz = hx * inv, hy * inv, hz * inv
                 oh = ox * hx + oy * hy + oz * hz
-                ix, iy, iz = 2.0 * oh * hx - ox, 2.0 * oh * hy - oy, 2.0 * oh * hz - oz
+                ix, iy, iz = F(2.0) * oh * hx - ox, F(2.0) * oh * hy - oy, F(2.0) * oh * hz - oz
                 r2_o, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
-                ok = (iz > 0.0) & (oz > 0.0) & (oh > 0.0) & (hz > 0.0) & (co > 0.0)
+                ok = (iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
                 r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
-                e, scale = _ndf_pre(kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > 0.0 else 1.0)
+                e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
                 r0[k] = oh
-                r1[k], r2[k], r5[k] = _smith_pre(kind, shadowing, r2_o, co, r2_i, ci)
+                r1[k], r2[k], r5[k] = _smith_pre(F, kind, shadowing, r2_o, co, r2_i, ci)
                 r3[k] = e
-                r4[k] = scale if ok else 0.0
+                r4[k] = scale if ok else F(0.0)
                 r6[k] = co
                 r7[k], r8[k], r9[k] = ix, iy, iz
-                r10[k] = 1.0 if (ci > 0.0) | (not shadowing) else 0.0     # wi visible: G > 0
+                r10[k] = F(1.0) if (ci > F(0.0)) | (not shadowing) else F(0.0)     # wi visible: G > 0
             _smith_block_post(kind, buf, m)
             for k in range(m):
                 area, e, f = r1[k], r3[k], r4[k]
-                p = _ndf_over(kind, e, f, 2.0 * area) if (f > 0.0) & (e > 0.0) else 0.0
+                p = _ndf_over(F, kind, e, f, F(2.0) * area) if (f > F(0.0)) & (e > F(0.0)) else F(0.0)
                 pdf_b[k] = p
-                r2[k] = r5[k] * area / r2[k] if (p > 0.0) & (r10[k] > 0.0) else 0.0   # G / G1(o)
-            _fresnel_block(fk, fp, tx, tv, r0, r2, buf[3:6], m)
+                r2[k] = r5[k] * area / r2[k] if (p > F(0.0)) & (r10[k] > F(0.0)) else F(0.0)   # G / G1(o)
+            _fresnel_block(F, fk, fp, tx, tv, r0, r2, buf[3:6], m)
             _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
             _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
     return kernel
