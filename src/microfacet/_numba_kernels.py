@@ -4,12 +4,18 @@ Numba's on-disk cache, on first use; see that module).
 Each public kernel, ``kernel(start, stop, ...)``, works through the pairs ``start:stop``
 in blocks of :data:`BLOCK` and writes its outputs in place, with the Fresnel term inside.
 A block runs as a few loops over a small scratch array, one per stage, written with
-selects instead of branches and with contiguous per-channel rows, so that LLVM
-vectorizes each stage that makes no library call (all of GGX; Beckmann's ``exp`` and
-``erfc`` are the kernels' own, :func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table
-loads; its visible-slope Halley solve and ``erfinv`` stay in a scalar loop). Kernels are
-compiled per distribution kind (a constant in them: :func:`eval_kernel` etc.); the
-Fresnel kind, shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
+selects instead of branches, reading the ``(n, 3)`` inputs through flat views indexed
+``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
+through flat views: constant strides, so that LLVM vectorizes each stage that makes no
+library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
+:func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table loads; its visible-slope
+Halley solve and ``erfinv`` stay in a scalar loop). ``a[k, axis]`` on 2-D arrays (runtime
+strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
+compiled per distribution kind and arithmetic type ``F`` (float64 or float32; constants in
+them: :func:`eval_kernel` etc.); the helpers take ``F`` and write their constants as ``F(c)``
+(a float literal would promote float32 arithmetic to float64). Beckmann's ``exp``, ``erfc``
+and visible-slope solve stay float64 (they take float64 arguments). The Fresnel kind,
+shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
 quotients where that is exact algebra (each docstring says how). ``error_model="numpy"``:
 a division by zero gives inf/NaN (then masked), as in NumPy, instead of raising; fastmath
@@ -295,7 +301,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
 def _smith_block_post(kind, buf, m):
     """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
     (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
-    loop vectorizes); nothing for GGX."""
+    loop vectorizes; float64 arithmetic, also on float32 rows); nothing for GGX."""
     if kind != GGX:
         v_o, v_i, e, co = buf[1], buf[2], buf[3], buf[6]
         for k in range(m):
@@ -550,7 +556,8 @@ def _interleave(rows, m, out):
 def projected_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
     ``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair (:func:`_projected_block`) of the
-    distribution ``kind`` (the kernels are compiled per kind, which is a constant in them)."""
+    distribution ``kind`` in ``dtype`` arithmetic (the kernels are compiled per kind and
+    ``dtype``, constants in them; the caller passes the scalar parameters as ``dtype``)."""
     F = np.dtype(dtype).type
 
     @_jit
