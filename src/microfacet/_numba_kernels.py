@@ -4,7 +4,9 @@ Numba's on-disk cache, on first use; see that module).
 Each public kernel, ``kernel(start, stop, ...)``, works through the pairs ``start:stop``
 in blocks of :data:`BLOCK` and writes its outputs in place, with the Fresnel term inside.
 A block runs as a few loops over a small scratch array, one per stage, written with
-selects instead of branches, reading the ``(n, 3)`` inputs through flat views indexed
+selects instead of branches, on the operands of quotients and roots rather than their
+results (LLVM sinks a quotient used once into the branch of a conditional expression and
+then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through flat views indexed
 ``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
 through flat views: constant strides, so that LLVM vectorizes each stage that makes no
 library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
@@ -95,9 +97,9 @@ def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
     ci = ci if lit else F(1.0)
     if kind == GGX:
         qo = math.sqrt(co * co + r2)
-        qi = math.sqrt(ci * ci + r2_i) if lit else F(1.0)
+        qi = math.sqrt(ci * ci + (r2_i if lit else F(0.0)))
         return co + qo, ci * qo + co * qi, ci
-    return co / math.sqrt(r2), (ci / math.sqrt(r2_i) if lit else F(math.inf)), F(1.0)
+    return co / math.sqrt(r2), ci / math.sqrt(r2_i if lit else F(0.0)), F(1.0)     # 1 / 0 = inf
 
 
 @_inline
@@ -182,6 +184,14 @@ def _ndf_over(F, kind, e, scale, den):
     if kind == GGX:
         return scale / (e * den)
     return e * scale * e / den
+
+
+@_jit
+def _guard(F, valid, e, scale, den):
+    """The arguments of :func:`_ndf_over` where ``valid``, else ``(1, 0, 1)`` (which give 0):
+    the operands of a quotient are selected, not its result, since LLVM sinks a quotient
+    used once into the branch of a conditional expression and then leaves the loop scalar."""
+    return (e if valid else F(1.0)), (scale if valid else F(0.0)), (den if valid else F(1.0))
 
 
 @_jit
@@ -279,7 +289,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
-        inv = F(1.0) / math.sqrt(n2) if n2 > F(0.0) else F(0.0)
+        inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
         hx, hy, hz = hx * inv, hy * inv, hz * inv
         oh = ox * hx + oy * hy + oz * hz
         r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
@@ -289,12 +299,12 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         oh_r[k] = oh
         a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, r2, co, r2_i, ci)
         e_r[k] = e
-        f_r[k] = scale / (iz if divide_cos_i else F(1.0)) if ok else F(0.0)
+        f_r[k] = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
         co_r[k] = co
     _smith_block_post(kind, buf, m)
     for k in range(m):
         e, f = e_r[k], f_r[k]
-        a_r[k] = _ndf_over(F, kind, e, f * c_r[k], F(2.0) * w_r[k]) if (f > F(0.0)) & (e > F(0.0)) else F(0.0)
+        a_r[k] = _ndf_over(F, kind, *_guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c_r[k], F(2.0) * w_r[k]))
 
 
 @_jit
@@ -636,7 +646,7 @@ def sample_kernel(kind, dtype=np.float64):
                 c = max(oz - ox * xn - oy * yn, F(0.0))
                 r2_o = a * a + b * b
                 inv_r = F(1.0) / math.sqrt(r2_o)
-                r0[k] = c / math.sqrt(r2_o + c * c) if r2_o > F(0.0) else F(1.0)
+                r0[k] = (c if r2_o > F(0.0) else F(1.0)) / math.sqrt(r2_o + c * c if r2_o > F(0.0) else F(1.0))
                 r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
                 r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
             if kind == GGX:                          # the standard visible normal
@@ -653,7 +663,7 @@ def sample_kernel(kind, dtype=np.float64):
                 hy = ay * (rho * mx + s1 * my) - yn * mz
                 hz = mz
                 n2 = hx * hx + hy * hy + hz * hz
-                inv = F(1.0) / math.sqrt(n2) if n2 > F(0.0) else F(0.0)
+                inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))   # 0 at n2 = 0
                 hx, hy, hz = hx * inv, hy * inv, hz * inv
                 oh = ox * hx + oy * hy + oz * hz
                 ix, iy, iz = F(2.0) * oh * hx - ox, F(2.0) * oh * hy - oy, F(2.0) * oh * hz - oz
@@ -671,9 +681,10 @@ def sample_kernel(kind, dtype=np.float64):
             _smith_block_post(kind, buf, m)
             for k in range(m):
                 area, e, f = r1[k], r3[k], r4[k]
-                p = _ndf_over(F, kind, e, f, F(2.0) * area) if (f > F(0.0)) & (e > F(0.0)) else F(0.0)
+                p = _ndf_over(F, kind, *_guard(F, (f > F(0.0)) & (e > F(0.0)), e, f, F(2.0) * area))
                 pdf_b[k] = p
-                r2[k] = r5[k] * area / r2[k] if (p > F(0.0)) & (r10[k] > F(0.0)) else F(0.0)   # G / G1(o)
+                g = (p > F(0.0)) & (r10[k] > F(0.0))
+                r2[k] = (r5[k] * area if g else F(0.0)) / (r2[k] if g else F(1.0))   # G / G1(o)
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, buf[3:6], m)
             _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
             _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
