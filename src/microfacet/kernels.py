@@ -8,8 +8,9 @@ term; everything else takes the NumPy path. Set ``MICROFACET_NUMBA=0`` to disabl
 
 A batch runs as a few tasks on a thread pool of :func:`threads` threads (the kernels
 release the GIL), each working through its range in cache-sized blocks, so the only
-memory a call allocates is its outputs. Outputs are float64, or float32 for
-``MicrofacetBRDF(..., dtype=np.float32)`` (float32 inputs are read as they are).
+memory a call allocates is its outputs (broadcast inputs are copied a block at a time).
+The arithmetic and outputs are float64, or float32 for ``MicrofacetBRDF(...,
+dtype=np.float32)`` (kernels compiled per dtype; float32 inputs are read as they are).
 
 Numba is imported, and each kernel compiled (or loaded from Numba's on-disk cache,
 ``cache=True``), on first use, not when :mod:`microfacet` is imported: the kernels live
