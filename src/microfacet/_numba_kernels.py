@@ -20,9 +20,12 @@ and visible-slope solve stay float64 (they take float64 arguments). The Fresnel 
 shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
 quotients where that is exact algebra (each docstring says how). ``error_model="numpy"``:
-a division by zero gives inf/NaN (then masked), as in NumPy, instead of raising; fastmath
-is off (the kernels equal the reference to 1e-12; ``contract``/``arcp``/``nsz`` moved some
-sampled GGX directions by 2e-8 and saved ~10 %)."""
+a division by zero gives inf/NaN (then masked), as in NumPy, instead of raising. fastmath
+is off in float64 (the kernels equal the reference to 1e-12; ``contract``/``arcp``/``nsz``
+moved some sampled GGX directions by 2e-8 and saved ~10 %); the float32 kernels take
+``arcp``, ``afn`` and ``contract`` (:data:`_jit_float32`: eval 1.25x faster), which the
+helpers, inlined in Numba's IR (:data:`_inline`), inherit. Inlining doubled the cold
+compile (~7 s per kernel and dtype, once per install: ``cache=True``)."""
 from __future__ import annotations
 
 import functools
@@ -68,13 +71,16 @@ def _erfc_taylor(c, degree=15):
 _ERFC_TAYLOR = np.array([_erfc_taylor(0.25 * k + 0.125) for k in range(24)]).ravel()
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-#: For the helpers called two calls deep in a loop that must vectorize (LLVM would not
-#: inline them that far): Numba inlines them into its own IR.
+#: The float32 kernels: approximate reciprocals and square roots refined by a Newton step
+#: (``arcp``, ``afn``: ``vrsqrt14ps``, a few ulps) and fused multiply-adds (``contract``).
+_jit_float32 = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"arcp", "afn", "contract"})
+#: For the per-element helpers of the kernels: Numba inlines them into its own IR (LLVM
+#: would not inline them two calls deep), so that they take the kernel's fastmath flags.
 _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 # ------------------------------------------------------------------------ helpers
-@_jit
+@_inline
 def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
     """``(a^2 + b^2, c)`` of the warped direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3)."""
     a = ax * kx + rho * ay * ky
@@ -82,7 +88,7 @@ def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
     return a * a + b * b, kz - kx * xn - ky * yn
 
 
-@_jit
+@_inline
 def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
     """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
     (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
@@ -151,7 +157,7 @@ def _smith_post(v_o, v_i, co):
     return 2.0 * co * (1.0 + lam_o), 2.0 * co * (1.0 + lam_o + _beckmann_lambda(v_i))
 
 
-@_jit
+@_inline
 def _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
     """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
     (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)`` for :func:`_ndf_over`: GGX
@@ -167,7 +173,7 @@ def _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
     return F(0.5) * (x * x + y * y) / z2, inv_det / (F(math.pi) * z2 * z2)
 
 
-@_jit
+@_inline
 def _ndf_post(kind, e):
     """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)``; GGX ``e``)."""
     if kind == GGX:
@@ -175,7 +181,7 @@ def _ndf_post(kind, e):
     return _exp_neg(-e)
 
 
-@_jit
+@_inline
 def _ndf_over(F, kind, e, scale, den):
     """``D scale / den`` from :func:`_ndf_post`'s ``e`` (one quotient): GGX ``scale / (e den)``;
     Beckmann's ``exp(-(x^2 + y^2) / z^2)`` is the square of ``e = exp(-(x^2 + y^2) / (2 z^2))``,
@@ -186,7 +192,7 @@ def _ndf_over(F, kind, e, scale, den):
     return e * scale * e / den
 
 
-@_jit
+@_inline
 def _guard(F, valid, e, scale, den):
     """The arguments of :func:`_ndf_over` where ``valid``, else ``(1, 0, 1)`` (which give 0):
     the operands of a quotient are selected, not its result, since LLVM sinks a quotient
@@ -194,7 +200,7 @@ def _guard(F, valid, e, scale, den):
     return (e if valid else F(1.0)), (scale if valid else F(0.0)), (den if valid else F(1.0))
 
 
-@_jit
+@_inline
 def _schlick(F, f0, c):
     """Schlick's ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I; :class:`~microfacet.fresnel.Schlick`)."""
     m = F(1.0) - min(max(c, F(0.0)), F(1.0))
@@ -202,7 +208,7 @@ def _schlick(F, f0, c):
     return f0 + (F(1.0) - f0) * (m2 * m2 * m)
 
 
-@_jit
+@_inline
 def _dielectric(F, eta, c):
     """Dielectric Fresnel reflectance (Table 2.I; :class:`~microfacet.fresnel.Dielectric`),
     1 under total internal reflection."""
@@ -215,7 +221,7 @@ def _dielectric(F, eta, c):
     return F(1.0) if (g2 < F(0.0)) | (not abs(f) < F(math.inf)) else f
 
 
-@_jit
+@_inline
 def _conductor(F, eta, k, c):
     """Conductor Fresnel reflectance (:func:`microfacet.fresnel.conductor_reflectance`) with
     its two quotients in one: ``(R_s + R_p) / 2 = R_s t3 / (t3 + t4)``, ``R_s = (A - B) / (A + B)``."""
@@ -248,7 +254,7 @@ def _interp(tx, tv, ch, c):
     return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
 
 
-@_jit
+@_inline
 def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out_rows, m):
     """``out_rows[ch, k] = F_ch(c_row[k]) * s_row[k]`` for ``k < m``: the Fresnel term of kind
     ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv`` the
@@ -274,7 +280,7 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out_rows, m):
                 o[k] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
 
 
-@_jit
+@_inline
 def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
     """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
@@ -304,10 +310,11 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
     _smith_block_post(kind, buf, m)
     for k in range(m):
         e, f = e_r[k], f_r[k]
-        a_r[k] = _ndf_over(F, kind, *_guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c_r[k], F(2.0) * w_r[k]))
+        e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c_r[k], F(2.0) * w_r[k])
+        a_r[k] = _ndf_over(F, kind, e, scale, den)
 
 
-@_jit
+@_inline
 def _smith_block_post(kind, buf, m):
     """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
     (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
@@ -450,7 +457,7 @@ def _visible_slope_quantile(u, cos_theta):
     return x
 
 
-@_jit
+@_inline
 def _sin_cos(F, x):
     """``(sin x, cos x)`` for ``|x| <= pi/4``: Taylor series to ``x^15`` and ``x^16``
     (truncation below 5e-17), arithmetic only, so that a loop calling it vectorizes."""
@@ -462,7 +469,7 @@ def _sin_cos(F, x):
     return x * sn, F(1.0) - x2 * cs
 
 
-@_jit
+@_inline
 def _ggx_visible_std(F, u0, u1, cos_t):
     """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
     form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
@@ -554,7 +561,7 @@ def _flat_rows_impl(a, j0, m, scratch):
     return copy
 
 
-@_jit
+@_inline
 def _interleave(rows, m, out):
     """``out[3 k + ch] = rows[ch, k]`` for ``k < m`` (a flat output block, :func:`_flat_rows`)."""
     r0, r1, r2 = rows[0], rows[1], rows[2]
@@ -570,7 +577,7 @@ def projected_kernel(kind, dtype=np.float64):
     ``dtype``, constants in them; the caller passes the scalar parameters as ``dtype``)."""
     F = np.dtype(dtype).type
 
-    @_jit
+    @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
         buf = np.empty((7, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
@@ -589,7 +596,7 @@ def pdf_kernel(kind, dtype=np.float64):
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
     F = np.dtype(dtype).type
 
-    @_jit
+    @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
         buf = np.empty((7, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
@@ -607,7 +614,7 @@ def eval_kernel(kind, dtype=np.float64):
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
     F = np.dtype(dtype).type
 
-    @_jit
+    @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
         buf = np.empty((7, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
@@ -628,7 +635,7 @@ def sample_kernel(kind, dtype=np.float64):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
     F = np.dtype(dtype).type
 
-    @_jit
+    @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(F(1.0) - rho * rho)
         buf = np.empty((11, BLOCK), F)
@@ -681,7 +688,8 @@ def sample_kernel(kind, dtype=np.float64):
             _smith_block_post(kind, buf, m)
             for k in range(m):
                 area, e, f = r1[k], r3[k], r4[k]
-                p = _ndf_over(F, kind, *_guard(F, (f > F(0.0)) & (e > F(0.0)), e, f, F(2.0) * area))
+                e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f, F(2.0) * area)
+                p = _ndf_over(F, kind, e, scale, den)
                 pdf_b[k] = p
                 g = (p > F(0.0)) & (r10[k] > F(0.0))
                 r2[k] = (r5[k] * area if g else F(0.0)) / (r2[k] if g else F(1.0))   # G / G1(o)
