@@ -300,7 +300,8 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         oh = ox * hx + oy * hy + oz * hz
         r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
         r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
-        ok = (iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0)) & ((ci > F(0.0)) | (not shadowing))
+        ok = ((iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
+              & ((ci > F(0.0)) | (not shadowing)))
         e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
         oh_r[k] = oh
         a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, r2, co, r2_i, ci)
