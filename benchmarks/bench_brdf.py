@@ -415,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     if rat:
         print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64 unless named float32; "
               f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads; "
-              f"'{F32.strip()}': dtype=np.float32, float32 inputs and outputs, float64 arithmetic). "
+              f"'{F32.strip()}': dtype=np.float32, float32 inputs, arithmetic and outputs). "
               f"Mitsuba {variant}: float32"
               + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
         print("  (wall-time ratio, then the ratio of process CPU times, which the machine's load "

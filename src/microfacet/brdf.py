@@ -139,10 +139,14 @@ class MicrofacetBRDF(BRDF):
         If False, the GAF accounts for masking (of ``wo``) only.
     dtype : {numpy.float64, numpy.float32}
         Type of the results of ``eval``, ``eval_cos``, ``pdf`` and ``sample``. With float32,
-        the compiled kernels also read float32 directions and uniforms as they are (no
-        float64 copy) and write float32: half the memory traffic. The arithmetic stays
-        float64 (the results are the float64 ones rounded, relative error <= 2^-24 on the
-        same inputs); the NumPy path computes in float64 and rounds.
+        the compiled kernels (Smith, scalar parameters) read float32 directions and uniforms
+        as they are (no float64 copy), compute in float32 (twice the SIMD width, approximate
+        reciprocal square roots refined by a Newton step: GGX 2.5-3x faster than float64,
+        Beckmann 1.4x) and write float32; Beckmann's exp/erfc, its visible-slope solve and the Tabulated
+        Fresnel interpolation stay float64. Against float64 on the same inputs, where ``f`` is
+        well-conditioned (``z_i, z_o > 0.05``): ``f cos`` and pdf within 1e-5 relative for
+        99.9 % of pairs (2e-4 worst), sampled directions within 3e-5 (tested in
+        ``tests/test_kernels.py``). The NumPy path computes in float64 and rounds.
     """
 
     def __init__(self, distribution: SlopeDistribution, fresnel: _fresnel.Fresnel | None = None,

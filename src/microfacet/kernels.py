@@ -8,8 +8,9 @@ term; everything else takes the NumPy path. Set ``MICROFACET_NUMBA=0`` to disabl
 
 A batch runs as a few tasks on a thread pool of :func:`threads` threads (the kernels
 release the GIL), each working through its range in cache-sized blocks, so the only
-memory a call allocates is its outputs. Outputs are float64, or float32 for
-``MicrofacetBRDF(..., dtype=np.float32)`` (float32 inputs are read as they are).
+memory a call allocates is its outputs (broadcast inputs are copied a block at a time).
+The arithmetic and outputs are float64, or float32 for ``MicrofacetBRDF(...,
+dtype=np.float32)`` (kernels compiled per dtype; float32 inputs are read as they are).
 
 Numba is imported, and each kernel compiled (or loaded from Numba's on-disk cache,
 ``cache=True``), on first use, not when :mod:`microfacet` is imported: the kernels live
@@ -167,45 +168,54 @@ def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
     return oh.reshape(shape), s.reshape(shape)
 
 
+def _typed(dtype, params):
+    """``params`` as scalars of ``dtype``, the kernels' arithmetic type (float64 arguments
+    would promote float32 arithmetic)."""
+    F = np.dtype(dtype).type
+    return [F(p) for p in params]
+
+
 def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64):
     """``F D G / (4 z_o) [/ z_i]`` RGB ``(..., 3)`` of a Smith ``brdf`` (Eq. 2.1) by one
-    compiled pass with the Fresnel term inside, written as ``dtype``, or ``None`` when the
-    kernel does not apply (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
+    compiled pass with the Fresnel term inside, computed and written as ``dtype``, or ``None``
+    when the kernel does not apply (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
     p = _brdf_params(brdf)
     if p is None:
         return None
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(wi, wo)
     out = np.empty(shape + (3,), dtype)
-    _launch_ranges(_kernels().eval_kernel(kind), n, _rows(wi, shape), _rows(wo, shape), *d, brdf.shadowing,
-                   bool(divide_cos_i), fk, *f, out.reshape(-1, 3))
+    _launch_ranges(_kernels().eval_kernel(kind, np.dtype(dtype)), n, _rows(wi, shape), _rows(wo, shape),
+                   *_typed(dtype, d), brdf.shadowing, bool(divide_cos_i), fk, f[0].astype(dtype), *f[1:],
+                   out.reshape(-1, 3))
     return out
 
 
 def smith_pdf(brdf, wi, wo, dtype=np.float64):
     """Visible-normal sampling density ``D(h) / (4 A(o))`` (Eq. 2.17) of a Smith ``brdf`` by
-    one compiled pass, written as ``dtype``, or ``None`` when the kernel does not apply."""
+    one compiled pass, computed and written as ``dtype``, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
     shape, n = _shape_n(wi, wo)
     out = np.empty(shape, dtype)
-    _launch_ranges(_kernels().pdf_kernel(p[0][0]), n, _rows(wi, shape), _rows(wo, shape), *p[0][1:],
-                   out.reshape(-1))
+    _launch_ranges(_kernels().pdf_kernel(p[0][0], np.dtype(dtype)), n, _rows(wi, shape), _rows(wo, shape),
+                   *_typed(dtype, p[0][1:]), out.reshape(-1))
     return out
 
 
 def smith_sample(brdf, u, wo, dtype=np.float64):
     """``(wi, weight, pdf)`` of visible-normal sampling (Sec. 2.2, 3.2, Eq. 2.23) of a Smith
-    ``brdf`` by one compiled pass, written as ``dtype``, or ``None`` when the kernel does not apply."""
+    ``brdf`` by one compiled pass, computed and written as ``dtype``, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(u, wo)
     wi, weight, pdf = np.empty(shape + (3,), dtype), np.empty(shape + (3,), dtype), np.empty(shape, dtype)
-    _launch_ranges(_kernels().sample_kernel(kind), n, _rows(u, shape), _rows(wo, shape), *d, brdf.shadowing,
-                   fk, *f, wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
+    _launch_ranges(_kernels().sample_kernel(kind, np.dtype(dtype)), n, _rows(u, shape), _rows(wo, shape),
+                   *_typed(dtype, d), brdf.shadowing, fk, f[0].astype(dtype), *f[1:],
+                   wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
     return wi, weight, pdf
 
 
