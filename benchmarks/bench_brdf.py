@@ -8,7 +8,10 @@ anisotropic GGX and Beckmann, with
 and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
 same directions with the same parameters (rho = 0, zero mean slope: the only case both
 models share) and the same conductor Fresnel term. Each timing is the best and the
-median of ``--repeats`` runs after one warm-up run (time.perf_counter).
+median of ``--repeats`` runs after one warm-up run (time.perf_counter). Op ``io`` is
+the memory floor of an eval on each side: read the two directions, write a 3-vector per
+pair, no arithmetic (ours: a compiled kernel on the same threads, float64 (n, 3) arrays and
+float32 ones; Mitsuba: ``view + light`` on its float32 (3, n) arrays).
 
 Mitsuba runs in ``llvm_ad_rgb`` (vectorized float32 JIT on all cores) when that works,
 which needs a system libLLVM >= 16 (e.g. Debian's ``libllvm19``; set
@@ -182,6 +185,31 @@ def bench_ours(inputs, repeats: int) -> list[dict]:
     return rows
 
 
+def _add_rows(start, stop, a, b, out):
+    """``out = a + b`` over rows ``start:stop`` of ``(n, 3)`` arrays through flat views (as the
+    Smith kernels read and write them): the memory traffic of an eval and no arithmetic."""
+    x, y, z = a.reshape(-1), b.reshape(-1), out.reshape(-1)
+    for j in range(3 * start, 3 * stop):
+        z[j] = x[j] + y[j]
+
+
+def bench_io_floor(inputs, repeats: int) -> list[dict]:
+    """The memory floor of ``eval`` (op ``io``): read ``wi`` and ``wo``, write an ``(n, 3)``
+    output, by a compiled kernel on the same threads as ours, in float64 and float32."""
+    if not mf.kernels.AVAILABLE:
+        return []
+    import numba
+    kernel = numba.njit(nogil=True)(_add_rows)
+    rows = []
+    for name, dtype in (("", np.float64), (F32, np.float32)):
+        wi, wo = inputs["wi"].astype(dtype), inputs["wo"].astype(dtype)
+        out = np.empty_like(wi)
+        rows.append({"impl": "microfacet", "op": "io", "distribution": "read 2, write 1" + name, "n": len(wi),
+                     "extrapolated": False,
+                     **time_it(lambda: mf.kernels._launch_ranges(kernel, len(wi), wi, wo, out), repeats)})
+    return rows
+
+
 def scaling(sizes: list[int], repeats: int) -> list[dict]:
     """Best time per element, peak extra bytes per element (:func:`peak_memory`, whose
     call is also the warm-up) and the process's peak RSS so far (the largest peak seen
@@ -287,6 +315,8 @@ def bench_mitsuba_llvm(inputs, repeats: int, threads: int | None) -> list[dict]:
         for op, fn in ops.items():
             rows.append({"impl": "mitsuba llvm_ad_rgb", "op": op, "distribution": kind, "n": n,
                          "extrapolated": False, **time_it(run(fn), repeats)})
+    rows.append({"impl": "mitsuba llvm_ad_rgb", "op": "io", "distribution": "read 2, write 1", "n": n,
+                 "extrapolated": False, **time_it(run(lambda: view + light), repeats)})
     return rows
 
 
@@ -400,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     if variant is None and args.mitsuba not in ("auto", "none"):
         return 2  # the requested Mitsuba variant does not run here
     inputs = make_inputs(args.n)
-    rows = bench_ours(inputs, args.repeats)
+    rows = bench_ours(inputs, args.repeats) + bench_io_floor(inputs, args.repeats)
     threads = None
     if variant == "llvm_ad_rgb":
         rows += bench_mitsuba_llvm(inputs, args.repeats, args.mitsuba_threads)
