@@ -506,7 +506,7 @@ def _albedo_estimate(brdf) -> float:
 def _start_alpha(start) -> tuple[float, float, float, np.ndarray]:
     """``(alpha_x, alpha_y, rho, mean_slope)`` of a start: a fitted tabulated BRDF (its
     moment conversion to GGX, App. C) or an analytic :class:`MicrofacetBRDF`."""
-    brdf = start.to_ggx() if hasattr(start, "to_ggx") else start
+    brdf = start.to_ggx(resolve_fresnel=False) if hasattr(start, "to_ggx") else start
     d = getattr(brdf, "distribution", None)
     if d is None:
         raise ValueError(f"fit_analytic: start must be a fit or a MicrofacetBRDF, got {type(start).__name__}")
