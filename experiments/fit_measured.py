@@ -11,9 +11,10 @@ anisotropic fit of the RGL files) and reports
   conversions ``fit.to_ggx(reference=m)`` and ``fit.to_beckmann(reference=m)`` (Fresnel
   tables solved against the data, as ``microfacet fit --method moments`` writes them) and
   the issue's baseline, the moment GGX of the constraint-only fit (``albedo_weight=0``)
-  with that fit's own Fresnel table (``resolve_fresnel=False``), against the data (:func:`microfacet.metrics.fit_error`: a
-  32^3 grid of MERL coordinates, **grazing pairs with cos theta_i or cos theta_o < 0.1
-  excluded**, and for MERL the pairs touching unmeasured samples);
+  with that fit's own Fresnel table (``resolve_fresnel=False``), against the data
+  (:func:`microfacet.metrics.fit_error`: a 32^3 grid of MERL coordinates, **grazing
+  pairs with cos theta_i or cos theta_o < 0.1 excluded**, and for MERL the pairs
+  touching unmeasured samples);
 * the least-squares fits of :func:`microfacet.fit.fit_analytic` (GGX and Beckmann, with
   and without a Lambertian base, and with a coat lobe and a base, GGX also with the
   ``normal_map`` GAF; Fresnel table, the default albedo weight; started from the

@@ -377,8 +377,8 @@ class _Problem:
         """``(V, X)``: the fit's directional albedo (Eq. 1.8) per unit linear unknown
         ``x = (v, c, k_d)`` at the views of :data:`ENERGY_VIEWS_DEG`: the lobe's
         albedo with ``F`` the hat of each Fresnel node (:func:`.extract.albedo_rows`, whose
-        nodes are :data:`FRESNEL_NODES` reversed), the coat's with ``F = 1 - m^5`` and
-        ``m^5`` (:func:`coat_fresnel`), and 1 for ``k_d`` (a Lambertian's albedo is
+        nodes are :data:`FRESNEL_NODES` reversed), the coat's with ``F`` each function of
+        :func:`_coat_basis`, and 1 for ``k_d`` (a Lambertian's albedo is
         ``k_d``). The fit's albedo at view ``v`` is ``rows[v] @ x``."""
         t = np.radians(ENERGY_VIEWS_DEG)
         phis = np.radians([0.0, 45.0, 90.0]) if self.anisotropic else np.zeros(1)
@@ -426,7 +426,8 @@ class _Problem:
         albedo is at most its largest Fresnel value (a lobe with ``F = 1`` loses energy,
         :func:`~microfacet.metrics.white_furnace`)."""
         n = len(FRESNEL_NODES)
-        bound = np.max(x[:n]) + (np.max(x[n:n + self.n_coat]) if self.coat else 0.0) + (x[-1] if self.diffuse else 0.0)
+        coat = np.max(x[n:n + self.n_coat]) if self.coat else 0.0
+        bound = np.max(x[:n]) + coat + (x[-1] if self.diffuse else 0.0)
         return bool(bound > 1.0 - ENERGY_MARGIN)
 
     def _solve_conductor(self, H, g, k, rows):

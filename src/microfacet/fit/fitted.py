@@ -203,7 +203,7 @@ class FittedBRDF(MicrofacetBRDF):
         ``alpha_x^2 = 2 Var[x~]``, ``alpha_y^2 = 2 Var[y~]``, ``rho alpha_x alpha_y =
         2 Cov[x~, y~]``, mean slope kept); exact (up to the fit's quadrature) when the
         fitted BRDF is a Beckmann one. Its Fresnel table is solved for the converted NDF
-        against ``reference`` (default: the fit's lobe; e.g. the fit's data), or, with
+        against ``reference`` (default: the fit's lobe; or the data it was fitted to), or, with
         ``resolve_fresnel=False``, the fit's own table (:meth:`_analytic`).
         ``method="least_squares"``: the least-squares fit
         of this BRDF (:func:`~microfacet.fit.analytic.fit_analytic`, ``options`` passed
