@@ -7,16 +7,21 @@ runs ``mf.fit.fit(m, resolution=N)`` (isotropic; with ``--anisotropic`` also an
 anisotropic fit of the RGL files) and reports
 
 * the fit time (``time.perf_counter`` around ``mf.fit.fit`` alone; one run, cold);
-* the relative RMS error of ``f_r cos theta_i`` of the tabulated fit, ``fit.to_ggx()``
-  and ``fit.to_beckmann()`` against the data (:func:`microfacet.metrics.fit_error`: a
-  32^3 grid of MERL coordinates, **grazing pairs with cos theta_i or cos theta_o < 0.1
-  excluded**, and for MERL the pairs touching unmeasured samples);
+* the relative RMS error of ``f_r cos theta_i`` of the tabulated fit, its moment
+  conversions ``fit.to_ggx(reference=m)`` and ``fit.to_beckmann(reference=m)`` (Fresnel
+  tables solved against the data, as ``microfacet fit --method moments`` writes them) and
+  the issue's baseline, the moment GGX of the constraint-only fit (``albedo_weight=0``)
+  with that fit's own Fresnel table (``resolve_fresnel=False``), against the data
+  (:func:`microfacet.metrics.fit_error`: a 32^3 grid of MERL coordinates, **grazing
+  pairs with cos theta_i or cos theta_o < 0.1 excluded**, and for MERL the pairs
+  touching unmeasured samples);
 * the least-squares fits of :func:`microfacet.fit.fit_analytic` (GGX and Beckmann, with
-  and without a Lambertian base, and with a coat lobe and a base; Fresnel table, the
-  default albedo weight; started from the tabulated fit) and their fit time;
+  and without a Lambertian base, and with a coat lobe and a base, GGX also with the
+  ``normal_map`` GAF; Fresnel table, the default albedo weight; started from the
+  tabulated fit) and their fit time;
 * the trade-off of the albedo weight: for each weight of ``--weights``, the least-squares
   fit of least objective (:func:`microfacet.fit.outputs.objective`) among the six, its
-  grid error (and its ratio to the moment-converted GGX), uniform error and albedo ratio;
+  grid error (and its ratio to the baseline), uniform error and albedo ratio;
 * for every fit the error over uniformly distributed pairs
   (:func:`microfacet.metrics.uniform_error`) and the directional-albedo ratio fit/data at
   0/30/60/75 deg (:func:`microfacet.metrics.albedo_ratios`: the ratio farthest from 1 over
@@ -63,10 +68,13 @@ def _alpha(brdf) -> str:
     return f"{ax:.4f}" if abs(ax - ay) < 1e-4 * ax and abs(rho) < 1e-6 else f"{ax:.4f}, {ay:.4f}, ρ {rho:+.3f}"
 
 
-#: Least-squares fits by column name: (model, diffuse, coat).
-LEAST_SQUARES = {"LS GGX": ("ggx", False, False), "LS GGX+d": ("ggx", True, False),
-                 "LS Beck": ("beckmann", False, False), "LS Beck+d": ("beckmann", True, False),
-                 "LS GGX+c+d": ("ggx", True, True), "LS Beck+c+d": ("beckmann", True, True)}
+#: Least-squares fits by column name: (model, diffuse, coat, GAF).
+LEAST_SQUARES = {"LS GGX": ("ggx", False, False, "smith"), "LS GGX+d": ("ggx", True, False, "smith"),
+                 "LS Beck": ("beckmann", False, False, "smith"), "LS Beck+d": ("beckmann", True, False, "smith"),
+                 "LS GGX+c+d": ("ggx", True, True, "smith"), "LS Beck+c+d": ("beckmann", True, True, "smith"),
+                 "LS GGX+c+d nm": ("ggx", True, True, "normal_map")}
+#: The fits of the albedo-weight sweep (the Smith ones).
+SWEPT = [name for name, (*_, gaf) in LEAST_SQUARES.items() if gaf == "smith"]
 
 
 def _worst(ratios) -> float:
@@ -95,25 +103,28 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
     t0 = time.perf_counter()
     fit = mf.fit.fit(m, resolution=resolution, anisotropic=anisotropic)
     seconds = time.perf_counter() - t0
-    fits = {"tabulated": fit, "ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
+    constraint_only = fit if anisotropic else mf.fit.fit(m, resolution=resolution, albedo_weight=0.0)
+    fits = {"tabulated": fit, "ggx": fit.to_ggx(reference=m), "beckmann": fit.to_beckmann(reference=m),
+            "baseline": constraint_only.to_ggx(resolve_fresnel=False)}
     ls_seconds = {}
-    for name, (model, diffuse, coat) in LEAST_SQUARES.items():
+    for name, (model, diffuse, coat, gaf) in LEAST_SQUARES.items():
         t0 = time.perf_counter()
-        fits[name] = mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, coat=coat, start=fit)
+        fits[name] = mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, coat=coat, start=fit,
+                                         gaf=gaf)
         ls_seconds[name] = time.perf_counter() - t0
-    swept = {(w, name): mf.fit.fit_analytic(m, model, diffuse=diffuse, anisotropic=anisotropic, coat=coat,
-                                            start=fit, albedo_weight=w)
-             for w in weights if w != ALBEDO_WEIGHT for name, (model, diffuse, coat) in LEAST_SQUARES.items()}
-    swept.update({(ALBEDO_WEIGHT, name): fits[name] for name in LEAST_SQUARES if ALBEDO_WEIGHT in weights})
+    swept = {(w, name): mf.fit.fit_analytic(m, LEAST_SQUARES[name][0], diffuse=LEAST_SQUARES[name][1],
+                                            anisotropic=anisotropic, coat=LEAST_SQUARES[name][2], start=fit,
+                                            albedo_weight=w)
+             for w in weights if w != ALBEDO_WEIGHT for name in SWEPT}
+    swept.update({(ALBEDO_WEIGHT, name): fits[name] for name in SWEPT if ALBEDO_WEIGHT in weights})
     keys = {f"w{w:g} {name}": b for (w, name), b in swept.items()}
     all_fits = {**fits, **keys}
     errors, uniform, albedo = fit_error(m, all_fits), uniform_error(m, all_fits), albedo_ratios(m, all_fits)
     best = min(LEAST_SQUARES, key=lambda k: objective(errors[k], uniform[k], albedo[k], ALBEDO_WEIGHT))
     tradeoff = {}
     for w in weights:
-        k = min((f"w{w:g} {name}" for name in LEAST_SQUARES),
-                key=lambda k: objective(errors[k], uniform[k], albedo[k], w))
-        tradeoff[w] = (k.split(" ", 1)[1], errors[k], errors[k] / errors["ggx"], uniform[k], _worst(albedo[k]))
+        k = min((f"w{w:g} {name}" for name in SWEPT), key=lambda k: objective(errors[k], uniform[k], albedo[k], w))
+        tradeoff[w] = (k.split(" ", 1)[1], errors[k], errors[k] / errors["baseline"], uniform[k], _worst(albedo[k]))
     row = {"material": material_name(path), "format": m.format,
            "mode": "aniso" if anisotropic else "iso", "seconds": seconds, "ls_seconds": ls_seconds,
            "errors": errors, "uniform": uniform, "best": best, "tradeoff": tradeoff,
@@ -126,21 +137,24 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
 
 
 def format_tables(rows: list[dict], resolution: int) -> str:
-    names = ["tabulated", "ggx", "beckmann", *LEAST_SQUARES]
-    heads = ["tabulated", "GGX (moments)", "Beckmann (moments)", *LEAST_SQUARES]
+    names = ["tabulated", "baseline", "ggx", "beckmann", *LEAST_SQUARES]
+    heads = ["tabulated", "baseline", "GGX (moments)", "Beckmann (moments)", *LEAST_SQUARES]
     lines = [f"Fits at resolution {resolution} ({platform.processor() or platform.machine()}, "
              f"Python {platform.python_version()}, NumPy {np.__version__}); least-squares fits "
              f"(LS) by `mf.fit.fit_analytic(m, model, diffuse=..., coat=..., start=fit)` (Fresnel table, albedo "
-             f"weight {ALBEDO_WEIGHT:g}), `+d`: with a Lambertian base, `+c`: with a coat lobe. Best: the LS fit of least objective "
+             f"weight {ALBEDO_WEIGHT:g}), `+d`: with a Lambertian base, `+c`: with a coat lobe (7-node Fresnel table), "
+             "`nm`: the normal_map GAF. Moments: `fit.to_ggx(reference=m)`, `fit.to_beckmann(reference=m)` "
+             "(Fresnel tables solved against the data). Baseline: the issue's, "
+             "`fit(m, albedo_weight=0).to_ggx(resolve_fresnel=False)`. Best: the LS fit of least objective "
              "(grid² + uniform² + weight² · mean (albedo ratio − 1)²).", "",
              "Grid error (`fit_error`) / uniform-pairs error (`uniform_error`):", "",
-             "| material | format | fit | " + " | ".join(heads) + " | best LS / GGX moments |",
+             "| material | format | fit | " + " | ".join(heads) + " | best LS / baseline, / GGX moments |",
              "|---|---|---|" + "---|" * (len(heads) + 1)]
     for r in rows:
         e, u = r["errors"], r["uniform"]
         lines.append(f"| {r['material']} | {r['format']} | {r['mode']} | "
                      + " | ".join(f"{e[k]:.4f} / {u[k]:.4f}" for k in names)
-                     + f" | {r['best']}: {e[r['best']] / e['ggx']:.2f} |")
+                     + f" | {r['best']}: {e[r['best']] / e['baseline']:.2f}, {e[r['best']] / e['ggx']:.2f} |")
     lines += ["", "Albedo ratio fit/data farthest from 1 (views 0/30/60/75°, RGB) and white furnace "
               "(max albedo of the microfacet lobe with F = 1, views 0–89°):", "",
               "| material | fit | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
@@ -148,8 +162,8 @@ def format_tables(rows: list[dict], resolution: int) -> str:
               + " | ".join(f"{r['albedo'][k]:.3f} / {r['furnace'][k]:.3f}" for k in names) + " |" for r in rows]
     lines += ["", "Fitted roughness (α, or αx, αy, ρ), coat roughness, diffuse luminance kd, fit times (s; tabulated "
               "fit, then each LS fit; `time.perf_counter`, one run):", "",
-              "| material | fit | GGX mom | Beck mom | " + " | ".join(LEAST_SQUARES) + " | times |",
-              "|---|---|---|---|" + "---|" * (len(LEAST_SQUARES) + 1)]
+              "| material | fit | baseline | GGX mom | Beck mom | " + " | ".join(LEAST_SQUARES) + " | times |",
+              "|---|---|---|---|---|" + "---|" * (len(LEAST_SQUARES) + 1)]
     for r in rows:
         cells = [r["alpha"][k] for k in names[1:]]
         times = f"{r['seconds']:.2f}; " + ", ".join(f"{t:.2f}" for t in r["ls_seconds"].values())
@@ -158,7 +172,7 @@ def format_tables(rows: list[dict], resolution: int) -> str:
     if sweep:
         weights = list(sweep[0]["tradeoff"])
         lines += ["", "Albedo weight trade-off: for each weight, the LS fit of least objective at that weight "
-                  "(its name), grid error (× the GGX moment conversion's), uniform error and albedo ratio "
+                  "(its name), grid error (× the baseline's), uniform error and albedo ratio "
                   "farthest from 1:", "",
                   "| material | fit | " + " | ".join(f"weight {w:g}" for w in weights) + " |",
                   "|---|---|" + "---|" * len(weights)]

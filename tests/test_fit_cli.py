@@ -65,7 +65,9 @@ def test_fit_writes_npz_json_png(single):
     assert len(summary["least_squares"]) == 2 and "ggx" in summary["least_squares"]   # exact family: no base
     assert summary["ggx"]["diffuse"] is None
     assert summary["ggx"]["alpha_x"] == pytest.approx(ALPHA, rel=1e-3)     # least squares: exact family
-    assert summary["errors"]["ggx"] <= summary["errors"]["ggx_moments"] and summary["errors"]["ggx"] < 0.01
+    # exact family: both fit (the moment GGX's own Fresnel table, solved against the data, has
+    # more nodes than the least-squares fit's 7)
+    assert summary["errors"]["ggx"] < 0.01 and summary["errors"]["ggx_moments"] < 0.01
     for kind in ("tabulated", "ggx", "beckmann"):
         assert 0 <= summary["errors"]["uniform"][kind] < 1.0
         ratios = np.array(summary["errors"]["albedo_ratio"][kind])

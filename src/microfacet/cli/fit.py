@@ -72,9 +72,8 @@ def add(sub) -> None:
                         "grid^2 + uniform^2 + W^2 mean((albedo fit/data - 1)^2) over views 0/30/60/75 deg "
                         f"and RGB (default {ALBEDO_WEIGHT:g}; 0: fit the shape only, ~4: albedo within ~10 %%)")
     p.add_argument("--coat", action="store_true",
-                   help="add a coat to the least-squares fits: a second GGX/Beckmann lobe with a Schlick "
-                        "Fresnel term of free normal and grazing reflectance (clear coats, varnished paints; "
-                        "slower: 1-7 s per fit)")
+                   help="add a coat to the least-squares fits: a second GGX/Beckmann lobe with its own "
+                        "7-node Fresnel table (clear coats, metallic paints; slower: 1-10 s per fit)")
     p.add_argument("--no-picture", dest="picture", action="store_false",
                    help="do not draw OUT.png (saves ~0.7 s of matplotlib per file; single files only: a "
                         "folder's up-to-date check wants the picture)")

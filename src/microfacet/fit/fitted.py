@@ -175,9 +175,31 @@ class FittedBRDF(MicrofacetBRDF):
                     abs_x=np.sum(w * np.abs(dx)), abs_y=np.sum(w * np.abs(dy)),
                     beta1=np.sum(w * dx * dy * inv), beta2=np.sum(w * dy * dy * inv))
 
-    def _analytic(self, distribution) -> MicrofacetBRDF:
-        """The analytic lobe with the fitted Fresnel term (the diffuse base is not carried)."""
-        return MicrofacetBRDF(distribution, fresnel=self.fresnel, gaf=self.gaf_model, shadowing=self.shadowing)
+    def _analytic(self, distribution, reference, resolve_fresnel: bool) -> MicrofacetBRDF:
+        """The analytic lobe of a moment conversion (the diffuse base is not carried), with
+        its own Fresnel table (``resolve_fresnel``) or the fitted one.
+
+        Its own: the bounded least squares of :func:`fit` (Eq. 4.11, Algorithm 2,
+        :func:`extract.solve_fresnel`; table of as many nodes as the fit's) of
+        ``reference`` (default: this fit's lobe, :meth:`specular`) against the converted
+        NDF, under the energy constraint of :func:`fit` (the reference's albedo +
+        :data:`ENERGY_MARGIN`) and without its albedo term. The fitted table was solved
+        for the tabulated NDF (and, with ``albedo_weight > 0``, tuned for its albedo):
+        with weights ``1 / f_id`` the solution at a node is ``sum f / sum f_id``, so against
+        the fit itself it is the fitted table rescaled by the ratio of the two lobes'
+        masses at that ``theta_d``, and against the fit's own data (``reference``) it does
+        not depend on the fit's albedo weight."""
+        if not resolve_fresnel:
+            return MicrofacetBRDF(distribution, fresnel=self.fresnel, gaf=self.gaf_model, shadowing=self.shadowing)
+        ideal = MicrofacetBRDF(distribution, gaf=self.gaf_model, shadowing=self.shadowing)
+        reference = self.specular() if reference is None else reference
+        n_d = len(getattr(self.fresnel, "cos_theta_d", ())) or 91
+        samples = extract.fresnel_samples(reference, n_d, n_phi_h=(8 if self.anisotropic else 1),
+                                          isotropic=not self.anisotropic)
+        energy = extract.albedo_rows(reference, ideal, n_d, _energy_views(self.anisotropic), n_u=20)
+        cos_d, rgb, _ = extract.solve_fresnel(samples, ideal, albedo=energy, energy_margin=ENERGY_MARGIN)
+        return MicrofacetBRDF(distribution, fresnel=_fresnel.Tabulated(cos_d, rgb), gaf=self.gaf_model,
+                              shadowing=self.shadowing)
 
     def _least_squares(self, model: str, options: dict):
         """:func:`~microfacet.fit.analytic.fit_analytic` of this fit itself (it is a BRDF:
@@ -186,23 +208,27 @@ class FittedBRDF(MicrofacetBRDF):
         options = {"diffuse": self.has_diffuse, "anisotropic": self.anisotropic, **options}
         return fit_analytic(self, model, start=self, gaf=self.gaf_model, shadowing=self.shadowing, **options)
 
-    def to_beckmann(self, method: str = "moments", **options):
-        """Beckmann BRDF with the fitted Fresnel term.
+    def to_beckmann(self, method: str = "moments", *, reference=None, resolve_fresnel: bool = True, **options):
+        """Beckmann BRDF converted from the fit.
 
         ``method="moments"``: the same second slope moments (App. C, as LEAN/LEADR:
         ``alpha_x^2 = 2 Var[x~]``, ``alpha_y^2 = 2 Var[y~]``, ``rho alpha_x alpha_y =
         2 Cov[x~, y~]``, mean slope kept); exact (up to the fit's quadrature) when the
-        fitted BRDF is a Beckmann one. ``method="least_squares"``: the least-squares fit
+        fitted BRDF is a Beckmann one. Its Fresnel table is solved for the converted NDF
+        against ``reference`` (default: the fit's lobe; or the data it was fitted to), or, with
+        ``resolve_fresnel=False``, the fit's own table (:meth:`_analytic`).
+        ``method="least_squares"``: the least-squares fit
         of this BRDF (:func:`~microfacet.fit.analytic.fit_analytic`, ``options`` passed
         on; a :class:`~microfacet.fit.analytic.SumBRDF` with a Lambertian base when the
         fit has one)."""
-        if _conversion(method) == "least_squares":
+        if _conversion(method, reference, resolve_fresnel) == "least_squares":
             return self._least_squares("beckmann", options)
         m = self.slope_moments()
-        return self._analytic(Beckmann.from_moments(m["e1"], m["e2"], m["e3"], m["e4"], m["e5"]))
+        return self._analytic(Beckmann.from_moments(m["e1"], m["e2"], m["e3"], m["e4"], m["e5"]), reference,
+                              resolve_fresnel)
 
-    def to_ggx(self, method: str = "moments", **options):
-        """GGX BRDF with the fitted Fresnel term.
+    def to_ggx(self, method: str = "moments", *, reference=None, resolve_fresnel: bool = True, **options):
+        """GGX BRDF converted from the fit.
 
         ``method="moments"``: first absolute moments (App. C): ``alpha_x = E|x~|``,
         ``alpha_y = E|y~|`` (about the mean, which is kept) and ``rho`` from the angular
@@ -210,16 +236,17 @@ class FittedBRDF(MicrofacetBRDF):
         S / tr S`` with ``S = Sigma^(1/2)`` for any elliptic distribution,
         ``rho = beta1 / sqrt(((1 - beta2)^2 + beta1^2) (beta1^2 + beta2^2))`` (the paper's
         ``(alpha_y / alpha_x) beta1 / (beta1^2 + beta2^2)`` when both hold exactly).
-        Exact (up to the fit's quadrature) when the fitted BRDF is a GGX one.
-        ``method="least_squares"``: as in :meth:`to_beckmann`."""
-        if _conversion(method) == "least_squares":
+        Exact (up to the fit's quadrature) when the fitted BRDF is a GGX one. Fresnel
+        term, ``reference``, ``resolve_fresnel`` and ``method="least_squares"``: as in
+        :meth:`to_beckmann`."""
+        if _conversion(method, reference, resolve_fresnel) == "least_squares":
             return self._least_squares("ggx", options)
         m = self.slope_moments()
         b1, b2 = m["beta1"], m["beta2"]
         rho = b1 / np.sqrt(((1.0 - b2) ** 2 + b1 * b1) * (b1 * b1 + b2 * b2))
         rho = float(np.clip(rho, -1.0 + 1e-9, 1.0 - 1e-9))
-        return self._analytic(GGX(alpha_x=m["abs_x"], alpha_y=m["abs_y"], rho=rho,
-                                  mean_slope=(m["e1"], m["e2"])))
+        return self._analytic(GGX(alpha_x=m["abs_x"], alpha_y=m["abs_y"], rho=rho, mean_slope=(m["e1"], m["e2"])),
+                              reference, resolve_fresnel)
 
     # ------------------------------------------------------------------- files
     def save(self, path: str | os.PathLike) -> Path:
@@ -258,9 +285,11 @@ class FittedBRDF(MicrofacetBRDF):
 
 
 # ------------------------------------------------------------------------ fitting
-def _conversion(method: str) -> str:
+def _conversion(method: str, reference=None, resolve_fresnel: bool = True) -> str:
     if method not in CONVERSIONS:
         raise ValueError(f"method must be one of {CONVERSIONS}, got {method!r}")
+    if method == "least_squares" and (reference is not None or not resolve_fresnel):
+        raise ValueError("reference and resolve_fresnel are options of method='moments'")
     return method
 
 

@@ -7,7 +7,8 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
 * ``NAME.json`` — ``"ggx"`` and ``"beckmann"``: the analytic fits of the chosen method
   (``least_squares`` by default: :func:`microfacet.fit.fit_analytic`, with a diffuse
   base unless it fits to less than :data:`NEGLIGIBLE_BASE` for ``diffuse="auto"``, with
-  a coat for ``coat=True``; ``moments``: ``fit.to_ggx()``, ``fit.to_beckmann()``), each
+  a coat for ``coat=True``; ``moments``: ``fit.to_ggx(reference=data)``,
+  ``fit.to_beckmann(reference=data)``: Fresnel tables solved against the data), each
   ``{"alpha_x", "alpha_y", "rho", "fresnel", "coat", "diffuse"}`` (``coat``: ``{"alpha",
   "fresnel"}`` or null; ``diffuse``: the Lambertian reflectance, RGB, or null);
   ``"moments"`` and ``"least_squares"``: every fit of each method by name; ``"fresnel"`` (the tabulated fit's), ``"seconds"`` (fit
@@ -210,7 +211,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     t0 = time.perf_counter()
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
     t1 = time.perf_counter()
-    moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
+    moments = {"ggx": fit.to_ggx(reference=brdf), "beckmann": fit.to_beckmann(reference=brdf)}
     least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel, albedo_weight, coat) \
         if method == "least_squares" else {}
     t2 = time.perf_counter()
