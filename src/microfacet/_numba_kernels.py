@@ -112,9 +112,10 @@ def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
 @_inline
 def _beckmann_lambda(v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
-    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_pos` (absolute errors ~1e-16: only
+    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_near` (absolute errors ~2e-15: only
     ``1 + Lambda`` is used)."""
-    lam = 0.5 * (_exp_neg(-v * v) / (v * _SQRT_PI) - _erfc_pos(v))
+    e = _exp_neg(-v * v)
+    lam = 0.5 * (e / (v * _SQRT_PI) - _erfc_near(v, e))
     return lam if lam > 0.0 else 0.0
 
 
@@ -148,6 +149,38 @@ def _erfc_pos(v):
     for j in range(16):
         p = p * s + _ERFC_TAYLOR[np.uint64(16) * k + np.uint64(j)]
     return p if v < 6.0 else 0.0
+
+
+#: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` in ``s = 2 (tau - tau_M) / (1 - tau_M) - 1 =
+#: _ERFCX_A / (2 + v) - _ERFCX_B`` (``tau = 2 / (2 + v)``, ``tau_M`` its value at the end): in ``[-1, 1]``.
+_ERFCX_MAX = 6.0
+_ERFCX_A, _ERFCX_B = 4.0 / (1.0 - 2.0 / (2.0 + _ERFCX_MAX)), (1.0 + 2.0 / (2.0 + _ERFCX_MAX)) / (1.0 - 2.0 / (2.0 + _ERFCX_MAX))
+
+
+def _erfcx_chebyshev(degree=19):
+    """Chebyshev coefficients (Clenshaw order) of ``erfcx(v) = exp(v^2) erfc(v)``, ``v`` in
+    ``[0, _ERFCX_MAX]``, in the variable ``s`` of :data:`_ERFCX_A` (``erfcx ~ tau / sqrt(pi)`` for large
+    ``v``: smooth in ``tau = 2 / (2 + v)``), interpolated at the Chebyshev points of SciPy's
+    ``erfcx`` (coefficients below 2e-16 from degree 18)."""
+    from scipy.special import erfcx
+    return np.polynomial.chebyshev.chebinterpolate(lambda s: erfcx(_ERFCX_A / (s + _ERFCX_B) - 2.0), degree)[::-1].copy()
+
+
+#: :func:`_erfcx_chebyshev` (built on import).
+_ERFCX_CHEB = _erfcx_chebyshev()
+
+
+@_inline
+def _erfc_near(v, e):
+    """``erfc(v) = e erfcx(v)`` for ``v >= 0`` given ``e = exp(-v^2)``: Clenshaw's sum of
+    :data:`_ERFCX_CHEB` (4e-15 relative to ``v = 4``, 2e-15 absolute; measured against mpmath),
+    ``erfcx(6) e`` beyond 6 (absolute error below 2e-17); arithmetic only, no table gathers
+    (:func:`_erfc_pos`'s 16 per call bound the loops that call it)."""
+    s = _ERFCX_A / (2.0 + min(max(v, 0.0), _ERFCX_MAX)) - _ERFCX_B
+    b1, b2 = 0.0, 0.0
+    for j in range(_ERFCX_CHEB.shape[0] - 1):
+        b1, b2 = 2.0 * s * b1 - b2 + _ERFCX_CHEB[j], b1
+    return e * (s * b1 - b2 + _ERFCX_CHEB[_ERFCX_CHEB.shape[0] - 1])
 
 
 @_inline
@@ -514,41 +547,11 @@ def _ggx_visible_std(F, u0, u1, cos_t):
     return s * tz - c * t2, t1, c * tz + s * t2
 
 
-#: Its lanes with ``|x~|`` or ``|y~|`` beyond this go to the scalar solvers: :func:`_erfc_pos` is
-#: accurate to 2e-15 relative below it (1e-13 at 5, 1e-11 at 6), which the Gaussian tails need.
+#: Lanes of :func:`_beckmann_visible_block` with ``|x~|`` or ``|y~|`` beyond this go to the scalar
+#: solvers: :func:`_erfc_near` keeps 4e-15 relative below it (worse beyond), which the Gaussian tails need.
 _TAIL = 4.0
 #: ``2 / sqrt(pi) (-1)^n / (n! (2n + 1))``, ``n = 13 ... 0`` (Horner order, :func:`_erf_small`).
 _ERF_TAYLOR = np.array([2.0 / _SQRT_PI * (-1) ** n / (math.factorial(n) * (2 * n + 1)) for n in range(13, -1, -1)])
-
-
-#: ``s = 2 (tau - tau_T) / (1 - tau_T) - 1 = _ERFCX_A / (2 + v) - _ERFCX_B`` maps ``tau = 2 / (2 + v)``,
-#: ``v`` in ``[0, _TAIL]``, to ``[-1, 1]`` (``tau_T = 2 / (2 + _TAIL)``; 6 and 2 for a tail at 4).
-_ERFCX_A, _ERFCX_B = 4.0 / (1.0 - 2.0 / (2.0 + _TAIL)), (1.0 + 2.0 / (2.0 + _TAIL)) / (1.0 - 2.0 / (2.0 + _TAIL))
-
-
-def _erfcx_chebyshev(degree=19):
-    """Chebyshev coefficients (Clenshaw order) of ``erfcx(v) = exp(v^2) erfc(v)``, ``v`` in
-    ``[0, _TAIL]``, in the variable ``s`` of :data:`_ERFCX_A` (``erfcx ~ tau / sqrt(pi)`` for large
-    ``v``: smooth in ``tau = 2 / (2 + v)``), interpolated at the Chebyshev points of SciPy's
-    ``erfcx`` (coefficients below 2e-16 from degree 18)."""
-    from scipy.special import erfcx
-    return np.polynomial.chebyshev.chebinterpolate(lambda s: erfcx(_ERFCX_A / (s + _ERFCX_B) - 2.0), degree)[::-1].copy()
-
-
-#: :func:`_erfcx_chebyshev` (built on import).
-_ERFCX_CHEB = _erfcx_chebyshev()
-
-
-@_inline
-def _erfc_near(v, e):
-    """``erfc(v) = e erfcx(v)`` for ``0 <= v <= _TAIL`` given ``e = exp(-v^2)``: Clenshaw's sum
-    of :data:`_ERFCX_CHEB` (2e-15 relative, measured against mpmath), arithmetic only, no
-    table gathers (:func:`_erfc_pos`'s 16 per call bound the vectorized solve)."""
-    s = _ERFCX_A / (2.0 + min(max(v, 0.0), _TAIL)) - _ERFCX_B
-    b1, b2 = 0.0, 0.0
-    for j in range(_ERFCX_CHEB.shape[0] - 1):
-        b1, b2 = 2.0 * s * b1 - b2 + _ERFCX_CHEB[j], b1
-    return e * (s * b1 - b2 + _ERFCX_CHEB[_ERFCX_CHEB.shape[0] - 1])
 
 
 @_inline
