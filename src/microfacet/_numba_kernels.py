@@ -10,7 +10,7 @@ then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through fla
 ``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
 through flat views: constant strides, so that LLVM vectorizes each stage that makes no
 library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
-:func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table loads, also in the fixed
+:func:`_exp_neg`, :func:`_erfc_near` and :func:`_erfc_pos`, arithmetic and table loads, also in the fixed
 Halley steps of its visible-slope and ``erfinv`` solves, :func:`_beckmann_visible_block`; their
 guesses (library ``log``) and the rare lanes left to the scalar solvers stay scalar). ``a[k, axis]`` on 2-D arrays (runtime
 strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
