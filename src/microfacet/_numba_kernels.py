@@ -10,10 +10,10 @@ then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through fla
 ``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
 through flat views: constant strides, so that LLVM vectorizes each stage that makes no
 library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
-:func:`_exp_neg`, :func:`_erfc_near` and :func:`_erfc_pos`, arithmetic and table loads, also in the fixed
-Halley steps of its visible-slope and ``erfinv`` solves, :func:`_beckmann_visible_block`; their
-guesses (library ``log``) and the rare lanes left to the scalar solvers stay scalar). ``a[k, axis]`` on 2-D arrays (runtime
-strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
+:func:`_exp_neg`, :func:`_erfc_near` and :func:`_erfc_pos`, arithmetic and table loads, also
+in the fixed Halley steps of its visible-slope and ``erfinv`` solves,
+:func:`_beckmann_visible_block`, whose guesses (library ``log``) and rare lanes left to the
+scalar solvers stay scalar). ``a[k, axis]`` on 2-D arrays (runtime strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
 compiled per distribution kind and arithmetic type ``F`` (float64 or float32; constants in
 them: :func:`eval_kernel` etc.); the helpers take ``F`` and write their constants as ``F(c)``
 (a float literal would promote float32 arithmetic to float64). Beckmann's ``exp``, ``erfc``
@@ -151,19 +151,21 @@ def _erfc_pos(v):
     return p if v < 6.0 else 0.0
 
 
-#: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` in ``s = 2 (tau - tau_M) / (1 - tau_M) - 1 =
-#: _ERFCX_A / (2 + v) - _ERFCX_B`` (``tau = 2 / (2 + v)``, ``tau_M`` its value at the end): in ``[-1, 1]``.
+#: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` in ``s = 2 (tau - tau_M) / (1 - tau_M) - 1
+#: = _ERFCX_A / (2 + v) - _ERFCX_B`` in ``[-1, 1]`` (``tau = 2 / (2 + v)``, ``tau_M`` its value at the end).
 _ERFCX_MAX = 6.0
-_ERFCX_A, _ERFCX_B = 4.0 / (1.0 - 2.0 / (2.0 + _ERFCX_MAX)), (1.0 + 2.0 / (2.0 + _ERFCX_MAX)) / (1.0 - 2.0 / (2.0 + _ERFCX_MAX))
+_TAU_M = 2.0 / (2.0 + _ERFCX_MAX)
+_ERFCX_A, _ERFCX_B = 4.0 / (1.0 - _TAU_M), (1.0 + _TAU_M) / (1.0 - _TAU_M)
 
 
 def _erfcx_chebyshev(degree=19):
     """Chebyshev coefficients (Clenshaw order) of ``erfcx(v) = exp(v^2) erfc(v)``, ``v`` in
-    ``[0, _ERFCX_MAX]``, in the variable ``s`` of :data:`_ERFCX_A` (``erfcx ~ tau / sqrt(pi)`` for large
-    ``v``: smooth in ``tau = 2 / (2 + v)``), interpolated at the Chebyshev points of SciPy's
-    ``erfcx`` (coefficients below 2e-16 from degree 18)."""
+    ``[0, _ERFCX_MAX]``, in the variable ``s`` of :data:`_ERFCX_A` (``erfcx ~ tau / sqrt(pi)`` for
+    large ``v``: smooth in ``tau = 2 / (2 + v)``), interpolated at the Chebyshev points of
+    SciPy's ``erfcx`` (coefficients below 2e-16 from degree 18)."""
     from scipy.special import erfcx
-    return np.polynomial.chebyshev.chebinterpolate(lambda s: erfcx(_ERFCX_A / (s + _ERFCX_B) - 2.0), degree)[::-1].copy()
+    cheb = np.polynomial.chebyshev.chebinterpolate(lambda s: erfcx(_ERFCX_A / (s + _ERFCX_B) - 2.0), degree)
+    return cheb[::-1].copy()
 
 
 #: :func:`_erfcx_chebyshev` (built on import).
@@ -548,7 +550,7 @@ def _ggx_visible_std(F, u0, u1, cos_t):
 
 
 #: Lanes of :func:`_beckmann_visible_block` with ``|x~|`` or ``|y~|`` beyond this go to the scalar
-#: solvers: :func:`_erfc_near` keeps 4e-15 relative below it (worse beyond), which the Gaussian tails need.
+#: solvers: :func:`_erfc_near` keeps 4e-15 relative below it, which the Gaussian tails need.
 _TAIL = 4.0
 #: ``2 / sqrt(pi) (-1)^n / (n! (2n + 1))``, ``n = 13 ... 0`` (Horner order, :func:`_erf_small`).
 _ERF_TAYLOR = np.array([2.0 / _SQRT_PI * (-1) ** n / (math.factorial(n) * (2 * n + 1)) for n in range(13, -1, -1)])
@@ -586,10 +588,9 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
     chains of multiply-adds, 51 -> 46 ms per 10^6 views) three of
     :func:`_visible_slope_quantile`'s steps on ``F - u z`` (unrolled: in a loop, the loop over
     ``k`` did not vectorize; two left 10 % of the lanes to the scalar solve, three 1 %) and one
-    of :func:`_erfinv`'s, with their stopping tests after the last; the lanes that fail them,
-    lie in the upper tail
-    (``u >= _UPPER``, solved on the complementary CDF) or beyond :data:`_TAIL` are solved
-    again by those scalar functions."""
+    of :func:`_erfinv`'s, with their stopping tests after the last. The lanes that fail them,
+    lie in the upper tail (``u >= _UPPER``, solved on the complementary CDF) or beyond
+    :data:`_TAIL` are solved again by those scalar functions."""
     gx, gy, ok_x, ok_y = bk[0], bk[1], bk[2], bk[3]
     for k in range(m):                               # guesses (library log)
         u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
@@ -629,7 +630,8 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
 # ------------------------------------------------------------------------ kernels
 #: Directions per block: a kernel call ``kernel(start, stop, ...)`` works through the pairs
 #: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
-#: one loop per stage, so that the stages without library calls vectorize and the extra memory is independent of N.
+#: one loop per stage, so that the stages without library calls vectorize and the extra
+#: memory is independent of N.
 #: The caller runs ranges on threads (:func:`microfacet.kernels._launch_ranges`): Numba's
 #: ``prange`` keeps these loops from vectorizing.
 BLOCK = 256
