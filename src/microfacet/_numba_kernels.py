@@ -10,9 +10,10 @@ then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through fla
 ``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
 through flat views: constant strides, so that LLVM vectorizes each stage that makes no
 library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
-:func:`_exp_neg` and :func:`_erfc_pos`, arithmetic and table loads; its visible-slope
-Halley solve and ``erfinv`` stay in a scalar loop). ``a[k, axis]`` on 2-D arrays (runtime
-strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
+:func:`_exp_neg`, :func:`_erfc_near` and :func:`_erfc_pos`, arithmetic and table loads, also
+in the fixed Halley steps of its visible-slope and ``erfinv`` solves,
+:func:`_beckmann_visible_block`, whose guesses (library ``log``) and rare lanes left to the
+scalar solvers stay scalar). ``a[k, axis]`` on 2-D arrays (runtime strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
 compiled per distribution kind and arithmetic type ``F`` (float64 or float32; constants in
 them: :func:`eval_kernel` etc.); the helpers take ``F`` and write their constants as ``F(c)``
 (a float literal would promote float32 arithmetic to float64). Beckmann's ``exp``, ``erfc``
@@ -111,9 +112,10 @@ def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
 @_inline
 def _beckmann_lambda(v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
-    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_pos` (absolute errors ~1e-16: only
+    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_near` (absolute errors ~2e-15: only
     ``1 + Lambda`` is used)."""
-    lam = 0.5 * (_exp_neg(-v * v) / (v * _SQRT_PI) - _erfc_pos(v))
+    e = _exp_neg(-v * v)
+    lam = 0.5 * (e / (v * _SQRT_PI) - _erfc_near(v, e))
     return lam if lam > 0.0 else 0.0
 
 
@@ -147,6 +149,40 @@ def _erfc_pos(v):
     for j in range(16):
         p = p * s + _ERFC_TAYLOR[np.uint64(16) * k + np.uint64(j)]
     return p if v < 6.0 else 0.0
+
+
+#: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` in ``s = 2 (tau - tau_M) / (1 - tau_M) - 1
+#: = _ERFCX_A / (2 + v) - _ERFCX_B`` in ``[-1, 1]`` (``tau = 2 / (2 + v)``, ``tau_M`` its value at the end).
+_ERFCX_MAX = 6.0
+_TAU_M = 2.0 / (2.0 + _ERFCX_MAX)
+_ERFCX_A, _ERFCX_B = 4.0 / (1.0 - _TAU_M), (1.0 + _TAU_M) / (1.0 - _TAU_M)
+
+
+def _erfcx_chebyshev(degree=19):
+    """Chebyshev coefficients (Clenshaw order) of ``erfcx(v) = exp(v^2) erfc(v)``, ``v`` in
+    ``[0, _ERFCX_MAX]``, in the variable ``s`` of :data:`_ERFCX_A` (``erfcx ~ tau / sqrt(pi)`` for
+    large ``v``: smooth in ``tau = 2 / (2 + v)``), interpolated at the Chebyshev points of
+    SciPy's ``erfcx`` (coefficients below 2e-16 from degree 18)."""
+    from scipy.special import erfcx
+    cheb = np.polynomial.chebyshev.chebinterpolate(lambda s: erfcx(_ERFCX_A / (s + _ERFCX_B) - 2.0), degree)
+    return cheb[::-1].copy()
+
+
+#: :func:`_erfcx_chebyshev` (built on import).
+_ERFCX_CHEB = _erfcx_chebyshev()
+
+
+@_inline
+def _erfc_near(v, e):
+    """``erfc(v) = e erfcx(v)`` for ``v >= 0`` given ``e = exp(-v^2)``: Clenshaw's sum of
+    :data:`_ERFCX_CHEB` (4e-15 relative to ``v = 4``, 2e-15 absolute; measured against mpmath),
+    ``erfcx(6) e`` beyond 6 (absolute error below 2e-17); arithmetic only, no table gathers
+    (:func:`_erfc_pos`'s 16 per call bound the loops that call it)."""
+    s = _ERFCX_A / (2.0 + min(max(v, 0.0), _ERFCX_MAX)) - _ERFCX_B
+    b1, b2 = 0.0, 0.0
+    for j in range(_ERFCX_CHEB.shape[0] - 1):
+        b1, b2 = 2.0 * s * b1 - b2 + _ERFCX_CHEB[j], b1
+    return e * (s * b1 - b2 + _ERFCX_CHEB[_ERFCX_CHEB.shape[0] - 1])
 
 
 @_inline
@@ -332,14 +368,9 @@ def _smith_block_post(kind, buf, m):
 
 
 @_jit
-def _erfinv(y):
-    """``erfinv(y)`` for ``|y| < 1``: Giles' single-precision approximation ("Approximating
-    the erfinv function", GPU Computing Gems 2011; relative error <= 1.25e-7 measured on 10^6
-    uniform ``y``) and Halley steps on ``erf(x) = y`` (on ``erfc(|x|) = 1 - |y|`` for ``|y| > 1/2``,
-    exact there, so the tails keep precision): one, more where ``1 - |y| < 2^-24``, outside the
-    approximation's range. A step of ``d`` leaves an error ``~ K d^3``, Halley's constant
-    ``K = (f2 / 2 f1)^2 - f3 / 6 f1 = (x^2 + 1) / 3`` (``f_n`` the derivatives of ``erf``), below
-    4e-18 relative for ``|d| <= 2e-7 |x|``, ``|x| <= 6``."""
+def _erfinv_guess(y):
+    """Giles' single-precision ``erfinv(y)``, ``|y| < 1`` ("Approximating the erfinv function",
+    GPU Computing Gems 2011; relative error <= 1.25e-7 measured on 10^6 uniform ``y``)."""
     w = -math.log((1.0 - y) * (1.0 + y))
     if w < 5.0:
         w -= 2.5
@@ -353,16 +384,31 @@ def _erfinv(y):
         for q in (0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773,
                   -0.0076224613, 0.00943887047, 1.00167406, 2.83297682):
             p = q + p * w
-    x = p * y
-    sign = 1.0 if y >= 0.0 else -1.0
+    return p * y
+
+
+@_inline
+def _erfinv_step(y, x, f, exp_x2):
+    """Halley's step on ``erf(x) = y`` from ``x`` given its residual ``f`` (``erf(|x|) - |y|``,
+    or ``(1 - |y|) - erfc(|x|)`` for ``|y| > 1/2``) and ``exp_x2 = exp(x^2)``: ``(x', d)``, ``d =
+    f / f'`` the Newton step, ``x' = sign(y) (|x| - d / (1 + |x| d))`` (``f'' / f' = -2 |x|``)."""
+    ax = abs(x)
+    d = f * (0.5 * _SQRT_PI) * exp_x2
+    return (1.0 if y >= 0.0 else -1.0) * (ax - d / (1.0 + ax * d)), d
+
+
+@_jit
+def _erfinv(y):
+    """``erfinv(y)`` for ``|y| < 1``: :func:`_erfinv_guess` and :func:`_erfinv_step` on
+    ``erf(x) = y`` (on ``erfc(|x|) = 1 - |y|`` for ``|y| > 1/2``, exact there, so the tails keep
+    precision): one, more where ``1 - |y| < 2^-24``, outside the guess's range. A step of ``d``
+    leaves an error ``~ K d^3``, Halley's constant ``K = (f2 / 2 f1)^2 - f3 / 6 f1 = (x^2 + 1) / 3``
+    (``f_n`` the derivatives of ``erf``), below 4e-18 relative for ``|d| <= 2e-7 |x|``, ``|x| <= 6``."""
+    x = _erfinv_guess(y)
     for _ in range(6):                                # 1 step, more beyond float32's range
         ax = abs(x)
-        if abs(y) > 0.5:                              # f = (1 - |y|) - erfc(|x|), increasing in |x|
-            f = (1.0 - abs(y)) - math.erfc(ax)
-        else:
-            f = math.erf(ax) - abs(y)
-        d = f * (0.5 * _SQRT_PI) * math.exp(ax * ax)   # f / f'
-        x = sign * (ax - d / (1.0 + ax * d))          # Halley: f'' / f' = -2 |x|
+        f = (1.0 - abs(y)) - math.erfc(ax) if abs(y) > 0.5 else math.erf(ax) - abs(y)
+        x, d = _erfinv_step(y, x, f, math.exp(ax * ax))
         if abs(d) <= 2e-7 * ax:                       # this step left < 4e-18 relative
             break
     return x
@@ -422,6 +468,17 @@ def _visible_slope_guess(u, c):
             + wc * ((1.0 - ws) * _Q2_TAB[ic + 1, js] + ws * _Q2_TAB[ic + 1, js + 1]))
 
 
+@_inline
+def _q2_step(x, r, t, e):
+    """Newton's step ``f / f'`` on the visible-slope CDF residual ``r`` at ``x`` (``f'`` the
+    density ``2 e (1 - x t) / sqrt(pi)``, ``e = exp(-x^2)``) and the point ``x'`` of Halley's
+    step ``f / f' / (1 - f f'' / (2 f'^2))`` (``f'' / f' = -2x - t / (1 - x t)``) where its
+    denominator exceeds 1/2, else Newton's (the operand selected, not the quotient)."""
+    step = r / (2.0 * e * (1.0 - x * t) / _SQRT_PI)
+    den = 1.0 - 0.5 * step * (-2.0 * x - t / (1.0 - x * t))
+    return step, x - step / (den if den > 0.5 else 1.0)
+
+
 @_jit
 def _visible_slope_quantile(u, cos_theta):
     """``Q2(u)`` of the standard Beckmann visible x-slope (Table 2.V): the safeguarded
@@ -449,9 +506,7 @@ def _visible_slope_quantile(u, cos_theta):
             lo = x
         if r > 0.0:
             hi = x
-        step = r / (2.0 * e * (1.0 - x * t) / _SQRT_PI)    # Newton: f / f', f' the density
-        den = 1.0 - 0.5 * step * (-2.0 * x - t / (1.0 - x * t))   # Halley: f'' / f' = -2x - t / (1 - x t)
-        xn = x - (step / den if den > 0.5 else step)
+        step, xn = _q2_step(x, r, t, e)
         converged = (abs(step) <= 1e-12 * max(1.0, abs(x))) or r == 0.0   # on the Newton step
         if not converged and not (lo < xn < hi):
             xn = 0.5 * (lo + hi)
@@ -494,21 +549,89 @@ def _ggx_visible_std(F, u0, u1, cos_t):
     return s * tz - c * t2, t1, c * tz + s * t2
 
 
-@_jit
-def _beckmann_visible_std(u0, u1, cos_t):
-    """Standard Beckmann visible normal for a view at ``theta`` in the xz plane
-    (``Beckmann.sample_visible_std``: ``x~ = Q2(u0)``, ``y~ = erfinv(2 u1 - 1)``)."""
-    x = _visible_slope_quantile(u0, cos_t)
-    y = _erfinv(2.0 * min(max(u1, _U_MIN), 1.0 - _U_MIN) - 1.0)
-    inv = 1.0 / math.sqrt(1.0 + x * x + y * y)
-    return -x * inv, -y * inv, inv
+#: Lanes of :func:`_beckmann_visible_block` with ``|x~|`` or ``|y~|`` beyond this go to the scalar
+#: solvers: :func:`_erfc_near` keeps 4e-15 relative below it, which the Gaussian tails need.
+_TAIL = 4.0
+#: ``2 / sqrt(pi) (-1)^n / (n! (2n + 1))``, ``n = 13 ... 0`` (Horner order, :func:`_erf_small`).
+_ERF_TAYLOR = np.array([2.0 / _SQRT_PI * (-1) ** n / (math.factorial(n) * (2 * n + 1)) for n in range(13, -1, -1)])
+
+
+@_inline
+def _erf_small(x):
+    """``erf(x)`` for ``|x| <= 1/2`` by its Taylor series ``2 / sqrt(pi) sum (-1)^n x^(2n+1) /
+    (n! (2n + 1))`` to ``n = 13`` (truncation below 1e-19 relative), arithmetic only."""
+    x2 = x * x
+    p = _ERF_TAYLOR[0]
+    for j in range(1, _ERF_TAYLOR.shape[0]):
+        p = _ERF_TAYLOR[j] + x2 * p
+    return x * p
+
+
+@_inline
+def _q2_cdf_step(x, t, target):
+    """:func:`_q2_step` on ``F(x) - target``, ``F = erfc(-x) + t exp(-x^2) / sqrt(pi)`` (the
+    unnormalized CDF, :func:`_cdf`) with :func:`_exp_neg` and :func:`_erfc_near` (``erfc(-x) =
+    2 - erfc(x)``; ``|x| <= _TAIL``): arithmetic and table loads."""
+    e = _exp_neg(-x * x)
+    ec = _erfc_near(abs(x), e)
+    return _q2_step(x, (ec if x < 0.0 else 2.0 - ec) + t * e / _SQRT_PI - target, t, e)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
+    """``out_rows[:, k]``: the standard Beckmann visible normal for a view at ``theta`` in the
+    xz plane (``Beckmann.sample_visible_std``: ``x~ = Q2(u[2 k])``, ``y~ = erfinv(2 u[2 k + 1] -
+    1)``, ``cos theta = cos_row[k]``) for ``k < m``, in float64 (rows ``bk (4, BLOCK)``). The
+    guesses :func:`_visible_slope_guess` and :func:`_erfinv_guess` (library ``log``) in a
+    loop of their own; then, in a loop that vectorizes (:func:`_exp_neg`, :func:`_erfc_near`
+    with ``erfc(-x) = 2 - erfc(x)``, :func:`_erf_small`; fastmath ``contract``: its latency is
+    chains of multiply-adds, 51 -> 46 ms per 10^6 views) three of
+    :func:`_visible_slope_quantile`'s steps on ``F - u z`` (unrolled: in a loop, the loop over
+    ``k`` did not vectorize; two left 10 % of the lanes to the scalar solve, three 1 %) and one
+    of :func:`_erfinv`'s, with their stopping tests after the last. The lanes that fail them,
+    lie in the upper tail (``u >= _UPPER``, solved on the complementary CDF) or beyond
+    :data:`_TAIL` are solved again by those scalar functions."""
+    gx, gy, ok_x, ok_y = bk[0], bk[1], bk[2], bk[3]
+    for k in range(m):                               # guesses (library log)
+        u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
+        gx[k] = _visible_slope_guess(u0, min(max(float(cos_row[k]), 1e-12), 1.0))
+        gy[k] = _erfinv_guess(2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
+    for k in range(m):                               # Halley steps, vectorized
+        u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
+        c = min(max(float(cos_row[k]), 1e-12), 1.0)
+        s = math.sqrt(max(0.0, 1.0 - c * c))
+        a, t = c / s, s / c
+        target = u0 * ((2.0 - _erfc_pos(a)) + t * _exp_neg(-a * a) / _SQRT_PI)
+        hi = min(a, 8.0)
+        x = min(max(gx[k], -8.0), hi)
+        step, x = _q2_cdf_step(x, t, target)
+        step, x = _q2_cdf_step(x, t, target)
+        step, x = _q2_cdf_step(x, t, target)
+        ok_x[k] = 1.0 if ((u0 < _UPPER) & (abs(step) <= 1e-12 * max(1.0, abs(x)))
+                          & (abs(x) < _TAIL) & (x < hi)) else 0.0
+        gx[k] = x
+        y = 2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0
+        ay = abs(gy[k])
+        e = _exp_neg(-ay * ay)
+        f = (1.0 - abs(y)) - _erfc_near(ay, e) if abs(y) > 0.5 else _erf_small(min(ay, 0.5)) - abs(y)
+        gy[k], d = _erfinv_step(y, gy[k], f, 1.0 / e)
+        ok_y[k] = 1.0 if (abs(d) <= 2e-7 * ay) & (ay < _TAIL) else 0.0
+    for k in range(m):                               # the rare rest, scalar
+        if ok_x[k] == 0.0:
+            gx[k] = _visible_slope_quantile(float(u[2 * k]), float(cos_row[k]))
+        if ok_y[k] == 0.0:
+            gy[k] = _erfinv(2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
+    for k in range(m):
+        x, y = gx[k], gy[k]
+        inv = 1.0 / math.sqrt(1.0 + x * x + y * y)
+        out_rows[0, k], out_rows[1, k], out_rows[2, k] = -x * inv, -y * inv, inv
 
 
 # ------------------------------------------------------------------------ kernels
 #: Directions per block: a kernel call ``kernel(start, stop, ...)`` works through the pairs
 #: ``start:stop`` in blocks of this many, in a ``(rows, BLOCK)`` scratch array (in cache),
-#: one loop per stage, so that the stages without library calls vectorize (Beckmann's
-#: visible-slope solve stays scalar) and the extra memory is independent of N.
+#: one loop per stage, so that the stages without library calls vectorize and the extra
+#: memory is independent of N.
 #: The caller runs ranges on threads (:func:`microfacet.kernels._launch_ranges`): Numba's
 #: ``prange`` keeps these loops from vectorizing.
 BLOCK = 256
@@ -644,6 +767,7 @@ def sample_kernel(kind, dtype=np.float64):
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(F(1.0) - rho * rho)
         buf = np.empty((11, BLOCK), F)
+        bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
@@ -664,9 +788,8 @@ def sample_kernel(kind, dtype=np.float64):
             if kind == GGX:                          # the standard visible normal
                 for k in range(m):
                     r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u_b[2 * k]), F(u_b[2 * k + 1]), r0[k])
-            else:                                    # (library calls: a loop of its own)
-                for k in range(m):
-                    r3[k], r4[k], r5[k] = _beckmann_visible_std(float(u_b[2 * k]), float(u_b[2 * k + 1]), float(r0[k]))
+            else:
+                _beckmann_visible_block(u_b, r0, buf[3:6], bk, m)
             for k in range(m):
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 cp, sp = r1[k], r2[k]
