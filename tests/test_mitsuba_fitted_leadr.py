@@ -25,7 +25,7 @@ mi = pytest.importorskip("mitsuba", reason="the Mitsuba plugins need the optiona
                                            "(pip install 'microfacet[mitsuba]')")
 dr = pytest.importorskip("drjit", reason="the Mitsuba plugins need drjit (installed with mitsuba)")
 from test_mitsuba_plugins import (assert_close, f32, hemisphere, llvm, llvm_ok, load_error,  # noqa: E402,F401
-                                  plugin_eval_pdf, render_stats, sphere_scene, use, variant, vec3)
+                                  REL_TOL, plugin_eval_pdf, render_stats, sphere_scene, use, variant, vec3)
 
 CU = mf.fresnel.Conductor.METALS["Cu"]
 
@@ -69,6 +69,20 @@ def fit_oracle(path, use_="tabulated"):
     return {"tabulated": fit, "ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}[use_]
 
 
+def fresnel_tolerance(brdf) -> float:
+    """``REL_TOL``, or more for a steep Fresnel table: the plugin's float32 ``o.h`` (errors
+    up to ~5e-6 measured) moves ``F`` by ``|dF/d cos| / F`` times that (the table a moment conversion
+    solves for a cross-family NDF, e.g. GGX 0.3 -> Beckmann 1.29, has ``|dF/d cos|`` ~ 24
+    where ``F`` ~ 0.1)."""
+    fresnel = getattr(brdf, "fresnel", None)
+    if not hasattr(fresnel, "cos_theta_d"):
+        return REL_TOL
+    x, v = fresnel.cos_theta_d, fresnel.values
+    mid = 0.5 * (v[1:] + v[:-1])
+    log_slope = np.abs(np.diff(v, axis=0)) / np.diff(x)[:, None] / np.maximum(mid, 1e-3)
+    return max(REL_TOL, 5e-6 * float(log_slope.max()))
+
+
 def direction_pairs(brdf, rng, n):
     """Views ``wo`` (grazing ones included); lights half from the oracle's sampler, half uniform."""
     wo = hemisphere(rng, n // 2)
@@ -88,7 +102,7 @@ def test_fitted_eval_pdf_match_numpy(llvm, files, name, use_):
     wi, wo = direction_pairs(brdf, np.random.default_rng(FITS.index(name)), 12000)
     bsdf = mi.load_dict({"type": "mf_fitted", "filename": files[name], "use": use_})
     f, pdf = plugin_eval_pdf(bsdf, "llvm_ad_rgb", wi, wo)
-    assert_close("eval", f, brdf.eval_cos(wi, wo))
+    assert_close("eval", f, brdf.eval_cos(wi, wo), rel_tol=fresnel_tolerance(brdf))
     assert_close("pdf", pdf, brdf.pdf(wi, wo))
 
 
@@ -230,7 +244,7 @@ def test_leadr_eval_pdf_match_library(llvm, files, key, value, width):
     v2 = lambda a: mi.Vector2f(*(np.ascontiguousarray(a[:, j], np.float32) for j in range(2)))  # noqa: E731
     si.uv, si.duv_dx, si.duv_dy = v2(uv), v2(J[:, 0]), v2(J[:, 1])
     value_, pdf = bsdf.eval_pdf(mi.BSDFContext(), si, vec3(wi))
-    assert_close("eval", np.array(value_).T.reshape(-1, 3), brdf.eval_cos(wi, wo))
+    assert_close("eval", np.array(value_).T.reshape(-1, 3), brdf.eval_cos(wi, wo), rel_tol=fresnel_tolerance(brdf))
     assert_close("pdf", np.array(pdf).ravel(), brdf.pdf(wi, wo))
 
 

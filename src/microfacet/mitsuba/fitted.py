@@ -8,8 +8,9 @@ Mitsuba 3 BSDF plugin.
 (visible normals for isotropic Smith fits, slopes of ``P`` otherwise; with a diffuse
 base, the lobe or the cosine lobe with probability ``luminance(F(1))`` over
 ``luminance(F(1)) + luminance(k_d)``, pdf the mixture's). ``use="ggx"|"beckmann"``
-renders :meth:`FittedBRDF.to_ggx` / :meth:`FittedBRDF.to_beckmann` (App. C; the diffuse
-base is not carried, as in the library) through ``mf_microfacet``'s analytic lobe. The
+renders :meth:`FittedBRDF.to_ggx` / :meth:`FittedBRDF.to_beckmann` (App. C, with the Fresnel
+table solved for the converted NDF; the diffuse base is not carried, as in the library)
+through ``mf_microfacet``'s analytic lobe. The
 lobe code (GAF, eval, pdf, sample) is ``mf_microfacet``'s (:mod:`.bsdf`).
 """
 from __future__ import annotations
@@ -69,7 +70,7 @@ def _make_class() -> type:
             self.shadowing = fit.shadowing
             self.separable = False
             self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
-            self.fresnel_table = InterpolatedColor(fit.fresnel.cos_theta_d, fit.fresnel.values)
+            fresnel = fit.fresnel
             if self.use == "tabulated":
                 self.kind = "tabulated"
                 self.make_lobe = tabulated_lobe(fit.distribution)
@@ -80,11 +81,13 @@ def _make_class() -> type:
                 dist = fit.distribution
             else:
                 self.kind = self.use
-                dist = (fit.to_ggx() if self.use == GGX else fit.to_beckmann()).distribution
+                converted = fit.to_ggx() if self.use == GGX else fit.to_beckmann()
+                dist, fresnel = converted.distribution, converted.fresnel
                 params = [mi.Float(float(v)) for v in (dist.alpha_x, dist.alpha_y, dist.rho, dist.xn, dist.yn)]
                 self.make_lobe = lambda: Lobe(self.kind, *params)
                 self.samples_visible = self.gaf == "smith"
                 self.diffuse = None
+            self.fresnel_table = InterpolatedColor(fresnel.cos_theta_d, fresnel.values)
             anisotropic = (fit.anisotropic or float(dist.alpha_x) != float(dist.alpha_y)
                            or np.any(np.asarray(dist.rho) != 0) or np.any(np.asarray(dist.mean_slope) != 0))
             glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide

@@ -166,7 +166,7 @@ def _make_class() -> type:
                     raise _bsdf._error("fit", "brings its own Fresnel table: drop the Fresnel parameters",
                                        PLUGIN)
                 base = fit.to_beckmann()
-                self.fresnel_table = InterpolatedColor(fit.fresnel.cos_theta_d, fit.fresnel.values)
+                self.fresnel_table = InterpolatedColor(base.fresnel.cos_theta_d, base.fresnel.values)
             else:
                 if "alpha" in props and props.type("alpha") not in (mi.Properties.Type.Float,
                                                                       mi.Properties.Type.Integer):
