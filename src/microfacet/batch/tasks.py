@@ -97,7 +97,7 @@ class Task:
 # ---------------------------------------------------------------------------- bake
 def _in_background(fn: Callable, *args):
     """``fn(*args)`` started on a new thread: a ``Future`` of its result. For work that
-    releases the GIL (an image decode) while this thread imports modules."""
+    releases the GIL (an image decode, a gzip decompression) while this thread imports modules."""
     from concurrent.futures import ThreadPoolExecutor
     pool = ThreadPoolExecutor(1, thread_name_prefix="microfacet-read")
     try:
@@ -176,9 +176,10 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures."""
-    from ..fit.outputs import fit_material, summary_row
     from ..measured import load
-    brdf = load(source)
+    reading = _in_background(load, source)        # read + gunzip (GIL released) overlap the fit imports
+    from ..fit.outputs import fit_material, summary_row
+    brdf = reading.result()
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
                            fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)
