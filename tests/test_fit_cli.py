@@ -291,3 +291,60 @@ def test_fit_material_writes_the_three_files(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gold.json", "gold.npz", "gold.png"]
     assert mf.fit.load(tmp_path / "gold.npz").distribution.n_theta == 31   # 2 N - 1 (refined)
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+class _SerialPool:
+    """A stand-in for ``ThreadPoolExecutor`` that runs every job at once, on the caller's thread."""
+
+    def __init__(self, *args, **kwargs):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def submit(self, fn, *args, **kwargs):
+        from concurrent.futures import Future
+        future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as e:          # as a worker thread: raised by result()
+            future.set_exception(e)
+        return future
+
+    def map(self, fn, *iterables):
+        return map(fn, *iterables)
+
+
+def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monkeypatch):
+    """The least-squares fits and metrics run on threads give the same bytes as run one after
+    the other (issue 10: overlapping stages changes no result); only the fit times differ."""
+    from microfacet.fit import outputs
+    data = mf.measured.load(inputs / "gold-ggx.binary")
+    files = {}
+    for mode in ("threads", "serial"):
+        if mode == "serial":
+            monkeypatch.setattr(outputs, "ThreadPoolExecutor", _SerialPool)
+        out = tmp_path / mode / "gold.npz"
+        summary = outputs.fit_material(data, out, resolution=16, picture=False)
+        assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5
+        text = out.with_suffix(".json").read_text().splitlines()
+        files[mode] = out.read_bytes(), [line for line in text if '"seconds' not in line]
+    assert files["threads"] == files["serial"]
+
+
+def test_fit_material_interrupted_on_a_thread_writes_nothing(inputs, tmp_path, monkeypatch):
+    """A Ctrl-C (or an error) inside a least-squares fit running on a worker thread reaches
+    the caller, and no file is written."""
+    import microfacet.fit.analytic
+    from microfacet.fit.outputs import fit_material
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(microfacet.fit.analytic, "fit_analytic", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        fit_material(mf.measured.load(inputs / "gold-ggx.binary"), tmp_path / "gold.npz", resolution=16,
+                     picture=False)
+    assert list(tmp_path.iterdir()) == []
