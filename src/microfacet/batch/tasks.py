@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from ..io.names import input_name
+from ..io.read import decompressed
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
@@ -169,6 +170,17 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
                "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
 
 
+def _file_data(path: Path) -> bytes | None:
+    """The uncompressed bytes of ``path`` (:func:`~microfacet.io.read.decompressed`), or None
+    if it cannot be read (then :func:`microfacet.measured.load` says why). Imports no more
+    than NumPy, so it can run while the fit modules import."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        return None
+    return decompressed(data, path)
+
+
 def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
              method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
              albedo_weight: float | None = None, coat: bool = False, picture: bool = True) -> dict:
@@ -176,10 +188,11 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures."""
-    from ..measured import load
-    reading = _in_background(load, source)        # read + gunzip (GIL released) overlap the fit imports
+    reading = _in_background(_file_data, source)      # read + gunzip (GIL released) overlap the imports
     from ..fit.outputs import fit_material, summary_row
-    brdf = reading.result()
+    from ..measured import load, load_bytes
+    data = reading.result()
+    brdf = load(source) if data is None else load_bytes(data, source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
                            fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)
