@@ -167,10 +167,15 @@ def _least_square(brdf, fit, model: str, anisotropic: bool, diffuse: str, fresne
     return f"{model}{'_coat' if coat else ''}{'_diffuse' if base is not None else ''}", b, time.perf_counter()
 
 
+def _metrics(brdf) -> tuple:
+    """The data's side of the metrics: the :class:`~microfacet.metrics.RelativeRMS` of the
+    grid and of the uniform pairs and the :class:`~microfacet.metrics.AlbedoRatios` of ``brdf``."""
+    return RelativeRMS(brdf, measurement_directions()), RelativeRMS(brdf, uniform_directions()), AlbedoRatios(brdf)
+
+
 def _scores(metrics: tuple, named: dict) -> tuple[dict, dict, dict, dict]:
-    """Grid errors, uniform errors, albedo ratios and white furnaces of the fits ``named``;
-    ``metrics``: the :class:`~microfacet.metrics.RelativeRMS` of the grid and of the uniform
-    pairs and the :class:`~microfacet.metrics.AlbedoRatios` of the data."""
+    """Grid errors, uniform errors, albedo ratios and white furnaces of the fits ``named``
+    (``metrics``: :func:`_metrics` of the data)."""
     grid, uniform, albedo = metrics
     return grid(named), uniform(named), albedo(named), {k: white_furnace(b) for k, b in named.items()}
 
@@ -214,19 +219,19 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     if out_npz.is_dir():
         raise MicrofacetError(f"{out_npz}: is a folder")
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
-    t0 = time.perf_counter()
-    fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
-    t1 = time.perf_counter()
-    moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
-    first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
-    # independent work on threads (NumPy releases the GIL in its array loops): the two
-    # least-squares fits, then their metrics, beside the data's side of the metrics and
-    # the metrics of the tabulated and moment fits; every result as computed serially
-    with ThreadPoolExecutor(2, thread_name_prefix="microfacet-fit") as pool:
+    # independent work on threads (NumPy releases the GIL in its array loops): the data's side
+    # of the metrics beside the tabulated fit, then the two least-squares fits beside the
+    # metrics of the tabulated and moment fits, then their own; every result as computed serially
+    with ThreadPoolExecutor(3, thread_name_prefix="microfacet-fit") as pool:
+        metrics_job = pool.submit(_metrics, brdf)
+        t0 = time.perf_counter()
+        fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
+        t1 = time.perf_counter()
+        moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
+        first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
         least_jobs = [pool.submit(_least_square, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight, coat)
                       for model in (("ggx", "beckmann") if method == "least_squares" else ())]
-        metrics = (RelativeRMS(brdf, measurement_directions()), RelativeRMS(brdf, uniform_directions()),
-                   AlbedoRatios(brdf))
+        metrics = metrics_job.result()
         scores = [_scores(metrics, first)]
         least = [job.result() for job in least_jobs]
         scores += pool.map(lambda one: _scores(metrics, {f"{one[0]}_least_squares": one[1]}), least)
