@@ -221,7 +221,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
     # independent work on threads (NumPy releases the GIL in its array loops): the data's side
     # of the metrics beside the tabulated fit, then the two least-squares fits beside the
-    # metrics of the tabulated and moment fits, then their own; every result as computed serially
+    # metrics of the tabulated and moment fits; every result as computed serially
     with ThreadPoolExecutor(3, thread_name_prefix="microfacet-fit") as pool:
         metrics_job = pool.submit(_metrics, brdf)
         t0 = time.perf_counter()
@@ -234,10 +234,10 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         metrics = metrics_job.result()
         scores = [_scores(metrics, first)]
         least = [job.result() for job in least_jobs]
-        scores += pool.map(lambda one: _scores(metrics, {f"{one[0]}_least_squares": one[1]}), least)
     t2 = max((end for *_, end in least), default=t1)
     least = {name: b for name, b, _ in least}
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
+    scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
     grid, uniform, albedo, furnace = ({k: v for part in scores for k, v in part[i].items()} for i in range(4))
     chosen = moments if method == "moments" else {
         family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}
