@@ -301,12 +301,6 @@ class _SerialPool:
     def __init__(self, *args, **kwargs):
         pass
 
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
-
     def submit(self, fn, *args, **kwargs):
         from concurrent.futures import Future
         future = Future()
@@ -316,8 +310,8 @@ class _SerialPool:
             future.set_exception(e)
         return future
 
-    def map(self, fn, *iterables):
-        return map(fn, *iterables)
+    def shutdown(self, wait=True, cancel_futures=False):
+        pass
 
 
 def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monkeypatch):

@@ -221,8 +221,10 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
     # independent work on threads (NumPy releases the GIL in its array loops): the data's side
     # of the metrics beside the tabulated fit, then the two least-squares fits beside the
-    # metrics of the tabulated and moment fits; every result as computed serially
-    with ThreadPoolExecutor(3, thread_name_prefix="microfacet-fit") as pool:
+    # metrics of the tabulated and moment fits; every result as computed serially. On an
+    # error or Ctrl-C nothing more starts and the caller is not held (a running fit ends alone).
+    pool = ThreadPoolExecutor(3, thread_name_prefix="microfacet-fit")
+    try:
         metrics_job = pool.submit(_metrics, brdf)
         t0 = time.perf_counter()
         fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
@@ -234,6 +236,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         metrics = metrics_job.result()
         scores = [_scores(metrics, first)]
         least = [job.result() for job in least_jobs]
+    finally:
+        pool.shutdown(wait=False, cancel_futures=True)
     t2 = max((end for *_, end in least), default=t1)
     least = {name: b for name, b, _ in least}
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
