@@ -295,23 +295,15 @@ def test_fit_material_writes_the_three_files(tmp_path):
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-class _SerialPool:
-    """A stand-in for ``ThreadPoolExecutor`` that runs every job at once, on the caller's thread."""
-
-    def __init__(self, *args, **kwargs):
-        pass
-
-    def submit(self, fn, *args, **kwargs):
-        from concurrent.futures import Future
-        future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except BaseException as e:          # as a worker thread: raised by result()
-            future.set_exception(e)
-        return future
-
-    def shutdown(self, wait=True, cancel_futures=False):
-        pass
+def _at_once(fn, *args):
+    """A stand-in for ``in_background`` that runs ``fn`` at once, on the caller's thread."""
+    from concurrent.futures import Future
+    future = Future()
+    try:
+        future.set_result(fn(*args))
+    except BaseException as e:              # as a worker thread: raised by result()
+        future.set_exception(e)
+    return future
 
 
 def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monkeypatch):
@@ -322,7 +314,7 @@ def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monke
     files = {}
     for mode in ("threads", "serial"):
         if mode == "serial":
-            monkeypatch.setattr(outputs, "ThreadPoolExecutor", _SerialPool)
+            monkeypatch.setattr(outputs, "in_background", _at_once)
         out = tmp_path / mode / "gold.npz"
         summary = outputs.fit_material(data, out, resolution=16, picture=False)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5

@@ -29,11 +29,11 @@ import json
 import os
 import time
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from .._background import in_background
 from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
@@ -221,23 +221,18 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
     # independent work on threads (NumPy releases the GIL in its array loops): the data's side
     # of the metrics beside the tabulated fit, then the two least-squares fits beside the
-    # metrics of the tabulated and moment fits; every result as computed serially. On an
-    # error or Ctrl-C nothing more starts and the caller is not held (a running fit ends alone).
-    pool = ThreadPoolExecutor(3, thread_name_prefix="microfacet-fit")
-    try:
-        metrics_job = pool.submit(_metrics, brdf)
-        t0 = time.perf_counter()
-        fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
-        t1 = time.perf_counter()
-        moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
-        first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
-        least_jobs = [pool.submit(_least_square, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight, coat)
-                      for model in (("ggx", "beckmann") if method == "least_squares" else ())]
-        metrics = metrics_job.result()
-        scores = [_scores(metrics, first)]
-        least = [job.result() for job in least_jobs]
-    finally:
-        pool.shutdown(wait=False, cancel_futures=True)
+    # metrics of the tabulated and moment fits; every result as computed serially
+    metrics_job = in_background(_metrics, brdf)
+    t0 = time.perf_counter()
+    fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
+    t1 = time.perf_counter()
+    moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
+    first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
+    least_jobs = [in_background(_least_square, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight, coat)
+                  for model in (("ggx", "beckmann") if method == "least_squares" else ())]
+    metrics = metrics_job.result()
+    scores = [_scores(metrics, first)]
+    least = [job.result() for job in least_jobs]
     t2 = max((end for *_, end in least), default=t1)
     least = {name: b for name, b, _ in least}
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
