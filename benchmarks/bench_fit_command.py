@@ -59,7 +59,7 @@ def one_process(path: str) -> list[float]:
         mark()
         least = []
         for model in ("ggx", "beckmann"):
-            least.append(outputs._least_square(brdf, fit, model, False, "auto", "table", 4.0))
+            least.append(outputs._least_squares_fit(brdf, fit, model, False, "auto", "table", 4.0))
             mark()
         outputs._scores(metrics, first)
         mark()
@@ -103,7 +103,7 @@ def threads(path: str, runs: int) -> None:
         first = {"tabulated": fit, "ggx_moments": fit.to_ggx(), "beckmann_moments": fit.to_beckmann()}
 
         def least(model):
-            return outputs._least_square(brdf, fit, model, False, "auto", "table", 4.0)
+            return outputs._least_squares_fit(brdf, fit, model, False, "auto", "table", 4.0)
         pairs = {"tabulated fit | metrics data side": (lambda: outputs._run_fit(brdf, 90, False, "smith", False, 4.0),
                                                        lambda: outputs._metrics(brdf)),
                  "least squares GGX | Beckmann": (lambda: least("ggx"), lambda: least("beckmann")),

@@ -295,14 +295,11 @@ def test_fit_material_writes_the_three_files(tmp_path):
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def _at_once(fn, *args):
-    """A stand-in for ``in_background`` that runs ``fn`` at once, on the caller's thread."""
-    from concurrent.futures import Future
-    future = Future()
-    try:
-        future.set_result(fn(*args))
-    except BaseException as e:              # as a worker thread: raised by result()
-        future.set_exception(e)
+def _waited(fn, *args):
+    """``in_background(fn, *args)``, waited for: the jobs run one after the other."""
+    from microfacet._background import in_background
+    future = in_background(fn, *args)
+    future.exception()                      # waits; raises nothing
     return future
 
 
@@ -314,7 +311,7 @@ def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monke
     files = {}
     for mode in ("threads", "serial"):
         if mode == "serial":
-            monkeypatch.setattr(outputs, "in_background", _at_once)
+            monkeypatch.setattr(outputs, "in_background", _waited)
         out = tmp_path / mode / "gold.npz"
         summary = outputs.fit_material(data, out, resolution=16, picture=False)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5

@@ -162,8 +162,8 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
 
 def _file_data(path: Path) -> bytes | None:
     """The uncompressed bytes of ``path`` (:func:`~microfacet.io.read.decompressed`), or None
-    if it cannot be read (then :func:`microfacet.measured.load` says why). Imports no more
-    than NumPy, so it can run while the fit modules import."""
+    if it cannot be read (then :func:`microfacet.measured.load` says why). Needs zlib only,
+    so it can run while the fit modules import."""
     try:
         data = Path(path).read_bytes()
     except OSError:

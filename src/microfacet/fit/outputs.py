@@ -151,7 +151,7 @@ def _write_all(files: dict) -> None:
         raise
 
 
-def _least_square(brdf, fit, model: str, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
+def _least_squares_fit(brdf, fit, model: str, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
                   coat: bool = False) -> tuple[str, object, float]:
     """``(name, fit, end time)``: the least-squares fit of ``model`` named as ``ggx``,
     ``ggx_diffuse``, ``beckmann_coat_diffuse``, ... and the ``time.perf_counter()`` it ended at.
@@ -205,9 +205,11 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     :func:`microfacet.fit.fit` as ``diffuse``. The picture is rendered in memory first,
     then the three files are written, each atomically; if a write fails or is interrupted
     the ones already written are removed (no ``.npz`` without its ``.json`` and
-    ``.png``). Returns the JSON
-    summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
-    the least-squares fits (not of the errors, picture or files).
+    ``.png``). The data's side of the metrics and the least-squares fits run on threads
+    (:func:`microfacet._background.in_background`; the same bytes as one after the other).
+    Returns the JSON summary (module docstring); ``seconds`` holds the time of the tabulated
+    fit and of the least-squares fits (wall, until the last ends; not of the errors,
+    picture or files).
     """
     from .analytic import ALBEDO_WEIGHT
     albedo_weight = ALBEDO_WEIGHT if albedo_weight is None else float(albedo_weight)
@@ -228,7 +230,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     t1 = time.perf_counter()
     moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
     first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
-    least_jobs = [in_background(_least_square, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight, coat)
+    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight, coat)
                   for model in (("ggx", "beckmann") if method == "least_squares" else ())]
     metrics = metrics_job.result()
     scores = [_scores(metrics, first)]
