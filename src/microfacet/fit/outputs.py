@@ -230,8 +230,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     t1 = time.perf_counter()
     moments = {"ggx": fit.to_ggx(), "beckmann": fit.to_beckmann()}
     first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
-    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight, coat)
-                  for model in (("ggx", "beckmann") if method == "least_squares" else ())]
+    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight,
+                                coat) for model in (("ggx", "beckmann") if method == "least_squares" else ())]
     metrics = metrics_job.result()
     scores = [_scores(metrics, first)]
     least = [job.result() for job in least_jobs]
