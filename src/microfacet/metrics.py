@@ -9,6 +9,9 @@
   channel (:func:`directional_albedo`, half-vector quadrature);
 * :func:`white_furnace` — directional albedo of a fit's microfacet lobes with a white
   Fresnel term (``<= 1`` for an energy-conserving model), the maximum over views;
+* :class:`RelativeRMS`, :class:`AlbedoRatios` — :func:`fit_error` and :func:`albedo_ratios`
+  with the reference's side (pairs, values, norm, albedo) computed once, then called on
+  any fits (read-only: threads may share one);
 * :func:`ndf_error` — relative L2 difference of ``D cos theta_h`` over the hemisphere
   between two NDFs (e.g. a fit's and the ``ndf`` field of an RGL file).
 
