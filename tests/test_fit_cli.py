@@ -170,6 +170,8 @@ def test_fit_into_an_existing_folder_names_files_after_the_input(inputs, tmp_pat
 @pytest.mark.parametrize("make, message", [
     (lambda d: d / "missing.binary", "No such file or directory"),
     (lambda d: (d / "bad.binary").write_bytes(b"\0" * 100) and d / "bad.binary", "unknown measured-BRDF format"),
+    (lambda d: (d / "bad.binary.gz").write_bytes(b"\x1f\x8b" + b"\0" * 100) and d / "bad.binary.gz",
+     "bad.binary.gz: corrupt gzip stream"),                  # decompressed on a thread
     (lambda d: d / "empty", "no fit inputs"),
 ])
 def test_fit_bad_input_gives_one_line(make, message, tmp_path, capsys):
@@ -293,3 +295,43 @@ def test_fit_material_writes_the_three_files(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gold.json", "gold.npz", "gold.png"]
     assert mf.fit.load(tmp_path / "gold.npz").distribution.n_theta == 31   # 2 N - 1 (refined)
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _waited(fn, *args):
+    """``in_background(fn, *args)``, waited for: the jobs run one after the other."""
+    from microfacet._background import in_background
+    future = in_background(fn, *args)
+    future.exception()                      # waits; raises nothing
+    return future
+
+
+def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monkeypatch):
+    """The least-squares fits and metrics run on threads give the same bytes as run one after
+    the other (issue 10: overlapping stages changes no result); only the fit times differ."""
+    from microfacet.fit import outputs
+    data = mf.measured.load(inputs / "gold-ggx.binary")
+    files = {}
+    for mode in ("threads", "serial"):
+        if mode == "serial":
+            monkeypatch.setattr(outputs, "in_background", _waited)
+        out = tmp_path / mode / "gold.npz"
+        summary = outputs.fit_material(data, out, resolution=16, picture=False)
+        assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5
+        text = out.with_suffix(".json").read_text().splitlines()
+        files[mode] = out.read_bytes(), [line for line in text if '"seconds' not in line]
+    assert files["threads"] == files["serial"]
+
+
+def test_fit_material_interrupted_on_a_thread_writes_nothing(inputs, tmp_path, monkeypatch):
+    """A Ctrl-C (or an error) inside a least-squares fit running on a worker thread reaches
+    the caller, and no file is written."""
+    import microfacet.fit.analytic
+    from microfacet.fit.outputs import fit_material
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(microfacet.fit.analytic, "fit_analytic", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        fit_material(mf.measured.load(inputs / "gold-ggx.binary"), tmp_path / "gold.npz", resolution=16,
+                     picture=False)
+    assert list(tmp_path.iterdir()) == []

@@ -9,6 +9,9 @@
   channel (:func:`directional_albedo`, half-vector quadrature);
 * :func:`white_furnace` — directional albedo of a fit's microfacet lobes with a white
   Fresnel term (``<= 1`` for an energy-conserving model), the maximum over views;
+* :class:`RelativeRMS`, :class:`AlbedoRatios` — :func:`fit_error` and :func:`albedo_ratios`
+  with the reference's side (pairs, values, norm, albedo) computed once, then called on
+  any fits (read-only: threads may share one);
 * :func:`ndf_error` — relative L2 difference of ``D cos theta_h`` over the hemisphere
   between two NDFs (e.g. a fit's and the ``ndf`` field of an RGL file).
 
@@ -28,9 +31,9 @@ import numpy as np
 from .geometry import hd_to_io, spherical_to_cartesian
 
 __all__ = ["GRAZING_COS", "ALBEDO_VIEWS_DEG", "measurement_directions", "uniform_directions",
-           "measured_mask", "compared_pairs", "sobol", "fit_error", "uniform_error", "albedo_directions",
-           "directional_albedo", "albedo_ratios", "white_furnace", "ndf_error", "hemisphere_grid",
-           "describe_fit_error", "describe_uniform_error", "describe_albedo"]
+           "measured_mask", "compared_pairs", "sobol", "fit_error", "RelativeRMS", "uniform_error",
+           "albedo_directions", "directional_albedo", "albedo_ratios", "AlbedoRatios", "white_furnace",
+           "ndf_error", "hemisphere_grid", "describe_fit_error", "describe_uniform_error", "describe_albedo"]
 
 #: Pairs with ``cos theta_i`` or ``cos theta_o`` below this are excluded (grazing).
 GRAZING_COS = 0.1
@@ -196,18 +199,33 @@ def fit_error(reference, fits, n: int = 32, directions=None) -> dict[str, float]
         Error per fit name (``"fit"`` for a single BRDF), plus ``"n_pairs"``, the number
         of pairs used.
     """
-    pairs = compared_pairs(reference, measurement_directions(n) if directions is None else directions)
-    wi, wo = pairs[:2]
-    w = pairs[2][:, None] if len(pairs) == 3 else 1.0
-    ref = reference.eval_cos(wi, wo)
-    norm = float(np.sqrt(np.sum(w * ref * ref)))
-    if not np.isfinite(norm) or norm == 0.0:
-        raise ValueError("the reference BRDF is zero or not finite on the compared directions")
-    named = fits if isinstance(fits, dict) else {"fit": fits}
-    out = {name: float(np.sqrt(np.sum(w * (brdf.eval_cos(wi, wo) - ref) ** 2)) / norm)
-           for name, brdf in named.items()}
-    out["n_pairs"] = int(len(wi))
-    return out
+    return RelativeRMS(reference, measurement_directions(n) if directions is None else directions)(fits)
+
+
+class RelativeRMS:
+    """:func:`fit_error` against ``reference`` over the pairs of ``directions`` (``(wi, wo)``
+    or weighted ``(wi, wo, w)``, filtered by :func:`compared_pairs`), the reference
+    evaluated once: ``RelativeRMS(reference, directions)(fits)`` is
+    ``fit_error(reference, fits, directions=directions)``, bit for bit. Read-only after
+    construction, so threads may call one at once."""
+
+    def __init__(self, reference, directions):
+        pairs = compared_pairs(reference, directions)
+        self.wi, self.wo = pairs[:2]
+        self.w = pairs[2][:, None] if len(pairs) == 3 else 1.0
+        self.ref = reference.eval_cos(self.wi, self.wo)
+        self.norm = float(np.sqrt(np.sum(self.w * self.ref * self.ref)))
+        if not np.isfinite(self.norm) or self.norm == 0.0:
+            raise ValueError("the reference BRDF is zero or not finite on the compared directions")
+
+    def __call__(self, fits) -> dict[str, float]:
+        """``e = sqrt(sum w |f_fit cos - f_ref cos|^2) / norm`` per fit name (``"fit"`` for a
+        single BRDF), plus ``"n_pairs"``."""
+        named = fits if isinstance(fits, dict) else {"fit": fits}
+        out = {name: float(np.sqrt(np.sum(self.w * (brdf.eval_cos(self.wi, self.wo) - self.ref) ** 2))) / self.norm
+               for name, brdf in named.items()}
+        out["n_pairs"] = int(len(self.wi))
+        return out
 
 
 def uniform_error(reference, fits, n: int = UNIFORM_PAIRS, seed: int = 0) -> dict[str, float]:
@@ -271,17 +289,30 @@ def albedo_ratios(reference, fit, views_deg=ALBEDO_VIEWS_DEG):
     directions fit errors compare: ``cos theta_i >= GRAZING_COS`` and, for MERL, measured
     samples. NaN where the reference's albedo is 0. ``fit`` may be a dict of fits by name:
     then a dict of ratios (the reference's albedo computed once)."""
-    nodes = albedo_directions(views_deg, GRAZING_COS)
-    keep = measured_mask(reference, nodes[0], nodes[1])
-    nodes = tuple(a[keep] for a in nodes)
-    ref = _albedo_sums(reference, nodes, len(views_deg))
-    named = fit if isinstance(fit, dict) else {"fit": fit}
-    out = {}
-    for name, brdf in named.items():
-        fit_albedo = _albedo_sums(brdf, nodes, len(views_deg))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[name] = np.where(ref > 0, fit_albedo / ref, np.nan)
-    return out if isinstance(fit, dict) else out["fit"]
+    return AlbedoRatios(reference, views_deg)(fit)
+
+
+class AlbedoRatios:
+    """:func:`albedo_ratios` against ``reference``, its albedo computed once:
+    ``AlbedoRatios(reference, views_deg)(fit)`` is ``albedo_ratios(reference, fit, views_deg)``.
+    Read-only after construction, so threads may call one at once."""
+
+    def __init__(self, reference, views_deg=ALBEDO_VIEWS_DEG):
+        nodes = albedo_directions(views_deg, GRAZING_COS)
+        keep = measured_mask(reference, nodes[0], nodes[1])
+        self.nodes = tuple(a[keep] for a in nodes)
+        self.n_views = len(views_deg)
+        self.ref = _albedo_sums(reference, self.nodes, self.n_views)
+
+    def __call__(self, fit):
+        """Ratios ``(len(views_deg), 3)`` of ``fit``, or a dict of them for a dict of fits."""
+        named = fit if isinstance(fit, dict) else {"fit": fit}
+        out = {}
+        for name, brdf in named.items():
+            fit_albedo = _albedo_sums(brdf, self.nodes, self.n_views)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                out[name] = np.where(self.ref > 0, fit_albedo / self.ref, np.nan)
+        return out if isinstance(fit, dict) else out["fit"]
 
 
 def _white(brdf):

@@ -17,8 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .._background import in_background
 from ..errors import MicrofacetError
 from ..io.names import input_name
+from ..io.read import decompressed
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
@@ -95,17 +97,6 @@ class Task:
 
 
 # ---------------------------------------------------------------------------- bake
-def _in_background(fn: Callable, *args):
-    """``fn(*args)`` started on a new thread: a ``Future`` of its result. For work that
-    releases the GIL (an image decode) while this thread imports modules."""
-    from concurrent.futures import ThreadPoolExecutor
-    pool = ThreadPoolExecutor(1, thread_name_prefix="microfacet-read")
-    try:
-        return pool.submit(fn, *args)
-    finally:
-        pool.shutdown(wait=False)
-
-
 def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = False, border: str = "wrap",
               roughness: float | None = None, material: str | os.PathLike | None = None,
               encoding: str = "auto", z: str = "auto", compression: str = "none") -> dict:
@@ -114,7 +105,7 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     ``out`` (.exr, lossless ``compression``, see ``leadr.write_pyramid``) and its filtered-appearance preview ``out.png``. Returns the size, the
     number of MIP levels and the top level's Beckmann lobe."""
     from ..io.image import read_image
-    reading = None if normal_map else _in_background(read_image, source)   # the decode overlaps the imports
+    reading = None if normal_map else in_background(read_image, source)   # the decode overlaps the imports
     from .. import leadr
     from ..io import write_png
     from ..leadr.files import heights_of_image
@@ -169,6 +160,17 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
                "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
 
 
+def _file_data(path: Path) -> bytes | None:
+    """The uncompressed bytes of ``path`` (:func:`~microfacet.io.read.decompressed`), or None
+    if it cannot be read (then :func:`microfacet.measured.load` says why). Needs zlib only,
+    so it can run while the fit modules import."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        return None
+    return decompressed(data, path)
+
+
 def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
              method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
              albedo_weight: float | None = None, coat: bool = False, picture: bool = True) -> dict:
@@ -176,9 +178,11 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures."""
+    reading = in_background(_file_data, source)      # read + gunzip (GIL released) overlap the imports
     from ..fit.outputs import fit_material, summary_row
-    from ..measured import load
-    brdf = load(source)
+    from ..measured import load, load_bytes
+    data = reading.result()
+    brdf = load(source) if data is None else load_bytes(data, source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
                            fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)

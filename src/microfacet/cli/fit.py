@@ -88,13 +88,13 @@ def run(args) -> int:
             raise ValueError(f"--no-picture applies to a single file, not to the folder {args.input}")
         return run_batch(args, "fit", args.input)
     from ..batch.tasks import fit_file
-    from ..fit.outputs import format_summary_markdown
     source = Path(args.input)
     target = output_path(args.output, ".npz", source, side=(".json", ".png"))
     with numpy_kernels(not (args.anisotropic or args.coat or args.fresnel == "conductor")):
         row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
                        method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
                        albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture)
+    from ..fit.outputs import format_summary_markdown      # imported by fit_file, after its read started
     print(format_summary_markdown([{"material": input_name(source), "file": source.name, "status": "ok",
                                     "seconds": row["fit_seconds"], **row}]), end="")
     return 0

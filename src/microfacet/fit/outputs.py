@@ -34,10 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .._background import in_background
 from ..errors import MicrofacetError
 from ..io.names import material_name
-from ..metrics import (ALBEDO_VIEWS_DEG, albedo_ratios, describe_albedo, describe_fit_error,
-                       describe_uniform_error, fit_error, uniform_error, white_furnace)
+from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
+                       describe_uniform_error, measurement_directions, uniform_directions, white_furnace)
 
 __all__ = ["material_name", "fit_material", "distribution_params",
            "fresnel_json", "analytic_json", "analytic_from_json", "summary_row",
@@ -151,22 +152,33 @@ def _write_all(files: dict) -> None:
         raise
 
 
-def _least_squares(brdf, fit, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
-                   coat: bool = False) -> dict:
-    """Least-squares fits by name (``ggx``, ``ggx_diffuse``, ``beckmann_coat_diffuse``, ...).
-    ``diffuse="auto"``: one fit with a base per model, the base dropped where it fits to
-    less than :data:`NEGLIGIBLE_BASE` (the model without a base is the special case
-    ``k_d = 0`` of the one with, so fitting both is redundant)."""
+def _least_squares_fit(brdf, fit, model: str, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
+                  coat: bool = False) -> tuple[str, object, float]:
+    """``(name, fit, end time)``: the least-squares fit of ``model`` named as ``ggx``,
+    ``ggx_diffuse``, ``beckmann_coat_diffuse``, ... and the ``time.perf_counter()`` it ended at.
+    ``diffuse="auto"``: one fit with a base, the base dropped where it fits to less than
+    :data:`NEGLIGIBLE_BASE` (the model without a base is the special case ``k_d = 0`` of
+    the one with, so fitting both is redundant)."""
     from .analytic import SumBRDF, fit_analytic
-    fits = {}
-    for model in ("ggx", "beckmann"):
-        b = fit_analytic(brdf, model, diffuse=diffuse != "off", anisotropic=anisotropic, fresnel=fresnel, coat=coat,
-                         start=fit, albedo_weight=albedo_weight)
-        *lobes, base = _parts(b)
-        if diffuse == "auto" and base is not None and np.all(base.reflectance < NEGLIGIBLE_BASE):
-            b, base = (lobes[0] if lobes[1] is None else SumBRDF(*lobes)), None
-        fits[f"{model}{'_coat' if coat else ''}{'_diffuse' if base is not None else ''}"] = b
-    return fits
+    b = fit_analytic(brdf, model, diffuse=diffuse != "off", anisotropic=anisotropic, fresnel=fresnel, coat=coat,
+                     start=fit, albedo_weight=albedo_weight)
+    *lobes, base = _parts(b)
+    if diffuse == "auto" and base is not None and np.all(base.reflectance < NEGLIGIBLE_BASE):
+        b, base = (lobes[0] if lobes[1] is None else SumBRDF(*lobes)), None
+    return f"{model}{'_coat' if coat else ''}{'_diffuse' if base is not None else ''}", b, time.perf_counter()
+
+
+def _metrics(brdf) -> tuple:
+    """The data's side of the metrics: the :class:`~microfacet.metrics.RelativeRMS` of the
+    grid and of the uniform pairs and the :class:`~microfacet.metrics.AlbedoRatios` of ``brdf``."""
+    return RelativeRMS(brdf, measurement_directions()), RelativeRMS(brdf, uniform_directions()), AlbedoRatios(brdf)
+
+
+def _scores(metrics: tuple, named: dict) -> tuple[dict, dict, dict, dict]:
+    """Grid errors, uniform errors, albedo ratios and white furnaces of the fits ``named``
+    (``metrics``: :func:`_metrics` of the data)."""
+    grid, uniform, albedo = metrics
+    return grid(named), uniform(named), albedo(named), {k: white_furnace(b) for k, b in named.items()}
 
 
 def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -> float:
@@ -194,9 +206,11 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     :func:`microfacet.fit.fit` as ``diffuse``. The picture is rendered in memory first,
     then the three files are written, each atomically; if a write fails or is interrupted
     the ones already written are removed (no ``.npz`` without its ``.json`` and
-    ``.png``). Returns the JSON
-    summary (module docstring); ``seconds`` holds the time of the tabulated fit and of
-    the least-squares fits (not of the errors, picture or files).
+    ``.png``). The data's side of the metrics and the least-squares fits run on threads
+    (:func:`microfacet._background.in_background`; the same bytes as one after the other).
+    Returns the JSON summary (module docstring); ``seconds`` holds the time of the tabulated
+    fit and of the least-squares fits (wall, until the last ends; not of the errors,
+    picture or files).
     """
     from .analytic import ALBEDO_WEIGHT
     albedo_weight = ALBEDO_WEIGHT if albedo_weight is None else float(albedo_weight)
@@ -208,16 +222,25 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     if out_npz.is_dir():
         raise MicrofacetError(f"{out_npz}: is a folder")
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
+    # independent work on threads (NumPy releases the GIL in its array loops): the data's side
+    # of the metrics beside the tabulated fit, then the two least-squares fits beside the
+    # metrics of the tabulated and moment fits; every result as computed serially
+    metrics_job = in_background(_metrics, brdf)
     t0 = time.perf_counter()
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
     t1 = time.perf_counter()
     moments = {"ggx": fit.to_ggx(reference=brdf), "beckmann": fit.to_beckmann(reference=brdf)}
-    least = _least_squares(brdf, fit, anisotropic, diffuse, fresnel, albedo_weight, coat) \
-        if method == "least_squares" else {}
-    t2 = time.perf_counter()
-    named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
-             **{f"{k}_least_squares": b for k, b in least.items()}}
-    grid, uniform, albedo = fit_error(brdf, named), uniform_error(brdf, named), albedo_ratios(brdf, named)
+    first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
+    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight,
+                                coat) for model in (("ggx", "beckmann") if method == "least_squares" else ())]
+    metrics = metrics_job.result()
+    scores = [_scores(metrics, first)]
+    least = [job.result() for job in least_jobs]
+    t2 = max((end for *_, end in least), default=t1)
+    least = {name: b for name, b, _ in least}
+    named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
+    scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
+    grid, uniform, albedo, furnace = ({k: v for part in scores for k, v in part[i].items()} for i in range(4))
     chosen = moments if method == "moments" else {
         family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}
     fits = {"tabulated": fit, **chosen}
@@ -237,7 +260,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
                    "albedo_ratio": {**{k: albedo[names[k]].round(4).tolist() for k in fits},
                                     **{k: v.round(4).tolist() for k, v in albedo.items()},
                                     "views_deg": list(ALBEDO_VIEWS_DEG), "metric": describe_albedo()},
-                   "white_furnace": {k: round(white_furnace(b), 4) for k, b in named.items()}},
+                   "white_furnace": {k: round(furnace[k], 4) for k in named}},
         "resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf,
         "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
         "tabulated_diffuse": bool(tabulated_diffuse),

@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import os
+import zlib
 from pathlib import Path
 
 from ..errors import MicrofacetError
 
-__all__ = ["read_bytes"]
+__all__ = ["read_bytes", "decompressed", "GZIP_MAGIC"]
+
+GZIP_MAGIC = b"\x1f\x8b"
 
 
 def read_bytes(path: str | os.PathLike, kind: str, size: int | None = None) -> bytes:
@@ -23,3 +26,23 @@ def read_bytes(path: str | os.PathLike, kind: str, size: int | None = None) -> b
         raise MicrofacetError(f"{path}: is a directory, not {kind}") from None
     except OSError as e:
         raise MicrofacetError(f"{path}: cannot read ({e.strerror or e})") from None
+
+
+def decompressed(data: bytes, path: str | os.PathLike) -> bytes:
+    """``data``, decompressed (all members) if it starts with the gzip magic; a corrupt or
+    truncated stream raises :class:`MicrofacetError` naming ``path``. NumPy-free, and zlib
+    releases the GIL: a thread can decompress while another imports modules."""
+    if data[:2] != GZIP_MAGIC:
+        return data
+    try:
+        d = zlib.decompressobj(wbits=31)
+        out = d.decompress(data)
+        while d.eof and d.unused_data[:2] == GZIP_MAGIC:        # concatenated members
+            rest = d.unused_data
+            d = zlib.decompressobj(wbits=31)
+            out += d.decompress(rest)
+    except zlib.error as e:
+        raise MicrofacetError(f"{os.fspath(path)}: corrupt gzip stream ({e})") from e
+    if not d.eof:
+        raise MicrofacetError(f"{os.fspath(path)}: truncated gzip stream")
+    return out

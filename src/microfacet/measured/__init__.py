@@ -14,8 +14,8 @@ naming the file and what is wrong with it. Files are only read.
 from __future__ import annotations
 
 import os
-import zlib
 
+from ..io.read import decompressed
 from .base import MeasuredBRDF, file_error, read_bytes
 from .merl import MERLBRDF, is_merl, read_merl
 from .rgl import RGLBRDF, read_rgl
@@ -23,26 +23,8 @@ from .tensor_file import is_tensor_file, read_tensor_file, write_tensor_file
 from .utia import N_BYTES as UTIA_BYTES
 from .utia import UTIABRDF, is_utia, read_utia
 
-__all__ = ["load", "detect", "MeasuredBRDF", "MERLBRDF", "RGLBRDF", "UTIABRDF",
+__all__ = ["load", "load_bytes", "detect", "MeasuredBRDF", "MERLBRDF", "RGLBRDF", "UTIABRDF",
            "read_tensor_file", "write_tensor_file"]
-
-GZIP_MAGIC = b"\x1f\x8b"
-
-
-def gunzip(data: bytes, path) -> bytes:
-    """Decompress gzip ``data`` (all members); a corrupt or truncated stream is an error."""
-    try:
-        d = zlib.decompressobj(wbits=31)
-        out = d.decompress(data)
-        while d.eof and d.unused_data[:2] == GZIP_MAGIC:        # concatenated members
-            rest = d.unused_data
-            d = zlib.decompressobj(wbits=31)
-            out += d.decompress(rest)
-    except zlib.error as e:
-        raise file_error(path, f"corrupt gzip stream ({e})") from e
-    if not d.eof:
-        raise file_error(path, "truncated gzip stream")
-    return out
 
 
 def detect(data: bytes) -> str:
@@ -73,9 +55,11 @@ def load(path: str | os.PathLike) -> MeasuredBRDF:
     MicrofacetError
         Unreadable or unknown file, bad header or size, truncated data, NaN/inf values.
     """
-    data = read_bytes(path)
-    if data[:2] == GZIP_MAGIC:
-        data = gunzip(data, path)
+    return load_bytes(decompressed(read_bytes(path), path), path)
+
+
+def load_bytes(data: bytes, path: str | os.PathLike) -> MeasuredBRDF:
+    """:func:`load` of the file's uncompressed bytes ``data`` (``path`` names it in errors)."""
     kind = detect(data)
     if kind == "rgl":
         return RGLBRDF(read_rgl(data, path), path)
