@@ -224,15 +224,16 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
     # independent work on threads (NumPy releases the GIL in its array loops): the data's side
     # of the metrics beside the tabulated fit, then the two least-squares fits beside the
-    # metrics of the tabulated and moment fits; every result as computed serially
+    # moment conversions and the metrics of the tabulated and moment fits; every result as
+    # computed serially
     metrics_job = in_background(_metrics, brdf)
     t0 = time.perf_counter()
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
     t1 = time.perf_counter()
-    moments = {"ggx": fit.to_ggx(reference=brdf), "beckmann": fit.to_beckmann(reference=brdf)}
-    first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
     least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight,
                                 coat) for model in (("ggx", "beckmann") if method == "least_squares" else ())]
+    moments = {"ggx": fit.to_ggx(reference=brdf), "beckmann": fit.to_beckmann(reference=brdf)}
+    first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
     metrics = metrics_job.result()
     scores = [_scores(metrics, first)]
     least = [job.result() for job in least_jobs]
