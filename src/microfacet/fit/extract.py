@@ -485,18 +485,19 @@ def spd_solve(h: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-12,
-           max_iter: int = 200) -> np.ndarray:
+           max_iter: int = 200, x0=None) -> np.ndarray:
     """``argmin 1/2 x^T h x - g^T x`` over the box ``lo <= x <= hi`` (``h`` symmetric
     positive definite; ``hi`` may be ``inf``): Bertsekas' projected Newton method (1982)
     -- the Newton step on the variables not held at a bound by the gradient, an Armijo
     search along the projection arc -- until the projected gradient vanishes
     (``|x - P(x - grad)| <= tol |g|``). Exact for the final active set (one Cholesky solve
     per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
-    ``g = r^T y``."""
+    ``g = r^T y``. ``x0``: the start (projected on the box; default the unconstrained
+    minimizer projected), e.g. the solution of a nearby problem, whose active set it guesses."""
     scale = max(float(np.max(np.abs(g))), 1e-300)
     # np.clip, np.ix_, np.linalg.norm and np.array_equal spelled with ufuncs and masks (the
-    # same values): this loop runs ~10^5 times in a coat fit's energy-constrained solves
-    x = np.minimum(np.maximum(spd_solve(h, g), lo), hi)
+    # same values): this loop runs ~10^4 times in a coat fit's energy-constrained solves
+    x = np.minimum(np.maximum(spd_solve(h, g) if x0 is None else x0, lo), hi)
     for _ in range(max_iter):
         grad = h @ x - g
         step = x - np.minimum(np.maximum(x - grad, lo), hi)
@@ -530,10 +531,12 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     the box QP with ``g - a^T lambda`` (:func:`box_qp`), the dual gradient is
     ``a x - a_data`` and its Hessian ``-a_F h_FF^-1 a_F^T`` over the variables ``F``
     strictly inside their bounds; each step maximizes that local quadratic model over
-    ``lambda >= 0`` (itself a small box QP; damped so that the dual never decreases),
-    exact once the free set settles. A remaining
-    violation is removed by scaling ``x`` down (all rows are nonnegative), so the result
-    is feasible."""
+    ``lambda >= 0`` (itself a small box QP, started from the current ``lambda``, so that
+    at the optimum it returns ``lambda`` exactly and the iteration stops: from its
+    unconstrained minimizer it returned it only to rounding, and ~15 more steps in
+    rounding noise followed; damped so that the dual never decreases), exact once the
+    free set settles. A remaining violation is removed by
+    scaling ``x`` down (all rows are nonnegative), so the result is feasible."""
     a, a_data = albedo
     rows = _albedo_rows_of(a, diffuse)
     limit = a_data[:, c]
@@ -545,6 +548,7 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     dual = lambda x, lam: 0.5 * x @ h @ x - g @ x + lam @ (rows @ x - limit)   # noqa: E731
     lam, x = np.zeros(v), x0
     value = dual(x, lam)
+    zero, inf = np.zeros(v), np.full(v, np.inf)
     for _ in range(max_iter):
         gap = rows @ x - limit
         if np.all(gap <= 1e-10 * np.abs(limit)) and np.all(lam * np.abs(gap) <= 1e-10 * np.abs(value)):
@@ -554,7 +558,7 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
         if np.any(free):
             af = rows[:, free]
             m = af @ spd_solve(h[np.ix_(free, free)], af.T)
-        target = box_qp(m + delta * np.eye(v), gap + m @ lam, np.zeros(v), np.full(v, np.inf))
+        target = box_qp(m + delta * np.eye(v), gap + m @ lam, zero, inf, x0=lam)
         step = 1.0
         for _ in range(40):                        # the dual may only increase
             lam_n = lam + step * (target - lam)
