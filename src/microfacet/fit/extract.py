@@ -265,7 +265,8 @@ def _hats(cos_d, n_d: int):
     ``F = (1 - t) F_k + t F_{k+1}``."""
     c = np.clip(np.asarray(cos_d, dtype=np.float64), 0.0, 1.0)
     k0 = np.minimum((np.arccos(c) / (HALF_PI / (n_d - 1))).astype(np.intp), n_d - 2)
-    ca, cb = np.cos(k0 * (HALF_PI / (n_d - 1))), np.cos((k0 + 1) * (HALF_PI / (n_d - 1)))
+    nodes = np.cos(np.arange(n_d) * (HALF_PI / (n_d - 1)))          # gathered, not a cos per value
+    ca, cb = nodes[k0], nodes[k0 + 1]
     return k0, np.clip((ca - c) / (ca - cb), 0.0, 1.0)
 
 
@@ -587,7 +588,7 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``; ``brdf=None``: the model's rows alone
     (``a_data`` None), e.g. to bound a fit's own albedo."""
     from ..brdf import Lambertian
-    from ..geometry import dot, half_vector
+    from ..geometry import dot
 
     u, wo_v, wi_c, pdf_c, k0_c, t_c = _cosine_strategy(n_u, views, n_d)     # the cosine lobe's, kept
     v_count = len(wo_v)
@@ -600,7 +601,8 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     ok = (pdf > 0) & (wi[..., 2] > 0)
     inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
-    k0_s, t_s = _hats(dot(wo_v, half_vector(wi_s, wo_v)), n_d)
+    # cos theta_d = o . h = sqrt((1 + i . o) / 2) for unit i, o (no half vector per sample)
+    k0_s, t_s = _hats(np.sqrt(np.maximum(0.5 * (1.0 + dot(wi_s, wo_v)), 0.0)), n_d)
     k0, t = np.concatenate([k0_s, k0_c], axis=1), np.concatenate([t_s, t_c], axis=1)
     key = (k0 + n_d * np.arange(v_count)[:, None]).ravel()           # node k of view v: v n_d + k
     size = v_count * n_d
