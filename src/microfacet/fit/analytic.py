@@ -278,6 +278,8 @@ class _Problem:
         self.coat_fresnel = coat_fresnel
         self._last = (None, None)
         self._quadratics, self._lobes, self._extras, self._lobe_rows = {}, {}, {}, {}
+        # the coat's Fresnel basis on every pair: the same for every coat roughness
+        self._coat_basis = _coat_basis(coat_fresnel, data.cos_d) if self.coat else None
 
     def distribution(self, q):
         if self.anisotropic:
@@ -347,7 +349,7 @@ class _Problem:
         per coat, which the entry holds, so its ``id`` stays its own)."""
         def make():
             d = self.data
-            extras = ([s_c[:, None] * _coat_basis(self.coat_fresnel, d.cos_d)] if self.coat else []) \
+            extras = ([s_c[:, None] * self._coat_basis] if self.coat else []) \
                 + ([d.lambert[:, None]] if self.diffuse else [])
             E = np.concatenate(extras, axis=-1)
             Ep, Ea = E[:d.m], E[d.m:]
