@@ -423,8 +423,7 @@ def test_energy_constrained_solves_stop_at_their_optimum(monkeypatch):
     def checked_solve(h, g, x0, bounds, albedo, c, diffuse, **kwargs):
         calls["solves"] += 1
         x = energy_constrained(h, g, x0, bounds, albedo, c, diffuse, **kwargs)
-        rows = albedo[0] if diffuse else albedo[0][:, :-1]
-        assert np.all(rows @ x <= albedo[1][:, c] * (1.0 + 1e-9))
+        assert np.all(extract._albedo_rows_of(albedo[0], diffuse) @ x <= albedo[1][:, c] * (1.0 + 1e-9))
         return x
     monkeypatch.setattr(extract, "box_qp", counted_box_qp)
     monkeypatch.setattr(analytic, "_energy_constrained", checked_solve)

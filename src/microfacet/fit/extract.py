@@ -534,10 +534,10 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     strictly inside their bounds; each step maximizes that local quadratic model over
     ``lambda >= 0`` (itself a small box QP, started from the current ``lambda``, so that
     at the optimum it returns ``lambda`` exactly and the iteration stops: from its
-    unconstrained minimizer it returned it only to rounding, and ~15 more steps in
-    rounding noise followed; damped so that the dual never decreases), exact once the
-    free set settles. A remaining violation is removed by
-    scaling ``x`` down (all rows are nonnegative), so the result is feasible."""
+    unconstrained minimizer it returned it only to rounding, and steps in rounding noise
+    followed; damped so that the dual never decreases), exact once the free set settles.
+    A remaining violation is removed by scaling ``x`` down (all rows are nonnegative), so
+    the result is feasible."""
     a, a_data = albedo
     rows = _albedo_rows_of(a, diffuse)
     limit = a_data[:, c]
