@@ -642,26 +642,53 @@ _INF_BITS = np.int64(0x7FF0000000000000)
 
 
 @_jit
+def _deviation_bits(w, m, row, top):
+    """``max(top, bits of | |w_k|^2 - 1 |)`` over the rows ``k < m`` of a flat block ``w``
+    (``3 k + axis``, :func:`_flat_rows`), in float64 as :func:`microfacet.geometry.unit_deviation`
+    (same operations and order: the same values), through the float64 scratch ``row (BLOCK,)``.
+    The maximum is taken over int64 bits (see :data:`_INF_BITS`; an integer maximum vectorizes, a
+    float one that must see NaN does not). Not inlined: no fastmath ``contract`` from the kernel.
+    The kernels call it on each block of their inputs as they read it (in cache), so that the
+    unit-length check of ``MicrofacetBRDF`` costs no pass over memory of its own."""
+    bits = row.view(np.int64)
+    for k in range(m):
+        x, y, z = np.float64(w[3 * k]), np.float64(w[3 * k + 1]), np.float64(w[3 * k + 2])
+        row[k] = abs(x * x + y * y + z * z - 1.0)
+    for k in range(m):
+        top = max(top, bits[k])
+    return top
+
+
+@_jit
+def _deviation(top, row):
+    """The float64 whose bits are ``top`` (:func:`_deviation_bits`), ``inf`` for NaN and inf."""
+    if top >= _INF_BITS:
+        return math.inf
+    row.view(np.int64)[0] = top
+    return row[0]
+
+
+@_jit
+def _outside_unit(u, m):
+    """How many of ``u[:2 m]`` lie outside ``[0, 1]`` (NaN included): the range check of
+    ``MicrofacetBRDF.sample``'s uniforms, on each block as the sample kernel reads it."""
+    n = 0
+    for k in range(2 * m):
+        n += 0 if (u[k] >= 0.0) & (u[k] <= 1.0) else 1
+    return n
+
+
+@_jit
 def _unit_deviation(w):
     """``max | |w|^2 - 1 |`` over the rows of a C-contiguous ``w (n, 3)``; ``inf`` if one is
-    NaN or inf. Through a flat view, a block of deviations at a time, whose maximum is taken
-    over their int64 bits (see :data:`_INF_BITS`; an integer maximum vectorizes, a float one
-    that must see NaN does not)."""
+    NaN or inf (:func:`_deviation_bits` on a flat view, a block at a time)."""
     a = w.reshape(w.size)
-    e = np.empty(BLOCK)
-    bits = e.view(np.int64)
+    row = np.empty(BLOCK)
     top = np.int64(0)
     for j0 in range(0, w.shape[0], BLOCK):
         m = min(BLOCK, w.shape[0] - j0)
-        b = a[3 * j0:3 * (j0 + m)]
-        for k in range(m):
-            e[k] = abs(b[3 * k] * b[3 * k] + b[3 * k + 1] * b[3 * k + 1] + b[3 * k + 2] * b[3 * k + 2] - 1.0)
-        for k in range(m):
-            top = max(top, bits[k])
-    if top >= _INF_BITS:
-        return math.inf
-    bits[0] = top
-    return e[0]
+        top = _deviation_bits(a[3 * j0:3 * (j0 + m)], m, row, top)
+    return _deviation(top, row)
 
 
 def _flat_rows(a, j0, m, scratch):
@@ -726,13 +753,16 @@ def pdf_kernel(kind, dtype=np.float64):
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        buf = np.empty((7, BLOCK), F)
+        buf, dev = np.empty((7, BLOCK), F), np.empty(BLOCK)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
+        top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf)
+            wi_b, wo_b = _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so)
+            top_i, top_o = _deviation_bits(wi_b, m, dev, top_i), _deviation_bits(wo_b, m, dev, top_o)
+            _projected_block(F, kind, False, False, wi_b, wo_b, m, ax, ay, rho, xn, yn, buf)
             out[j0:j0 + m] = buf[1, :m]
+        return _deviation(top_i, dev), _deviation(top_o, dev)
     return kernel
 
 
@@ -744,15 +774,18 @@ def eval_kernel(kind, dtype=np.float64):
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        buf = np.empty((7, BLOCK), F)
+        buf, dev = np.empty((7, BLOCK), F), np.empty(BLOCK)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         out_flat = out.reshape(out.size)
+        top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf)
+            wi_b, wo_b = _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so)
+            top_i, top_o = _deviation_bits(wi_b, m, dev, top_i), _deviation_bits(wo_b, m, dev, top_o)
+            _projected_block(F, kind, shadowing, divide_cos_i, wi_b, wo_b, m, ax, ay, rho, xn, yn, buf)
             _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
             _interleave(buf[2:5], m, out_flat[3 * j0:3 * (j0 + m)])
+        return _deviation(top_i, dev), _deviation(top_o, dev)
     return kernel
 
 
@@ -769,12 +802,14 @@ def sample_kernel(kind, dtype=np.float64):
         buf = np.empty((11, BLOCK), F)
         bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
+        outside, top_o = 0, np.int64(0)
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
         r7, r8, r9, r10 = buf[7], buf[8], buf[9], buf[10]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
+            outside, top_o = outside + _outside_unit(u_b, m), _deviation_bits(wo_b, m, bk[0], top_o)
             for k in range(m):                       # polar angle and azimuth of the warped view
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 a = ax * ox + rho * ay * oy
@@ -824,4 +859,5 @@ def sample_kernel(kind, dtype=np.float64):
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, buf[3:6], m)
             _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
             _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
+        return outside, _deviation(top_o, bk[0])
     return kernel
