@@ -317,22 +317,23 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out_rows, m):
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, dev):
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev):
     """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
-    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays, and
-    writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`) to the float64
-    rows ``dev[0]``, ``dev[1]``."""
+    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays; if
+    ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
+    to the float64 rows ``dev[0]``, ``dev[1]``."""
     s1 = math.sqrt(F(1.0) - rho * rho)
     oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     dev_i, dev_o = dev[0], dev[1]
     for k in range(m):
         ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
         ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
-        dev_i[k], dev_o[k] = _deviation_at(wi, k), _deviation_at(wo, k)
+        if measure:
+            dev_i[k], dev_o[k] = _deviation_at(wi, k), _deviation_at(wo, k)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
@@ -667,8 +668,11 @@ def _max_bits(row, m, top):
 
 
 @_jit
-def _deviation(top, row):
-    """The float64 whose bits are ``top`` (:func:`_max_bits`), ``inf`` for NaN and inf."""
+def _deviation(top, row, measured=True):
+    """The float64 whose bits are ``top`` (:func:`_max_bits`), ``inf`` for NaN and inf; NaN if
+    not ``measured``."""
+    if not measured:
+        return math.nan
     if top >= _INF_BITS:
         return math.inf
     row.view(np.int64)[0] = top
@@ -749,7 +753,7 @@ def projected_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, dev)
+                             m, ax, ay, rho, xn, yn, buf, False, dev)
             oh_out[j0:j0 + m] = buf[0, :m]
             s_out[j0:j0 + m] = buf[1, :m]
     return kernel
@@ -760,6 +764,7 @@ def pdf_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
     F = np.dtype(dtype).type
+    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
@@ -769,10 +774,11 @@ def pdf_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, dev)
-            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
+                             m, ax, ay, rho, xn, yn, buf, measure, dev)
+            if measure:
+                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             out[j0:j0 + m] = buf[1, :m]
-        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
+        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
     return kernel
 
 
@@ -781,6 +787,7 @@ def eval_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
     F = np.dtype(dtype).type
+    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
@@ -791,11 +798,12 @@ def eval_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, dev)
-            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
+                             m, ax, ay, rho, xn, yn, buf, measure, dev)
+            if measure:
+                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
             _interleave(buf[2:5], m, out_flat[3 * j0:3 * (j0 + m)])
-        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
+        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
     return kernel
 
 
@@ -805,6 +813,7 @@ def sample_kernel(kind, dtype=np.float64):
     visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
     F = np.dtype(dtype).type
+    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
@@ -822,7 +831,8 @@ def sample_kernel(kind, dtype=np.float64):
             outside += _outside_unit(u_b, m)
             for k in range(m):                       # polar angle and azimuth of the warped view
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
-                dev_o[k] = _deviation_at(wo_b, k)
+                if measure:
+                    dev_o[k] = _deviation_at(wo_b, k)
                 a = ax * ox + rho * ay * oy
                 b = ay * s1 * oy
                 c = max(oz - ox * xn - oy * yn, F(0.0))
@@ -831,7 +841,8 @@ def sample_kernel(kind, dtype=np.float64):
                 r0[k] = (c if r2_o > F(0.0) else F(1.0)) / math.sqrt(r2_o + c * c if r2_o > F(0.0) else F(1.0))
                 r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
                 r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
-            top_o = _max_bits(dev_o, m, top_o)
+            if measure:
+                top_o = _max_bits(dev_o, m, top_o)
             if kind == GGX:                          # the standard visible normal
                 for k in range(m):
                     r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u_b[2 * k]), F(u_b[2 * k + 1]), r0[k])
@@ -871,5 +882,5 @@ def sample_kernel(kind, dtype=np.float64):
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, buf[3:6], m)
             _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
             _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
-        return outside, _deviation(top_o, dev_o)
+        return outside, _deviation(top_o, dev_o, measure)
     return kernel
