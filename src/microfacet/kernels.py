@@ -11,6 +11,10 @@ release the GIL), each working through its range in cache-sized blocks, so the o
 memory a call allocates is its outputs (broadcast inputs are copied a block at a time).
 The arithmetic and outputs are float64, or float32 for ``MicrofacetBRDF(...,
 dtype=np.float32)`` (kernels compiled per dtype; float32 inputs are read as they are).
+The eval, pdf and sample kernels also measure their inputs' checks as they read them (the
+unit-length deviations of ``wi``, ``wo`` in float64, the uniforms ``u`` outside ``[0, 1]``) and
+return them per task (:func:`_checks`), so that ``MicrofacetBRDF`` raises its ``ValueError``
+without a pass of its own over the inputs.
 
 Numba is imported, and each kernel compiled (or loaded from Numba's on-disk cache,
 ``cache=True``), on first use, not when :mod:`microfacet` is imported: the kernels live
