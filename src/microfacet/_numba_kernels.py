@@ -650,9 +650,9 @@ _INF_BITS = np.int64(0x7FF0000000000000)
 def _deviation_at(w, k):
     """``| |w_k|^2 - 1 |`` of row ``k`` of a flat block ``w`` (``3 k + axis``, :func:`_flat_rows`)
     in float64, as :func:`microfacet.geometry.unit_deviation` (same operations, same order: the
-    same value; fused multiply-adds in the float32 kernels change nothing for float32 inputs,
-    whose squares are exact in float64). The kernels compute it in the loop that reads the
-    block, so that ``MicrofacetBRDF``'s unit-length check takes no pass of its own."""
+    same value). The float64 kernels compute it in the loop that reads the block, so that
+    ``MicrofacetBRDF``'s unit-length check takes no pass of its own (the float32 kernels do not:
+    float64 arithmetic in their loops halved their SIMD width, GGX eval 2.0 -> 2.8 ms per 10^6)."""
     x, y, z = np.float64(w[3 * k]), np.float64(w[3 * k + 1]), np.float64(w[3 * k + 2])
     return abs(x * x + y * y + z * z - 1.0)
 
@@ -762,7 +762,8 @@ def projected_kernel(kind, dtype=np.float64):
 @functools.cache
 def pdf_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
-    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
+    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair; returns the
+    largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`; NaN in float32)."""
     F = np.dtype(dtype).type
     measure = F is np.float64
 
@@ -785,7 +786,8 @@ def pdf_kernel(kind, dtype=np.float64):
 @functools.cache
 def eval_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
-    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
+    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2);
+    returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
     measure = F is np.float64
 
@@ -811,7 +813,8 @@ def eval_kernel(kind, dtype=np.float64):
 def sample_kernel(kind, dtype=np.float64):
     """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
     visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
-    ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
+    ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``;
+    returns how many of its ``u`` lie outside ``[0, 1]`` and the deviation of its ``wo``."""
     F = np.dtype(dtype).type
     measure = F is np.float64
 
