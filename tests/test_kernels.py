@@ -82,10 +82,10 @@ def test_fused_eval_pdf_sample_match_numpy(D, kw, fresnel, shadowing):
     u[:4] = [[0.0, 0.0], [1.0, 1.0], [0.5, 0.5], [0.0, 1.0]]                # corners of the square
     for divide in (False, True):
         oh, s = brdf._projected_numpy(wi, wo, divide)
-        fast = kernels.smith_eval(brdf, wi, wo, divide)
+        fast = kernels.smith_eval(brdf, wi, wo, divide)[0]
         np.testing.assert_allclose(fast, fresnel(oh) * s[:, None], rtol=1e-12, atol=1e-300)   # subnormals keep fewer digits
-    np.testing.assert_allclose(kernels.smith_pdf(brdf, wi, wo), brdf._pdf_numpy(wi, wo), rtol=1e-12, atol=1e-300)   # subnormals keep fewer digits
-    wi_s, weight, pdf = kernels.smith_sample(brdf, u, wo)
+    np.testing.assert_allclose(kernels.smith_pdf(brdf, wi, wo)[0], brdf._pdf_numpy(wi, wo), rtol=1e-12, atol=1e-300)   # subnormals keep fewer digits
+    wi_s, weight, pdf = kernels.smith_sample(brdf, u, wo)[0]
     wi_r, weight_r, pdf_r = brdf._sample_numpy(u, wo)
     np.testing.assert_allclose(wi_s, wi_r, rtol=0, atol=1e-12)
     np.testing.assert_allclose(pdf, pdf_r, rtol=1e-12, atol=1e-300)   # subnormals keep fewer digits
@@ -301,3 +301,62 @@ def test_kernels_read_any_layout(dtype):
         np.testing.assert_array_equal(fast, ref)
     for fast, ref in zip(brdf.sample(u, wo), brdf.sample(u, np.ascontiguousarray(wo))):
         np.testing.assert_array_equal(fast, ref)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=lambda t: np.dtype(t).name)
+def test_input_checks_fused_into_the_kernels(dtype, monkeypatch):
+    """eval, eval_cos, pdf and sample check their inputs in the kernels' pass (float64: no pass
+    of their own, ``kernels.unit_deviation`` is not called; float32: the uniforms only) and raise
+    the errors of ``_dirs`` / ``_uniforms``, message for message, for one bad value at the start,
+    in the middle or at the end of a batch run as several tasks, or in a broadcast input; values
+    within the tolerance pass."""
+    from microfacet.brdf import UNIT_TOLERANCE, _dirs as dirs, _uniforms as uniforms
+    from microfacet.geometry import unit_deviation
+    f32 = dtype == np.float32
+    monkeypatch.setattr(kernels, "threads", lambda: 2)            # tasks on 2 threads, also where Numba has 1
+    if not f32:
+        monkeypatch.setattr(kernels, "unit_deviation", None)      # a separate pass would fail
+    rng = np.random.default_rng(11)
+    n = 3 * kernels.PARALLEL_MIN + 5
+    assert min(8, n // kernels.TASK_MIN) == 6
+    brdf = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.5), fresnel=mf.fresnel.Conductor.metal("Cu"), dtype=dtype)
+    wi, wo, u = _dirs(rng, n).astype(dtype), _dirs(rng, n).astype(dtype), rng.random((n, 2)).astype(dtype)
+    u[:2] = [[0.0, 1.0], [1.0, 0.0]]                              # both ends are accepted
+    for scale2 in (1 + 0.9 * UNIT_TOLERANCE, 1 - 0.9 * UNIT_TOLERANCE):
+        w = wi.copy()
+        w[n // 2] = (w[n // 2] * np.sqrt(scale2)).astype(dtype)
+        assert np.all(np.isfinite(brdf.eval(w, wo))) and np.all(np.isfinite(brdf.pdf(wo, w)))
+    assert np.all(np.isfinite(brdf.sample(u, wo)[1]))
+    measured = {"wi": unit_deviation(wi), "wo": unit_deviation(wo)}               # the NumPy values, exactly
+    assert kernels.smith_eval(brdf, wi, wo, True, dtype)[1] == ({} if f32 else measured)
+    assert kernels.smith_sample(brdf, u, wo, dtype)[1] == ({"u": 0} if f32 else {"u": 0, "wo": measured["wo"]})
+
+    def reference(f, *args):
+        with pytest.raises(ValueError) as e:
+            f(*args)
+        return str(e.value)
+
+    monkeypatch.setattr(kernels, "unit_deviation", unit_deviation)                # for the references
+    bad_dirs = ([0.0, 0.0, 1.0 + 1.1 * UNIT_TOLERANCE / 2], [0.0, np.nan, 1.0], [np.inf, 0.0, 0.0], [0.0, 0.0, 0.0])
+    for k in (0, n // 2 + 7, n - 1):
+        for bad in bad_dirs:
+            w = wi.copy()
+            w[k] = bad
+            ref = reference(dirs, w, "wi", f32)
+            for method in (brdf.eval, brdf.eval_cos, brdf.pdf):
+                assert reference(method, w, wo) == ref
+                assert reference(method, wo, w) == ref.replace("wi ", "wo ", 1)
+            assert reference(brdf.sample, u, w) == ref.replace("wi ", "wo ", 1)
+        for bad in (1.5, -0.1, np.nan):
+            v = u.copy()
+            v[k, 1] = bad
+            assert reference(brdf.sample, v, wo) == reference(uniforms, v, f32)
+    # broadcast inputs, copied block by block: (m, 1, 3) against (1, l, 3), one direction against all
+    w = wi[:600, None].copy()
+    w[400, 0] = [0.0, 0.6, 0.9]
+    assert reference(brdf.eval, w, wo[None, :300]) == reference(dirs, w, "wi", f32)
+    assert reference(brdf.pdf, wo[None, :300], w) == reference(dirs, w, "wo", f32)
+    one = np.array([0.0, 0.0, 1.01], dtype)
+    assert reference(brdf.eval, wi, one) == reference(brdf.sample, u, one) == reference(dirs, one, "wo", f32)
+    v = np.array([0.5, 1.01], dtype)
+    assert reference(brdf.sample, v, wo) == reference(uniforms, v, f32)

@@ -317,18 +317,23 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out_rows, m):
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf):
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev):
     """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
-    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays."""
+    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays; if
+    ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
+    to the float64 rows ``dev[0]``, ``dev[1]``."""
     s1 = math.sqrt(F(1.0) - rho * rho)
     oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
+    dev_i, dev_o = dev[0], dev[1]
     for k in range(m):
         ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
         ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
+        if measure:
+            dev_i[k], dev_o[k] = _deviation_at(wi, k), _deviation_at(wo, k)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
@@ -641,27 +646,63 @@ BLOCK = 256
 _INF_BITS = np.int64(0x7FF0000000000000)
 
 
+@_inline
+def _deviation_at(w, k):
+    """``| |w_k|^2 - 1 |`` of row ``k`` of a flat block ``w`` (``3 k + axis``, :func:`_flat_rows`)
+    in float64, as :func:`microfacet.geometry.unit_deviation` (same operations, same order: the
+    same value). The float64 kernels compute it in the loop that reads the block, so that
+    ``MicrofacetBRDF``'s unit-length check takes no pass of its own (the float32 kernels do not:
+    float64 arithmetic in their loops halved their SIMD width, GGX eval 2.0 -> 2.8 ms per 10^6)."""
+    x, y, z = np.float64(w[3 * k]), np.float64(w[3 * k + 1]), np.float64(w[3 * k + 2])
+    return abs(x * x + y * y + z * z - 1.0)
+
+
+@_inline
+def _max_bits(row, m, top):
+    """``max(top, int64 bits of row[:m])`` for non-negative float64 ``row`` (:func:`_deviation_at`):
+    see :data:`_INF_BITS` (an integer maximum vectorizes, a float one that must see NaN does not)."""
+    bits = row.view(np.int64)
+    for k in range(m):
+        top = max(top, bits[k])
+    return top
+
+
+@_jit
+def _deviation(top, row, measured=True):
+    """The float64 whose bits are ``top`` (:func:`_max_bits`), ``inf`` for NaN and inf; NaN if
+    not ``measured``."""
+    if not measured:
+        return math.nan
+    if top >= _INF_BITS:
+        return math.inf
+    row.view(np.int64)[0] = top
+    return row[0]
+
+
+@_jit
+def _outside_unit(u, m):
+    """How many of ``u[:2 m]`` lie outside ``[0, 1]`` (NaN included): the range check of
+    ``MicrofacetBRDF.sample``'s uniforms, on each block as the sample kernel reads it."""
+    n = 0
+    for k in range(2 * m):
+        n += 0 if (u[k] >= 0.0) & (u[k] <= 1.0) else 1
+    return n
+
+
 @_jit
 def _unit_deviation(w):
     """``max | |w|^2 - 1 |`` over the rows of a C-contiguous ``w (n, 3)``; ``inf`` if one is
-    NaN or inf. Through a flat view, a block of deviations at a time, whose maximum is taken
-    over their int64 bits (see :data:`_INF_BITS`; an integer maximum vectorizes, a float one
-    that must see NaN does not)."""
+    NaN or inf (:func:`_deviation_at`, :func:`_max_bits` on a flat view, a block at a time)."""
     a = w.reshape(w.size)
-    e = np.empty(BLOCK)
-    bits = e.view(np.int64)
+    row = np.empty(BLOCK)
     top = np.int64(0)
     for j0 in range(0, w.shape[0], BLOCK):
         m = min(BLOCK, w.shape[0] - j0)
         b = a[3 * j0:3 * (j0 + m)]
         for k in range(m):
-            e[k] = abs(b[3 * k] * b[3 * k] + b[3 * k + 1] * b[3 * k + 1] + b[3 * k + 2] * b[3 * k + 2] - 1.0)
-        for k in range(m):
-            top = max(top, bits[k])
-    if top >= _INF_BITS:
-        return math.inf
-    bits[0] = top
-    return e[0]
+            row[k] = _deviation_at(b, k)
+        top = _max_bits(row, m, top)
+    return _deviation(top, row)
 
 
 def _flat_rows(a, j0, m, scratch):
@@ -707,12 +748,12 @@ def projected_kernel(kind, dtype=np.float64):
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        buf = np.empty((7, BLOCK), F)
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf)
+                             m, ax, ay, rho, xn, yn, buf, False, dev)
             oh_out[j0:j0 + m] = buf[0, :m]
             s_out[j0:j0 + m] = buf[1, :m]
     return kernel
@@ -721,38 +762,50 @@ def projected_kernel(kind, dtype=np.float64):
 @functools.cache
 def pdf_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
-    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair."""
+    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair; returns the
+    largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`; NaN in float32)."""
     F = np.dtype(dtype).type
+    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        buf = np.empty((7, BLOCK), F)
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
+        top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf)
+                             m, ax, ay, rho, xn, yn, buf, measure, dev)
+            if measure:
+                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             out[j0:j0 + m] = buf[1, :m]
+        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
     return kernel
 
 
 @functools.cache
 def eval_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
-    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2)."""
+    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2);
+    returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
+    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        buf = np.empty((7, BLOCK), F)
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         out_flat = out.reshape(out.size)
+        top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf)
+                             m, ax, ay, rho, xn, yn, buf, measure, dev)
+            if measure:
+                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
             _interleave(buf[2:5], m, out_flat[3 * j0:3 * (j0 + m)])
+        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
     return kernel
 
 
@@ -760,8 +813,10 @@ def eval_kernel(kind, dtype=np.float64):
 def sample_kernel(kind, dtype=np.float64):
     """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
     visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
-    ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``."""
+    ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``;
+    returns how many of its ``u`` lie outside ``[0, 1]`` and the deviation of its ``wo``."""
     F = np.dtype(dtype).type
+    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
@@ -769,14 +824,18 @@ def sample_kernel(kind, dtype=np.float64):
         buf = np.empty((11, BLOCK), F)
         bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
+        outside, top_o, dev_o = 0, np.int64(0), bk[0]
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
         r7, r8, r9, r10 = buf[7], buf[8], buf[9], buf[10]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
+            outside += _outside_unit(u_b, m)
             for k in range(m):                       # polar angle and azimuth of the warped view
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
+                if measure:
+                    dev_o[k] = _deviation_at(wo_b, k)
                 a = ax * ox + rho * ay * oy
                 b = ay * s1 * oy
                 c = max(oz - ox * xn - oy * yn, F(0.0))
@@ -785,6 +844,8 @@ def sample_kernel(kind, dtype=np.float64):
                 r0[k] = (c if r2_o > F(0.0) else F(1.0)) / math.sqrt(r2_o + c * c if r2_o > F(0.0) else F(1.0))
                 r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
                 r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
+            if measure:
+                top_o = _max_bits(dev_o, m, top_o)
             if kind == GGX:                          # the standard visible normal
                 for k in range(m):
                     r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u_b[2 * k]), F(u_b[2 * k + 1]), r0[k])
@@ -824,4 +885,5 @@ def sample_kernel(kind, dtype=np.float64):
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, buf[3:6], m)
             _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
             _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
+        return outside, _deviation(top_o, dev_o, measure)
     return kernel

@@ -27,41 +27,94 @@ GAFS = ("smith", "vgroove", "normal_map")
 UNIT_TOLERANCE = 1e-5
 
 
-def _dirs(w, name: str, float32: bool = False) -> np.ndarray:
-    """``w`` as float64 unit directions ``(..., 3)`` (the convention of every BRDF method);
-    float32 arrays stay float32 if ``float32`` (for the compiled kernels, which read either).
-
-    Raises ``ValueError`` naming ``name`` if the last axis is not 3, or a vector is not
-    unit length within :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included).
-    The check is one compiled pass (:func:`microfacet.kernels.unit_deviation`)."""
+def _as_dirs(w, name: str, float32: bool = False) -> np.ndarray:
+    """``w`` as float64 directions ``(..., 3)`` (float32 arrays stay float32 if ``float32``, for
+    the compiled kernels, which read either); ``ValueError`` naming ``name`` if the last axis is not 3."""
     w = np.asarray(w)
     if not (float32 and w.dtype == np.float32):
         w = w.astype(np.float64, copy=False)
     if w.shape[-1:] != (3,):
         raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
-    if not kernels.unit_deviation(w) <= UNIT_TOLERANCE:
+    return w
+
+
+def _check_unit(w, name: str, deviation=None) -> None:
+    """``ValueError`` naming ``name`` if a vector of ``w`` is not unit length within
+    :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included). ``deviation``: the largest
+    ``| |w|^2 - 1 |`` if a kernel measured it while reading ``w``, else one compiled pass
+    (:func:`microfacet.kernels.unit_deviation`)."""
+    if deviation is None:
+        deviation = kernels.unit_deviation(w)
+    if not deviation <= UNIT_TOLERANCE:
         n2 = np.sum(w * w, axis=-1)
         bad = np.argwhere(~(np.abs(n2 - 1.0) <= UNIT_TOLERANCE))[0]
         where = f" at index {tuple(bad.tolist())}" if w.ndim > 1 else ""
         raise ValueError(f"{name} must be unit vectors (| |w|^2 - 1 | <= {UNIT_TOLERANCE:g}; "
                          f"normalize them first), got {w[tuple(bad)].tolist()} of length "
                          f"{np.sqrt(n2[tuple(bad)]):.9g}{where}")
+
+
+def _dirs(w, name: str, float32: bool = False) -> np.ndarray:
+    """``w`` as unit directions ``(..., 3)`` (the convention of every BRDF method): :func:`_as_dirs`
+    and :func:`_check_unit`."""
+    w = _as_dirs(w, name, float32)
+    _check_unit(w, name)
     return w
 
 
-def _uniforms(u, float32: bool = False) -> np.ndarray:
-    """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]`` (float32 arrays stay float32 if
-    ``float32``); ``ValueError`` otherwise (NaN too)."""
+def _as_uniforms(u, float32: bool = False) -> np.ndarray:
+    """``u`` as float64 uniforms ``(..., 2)`` (float32 arrays stay float32 if ``float32``);
+    ``ValueError`` if the last axis is not 2."""
     u = np.asarray(u)
     if not (float32 and u.dtype == np.float32):
         u = u.astype(np.float64, copy=False)
     if u.shape[-1:] != (2,):
         raise ValueError(f"u must have a last axis of size 2, got shape {u.shape}")
-    if u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0):
-        bad = ~((u >= 0.0) & (u <= 1.0))
-        raise ValueError(f"u must lie in [0, 1] (uniform random numbers), got {float(u[bad][0])!r} "
-                         f"({int(bad.sum())} value(s) outside)")
     return u
+
+
+def _check_uniforms(u, name: str = "u", outside=None) -> None:
+    """``ValueError`` if a value of ``u`` lies outside ``[0, 1]`` (NaN too). ``outside``: nonzero
+    if a kernel found one while reading ``u``, else two NumPy passes."""
+    if outside is None:
+        outside = u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0)
+    if outside:
+        bad = ~((u >= 0.0) & (u <= 1.0))
+        raise ValueError(f"{name} must lie in [0, 1] (uniform random numbers), got {float(u[bad][0])!r} "
+                         f"({int(bad.sum())} value(s) outside)")
+
+
+def _uniforms(u, float32: bool = False) -> np.ndarray:
+    """``u`` as uniforms ``(..., 2)`` in ``[0, 1]``: :func:`_as_uniforms` and :func:`_check_uniforms`."""
+    u = _as_uniforms(u, float32)
+    _check_uniforms(u)
+    return u
+
+
+def _fused(kernel, float32: bool, **inputs):
+    """``(arrays, result)``: ``inputs`` (directions ``wi``/``wo``, uniforms ``u``; keyword order
+    is the order of their checks) converted as by :func:`_dirs` / :func:`_uniforms`, and the
+    result of ``kernel(**arrays)``, a :mod:`microfacet.kernels` function that returns ``(result,
+    checks)`` (the inputs' measures, taken while it read them: no pass of their own) or ``None``
+    where it does not apply (then ``result`` is ``None`` and the inputs are checked here).
+    A bad input raises the ``ValueError`` of :func:`_dirs` / :func:`_uniforms`, whose messages are
+    built from the inputs, after the kernel (its outputs are dropped); a malformed input or shapes
+    that do not broadcast raise after the checks of the inputs before them, as :func:`_dirs`
+    called in turn would."""
+    arrays = {}
+    checks = {name: _check_uniforms if name == "u" else _check_unit for name in inputs}
+    try:
+        for name, value in inputs.items():
+            arrays[name] = _as_uniforms(value, float32) if name == "u" else _as_dirs(value, name, float32)
+        fast = kernel(**arrays)
+    except ValueError:
+        for name, a in arrays.items():
+            checks[name](a, name)
+        raise
+    measures = {} if fast is None else fast[1]
+    for name, a in arrays.items():
+        checks[name](a, name, measures.get(name))
+    return arrays, None if fast is None else fast[0]
 
 
 class BRDF:
@@ -253,12 +306,11 @@ class MicrofacetBRDF(BRDF):
         """``F D G / (4 z_o) [/ z_i]``: one compiled pass for Smith BRDFs with scalar
         parameters and a :mod:`microfacet.fresnel` term (:func:`microfacet.kernels.smith_eval`),
         :meth:`_projected` times the Fresnel term otherwise (the reference)."""
-        f32 = self.dtype == np.float32
-        wi, wo = _dirs(wi, "wi", f32), _dirs(wo, "wo", f32)
-        fast = kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype)
+        d, fast = _fused(lambda wi, wo: kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype),
+                         self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
-        oh, s = self._projected_unit(wi.astype(np.float64, copy=False), wo.astype(np.float64, copy=False),
+        oh, s = self._projected_unit(d["wi"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False),
                                      divide_cos_i)
         return (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False)
 
@@ -273,13 +325,12 @@ class MicrofacetBRDF(BRDF):
     def pdf(self, wi, wo) -> np.ndarray:
         """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
         pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
-        f32 = self.dtype == np.float32
-        wi, wo = _dirs(wi, "wi", f32), _dirs(wo, "wo", f32)
-        fast = kernels.smith_pdf(self, wi, wo, self.dtype)
+        d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype), self.dtype == np.float32,
+                         wi=wi, wo=wo)
         if fast is not None:
             return fast
-        return self._pdf_numpy(wi.astype(np.float64, copy=False),
-                               wo.astype(np.float64, copy=False)).astype(self.dtype, copy=False)
+        return self._pdf_numpy(d["wi"].astype(np.float64, copy=False),
+                               d["wo"].astype(np.float64, copy=False)).astype(self.dtype, copy=False)
 
     def _pdf_numpy(self, wi, wo) -> np.ndarray:
         """NumPy reference of :meth:`pdf` (unit ``wi``, ``wo``)."""
@@ -306,12 +357,11 @@ class MicrofacetBRDF(BRDF):
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
         :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
-        f32 = self.dtype == np.float32
-        wo, u = _dirs(wo, "wo", f32), _uniforms(u, f32)
-        fast = kernels.smith_sample(self, u, wo, self.dtype)
+        d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype), self.dtype == np.float32,
+                         wo=wo, u=u)
         if fast is not None:
             return fast
-        out = self._sample_numpy(u.astype(np.float64, copy=False), wo.astype(np.float64, copy=False))
+        out = self._sample_numpy(d["u"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False))
         return tuple(a.astype(self.dtype, copy=False) for a in out)
 
     def _sample_numpy(self, u, wo):
