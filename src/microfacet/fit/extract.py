@@ -194,7 +194,7 @@ def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndar
     Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
     as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal."""
     _check_model(model)
-    n, m = len(theta), len(phi)
+    m = len(phi)
     if not np.allclose(phi, np.arange(m) * (2.0 * np.pi / m), atol=1e-12):
         raise ValueError("smith_kernel_anisotropic needs the uniform azimuths 2 pi k / m")
     cos_o = np.repeat(np.cos(theta[:-1]), m)
