@@ -153,7 +153,7 @@ def _write_all(files: dict) -> None:
 
 
 def _least_squares_fit(brdf, fit, model: str, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
-                  coat: bool = False) -> tuple[str, object, float]:
+                       coat: bool = False) -> tuple[str, object, float]:
     """``(name, fit, end time)``: the least-squares fit of ``model`` named as ``ggx``,
     ``ggx_diffuse``, ``beckmann_coat_diffuse``, ... and the ``time.perf_counter()`` it ended at.
     ``diffuse="auto"``: one fit with a base, the base dropped where it fits to less than
