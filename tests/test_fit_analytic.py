@@ -120,19 +120,20 @@ def test_table_coat_recovers_a_second_metallic_lobe():
     """A coat with a 7-node Fresnel table (the default ``coat_fresnel``) fits a second
     lobe whose Fresnel term falls towards grazing (as gold-metallic-paint's, which Schlick's
     ``f0, f90`` cannot follow): both roughnesses within 1 % and the sharp lobe's table
-    within 0.01; the Schlick coat misses it by > 10x the table coat's error."""
+    within 0.01, the grid error at the optimizer's tolerance. (A Schlick coat fits it as
+    well here, by taking the rough lobe's constant Fresnel term: both fits' errors are
+    ~1e-8 to 1e-7, no test of which is the better.)"""
     from microfacet.fit.analytic import TABLE_NODES
     falling = np.interp(TABLE_NODES, [0.0, 0.5, 1.0], [0.0, 0.15, 0.25])[:, None] * [1.0, 0.7, 0.3]
     truth = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.35), fresnel=mf.fresnel.Tabulated(
                         TABLE_NODES, np.repeat([[0.3, 0.2, 0.05]], len(TABLE_NODES), 0))),
                     mf.MicrofacetBRDF(mf.GGX(alpha=0.08), fresnel=mf.fresnel.Tabulated(TABLE_NODES, falling)))
     start = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
-    fits = {c: fit_analytic(truth, "ggx", coat=True, coat_fresnel=c, start=start, **FAST) for c in ("table", "schlick")}
-    sharp, rough = sorted(fits["table"].brdfs, key=lambda b: float(b.distribution.alpha_x))
+    fit = fit_analytic(truth, "ggx", coat=True, start=start, **FAST)
+    sharp, rough = sorted(fit.brdfs, key=lambda b: float(b.distribution.alpha_x))
     assert abs(rough.distribution.alpha_x / 0.35 - 1.0) < 0.01 and abs(sharp.distribution.alpha_x / 0.08 - 1.0) < 0.01
     np.testing.assert_allclose(sharp.fresnel(TABLE_NODES), falling, atol=0.01)
-    e = fit_error(truth, fits, n=16)
-    assert 10.0 * e["table"] < e["schlick"]
+    assert fit_error(truth, fit, n=16)["fit"] < 1e-6
     with pytest.raises(ValueError, match="coat_fresnel must be one of"):
         fit_analytic(truth, "ggx", coat=True, coat_fresnel="conductor", **FAST)
 

@@ -17,14 +17,16 @@ data's energy, not only its shape.
 Variable projection, in node space. For given shape parameters ``q`` (``log alpha_x``,
 ``log alpha_y``, ``rho``; then ``log alpha_c`` of a coat) the model is
 ``s(q) F(cos theta_d) [+ s_c(q) F_c(cos theta_d)] + k_d cos theta_i / pi`` with
-``s = D G / (4 cos theta_o)`` and ``F_c = sum_b c_b B_b`` (:func:`_coat_basis`); ``F`` enters only through its values
-``v`` at the 91 :data:`FRESNEL_NODES` (1 deg apart in ``theta_d``; piecewise linear in
-``cos theta_d``: exact for the table, whose 7 nodes are among them, within 1e-3 for Schlick
-and conductors). So the objective is, per channel, a quadratic form in
+``s = D G / (4 cos theta_o)`` and ``F_c = sum_b c_b B_b`` (:func:`_coat_basis`); ``F`` and
+``F_c`` enter only through their values ``v`` and ``B c`` at the 91 :data:`FRESNEL_NODES`
+(1 deg apart in ``theta_d``; piecewise linear in ``cos theta_d``: exact for the tables,
+whose 7 nodes are among them, within 1e-3 for Schlick and conductors; the fitted coat is
+tabulated there). So the objective is, per channel, a quadratic form in
 ``x = (v, c, k_d)`` whose matrix and vector are sums over pairs accumulated into
-the nodes once per ``q`` (the pairs are sorted by Fresnel node, each sum one
-``np.add.reduceat``; the matrix is banded): one evaluation of ``s`` (and ``s_c``) on the
-pairs and the albedo nodes per ``q``, nothing else per pair. The linear coefficients
+the nodes once per lobe and per ``q`` (the pairs are sorted by Fresnel node, each sum one
+``np.add.reduceat``; the blocks of ``F`` and ``F_c`` are tridiagonal): one evaluation of
+``s`` (and ``s_c``) on the pairs and the albedo nodes per lobe, and the cross sums of
+``s s_c`` per ``q``, nothing else per pair. The linear coefficients
 (Schlick ``F0``, table values, the coat's ``c``, ``k_d``, each in ``[0, 1]``) are then
 solved exactly on that small system (a box QP, :func:`.extract.box_qp`, where a bound is
 active) under the energy constraint: at every view of :data:`ENERGY_VIEWS_DEG` and per
@@ -43,6 +45,7 @@ both refined together.
 from __future__ import annotations
 
 import weakref
+from typing import NamedTuple
 
 import numpy as np
 
@@ -219,7 +222,6 @@ class _Data:
         self.w_albedo_hat = w_a[:, None] * hats[m:]
         self.view, self.w_albedo = view, w_a
         self.lambert = np.clip(self.wi[:, 2], 0.0, None) / np.pi            # k_d cos theta_i / pi
-        self.cos_d = np.clip(oh, 0.0, 1.0)                                  # the coat's Fresnel
         self.wref = self.w[:, None] * ref                                    # w f_ref
         self.ref2 = np.sum(self.wref * ref, axis=0)         # sum w f_ref^2 per channel
 
@@ -238,6 +240,25 @@ class _Groups:
         if len(self.keys):
             out[self.keys] = np.add.reduceat(values, self.starts, axis=0)
         return out
+
+
+class _LobeSums(NamedTuple):
+    """A lobe's terms of :meth:`_Problem.quadratic`: ``s = D G / (4 cos theta_o)`` on the
+    pairs ``(m,)`` (0 where invalid); per left node ``j`` the sums ``sum w s^2`` of the hat
+    products ``hat_j^2, hat_{j+1}^2, hat_j hat_{j+1}`` ``(n, 3)``; ``sum w s hat_k f_ref``
+    ``(3, n)``; the albedo rows ``sum w_a s hat_k`` per view ``(V, n)``; with a base,
+    ``sum w s hat_k L`` ``(n,)`` (else None)."""
+    s: np.ndarray
+    s2: np.ndarray
+    g: np.ndarray
+    rows: np.ndarray
+    lambert: np.ndarray | None
+
+
+def _tridiagonal(s2: np.ndarray) -> np.ndarray:
+    """``(n, n)``: ``sum w s s' hat_j hat_k`` from its sums per left node ``(n, 3)``
+    (:class:`_LobeSums`): each pair touches nodes ``j, j + 1`` only."""
+    return np.diag(_spread(s2[:, :2])) + np.diag(s2[:-1, 2], 1) + np.diag(s2[:-1, 2], -1)
 
 
 def _spread(sums: np.ndarray) -> np.ndarray:
@@ -277,9 +298,9 @@ class _Problem:
         self.coat = bool(coat)
         self.coat_fresnel = coat_fresnel
         self._last = (None, None)
-        self._quadratics, self._lobes, self._extras, self._lobe_rows = {}, {}, {}, {}
-        # the coat's Fresnel basis on every pair: the same for every coat roughness
-        self._coat_basis = _coat_basis(coat_fresnel, data.cos_d) if self.coat else None
+        self._quadratics, self._lobes, self._lobe_rows = {}, {}, {}
+        self._coat_nodes = _coat_basis(coat_fresnel, FRESNEL_NODES) if self.coat else None
+        self._base = self._base_sums() if self.diffuse else None
 
     def distribution(self, q):
         if self.anisotropic:
@@ -297,39 +318,50 @@ class _Problem:
             lo, hi = lo + [la[0]], hi + [la[1]]
         return np.array(lo), np.array(hi)
 
-    def _s(self, distribution) -> np.ndarray:
-        """``s = D G / (4 cos theta_o)`` of a lobe on every pair of the data, 0 where invalid;
-        kept per lobe (:func:`.extract._kept`, 16 of each kind: at least the scan's; a coat
-        fit's finite differences move one lobe at a time)."""
+    def _lobe(self, distribution) -> _LobeSums:
+        """A lobe's terms of :meth:`quadratic` (:class:`_LobeSums`), kept per lobe
+        (:func:`.extract._kept`, 16 of each kind: at least the scan's; a coat fit's finite
+        differences move one lobe at a time)."""
         def make():
-            d = self.data
+            d, n = self.data, len(FRESNEL_NODES)
             # unit directions by construction (metrics' direction sets): no check per lobe
             s = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)._projected_unit(d.wi, d.wo)[1]
-            return np.where(np.isfinite(s), s, 0.0)
+            s = np.where(np.isfinite(s), s, 0.0)
+            sp, sa = s[:d.m], s[d.m:]
+            return _LobeSums(sp, d.pairs.sum(sp[:, None] ** 2 * d.w_hat2),
+                             _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T,
+                             _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n),
+                             _spread(d.pairs.sum((sp * d.lambert[:d.m])[:, None] * d.w_hat)) if self.diffuse else None)
         return _kept(self._lobes, _lobe_key(distribution), make)
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
         ``x = (v, c, k_d)`` (``v``: Fresnel values at :data:`FRESNEL_NODES`; the coat's
         coefficients ``c`` only with a coat, ``k_d`` only with a diffuse base): the pairs'
-        ``sum w (s F + s_c sum_b c_b B_b + k_d L - f_ref)^2`` (``B``: :func:`_coat_basis`) plus the albedo term
-        ``lambda^2 / (3 V) sum_{views} (a_fit / a_data - 1)^2``."""
-        d, n = self.data, len(FRESNEL_NODES)
-        s = self._s(self.distribution(q))
-        sp, sa = s[:d.m], s[d.m:]
-        s2 = d.pairs.sum(sp[:, None] ** 2 * d.w_hat2)                  # per left node: hat products
-        G = np.diag(_spread(s2[:, :2])) + np.diag(s2[:-1, 2], 1) + np.diag(s2[:-1, 2], -1)
-        g = _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T
+        ``sum w (s F + s_c F_c + k_d L - f_ref)^2`` plus the albedo term
+        ``lambda^2 / (3 V) sum_{views} (a_fit / a_data - 1)^2``. The coat enters as the lobe,
+        through its values at the nodes, ``F_c = B c`` (``B``: :func:`_coat_basis` at
+        :data:`FRESNEL_NODES`; exact for the table, whose nodes are among them): its blocks
+        are those of a second lobe mapped by ``B``, the cross block
+        ``sum w s s_c hat_j hat_k`` is tridiagonal like the lobe's own."""
+        d = self.data
+        lobe = self._lobe(self.distribution(q))
+        G, g, albedo_rows = _tridiagonal(lobe.s2), lobe.g, lobe.rows
         k = d.ref2.copy()
-        albedo_rows = _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n)   # (V, n)
-        if self.n_extra:
-            Ep, EE, gE, rows = self._extra_sums(self._s(self.coat_distribution(q)) if self.coat else None)
-            e = Ep.shape[1]
-            GE = _spread(d.pairs.sum(((sp[:, None] * Ep)[:, None, :] * d.w_hat[:, :, None]).reshape(d.m, 2 * e))
-                         .reshape(n, 2, e))
-            G = np.block([[G, GE], [GE.T, EE]])
-            g = np.concatenate([g, gE], axis=1)
-            albedo_rows = np.concatenate([albedo_rows, rows], axis=1)
+        base = [lobe.lambert]
+        if self.coat:
+            coat, B = self._lobe(self.coat_distribution(q)), self._coat_nodes
+            cross = _tridiagonal(d.pairs.sum((lobe.s * coat.s)[:, None] * d.w_hat2)) @ B
+            G = np.block([[G, cross], [cross.T, B.T @ _tridiagonal(coat.s2) @ B]])
+            g = np.concatenate([g, coat.g @ B], axis=1)
+            albedo_rows = np.concatenate([albedo_rows, coat.rows @ B], axis=1)
+            base.append(coat.lambert @ B if self.diffuse else None)
+        if self.diffuse:
+            LL, gL, rows_L = self._base
+            GL = np.concatenate(base)[:, None]
+            G = np.block([[G, GL], [GL.T, LL]])
+            g = np.concatenate([g, gL], axis=1)
+            albedo_rows = np.concatenate([albedo_rows, rows_L], axis=1)
         H = np.repeat(G[None], 3, axis=0)
         if self.albedo_weight > 0:
             c2 = self.albedo_weight**2 / (3 * len(ALBEDO_VIEWS_DEG))
@@ -341,23 +373,15 @@ class _Problem:
             k = k + c2 * np.sum(inv > 0, axis=1)
         return H, g, k
 
-    def _extra_sums(self, s_c):
-        """The terms of :meth:`quadratic` in the other columns alone, one value per pair (the
-        coat's Fresnel basis terms (:func:`_coat_basis`) of its ``s_c``, the base's ``k_d L``): ``E`` on the
-        pairs, ``sum w E E^T``, ``sum w E f_ref`` and their albedo rows. They depend on the
-        coat only (the base's on nothing): kept per ``s_c`` (:meth:`_s` returns one array
-        per coat, which the entry holds, so its ``id`` stays its own)."""
-        def make():
-            d = self.data
-            extras = ([s_c[:, None] * self._coat_basis] if self.coat else []) \
-                + ([d.lambert[:, None]] if self.diffuse else [])
-            E = np.concatenate(extras, axis=-1)
-            Ep, Ea = E[:d.m], E[d.m:]
-            rows = np.stack([np.bincount(d.view, d.w_albedo * c, minlength=len(ALBEDO_VIEWS_DEG)) for c in Ea.T],
-                            axis=-1)
-            # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
-            return s_c, Ep, np.einsum("me,mf->ef", Ep, d.w[:, None] * Ep), np.einsum("me,mc->ce", Ep, d.wref), rows
-        return _kept(self._extras, id(s_c), make)[1:]
+    def _base_sums(self):
+        """The base's terms of :meth:`quadratic`, which depend on no parameter: ``sum w L^2``
+        ``(1, 1)``, ``sum w L f_ref`` ``(3, 1)`` and its albedo rows ``(V, 1)``
+        (``L = cos theta_i / pi``)."""
+        d = self.data
+        L = d.lambert[:d.m, None]
+        # einsum, not BLAS: a threaded GEMM over the pairs costs more than it saves here
+        return (np.einsum("me,mf->ef", L, d.w[:, None] * L), np.einsum("me,mc->ce", L, d.wref),
+                np.bincount(d.view, d.w_albedo * d.lambert[d.m:], minlength=len(ALBEDO_VIEWS_DEG))[:, None])
 
     @property
     def n_coat(self) -> int:
@@ -431,7 +455,7 @@ class _Problem:
                          lambda: albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1])
         cols = [lobe(self.distribution(q))]
         if self.coat:
-            cols.append(lobe(self.coat_distribution(q)) @ _coat_basis(self.coat_fresnel, FRESNEL_NODES))
+            cols.append(lobe(self.coat_distribution(q)) @ self._coat_nodes)
         if self.diffuse:
             cols.append(np.ones((len(views), 1)))
         return np.concatenate(cols, axis=1)
@@ -527,7 +551,7 @@ class _Problem:
         lobes = [MicrofacetBRDF(self.distribution(q), fresnel=fresnel, gaf=self.gaf, shadowing=self.shadowing)]
         if self.coat:
             i = c.shape[1] - self.n_extra                          # coefficients: (F..., coat...[, k_d])
-            values = _coat_basis(self.coat_fresnel, FRESNEL_NODES) @ np.clip(c[:, i:i + self.n_coat].T, 0.0, 1.0)
+            values = self._coat_nodes @ np.clip(c[:, i:i + self.n_coat].T, 0.0, 1.0)
             lobes.append(MicrofacetBRDF(self.coat_distribution(q), fresnel=_fresnel.Tabulated(FRESNEL_NODES, values),
                                         gaf=self.gaf, shadowing=self.shadowing))
         if self.diffuse:
