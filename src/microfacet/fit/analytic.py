@@ -39,7 +39,8 @@ it. ``q`` is found by a scan of the roughness and a golden-section search
 (isotropic; no SciPy optimizer imported), then ``L-BFGS-B`` over ``(log alpha_x,
 log alpha_y, rho)`` (anisotropic), started from the moment conversion of the tabulated
 fit (thesis App. C); a coat's roughness by a scan at that shape, then ``L-BFGS-B`` over
-all from the :data:`COAT_STARTS` best; a conductor is fitted at the table fit's shape and
+all from the :data:`COAT_STARTS` best, each on the box-only objective, then the best on
+``E`` (:func:`_coat_search`); a conductor is fitted at the table fit's shape and
 both refined together.
 """
 from __future__ import annotations
@@ -80,6 +81,9 @@ _CONDUCTOR_STARTS = np.array([(eta, k) for eta in np.geomspace(0.2, 5.0, 8) for 
 ALBEDO_WEIGHT = 4.0
 #: Starts of the joint search of the lobe and coat roughness (the best of the coat scan).
 COAT_STARTS = 3
+#: ``ftol`` of L-BFGS-B (absolute for objectives below 1): every search's, and the looser
+#: one of the coat's searches that only lead a start to its basin (:func:`_coat_search`).
+FTOL, BASIN_FTOL = 1e-12, 1e-8
 #: Views ``theta_o`` (deg) at which a fit's directional albedo is bounded by 1 (energy
 #: constraint of :func:`fit_analytic`; azimuths 0, 45 and 90 deg for an anisotropic fit).
 ENERGY_VIEWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 84.0, 87.0, 89.0, 89.5)
@@ -645,17 +649,29 @@ def _minimize_log_alpha(problem: _Problem, candidates, lo: float, hi: float) -> 
     return float(x) if fx <= errors[b] else float(grid[b])
 
 
-def _minimize(problem: _Problem, q0, max_nfev: int) -> np.ndarray:
+def _minimize(problem: _Problem, q0, max_nfev: int, relaxed: bool = False) -> np.ndarray:
     """``q`` minimizing ``problem`` from ``q0``: Brent around ``q0`` (one parameter) or
-    bounded L-BFGS-B."""
+    bounded L-BFGS-B (``ftol`` :data:`FTOL`). ``relaxed``: L-BFGS-B on the box-only
+    objective :meth:`_Problem.lower_bound` (no energy rows) to :data:`BASIN_FTOL`."""
     from scipy.optimize import minimize
     lo, hi = problem.bounds()
     q0 = np.clip(np.asarray(q0, dtype=np.float64), lo, hi)
     if len(q0) == 1:
         return np.array([_minimize_log_alpha(problem, q0[0] + np.linspace(-0.3, 0.3, 5), lo[0], hi[0])])
-    r = minimize(problem.error, q0, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
-                 options={"maxfun": max_nfev, "ftol": 1e-12, "gtol": 1e-9})
-    return r.x if r.fun <= problem.error(q0) else q0
+    f = problem.lower_bound if relaxed else problem.error
+    r = minimize(f, q0, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
+                 options={"maxfun": max_nfev, "ftol": BASIN_FTOL if relaxed else FTOL, "gtol": 1e-9})
+    return r.x if r.fun <= f(q0) else q0
+
+
+def _coat_search(problem: _Problem, scan, max_nfev: int) -> np.ndarray:
+    """``q`` (shape, then ``log alpha_c``) minimizing the coat ``problem``, whose objective has
+    several minima: the :data:`COAT_STARTS` best of the ``scan`` (:func:`_least`) are each led
+    to their basin on the box-only objective, a lower bound of ``E`` equal to it wherever
+    the energy constraint is inactive (:func:`_minimize`, ``relaxed``: no energy rows, a
+    loose tolerance), and the one of least ``E`` is refined on ``E``."""
+    basins = (_minimize(problem, scan[i], max_nfev, relaxed=True) for i in _least(problem, scan, COAT_STARTS)[0])
+    return _minimize(problem, min(basins, key=problem.error), max_nfev)
 
 
 def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: bool = False,
@@ -749,12 +765,9 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
             q0 = [q[0] - ratio, q[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
         q = _minimize(aniso, q0, max_nfev)
     # stage 3: the coat, from a scan of its roughness at that shape, then refined with it
-    # from the COAT_STARTS best scan values (the joint objective has several minima)
     if coat:
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
-        scan = [np.append(q, lc) for lc in np.log(_SCAN)]
-        q = min((_minimize(problem, scan[i], max_nfev) for i in _least(problem, scan, COAT_STARTS)[0]),
-                key=problem.error)
+        q = _coat_search(problem, [np.append(q, lc) for lc in np.log(_SCAN)], max_nfev)
     # stage 4: a conductor, refined from that shape
     if fresnel == "conductor":
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)

@@ -529,7 +529,8 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
     feasible).
 
     Dual Newton on the multipliers ``lambda >= 0`` of the ``V`` rows: ``x(lambda)`` is
-    the box QP with ``g - a^T lambda`` (:func:`box_qp`), the dual gradient is
+    the box QP with ``g - a^T lambda`` (:func:`box_qp`, started from the last ``x``: the same
+    optimum), the dual gradient is
     ``a x - a_data`` and its Hessian ``-a_F h_FF^-1 a_F^T`` over the variables ``F``
     strictly inside their bounds; each step maximizes that local quadratic model over
     ``lambda >= 0`` (itself a small box QP, started from the current ``lambda``, so that
@@ -563,7 +564,7 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50
         step = 1.0
         for _ in range(40):                        # the dual may only increase
             lam_n = lam + step * (target - lam)
-            x_n = box_qp(h, g - rows.T @ lam_n, lo, hi)
+            x_n = box_qp(h, g - rows.T @ lam_n, lo, hi, x0=x)
             value_n = dual(x_n, lam_n)
             if value_n >= value - 1e-13 * abs(value):
                 break
