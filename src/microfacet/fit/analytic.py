@@ -654,13 +654,17 @@ def _minimize(problem: _Problem, q0, max_nfev: int, relaxed: bool = False) -> np
     bounded L-BFGS-B (``ftol`` :data:`FTOL`). ``relaxed``: L-BFGS-B on the box-only
     objective :meth:`_Problem.lower_bound` (no energy rows) to :data:`BASIN_FTOL`."""
     from scipy.optimize import minimize
+    from threadpoolctl import threadpool_limits
     lo, hi = problem.bounds()
     q0 = np.clip(np.asarray(q0, dtype=np.float64), lo, hi)
     if len(q0) == 1:
         return np.array([_minimize_log_alpha(problem, q0[0] + np.linspace(-0.3, 0.3, 5), lo[0], hi[0])])
     f = problem.lower_bound if relaxed else problem.error
-    r = minimize(f, q0, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
-                 options={"maxfun": max_nfev, "ftol": BASIN_FTOL if relaxed else FTOL, "gtol": 1e-9})
+    # one BLAS thread: on 2-4 parameters SciPy's L-BFGS-B woke OpenBLAS's threads, which
+    # then spun (a coat fit's CPU time doubled)
+    with threadpool_limits(limits=1, user_api="blas"):
+        r = minimize(f, q0, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
+                     options={"maxfun": max_nfev, "ftol": BASIN_FTOL if relaxed else FTOL, "gtol": 1e-9})
     return r.x if r.fun <= f(q0) else q0
 
 
