@@ -197,6 +197,29 @@ def test_compiled_bake_matches_the_numpy_reference():
                 np.testing.assert_allclose(f, r, rtol=3e-7, atol=1e-6 * np.abs(r).max())
 
 
+def test_bake_of_stored_gray_levels_matches_the_heights():
+    """``bake(levels, scale / top)`` (``microfacet bake``'s path: no float64 heights) is the bake
+    of the heights ``levels / top`` of 8/16-bit gray and RGB images (RGB: the mean of R, G, B)."""
+    from microfacet.leadr.files import height_levels
+    rng = np.random.default_rng(8)
+    for dtype, channels in [(np.uint8, None), (np.uint16, None), (np.uint16, 3), (np.uint8, 4), (np.uint16, 2)]:
+        top = np.iinfo(dtype).max
+        image = rng.integers(0, top + 1, (17, 12) if channels is None else (17, 12, channels)).astype(dtype)
+        levels, divisor = height_levels(image, "x.png")
+        heights = (image if channels is None else image[..., :1 if channels < 3 else 3].mean(axis=2)) / top
+        np.testing.assert_allclose(levels / divisor, heights, rtol=1e-15, atol=1e-15)
+        fast = leadr.bake(levels, 3.0 / divisor, 0.2)
+        for f, r in zip(fast, leadr.bake_reference(heights, 3.0, 0.2)):
+            np.testing.assert_allclose(f, r, rtol=3e-7, atol=1e-6 * np.abs(r).max())
+
+
+def test_bake_refuses_moments_that_overflow_float32():
+    xi = leadr.gaussian_heightfield((8, 8), 0.3, seed=2)
+    for kwargs in ({"scale": 1e30}, {"roughness": 1e25}):
+        with pytest.raises(ValueError, match="overflow float32"):
+            leadr.bake(xi, **kwargs)
+
+
 def test_base_roughness_and_material_merge():
     xi = leadr.gaussian_heightfield((32, 32), 0.3, seed=7)
     lobe = mf.Beckmann(alpha_x=0.2, alpha_y=0.1, rho=0.3, mean_slope=(0.05, 0.0))

@@ -108,21 +108,25 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     reading = None if normal_map else in_background(read_image, source)   # the decode overlaps the imports
     from .. import leadr
     from ..io import write_png
-    from ..leadr.files import heights_of_image
+    from ..leadr.files import height_levels
     from ..leadr.preview import preview_image
     base = roughness
     if material is not None:
         from ..fit import load
         base = load(material).to_beckmann()
-    with np.errstate(over="ignore", invalid="ignore"):
+    try:
         if normal_map:
-            pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
+            with np.errstate(over="ignore", invalid="ignore"):
+                pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
+            if not (np.isfinite(pyramid[0].min()) and np.isfinite(pyramid[0].max())):   # so are its averages
+                raise ValueError(f"the slope moments overflow float32 (scale {scale:g}"
+                                 f"{'' if roughness is None else f', roughness {roughness:g}'}); "
+                                 "use a smaller scale or roughness")
         else:
-            pyramid = leadr.bake(heights_of_image(reading.result(), source), scale, base, border=border)
-    if not all(np.isfinite(level.min()) and np.isfinite(level.max()) for level in pyramid):   # NaN propagates
-        raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
-                              f"{'' if roughness is None else f', roughness {roughness:g}'}); "
-                              "use a smaller scale or roughness")
+            levels, top = height_levels(reading.result(), source)
+            pyramid = leadr.bake(levels, scale / top, base, border=border)
+    except ValueError as e:
+        raise MicrofacetError(f"{source}: {e}") from None
     preview = preview_image(pyramid)                  # before any write: a failure leaves no file
     leadr.write_pyramid(out, pyramid, compression=compression)
     try:
@@ -130,11 +134,11 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     except BaseException:                             # Ctrl-C, a full disk: no pyramid without its preview
         out.unlink(missing_ok=True)
         raise
-    top = leadr.from_moments(pyramid[-1][0, 0])
+    lobe = leadr.from_moments(pyramid[-1][0, 0])
     h, w = pyramid[0].shape[:2]
-    return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(top.alpha_x),
-            "alpha_y": float(top.alpha_y), "rho": float(top.rho), "mean_x": float(top.xn),
-            "mean_y": float(top.yn)}
+    return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(lobe.alpha_x),
+            "alpha_y": float(lobe.alpha_y), "rho": float(lobe.rho), "mean_x": float(lobe.xn),
+            "mean_y": float(lobe.yn)}
 
 
 # -------------------------------------------------------------------------- glints

@@ -112,25 +112,32 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
     (equal in a gray image); alpha is ignored. A colour map that decodes as a normal map
     (:func:`_looks_like_normal_map`) is read as heights all the same, with a
     :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless)."""
-    return heights_of_image(read_image(Path(path)), path)
+    levels, top = height_levels(read_image(Path(path)), path)
+    return np.divide(levels, top, dtype=np.float64)
 
 
-def heights_of_image(a: np.ndarray, path: str | os.PathLike) -> np.ndarray:
-    """:func:`load_height_map` of the image ``a`` read from ``path`` (by
-    :func:`~microfacet.io.image.read_image`; ``path`` names it in messages)."""
+def height_levels(a: np.ndarray, path: str | os.PathLike) -> tuple[np.ndarray, float]:
+    """``(levels, top)``: the heights ``levels / top`` (:func:`load_height_map`) of the image ``a``
+    read from ``path`` (which names it in messages), with ``levels`` as the image stores them: an integer image's gray levels (or their sum over R, G, B, in
+    ``uint32``) and ``top`` its largest level (times 3), so that ``microfacet.leadr.bake(levels,
+    scale / top)`` bakes the heights without a float64 copy of them (4096²: 128 MB)."""
     path = Path(path)
     if a.ndim == 3 and a.shape[2] >= 3 and _looks_like_normal_map(a[..., :3]):
         warnings.warn(f"{path}: looks like a tangent-space normal map (its colours decode to unit "
                       "normals) but is read as heights (the mean of R, G, B); bake it with --normal-map "
                       "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=3)
-    if a.dtype in (np.uint8, np.uint16):
-        a = np.divide(a, float(np.iinfo(a.dtype).max), dtype=np.float64)      # one pass
-    if a.ndim == 3:
-        a = a[..., :1] if a.shape[2] in (1, 2) else a[..., :3]
-        a = a.mean(axis=2)
-    if min(a.shape) < 1:
+    if min(a.shape[:2]) < 1:
         raise MicrofacetError(f"{path}: empty image")
-    return a
+    integer = a.dtype in (np.uint8, np.uint16)
+    top = float(np.iinfo(a.dtype).max) if integer else 1.0
+    if a.ndim == 3:
+        if a.shape[2] in (1, 2):
+            a = a[..., 0]
+        elif integer:
+            a, top = a[..., :3].sum(axis=2, dtype=np.uint32), 3.0 * top
+        else:
+            a = a[..., :3].mean(axis=2)
+    return a, top
 
 
 def load_normal_map(path: str | os.PathLike) -> np.ndarray:

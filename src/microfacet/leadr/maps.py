@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from ..distributions import Beckmann
+from ..kernels import _launch_ranges
 from ..io.normalmap import normals_to_slopes, read_slopes
 from .mip import mip_pyramid
 from .moments import convolve, to_moments
@@ -36,7 +37,7 @@ def _check_height(height) -> np.ndarray:
         raise ValueError(f"a height map must be a non-empty (H, W) array, got shape {h.shape}")
     if not np.issubdtype(h.dtype, np.number) or np.issubdtype(h.dtype, np.complexfloating):
         raise ValueError(f"a height map must be real, got dtype {h.dtype}")
-    if not np.all(np.isfinite(h)):
+    if h.dtype.kind == "f" and not np.all(np.isfinite(h)):
         raise ValueError("a height map must be finite (found NaN or inf)")
     return h
 
@@ -149,13 +150,19 @@ def _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e):  # pragm
     e[4][i] = x * y + b[4] + x * b[1] + y * b[0]
 
 
-@numba.njit(parallel=True, cache=True)
-def _height_moments(xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
-    """Level-0 moments into the planar ``out (5, H, W)``, row by row through 1-D row views:
-    the two border texels, then the inner ones (no index select: that loop vectorizes)."""
+#: Bits of float32's exponent field: all ones for inf and NaN.
+_EXPONENT32 = np.uint32(0x7F800000)
+
+
+@numba.njit(cache=True, nogil=True)
+def _height_moments(start, stop, xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
+    """Level-0 moments of rows ``start:stop`` into the planar float32 ``out (5, H, W)``, row by
+    row through 1-D row views: the two border texels, then the inner ones (no index select:
+    that loop vectorizes). Returns how many stored moments are not finite (overflow of float32)."""
     h, w = xi.shape
     b = (base[0], base[1], base[2], base[3], base[4])
-    for j in numba.prange(h):
+    bad = 0
+    for j in range(start, stop):
         jt, jb = _neighbours(j, h, wrap)
         row, up, down = xi[j], xi[jt], xi[jb]
         e = (out[0, j], out[1, j], out[2, j], out[3, j], out[4, j])
@@ -164,6 +171,11 @@ def _height_moments(xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cove
             _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e)
         for i in range(1, w - 1):
             _texel_moments(row, up, down, i - 1, i, i + 1, sx_scale, sy_scale, b, e)
+        for c in range(5):                           # inf and NaN: exponent bits all ones
+            bits = e[c].view(np.uint32)
+            for i in range(w):
+                bad += (bits[i] & _EXPONENT32) == _EXPONENT32
+    return bad
 
 
 def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
@@ -174,22 +186,29 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") ->
     units of the unit uv square (Sec. 3.4, Listing 3.6), convolved with the base
     ``roughness`` (Listing 5.1; ``None``, ``alpha``, ``(alpha_x, alpha_y)`` or a Beckmann
     lobe); the other levels are exact averages (:func:`microfacet.leadr.mip_pyramid`).
-    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage). The
+    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage) from the
+    heights as they are stored (``uint8``, ``uint16``, ``uint32``, float32 or float64). The
     levels are ``(H_k, W_k, 5)`` views of channels-first storage: each ``level[..., c]``
     is contiguous, as the EXR writer stores it (:func:`~microfacet.leadr.mip_pyramid`).
+    Raises ``ValueError`` if a moment overflows float32 (too large a ``scale`` or roughness).
     """
     xi = _check_height(height)
     _check_border(border)
     if not np.isfinite(scale):
         raise ValueError(f"scale must be finite, got {scale!r}")
-    if xi.dtype not in (np.float32, np.float64):
+    if xi.dtype not in (np.uint8, np.uint16, np.uint32, np.float32, np.float64):
         xi = xi.astype(np.float64)
     base = base_moments(roughness)
     base = np.zeros(5) if base is None else base
     h, w = xi.shape
     planar = np.empty((5, h, w), dtype=np.float32)
-    _height_moments(np.ascontiguousarray(xi), 0.5 * w * float(scale), 0.5 * h * float(scale),
-                    border == "wrap", base, planar)
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = _launch_ranges(_height_moments, h, np.ascontiguousarray(xi), 0.5 * w * float(scale),
+                             0.5 * h * float(scale), border == "wrap", base, planar, cost=w)
+    if sum(bad):
+        raise ValueError(f"the slope moments overflow float32 (scale {scale:g}"
+                         f"{'' if roughness is None else f', roughness {roughness}'}); "
+                         "use a smaller scale or roughness")
     return mip_pyramid(planar.transpose(1, 2, 0))
 
 
