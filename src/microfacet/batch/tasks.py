@@ -20,7 +20,7 @@ import numpy as np
 from .._background import in_background
 from ..errors import MicrofacetError
 from ..io.names import input_name
-from ..io.read import decompressed
+from ..io.read import MEASURED_BRDF, read_decompressed
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
@@ -164,17 +164,6 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
                "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
 
 
-def _file_data(path: Path) -> bytes | None:
-    """The uncompressed bytes of ``path`` (:func:`~microfacet.io.read.decompressed`), or None
-    if it cannot be read (then :func:`microfacet.measured.load` says why). Needs zlib only,
-    so it can run while the fit modules import."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError:
-        return None
-    return decompressed(data, path)
-
-
 def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
              method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
              albedo_weight: float | None = None, coat: bool = False, picture: bool = True) -> dict:
@@ -182,11 +171,10 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures."""
-    reading = in_background(_file_data, source)      # read + gunzip (GIL released) overlap the imports
+    reading = in_background(read_decompressed, source, MEASURED_BRDF)   # read + gunzip (GIL released) overlap the imports
     from ..fit.outputs import fit_material, summary_row
-    from ..measured import load, load_bytes
-    data = reading.result()
-    brdf = load(source) if data is None else load_bytes(data, source)
+    from ..measured import load_bytes
+    brdf = load_bytes(reading.result(), source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
                            fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)
