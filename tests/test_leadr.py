@@ -471,6 +471,32 @@ def test_pyramid_exr_round_trip(tmp_path):
     assert sorted(parts[1].channels) == ["E1", "E2", "E3", "E4", "E5"]
 
 
+@pytest.mark.parametrize("shape", [(37, 20), (1, 9), (64, 64), (5, 1), (1, 1)])
+def test_pyramid_file_is_openexrs_file_byte_for_byte(tmp_path, shape):
+    """A bake into ``pyramid_file`` writes the bytes OpenEXR writes for the same pyramid."""
+    xi = leadr.gaussian_heightfield(shape, 0.3, seed=5) if min(shape) > 1 else np.linspace(0, 1, np.prod(shape)).reshape(shape)
+    pyr = leadr.bake(xi, 2.0, roughness=0.05)
+    with leadr.pyramid_file(tmp_path / "mapped.exr", *shape) as levels:
+        assert [lv.shape for lv in levels] == [p.shape for p in pyr]
+        baked = leadr.bake(xi, 2.0, roughness=0.05, out=levels)
+        assert baked is levels and not (tmp_path / "mapped.exr").exists()
+    leadr.write_pyramid(tmp_path / "openexr.exr", pyr)
+    assert (tmp_path / "mapped.exr").read_bytes() == (tmp_path / "openexr.exr").read_bytes()
+    for a, b in zip(pyr, leadr.read_pyramid(tmp_path / "mapped.exr"), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mapped.exr", "openexr.exr"]
+
+
+def test_pyramid_file_leaves_nothing_on_an_error(tmp_path):
+    (tmp_path / "p.exr").write_bytes(b"old")
+    with pytest.raises(ValueError, match="overflow"):
+        with leadr.pyramid_file(tmp_path / "p.exr", 8, 8) as levels:
+            leadr.bake(leadr.gaussian_heightfield((8, 8), 0.3, seed=2), 1e30, out=levels)
+    assert [p.name for p in tmp_path.iterdir()] == ["p.exr"] and (tmp_path / "p.exr").read_bytes() == b"old"
+    with pytest.raises(ValueError, match="out must be the float32 levels of a 8 x 9"):
+        leadr.bake(np.zeros((8, 9)), out=levels)
+
+
 @pytest.mark.parametrize("compression", sorted(COMPRESSIONS))
 def test_pyramid_every_lossless_compression_is_exact(tmp_path, compression):
     pyr = leadr.bake(leadr.gaussian_heightfield((70, 45), 0.3, seed=3), roughness=0.05)   # > 1 PIZ block

@@ -8,10 +8,12 @@ that sees the files, any number of times: the outputs are the same bytes every t
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import inspect
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -114,21 +116,21 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     if material is not None:
         from ..fit import load
         base = load(material).to_beckmann()
-    try:
-        if normal_map:
-            with np.errstate(over="ignore", invalid="ignore"):
+    with contextlib.ExitStack() as files:
+        storage = None
+        try:
+            if normal_map:
                 pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
-            if not (np.isfinite(pyramid[0].min()) and np.isfinite(pyramid[0].max())):   # so are its averages
-                raise ValueError(f"the slope moments overflow float32 (scale {scale:g}"
-                                 f"{'' if roughness is None else f', roughness {roughness:g}'}); "
-                                 "use a smaller scale or roughness")
-        else:
-            levels, top = height_levels(reading.result(), source)
-            pyramid = leadr.bake(levels, scale / top, base, border=border)
-    except ValueError as e:
-        raise MicrofacetError(f"{source}: {e}") from None
-    preview = preview_image(pyramid)                  # before any write: a failure leaves no file
-    leadr.write_pyramid(out, pyramid, compression=compression)
+            else:
+                levels, top = height_levels(reading.result(), source)
+                if compression == "none" and sys.byteorder == "little":   # baked into the file (pyramid_file)
+                    storage = files.enter_context(leadr.pyramid_file(out, *levels.shape[:2]))
+                pyramid = leadr.bake(levels, scale / top, base, border=border, out=storage)
+        except ValueError as e:
+            raise MicrofacetError(f"{source}: {e}") from None
+        preview = preview_image(pyramid)              # before the pyramid is written: a failure leaves no file
+        if storage is None:
+            leadr.write_pyramid(out, pyramid, compression=compression)
     try:
         write_png(out.with_suffix(".png"), preview)
     except BaseException:                             # Ctrl-C, a full disk: no pyramid without its preview

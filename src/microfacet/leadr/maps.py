@@ -21,7 +21,7 @@ import numpy as np
 from ..distributions import Beckmann
 from ..kernels import _launch_ranges
 from ..io.normalmap import normals_to_slopes, read_slopes
-from .mip import mip_pyramid
+from .mip import mip_pyramid, mip_sizes
 from .moments import convolve, to_moments
 
 __all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode_normal_map",
@@ -29,6 +29,8 @@ __all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode
            "bake", "bake_reference", "BORDERS"]
 
 BORDERS = ("wrap", "clamp")
+#: The error of a bake whose moments do not fit in float32.
+OVERFLOW = "the slope moments overflow float32 (too large a scale or roughness)"
 
 
 def _check_height(height) -> np.ndarray:
@@ -127,7 +129,11 @@ def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0, *, encoding:
     if not np.isfinite(scale):
         raise ValueError(f"scale must be finite, got {scale!r}")
     slopes = decode_normal_map(nmap, encoding, z) * float(scale)
-    return slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        E = slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
+    if not (np.isfinite(E.min()) and np.isfinite(E.max())):        # NaN propagates
+        raise ValueError(OVERFLOW)
+    return E
 
 
 @numba.njit(inline="always")
@@ -178,7 +184,8 @@ def _height_moments(start, stop, xi, sx_scale, sy_scale, wrap, base, out):  # pr
     return bad
 
 
-def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
+def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
+         out: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """LEAN/LEADR MIP pyramid of a height map: a list of ``(H_k, W_k, 5)`` float32 moment
     maps ``E1..E5``, level 0 first, down to ``1 x 1``.
 
@@ -190,7 +197,9 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") ->
     heights as they are stored (``uint8``, ``uint16``, ``uint32``, float32 or float64). The
     levels are ``(H_k, W_k, 5)`` views of channels-first storage: each ``level[..., c]``
     is contiguous, as the EXR writer stores it (:func:`~microfacet.leadr.mip_pyramid`).
-    Raises ``ValueError`` if a moment overflows float32 (too large a ``scale`` or roughness).
+    ``out``: the levels to fill instead (float32 ``(H_k, W_k, 5)`` of the pyramid's sizes, e.g.
+    :func:`microfacet.leadr.pyramid_file`'s, whose file they are). Raises ``ValueError`` if a
+    moment overflows float32 (too large a ``scale`` or roughness).
     """
     xi = _check_height(height)
     _check_border(border)
@@ -201,15 +210,16 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") ->
     base = base_moments(roughness)
     base = np.zeros(5) if base is None else base
     h, w = xi.shape
-    planar = np.empty((5, h, w), dtype=np.float32)
+    if out is not None and (len(out) != len(mip_sizes(h, w)) or out[0].shape != (h, w, 5)
+                            or out[0].dtype != np.float32):
+        raise ValueError(f"out must be the float32 levels of a {h} x {w} map's pyramid")
+    planar = np.empty((5, h, w), dtype=np.float32) if out is None else np.moveaxis(out[0], -1, 0)
     with np.errstate(over="ignore", invalid="ignore"):
         bad = _launch_ranges(_height_moments, h, np.ascontiguousarray(xi), 0.5 * w * float(scale),
                              0.5 * h * float(scale), border == "wrap", base, planar, cost=w)
     if sum(bad):
-        raise ValueError(f"the slope moments overflow float32 (scale {scale:g}"
-                         f"{'' if roughness is None else f', roughness {roughness}'}); "
-                         "use a smaller scale or roughness")
-    return mip_pyramid(planar.transpose(1, 2, 0))
+        raise ValueError(OVERFLOW)
+    return mip_pyramid(planar.transpose(1, 2, 0), out)
 
 
 def bake_reference(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:

@@ -103,19 +103,22 @@ def _channels_first(a: np.ndarray) -> bool:
     return np.moveaxis(a, -1, 0).flags.c_contiguous
 
 
-def downsample(level: np.ndarray, size: tuple[int, int] | None = None) -> np.ndarray:
+def downsample(level: np.ndarray, size: tuple[int, int] | None = None, out: np.ndarray | None = None) -> np.ndarray:
     """Next MIP level of an ``(H, W, C)`` map (see the module docstring for the weights),
     in the layout of ``level``: channels last (C-contiguous), or channels first (a view of
-    C-contiguous ``(C, H, W)`` storage, :func:`microfacet.leadr.bake`'s)."""
+    C-contiguous ``(C, H, W)`` storage, :func:`microfacet.leadr.bake`'s), or into ``out``."""
     a = np.asarray(level)
     if a.ndim != 3:
         raise ValueError(f"a MIP level must be (H, W, C), got shape {a.shape}")
     planar = _channels_first(a)
-    if not (planar or a.flags.c_contiguous):
+    if not (planar or a.flags.c_contiguous or out is not None):
         a = np.ascontiguousarray(a)
     h, w, nc = a.shape
     ho, wo = size if size is not None else (max(1, h // 2), max(1, w // 2))
-    out = np.empty((nc, ho, wo), a.dtype).transpose(1, 2, 0) if planar else np.empty((ho, wo, nc), a.dtype)
+    if out is None:
+        out = np.empty((nc, ho, wo), a.dtype).transpose(1, 2, 0) if planar else np.empty((ho, wo, nc), a.dtype)
+    elif out.shape != (ho, wo, nc):
+        raise ValueError(f"out must have shape {(ho, wo, nc)}, got {out.shape}")
     src, dst = np.moveaxis(a, -1, 0), np.moveaxis(out, -1, 0)        # (C, H, W) views
     if (h, w) == (2 * ho, 2 * wo):                      # even sizes: the plain 2x2 average
         _launch_ranges(_downsample_2x2, nc * ho, src, dst, cost=4 * wo)
@@ -126,11 +129,17 @@ def downsample(level: np.ndarray, size: tuple[int, int] | None = None) -> np.nda
     return out
 
 
-def mip_pyramid(moments) -> list[np.ndarray]:
+def mip_pyramid(moments, out: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """MIP pyramid ``[level 0, level 1, ..., 1 x 1]`` of an ``(H, W, C)`` map (C = 5 for
     LEAN moments) by exact averaging; level 0 is the input (as a contiguous array, or the
     input itself if it is a channels-first view, see :func:`downsample`, whose layout the
-    levels keep). The dtype (float32 or float64) is kept; sums are accumulated in float64."""
+    levels keep). The dtype (float32 or float64) is kept; sums are accumulated in float64.
+    With ``out`` (levels of the pyramid's sizes, e.g. :func:`microfacet.leadr.pyramid_file`'s,
+    ``out[0]`` holding the moments) the levels above 0 are written into it, and it is returned."""
+    if out is not None:
+        for k in range(1, len(out)):
+            downsample(out[k - 1], out[k].shape[:2], out=out[k])
+        return out
     a = np.asarray(moments)
     if a.ndim != 3 or 0 in a.shape:
         raise ValueError(f"moments must be a non-empty (H, W, C) array, got shape {a.shape}")
