@@ -110,7 +110,10 @@ def pyramid_file(path: str | os.PathLike, height: int, width: int) -> Iterator[l
         tables.append(offset + 4 * (prefix + 5 * w) * np.arange(h, dtype=np.uint64))
         offset += 4 * (prefix + 5 * w) * h
     with atomic_path(path) as tmp, open(tmp, "r+b") as f:
-        os.posix_fallocate(f.fileno(), 0, offset)        # a full disk fails here, not in the mapping
+        if hasattr(os, "posix_fallocate"):               # a full disk fails here, not in the mapping
+            os.posix_fallocate(f.fileno(), 0, offset)
+        else:                                           # (macOS, Windows)
+            f.truncate(offset)
         f.write(headers + np.concatenate(tables).astype("<u8").tobytes())
         f.flush()
         memory = mmap.mmap(f.fileno(), offset)
