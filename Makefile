@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 OUT    ?= demo-output
+# batch sizes of `make bench`'s scaling table (1e8 needs ~12 GB: SCALING=1e4,1e5,1e6,1e7,1e8)
+SCALING ?= 1e4,1e5,1e6,1e7
 
 .PHONY: setup demo test bench clean
 
@@ -34,7 +36,8 @@ test: setup
 	$(PY) -m pytest -q -n auto --maxprocesses 4
 
 bench: setup
-	$(PY) benchmarks/bench_brdf.py
+	$(PY) benchmarks/bench_brdf.py --scaling $(SCALING)
+	$(PY) benchmarks/bench_measured.py
 	$(PY) benchmarks/bench_view.py
 
 clean:

@@ -4,10 +4,9 @@
 For ``--n`` fixed-seed random direction pairs (uniform in the upper hemisphere) this
 times our BRDF (float64, and float32 mode for the non-sheared ones; Smith eval, pdf and
 sample by the Numba kernels of :mod:`microfacet.kernels`, on Numba's thread count) for
-anisotropic GGX and Beckmann, with
-and without correlation and mean slope, and Mitsuba 3's ``roughconductor`` plugin on the
-same directions with the same parameters (rho = 0, zero mean slope: the only case both
-models share) and the same conductor Fresnel term. Each timing is the best and the
+anisotropic GGX and Beckmann, with and without correlation and mean slope, and isotropic
+ones ('iso'), and Mitsuba 3's ``roughconductor`` plugin on the same directions with the
+same parameters (rho = 0, zero mean slope: the cases both models share) and the same conductor Fresnel term. Each timing is the best and the
 median of ``--repeats`` runs after one warm-up run (time.perf_counter). Op ``io`` is
 the memory floor of an eval on each side: read the two directions, write a 3-vector per
 pair, no arithmetic (ours: a compiled kernel on the same threads, float64 (n, 3) arrays and
@@ -54,6 +53,7 @@ import microfacet as mf
 
 EVAL_GOAL_S = 0.1  # goal: eval on 1e6 directions in under 0.1 s
 ALPHA_X, ALPHA_Y = 0.2, 0.5
+ALPHA_ISO = 0.3     # the isotropic configurations ('iso')
 RHO, MEAN_SLOPE = 0.3, (0.1, -0.2)
 METAL = "Cu"  # conductor Fresnel term used on both sides
 
@@ -162,14 +162,14 @@ def our_configs() -> dict[str, mf.MicrofacetBRDF]:
     fresnel = mf.fresnel.Conductor.metal(METAL)
     aniso = {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y}
     sheared = dict(aniso, rho=RHO, mean_slope=MEAN_SLOPE)
-    return {
-        "ggx": mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel),
-        "beckmann": mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel),
-        "ggx" + F32: mf.MicrofacetBRDF(mf.GGX(**aniso), fresnel=fresnel, dtype=np.float32),
-        "beckmann" + F32: mf.MicrofacetBRDF(mf.Beckmann(**aniso), fresnel=fresnel, dtype=np.float32),
-        "ggx sheared": mf.MicrofacetBRDF(mf.GGX(**sheared), fresnel=fresnel),
-        "beckmann sheared": mf.MicrofacetBRDF(mf.Beckmann(**sheared), fresnel=fresnel),
-    }
+    configs = {}
+    for kind, D in (("ggx", mf.GGX), ("beckmann", mf.Beckmann)):
+        configs |= {kind: mf.MicrofacetBRDF(D(**aniso), fresnel=fresnel),
+                    kind + F32: mf.MicrofacetBRDF(D(**aniso), fresnel=fresnel, dtype=np.float32),
+                    kind + " iso": mf.MicrofacetBRDF(D(alpha=ALPHA_ISO), fresnel=fresnel),
+                    kind + " iso" + F32: mf.MicrofacetBRDF(D(alpha=ALPHA_ISO), fresnel=fresnel, dtype=np.float32),
+                    kind + " sheared": mf.MicrofacetBRDF(D(**sheared), fresnel=fresnel)}
+    return configs
 
 
 def bench_ours(inputs, repeats: int) -> list[dict]:
@@ -275,10 +275,15 @@ def pick_variant(requested: str) -> tuple[str | None, str]:
     return requested, f"{requested} requested"
 
 
-def mitsuba_bsdf(mi, kind: str):
+#: Mitsuba's configurations: ``(our name, distribution, alpha_u, alpha_v)`` (rho = 0, no mean slope).
+MITSUBA_CONFIGS = [(kind + iso, kind, *alphas) for kind in ("ggx", "beckmann")
+                   for iso, alphas in (("", (ALPHA_X, ALPHA_Y)), (" iso", (ALPHA_ISO, ALPHA_ISO)))]
+
+
+def mitsuba_bsdf(mi, kind: str, alpha_u: float, alpha_v: float):
     eta, k = mf.fresnel.Conductor.METALS[METAL]
     return mi.load_dict({
-        "type": "roughconductor", "distribution": kind, "alpha_u": ALPHA_X, "alpha_v": ALPHA_Y,
+        "type": "roughconductor", "distribution": kind, "alpha_u": alpha_u, "alpha_v": alpha_v,
         "eta": {"type": "rgb", "value": list(eta)}, "k": {"type": "rgb", "value": list(k)}})
 
 
@@ -307,13 +312,13 @@ def bench_mitsuba_llvm(inputs, repeats: int, threads: int | None) -> list[dict]:
         return go
 
     rows = []
-    for kind in ("ggx", "beckmann"):
-        bsdf = mitsuba_bsdf(mi, kind)
+    for name, kind, au, av in MITSUBA_CONFIGS:
+        bsdf = mitsuba_bsdf(mi, kind, au, av)
         ops = {"eval": lambda b=bsdf: b.eval(ctx, si, light),
                "pdf": lambda b=bsdf: b.pdf(ctx, si, light),
                "sample": lambda b=bsdf: b.sample(ctx, si, s1, s2)}
         for op, fn in ops.items():
-            rows.append({"impl": "mitsuba llvm_ad_rgb", "op": op, "distribution": kind, "n": n,
+            rows.append({"impl": "mitsuba llvm_ad_rgb", "op": op, "distribution": name, "n": n,
                          "extrapolated": False, **time_it(run(fn), repeats)})
     rows.append({"impl": "mitsuba llvm_ad_rgb", "op": "io", "distribution": "read 2, write 1", "n": n,
                  "extrapolated": False, **time_it(run(lambda: view + light), repeats)})
@@ -332,8 +337,8 @@ def bench_mitsuba_scalar(inputs, repeats: int, n_scalar: int) -> list[dict]:
     ctx = mi.BSDFContext()
     si = mi.SurfaceInteraction3f()
     rows = []
-    for kind in ("ggx", "beckmann"):
-        bsdf = mitsuba_bsdf(mi, kind)
+    for name, kind, au, av in MITSUBA_CONFIGS:
+        bsdf = mitsuba_bsdf(mi, kind, au, av)
 
         def loop(method, args):
             def go():
@@ -348,7 +353,7 @@ def bench_mitsuba_scalar(inputs, repeats: int, n_scalar: int) -> list[dict]:
         for op, fn in ops.items():
             t = time_it(fn, repeats)
             scale = n / m  # per-call cost extrapolated to n directions
-            rows.append({"impl": "mitsuba scalar_rgb", "op": op, "distribution": kind, "n": n,
+            rows.append({"impl": "mitsuba scalar_rgb", "op": op, "distribution": name, "n": n,
                          "extrapolated": m < n, "measured_n": m,
                          **{k: (v * scale if k != "times_s" else [x * scale for x in v])
                             for k, v in t.items()}})
@@ -357,11 +362,11 @@ def bench_mitsuba_scalar(inputs, repeats: int, n_scalar: int) -> list[dict]:
 
 # -------------------------------------------------------------------------- report
 def print_table(rows: list[dict]) -> None:
-    print(f"{'implementation':22s} {'op':7s} {'distribution':17s} {'N':>9s} "
+    print(f"{'implementation':22s} {'op':7s} {'distribution':20s} {'N':>9s} "
           f"{'best ms':>10s} {'median ms':>10s} {'Mevals/s':>9s}")
     for r in rows:
         note = f"  (extrapolated from N={r['measured_n']})" if r.get("extrapolated") else ""
-        print(f"{r['impl']:22s} {r['op']:7s} {r['distribution']:17s} {r['n']:9d} "
+        print(f"{r['impl']:22s} {r['op']:7s} {r['distribution']:20s} {r['n']:9d} "
               f"{r['best_s'] * 1e3:10.3f} {r['median_s'] * 1e3:10.3f} {r['n'] / r['best_s'] / 1e6:9.2f}{note}")
 
 
@@ -423,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"microfacet {mf.__version__}, numpy {np.__version__}, Python {platform.python_version()}, "
           f"{platform.machine()}, {os.cpu_count()} CPUs; N = {args.n}, repeats = {args.repeats}")
-    print(f"parameters: alpha_x = {ALPHA_X}, alpha_y = {ALPHA_Y}; 'sheared': rho = {RHO}, "
+    print(f"parameters: alpha_x = {ALPHA_X}, alpha_y = {ALPHA_Y}; 'iso': alpha = {ALPHA_ISO}; 'sheared': rho = {RHO}, "
           f"mean slope = {MEAN_SLOPE}; conductor Fresnel ({METAL}) on both sides")
     variant, why = (None, "skipped (--mitsuba none)") if args.mitsuba == "none" else pick_variant(args.mitsuba)
     print(f"mitsuba: {why}")
@@ -452,14 +457,14 @@ def main(argv: list[str] | None = None) -> int:
               "inflates less; Mitsuba's first call, tracing + kernel compile or cache load, not counted)")
         for r in rat:
             first = f"   (first call {r['mitsuba_first_call_s']:.3f} s)" if variant == "llvm_ad_rgb" else ""
-            print(f"  {r['op']:7s} {r['distribution']:17s} {r['ours_s'] * 1e3:9.3f} ms / "
+            print(f"  {r['op']:7s} {r['distribution']:20s} {r['ours_s'] * 1e3:9.3f} ms / "
                   f"{r['mitsuba_s'] * 1e3:9.3f} ms = {r['ratio']:7.1f}   CPU {r['cpu_ratio']:7.1f}{first}")
     goal = [(r["distribution"], r["best_s"] * 1e6 / r["n"]) for r in rows
             if r["impl"] == "microfacet" and r["op"] == "eval"]
     scaled = "" if args.n == 1_000_000 else f", measured at N = {args.n} and scaled to 1e6"
     print(f"\ngoal: eval of 1e6 directions in < {EVAL_GOAL_S} s (best time{scaled}):")
     for name, t in goal:
-        print(f"  {name:17s} {t:7.3f} s  {'met' if t < EVAL_GOAL_S else 'NOT met'}")
+        print(f"  {name:20s} {t:7.3f} s  {'met' if t < EVAL_GOAL_S else 'NOT met'}")
 
     scale_rows = scaling(sizes, args.repeats) if sizes else []
     if scale_rows:
@@ -481,7 +486,7 @@ def main(argv: list[str] | None = None) -> int:
             "n": args.n, "repeats": args.repeats, "mitsuba_variant": variant, "mitsuba_note": why,
             "mitsuba_threads": threads, "numpy": np.__version__, "python": platform.python_version(),
             "machine": platform.machine(), "cpus": os.cpu_count(),
-            "parameters": {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y, "rho": RHO,
+            "parameters": {"alpha_x": ALPHA_X, "alpha_y": ALPHA_Y, "alpha_iso": ALPHA_ISO, "rho": RHO,
                            "mean_slope": MEAN_SLOPE, "fresnel": f"conductor {METAL}"},
             "results": rows, "ratios": rat, "eval_goal_s": EVAL_GOAL_S, "scaling": scale_rows,
             "load_average": load, "numba_threads": _numba_threads()})

@@ -197,6 +197,29 @@ def test_compiled_bake_matches_the_numpy_reference():
                 np.testing.assert_allclose(f, r, rtol=3e-7, atol=1e-6 * np.abs(r).max())
 
 
+def test_bake_of_stored_gray_levels_matches_the_heights():
+    """``bake(levels, scale / top)`` (``microfacet bake``'s path: no float64 heights) is the bake
+    of the heights ``levels / top`` of 8/16-bit gray and RGB images (RGB: the mean of R, G, B)."""
+    from microfacet.leadr.files import height_levels
+    rng = np.random.default_rng(8)
+    for dtype, channels in [(np.uint8, None), (np.uint16, None), (np.uint16, 3), (np.uint8, 4), (np.uint16, 2)]:
+        top = np.iinfo(dtype).max
+        image = rng.integers(0, top + 1, (17, 12) if channels is None else (17, 12, channels)).astype(dtype)
+        levels, divisor = height_levels(image, "x.png")
+        heights = (image if channels is None else image[..., :1 if channels < 3 else 3].mean(axis=2)) / top
+        np.testing.assert_allclose(levels / divisor, heights, rtol=1e-15, atol=1e-15)
+        fast = leadr.bake(levels, 3.0 / divisor, 0.2)
+        for f, r in zip(fast, leadr.bake_reference(heights, 3.0, 0.2)):
+            np.testing.assert_allclose(f, r, rtol=3e-7, atol=1e-6 * np.abs(r).max())
+
+
+def test_bake_refuses_moments_that_overflow_float32():
+    xi = leadr.gaussian_heightfield((8, 8), 0.3, seed=2)
+    for kwargs in ({"scale": 1e30}, {"roughness": 1e25}):
+        with pytest.raises(ValueError, match="overflow float32"):
+            leadr.bake(xi, **kwargs)
+
+
 def test_base_roughness_and_material_merge():
     xi = leadr.gaussian_heightfield((32, 32), 0.3, seed=7)
     lobe = mf.Beckmann(alpha_x=0.2, alpha_y=0.1, rho=0.3, mean_slope=(0.05, 0.0))
@@ -446,6 +469,32 @@ def test_pyramid_exr_round_trip(tmp_path):
     parts = OpenEXR.File(str(path), separate_channels=True).parts
     assert [p.name() for p in parts] == [f"mip{k}" for k in range(len(pyr))]
     assert sorted(parts[1].channels) == ["E1", "E2", "E3", "E4", "E5"]
+
+
+@pytest.mark.parametrize("shape", [(37, 20), (1, 9), (64, 64), (5, 1), (1, 1)])
+def test_pyramid_file_is_openexrs_file_byte_for_byte(tmp_path, shape):
+    """A bake into ``pyramid_file`` writes the bytes OpenEXR writes for the same pyramid."""
+    xi = leadr.gaussian_heightfield(shape, 0.3, seed=5) if min(shape) > 1 else np.linspace(0, 1, np.prod(shape)).reshape(shape)
+    pyr = leadr.bake(xi, 2.0, roughness=0.05)
+    with leadr.pyramid_file(tmp_path / "mapped.exr", *shape) as levels:
+        assert [lv.shape for lv in levels] == [p.shape for p in pyr]
+        baked = leadr.bake(xi, 2.0, roughness=0.05, out=levels)
+        assert baked is levels and not (tmp_path / "mapped.exr").exists()
+    leadr.write_pyramid(tmp_path / "openexr.exr", pyr)
+    assert (tmp_path / "mapped.exr").read_bytes() == (tmp_path / "openexr.exr").read_bytes()
+    for a, b in zip(pyr, leadr.read_pyramid(tmp_path / "mapped.exr"), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mapped.exr", "openexr.exr"]
+
+
+def test_pyramid_file_leaves_nothing_on_an_error(tmp_path):
+    (tmp_path / "p.exr").write_bytes(b"old")
+    with pytest.raises(ValueError, match="overflow"):
+        with leadr.pyramid_file(tmp_path / "p.exr", 8, 8) as levels:
+            leadr.bake(leadr.gaussian_heightfield((8, 8), 0.3, seed=2), 1e30, out=levels)
+    assert [p.name for p in tmp_path.iterdir()] == ["p.exr"] and (tmp_path / "p.exr").read_bytes() == b"old"
+    with pytest.raises(ValueError, match="out must be the float32 levels of a 8 x 9"):
+        leadr.bake(np.zeros((8, 9)), out=levels)
 
 
 @pytest.mark.parametrize("compression", sorted(COMPRESSIONS))

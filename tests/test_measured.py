@@ -245,8 +245,10 @@ def test_merl_bad_files(tmp_path, smooth_raw):
             mf.measured.load(path)
         assert name in str(e.value)
         assert digest(path) == before              # inputs are never modified
-    with pytest.raises(mf.MicrofacetError, match="cannot read"):
+    with pytest.raises(mf.MicrofacetError, match="missing.binary: no such file"):
         mf.measured.load(tmp_path / "missing.binary")
+    with pytest.raises(mf.MicrofacetError, match="is a directory, not a measured BRDF"):
+        mf.measured.load(tmp_path)
 
 
 def test_merl_header_mismatch_message(tmp_path):

@@ -102,15 +102,15 @@ def _pool(n: int):
     return ThreadPoolExecutor(n, thread_name_prefix="microfacet")
 
 
-def _launch_ranges(kernel, n: int, *args) -> list:
+def _launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     """``kernel(start, stop, *args)`` over ``0:n`` (the Smith kernels, which work through a
-    range): on the calling thread below :data:`PARALLEL_MIN`, else as up to 4 tasks of at
-    least :data:`TASK_MIN` per thread (so that a thread slowed by the machine's load hands
-    work to the others) on a pool of :func:`threads` threads (the kernels release the GIL).
-    Returns the tasks' return values."""
+    range; ``cost`` elements per index, e.g. a row's texels): on the calling thread below
+    :data:`PARALLEL_MIN` elements, else as up to 4 tasks of at least :data:`TASK_MIN` elements
+    per thread (so that a thread slowed by the machine's load hands work to the others) on a
+    pool of :func:`threads` threads (the kernels release the GIL). Returns the tasks' return values."""
     t = threads()
-    tasks = min(4 * t, n // TASK_MIN)
-    if t < 2 or n < PARALLEL_MIN:
+    tasks = min(4 * t, n * cost // TASK_MIN, n)
+    if t < 2 or n * cost < PARALLEL_MIN:
         return [kernel(0, n, *args)]
     bounds = np.linspace(0, n, tasks + 1).astype(np.int64)
     return list(_pool(t).map(lambda i: kernel(bounds[i], bounds[i + 1], *args), range(tasks)))

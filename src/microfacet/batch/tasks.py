@@ -8,10 +8,12 @@ that sees the files, any number of times: the outputs are the same bytes every t
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import inspect
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -20,7 +22,7 @@ import numpy as np
 from .._background import in_background
 from ..errors import MicrofacetError
 from ..io.names import input_name
-from ..io.read import decompressed
+from ..io.read import MEASURED_BRDF, read_decompressed
 
 __all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
 
@@ -108,33 +110,37 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     reading = None if normal_map else in_background(read_image, source)   # the decode overlaps the imports
     from .. import leadr
     from ..io import write_png
-    from ..leadr.files import heights_of_image
+    from ..leadr.files import height_levels
     from ..leadr.preview import preview_image
     base = roughness
     if material is not None:
         from ..fit import load
         base = load(material).to_beckmann()
-    with np.errstate(over="ignore", invalid="ignore"):
-        if normal_map:
-            pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
-        else:
-            pyramid = leadr.bake(heights_of_image(reading.result(), source), scale, base, border=border)
-    if not all(np.isfinite(level.min()) and np.isfinite(level.max()) for level in pyramid):   # NaN propagates
-        raise MicrofacetError(f"{source}: the slope moments overflow float32 (scale {scale:g}"
-                              f"{'' if roughness is None else f', roughness {roughness:g}'}); "
-                              "use a smaller scale or roughness")
-    preview = preview_image(pyramid)                  # before any write: a failure leaves no file
-    leadr.write_pyramid(out, pyramid, compression=compression)
+    with contextlib.ExitStack() as files:
+        storage = None
+        try:
+            if normal_map:
+                pyramid = leadr.mip_pyramid(leadr.normal_map_to_moments(source, base, scale, encoding=encoding, z=z))
+            else:
+                levels, top = height_levels(reading.result(), source)
+                if compression == "none" and sys.byteorder == "little":   # baked into the file (pyramid_file)
+                    storage = files.enter_context(leadr.pyramid_file(out, *levels.shape[:2]))
+                pyramid = leadr.bake(levels, scale / top, base, border=border, out=storage)
+        except ValueError as e:
+            raise MicrofacetError(f"{source}: {e}") from None
+        preview = preview_image(pyramid)              # before the pyramid is written: a failure leaves no file
+        if storage is None:
+            leadr.write_pyramid(out, pyramid, compression=compression)
     try:
         write_png(out.with_suffix(".png"), preview)
     except BaseException:                             # Ctrl-C, a full disk: no pyramid without its preview
         out.unlink(missing_ok=True)
         raise
-    top = leadr.from_moments(pyramid[-1][0, 0])
+    lobe = leadr.from_moments(pyramid[-1][0, 0])
     h, w = pyramid[0].shape[:2]
-    return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(top.alpha_x),
-            "alpha_y": float(top.alpha_y), "rho": float(top.rho), "mean_x": float(top.xn),
-            "mean_y": float(top.yn)}
+    return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(lobe.alpha_x),
+            "alpha_y": float(lobe.alpha_y), "rho": float(lobe.rho), "mean_x": float(lobe.xn),
+            "mean_y": float(lobe.yn)}
 
 
 # -------------------------------------------------------------------------- glints
@@ -160,17 +166,6 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
                "beckmann_alpha_x", "beckmann_alpha_y", "beckmann_rho", "beckmann_diffuse")
 
 
-def _file_data(path: Path) -> bytes | None:
-    """The uncompressed bytes of ``path`` (:func:`~microfacet.io.read.decompressed`), or None
-    if it cannot be read (then :func:`microfacet.measured.load` says why). Needs zlib only,
-    so it can run while the fit modules import."""
-    try:
-        data = Path(path).read_bytes()
-    except OSError:
-        return None
-    return decompressed(data, path)
-
-
 def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
              method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
              albedo_weight: float | None = None, coat: bool = False, picture: bool = True) -> dict:
@@ -178,11 +173,10 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures."""
-    reading = in_background(_file_data, source)      # read + gunzip (GIL released) overlap the imports
+    reading = in_background(read_decompressed, source, MEASURED_BRDF)   # read + gunzip (GIL released) overlap the imports
     from ..fit.outputs import fit_material, summary_row
-    from ..measured import load, load_bytes
-    data = reading.result()
-    brdf = load(source) if data is None else load_bytes(data, source)
+    from ..measured import load_bytes
+    brdf = load_bytes(reading.result(), source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
                            fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)

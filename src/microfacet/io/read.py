@@ -7,9 +7,11 @@ from pathlib import Path
 
 from ..errors import MicrofacetError
 
-__all__ = ["read_bytes", "decompressed", "GZIP_MAGIC"]
+__all__ = ["read_bytes", "decompressed", "read_decompressed", "GZIP_MAGIC", "MEASURED_BRDF"]
 
 GZIP_MAGIC = b"\x1f\x8b"
+#: What :func:`microfacet.measured.load` expects, in messages.
+MEASURED_BRDF = "a measured BRDF (MERL, RGL .bsdf, UTIA)"
 
 
 def read_bytes(path: str | os.PathLike, kind: str, size: int | None = None) -> bytes:
@@ -46,3 +48,9 @@ def decompressed(data: bytes, path: str | os.PathLike) -> bytes:
     if not d.eof:
         raise MicrofacetError(f"{os.fspath(path)}: truncated gzip stream")
     return out
+
+
+def read_decompressed(path: str | os.PathLike, kind: str) -> bytes:
+    """:func:`read_bytes` of all of ``path``, :func:`decompressed`: a file's content, gzipped
+    or not. NumPy-free and releasing the GIL, as :func:`decompressed`."""
+    return decompressed(read_bytes(path, kind), path)

@@ -5,7 +5,7 @@ A texel stores the five linear slope moments ``E1..E5 = E[x~], E[y~], E[x~^2], E
 E[x~ y~]`` of the uv square's slopes (Eq. 3.5-3.9); they MIP-map by averaging, convolve
 by adding (Listing 5.1) and convert to a Beckmann lobe with :func:`from_moments`.
 """
-from .files import load_height_map, load_normal_map, read_pyramid, write_normal_map, write_pyramid
+from .files import load_height_map, load_normal_map, pyramid_file, read_pyramid, write_normal_map, write_pyramid
 from .heightfield import gaussian_heightfield
 from .maps import (base_moments, bake, bake_reference, decode_normal_map, encode_normal_map,
                    height_to_slopes, normal_map_to_moments, normals_to_slopes,
@@ -25,7 +25,7 @@ __all__ = ["to_moments", "from_moments", "convolve", "scale_height", "transform"
            "decode_normal_map", "slopes_to_moments", "normal_map_to_moments", "base_moments",
            "bake", "bake_reference",
            "mip_pyramid", "mip_sizes", "downsample_weights", "lookup",
-           "read_pyramid", "write_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
+           "read_pyramid", "write_pyramid", "pyramid_file", "load_height_map", "load_normal_map", "write_normal_map",
            "gaussian_heightfield",
            "shading", "point_light", "env_specular", "MipEnvironment", "sample_grid",
            "artificial_micronormal", "sh_project", "sh_add_directional", "sh_irradiance",

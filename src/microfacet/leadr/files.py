@@ -5,12 +5,18 @@ Pyramid file: one OpenEXR multi-part file, one part per MIP level named ``mip0``
 ``write_pyramid``) with float32 channels
 ``E1 E2 E3 E4 E5`` (moments of the unit uv square's slopes at every level). Every part
 shares level 0's display window (OpenEXR requires it); the data window of part ``k`` is
-its own ``W_k x H_k``.
+its own ``W_k x H_k``. :func:`pyramid_file` lays out the uncompressed file, byte for byte as
+OpenEXR writes it, in memory mapped onto the file, for :func:`microfacet.leadr.bake` to
+fill (OpenExr file layout, "Multi-Part Files" and "Scan Lines").
 """
 from __future__ import annotations
 
+import contextlib
+import mmap
 import os
+import struct
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +29,7 @@ from ..io.image import read_image
 from ..io.png import write_png_data
 from .mip import mip_sizes
 
-__all__ = ["write_pyramid", "read_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
+__all__ = ["write_pyramid", "pyramid_file", "read_pyramid", "load_height_map", "load_normal_map", "write_normal_map",
            "CHANNELS"]
 
 CHANNELS = ("E1", "E2", "E3", "E4", "E5")
@@ -55,6 +61,69 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -
     with atomic_path(path) as tmp, exr_threads():
         OpenEXR.File(parts).write(str(tmp))
     return Path(path)
+
+
+def _attribute(name: str, kind: str, value: bytes) -> bytes:
+    """An EXR header attribute: name, type (null-terminated), size (int32), value."""
+    return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+
+
+def _part_header(k: int, height: int, width: int, display: tuple[int, int], multi: bool) -> bytes:
+    """The header of part ``mip{k}`` (an uncompressed float32 scanline image ``height x width``
+    with channels :data:`CHANNELS`, display window ``display = (H_0, W_0)``) of a ``multi``-part
+    file or a single-part one: OpenEXR's attributes, in its (alphabetical) order, then the null
+    byte that ends a header."""
+    chlist = b"".join(c.encode() + b"\0" + struct.pack("<iB3xii", 2, 0, 1, 1) for c in CHANNELS) + b"\0"
+    window = struct.pack("<4i", 0, 0, width - 1, height - 1)
+    name = f"mip{k}".encode()
+    return b"".join([
+        _attribute("channels", "chlist", chlist),
+        _attribute("chunkCount", "int", struct.pack("<i", height)) if multi else b"",
+        _attribute("compression", "compression", b"\0"), _attribute("dataWindow", "box2i", window),
+        _attribute("displayWindow", "box2i", struct.pack("<4i", 0, 0, display[1] - 1, display[0] - 1)),
+        _attribute("lineOrder", "lineOrder", b"\0"), _attribute("name", "string", name),
+        _attribute("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+        _attribute("screenWindowCenter", "v2f", struct.pack("<2f", 0.0, 0.0)),
+        _attribute("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+        _attribute("type", "string", b"scanlineimage"), b"\0"])
+
+
+@contextlib.contextmanager
+def pyramid_file(path: str | os.PathLike, height: int, width: int) -> Iterator[list[np.ndarray]]:
+    """Storage for the moment pyramid of an ``height x width`` map inside the file it will be:
+    yields its levels, ``(H_k, W_k, 5)`` float32 views of an uncompressed pyramid EXR (the
+    file :func:`write_pyramid` writes with ``compression="none"``, byte for byte) mapped in
+    memory, to be filled (``microfacet.leadr.bake(..., out=levels)``). On leaving the block
+    the file replaces ``path`` atomically (flushed to disk); on an exception nothing is left.
+    A bake filling it touches each byte once, where an array then written to a file takes
+    its memory twice (the array's pages and the file's), which costs most of a large bake.
+    Do not write into the levels after the block: they remain mapped onto the file."""
+    sizes = mip_sizes(height, width)
+    multi = len(sizes) > 1                   # a 1 x 1 map has one level: a single-part file
+    prefix = 3 if multi else 2               # chunk: [part,] y, size (int32), then E1..E5 of line y
+    headers = b"v/1\x01" + struct.pack("<i", 2 | (0x1000 if multi else 0)) + b"".join(    # version 2
+        _part_header(k, h, w, sizes[0], multi) for k, (h, w) in enumerate(sizes)) + (b"\0" if multi else b"")
+    offset = len(headers) + 8 * sum(h for h, _ in sizes)                    # the offset tables
+    starts, tables = [], []
+    for h, w in sizes:
+        starts.append(offset)
+        tables.append(offset + 4 * (prefix + 5 * w) * np.arange(h, dtype=np.uint64))
+        offset += 4 * (prefix + 5 * w) * h
+    with atomic_path(path) as tmp, open(tmp, "r+b") as f:
+        if hasattr(os, "posix_fallocate"):               # a full disk fails here, not in the mapping
+            os.posix_fallocate(f.fileno(), 0, offset)
+        else:                                           # (macOS, Windows)
+            f.truncate(offset)
+        f.write(headers + np.concatenate(tables).astype("<u8").tobytes())
+        f.flush()
+        memory = mmap.mmap(f.fileno(), offset)
+        levels = []
+        for k, ((h, w), start) in enumerate(zip(sizes, starts)):
+            lines = np.ndarray((h, prefix + 5 * w), np.float32, memory, start)
+            lines.view(np.int32)[:, :prefix] = np.stack([np.full(h, k), np.arange(h), np.full(h, 20 * w)],
+                                                        axis=1)[:, 3 - prefix:]
+            levels.append(lines[:, prefix:].reshape(h, 5, w).transpose(0, 2, 1))
+        yield levels                                     # atomic_path's fsync writes the mapped pages
 
 
 #: What a pyramid is, in error messages.
@@ -112,25 +181,32 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
     (equal in a gray image); alpha is ignored. A colour map that decodes as a normal map
     (:func:`_looks_like_normal_map`) is read as heights all the same, with a
     :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless)."""
-    return heights_of_image(read_image(Path(path)), path)
+    levels, top = height_levels(read_image(Path(path)), path)
+    return np.divide(levels, top, dtype=np.float64)
 
 
-def heights_of_image(a: np.ndarray, path: str | os.PathLike) -> np.ndarray:
-    """:func:`load_height_map` of the image ``a`` read from ``path`` (by
-    :func:`~microfacet.io.image.read_image`; ``path`` names it in messages)."""
+def height_levels(a: np.ndarray, path: str | os.PathLike) -> tuple[np.ndarray, float]:
+    """``(levels, top)``: the heights ``levels / top`` (:func:`load_height_map`) of the image ``a``
+    read from ``path`` (which names it in messages), with ``levels`` as the image stores them: an integer image's gray levels (or their sum over R, G, B, in
+    ``uint32``) and ``top`` its largest level (times 3), so that ``microfacet.leadr.bake(levels,
+    scale / top)`` bakes the heights without a float64 copy of them (4096²: 128 MB)."""
     path = Path(path)
     if a.ndim == 3 and a.shape[2] >= 3 and _looks_like_normal_map(a[..., :3]):
         warnings.warn(f"{path}: looks like a tangent-space normal map (its colours decode to unit "
                       "normals) but is read as heights (the mean of R, G, B); bake it with --normal-map "
                       "(microfacet.leadr.normal_map_to_moments)", HeightMapWarning, stacklevel=3)
-    if a.dtype in (np.uint8, np.uint16):
-        a = np.divide(a, float(np.iinfo(a.dtype).max), dtype=np.float64)      # one pass
-    if a.ndim == 3:
-        a = a[..., :1] if a.shape[2] in (1, 2) else a[..., :3]
-        a = a.mean(axis=2)
-    if min(a.shape) < 1:
+    if min(a.shape[:2]) < 1:
         raise MicrofacetError(f"{path}: empty image")
-    return a
+    integer = a.dtype in (np.uint8, np.uint16)
+    top = float(np.iinfo(a.dtype).max) if integer else 1.0
+    if a.ndim == 3:
+        if a.shape[2] in (1, 2):
+            a = a[..., 0]
+        elif integer:
+            a, top = a[..., :3].sum(axis=2, dtype=np.uint32), 3.0 * top
+        else:
+            a = a[..., :3].mean(axis=2)
+    return a, top
 
 
 def load_normal_map(path: str | os.PathLike) -> np.ndarray:

@@ -19,8 +19,9 @@ import numba
 import numpy as np
 
 from ..distributions import Beckmann
+from ..kernels import _launch_ranges
 from ..io.normalmap import normals_to_slopes, read_slopes
-from .mip import mip_pyramid
+from .mip import mip_pyramid, mip_sizes
 from .moments import convolve, to_moments
 
 __all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode_normal_map",
@@ -28,6 +29,8 @@ __all__ = ["height_to_slopes", "slopes_to_normals", "normals_to_slopes", "encode
            "bake", "bake_reference", "BORDERS"]
 
 BORDERS = ("wrap", "clamp")
+#: The error of a bake whose moments do not fit in float32.
+OVERFLOW = "the slope moments overflow float32 (too large a scale or roughness)"
 
 
 def _check_height(height) -> np.ndarray:
@@ -36,7 +39,7 @@ def _check_height(height) -> np.ndarray:
         raise ValueError(f"a height map must be a non-empty (H, W) array, got shape {h.shape}")
     if not np.issubdtype(h.dtype, np.number) or np.issubdtype(h.dtype, np.complexfloating):
         raise ValueError(f"a height map must be real, got dtype {h.dtype}")
-    if not np.all(np.isfinite(h)):
+    if h.dtype.kind == "f" and not np.all(np.isfinite(h)):
         raise ValueError("a height map must be finite (found NaN or inf)")
     return h
 
@@ -126,7 +129,11 @@ def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0, *, encoding:
     if not np.isfinite(scale):
         raise ValueError(f"scale must be finite, got {scale!r}")
     slopes = decode_normal_map(nmap, encoding, z) * float(scale)
-    return slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        E = slopes_to_moments(slopes, base_moments(roughness)).astype(np.float32)
+    if not (np.isfinite(E.min()) and np.isfinite(E.max())):        # NaN propagates
+        raise ValueError(OVERFLOW)
+    return E
 
 
 @numba.njit(inline="always")
@@ -149,13 +156,19 @@ def _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e):  # pragm
     e[4][i] = x * y + b[4] + x * b[1] + y * b[0]
 
 
-@numba.njit(parallel=True, cache=True)
-def _height_moments(xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
-    """Level-0 moments into the planar ``out (5, H, W)``, row by row through 1-D row views:
-    the two border texels, then the inner ones (no index select: that loop vectorizes)."""
+#: Bits of float32's exponent field: all ones for inf and NaN.
+_EXPONENT32 = np.uint32(0x7F800000)
+
+
+@numba.njit(cache=True, nogil=True)
+def _height_moments(start, stop, xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
+    """Level-0 moments of rows ``start:stop`` into the planar float32 ``out (5, H, W)``, row by
+    row through 1-D row views: the two border texels, then the inner ones (no index select:
+    that loop vectorizes). Returns how many stored moments are not finite (overflow of float32)."""
     h, w = xi.shape
     b = (base[0], base[1], base[2], base[3], base[4])
-    for j in numba.prange(h):
+    bad = 0
+    for j in range(start, stop):
         jt, jb = _neighbours(j, h, wrap)
         row, up, down = xi[j], xi[jt], xi[jb]
         e = (out[0, j], out[1, j], out[2, j], out[3, j], out[4, j])
@@ -164,9 +177,15 @@ def _height_moments(xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cove
             _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e)
         for i in range(1, w - 1):
             _texel_moments(row, up, down, i - 1, i, i + 1, sx_scale, sy_scale, b, e)
+        for c in range(5):                           # inf and NaN: exponent bits all ones
+            bits = e[c].view(np.uint32)
+            for i in range(w):
+                bad += (bits[i] & _EXPONENT32) == _EXPONENT32
+    return bad
 
 
-def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
+def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
+         out: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """LEAN/LEADR MIP pyramid of a height map: a list of ``(H_k, W_k, 5)`` float32 moment
     maps ``E1..E5``, level 0 first, down to ``1 x 1``.
 
@@ -174,23 +193,33 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") ->
     units of the unit uv square (Sec. 3.4, Listing 3.6), convolved with the base
     ``roughness`` (Listing 5.1; ``None``, ``alpha``, ``(alpha_x, alpha_y)`` or a Beckmann
     lobe); the other levels are exact averages (:func:`microfacet.leadr.mip_pyramid`).
-    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage). The
+    One fused compiled pass builds level 0 (float64 arithmetic, float32 storage) from the
+    heights as they are stored (``uint8``, ``uint16``, ``uint32``, float32 or float64). The
     levels are ``(H_k, W_k, 5)`` views of channels-first storage: each ``level[..., c]``
     is contiguous, as the EXR writer stores it (:func:`~microfacet.leadr.mip_pyramid`).
+    ``out``: the levels to fill instead (float32 ``(H_k, W_k, 5)`` of the pyramid's sizes, e.g.
+    :func:`microfacet.leadr.pyramid_file`'s, whose file they are). Raises ``ValueError`` if a
+    moment overflows float32 (too large a ``scale`` or roughness).
     """
     xi = _check_height(height)
     _check_border(border)
     if not np.isfinite(scale):
         raise ValueError(f"scale must be finite, got {scale!r}")
-    if xi.dtype not in (np.float32, np.float64):
+    if xi.dtype not in (np.uint8, np.uint16, np.uint32, np.float32, np.float64):
         xi = xi.astype(np.float64)
     base = base_moments(roughness)
     base = np.zeros(5) if base is None else base
     h, w = xi.shape
-    planar = np.empty((5, h, w), dtype=np.float32)
-    _height_moments(np.ascontiguousarray(xi), 0.5 * w * float(scale), 0.5 * h * float(scale),
-                    border == "wrap", base, planar)
-    return mip_pyramid(planar.transpose(1, 2, 0))
+    if out is not None and (len(out) != len(mip_sizes(h, w)) or out[0].shape != (h, w, 5)
+                            or out[0].dtype != np.float32):
+        raise ValueError(f"out must be the float32 levels of a {h} x {w} map's pyramid")
+    planar = np.empty((5, h, w), dtype=np.float32) if out is None else np.moveaxis(out[0], -1, 0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = _launch_ranges(_height_moments, h, np.ascontiguousarray(xi), 0.5 * w * float(scale),
+                             0.5 * h * float(scale), border == "wrap", base, planar, cost=w)
+    if sum(bad):
+        raise ValueError(OVERFLOW)
+    return mip_pyramid(planar.transpose(1, 2, 0), out)
 
 
 def bake_reference(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:

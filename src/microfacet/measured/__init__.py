@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import os
 
-from ..io.read import decompressed
-from .base import MeasuredBRDF, file_error, read_bytes
+from ..io.read import MEASURED_BRDF, read_decompressed
+from .base import MeasuredBRDF, file_error
 from .merl import MERLBRDF, is_merl, read_merl
 from .rgl import RGLBRDF, read_rgl
 from .tensor_file import is_tensor_file, read_tensor_file, write_tensor_file
@@ -55,7 +55,7 @@ def load(path: str | os.PathLike) -> MeasuredBRDF:
     MicrofacetError
         Unreadable or unknown file, bad header or size, truncated data, NaN/inf values.
     """
-    return load_bytes(decompressed(read_bytes(path), path), path)
+    return load_bytes(read_decompressed(path, MEASURED_BRDF), path)
 
 
 def load_bytes(data: bytes, path: str | os.PathLike) -> MeasuredBRDF:

@@ -23,7 +23,7 @@ from ..brdf import _dirs as as_dirs   # the one direction check of every BRDF
 from ..errors import MicrofacetError
 from ..geometry import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 
-__all__ = ["MeasuredBRDF", "read_bytes", "file_error", "check_finite", "as_dirs", "compiled_kernels"]
+__all__ = ["MeasuredBRDF", "file_error", "check_finite", "as_dirs", "compiled_kernels"]
 
 
 def compiled_kernels():
@@ -44,14 +44,6 @@ def _rows(a, k: int) -> np.ndarray:
 def file_error(path, what: str) -> MicrofacetError:
     """A :class:`MicrofacetError` naming the file and what is wrong with it."""
     return MicrofacetError(f"{os.fspath(path)}: {what}")
-
-
-def read_bytes(path) -> bytes:
-    """All bytes of ``path`` (opened read-only); an unreadable file is a ``MicrofacetError``."""
-    try:
-        return Path(path).read_bytes()
-    except OSError as e:
-        raise file_error(path, f"cannot read file ({e.strerror or e})") from e
 
 
 def check_finite(path, values: np.ndarray, what: str) -> None:
