@@ -772,6 +772,8 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     if coat:
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
         q = _coat_search(problem, [np.append(q, lc) for lc in np.log(_SCAN)], max_nfev)
+        if not anisotropic and linear == coat_fresnel and q[0] < q[1]:
+            q = q[::-1].copy()       # interchangeable lobes (mirror minima): the coat is the sharper
     # stage 4: a conductor, refined from that shape
     if fresnel == "conductor":
         problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)
