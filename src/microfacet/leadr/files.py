@@ -186,10 +186,11 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
 
 
 def height_levels(a: np.ndarray, path: str | os.PathLike) -> tuple[np.ndarray, float]:
-    """``(levels, top)``: the heights ``levels / top`` (:func:`load_height_map`) of the image ``a``
-    read from ``path`` (which names it in messages), with ``levels`` as the image stores them: an integer image's gray levels (or their sum over R, G, B, in
-    ``uint32``) and ``top`` its largest level (times 3), so that ``microfacet.leadr.bake(levels,
-    scale / top)`` bakes the heights without a float64 copy of them (4096²: 128 MB)."""
+    """``(levels, top)``: the heights ``levels / top`` (:func:`load_height_map`) of the image
+    ``a`` read from ``path`` (which names it in messages), ``levels`` as the image stores them:
+    an integer image's gray levels (or their sum over R, G, B, in ``uint32``) and ``top`` its
+    largest level (times 3), so that ``microfacet.leadr.bake(levels, scale / top)`` bakes the
+    heights without a float64 copy of them (4096²: 128 MB)."""
     path = Path(path)
     if a.ndim == 3 and a.shape[2] >= 3 and _looks_like_normal_map(a[..., :3]):
         warnings.warn(f"{path}: looks like a tangent-space normal map (its colours decode to unit "

@@ -19,8 +19,8 @@ import numba
 import numpy as np
 
 from ..distributions import Beckmann
-from ..kernels import _launch_ranges
 from ..io.normalmap import normals_to_slopes, read_slopes
+from ..kernels import _launch_ranges
 from .mip import mip_pyramid, mip_sizes
 from .moments import convolve, to_moments
 
