@@ -90,8 +90,17 @@ def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
 
 
 @_inline
-def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
-    """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
+def _view_root(F, kind, r2, co):
+    """The square root in :func:`_smith_pre`'s terms of the warped view ``o' = (a, b, c_o)``,
+    ``r2 = a^2 + b^2`` (``c_o = 1`` where ``c_o <= 0``): GGX ``q_o = sqrt(c_o^2 + r2)``, Beckmann
+    ``sqrt(r2)``; apart, so that the sample kernel takes it from its first loop."""
+    co = co if co > F(0.0) else F(1.0)
+    return math.sqrt(co * co + r2) if kind == GGX else math.sqrt(r2)
+
+
+@_inline
+def _smith_pre(F, kind, shadowing, root_o, co, r2_i, ci):
+    """Smith terms of the warped view ``o' = (a, b, c_o)``, ``root_o`` its :func:`_view_root`, and light
     (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
     mask those): ``(A, W, c)`` with ``A = 2 c_o (1 + Lambda_o)``, ``W / c = 2 c_o (1 + Lambda_o +
     Lambda_i)`` (``Lambda_i = 0`` without shadowing), so that ``D / (4 A(o)) = D / (2 A)``,
@@ -103,10 +112,9 @@ def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
     lit = shadowing & (ci > F(0.0))
     ci = ci if lit else F(1.0)
     if kind == GGX:
-        qo = math.sqrt(co * co + r2)
         qi = math.sqrt(ci * ci + (r2_i if lit else F(0.0)))
-        return co + qo, ci * qo + co * qi, ci
-    return co / math.sqrt(r2), ci / math.sqrt(r2_i if lit else F(0.0)), F(1.0)     # 1 / 0 = inf
+        return co + root_o, ci * root_o + co * qi, ci
+    return co / root_o, ci / math.sqrt(r2_i if lit else F(0.0)), F(1.0)     # 1 / 0 = inf
 
 
 @_inline
@@ -357,7 +365,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
               & ((ci > F(0.0)) | (not shadowing)))
         e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
         oh_r[k] = oh
-        a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, r2, co, r2_i, ci)
+        a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
         e_r[k] = e
         f_r[k] = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
         co_r[k] = co
@@ -824,30 +832,34 @@ def sample_kernel(kind, dtype=np.float64):
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(F(1.0) - rho * rho)
-        buf = np.empty((8, BLOCK), F)
+        buf = np.empty((9, BLOCK), F)
         bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
         outside, top_o, dev_o = 0, np.int64(0), bk[0]
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
-        r7 = buf[7]
+        r7, r8 = buf[7], buf[8]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
             wi_b = wi_flat[3 * j0:3 * (j0 + m)]
             outside += _outside_unit(u_b, m)
-            for k in range(m):                       # polar angle and azimuth of the warped view
+            for k in range(m):                       # the warped view o' = (a, b, c_o): polar angle, azimuth
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 if measure:
                     dev_o[k] = _deviation_at(wo_b, k)
                 a = ax * ox + rho * ay * oy
                 b = ay * s1 * oy
-                c = max(oz - ox * xn - oy * yn, F(0.0))
+                co = oz - ox * xn - oy * yn
+                c = max(co, F(0.0))
                 r2_o = a * a + b * b
+                root = _view_root(F, kind, r2_o, co)
+                q = root if kind == GGX else math.sqrt(r2_o + c * c)     # |o'| where c_o > 0
                 inv_r = F(1.0) / math.sqrt(r2_o)
-                r0[k] = (c if r2_o > F(0.0) else F(1.0)) / math.sqrt(r2_o + c * c if r2_o > F(0.0) else F(1.0))
+                r0[k] = (c if r2_o > F(0.0) else F(1.0)) / (q if r2_o > F(0.0) else F(1.0))
                 r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
                 r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
+                r6[k], r8[k] = co, root
             if measure:
                 top_o = _max_bits(dev_o, m, top_o)
             if kind == GGX:                          # the standard visible normal
@@ -867,15 +879,14 @@ def sample_kernel(kind, dtype=np.float64):
                 hx, hy, hz = hx * inv, hy * inv, hz * inv
                 oh = ox * hx + oy * hy + oz * hz
                 ix, iy, iz = F(2.0) * oh * hx - ox, F(2.0) * oh * hy - oy, F(2.0) * oh * hz - oz
-                r2_o, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+                co = r6[k]
                 ok = (iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
                 r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
                 e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
                 r0[k] = oh
-                r1[k], r2[k], r5[k] = _smith_pre(F, kind, shadowing, r2_o, co, r2_i, ci)
+                r1[k], r2[k], r5[k] = _smith_pre(F, kind, shadowing, r8[k], co, r2_i, ci)
                 r3[k] = e
                 r4[k] = scale if ok else F(0.0)
-                r6[k] = co
                 wi_b[3 * k], wi_b[3 * k + 1], wi_b[3 * k + 2] = ix, iy, iz
                 r7[k] = F(1.0) if (ci > F(0.0)) | (not shadowing) else F(0.0)     # wi visible: G > 0
             _smith_block_post(kind, buf, m)
