@@ -555,6 +555,24 @@ def _sin_cos(F, x):
 
 
 @_inline
+def _view_angles(F, kind, wo, k, ax, ay, rho, s1, xn, yn):
+    """``(cos theta, cos phi, sin phi, c_o, root)`` of the warped view ``o' = (a, b, c_o)`` (Eq. 3.3)
+    of the direction ``k`` of a flat ``wo`` (``3 k + axis``), ``root`` its :func:`_view_root`:
+    ``theta`` is 0 where ``a = b = 0``, ``pi/2`` where ``c_o <= 0``."""
+    ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
+    a = ax * ox + rho * ay * oy
+    b = ay * s1 * oy
+    co = oz - ox * xn - oy * yn
+    c = max(co, F(0.0))
+    r2 = a * a + b * b
+    root = _view_root(F, kind, r2, co)
+    q = root if kind == GGX else math.sqrt(r2 + c * c)          # |o'| where c_o > 0
+    inv_r = F(1.0) / math.sqrt(r2)
+    cos_t = (c if r2 > F(0.0) else F(1.0)) / (q if r2 > F(0.0) else F(1.0))
+    return cos_t, (a * inv_r if r2 > F(0.0) else F(1.0)), (b * inv_r if r2 > F(0.0) else F(0.0)), co, root
+
+
+@_inline
 def _ggx_visible_std(F, u0, u1, cos_t):
     """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
     form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
@@ -699,14 +717,11 @@ def _deviation(top, row, measured=True):
     return row[0]
 
 
-@_jit
-def _outside_unit(u, m):
-    """How many of ``u[:2 m]`` lie outside ``[0, 1]`` (NaN included): the range check of
-    ``MicrofacetBRDF.sample``'s uniforms, on each block as the sample kernel reads it."""
-    n = 0
-    for k in range(2 * m):
-        n += 0 if (u[k] >= 0.0) & (u[k] <= 1.0) else 1
-    return n
+@_inline
+def _outside_unit(u):
+    """1 if ``u`` lies outside ``[0, 1]`` (NaN included), else 0: the range check of
+    ``MicrofacetBRDF.sample``'s uniforms, counted as the sample kernel reads them."""
+    return 0 if (u >= 0.0) & (u <= 1.0) else 1
 
 
 @_jit
@@ -833,9 +848,9 @@ def sample_kernel(kind, dtype=np.float64):
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(F(1.0) - rho * rho)
         buf = np.empty((9, BLOCK), F)
-        bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
+        bk = np.empty((5, BLOCK))                    # Beckmann's float64 rows, then the deviations
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
-        outside, top_o, dev_o = 0, np.int64(0), bk[0]
+        outside, top_o, dev_o = 0, np.int64(0), bk[4]
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
         r7, r8 = buf[7], buf[8]
@@ -843,30 +858,26 @@ def sample_kernel(kind, dtype=np.float64):
             m = min(BLOCK, stop - j0)
             u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
             wi_b = wi_flat[3 * j0:3 * (j0 + m)]
-            outside += _outside_unit(u_b, m)
-            for k in range(m):                       # the warped view o' = (a, b, c_o): polar angle, azimuth
-                ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
-                if measure:
-                    dev_o[k] = _deviation_at(wo_b, k)
-                a = ax * ox + rho * ay * oy
-                b = ay * s1 * oy
-                co = oz - ox * xn - oy * yn
-                c = max(co, F(0.0))
-                r2_o = a * a + b * b
-                root = _view_root(F, kind, r2_o, co)
-                q = root if kind == GGX else math.sqrt(r2_o + c * c)     # |o'| where c_o > 0
-                inv_r = F(1.0) / math.sqrt(r2_o)
-                r0[k] = (c if r2_o > F(0.0) else F(1.0)) / (q if r2_o > F(0.0) else F(1.0))
-                r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
-                r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
-                r6[k], r8[k] = co, root
+            if kind == GGX:                          # the warped view and the standard visible normal
+                for k in range(m):
+                    if measure:
+                        dev_o[k] = _deviation_at(wo_b, k)
+                    u0, u1 = u_b[2 * k], u_b[2 * k + 1]
+                    r0[k] = F(_outside_unit(u0) + _outside_unit(u1))
+                    cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
+                    r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u0), F(u1), cos_t)
+                for k in range(m):                   # (an integer sum in the loop above split its float32 lanes)
+                    outside += 0 if r0[k] == F(0.0) else 1
+            else:
+                for k in range(2 * m):
+                    outside += _outside_unit(u_b[k])
+                for k in range(m):
+                    if measure:
+                        dev_o[k] = _deviation_at(wo_b, k)
+                    r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
+                _beckmann_visible_block(u_b, r0, buf[3:6], bk, m)
             if measure:
                 top_o = _max_bits(dev_o, m, top_o)
-            if kind == GGX:                          # the standard visible normal
-                for k in range(m):
-                    r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u_b[2 * k]), F(u_b[2 * k + 1]), r0[k])
-            else:
-                _beckmann_visible_block(u_b, r0, buf[3:6], bk, m)
             for k in range(m):
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 cp, sp = r1[k], r2[k]
