@@ -345,7 +345,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays; if
     ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
-    to the float64 rows ``dev[0]``, ``dev[1]``."""
+    to the rows ``dev[0]``, ``dev[1]`` (of ``F``)."""
     s1 = math.sqrt(F(1.0) - rho * rho)
     oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     dev_i, dev_o = dev[0], dev[1]
@@ -353,7 +353,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
         ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
         if measure:
-            dev_i[k], dev_o[k] = _deviation_at(wi, k), _deviation_at(wo, k)
+            dev_i[k], dev_o[k] = _deviation_at(F, wi, k), _deviation_at(F, wo, k)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
@@ -680,41 +680,59 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
 BLOCK = 256
 
 
-#: Bits of float64 ``inf``: non-negative floats, then inf, then NaN, order as their int64 bits.
-_INF_BITS = np.int64(0x7FF0000000000000)
+#: Bits of float64 and float32 ``inf``: non-negative floats, then inf, then NaN, order as their
+#: integer bits.
+_INF_BITS, _INF_BITS32 = np.int64(0x7FF0000000000000), np.int64(0x7F800000)
+#: The float32 kernels' deviations (:func:`_deviation_at` in float32) are within this of the exact
+#: ones where they are below 1/2: ``x^2 + y^2 + z^2 = s`` is computed to ``3 2^-24 s`` (``s < 3/2``),
+#: the subtraction of 1 is exact.
+_SLACK32 = 2.0**-20
 
 
 @_inline
-def _deviation_at(w, k):
+def _deviation_at(F, w, k):
     """``| |w_k|^2 - 1 |`` of row ``k`` of a flat block ``w`` (``3 k + axis``, :func:`_flat_rows`)
-    in float64, as :func:`microfacet.geometry.unit_deviation` (same operations, same order: the
-    same value). The float64 kernels compute it in the loop that reads the block, so that
-    ``MicrofacetBRDF``'s unit-length check takes no pass of its own (the float32 kernels do not:
-    float64 arithmetic in their loops halved their SIMD width, GGX eval 2.0 -> 2.8 ms per 10^6)."""
-    x, y, z = np.float64(w[3 * k]), np.float64(w[3 * k + 1]), np.float64(w[3 * k + 2])
-    return abs(x * x + y * y + z * z - 1.0)
+    in ``F`` arithmetic: in float64 as :func:`microfacet.geometry.unit_deviation` (same operations,
+    same order: the same value); in float32 within :data:`_SLACK32` of it. The kernels compute it in
+    the loop that reads the block, so that ``MicrofacetBRDF``'s unit-length check takes no pass of
+    its own (float64 arithmetic in the float32 kernels' loops halved their SIMD width, GGX eval
+    2.0 -> 2.8 ms per 10^6)."""
+    x, y, z = F(w[3 * k]), F(w[3 * k + 1]), F(w[3 * k + 2])
+    return abs(x * x + y * y + z * z - F(1.0))
+
+
+def _bits(row):
+    """``(row viewed as integers of its width, the bits of inf, the slack)`` of a float64 or float32
+    ``row`` of deviations (:data:`_INF_BITS`, :data:`_SLACK32`)."""
+
+
+@numba.extending.overload(_bits, inline="always")
+def _bits_impl(row):
+    if row.dtype == numba.types.float32:
+        return lambda row: (row.view(np.int32), _INF_BITS32, _SLACK32)
+    return lambda row: (row.view(np.int64), _INF_BITS, 0.0)
 
 
 @_inline
 def _max_bits(row, m, top):
-    """``max(top, int64 bits of row[:m])`` for non-negative float64 ``row`` (:func:`_deviation_at`):
+    """``max(top, integer bits of row[:m])`` for non-negative ``row`` (:func:`_deviation_at`):
     see :data:`_INF_BITS` (an integer maximum vectorizes, a float one that must see NaN does not)."""
-    bits = row.view(np.int64)
+    bits = _bits(row)[0]
     for k in range(m):
-        top = max(top, bits[k])
+        top = max(top, np.int64(bits[k]))
     return top
 
 
 @_jit
-def _deviation(top, row, measured=True):
-    """The float64 whose bits are ``top`` (:func:`_max_bits`), ``inf`` for NaN and inf; NaN if
-    not ``measured``."""
-    if not measured:
-        return math.nan
-    if top >= _INF_BITS:
+def _deviation(top, row):
+    """The float whose bits are ``top`` (:func:`_max_bits`) as float64, ``inf`` for NaN and inf;
+    plus :data:`_SLACK32` for a float32 ``row`` (then an upper bound of the exact deviation, where
+    that is below 1/2)."""
+    bits, inf_bits, slack = _bits(row)
+    if top >= inf_bits:
         return math.inf
-    row.view(np.int64)[0] = top
-    return row[0]
+    bits[0] = top
+    return np.float64(row[0]) + slack
 
 
 @_inline
@@ -735,7 +753,7 @@ def _unit_deviation(w):
         m = min(BLOCK, w.shape[0] - j0)
         b = a[3 * j0:3 * (j0 + m)]
         for k in range(m):
-            row[k] = _deviation_at(b, k)
+            row[k] = _deviation_at(np.float64, b, k)
         top = _max_bits(row, m, top)
     return _deviation(top, row)
 
@@ -775,7 +793,7 @@ def projected_kernel(kind, dtype=np.float64):
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
@@ -790,23 +808,21 @@ def projected_kernel(kind, dtype=np.float64):
 def pdf_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair; returns the
-    largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`; NaN in float32)."""
+    largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`)."""
     F = np.dtype(dtype).type
-    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, measure, dev)
-            if measure:
-                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
+                             m, ax, ay, rho, xn, yn, buf, True, dev)
+            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             out[j0:j0 + m] = buf[1, :m]
-        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
+        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
     return kernel
 
 
@@ -816,22 +832,20 @@ def eval_kernel(kind, dtype=np.float64):
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2);
     returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
-    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         out_flat = out.reshape(out.size)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, measure, dev)
-            if measure:
-                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
+                             m, ax, ay, rho, xn, yn, buf, True, dev)
+            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], out_flat[3 * j0:3 * (j0 + m)], m)
-        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
+        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
     return kernel
 
 
@@ -842,15 +856,14 @@ def sample_kernel(kind, dtype=np.float64):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``;
     returns how many of its ``u`` lie outside ``[0, 1]`` and the deviation of its ``wo``."""
     F = np.dtype(dtype).type
-    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(F(1.0) - rho * rho)
-        buf = np.empty((9, BLOCK), F)
-        bk = np.empty((5, BLOCK))                    # Beckmann's float64 rows, then the deviations
+        buf = np.empty((10, BLOCK), F)
+        bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
-        outside, top_o, dev_o = 0, np.int64(0), bk[4]
+        outside, top_o, dev_o = 0, np.int64(0), buf[9]
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
         r7, r8 = buf[7], buf[8]
@@ -860,8 +873,7 @@ def sample_kernel(kind, dtype=np.float64):
             wi_b = wi_flat[3 * j0:3 * (j0 + m)]
             if kind == GGX:                          # the warped view and the standard visible normal
                 for k in range(m):
-                    if measure:
-                        dev_o[k] = _deviation_at(wo_b, k)
+                    dev_o[k] = _deviation_at(F, wo_b, k)
                     u0, u1 = u_b[2 * k], u_b[2 * k + 1]
                     r0[k] = F(_outside_unit(u0) + _outside_unit(u1))
                     cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
@@ -872,12 +884,10 @@ def sample_kernel(kind, dtype=np.float64):
                 for k in range(2 * m):
                     outside += _outside_unit(u_b[k])
                 for k in range(m):
-                    if measure:
-                        dev_o[k] = _deviation_at(wo_b, k)
+                    dev_o[k] = _deviation_at(F, wo_b, k)
                     r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
                 _beckmann_visible_block(u_b, r0, buf[3:6], bk, m)
-            if measure:
-                top_o = _max_bits(dev_o, m, top_o)
+            top_o = _max_bits(dev_o, m, top_o)
             for k in range(m):
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 cp, sp = r1[k], r2[k]
@@ -909,5 +919,5 @@ def sample_kernel(kind, dtype=np.float64):
                 g = (p > F(0.0)) & (r7[k] > F(0.0))
                 r2[k] = (r5[k] * area if g else F(0.0)) / (r2[k] if g else F(1.0))   # G / G1(o)
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat[3 * j0:3 * (j0 + m)], m)
-        return outside, _deviation(top_o, dev_o, measure)
+        return outside, _deviation(top_o, dev_o)
     return kernel
