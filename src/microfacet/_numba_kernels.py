@@ -237,6 +237,18 @@ def _ndf_over(F, kind, e, scale, den):
 
 
 @_inline
+def _pdf_and_ratio(F, kind, area, w, c, e, scale, visible):
+    """``(pdf, G / G1(o))`` of a sampled pair from :func:`_smith_pre`'s ``(A, W, c)`` (after
+    :func:`_smith_post`) and :func:`_ndf_post`'s ``e`` and ``scale`` (0 where invalid):
+    ``D / (4 A(o)) = D / (2 A)`` and ``c A / W`` (Eq. 2.17, 2.23); 0 where the pdf is 0 or
+    ``wi`` is not ``visible``."""
+    e, scale, den = _guard(F, (scale > F(0.0)) & (e > F(0.0)), e, scale, F(2.0) * area)
+    p = _ndf_over(F, kind, e, scale, den)
+    g = (p > F(0.0)) & visible
+    return p, (c * area if g else F(0.0)) / (w if g else F(1.0))
+
+
+@_inline
 def _guard(F, valid, e, scale, den):
     """The arguments of :func:`_ndf_over` where ``valid``, else ``(1, 0, 1)`` (which give 0):
     the operands of a quotient are selected, not its result, since LLVM sinks a quotient
@@ -905,19 +917,19 @@ def sample_kernel(kind, dtype=np.float64):
                 r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
                 e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
                 r0[k] = oh
-                r1[k], r2[k], r5[k] = _smith_pre(F, kind, shadowing, r8[k], co, r2_i, ci)
-                r3[k] = e
-                r4[k] = scale if ok else F(0.0)
+                area, w, c = _smith_pre(F, kind, shadowing, r8[k], co, r2_i, ci)
+                scale = scale if ok else F(0.0)
                 wi_b[3 * k], wi_b[3 * k + 1], wi_b[3 * k + 2] = ix, iy, iz
-                r7[k] = F(1.0) if (ci > F(0.0)) | (not shadowing) else F(0.0)     # wi visible: G > 0
-            _smith_block_post(kind, buf, m)
-            for k in range(m):
-                area, e, f = r1[k], r3[k], r4[k]
-                e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f, F(2.0) * area)
-                p = _ndf_over(F, kind, e, scale, den)
-                pdf_b[k] = p
-                g = (p > F(0.0)) & (r7[k] > F(0.0))
-                r2[k] = (r5[k] * area if g else F(0.0)) / (r2[k] if g else F(1.0))   # G / G1(o)
+                visible = (ci > F(0.0)) | (not shadowing)                         # G > 0
+                if kind == GGX:                      # no Smith loop of its own: pdf and weight here
+                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, area, w, c, e, scale, visible)
+                else:
+                    r1[k], r2[k], r5[k], r3[k], r4[k] = area, w, c, e, scale
+                    r7[k] = F(1.0) if visible else F(0.0)
+            if kind != GGX:
+                _smith_block_post(kind, buf, m)
+                for k in range(m):
+                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k], r5[k], r3[k], r4[k], r7[k] > F(0.0))
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat[3 * j0:3 * (j0 + m)], m)
         return outside, _deviation(top_o, dev_o)
     return kernel
