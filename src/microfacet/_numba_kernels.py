@@ -249,6 +249,15 @@ def _pdf_and_ratio(F, kind, area, w, c, e, scale, visible):
 
 
 @_inline
+def _projected_over(F, kind, e, f, c, w):
+    """``D G / (4 z_o) [/ z_i] = D c / (2 W)`` of :func:`_projected_block` from :func:`_ndf_post`'s
+    ``e``, the NDF's ``scale`` ``f`` (0 where invalid, ``/ z_i`` taken) and :func:`_smith_pre`'s
+    ``c`` and ``W`` (after :func:`_smith_post`)."""
+    e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c, F(2.0) * w)
+    return _ndf_over(F, kind, e, scale, den)
+
+
+@_inline
 def _guard(F, valid, e, scale, den):
     """The arguments of :func:`_ndf_over` where ``valid``, else ``(1, 0, 1)`` (which give 0):
     the operands of a quotient are selected, not its result, since LLVM sinks a quotient
@@ -377,15 +386,16 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
               & ((ci > F(0.0)) | (not shadowing)))
         e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
         oh_r[k] = oh
-        a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
-        e_r[k] = e
-        f_r[k] = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
-        co_r[k] = co
-    _smith_block_post(kind, buf, m)
-    for k in range(m):
-        e, f = e_r[k], f_r[k]
-        e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c_r[k], F(2.0) * w_r[k])
-        a_r[k] = _ndf_over(F, kind, e, scale, den)
+        area, w, c = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
+        f = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
+        if kind == GGX:                              # no Smith loop of its own: the value here
+            a_r[k] = _projected_over(F, kind, e, f, c, w)
+        else:
+            a_r[k], w_r[k], c_r[k], e_r[k], f_r[k], co_r[k] = area, w, c, e, f, co
+    if kind != GGX:
+        _smith_block_post(kind, buf, m)
+        for k in range(m):
+            a_r[k] = _projected_over(F, kind, e_r[k], f_r[k], c_r[k], w_r[k])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
