@@ -358,8 +358,8 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev):
-    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev, dst):
+    """``buf[0, k] = o.h`` and ``dst[k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
@@ -389,13 +389,13 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         area, w, c = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
         f = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
         if kind == GGX:                              # no Smith loop of its own: the value here
-            a_r[k] = _projected_over(F, kind, e, f, c, w)
+            dst[k] = _projected_over(F, kind, e, f, c, w)
         else:
             a_r[k], w_r[k], c_r[k], e_r[k], f_r[k], co_r[k] = area, w, c, e, f, co
     if kind != GGX:
         _smith_block_post(kind, buf, m)
         for k in range(m):
-            a_r[k] = _projected_over(F, kind, e_r[k], f_r[k], c_r[k], w_r[k])
+            dst[k] = _projected_over(F, kind, e_r[k], f_r[k], c_r[k], w_r[k])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
@@ -820,9 +820,8 @@ def projected_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, False, dev)
+                             m, ax, ay, rho, xn, yn, buf, False, dev, s_out[j0:j0 + m])
             oh_out[j0:j0 + m] = buf[0, :m]
-            s_out[j0:j0 + m] = buf[1, :m]
     return kernel
 
 
@@ -841,9 +840,8 @@ def pdf_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, True, dev)
+                             m, ax, ay, rho, xn, yn, buf, True, dev, out[j0:j0 + m])
             top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
-            out[j0:j0 + m] = buf[1, :m]
         return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
     return kernel
 
@@ -864,7 +862,7 @@ def eval_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, True, dev)
+                             m, ax, ay, rho, xn, yn, buf, True, dev, buf[1])
             top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
             _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], out_flat[3 * j0:3 * (j0 + m)], m)
         return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
