@@ -3,7 +3,10 @@ Numba's on-disk cache, on first use; see that module).
 
 Each public kernel, ``kernel(start, stop, ...)``, works through the pairs ``start:stop``
 in blocks of :data:`BLOCK` and writes its outputs in place, with the Fresnel term inside.
-A block runs as a few loops over a small scratch array, one per stage, written with
+A block runs as a few loops over a small scratch array, one per stage (GGX, which has no
+Smith loop of its own, in fewer: the loop that reads an input also does the arithmetic
+that needs it and writes what it can to the outputs, so that memory waits overlap
+arithmetic: GGX sample 14.0 -> 10.5 ms, pdf 2.8 -> 2.2 ms per 10^6 on one core), written with
 selects instead of branches, on the operands of quotients and roots rather than their
 results (LLVM sinks a quotient used once into the branch of a conditional expression and
 then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through flat views indexed
@@ -326,7 +329,7 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
     ``k``; ``tx``, ``tv`` the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
     over ``k`` per kind (the choice outside it) with the three channels inside, writing the
     output as it goes (interleaved stores; rows and a second pass to interleave them cost
-    GGX sample 1.4 ms more per 10^6 pairs on one core), so that the analytic terms vectorize."""
+    GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms vectorize."""
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
     q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
     if fk == IDEAL:
