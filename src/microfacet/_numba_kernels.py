@@ -3,7 +3,10 @@ Numba's on-disk cache, on first use; see that module).
 
 Each public kernel, ``kernel(start, stop, ...)``, works through the pairs ``start:stop``
 in blocks of :data:`BLOCK` and writes its outputs in place, with the Fresnel term inside.
-A block runs as a few loops over a small scratch array, one per stage, written with
+A block runs as a few loops over a small scratch array, one per stage (GGX, which has no
+Smith loop of its own, in fewer: the loop that reads an input also does the arithmetic
+that needs it and writes what it can to the outputs, so that memory waits overlap
+arithmetic: GGX sample 14.0 -> 10.5 ms, pdf 2.8 -> 2.2 ms per 10^6 on one core), written with
 selects instead of branches, on the operands of quotients and roots rather than their
 results (LLVM sinks a quotient used once into the branch of a conditional expression and
 then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through flat views indexed
@@ -90,8 +93,17 @@ def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
 
 
 @_inline
-def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
-    """Smith terms of the warped view ``o' = (a, b, c_o)``, ``r2 = a^2 + b^2``, and light
+def _view_root(F, kind, r2, co):
+    """The square root in :func:`_smith_pre`'s terms of the warped view ``o' = (a, b, c_o)``,
+    ``r2 = a^2 + b^2`` (``c_o = 1`` where ``c_o <= 0``): GGX ``q_o = sqrt(c_o^2 + r2)``, Beckmann
+    ``sqrt(r2)``; apart, so that the sample kernel takes it from its first loop."""
+    co = co if co > F(0.0) else F(1.0)
+    return math.sqrt(co * co + r2) if kind == GGX else math.sqrt(r2)
+
+
+@_inline
+def _smith_pre(F, kind, shadowing, root_o, co, r2_i, ci):
+    """Smith terms of the warped view ``o' = (a, b, c_o)``, ``root_o`` its :func:`_view_root`, and light
     (``r2_i``, ``c_i``) (Eq. 3.3, Table 2.III), evaluated at ``c = 1`` where ``c <= 0`` (callers
     mask those): ``(A, W, c)`` with ``A = 2 c_o (1 + Lambda_o)``, ``W / c = 2 c_o (1 + Lambda_o +
     Lambda_i)`` (``Lambda_i = 0`` without shadowing), so that ``D / (4 A(o)) = D / (2 A)``,
@@ -103,10 +115,9 @@ def _smith_pre(F, kind, shadowing, r2, co, r2_i, ci):
     lit = shadowing & (ci > F(0.0))
     ci = ci if lit else F(1.0)
     if kind == GGX:
-        qo = math.sqrt(co * co + r2)
         qi = math.sqrt(ci * ci + (r2_i if lit else F(0.0)))
-        return co + qo, ci * qo + co * qi, ci
-    return co / math.sqrt(r2), ci / math.sqrt(r2_i if lit else F(0.0)), F(1.0)     # 1 / 0 = inf
+        return co + root_o, ci * root_o + co * qi, ci
+    return co / root_o, ci / math.sqrt(r2_i if lit else F(0.0)), F(1.0)     # 1 / 0 = inf
 
 
 @_inline
@@ -229,6 +240,27 @@ def _ndf_over(F, kind, e, scale, den):
 
 
 @_inline
+def _pdf_and_ratio(F, kind, area, w, c, e, scale, visible):
+    """``(pdf, G / G1(o))`` of a sampled pair from :func:`_smith_pre`'s ``(A, W, c)`` (after
+    :func:`_smith_post`) and :func:`_ndf_post`'s ``e`` and ``scale`` (0 where invalid):
+    ``D / (4 A(o)) = D / (2 A)`` and ``c A / W`` (Eq. 2.17, 2.23); 0 where the pdf is 0 or
+    ``wi`` is not ``visible``."""
+    e, scale, den = _guard(F, (scale > F(0.0)) & (e > F(0.0)), e, scale, F(2.0) * area)
+    p = _ndf_over(F, kind, e, scale, den)
+    g = (p > F(0.0)) & visible
+    return p, (c * area if g else F(0.0)) / (w if g else F(1.0))
+
+
+@_inline
+def _projected_over(F, kind, e, f, c, w):
+    """``D G / (4 z_o) [/ z_i] = D c / (2 W)`` of :func:`_projected_block` from :func:`_ndf_post`'s
+    ``e``, the NDF's ``scale`` ``f`` (0 where invalid, ``/ z_i`` taken) and :func:`_smith_pre`'s
+    ``c`` and ``W`` (after :func:`_smith_post`)."""
+    e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c, F(2.0) * w)
+    return _ndf_over(F, kind, e, scale, den)
+
+
+@_inline
 def _guard(F, valid, e, scale, den):
     """The arguments of :func:`_ndf_over` where ``valid``, else ``(1, 0, 1)`` (which give 0):
     the operands of a quotient are selected, not its result, since LLVM sinks a quotient
@@ -291,41 +323,53 @@ def _interp(tx, tv, ch, c):
 
 
 @_inline
-def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out_rows, m):
-    """``out_rows[ch, k] = F_ch(c_row[k]) * s_row[k]`` for ``k < m``: the Fresnel term of kind
-    ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv`` the
-    :class:`~microfacet.fresnel.Tabulated` grid and values), one loop per RGB channel over
-    1-D rows with the choice of the term outside it, so that the analytic terms vectorize."""
-    for ch in range(3):
-        p0, p1 = fp[0, ch], fp[1, ch]
-        o = out_rows[ch]
-        if fk == IDEAL:
-            for k in range(m):
-                o[k] = s_row[k]
-        elif fk == SCHLICK:
-            for k in range(m):
-                o[k] = _schlick(F, p0, c_row[k]) * s_row[k]
-        elif fk == DIELECTRIC:
-            for k in range(m):
-                o[k] = _dielectric(F, p0, c_row[k]) * s_row[k]
-        elif fk == CONDUCTOR:
-            for k in range(m):
-                o[k] = _conductor(F, p0, p1, c_row[k]) * s_row[k]
-        else:
-            for k in range(m):
-                o[k] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
+def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
+    """``out[3 k + ch] = F_ch(c_row[k]) * s_row[k]`` for ``k < m`` (a flat output block,
+    :func:`_flat_rows`): the Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]``
+    ``k``; ``tx``, ``tv`` the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
+    over ``k`` per kind (the choice outside it) with the three channels inside, writing the
+    output as it goes (interleaved stores; rows and a second pass to interleave them cost
+    GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms vectorize."""
+    p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
+    q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
+    if fk == IDEAL:
+        for k in range(m):
+            s = s_row[k]
+            out[3 * k], out[3 * k + 1], out[3 * k + 2] = s, s, s
+    elif fk == SCHLICK:
+        for k in range(m):
+            c, s = c_row[k], s_row[k]
+            out[3 * k] = _schlick(F, p0, c) * s
+            out[3 * k + 1] = _schlick(F, p1, c) * s
+            out[3 * k + 2] = _schlick(F, p2, c) * s
+    elif fk == DIELECTRIC:
+        for k in range(m):
+            c, s = c_row[k], s_row[k]
+            out[3 * k] = _dielectric(F, p0, c) * s
+            out[3 * k + 1] = _dielectric(F, p1, c) * s
+            out[3 * k + 2] = _dielectric(F, p2, c) * s
+    elif fk == CONDUCTOR:
+        for k in range(m):
+            c, s = c_row[k], s_row[k]
+            out[3 * k] = _conductor(F, p0, q0, c) * s
+            out[3 * k + 1] = _conductor(F, p1, q1, c) * s
+            out[3 * k + 2] = _conductor(F, p2, q2, c) * s
+    else:
+        for k in range(m):
+            for ch in range(3):
+                out[3 * k + ch] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev):
-    """``buf[0, k] = o.h`` and ``buf[1, k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev, dst):
+    """``buf[0, k] = o.h`` and ``dst[k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays; if
     ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
-    to the float64 rows ``dev[0]``, ``dev[1]``."""
+    to the rows ``dev[0]``, ``dev[1]`` (of ``F``)."""
     s1 = math.sqrt(F(1.0) - rho * rho)
     oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     dev_i, dev_o = dev[0], dev[1]
@@ -333,7 +377,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
         ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
         if measure:
-            dev_i[k], dev_o[k] = _deviation_at(wi, k), _deviation_at(wo, k)
+            dev_i[k], dev_o[k] = _deviation_at(F, wi, k), _deviation_at(F, wo, k)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
@@ -345,15 +389,16 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
               & ((ci > F(0.0)) | (not shadowing)))
         e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
         oh_r[k] = oh
-        a_r[k], w_r[k], c_r[k] = _smith_pre(F, kind, shadowing, r2, co, r2_i, ci)
-        e_r[k] = e
-        f_r[k] = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
-        co_r[k] = co
-    _smith_block_post(kind, buf, m)
-    for k in range(m):
-        e, f = e_r[k], f_r[k]
-        e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f * c_r[k], F(2.0) * w_r[k])
-        a_r[k] = _ndf_over(F, kind, e, scale, den)
+        area, w, c = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
+        f = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
+        if kind == GGX:                              # no Smith loop of its own: the value here
+            dst[k] = _projected_over(F, kind, e, f, c, w)
+        else:
+            a_r[k], w_r[k], c_r[k], e_r[k], f_r[k], co_r[k] = area, w, c, e, f, co
+    if kind != GGX:
+        _smith_block_post(kind, buf, m)
+        for k in range(m):
+            dst[k] = _projected_over(F, kind, e_r[k], f_r[k], c_r[k], w_r[k])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
@@ -535,6 +580,24 @@ def _sin_cos(F, x):
 
 
 @_inline
+def _view_angles(F, kind, wo, k, ax, ay, rho, s1, xn, yn):
+    """``(cos theta, cos phi, sin phi, c_o, root)`` of the warped view ``o' = (a, b, c_o)`` (Eq. 3.3)
+    of the direction ``k`` of a flat ``wo`` (``3 k + axis``), ``root`` its :func:`_view_root`:
+    ``theta`` is 0 where ``a = b = 0``, ``pi/2`` where ``c_o <= 0``."""
+    ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
+    a = ax * ox + rho * ay * oy
+    b = ay * s1 * oy
+    co = oz - ox * xn - oy * yn
+    c = max(co, F(0.0))
+    r2 = a * a + b * b
+    root = _view_root(F, kind, r2, co)
+    q = root if kind == GGX else math.sqrt(r2 + c * c)          # |o'| where c_o > 0
+    inv_r = F(1.0) / math.sqrt(r2)
+    cos_t = (c if r2 > F(0.0) else F(1.0)) / (q if r2 > F(0.0) else F(1.0))
+    return cos_t, (a * inv_r if r2 > F(0.0) else F(1.0)), (b * inv_r if r2 > F(0.0) else F(0.0)), co, root
+
+
+@_inline
 def _ggx_visible_std(F, u0, u1, cos_t):
     """Standard GGX visible normal for a view at ``theta`` in the xz plane (Heitz's closed
     form, ``GGX.sample_visible_std``) from the concentric disk map of ``geometry`` (its
@@ -642,51 +705,66 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
 BLOCK = 256
 
 
-#: Bits of float64 ``inf``: non-negative floats, then inf, then NaN, order as their int64 bits.
-_INF_BITS = np.int64(0x7FF0000000000000)
+#: Bits of float64 and float32 ``inf``: non-negative floats, then inf, then NaN, order as their
+#: integer bits.
+_INF_BITS, _INF_BITS32 = np.int64(0x7FF0000000000000), np.int64(0x7F800000)
+#: The float32 kernels' deviations (:func:`_deviation_at` in float32) are within this of the exact
+#: ones where they are below 1/2: ``x^2 + y^2 + z^2 = s`` is computed to ``3 2^-24 s`` (``s < 3/2``),
+#: the subtraction of 1 is exact.
+_SLACK32 = 2.0**-20
 
 
 @_inline
-def _deviation_at(w, k):
+def _deviation_at(F, w, k):
     """``| |w_k|^2 - 1 |`` of row ``k`` of a flat block ``w`` (``3 k + axis``, :func:`_flat_rows`)
-    in float64, as :func:`microfacet.geometry.unit_deviation` (same operations, same order: the
-    same value). The float64 kernels compute it in the loop that reads the block, so that
-    ``MicrofacetBRDF``'s unit-length check takes no pass of its own (the float32 kernels do not:
-    float64 arithmetic in their loops halved their SIMD width, GGX eval 2.0 -> 2.8 ms per 10^6)."""
-    x, y, z = np.float64(w[3 * k]), np.float64(w[3 * k + 1]), np.float64(w[3 * k + 2])
-    return abs(x * x + y * y + z * z - 1.0)
+    in ``F`` arithmetic: in float64 as :func:`microfacet.geometry.unit_deviation` (same operations,
+    same order: the same value); in float32 within :data:`_SLACK32` of it. The kernels compute it in
+    the loop that reads the block, so that ``MicrofacetBRDF``'s unit-length check takes no pass of
+    its own (float64 arithmetic in the float32 kernels' loops halved their SIMD width, GGX eval
+    2.0 -> 2.8 ms per 10^6)."""
+    x, y, z = F(w[3 * k]), F(w[3 * k + 1]), F(w[3 * k + 2])
+    return abs(x * x + y * y + z * z - F(1.0))
+
+
+def _bits(row):
+    """``(row viewed as integers of its width, the bits of inf, the slack)`` of a float64 or float32
+    ``row`` of deviations (:data:`_INF_BITS`, :data:`_SLACK32`)."""
+
+
+@numba.extending.overload(_bits, inline="always")
+def _bits_impl(row):
+    if row.dtype == numba.types.float32:
+        return lambda row: (row.view(np.int32), _INF_BITS32, _SLACK32)
+    return lambda row: (row.view(np.int64), _INF_BITS, 0.0)
 
 
 @_inline
 def _max_bits(row, m, top):
-    """``max(top, int64 bits of row[:m])`` for non-negative float64 ``row`` (:func:`_deviation_at`):
+    """``max(top, integer bits of row[:m])`` for non-negative ``row`` (:func:`_deviation_at`):
     see :data:`_INF_BITS` (an integer maximum vectorizes, a float one that must see NaN does not)."""
-    bits = row.view(np.int64)
+    bits = _bits(row)[0]
     for k in range(m):
-        top = max(top, bits[k])
+        top = max(top, np.int64(bits[k]))
     return top
 
 
 @_jit
-def _deviation(top, row, measured=True):
-    """The float64 whose bits are ``top`` (:func:`_max_bits`), ``inf`` for NaN and inf; NaN if
-    not ``measured``."""
-    if not measured:
-        return math.nan
-    if top >= _INF_BITS:
+def _deviation(top, row):
+    """The float whose bits are ``top`` (:func:`_max_bits`) as float64, ``inf`` for NaN and inf;
+    plus :data:`_SLACK32` for a float32 ``row`` (then an upper bound of the exact deviation, where
+    that is below 1/2)."""
+    bits, inf_bits, slack = _bits(row)
+    if top >= inf_bits:
         return math.inf
-    row.view(np.int64)[0] = top
-    return row[0]
+    bits[0] = top
+    return np.float64(row[0]) + slack
 
 
-@_jit
-def _outside_unit(u, m):
-    """How many of ``u[:2 m]`` lie outside ``[0, 1]`` (NaN included): the range check of
-    ``MicrofacetBRDF.sample``'s uniforms, on each block as the sample kernel reads it."""
-    n = 0
-    for k in range(2 * m):
-        n += 0 if (u[k] >= 0.0) & (u[k] <= 1.0) else 1
-    return n
+@_inline
+def _outside_unit(u):
+    """1 if ``u`` lies outside ``[0, 1]`` (NaN included), else 0: the range check of
+    ``MicrofacetBRDF.sample``'s uniforms, counted as the sample kernel reads them."""
+    return 0 if (u >= 0.0) & (u <= 1.0) else 1
 
 
 @_jit
@@ -700,7 +778,7 @@ def _unit_deviation(w):
         m = min(BLOCK, w.shape[0] - j0)
         b = a[3 * j0:3 * (j0 + m)]
         for k in range(m):
-            row[k] = _deviation_at(b, k)
+            row[k] = _deviation_at(np.float64, b, k)
         top = _max_bits(row, m, top)
     return _deviation(top, row)
 
@@ -730,14 +808,6 @@ def _flat_rows_impl(a, j0, m, scratch):
     return copy
 
 
-@_inline
-def _interleave(rows, m, out):
-    """``out[3 k + ch] = rows[ch, k]`` for ``k < m`` (a flat output block, :func:`_flat_rows`)."""
-    r0, r1, r2 = rows[0], rows[1], rows[2]
-    for k in range(m):
-        out[3 * k], out[3 * k + 1], out[3 * k + 2] = r0[k], r1[k], r2[k]
-
-
 @functools.cache
 def projected_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
@@ -748,14 +818,13 @@ def projected_kernel(kind, dtype=np.float64):
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, False, dev)
+                             m, ax, ay, rho, xn, yn, buf, False, dev, s_out[j0:j0 + m])
             oh_out[j0:j0 + m] = buf[0, :m]
-            s_out[j0:j0 + m] = buf[1, :m]
     return kernel
 
 
@@ -763,23 +832,20 @@ def projected_kernel(kind, dtype=np.float64):
 def pdf_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair; returns the
-    largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`; NaN in float32)."""
+    largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`)."""
     F = np.dtype(dtype).type
-    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, measure, dev)
-            if measure:
-                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
-            out[j0:j0 + m] = buf[1, :m]
-        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
+                             m, ax, ay, rho, xn, yn, buf, True, dev, out[j0:j0 + m])
+            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
+        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
     return kernel
 
 
@@ -789,23 +855,20 @@ def eval_kernel(kind, dtype=np.float64):
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2);
     returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
-    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK))
+        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
         si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
         out_flat = out.reshape(out.size)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, measure, dev)
-            if measure:
-                top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
-            _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], buf[2:5], m)
-            _interleave(buf[2:5], m, out_flat[3 * j0:3 * (j0 + m)])
-        return _deviation(top_i, dev[0], measure), _deviation(top_o, dev[1], measure)
+                             m, ax, ay, rho, xn, yn, buf, True, dev, buf[1])
+            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
+            _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], out_flat[3 * j0:3 * (j0 + m)], m)
+        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
     return kernel
 
 
@@ -816,41 +879,38 @@ def sample_kernel(kind, dtype=np.float64):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``;
     returns how many of its ``u`` lie outside ``[0, 1]`` and the deviation of its ``wo``."""
     F = np.dtype(dtype).type
-    measure = F is np.float64
 
     @(_jit if F is np.float64 else _jit_float32)
     def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
         s1 = math.sqrt(F(1.0) - rho * rho)
-        buf = np.empty((11, BLOCK), F)
+        buf = np.empty((10, BLOCK), F)
         bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
-        outside, top_o, dev_o = 0, np.int64(0), bk[0]
+        outside, top_o, dev_o = 0, np.int64(0), buf[9]
         wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
-        r7, r8, r9, r10 = buf[7], buf[8], buf[9], buf[10]
+        r7, r8 = buf[7], buf[8]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
-            outside += _outside_unit(u_b, m)
-            for k in range(m):                       # polar angle and azimuth of the warped view
-                ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
-                if measure:
-                    dev_o[k] = _deviation_at(wo_b, k)
-                a = ax * ox + rho * ay * oy
-                b = ay * s1 * oy
-                c = max(oz - ox * xn - oy * yn, F(0.0))
-                r2_o = a * a + b * b
-                inv_r = F(1.0) / math.sqrt(r2_o)
-                r0[k] = (c if r2_o > F(0.0) else F(1.0)) / math.sqrt(r2_o + c * c if r2_o > F(0.0) else F(1.0))
-                r1[k] = a * inv_r if r2_o > F(0.0) else F(1.0)
-                r2[k] = b * inv_r if r2_o > F(0.0) else F(0.0)
-            if measure:
-                top_o = _max_bits(dev_o, m, top_o)
-            if kind == GGX:                          # the standard visible normal
+            wi_b = wi_flat[3 * j0:3 * (j0 + m)]
+            if kind == GGX:                          # the warped view and the standard visible normal
                 for k in range(m):
-                    r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u_b[2 * k]), F(u_b[2 * k + 1]), r0[k])
+                    dev_o[k] = _deviation_at(F, wo_b, k)
+                    u0, u1 = u_b[2 * k], u_b[2 * k + 1]
+                    r0[k] = F(_outside_unit(u0) + _outside_unit(u1))
+                    cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
+                    r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u0), F(u1), cos_t)
+                for k in range(m):                   # (an integer sum in the loop above split its float32 lanes)
+                    outside += 0 if r0[k] == F(0.0) else 1
             else:
+                for k in range(2 * m):
+                    outside += _outside_unit(u_b[k])
+                for k in range(m):
+                    dev_o[k] = _deviation_at(F, wo_b, k)
+                    r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
                 _beckmann_visible_block(u_b, r0, buf[3:6], bk, m)
+            top_o = _max_bits(dev_o, m, top_o)
             for k in range(m):
                 ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
                 cp, sp = r1[k], r2[k]
@@ -863,27 +923,24 @@ def sample_kernel(kind, dtype=np.float64):
                 hx, hy, hz = hx * inv, hy * inv, hz * inv
                 oh = ox * hx + oy * hy + oz * hz
                 ix, iy, iz = F(2.0) * oh * hx - ox, F(2.0) * oh * hy - oy, F(2.0) * oh * hz - oz
-                r2_o, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
+                co = r6[k]
                 ok = (iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
                 r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
                 e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
                 r0[k] = oh
-                r1[k], r2[k], r5[k] = _smith_pre(F, kind, shadowing, r2_o, co, r2_i, ci)
-                r3[k] = e
-                r4[k] = scale if ok else F(0.0)
-                r6[k] = co
-                r7[k], r8[k], r9[k] = ix, iy, iz
-                r10[k] = F(1.0) if (ci > F(0.0)) | (not shadowing) else F(0.0)     # wi visible: G > 0
-            _smith_block_post(kind, buf, m)
-            for k in range(m):
-                area, e, f = r1[k], r3[k], r4[k]
-                e, scale, den = _guard(F, (f > F(0.0)) & (e > F(0.0)), e, f, F(2.0) * area)
-                p = _ndf_over(F, kind, e, scale, den)
-                pdf_b[k] = p
-                g = (p > F(0.0)) & (r10[k] > F(0.0))
-                r2[k] = (r5[k] * area if g else F(0.0)) / (r2[k] if g else F(1.0))   # G / G1(o)
-            _fresnel_block(F, fk, fp, tx, tv, r0, r2, buf[3:6], m)
-            _interleave(buf[7:10], m, wi_flat[3 * j0:3 * (j0 + m)])
-            _interleave(buf[3:6], m, weight_flat[3 * j0:3 * (j0 + m)])
-        return outside, _deviation(top_o, dev_o, measure)
+                area, w, c = _smith_pre(F, kind, shadowing, r8[k], co, r2_i, ci)
+                scale = scale if ok else F(0.0)
+                wi_b[3 * k], wi_b[3 * k + 1], wi_b[3 * k + 2] = ix, iy, iz
+                visible = (ci > F(0.0)) | (not shadowing)                         # G > 0
+                if kind == GGX:                      # no Smith loop of its own: pdf and weight here
+                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, area, w, c, e, scale, visible)
+                else:
+                    r1[k], r2[k], r5[k], r3[k], r4[k] = area, w, c, e, scale
+                    r7[k] = F(1.0) if visible else F(0.0)
+            if kind != GGX:
+                _smith_block_post(kind, buf, m)
+                for k in range(m):
+                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k], r5[k], r3[k], r4[k], r7[k] > F(0.0))
+            _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat[3 * j0:3 * (j0 + m)], m)
+        return outside, _deviation(top_o, dev_o)
     return kernel

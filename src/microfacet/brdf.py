@@ -41,9 +41,9 @@ def _as_dirs(w, name: str, float32: bool = False) -> np.ndarray:
 def _check_unit(w, name: str, deviation=None) -> None:
     """``ValueError`` naming ``name`` if a vector of ``w`` is not unit length within
     :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included). ``deviation``: the largest
-    ``| |w|^2 - 1 |`` if a kernel measured it while reading ``w``, else one compiled pass
-    (:func:`microfacet.kernels.unit_deviation`)."""
-    if deviation is None:
+    ``| |w|^2 - 1 |`` (or an upper bound of it) if a kernel measured it while reading ``w``, else,
+    and where that fails, one compiled pass (:func:`microfacet.kernels.unit_deviation`)."""
+    if deviation is None or not deviation <= UNIT_TOLERANCE:
         deviation = kernels.unit_deviation(w)
     if not deviation <= UNIT_TOLERANCE:
         n2 = np.sum(w * w, axis=-1)
