@@ -26,6 +26,12 @@ Usage::
     python benchmarks/bench_brdf.py [--n 1000000] [--repeats 5] [--json results.json]
                                     [--scaling 1e4,1e5,1e6,1e7,1e8]
 
+Our outputs are new arrays per call, as the API returns them; with glibc's defaults a call
+that frees more than ~48 MB returns it to the system, so that the next call page-faults
+its outputs in again (here ~1 ms per MB; Dr.Jit caches its allocations). Running with
+``MALLOC_TRIM_THRESHOLD_=1073741824 MALLOC_MMAP_THRESHOLD_=1073741824`` keeps that memory
+in the process, as a renderer reusing its buffers would (the header says which applies).
+
 ``--scaling`` adds a table of time per element and peak extra memory per element
 (``tracemalloc``: NumPy's allocations made by the call, outputs included, inputs not; and
 the rise of the process's peak RSS during the call, Linux) of eval, pdf and sample over
@@ -56,6 +62,8 @@ ALPHA_X, ALPHA_Y = 0.2, 0.5
 ALPHA_ISO = 0.3     # the isotropic configurations ('iso')
 RHO, MEAN_SLOPE = 0.3, (0.1, -0.2)
 METAL = "Cu"  # conductor Fresnel term used on both sides
+#: glibc's settings that keep freed memory in the process (reported in the header).
+HEAP_VARIABLES = ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")
 
 
 # ------------------------------------------------------------------------- timing
@@ -430,6 +438,10 @@ def main(argv: list[str] | None = None) -> int:
           f"{platform.machine()}, {os.cpu_count()} CPUs; N = {args.n}, repeats = {args.repeats}")
     print(f"parameters: alpha_x = {ALPHA_X}, alpha_y = {ALPHA_Y}; 'iso': alpha = {ALPHA_ISO}; 'sheared': rho = {RHO}, "
           f"mean slope = {MEAN_SLOPE}; conductor Fresnel ({METAL}) on both sides")
+    print("glibc heap: " + ", ".join(f"{k}={os.environ[k]}" for k in HEAP_VARIABLES if k in os.environ)
+          if any(k in os.environ for k in HEAP_VARIABLES) else
+          "glibc heap: default (freed outputs over ~48 MB go back to the system, and the next call "
+          "page-faults its outputs in again; Dr.Jit keeps its own allocations)")
     variant, why = (None, "skipped (--mitsuba none)") if args.mitsuba == "none" else pick_variant(args.mitsuba)
     print(f"mitsuba: {why}")
     if variant is None and args.mitsuba not in ("auto", "none"):
