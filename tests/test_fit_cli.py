@@ -168,7 +168,7 @@ def test_fit_into_an_existing_folder_names_files_after_the_input(inputs, tmp_pat
 
 
 @pytest.mark.parametrize("make, message", [
-    (lambda d: d / "missing.binary", "No such file or directory"),
+    (lambda d: d / "missing.binary", "missing.binary: no such file"),
     (lambda d: (d / "bad.binary").write_bytes(b"\0" * 100) and d / "bad.binary", "unknown measured-BRDF format"),
     (lambda d: (d / "bad.binary.gz").write_bytes(b"\x1f\x8b" + b"\0" * 100) and d / "bad.binary.gz",
      "bad.binary.gz: corrupt gzip stream"),                  # decompressed on a thread
