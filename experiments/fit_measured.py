@@ -19,6 +19,9 @@ anisotropic fit of the RGL files) and reports
   and without a Lambertian base, and with a coat lobe and a base, GGX also with the
   ``normal_map`` GAF; Fresnel table, the default albedo weight; started from the
   tabulated fit) and their fit time;
+* the tabulated fit with and without a Lambertian base (``diffuse=True``), at albedo weight
+  0 and the default: its grid and uniform errors and albedo ratio, and the grid error of each
+  base fit over the constraint-only fit without a base;
 * the trade-off of the albedo weight: for each weight of ``--weights``, the least-squares
   fit of least objective (:func:`microfacet.fit.outputs.objective`) among the six, its
   grid error (and its ratio to the baseline), uniform error and albedo ratio;
@@ -106,6 +109,9 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
     constraint_only = fit if anisotropic else mf.fit.fit(m, resolution=resolution, albedo_weight=0.0)
     fits = {"tabulated": fit, "ggx": fit.to_ggx(reference=m), "beckmann": fit.to_beckmann(reference=m),
             "baseline": constraint_only.to_ggx(resolve_fresnel=False)}
+    tabulated = {f"{'weight 0' if w == 0 else 'default'}{' +d' if d else ''}":
+                 mf.fit.fit(m, resolution=resolution, anisotropic=anisotropic, diffuse=d, albedo_weight=w)
+                 for w in (0.0, None) for d in (False, True)}
     ls_seconds = {}
     for name, (model, diffuse, coat, gaf) in LEAST_SQUARES.items():
         t0 = time.perf_counter()
@@ -118,7 +124,7 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
              for w in weights if w != ALBEDO_WEIGHT for name in SWEPT}
     swept.update({(ALBEDO_WEIGHT, name): fits[name] for name in SWEPT if ALBEDO_WEIGHT in weights})
     keys = {f"w{w:g} {name}": b for (w, name), b in swept.items()}
-    all_fits = {**fits, **keys}
+    all_fits = {**fits, **keys, **{f"tabulated {k}": b for k, b in tabulated.items()}}
     errors, uniform, albedo = fit_error(m, all_fits), uniform_error(m, all_fits), albedo_ratios(m, all_fits)
     best = min(LEAST_SQUARES, key=lambda k: objective(errors[k], uniform[k], albedo[k], ALBEDO_WEIGHT))
     tradeoff = {}
@@ -130,7 +136,9 @@ def fit_one(path: Path, resolution: int, anisotropic: bool, weights=()) -> dict:
            "errors": errors, "uniform": uniform, "best": best, "tradeoff": tradeoff,
            "albedo": {k: _worst(albedo[k]) for k in fits},
            "furnace": {k: white_furnace(b) for k, b in fits.items()},
-           "alpha": {k: _describe(b) for k, b in fits.items() if k != "tabulated"}}
+           "alpha": {k: _describe(b) for k, b in fits.items() if k != "tabulated"},
+           "tabulated": {k: (errors[f"tabulated {k}"], uniform[f"tabulated {k}"], _worst(albedo[f"tabulated {k}"]))
+                         for k in tabulated}}
     if hasattr(m, "ndf_table"):
         row["ndf"] = {k: ndf_error(m.ndf, _ndf(_lobe(b)))["l2"] for k, b in fits.items()}
     return row
@@ -168,6 +176,18 @@ def format_tables(rows: list[dict], resolution: int) -> str:
         cells = [r["alpha"][k] for k in names[1:]]
         times = f"{r['seconds']:.2f}; " + ", ".join(f"{t:.2f}" for t in r["ls_seconds"].values())
         lines.append(f"| {r['material']} | {r['mode']} | " + " | ".join(cells) + f" | {times} |")
+    lines += ["", "Tabulated fits with and without a Lambertian base (`fit(m, diffuse=..., albedo_weight=...)`; "
+              f"default weight: {ALBEDO_WEIGHT:g} isotropic, 0 anisotropic): grid / uniform error / albedo ratio "
+              "farthest from 1, and the grid error of each base fit over the constraint-only fit without a base "
+              "(weight 0, the fit of issue 10's time):", "",
+              "| material | fit | " + " | ".join(rows[0]["tabulated"]) + " | grid error +d / weight 0: weight 0, "
+              "default |", "|---|---|" + "---|" * (len(rows[0]["tabulated"]) + 1)]
+    for r in rows:
+        t = r["tabulated"]
+        w0 = t["weight 0"][0]
+        lines.append(f"| {r['material']} | {r['mode']} | "
+                     + " | ".join(f"{g:.4f} / {u:.4f} / {a:.3f}" for g, u, a in t.values())
+                     + f" | {t['weight 0 +d'][0] / w0:.2f}, {t['default +d'][0] / w0:.2f} |")
     sweep = [r for r in rows if r["tradeoff"]]
     if sweep:
         weights = list(sweep[0]["tradeoff"])
