@@ -54,7 +54,7 @@ from .. import fresnel as _fresnel
 from ..brdf import BRDF, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
-from .extract import _energy_constrained, _kept, albedo_rows, box_qp, golden_section
+from .extract import _distribution_key, _energy_constrained, _kept, albedo_rows, box_qp, golden_section
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, compared_pairs, measured_mask,
                        measurement_directions, uniform_directions)
 
@@ -94,13 +94,6 @@ ENERGY_SAMPLES = 48
 ENERGY_MARGIN = 2e-3
 #: Roughness values of the initial scan.
 _SCAN = np.geomspace(0.004, 1.5, 12)
-
-
-def _lobe_key(distribution) -> tuple:
-    """A distribution's family and parameters: what a :class:`_Problem` keeps per lobe is
-    keyed by them."""
-    return (type(distribution),) + tuple(np.asarray(getattr(distribution, a), dtype=np.float64).tobytes()
-                                         for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
 
 
 class SumBRDF(BRDF):
@@ -336,7 +329,7 @@ class _Problem:
                              _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T,
                              _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n),
                              _spread(d.pairs.sum((sp * d.lambert[:d.m])[:, None] * d.w_hat)) if self.diffuse else None)
-        return _kept(self._lobes, _lobe_key(distribution), make)
+        return _kept(self._lobes, _distribution_key(distribution), make)
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
@@ -390,9 +383,7 @@ class _Problem:
     @property
     def n_coat(self) -> int:
         """Number of the coat's Fresnel coefficients (:func:`_coat_basis`; 0 without a coat)."""
-        if not self.coat:
-            return 0
-        return len(TABLE_NODES) if self.coat_fresnel == "table" else 2
+        return self._coat_nodes.shape[1] if self.coat else 0
 
     @property
     def n_extra(self) -> int:
@@ -455,7 +446,7 @@ class _Problem:
 
         def lobe(distribution):
             ideal = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)
-            return _kept(self._lobe_rows, _lobe_key(distribution),
+            return _kept(self._lobe_rows, _distribution_key(distribution),
                          lambda: albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1])
         cols = [lobe(self.distribution(q))]
         if self.coat:

@@ -93,6 +93,13 @@ def _kept(store: dict, key, make, size: int = 16):
     return value
 
 
+def _distribution_key(distribution) -> tuple:
+    """A distribution's family and parameters (``alpha_x, alpha_y, rho, mean_slope``): the key
+    of what is kept per lobe (:func:`_kept`)."""
+    return (type(distribution),) + tuple(np.asarray(getattr(distribution, a), dtype=np.float64).tobytes()
+                                         for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
+
+
 def _read_only(*arrays) -> tuple:
     """``arrays``, made read-only (they are kept and shared)."""
     for array in arrays:

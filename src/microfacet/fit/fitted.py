@@ -153,11 +153,10 @@ class FittedBRDF(MicrofacetBRDF):
         the distribution and roughness they were computed for (the moment conversions and
         the least-squares fits started from them ask ~4 times)."""
         d = self.distribution
-        params = tuple(np.asarray(getattr(d, a), dtype=np.float64).tobytes()
-                       for a in ("alpha_x", "alpha_y", "rho", "mean_slope"))
+        key = extract._distribution_key(d)
         kept = getattr(self, "_kept_moments", None)
-        if kept is None or kept[0] is not d or kept[1] != params:
-            self._kept_moments = kept = (d, params, self._slope_moments())
+        if kept is None or kept[0] is not d or kept[1] != key:
+            self._kept_moments = kept = (d, key, self._slope_moments())
         return dict(kept[2])
 
     def _slope_moments(self) -> dict:
