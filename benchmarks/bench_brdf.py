@@ -26,7 +26,8 @@ Usage::
     python benchmarks/bench_brdf.py [--n 1000000] [--repeats 5] [--json results.json]
                                     [--scaling 1e4,1e5,1e6,1e7,1e8]
 
-Our outputs are new arrays per call, as the API returns them; with glibc's defaults a call
+Our outputs are new arrays per call, as the API returns them (and, in the rows marked
+``out=``, arrays allocated once and passed as ``out=``); with glibc's defaults a call
 that frees more than ~48 MB returns it to the system, so that the next call page-faults
 its outputs in again (here ~1 ms per MB; Dr.Jit caches its allocations). Running with
 ``MALLOC_TRIM_THRESHOLD_=1073741824 MALLOC_MMAP_THRESHOLD_=1073741824`` keeps that memory
@@ -180,16 +181,29 @@ def our_configs() -> dict[str, mf.MicrofacetBRDF]:
     return configs
 
 
+#: Suffix of the runs that write into outputs allocated once (``out=``), as a renderer reusing
+#: its buffers would (Dr.Jit reuses its allocations).
+OUT = " out="
+
+
 def bench_ours(inputs, repeats: int) -> list[dict]:
+    """Our rows: each configuration's eval, pdf and sample returning new arrays, and (but the
+    sheared ones) writing into outputs allocated once (:data:`OUT`)."""
     f32 = {k: v.astype(np.float32) for k, v in inputs.items()}
     rows = []
     for name, brdf in our_configs().items():
         src = f32 if name.endswith(F32) else inputs
         wi, wo, u = src["wi"], src["wo"], src["u"]
         ops = {"eval": lambda: brdf.eval(wi, wo), "pdf": lambda: brdf.pdf(wi, wo), "sample": lambda: brdf.sample(u, wo)}
-        for op, fn in ops.items():
-            rows.append({"impl": "microfacet", "op": op, "distribution": name, "n": len(wi),
-                         "extrapolated": False, **time_it(fn, repeats)})
+        runs = [(name, ops)]
+        if "sheared" not in name:
+            f, p, s = brdf.eval(wi, wo), brdf.pdf(wi, wo), brdf.sample(u, wo)
+            runs.append((name + OUT, {"eval": lambda: brdf.eval(wi, wo, out=f), "pdf": lambda: brdf.pdf(wi, wo, out=p),
+                                      "sample": lambda: brdf.sample(u, wo, out=s)}))
+        for label, ops in runs:
+            for op, fn in ops.items():
+                rows.append({"impl": "microfacet", "op": op, "distribution": label, "n": len(wi),
+                             "extrapolated": False, **time_it(fn, repeats)})
     return rows
 
 
@@ -370,21 +384,21 @@ def bench_mitsuba_scalar(inputs, repeats: int, n_scalar: int) -> list[dict]:
 
 # -------------------------------------------------------------------------- report
 def print_table(rows: list[dict]) -> None:
-    print(f"{'implementation':22s} {'op':7s} {'distribution':20s} {'N':>9s} "
+    print(f"{'implementation':22s} {'op':7s} {'distribution':26s} {'N':>9s} "
           f"{'best ms':>10s} {'median ms':>10s} {'Mevals/s':>9s}")
     for r in rows:
         note = f"  (extrapolated from N={r['measured_n']})" if r.get("extrapolated") else ""
-        print(f"{r['impl']:22s} {r['op']:7s} {r['distribution']:20s} {r['n']:9d} "
+        print(f"{r['impl']:22s} {r['op']:7s} {r['distribution']:26s} {r['n']:9d} "
               f"{r['best_s'] * 1e3:10.3f} {r['median_s'] * 1e3:10.3f} {r['n'] / r['best_s'] / 1e6:9.2f}{note}")
 
 
 def ratios(rows: list[dict]) -> list[dict]:
     """Our best time / Mitsuba's best time for each (op, distribution) both measured (ours in
-    float64 and in float32 mode against the same Mitsuba row)."""
+    float64 and in float32 mode, new outputs and :data:`OUT`, against the same Mitsuba row)."""
     ours = {(r["op"], r["distribution"]): r for r in rows if r["impl"] == "microfacet"}
     out = []
     for r in rows:
-        for name in (r["distribution"], r["distribution"] + F32):
+        for name in (r["distribution"] + suffix for suffix in ("", F32, OUT, F32 + OUT)):
             if not (r["impl"].startswith("mitsuba") and (r["op"], name) in ours):
                 continue
             o = ours[r["op"], name]
@@ -462,21 +476,22 @@ def main(argv: list[str] | None = None) -> int:
     if rat:
         print(f"\nours / Mitsuba (best times, same N; > 1 means ours is slower). Ours: float64 unless named float32; "
               f"Smith eval, pdf and sample by the fused Numba kernels ({_numba_threads()} threads; "
-              f"'{F32.strip()}': dtype=np.float32, float32 inputs, arithmetic and outputs). "
+              f"'{F32.strip()}': dtype=np.float32, float32 inputs, arithmetic and outputs; "
+              f"'{OUT.strip()}': outputs allocated once and passed as out=). "
               f"Mitsuba {variant}: float32"
               + (f", {threads} thread{'s' if threads > 1 else ''}" if threads else "") + ".")
         print("  (wall-time ratio, then the ratio of process CPU times, which the machine's load "
               "inflates less; Mitsuba's first call, tracing + kernel compile or cache load, not counted)")
         for r in rat:
             first = f"   (first call {r['mitsuba_first_call_s']:.3f} s)" if variant == "llvm_ad_rgb" else ""
-            print(f"  {r['op']:7s} {r['distribution']:20s} {r['ours_s'] * 1e3:9.3f} ms / "
+            print(f"  {r['op']:7s} {r['distribution']:26s} {r['ours_s'] * 1e3:9.3f} ms / "
                   f"{r['mitsuba_s'] * 1e3:9.3f} ms = {r['ratio']:7.1f}   CPU {r['cpu_ratio']:7.1f}{first}")
     goal = [(r["distribution"], r["best_s"] * 1e6 / r["n"]) for r in rows
-            if r["impl"] == "microfacet" and r["op"] == "eval"]
+            if r["impl"] == "microfacet" and r["op"] == "eval" and not r["distribution"].endswith(OUT)]
     scaled = "" if args.n == 1_000_000 else f", measured at N = {args.n} and scaled to 1e6"
     print(f"\ngoal: eval of 1e6 directions in < {EVAL_GOAL_S} s (best time{scaled}):")
     for name, t in goal:
-        print(f"  {name:20s} {t:7.3f} s  {'met' if t < EVAL_GOAL_S else 'NOT met'}")
+        print(f"  {name:26s} {t:7.3f} s  {'met' if t < EVAL_GOAL_S else 'NOT met'}")
 
     scale_rows = scaling(sizes, args.repeats) if sizes else []
     if scale_rows:

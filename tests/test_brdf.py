@@ -202,3 +202,52 @@ def test_vgroove_with_a_mean_slope_is_refused():
     with pytest.raises(ValueError, match="vgroove.*zero mean slope"):
         mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3, mean_slope=(0.5, -1.0)), gaf="vgroove")
     mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3, mean_slope=(0.5, -1.0)), gaf="normal_map")
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=["float64", "float32"])
+@pytest.mark.parametrize("gaf", ["smith", "vgroove"])     # the compiled kernels and the NumPy path
+def test_out_receives_the_same_results(gaf, dtype):
+    """``eval``, ``eval_cos``, ``pdf`` and ``sample`` with ``out=`` write into and return the given
+    arrays the values they return without it, over a batch the kernels split into tasks and with
+    broadcast inputs."""
+    rng = np.random.default_rng(3)
+    n = mf.kernels.PARALLEL_MIN + 17
+    wi, wo, u = _upper(rng, n), _upper(rng, n), rng.random((n, 2))
+    brdf = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.5), fresnel=mf.fresnel.Conductor.metal("Cu"),
+                             gaf=gaf, dtype=dtype)
+    for method, args in (("eval", (wi, wo)), ("eval_cos", (wi, wo[0])), ("pdf", (wi, wo))):
+        want = getattr(brdf, method)(*args)
+        out = np.full(want.shape, np.nan, dtype)
+        assert getattr(brdf, method)(*args, out=out) is out
+        np.testing.assert_array_equal(out, want)
+    want = brdf.sample(u, wo)
+    out = tuple(np.full(a.shape, np.nan, dtype) for a in want)
+    got = brdf.sample(u, wo, out=out)
+    assert all(g is o for g, o in zip(got, out))
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
+
+
+def test_bad_out_raises_naming_it():
+    """A wrong ``out`` (shape, dtype, layout, read-only, overlapping an input, not a 3-tuple for
+    ``sample``) raises ``ValueError`` naming it; a bad input is reported before it."""
+    rng = np.random.default_rng(4)
+    wi, wo, u = _upper(rng, 50), _upper(rng, 50), rng.random((50, 2))
+    brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    frozen = np.empty((50, 3))
+    frozen.flags.writeable = False
+    for out, what in ((np.empty((49, 3)), "shape"), (np.empty((50, 3), np.float32), "float32"),
+                      (np.empty((3, 50)).T, "non-contiguous"), (frozen, "read-only"), ([[0.0] * 3] * 50, "list")):
+        with pytest.raises(ValueError, match=f"out must be a writeable C-contiguous float64 array .*{what}"):
+            brdf.eval(wi, wo, out=out)
+    with pytest.raises(ValueError, match="out must not share memory"):
+        brdf.eval(wi, wo, out=wi)
+    with pytest.raises(ValueError, match="out must be a tuple of three"):
+        brdf.sample(u, wo, out=np.empty((50, 3)))
+    with pytest.raises(ValueError, match=r"out\[2\] must be .* of shape \(50,\)"):
+        brdf.sample(u, wo, out=(np.empty((50, 3)), np.empty((50, 3)), np.empty((50, 3))))
+    shared = np.empty((50, 3))
+    with pytest.raises(ValueError, match="three arrays must not share"):
+        brdf.sample(u, wo, out=(shared, shared, np.empty(50)))
+    with pytest.raises(ValueError, match="wo must be unit vectors"):
+        brdf.pdf(wi, 2.0 * wo, out=np.empty(49))

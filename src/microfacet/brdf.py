@@ -117,6 +117,14 @@ def _fused(kernel, float32: bool, **inputs):
     return arrays, None if fast is None else fast[0]
 
 
+def _into(out, result: np.ndarray, inputs) -> np.ndarray:
+    """``result``, or ``out`` with ``result`` copied in (:func:`microfacet.kernels.output`)."""
+    if out is None:
+        return result
+    np.copyto(kernels.output(out, result.shape, result.dtype, "out", tuple(inputs)), result)
+    return out
+
+
 class BRDF:
     """The BRDF protocol (Listing 1.2). Subclasses implement ``eval_cos``, ``sample``
     and ``pdf``; ``eval`` divides by ``cos theta_i``."""
@@ -302,35 +310,45 @@ class MicrofacetBRDF(BRDF):
                 s = np.where(s > 0, s / wi[..., 2], 0.0)
         return oh, s
 
-    def _eval(self, wi, wo, divide_cos_i: bool) -> np.ndarray:
+    def _eval(self, wi, wo, divide_cos_i: bool, out=None) -> np.ndarray:
         """``F D G / (4 z_o) [/ z_i]``: one compiled pass for Smith BRDFs with scalar
         parameters and a :mod:`microfacet.fresnel` term (:func:`microfacet.kernels.smith_eval`),
         :meth:`_projected` times the Fresnel term otherwise (the reference)."""
-        d, fast = _fused(lambda wi, wo: kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype),
+        d, fast = _fused(lambda wi, wo: kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype, out),
                          self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
         oh, s = self._projected_unit(d["wi"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False),
                                      divide_cos_i)
-        return (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False)
+        return _into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
-        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
-        return self._eval(wi, wo, False)
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
+        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2); written into ``out`` if
+        given (see :meth:`eval`)."""
+        return self._eval(wi, wo, False, out)
 
-    def eval(self, wi, wo) -> np.ndarray:
-        """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1)."""
-        return self._eval(wi, wo, True)
+    def eval(self, wi, wo, out=None) -> np.ndarray:
+        """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1).
 
-    def pdf(self, wi, wo) -> np.ndarray:
+        ``out``: an array to write the result into and return, as NumPy's ``out=`` (C-contiguous,
+        of the BRDF's ``dtype`` and the result's shape, sharing no memory with the inputs;
+        ``ValueError`` otherwise; its contents are unspecified after a ``ValueError`` on the
+        inputs). A renderer that reuses its buffers saves the allocation and the first touch
+        of new pages (GGX sample per 10^6 pairs: see the README's Benchmarks).
+        """
+        return self._eval(wi, wo, True, out)
+
+    def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
-        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
-        d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype), self.dtype == np.float32,
+        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`);
+        written into ``out`` if given (see :meth:`eval`)."""
+        d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype, out), self.dtype == np.float32,
                          wi=wi, wo=wo)
         if fast is not None:
             return fast
-        return self._pdf_numpy(d["wi"].astype(np.float64, copy=False),
-                               d["wo"].astype(np.float64, copy=False)).astype(self.dtype, copy=False)
+        return _into(out, self._pdf_numpy(d["wi"].astype(np.float64, copy=False),
+                                          d["wo"].astype(np.float64, copy=False)).astype(self.dtype, copy=False),
+                     d.values())
 
     def _pdf_numpy(self, wi, wo) -> np.ndarray:
         """NumPy reference of :meth:`pdf` (unit ``wi``, ``wo``)."""
@@ -351,18 +369,25 @@ class MicrofacetBRDF(BRDF):
             return self.distribution.vndf(h, wo)
         return self.distribution.ndf(h) * h[..., 2]
 
-    def sample(self, u, wo):
+    def sample(self, u, wo, out=None):
         """Reflect ``wo`` about a sampled normal: visible normals for Smith (Sec. 2.2, 3.2)
         when the distribution supports it, slopes of ``P`` otherwise. Returns
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
-        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
-        d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype), self.dtype == np.float32,
+        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`).
+        ``out``: a tuple of three arrays ``(wi, weight, pdf)`` to write them into and return
+        (as in :meth:`eval`; distinct arrays)."""
+        d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype, out), self.dtype == np.float32,
                          wo=wo, u=u)
         if fast is not None:
             return fast
-        out = self._sample_numpy(d["u"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False))
-        return tuple(a.astype(self.dtype, copy=False) for a in out)
+        result = self._sample_numpy(d["u"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False))
+        if out is None:
+            return tuple(a.astype(self.dtype, copy=False) for a in result)
+        out = kernels.sample_outputs(out, result[2].shape, self.dtype, tuple(d.values()))
+        for o, a in zip(out, result):
+            np.copyto(o, a)
+        return out
 
     def _sample_numpy(self, u, wo):
         """NumPy reference of :meth:`sample` (unit ``wo``, uniforms ``u``)."""

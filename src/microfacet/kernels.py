@@ -191,49 +191,80 @@ def _typed(dtype, params):
     return [F(p) for p in params]
 
 
-def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64):
+def output(out, shape, dtype, name="out", inputs=()):
+    """``out`` (an output array a caller passes to be written, as NumPy's ``out=``), or a new
+    array if it is ``None``: ``ValueError`` naming ``name`` unless it is a writeable
+    C-contiguous ndarray of ``shape`` and ``dtype`` that shares no memory with ``inputs``."""
+    if out is None:
+        return np.empty(shape, dtype)
+    if not (isinstance(out, np.ndarray) and out.shape == shape and out.dtype == dtype
+            and out.flags.c_contiguous and out.flags.writeable):
+        got = (("read-only " if not out.flags.writeable else "") + ("non-contiguous " if not out.flags.c_contiguous else "")
+               + f"{out.dtype} array of shape {out.shape}") if isinstance(out, np.ndarray) else type(out).__name__
+        raise ValueError(f"{name} must be a writeable C-contiguous {np.dtype(dtype)} array of shape {shape}, got {got}")
+    if any(np.may_share_memory(out, a) for a in inputs):
+        raise ValueError(f"{name} must not share memory with the inputs")
+    return out
+
+
+def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None):
     """``(f, checks)``: ``f = F D G / (4 z_o) [/ z_i]`` RGB ``(..., 3)`` of a Smith ``brdf``
     (Eq. 2.1) by one compiled pass with the Fresnel term inside, computed and written as
-    ``dtype``, and the unit-length deviations of ``wi`` and ``wo`` measured in that pass
-    (:func:`_checks`; ``f`` is meaningless if they fail), or ``None`` when the kernel does
-    not apply (no Numba, array parameters, another distribution, GAF or Fresnel class)."""
+    ``dtype`` (into ``out`` if given: :func:`output`), and the unit-length deviations of ``wi``
+    and ``wo`` measured in that pass (:func:`_checks`; ``f`` is meaningless if they fail), or
+    ``None`` when the kernel does not apply (no Numba, array parameters, another distribution,
+    GAF or Fresnel class)."""
     p = _brdf_params(brdf)
     if p is None:
         return None
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(wi, wo)
-    out = np.empty(shape + (3,), dtype)
+    out = output(out, shape + (3,), dtype, "out", (wi, wo))
     r = _launch_ranges(_kernels().eval_kernel(kind, np.dtype(dtype)), n, _rows(wi, shape), _rows(wo, shape),
                        *_typed(dtype, d), brdf.shadowing, bool(divide_cos_i), fk, f[0].astype(dtype), *f[1:],
                        out.reshape(-1, 3))
     return out, _checks(("wi", "wo"), r)
 
 
-def smith_pdf(brdf, wi, wo, dtype=np.float64):
+def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None):
     """``(pdf, checks)``: the visible-normal sampling density ``D(h) / (4 A(o))`` (Eq. 2.17) of
-    a Smith ``brdf`` by one compiled pass, computed and written as ``dtype``, and the checks of
-    ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply."""
+    a Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``), and
+    the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
     shape, n = _shape_n(wi, wo)
-    out = np.empty(shape, dtype)
+    out = output(out, shape, dtype, "out", (wi, wo))
     r = _launch_ranges(_kernels().pdf_kernel(p[0][0], np.dtype(dtype)), n, _rows(wi, shape), _rows(wo, shape),
                        *_typed(dtype, p[0][1:]), out.reshape(-1))
     return out, _checks(("wi", "wo"), r)
 
 
-def smith_sample(brdf, u, wo, dtype=np.float64):
+def sample_outputs(out, shape, dtype, inputs=()):
+    """``(wi, weight, pdf)`` of a sample of ``shape``: ``out``'s three arrays (:func:`output`,
+    named ``out[0]`` ... ``out[2]``, distinct), or new ones if it is ``None``."""
+    if out is None:
+        out = (None,) * 3
+    elif not (isinstance(out, tuple) and len(out) == 3):
+        raise ValueError(f"out must be a tuple of three arrays (wi, weight, pdf), got {type(out).__name__}")
+    arrays = [output(o, shape + last, dtype, f"out[{j}]", inputs)
+              for j, (o, last) in enumerate(zip(out, ((3,), (3,), ())))]
+    if any(np.may_share_memory(a, b) for j, a in enumerate(arrays) for b in arrays[j + 1:]):
+        raise ValueError("out's three arrays must not share memory")
+    return tuple(arrays)
+
+
+def smith_sample(brdf, u, wo, dtype=np.float64, out=None):
     """``((wi, weight, pdf), checks)``: visible-normal sampling (Sec. 2.2, 3.2, Eq. 2.23) of a
-    Smith ``brdf`` by one compiled pass, computed and written as ``dtype``, and the checks of
-    ``u`` (values outside ``[0, 1]``) and ``wo`` (:func:`_checks`) made in that pass, or ``None``
-    when the kernel does not apply."""
+    Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``'s
+    arrays: :func:`sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
+    ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(u, wo)
-    wi, weight, pdf = np.empty(shape + (3,), dtype), np.empty(shape + (3,), dtype), np.empty(shape, dtype)
+    wi, weight, pdf = sample_outputs(out, shape, dtype, (u, wo))
     r = _launch_ranges(_kernels().sample_kernel(kind, np.dtype(dtype)), n, _rows(u, shape), _rows(wo, shape),
                        *_typed(dtype, d), brdf.shadowing, fk, f[0].astype(dtype), *f[1:],
                        wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
