@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import itertools
 import os
 
 import numpy as np
@@ -106,14 +107,29 @@ def _launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     """``kernel(start, stop, *args)`` over ``0:n`` (the Smith kernels, which work through a
     range; ``cost`` elements per index, e.g. a row's texels): on the calling thread below
     :data:`PARALLEL_MIN` elements, else as up to 4 tasks of at least :data:`TASK_MIN` elements
-    per thread (so that a thread slowed by the machine's load hands work to the others) on a
-    pool of :func:`threads` threads (the kernels release the GIL). Returns the tasks' return values."""
+    per thread, which the calling thread and :func:`threads` ``- 1`` pool threads take in turn
+    until none is left (the kernels release the GIL): the caller starts at once, without
+    waiting for a pool thread to wake (~0.1 ms), and a thread slowed by the machine's load
+    takes fewer. Returns the tasks' return values."""
     t = threads()
     tasks = min(4 * t, n * cost // TASK_MIN, n)
     if t < 2 or n * cost < PARALLEL_MIN:
         return [kernel(0, n, *args)]
-    bounds = np.linspace(0, n, tasks + 1).astype(np.int64)
-    return list(_pool(t).map(lambda i: kernel(bounds[i], bounds[i + 1], *args), range(tasks)))
+    bounds = np.linspace(0, n, tasks + 1).astype(np.int64).tolist()
+    results = [None] * tasks
+    claim = itertools.count()                # next() is atomic under the GIL
+
+    def work():
+        for i in claim:
+            if i >= tasks:
+                return
+            results[i] = kernel(bounds[i], bounds[i + 1], *args)
+    helpers = [_pool(t - 1).submit(work) for _ in range(t - 1)]
+    work()
+    for f in helpers:                        # one still queued (the pool busy with another call) has nothing left
+        if not f.cancel():
+            f.result()
+    return results
 
 
 def _checks(names, results) -> dict:
