@@ -361,15 +361,18 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev, dst):
-    """``buf[0, k] = o.h`` and ``dst[k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev, dst,
+                     oh_row=True):
+    """``buf[0, k] = o.h`` (if ``oh_row``) and ``dst[k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays; if
     ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
-    to the rows ``dev[0]``, ``dev[1]`` (of ``F``)."""
+    to the rows ``dev[0]``, ``dev[1]`` (of ``F``). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
+    not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
+    so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
     s1 = math.sqrt(F(1.0) - rho * rho)
     oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     dev_i, dev_o = dev[0], dev[1]
@@ -380,15 +383,19 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
             dev_i[k], dev_o[k] = _deviation_at(F, wi, k), _deviation_at(F, wo, k)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
-        inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
-        hx, hy, hz = hx * inv, hy * inv, hz * inv
+        if oh_row:
+            inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
+            hx, hy, hz = hx * inv, hy * inv, hz * inv
         oh = ox * hx + oy * hy + oz * hz
         r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
         r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
         ok = ((iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
               & ((ci > F(0.0)) | (not shadowing)))
         e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
-        oh_r[k] = oh
+        if oh_row:
+            oh_r[k] = oh
+        else:
+            scale *= n2 * n2
         area, w, c = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
         f = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
         if kind == GGX:                              # no Smith loop of its own: the value here
@@ -850,7 +857,7 @@ def pdf_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, True, dev, out[j0:j0 + m])
+                             m, ax, ay, rho, xn, yn, buf, True, dev, out[j0:j0 + m], False)
             top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
         return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
     return kernel
