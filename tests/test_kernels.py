@@ -149,7 +149,7 @@ def test_gather_free_erfc_is_relatively_accurate():
     def near(v):
         out = np.empty(v.size)
         for j in range(v.size):
-            out[j] = k._erfc_near(v[j], np.exp(-v[j] * v[j]))
+            out[j] = k._erfc_near(np.float64, v[j], np.exp(-v[j] * v[j]))
         return out
 
     v = np.concatenate([np.linspace(0.0, 4.0, 40001), np.geomspace(1e-300, 4.0, 2000)])
@@ -270,7 +270,7 @@ def test_vectorizable_exp_and_erfc_match_numpy():
     def both(x, v):
         out = np.empty((2, x.size))
         for j in range(x.size):
-            out[0, j], out[1, j] = k._exp_neg(x[j]), k._erfc_pos(v[j])
+            out[0, j], out[1, j] = k._exp_neg(np.float64, x[j]), k._erfc_pos(v[j])
         return out
 
     x = -np.concatenate([np.linspace(0.0, 60.0, 20001), np.geomspace(1e-300, 800.0, 2000), [np.inf, np.nan]])
