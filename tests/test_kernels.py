@@ -335,6 +335,29 @@ def test_vectorizable_exp_matches_numpy():
     assert np.all(np.abs(got[~normal] - e[~normal]) <= 2.0**-150 + 1.2e-7 * e[~normal])     # subnormals
 
 
+def test_vectorizable_log_matches_mpmath():
+    """:func:`_log_pos` (the guesses' ``log``: bits and an ``atanh`` series) to 5e-16 relative
+    against mpmath (4.4e-16 measured), from the smallest normal float to 1e300 and around 1
+    (exactly 0 at 1)."""
+    import mpmath
+    import numba
+    k = kernels._kernels()
+
+    @numba.njit
+    def log(x):
+        out = np.empty_like(x)
+        for j in range(x.size):
+            out[j] = k._log_pos(x[j])
+        return out
+
+    x = np.concatenate([np.geomspace(2.3e-308, 1e300, 1001), np.linspace(0.5, 2.0, 1001),
+                        1.0 + np.geomspace(2.3e-16, 1e-3, 200), 1.0 - np.geomspace(1.2e-16, 1e-3, 200)])
+    with mpmath.workdps(30):
+        ref = np.array([float(mpmath.log(mpmath.mpf(float(t)))) for t in x])
+    np.testing.assert_allclose(log(x), ref, rtol=5e-16, atol=0)
+    assert log(np.array([1.0]))[0] == 0.0
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=lambda t: np.dtype(t).name)
 def test_kernels_read_any_layout(dtype):
     """Strided, Fortran-ordered and broadcast inputs (copied block by block into a contiguous
