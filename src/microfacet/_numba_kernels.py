@@ -13,14 +13,14 @@ then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through fla
 ``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
 through flat views: constant strides, so that LLVM vectorizes each stage that makes no
 library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
-:func:`_exp_neg`, :func:`_erfc_near` and :func:`_erfc_pos`, arithmetic and table loads, also
+:func:`_exp_neg` and :func:`_erfc_near`, polynomials and bit operations, no table loads, also
 in the fixed Halley steps of its visible-slope and ``erfinv`` solves,
-:func:`_beckmann_visible_block`, whose guesses (library ``log``) and rare lanes left to the
-scalar solvers stay scalar). ``a[k, axis]`` on 2-D arrays (runtime strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
+:func:`_beckmann_visible_block`, whose rare lanes left to the scalar solvers stay scalar). ``a[k, axis]`` on 2-D arrays (runtime strides) vectorized little: this layout made GGX eval 2x, pdf 2.7x faster. Kernels are
 compiled per distribution kind and arithmetic type ``F`` (float64 or float32; constants in
 them: :func:`eval_kernel` etc.); the helpers take ``F`` and write their constants as ``F(c)``
-(a float literal would promote float32 arithmetic to float64). Beckmann's ``exp``, ``erfc``
-and visible-slope solve stay float64 (they take float64 arguments). The Fresnel kind,
+(a float literal would promote float32 arithmetic to float64; constants that differ by type,
+such as the polynomials of Beckmann's ``exp`` and ``erfcx``, lower degrees in float32, are
+chosen by :func:`_of_type`). Beckmann's visible-slope solve stays float64. The Fresnel kind,
 shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
 quotients where that is exact algebra (each docstring says how). ``error_model="numpy"``:
@@ -54,25 +54,27 @@ _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W      # on [0, 1], as in distribu
 _SIN_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(15, 0, -2)])
 _COS_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(16, 1, -2)])
 
-#: ``exp`` of :func:`_exp_neg`: ``ln 2`` split so that ``n ln2_hi`` is exact, the table of
-#: ``2^n``, ``n = -1074 ... 0``, and ``1/13!, ..., 1/1!, 1`` (Horner order).
+
+def _exp_minimax(degree):
+    """Coefficients (Horner order) of ``exp(r) ~ 1 + r + r^2 q(r)`` on ``|r| <= ln 2 / 2``: ``q``
+    the Chebyshev interpolant of degree ``degree - 2`` (near minimax) of ``(exp(r) - 1 - r) / r^2``,
+    summed from its Taylor series (no cancellation); the two leading coefficients exactly 1."""
+    from numpy.polynomial import Chebyshev, Polynomial
+    half = 0.5 * math.log(2.0)
+    q = Chebyshev.interpolate(lambda r: sum(r**j / math.factorial(j + 2) for j in range(24)), degree - 2,
+                              domain=[-half, half])
+    return np.concatenate([q.convert(kind=Polynomial).coef[::-1], [1.0, 1.0]])
+
+
+#: ``ln 2`` split so that ``n ln2_hi`` is exact (:func:`_exp_neg`, :func:`_log_pos`).
 _LN2_HI, _LN2_LO = 6.93147180369123816490e-01, 1.90821492927058770002e-10
-_EXP2 = 2.0 ** np.arange(-1074.0, 1.0)
-_EXP_TAYLOR = np.array([1.0 / math.factorial(n) for n in range(13, -1, -1)])
+#: :func:`_exp_neg` per arithmetic type: the polynomial of :func:`_exp_minimax` (float64: degree 11,
+#: truncation 2e-17; float32: degree 6, 1e-7 with its roundings), the bound below which ``exp`` is 0,
+#: ``ln 2`` split and ``1.5 2^p`` (``x + c - c`` rounds ``x`` to an integer).
+_EXP64 = (_exp_minimax(11), -744.0, _LN2_HI, _LN2_LO, 1.5 * 2.0**52)
+_EXP32 = (_exp_minimax(6).astype(np.float32), np.float32(-104.0), np.float32(0.693359375),
+          np.float32(-2.12194440e-4), np.float32(1.5 * 2.0**23))
 
-
-def _erfc_taylor(c, degree=15):
-    """Taylor coefficients of ``erfc`` at ``c`` up to ``degree`` (Horner order):
-    ``erfc^(n)(c) = -2/sqrt(pi) (-1)^(n-1) H_(n-1)(c) exp(-c^2)`` (physicists' Hermite)."""
-    from numpy.polynomial.hermite import hermval
-    a = [math.erfc(c)] + [-2.0 / math.sqrt(math.pi) * (-1) ** (n - 1) * hermval(c, [0] * (n - 1) + [1])
-                          * math.exp(-c * c) / math.factorial(n) for n in range(1, degree + 1)]
-    return a[::-1]
-
-
-#: ``erfc`` of :func:`_erfc_pos`: 16 Taylor coefficients at the centre of each
-#: ``[k/4, (k+1)/4]``, ``k = 0 ... 23``.
-_ERFC_TAYLOR = np.array([_erfc_taylor(0.25 * k + 0.125) for k in range(24)]).ravel()
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 #: The float32 kernels: approximate reciprocals and square roots refined by a Newton step
@@ -120,88 +122,154 @@ def _smith_pre(F, kind, shadowing, root_o, co, r2_i, ci):
     return co / root_o, ci / math.sqrt(r2_i if lit else F(0.0)), F(1.0)     # 1 / 0 = inf
 
 
+def _float_type(row):
+    """The scalar type (``np.float64`` or ``np.float32``) of a float ``row``, in compiled code."""
+
+
+@numba.extending.overload(_float_type, inline="always")
+def _float_type_impl(row):
+    if row.dtype == numba.types.float32:
+        return lambda row: np.float32
+    return lambda row: np.float64
+
+
 @_inline
-def _beckmann_lambda(v):
+def _beckmann_lambda(F, v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at
-    ``v = inf``), with :func:`_exp_neg` and :func:`_erfc_near` (absolute errors ~2e-15: only
-    ``1 + Lambda`` is used)."""
-    e = _exp_neg(-v * v)
-    lam = 0.5 * (e / (v * _SQRT_PI) - _erfc_near(v, e))
-    return lam if lam > 0.0 else 0.0
+    ``v = inf``) in ``F`` arithmetic, with :func:`_exp_neg` and :func:`_erfc_near` (absolute
+    errors 5e-16 in float64, 2e-7 in float32, measured against mpmath: only ``1 + Lambda`` is used)."""
+    e = _exp_neg(F, -v * v)
+    lam = F(0.5) * (e / (v * F(_SQRT_PI)) - _erfc_near(F, v, e))
+    return lam if lam > F(0.0) else F(0.0)
+
+
+def _of_type(F, c64, c32):
+    """``c32`` if ``F`` is ``np.float32``, else ``c64``, chosen when the caller is compiled (for
+    constants, :data:`_EXP64` etc., that differ by arithmetic type)."""
+
+
+@numba.extending.overload(_of_type, inline="always")
+def _of_type_impl(F, c64, c32):
+    if F.instance_type == numba.types.float32:
+        return lambda F, c64, c32: c32
+    return lambda F, c64, c32: c64
+
+
+def _times_two_to(F, p, n):
+    """``p 2^n`` for an integer-valued ``F`` ``n`` in ``[-2044, 0]`` (float32: ``[-252, 0]``) as
+    ``p 2^(n // 2) 2^(n - n // 2)``, the two powers built from their bits (each normal, so that only
+    the last product rounds, also to a subnormal: the table of ``2^n`` it replaces was a gather)."""
+
+
+@numba.extending.overload(_times_two_to, inline="always")
+def _times_two_to_impl(F, p, n):
+    I, bits, bias = (np.int32, 23, 127) if F.instance_type == numba.types.float32 else (np.int64, 52, 1023)
+
+    def times_two_to(F, p, n):
+        n_i = I(n)
+        h = n_i >> I(1)
+        return p * I((h + I(bias)) << I(bits)).view(F) * I((n_i - h + I(bias)) << I(bits)).view(F)
+    return times_two_to
 
 
 @_inline
-def _exp_neg(x):
-    """``exp(x)`` for ``x <= 0`` (0 below -744, where it is < 1e-323, and for NaN) with
-    arithmetic and one table load, so that a loop calling it vectorizes: ``x = n ln 2 + r``,
-    ``|r| <= ln 2 / 2``, ``exp(r)`` by its Taylor series to ``r^13`` (truncation below
-    5e-18), times ``2^n`` (``n >= -1073``: inside the table)."""
-    xc = x if x > -744.0 else -744.0
-    xc = xc if xc < 0.0 else 0.0
-    n = math.floor(xc * (1.0 / math.log(2.0)) + 0.5)
-    r = (xc - n * _LN2_HI) - n * _LN2_LO
-    p = _EXP_TAYLOR[0]
-    for j in range(1, 14):
-        p = _EXP_TAYLOR[j] + r * p
-    return p * _EXP2[np.uint64(n + 1074.0)] if x > -744.0 else 0.0
+def _exp_neg(F, x):
+    """``exp(x)`` for ``x <= 0`` in ``F`` arithmetic (0 below :data:`_EXP64`'s bound, -744, where it
+    is < 1e-323 (float32: -104, < 1e-45), and for NaN), arithmetic only, so that a loop calling it
+    vectorizes: ``x = n ln 2 + r``, ``|r| <= ln 2 / 2`` (``n`` rounded by adding and subtracting
+    ``1.5 2^p``: no reassociation allowed), ``exp(r)`` by :func:`_exp_minimax`'s polynomial, times
+    ``2^n`` (:func:`_times_two_to`). Relative error 1 ulp (2.2e-16; float32 1.2e-7)."""
+    poly, lo, ln2_hi, ln2_lo, rnd = _of_type(F, _EXP64, _EXP32)
+    xc = x if x > lo else lo
+    xc = xc if xc < F(0.0) else F(0.0)
+    n = (xc * F(1.0 / math.log(2.0)) + rnd) - rnd
+    r = (xc - n * ln2_hi) - n * ln2_lo
+    p = poly[0]
+    for j in range(1, poly.shape[0]):
+        p = poly[j] + r * p
+    return _times_two_to(F, p, n) if x > lo else F(0.0)
+
+
+#: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` as a polynomial in ``s = 2 (tau - tau_M)
+#: / (1 - tau_M) - 1 = _ERFCX_A / (_ERFCX_K + v) - _ERFCX_B`` in ``[-1, 1]`` (``tau = K / (K + v)``,
+#: ``tau_M`` its value at the end; ``K = 4`` converges faster than 2: degree 17 instead of 19).
+_ERFCX_MAX, _ERFCX_K = 6.0, 4.0
+_TAU_M = _ERFCX_K / (_ERFCX_K + _ERFCX_MAX)
+_ERFCX_A, _ERFCX_B = 2.0 * _ERFCX_K / (1.0 - _TAU_M), (1.0 + _TAU_M) / (1.0 - _TAU_M)
+
+
+def _erfcx_decimal(nodes, digits=50):
+    """``erfcx(v) = exp(v^2) - 2 / sqrt(pi) sum_n 2^n v^(2n+1) / (2n+1)!!`` (the series of ``exp(v^2)
+    erf(v)``, positive terms) at ``v = _ERFCX_A / (s + _ERFCX_B) - _ERFCX_K`` of each float ``s`` of
+    ``nodes``, all in ``digits``-digit decimal arithmetic (``pi`` by the Gauss-Legendre AGM), rounded
+    to float64. (SciPy's ``erfcx`` is 8e-16 off near 0, and ``v`` rounded to float64 moves the value
+    by 5e-16; through the interpolant of :func:`_erfcx_poly` either cost 4e-15.)"""
+    import decimal
+    D = decimal.Decimal
+    out = []
+    with decimal.localcontext() as ctx:
+        ctx.prec = digits + 10
+        a, b, t, p = D(1), D(2).sqrt() / 2, D(1) / 4, D(1)
+        for _ in range(8):                           # digits double per step
+            a, b, t, p = (a + b) / 2, (a * b).sqrt(), t - p * ((a - b) / 2) ** 2, 2 * p
+        sqrt_pi = ((a + b) ** 2 / (4 * t)).sqrt()
+        for s in nodes:
+            x = D(_ERFCX_A) / (D(float(s)) + D(_ERFCX_B)) - D(_ERFCX_K)
+            term = total = x
+            n = 0
+            while term > total.scaleb(-digits - 10):
+                n += 1
+                term = term * 2 * x * x / (2 * n + 1)
+                total += term
+            out.append(float((x * x).exp() - 2 * total / sqrt_pi))
+    return np.array(out)
+
+
+def _erfcx_poly(degree):
+    """Coefficients (Horner order) in ``s`` of :data:`_ERFCX_A` of ``erfcx(v) = exp(v^2) erfc(v)``,
+    ``v`` in ``[0, _ERFCX_MAX]`` (``erfcx ~ tau / (K sqrt(pi))`` for large ``v``: smooth in ``tau``):
+    the interpolant (near minimax) through :func:`_erfcx_decimal` at the Chebyshev points, in
+    exact rational arithmetic (Newton's divided differences, expanded to the monomial basis), then
+    rounded: its coefficients sum to 1.00001 in absolute value, so Horner's rule is well
+    conditioned. (Chebyshev coefficients in float64 accumulated 4e-15 at ``v = 0``.)"""
+    from fractions import Fraction
+    x = [Fraction(float(t)) for t in np.polynomial.chebyshev.chebpts1(degree + 1)]
+    c = [Fraction(float(y)) for y in _erfcx_decimal(x)]
+    for j in range(1, degree + 1):                   # divided differences
+        for i in range(degree, j - 1, -1):
+            c[i] = (c[i] - c[i - 1]) / (x[i] - x[i - j])
+    p = [c[degree]]                                  # Newton form to monomials, highest first
+    for k in range(degree - 1, -1, -1):
+        p = [a - x[k] * b for a, b in zip(p + [Fraction(0)], [Fraction(0)] + p)]
+        p[-1] += c[k]
+    return np.array([float(a) for a in p])
+
+
+#: :func:`_erfcx_poly` of degree 17 (float64: 8e-16 relative to ``v = 4``) and 8 (float32), built on import.
+_ERFCX_POLY, _ERFCX_POLY32 = _erfcx_poly(17), _erfcx_poly(8).astype(np.float32)
 
 
 @_inline
-def _erfc_pos(v):
-    """``erfc(v)`` for ``v >= 0`` to an absolute 3e-16 (0 from ``v = 6``, where it is below
-    2.2e-17): the degree-15 Taylor polynomial of :data:`_ERFC_TAYLOR` on ``v``'s quarter
-    interval (``|s| <= 1/8``), with arithmetic and table loads (unsigned indices: no
-    wraparound test), so that a loop calling it vectorizes."""
-    vc = v if v < 6.0 else 0.0                       # NaN too; those give 0 below
-    vc = vc if vc > 0.0 else 0.0
-    k = np.uint64(4.0 * vc)
-    s = vc - 0.25 * k - 0.125
-    p = 0.0
-    for j in range(16):
-        p = p * s + _ERFC_TAYLOR[np.uint64(16) * k + np.uint64(j)]
-    return p if v < 6.0 else 0.0
-
-
-#: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` in ``s = 2 (tau - tau_M) / (1 - tau_M) - 1
-#: = _ERFCX_A / (2 + v) - _ERFCX_B`` in ``[-1, 1]`` (``tau = 2 / (2 + v)``, ``tau_M`` its value at the end).
-_ERFCX_MAX = 6.0
-_TAU_M = 2.0 / (2.0 + _ERFCX_MAX)
-_ERFCX_A, _ERFCX_B = 4.0 / (1.0 - _TAU_M), (1.0 + _TAU_M) / (1.0 - _TAU_M)
-
-
-def _erfcx_chebyshev(degree=19):
-    """Chebyshev coefficients (Clenshaw order) of ``erfcx(v) = exp(v^2) erfc(v)``, ``v`` in
-    ``[0, _ERFCX_MAX]``, in the variable ``s`` of :data:`_ERFCX_A` (``erfcx ~ tau / sqrt(pi)`` for
-    large ``v``: smooth in ``tau = 2 / (2 + v)``), interpolated at the Chebyshev points of
-    SciPy's ``erfcx`` (coefficients below 2e-16 from degree 18)."""
-    from scipy.special import erfcx
-    cheb = np.polynomial.chebyshev.chebinterpolate(lambda s: erfcx(_ERFCX_A / (s + _ERFCX_B) - 2.0), degree)
-    return cheb[::-1].copy()
-
-
-#: :func:`_erfcx_chebyshev` (built on import).
-_ERFCX_CHEB = _erfcx_chebyshev()
+def _erfc_near(F, v, e):
+    """``erfc(v) = e erfcx(v)`` for ``v >= 0`` given ``e = exp(-v^2)`` in ``F`` arithmetic: Horner's
+    rule on :data:`_ERFCX_POLY` (float64: 8e-16 relative to ``v = 4`` and absolute, measured
+    against mpmath; float32 :data:`_ERFCX_POLY32`, 2e-7 absolute), ``erfcx(6) e`` beyond 6 (absolute
+    error below 2e-17); arithmetic only, no table gathers (a piecewise Taylor series' 16 per call
+    bound the loops that called it)."""
+    poly = _of_type(F, _ERFCX_POLY, _ERFCX_POLY32)
+    s = F(_ERFCX_A) / (F(_ERFCX_K) + min(max(v, F(0.0)), F(_ERFCX_MAX))) - F(_ERFCX_B)
+    p = poly[0]
+    for j in range(1, poly.shape[0]):
+        p = poly[j] + s * p
+    return e * p
 
 
 @_inline
-def _erfc_near(v, e):
-    """``erfc(v) = e erfcx(v)`` for ``v >= 0`` given ``e = exp(-v^2)``: Clenshaw's sum of
-    :data:`_ERFCX_CHEB` (4e-15 relative to ``v = 4``, 2e-15 absolute; measured against mpmath),
-    ``erfcx(6) e`` beyond 6 (absolute error below 2e-17); arithmetic only, no table gathers
-    (:func:`_erfc_pos`'s 16 per call bound the loops that call it)."""
-    s = _ERFCX_A / (2.0 + min(max(v, 0.0), _ERFCX_MAX)) - _ERFCX_B
-    b1, b2 = 0.0, 0.0
-    for j in range(_ERFCX_CHEB.shape[0] - 1):
-        b1, b2 = 2.0 * s * b1 - b2 + _ERFCX_CHEB[j], b1
-    return e * (s * b1 - b2 + _ERFCX_CHEB[_ERFCX_CHEB.shape[0] - 1])
-
-
-@_inline
-def _smith_post(v_o, v_i, co):
-    """Beckmann ``(A, W)`` of :func:`_smith_pre` from its ``v_o``, ``v_i`` and ``c_o``."""
-    co = co if co > 0.0 else 1.0
-    lam_o = _beckmann_lambda(v_o)
-    return 2.0 * co * (1.0 + lam_o), 2.0 * co * (1.0 + lam_o + _beckmann_lambda(v_i))
+def _smith_post(F, v_o, v_i, co):
+    """Beckmann ``(A, W)`` of :func:`_smith_pre` from its ``v_o``, ``v_i`` and ``c_o`` in ``F`` arithmetic."""
+    co = co if co > F(0.0) else F(1.0)
+    lam_o = _beckmann_lambda(F, v_o)
+    return F(2.0) * co * (F(1.0) + lam_o), F(2.0) * co * (F(1.0) + lam_o + _beckmann_lambda(F, v_i))
 
 
 @_inline
@@ -221,11 +289,11 @@ def _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
 
 
 @_inline
-def _ndf_post(kind, e):
-    """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)``; GGX ``e``)."""
+def _ndf_post(F, kind, e):
+    """The transcendental factor of :func:`_ndf_pre` (Beckmann ``exp(-e)`` in ``F`` arithmetic; GGX ``e``)."""
     if kind == GGX:
         return e
-    return _exp_neg(-e)
+    return _exp_neg(F, -e)
 
 
 @_inline
@@ -412,42 +480,71 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
 def _smith_block_post(kind, shadowing, buf, m):
     """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
     (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
-    loop vectorizes; float64 arithmetic, also on float32 rows); nothing for GGX. Without
+    loop vectorizes; in the rows' arithmetic type, :func:`_float_type`: float32 rows took float64
+    arithmetic before, at half the SIMD width and the float64 polynomials' degrees; with
+    shadowing, in cache, one core: float32 5.8 -> 0.9 ns per pair, float64 5.1 -> 2.7 with this
+    round's ``exp`` and ``erfcx``); nothing for GGX. Without
     ``shadowing`` (``Lambda_i = 0``, ``W = A``: the pdf) one ``Lambda`` per pair, not two.
     Not inlined, so that it keeps its own fastmath ``contract``: its polynomials are chains of
     multiply-adds whose latency bounds the loop, and fused they take Beckmann eval from 21 to
     18 ms per 10^6 pairs on one core (the kernels' worst relative error against the
     reference is unchanged, 8e-13)."""
     if kind != GGX:
+        F = _float_type(buf)
         v_o, v_i, e, co = buf[1], buf[2], buf[3], buf[6]
         if shadowing:
             for k in range(m):
-                v_o[k], v_i[k] = _smith_post(v_o[k], v_i[k], co[k])
-                e[k] = _ndf_post(kind, e[k])
+                v_o[k], v_i[k] = _smith_post(F, v_o[k], v_i[k], co[k])
+                e[k] = _ndf_post(F, kind, e[k])
         else:
             for k in range(m):
-                v_o[k] = _smith_post(v_o[k], math.inf, co[k])[0]
+                v_o[k] = _smith_post(F, v_o[k], F(math.inf), co[k])[0]
                 v_i[k] = v_o[k]
-                e[k] = _ndf_post(kind, e[k])
+                e[k] = _ndf_post(F, kind, e[k])
 
 
-@_jit
+#: ``2 / (2 k + 1)``, ``k = 10 ... 0`` (Horner order in ``f^2``, :func:`_log_pos`).
+_ATANH_TAYLOR = np.array([2.0 / (2 * k + 1) for k in range(10, -1, -1)])
+
+
+@_inline
+def _log_pos(x):
+    """``log(x)`` for a normal float64 ``x > 0``, arithmetic and bit operations only, so that a
+    loop calling it vectorizes: ``x = 2^n m``, ``m`` in ``[sqrt(1/2), sqrt(2))`` from the bits,
+    ``log m = 2 atanh(f)``, ``f = (m - 1) / (m + 1)``, ``|f| <= 0.172``, by its Taylor series
+    ``2 sum f^(2k+1) / (2k + 1)`` to ``f^21`` (truncation below 1e-18), plus ``n ln 2``."""
+    b = np.float64(x).view(np.int64)
+    m = np.int64((b & np.int64(0xFFFFFFFFFFFFF)) | np.int64(0x3FF0000000000000)).view(np.float64)
+    big = m > math.sqrt(2.0)
+    n = float((b >> np.int64(52)) - np.int64(1023)) + (1.0 if big else 0.0)
+    m = 0.5 * m if big else m
+    f = (m - 1.0) / (m + 1.0)
+    f2 = f * f
+    p = _ATANH_TAYLOR[0]
+    for j in range(1, _ATANH_TAYLOR.shape[0]):
+        p = _ATANH_TAYLOR[j] + f2 * p
+    return n * _LN2_HI + (n * _LN2_LO + f * p)
+
+
+#: Giles' coefficients (Horner order) for ``w = -log(1 - y^2) < 5`` (in ``w - 2.5``) and beyond
+#: (in ``sqrt(w) - 3``), :func:`_erfinv_guess`.
+_GILES_CENTRAL = np.array([2.81022636e-08, 3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087,
+                           -0.00125372503, -0.00417768164, 0.246640727, 1.50140941])
+_GILES_TAIL = np.array([-0.000200214257, 0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773,
+                        -0.0076224613, 0.00943887047, 1.00167406, 2.83297682])
+
+
+@_inline
 def _erfinv_guess(y):
     """Giles' single-precision ``erfinv(y)``, ``|y| < 1`` ("Approximating the erfinv function",
-    GPU Computing Gems 2011; relative error <= 1.25e-7 measured on 10^6 uniform ``y``)."""
-    w = -math.log((1.0 - y) * (1.0 + y))
-    if w < 5.0:
-        w -= 2.5
-        p = 2.81022636e-08
-        for q in (3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087,
-                  -0.00125372503, -0.00417768164, 0.246640727, 1.50140941):
-            p = q + p * w
-    else:
-        w = math.sqrt(w) - 3.0
-        p = -0.000200214257
-        for q in (0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773,
-                  -0.0076224613, 0.00943887047, 1.00167406, 2.83297682):
-            p = q + p * w
+    GPU Computing Gems 2011; relative error <= 1.25e-7 measured on 10^6 uniform ``y``), its two
+    branches as selects of the coefficients, with :func:`_log_pos`: a loop calling it vectorizes."""
+    w = -_log_pos((1.0 - y) * (1.0 + y))
+    central = w < 5.0
+    z = w - 2.5 if central else math.sqrt(w) - 3.0
+    p = _GILES_CENTRAL[0] if central else _GILES_TAIL[0]
+    for j in range(1, _GILES_CENTRAL.shape[0]):
+        p = (_GILES_CENTRAL[j] if central else _GILES_TAIL[j]) + p * z
     return p * y
 
 
@@ -517,12 +614,13 @@ def _q2_table(n_cos=64, n_s=256):
 _Q2_S, _Q2_TAB = _q2_table()
 
 
-@_jit
+@_inline
 def _visible_slope_guess(u, c):
     """Bilinear interpolation of :data:`_Q2_TAB` at ``(cos theta, s(u))`` (:func:`_q2_table`): an
-    initial guess for ``Q2(u)`` (median error 3e-5, worst 0.12 on 10^6 samples with tails)."""
+    initial guess for ``Q2(u)`` (median error 3e-5, worst 0.12 on 10^6 samples with tails), with
+    :func:`_log_pos` and table loads: a loop calling it vectorizes."""
     y = 2.0 * u - 1.0
-    s = math.sqrt(-math.log((1.0 - y) * (1.0 + y)))
+    s = math.sqrt(-_log_pos((1.0 - y) * (1.0 + y)))
     n_c, n_s = _Q2_TAB.shape
     fc = c * (n_c - 1)
     fs = (min(max(s if y >= 0.0 else -s, -_Q2_S), _Q2_S) + _Q2_S) * ((n_s - 1) / (2.0 * _Q2_S))
@@ -654,9 +752,18 @@ def _q2_cdf_step(x, t, target):
     """:func:`_q2_step` on ``F(x) - target``, ``F = erfc(-x) + t exp(-x^2) / sqrt(pi)`` (the
     unnormalized CDF, :func:`_cdf`) with :func:`_exp_neg` and :func:`_erfc_near` (``erfc(-x) =
     2 - erfc(x)``; ``|x| <= _TAIL``): arithmetic and table loads."""
-    e = _exp_neg(-x * x)
-    ec = _erfc_near(abs(x), e)
+    e = _exp_neg(np.float64, -x * x)
+    ec = _erfc_near(np.float64, abs(x), e)
     return _q2_step(x, (ec if x < 0.0 else 2.0 - ec) + t * e / _SQRT_PI - target, t, e)
+
+
+@_inline
+def _visible_view(cos_theta):
+    """``(a, t) = (cot theta, tan theta)`` of the visible-slope CDF, ``cos theta`` clamped to
+    ``[1e-12, 1]`` (as in :func:`_visible_slope_quantile`)."""
+    c = min(max(cos_theta, 1e-12), 1.0)
+    s = math.sqrt(max(0.0, 1.0 - c * c))
+    return c / s, s / c
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
@@ -664,40 +771,44 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
     """``out_rows[:, k]``: the standard Beckmann visible normal for a view at ``theta`` in the
     xz plane (``Beckmann.sample_visible_std``: ``x~ = Q2(u[2 k])``, ``y~ = erfinv(2 u[2 k + 1] -
     1)``, ``cos theta = cos_row[k]``) for ``k < m``, in float64 (rows ``bk (4, BLOCK)``). The
-    guesses :func:`_visible_slope_guess` and :func:`_erfinv_guess` (library ``log``) in a
-    loop of their own; then, in a loop that vectorizes (:func:`_exp_neg`, :func:`_erfc_near`
+    guesses :func:`_visible_slope_guess` and :func:`_erfinv_guess` in a loop of their own (it
+    vectorizes since their ``log`` is :func:`_log_pos`, not the library's: the block 24 -> 20 ns
+    per view in cache, Beckmann sample 50 -> 34 ms per 10^6 on one core); then, in loops that vectorize (:func:`_exp_neg`, :func:`_erfc_near`
     with ``erfc(-x) = 2 - erfc(x)``, :func:`_erf_small`; fastmath ``contract``: its latency is
     chains of multiply-adds, 51 -> 46 ms per 10^6 views) three of
-    :func:`_visible_slope_quantile`'s steps on ``F - u z`` (unrolled: in a loop, the loop over
-    ``k`` did not vectorize; two left 10 % of the lanes to the scalar solve, three 1 %) and one
-    of :func:`_erfinv`'s, with their stopping tests after the last. The lanes that fail them,
-    lie in the upper tail (``u >= _UPPER``, solved on the complementary CDF) or beyond
-    :data:`_TAIL` are solved again by those scalar functions."""
+    :func:`_visible_slope_quantile`'s steps on ``F - u z`` (two left 10 % of the lanes to the
+    scalar solve, three 1 %), one loop over ``k`` per step (in one loop, each iteration a chain
+    of three dependent steps, the loop was bound by their latency: 10.4 instead of 3 x 1.7 ns
+    per view), and one of :func:`_erfinv`'s, with their stopping tests after the last. The lanes
+    that fail them, lie in the upper tail (``u >= _UPPER``, solved on the complementary CDF) or
+    beyond :data:`_TAIL` are solved again by those scalar functions."""
     gx, gy, ok_x, ok_y = bk[0], bk[1], bk[2], bk[3]
-    for k in range(m):                               # guesses (library log)
+    uz = bk[2]                                       # u z until the flags of x~ replace it
+    for k in range(m):                               # guesses
         u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
         gx[k] = _visible_slope_guess(u0, min(max(float(cos_row[k]), 1e-12), 1.0))
         gy[k] = _erfinv_guess(2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
-    for k in range(m):                               # Halley steps, vectorized
+    for k in range(m):                               # u z, the first Halley step of x~, y~'s step
         u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
-        c = min(max(float(cos_row[k]), 1e-12), 1.0)
-        s = math.sqrt(max(0.0, 1.0 - c * c))
-        a, t = c / s, s / c
-        target = u0 * ((2.0 - _erfc_pos(a)) + t * _exp_neg(-a * a) / _SQRT_PI)
-        hi = min(a, 8.0)
-        x = min(max(gx[k], -8.0), hi)
-        step, x = _q2_cdf_step(x, t, target)
-        step, x = _q2_cdf_step(x, t, target)
-        step, x = _q2_cdf_step(x, t, target)
-        ok_x[k] = 1.0 if ((u0 < _UPPER) & (abs(step) <= 1e-12 * max(1.0, abs(x)))
-                          & (abs(x) < _TAIL) & (x < hi)) else 0.0
-        gx[k] = x
+        a, t = _visible_view(float(cos_row[k]))
+        e_a = _exp_neg(np.float64, -a * a)
+        uz[k] = u0 * ((2.0 - _erfc_near(np.float64, a, e_a)) + t * e_a / _SQRT_PI)
+        gx[k] = _q2_cdf_step(min(max(gx[k], -8.0), min(a, 8.0)), t, uz[k])[1]
         y = 2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0
         ay = abs(gy[k])
-        e = _exp_neg(-ay * ay)
-        f = (1.0 - abs(y)) - _erfc_near(ay, e) if abs(y) > 0.5 else _erf_small(min(ay, 0.5)) - abs(y)
+        e = _exp_neg(np.float64, -ay * ay)
+        f = (1.0 - abs(y)) - _erfc_near(np.float64, ay, e) if abs(y) > 0.5 else _erf_small(min(ay, 0.5)) - abs(y)
         gy[k], d = _erfinv_step(y, gy[k], f, 1.0 / e)
         ok_y[k] = 1.0 if (abs(d) <= 2e-7 * ay) & (ay < _TAIL) else 0.0
+    for k in range(m):                               # the second
+        gx[k] = _q2_cdf_step(gx[k], _visible_view(float(cos_row[k]))[1], uz[k])[1]
+    for k in range(m):                               # the third, and the stopping test
+        u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
+        a, t = _visible_view(float(cos_row[k]))
+        step, x = _q2_cdf_step(gx[k], t, uz[k])
+        ok_x[k] = 1.0 if ((u0 < _UPPER) & (abs(step) <= 1e-12 * max(1.0, abs(x)))
+                          & (abs(x) < _TAIL) & (x < min(a, 8.0))) else 0.0
+        gx[k] = x
     for k in range(m):                               # the rare rest, scalar
         if ok_x[k] == 0.0:
             gx[k] = _visible_slope_quantile(float(u[2 * k]), float(cos_row[k]))
