@@ -751,7 +751,7 @@ def _erf_small(x):
 def _q2_cdf_step(x, t, target):
     """:func:`_q2_step` on ``F(x) - target``, ``F = erfc(-x) + t exp(-x^2) / sqrt(pi)`` (the
     unnormalized CDF, :func:`_cdf`) with :func:`_exp_neg` and :func:`_erfc_near` (``erfc(-x) =
-    2 - erfc(x)``; ``|x| <= _TAIL``): arithmetic and table loads."""
+    2 - erfc(x)``; ``|x| <= _TAIL``): arithmetic only."""
     e = _exp_neg(np.float64, -x * x)
     ec = _erfc_near(np.float64, abs(x), e)
     return _q2_step(x, (ec if x < 0.0 else 2.0 - ec) + t * e / _SQRT_PI - target, t, e)
