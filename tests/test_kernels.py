@@ -159,6 +159,19 @@ def test_gather_free_erfc_is_relatively_accurate():
     np.testing.assert_allclose(near(v), erfc(v), rtol=0, atol=1e-15)
 
 
+def _elementwise(f, F):
+    """A compiled loop applying a kernel helper ``f(F, x)`` to each element of a 1-D array."""
+    import numba
+
+    @numba.njit
+    def run(x):
+        out = np.empty_like(x)
+        for j in range(x.size):
+            out[j] = f(F, x[j])
+        return out
+    return run
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=lambda t: np.dtype(t).name)
 def test_beckmann_lambda_against_mpmath(dtype):
     """The kernels' ``Lambda(v)`` (:func:`_beckmann_lambda`, ``exp`` and ``erfcx`` polynomials of the
@@ -169,14 +182,7 @@ def test_beckmann_lambda_against_mpmath(dtype):
     import mpmath
     import numba
     k = kernels._kernels()
-    F = np.dtype(dtype).type
-
-    @numba.njit
-    def lam(v):
-        out = np.empty_like(v)
-        for j in range(v.size):
-            out[j] = k._beckmann_lambda(F, v[j])
-        return out
+    lam = _elementwise(k._beckmann_lambda, np.dtype(dtype).type)
 
     v = np.concatenate([np.geomspace(1e-4, 10.0, 1500), np.linspace(0.0, 8.0, 801)[1:]]).astype(dtype)
     with mpmath.workdps(30):
@@ -304,19 +310,10 @@ def test_vectorizable_exp_matches_numpy():
     """The kernels' ``exp`` (x <= 0; :func:`_exp_neg`), polynomials and bit operations only: float64
     to 2.2e-16 relative (1 ulp) down to the subnormals (0 below -744), exactly 1 at 0; float32 to
     1.2e-7 relative against float64 (1 ulp) down to its subnormals (0 below -104); NaN and -inf give 0."""
-    import numba
     k = kernels._kernels()
 
     def exp(x):
-        F = x.dtype.type
-
-        @numba.njit
-        def run(x):
-            out = np.empty_like(x)
-            for j in range(x.size):
-                out[j] = k._exp_neg(F, x[j])
-            return out
-        return run(x)
+        return _elementwise(k._exp_neg, x.dtype.type)(x)
 
     x = -np.concatenate([np.linspace(0.0, 60.0, 20001), np.geomspace(1e-300, 800.0, 2000),
                          np.linspace(700.0, 746.0, 4001), [np.inf, np.nan]])
