@@ -441,3 +441,29 @@ def test_input_checks_fused_into_the_kernels(dtype, monkeypatch):
     assert reference(brdf.eval, wi, one) == reference(brdf.sample, u, one) == reference(dirs, one, "wo", f32)
     v = np.array([0.5, 1.01], dtype)
     assert reference(brdf.sample, v, wo) == reference(uniforms, v, f32)
+
+
+def test_concurrent_calls_from_threads_match_serial():
+    """Calls from several Python threads at once (each splitting its batch into tasks that it and
+    the shared pool take from its own counter) give the results of the same calls made one by one,
+    ``out=`` included."""
+    from concurrent.futures import ThreadPoolExecutor
+    rng = np.random.default_rng(8)
+    n = 3 * kernels.PARALLEL_MIN + 5
+    wi, wo, u = _dirs(rng, n), _dirs(rng, n), rng.random((n, 2))
+    cu = mf.fresnel.Conductor.metal("Cu")
+    brdfs = [mf.MicrofacetBRDF(D(alpha_x=ax, alpha_y=0.4), fresnel=cu) for D in (mf.GGX, mf.Beckmann) for ax in (0.1, 0.3)]
+    calls = [(b, op) for b in brdfs for op in ("eval", "pdf", "sample")]
+
+    def run(call, out=None):
+        b, op = call
+        if op == "sample":
+            return b.sample(u, wo, out=out)
+        return getattr(b, op)(wi, wo, out=out)
+    serial = [run(c) for c in calls]
+    outs = [tuple(np.empty_like(a) for a in s) if isinstance(s, tuple) else np.empty_like(s) for s in serial]
+    with ThreadPoolExecutor(4) as pool:
+        parallel = list(pool.map(run, calls * 2, outs + [None] * len(calls)))
+    for s, p in zip(serial * 2, parallel):
+        for a, b in zip(s if isinstance(s, tuple) else (s,), p if isinstance(p, tuple) else (p,)):
+            np.testing.assert_array_equal(a, b)
