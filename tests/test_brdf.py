@@ -251,3 +251,45 @@ def test_bad_out_raises_naming_it():
         brdf.sample(u, wo, out=(shared, shared, np.empty(50)))
     with pytest.raises(ValueError, match="wo must be unit vectors"):
         brdf.pdf(wi, 2.0 * wo, out=np.empty(49))
+
+
+def test_every_brdf_takes_out(tmp_path):
+    """The protocol's ``out=`` on every BRDF class (the NumPy paths, the measured kernels, the
+    mixtures): the arrays given are returned, holding the values returned without them."""
+    from microfacet.distributions.tabulated import TabulatedIsotropic, theta_grid
+    from microfacet.fit import FittedBRDF
+    from microfacet.fit.analytic import SumBRDF
+    from microfacet.glints import Microsurface
+    from microfacet.measured import merl
+    rng = np.random.default_rng(9)
+    n = 200
+    wi, wo, u = _upper(rng, n), _upper(rng, n), rng.random((n, 2))
+    ggx = mf.GGX(alpha_x=0.2, alpha_y=0.5)
+    th = theta_grid(48)
+    table = TabulatedIsotropic(np.exp(-np.tan(th) ** 2 / 0.3**2), alpha_x=0.8, alpha_y=1.2)
+    i_h, i_d, i_p = np.meshgrid(np.arange(90), np.arange(90), np.arange(180), indexing="ij")
+    raw = np.stack([0.2 + np.cos(i_h / 60.0) ** 8, 0.3 + 0.0 * i_d, 0.1 + 0.001 * i_p]) / merl.SCALE[:, None, None, None]
+    path = tmp_path / "m.binary"
+    path.write_bytes(np.array([90, 90, 180], "<i4").tobytes() + raw.astype("<f8").tobytes())
+    slopes = rng.normal(scale=0.2, size=(16, 16, 2))
+    ms = Microsurface.from_normal_map(mf.leadr.slopes_to_normals(slopes))
+    brdfs = [mf.Lambertian(0.5), mf.MicrofacetBRDF(ggx, gaf="vgroove"),
+             FittedBRDF(table, mf.fresnel.Schlick(0.04), diffuse=0.2), FittedBRDF(table, mf.fresnel.Schlick(0.04)),
+             SumBRDF(mf.MicrofacetBRDF(ggx), mf.Lambertian(0.3)), ms.pbrdf((0.5, 0.5), np.eye(2) * 0.01),
+             mf.measured.load(path)]
+    for brdf in brdfs:
+        for method, args in (("eval", (wi, wo)), ("eval_cos", (wi, wo)), ("pdf", (wi, wo)), ("sample", (u, wo))):
+            want = getattr(brdf, method)(*args)
+            if method == "sample":
+                out = tuple(np.full(a.shape, np.nan) for a in want)
+                got = brdf.sample(*args, out=out)
+                assert all(g is o for g, o in zip(got, out)), type(brdf).__name__
+            else:
+                out = np.full(want.shape, np.nan)
+                got = getattr(brdf, method)(*args, out=out)
+                assert got is out, (type(brdf).__name__, method)
+                got, want = (got,), (want,)
+            for g, w in zip(got, want):
+                np.testing.assert_array_equal(g, w, err_msg=f"{type(brdf).__name__}.{method}")
+        with pytest.raises(ValueError, match="out must be"):
+            brdf.pdf(wi, wo, out=np.empty(n + 1))

@@ -5,6 +5,11 @@ arrays of directions: ``wi`` is the light (emitter) direction, ``wo`` the view
 (receiver) direction, both unit ``(..., 3)`` in the local frame (z = macro normal).
 Directions that are not unit length (within :data:`UNIT_TOLERANCE`), or hold NaN/inf,
 and uniforms outside ``[0, 1]`` raise ``ValueError``: they are never normalized silently.
+Each method also writes its result into ``out`` if given (NumPy's ``out=``; ``sample``: a
+tuple ``(wi, weight, pdf)``), C-contiguous arrays of the result's shape and dtype that share
+no memory with the inputs (``ValueError`` naming ``out`` otherwise), and returns them; for
+:class:`MicrofacetBRDF`'s compiled kernels, which write straight into them, that saves the
+allocation and first touch of new outputs.
 """
 from __future__ import annotations
 
@@ -125,28 +130,40 @@ def _into(out, result: np.ndarray, inputs) -> np.ndarray:
     return out
 
 
+def _into_sample(out, result, inputs):
+    """``(wi, weight, pdf)`` ``result``, or ``out``'s three arrays with it copied in
+    (:func:`microfacet.kernels.sample_outputs`)."""
+    if out is None:
+        return result
+    out = kernels.sample_outputs(out, result[2].shape, result[2].dtype, tuple(inputs))
+    for o, a in zip(out, result):
+        np.copyto(o, a)
+    return out
+
+
 class BRDF:
     """The BRDF protocol (Listing 1.2). Subclasses implement ``eval_cos``, ``sample``
     and ``pdf``; ``eval`` divides by ``cos theta_i``."""
 
-    def eval_cos(self, wi, wo) -> np.ndarray:  # pragma: no cover - interface
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:  # pragma: no cover - interface
         """Projected BRDF ``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (``evalp``)."""
         raise NotImplementedError
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def eval(self, wi, wo, out=None) -> np.ndarray:
         """BRDF value ``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
         wi = _dirs(wi, "wi")
         zi = wi[..., 2:3]
         fc = self.eval_cos(wi, wo)
-        return np.divide(fc, zi, out=np.zeros(np.broadcast_shapes(fc.shape, zi.shape)), where=zi > 0)
+        f = np.divide(fc, zi, out=np.zeros(np.broadcast_shapes(fc.shape, zi.shape)), where=zi > 0)
+        return _into(out, f, (wi, wo))
 
-    def sample(self, u, wo):  # pragma: no cover - interface
+    def sample(self, u, wo, out=None):  # pragma: no cover - interface
         """Importance-sample ``f_r cos theta_i``: ``(wi, weight, pdf)`` from uniforms
         ``u`` in ``[0,1]^2`` (``ValueError`` outside), with ``weight = eval_cos / pdf``
         (``evalp_is``)."""
         raise NotImplementedError
 
-    def pdf(self, wi, wo) -> np.ndarray:  # pragma: no cover - interface
+    def pdf(self, wi, wo, out=None) -> np.ndarray:  # pragma: no cover - interface
         """Solid-angle density of ``sample`` producing ``wi`` from ``wo``."""
         raise NotImplementedError
 
@@ -166,23 +183,23 @@ class Lambertian(BRDF):
     def __repr__(self) -> str:
         return f"Lambertian(reflectance={self.reflectance.tolist()})"
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         zi, zo = wi[..., 2], wo[..., 2]
-        return np.where((zi > 0) & (zo > 0), zi / np.pi, 0.0)[..., None] * self.reflectance
+        return _into(out, np.where((zi > 0) & (zo > 0), zi / np.pi, 0.0)[..., None] * self.reflectance, (wi, wo))
 
-    def pdf(self, wi, wo) -> np.ndarray:
+    def pdf(self, wi, wo, out=None) -> np.ndarray:
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
-        return np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0)
+        return _into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
 
-    def sample(self, u, wo):
+    def sample(self, u, wo, out=None):
         wo = _dirs(wo, "wo")
         u = _uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         ok = (wo[..., 2] > 0) & (wi[..., 2] > 0)
         pdf = np.where(ok, cosine_hemisphere_pdf(wi), 0.0)
-        return wi, np.where(ok[..., None], self.reflectance, 0.0), pdf
+        return _into_sample(out, (wi, np.where(ok[..., None], self.reflectance, 0.0), pdf), (u, wo))
 
 
 class MicrofacetBRDF(BRDF):
@@ -323,25 +340,18 @@ class MicrofacetBRDF(BRDF):
         return _into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2); written into ``out`` if
-        given (see :meth:`eval`)."""
+        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
         return self._eval(wi, wo, False, out)
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1).
-
-        ``out``: an array to write the result into and return, as NumPy's ``out=`` (C-contiguous,
-        of the BRDF's ``dtype`` and the result's shape, sharing no memory with the inputs;
-        ``ValueError`` otherwise; its contents are unspecified after a ``ValueError`` on the
-        inputs). A renderer that reuses its buffers saves the allocation and the first touch
-        of new pages (GGX sample per 10^6 pairs: see the README's Benchmarks).
-        """
+        """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1). ``out`` (see the module): of
+        the BRDF's ``dtype``; the kernels write into it as they go, so its contents are
+        unspecified after a ``ValueError`` on the inputs."""
         return self._eval(wi, wo, True, out)
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
-        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`);
-        written into ``out`` if given (see :meth:`eval`)."""
+        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
         d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype, out), self.dtype == np.float32,
                          wi=wi, wo=wo)
         if fast is not None:
@@ -374,20 +384,13 @@ class MicrofacetBRDF(BRDF):
         when the distribution supports it, slopes of ``P`` otherwise. Returns
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
-        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`).
-        ``out``: a tuple of three arrays ``(wi, weight, pdf)`` to write them into and return
-        (as in :meth:`eval`; distinct arrays)."""
+        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
         d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype, out), self.dtype == np.float32,
                          wo=wo, u=u)
         if fast is not None:
             return fast
         result = self._sample_numpy(d["u"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False))
-        if out is None:
-            return tuple(a.astype(self.dtype, copy=False) for a in result)
-        out = kernels.sample_outputs(out, result[2].shape, self.dtype, tuple(d.values()))
-        for o, a in zip(out, result):
-            np.copyto(o, a)
-        return out
+        return _into_sample(out, tuple(a.astype(self.dtype, copy=False) for a in result), d.values())
 
     def _sample_numpy(self, u, wo):
         """NumPy reference of :meth:`sample` (unit ``wo``, uniforms ``u``)."""

@@ -51,7 +51,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import fresnel as _fresnel
-from ..brdf import BRDF, Lambertian, MicrofacetBRDF
+from ..brdf import BRDF, Lambertian, MicrofacetBRDF, _into, _into_sample
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
 from .extract import _distribution_key, _energy_constrained, _kept, albedo_rows, box_qp, golden_section
@@ -118,19 +118,20 @@ class SumBRDF(BRDF):
     def __repr__(self) -> str:
         return "SumBRDF(" + ", ".join(map(repr, self.brdfs)) + f", weights={self.weights.round(4).tolist()})"
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``sum_j f_j cos theta_i``."""
-        return sum(b.eval_cos(wi, wo) for b in self.brdfs)
+        return _into(out, sum(b.eval_cos(wi, wo) for b in self.brdfs), (wi, wo))
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def eval(self, wi, wo, out=None) -> np.ndarray:
         """``sum_j f_j``."""
-        return sum(b.eval(wi, wo) for b in self.brdfs)
+        return _into(out, sum(b.eval(wi, wo) for b in self.brdfs), (wi, wo))
 
-    def pdf(self, wi, wo) -> np.ndarray:
+    def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Mixture density ``sum_j w_j pdf_j``."""
-        return sum(w * b.pdf(wi, wo) for w, b in zip(self.weights, self.brdfs, strict=True) if w > 0)
+        return _into(out, sum(w * b.pdf(wi, wo) for w, b in zip(self.weights, self.brdfs, strict=True) if w > 0),
+                     (wi, wo))
 
-    def sample(self, u, wo):
+    def sample(self, u, wo, out=None):
         """Choose lobe ``j`` with probability ``w_j`` by ``u[..., 0]``, sample it with the
         rescaled uniform; return ``(wi, eval_cos / pdf, pdf)`` of the mixture."""
         wo = np.asarray(wo, dtype=np.float64)
@@ -153,7 +154,7 @@ class SumBRDF(BRDF):
         fc = self.eval_cos(wi, wo)
         ok = (pdf > 0) & np.all(np.isfinite(fc), axis=-1)
         weight = np.where(ok[..., None], fc / np.where(ok, pdf, 1.0)[..., None], 0.0)
-        return wi, weight, np.where(ok, pdf, 0.0)
+        return _into_sample(out, (wi, weight, np.where(ok, pdf, 0.0)), (u, wo))
 
 
 # ------------------------------------------------------------------ least squares

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import fresnel as _fresnel
-from ..brdf import GAFS, Lambertian, MicrofacetBRDF
+from ..brdf import GAFS, Lambertian, MicrofacetBRDF, _into, _into_sample
 from ..distributions import GGX, Beckmann
 from ..distributions.tabulated import THETA_REFINE, TabulatedAnisotropic, TabulatedIsotropic, refine_radial, theta_grid
 from ..errors import MicrofacetError
@@ -77,15 +77,17 @@ class FittedBRDF(MicrofacetBRDF):
         return MicrofacetBRDF(self.distribution, fresnel=self.fresnel, gaf=self.gaf_model,
                               shadowing=self.shadowing)
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``f_r cos theta_i``: the microfacet lobe (Listing 2.2) plus ``k_d cos theta_i / pi``."""
-        out = super().eval_cos(wi, wo)
-        return out + self.base.eval_cos(wi, wo) if self.has_diffuse else out
+        if not self.has_diffuse:
+            return super().eval_cos(wi, wo, out)
+        return _into(out, super().eval_cos(wi, wo) + self.base.eval_cos(wi, wo), (wi, wo))
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def eval(self, wi, wo, out=None) -> np.ndarray:
         """``f_r = F D G / (4 cos theta_i cos theta_o) + k_d / pi`` (Eq. 2.1, 1.9)."""
-        out = super().eval(wi, wo)
-        return out + self.base.eval(wi, wo) if self.has_diffuse else out
+        if not self.has_diffuse:
+            return super().eval(wi, wo, out)
+        return _into(out, super().eval(wi, wo) + self.base.eval(wi, wo), (wi, wo))
 
     def _lobe_probability(self) -> float:
         """Probability of sampling the microfacet lobe: its albedo estimate
@@ -94,19 +96,19 @@ class FittedBRDF(MicrofacetBRDF):
         a_d = float(extract.luminance(self.diffuse))
         return a_s / (a_s + a_d) if a_s + a_d > 0 else 1.0
 
-    def pdf(self, wi, wo) -> np.ndarray:
+    def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of :meth:`sample`: ``p_s pdf_lobe + (1 - p_s) cos theta_i / pi``."""
         if not self.has_diffuse:
-            return super().pdf(wi, wo)
+            return super().pdf(wi, wo, out)
         p = self._lobe_probability()
-        return p * super().pdf(wi, wo) + (1.0 - p) * self.base.pdf(wi, wo)
+        return _into(out, p * super().pdf(wi, wo) + (1.0 - p) * self.base.pdf(wi, wo), (wi, wo))
 
-    def sample(self, u, wo):
+    def sample(self, u, wo, out=None):
         """Sample the lobe (:meth:`MicrofacetBRDF.sample`) or the base (cosine warp),
         chosen by ``u[..., 0]`` against :meth:`_lobe_probability` (rescaled to reuse it);
         returns ``(wi, eval_cos / pdf, pdf)`` of the mixture."""
         if not self.has_diffuse:
-            return super().sample(u, wo)
+            return super().sample(u, wo, out)
         u = np.asarray(u, dtype=np.float64)
         wo = np.asarray(wo, dtype=np.float64)
         p = self._lobe_probability()
@@ -121,7 +123,7 @@ class FittedBRDF(MicrofacetBRDF):
         fc = self.eval_cos(wi, wo_b)
         ok = pdf > 0
         weight = np.where(ok[..., None], fc / np.where(ok, pdf, 1.0)[..., None], 0.0)
-        return wi, weight, np.where(ok, pdf, 0.0)
+        return _into_sample(out, (wi, weight, np.where(ok, pdf, 0.0)), (u, wo))
 
     # ------------------------------------------------------------ backscattering
     def backscatter(self, k) -> np.ndarray:

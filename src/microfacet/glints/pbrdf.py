@@ -63,7 +63,7 @@ import numpy as np
 from scipy.special import erfc
 
 from .. import fresnel as _fresnel
-from ..brdf import BRDF, _dirs, _uniforms
+from ..brdf import BRDF, _dirs, _into, _into_sample, _uniforms
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector, reflect
 from .microsurface import BLOCK, FWHM_PER_SIGMA, LobeMixture
@@ -332,10 +332,10 @@ class PatchBRDF(BRDF):
         s = np.where(ok, d * self._g2_over_ao(ai, vi, ao, vo) / 4.0, 0.0)
         return oh, s
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``f_P(o, i) A_P(i) = F G2 D_P / (4 A_P(o))`` (Eq. 7), RGB ``(..., 3)``."""
         oh, s = self._projected(wi, wo)
-        return self.fresnel(oh) * s[..., None]
+        return _into(out, self.fresnel(oh) * s[..., None], (wi, wo))
 
     def f_p(self, wi, wo) -> np.ndarray:
         """The symmetric P-BRDF of Eq. 7, ``F G2 D_P / (4 A_P(o) A_P(i))``, RGB."""
@@ -345,7 +345,7 @@ class PatchBRDF(BRDF):
             s = np.where((ai > 0) & (ao > 0), s / np.where(ai > 0, ai, 1.0), 0.0)
         return self.fresnel(oh) * s[..., None]
 
-    def pdf(self, wi, wo) -> np.ndarray:
+    def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of :meth:`sample`: ``D_P(h) z_h / (4 o.h)`` (Sec. 5)."""
         wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
         h = half_vector(wi, wo)
@@ -353,9 +353,9 @@ class PatchBRDF(BRDF):
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0) & (self.weight_sum > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             p = self.pndf(h) * h[..., 2] / (4.0 * np.where(ok, oh, 1.0))
-        return np.where(ok, p, 0.0)
+        return _into(out, np.where(ok, p, 0.0), (wi, wo))
 
-    def sample(self, u, wo):
+    def sample(self, u, wo, out=None):
         """Footprint position, then normal (Sec. 5): lobe ``i`` with probability
         ``W_i / sum W`` from ``u[..., 0]`` (rescaled and reused), a normal of slope density
         ``P_i`` (``mf.Beckmann.sample_p22``), ``wi`` the reflection of ``wo``.
@@ -367,7 +367,8 @@ class PatchBRDF(BRDF):
         wof = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
         if self.lobes is None:
             z = np.zeros(shape)
-            return np.broadcast_to(wo, shape + (3,)) * [-1, -1, 1], np.zeros(shape + (3,)), z
+            return _into_sample(out, (np.broadcast_to(wo, shape + (3,)) * [-1, -1, 1], np.zeros(shape + (3,)), z),
+                                (u, wo))
         j = np.minimum(np.searchsorted(self._cdf, u[:, 0], side="right"), len(self._cdf) - 1)
         lo = np.where(j > 0, self._cdf[np.maximum(j - 1, 0)], 0.0)
         u0 = np.clip((u[:, 0] - lo) / np.maximum(self._cdf[j] - lo, 1e-300), 0.0, 1.0 - 1e-16)
@@ -378,7 +379,7 @@ class PatchBRDF(BRDF):
         f = self.eval_cos(wi, wof)
         with np.errstate(divide="ignore", invalid="ignore"):
             weight = np.where((pdf > 0)[:, None], f / np.where(pdf > 0, pdf, 1.0)[:, None], 0.0)
-        return wi.reshape(shape + (3,)), weight.reshape(shape + (3,)), pdf.reshape(shape)
+        return _into_sample(out, (wi.reshape(shape + (3,)), weight.reshape(shape + (3,)), pdf.reshape(shape)), (u, wo))
 
     # ---------------------------------------------------------------- diagnostics
     def albedo(self, wo, order: int = 24) -> float:

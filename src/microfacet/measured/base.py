@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import kernels
-from ..brdf import BRDF, _uniforms
+from ..brdf import BRDF, _into, _into_sample, _uniforms
 from ..brdf import _dirs as as_dirs   # the one direction check of every BRDF
 from ..errors import MicrofacetError
 from ..geometry import cosine_hemisphere_pdf, square_to_cosine_hemisphere
@@ -91,31 +91,31 @@ class MeasuredBRDF(BRDF):
         """NumPy reference of ``f_r cos theta_i``: ``f_r max(cos theta_i, 0)``."""
         return self._eval_numpy(wi, wo) * np.maximum(wi[..., 2:3], 0.0)
 
-    def _eval(self, wi, wo, cosine: bool) -> np.ndarray:
+    def _eval(self, wi, wo, cosine: bool, out=None) -> np.ndarray:
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         k = self._kernel()
         if k is None:
-            return self._eval_cos_numpy(wi, wo) if cosine else self._eval_numpy(wi, wo)
+            return _into(out, self._eval_cos_numpy(wi, wo) if cosine else self._eval_numpy(wi, wo), (wi, wo))
         shape = np.broadcast_shapes(wi.shape, wo.shape)
-        out = np.empty(shape)
+        out = kernels.output(out, shape, np.float64, "out", (wi, wo))
         kernels._launch(k[0], out.size // 3, _rows(np.broadcast_to(wi, shape), 3),
                         _rows(np.broadcast_to(wo, shape), 3), cosine, out.reshape(-1, 3), *k[2])
         return out
 
-    def eval(self, wi, wo) -> np.ndarray:
+    def eval(self, wi, wo, out=None) -> np.ndarray:
         """``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
-        return self._eval(wi, wo, False)
+        return self._eval(wi, wo, False, out)
 
-    def eval_cos(self, wi, wo) -> np.ndarray:
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (thesis: ``evalp``)."""
-        return self._eval(wi, wo, True)
+        return self._eval(wi, wo, True, out)
 
-    def pdf(self, wi, wo) -> np.ndarray:
+    def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of :meth:`sample`: ``cos theta_i / pi`` (0 if ``wo`` is below the horizon)."""
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
-        return np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0)
+        return _into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
 
-    def sample(self, u, wo):
+    def sample(self, u, wo, out=None):
         """Cosine-weighted light directions: ``(wi, eval_cos / pdf, pdf)``; weight and pdf
         are 0 where ``wo`` or ``wi`` is below the horizon."""
         wo = as_dirs(wo, "wo")
@@ -123,7 +123,7 @@ class MeasuredBRDF(BRDF):
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         k = self._kernel()
         if k is not None:
-            wi, weight, pdf = np.empty(shape + (3,)), np.empty(shape + (3,)), np.empty(shape)
+            wi, weight, pdf = kernels.sample_outputs(out, shape, np.float64, (u, wo))
             kernels._launch(k[1], pdf.size, _rows(np.broadcast_to(u, shape + (2,)), 2),
                             _rows(np.broadcast_to(wo, shape + (3,)), 3), wi.reshape(-1, 3), weight.reshape(-1, 3),
                             pdf.reshape(-1), *k[2])
@@ -134,4 +134,4 @@ class MeasuredBRDF(BRDF):
         ok = pdf > 0
         fc = self.eval_cos(wi, wo)
         weight = np.divide(fc, pdf[..., None], out=np.zeros_like(fc), where=ok[..., None])
-        return wi, weight, pdf
+        return _into_sample(out, (wi, weight, pdf), (u, wo))
