@@ -469,11 +469,13 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         if kind == GGX:                              # no Smith loop of its own: the value here
             dst[k] = _projected_over(F, kind, e, f, c, w)
         else:
-            a_r[k], w_r[k], c_r[k], e_r[k], f_r[k], co_r[k] = area, w, c, e, f, co
+            a_r[k], e_r[k], f_r[k], co_r[k] = area, e, f, co
+            if shadowing:
+                w_r[k] = w
     if kind != GGX:
         _smith_block_post(kind, shadowing, buf, m)
         for k in range(m):
-            dst[k] = _projected_over(F, kind, e_r[k], f_r[k], c_r[k], w_r[k])
+            dst[k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
@@ -484,7 +486,8 @@ def _smith_block_post(kind, shadowing, buf, m):
     arithmetic before, at half the SIMD width and the float64 polynomials' degrees; with
     shadowing, in cache, one core: float32 5.8 -> 0.9 ns per pair, float64 5.1 -> 2.7 with this
     round's ``exp`` and ``erfcx``); nothing for GGX. Without
-    ``shadowing`` (``Lambda_i = 0``, ``W = A``: the pdf) one ``Lambda`` per pair, not two.
+    ``shadowing`` (``Lambda_i = 0``, ``W = A``: the pdf) one ``Lambda`` per pair, not two, and
+    row 2 (``W``) is left as it is: callers read ``A`` (row 1) for it.
     Not inlined, so that it keeps its own fastmath ``contract``: its polynomials are chains of
     multiply-adds whose latency bounds the loop, and fused they take Beckmann eval from 21 to
     18 ms per 10^6 pairs on one core (the kernels' worst relative error against the
@@ -499,7 +502,6 @@ def _smith_block_post(kind, shadowing, buf, m):
         else:
             for k in range(m):
                 v_o[k] = _smith_post(F, v_o[k], F(math.inf), co[k])[0]
-                v_i[k] = v_o[k]
                 e[k] = _ndf_post(F, kind, e[k])
 
 
@@ -1065,7 +1067,8 @@ def sample_kernel(kind, dtype=np.float64):
             if kind != GGX:
                 _smith_block_post(kind, shadowing, buf, m)
                 for k in range(m):
-                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k], r5[k], r3[k], r4[k], r7[k] > F(0.0))
+                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k] if shadowing else r1[k], r5[k], r3[k], r4[k],
+                                                     r7[k] > F(0.0))
             _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat[3 * j0:3 * (j0 + m)], m)
         return outside, _deviation(top_o, dev_o)
     return kernel
