@@ -29,7 +29,8 @@ Usage::
 Our outputs are new arrays per call, as the API returns them (and, in the rows marked
 ``out=``, arrays allocated once and passed as ``out=``); with glibc's defaults a call
 that frees more than ~48 MB returns it to the system, so that the next call page-faults
-its outputs in again (here ~1 ms per MB; Dr.Jit caches its allocations). Running with
+its outputs in again (GGX sample of 10^6: 959 faults, 8.2 ms of system time on these VMs,
+``resource.getrusage``; Dr.Jit caches its allocations). Running with
 ``MALLOC_TRIM_THRESHOLD_=1073741824 MALLOC_MMAP_THRESHOLD_=1073741824`` keeps that memory
 in the process, as a renderer reusing its buffers would (the header says which applies).
 

@@ -395,7 +395,9 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
     """``out[3 k + ch] = F_ch(c_row[k]) * s_row[k]`` for ``k < m`` (a flat output block,
     :func:`_flat_rows`): the Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]``
     ``k``; ``tx``, ``tv`` the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
-    over ``k`` per kind (the choice outside it) with the three channels inside, writing the
+    over ``k`` per kind (the choice outside it: one loop with the choice inside, which LLVM
+    does not unswitch, took GGX Cu eval 4.7 -> 18 ms and float32 2.0 -> 6.0 ms per 10^6 pairs
+    on one core) with the three channels inside, writing the
     output as it goes (interleaved stores; rows and a second pass to interleave them cost
     GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms vectorize."""
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
