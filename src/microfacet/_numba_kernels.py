@@ -668,7 +668,7 @@ def _visible_slope_quantile(u, cos_theta):
     guess took 4.3)."""
     u = min(max(u, _U_MIN), 1.0 - _U_MIN)
     c = min(max(cos_theta, 1e-12), 1.0)
-    s = math.sqrt(max(0.0, 1.0 - c * c))
+    s = math.sqrt((1.0 - c) * (1.0 + c))            # 1 - c^2 without the rounding of c^2
     a = c / s
     t = s / c
     erfc_a, exp_a = math.erfc(a), math.exp(-a * a)
@@ -732,7 +732,7 @@ def _ggx_visible_std(F, u0, u1, cos_t):
     ``r cos phi``, ``r sin phi`` with ``phi = pi/2 - psi`` as ``r sin psi``, ``r cos psi``), with
     selects instead of branches."""
     c = min(max(cos_t, F(0.0)), F(1.0))
-    s = math.sqrt(F(1.0) - c * c)
+    s = math.sqrt((F(1.0) - c) * (F(1.0) + c))
     a, b = F(2.0) * u0 - F(1.0), F(2.0) * u1 - F(1.0)
     first = abs(a) > abs(b)                          # phi = pi/4 b/a; else phi = pi/2 - pi/4 a/b
     r = a if first else b
@@ -778,7 +778,7 @@ def _visible_view(cos_theta):
     """``(a, t) = (cot theta, tan theta)`` of the visible-slope CDF, ``cos theta`` clamped to
     ``[1e-12, 1]`` (as in :func:`_visible_slope_quantile`)."""
     c = min(max(cos_theta, 1e-12), 1.0)
-    s = math.sqrt(max(0.0, 1.0 - c * c))
+    s = math.sqrt((1.0 - c) * (1.0 + c))
     return c / s, s / c
 
 

@@ -47,7 +47,7 @@ def _pdf(x, t):
 
 def _view(cos_theta):
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 1e-12, 1.0)
-    s = np.sqrt(np.maximum(0.0, 1.0 - c * c))
+    s = np.sqrt((1.0 - c) * (1.0 + c))            # 1 - c^2 without the rounding of c^2
     with np.errstate(divide="ignore"):
         a = c / s
     t = s / c

@@ -460,7 +460,7 @@ class TabulatedIsotropic(_Tabulated):
         """
         u = np.asarray(u, dtype=np.float64)
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
-        sn = np.sqrt(np.maximum(1.0 - c * c, 0.0))
+        sn = np.sqrt((1.0 - c) * (1.0 + c))       # 1 - c^2 without the rounding of c^2
         a = np.minimum(c / np.maximum(sn, 1e-300), 1e8)
         a, u1, u2 = np.broadcast_arrays(a, u[..., 0], u[..., 1])
         shape = a.shape
