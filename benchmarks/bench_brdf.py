@@ -47,6 +47,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -81,20 +82,23 @@ def time_it(fn: Callable[[], object], repeats: int, warm_up: bool = True) -> dic
     """Best and median wall time of ``fn()`` over ``repeats`` runs after one warm-up run
     (unless ``warm_up`` is False: ``first_s`` is then None), and the best CPU time of the
     process (all its threads: ``time.process_time``), which a loaded machine inflates less
-    than wall time (a thread waiting for a core is not counted)."""
+    than wall time (a thread waiting for a core is not counted), and the minor page faults per
+    timed run (``resource.getrusage``: fresh output pages, see the module's docstring)."""
     first = None
     if warm_up:
         t0 = time.perf_counter()
         fn()
         first = time.perf_counter() - t0
     times, cpu = [], []
+    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     for _ in range(repeats):
         t0, c0 = time.perf_counter(), time.process_time()
         fn()
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
+    faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / repeats
     return {"best_s": min(times), "median_s": statistics.median(times), "first_s": first,
-            "times_s": times, "cpu_s": min(cpu)}
+            "times_s": times, "cpu_s": min(cpu), "faults": faults}
 
 
 # --------------------------------------------------------------------------- inputs
@@ -386,11 +390,12 @@ def bench_mitsuba_scalar(inputs, repeats: int, n_scalar: int) -> list[dict]:
 # -------------------------------------------------------------------------- report
 def print_table(rows: list[dict]) -> None:
     print(f"{'implementation':22s} {'op':7s} {'distribution':26s} {'N':>9s} "
-          f"{'best ms':>10s} {'median ms':>10s} {'Mevals/s':>9s}")
+          f"{'best ms':>10s} {'median ms':>10s} {'Mevals/s':>9s} {'faults':>7s}")
     for r in rows:
         note = f"  (extrapolated from N={r['measured_n']})" if r.get("extrapolated") else ""
         print(f"{r['impl']:22s} {r['op']:7s} {r['distribution']:26s} {r['n']:9d} "
-              f"{r['best_s'] * 1e3:10.3f} {r['median_s'] * 1e3:10.3f} {r['n'] / r['best_s'] / 1e6:9.2f}{note}")
+              f"{r['best_s'] * 1e3:10.3f} {r['median_s'] * 1e3:10.3f} {r['n'] / r['best_s'] / 1e6:9.2f}"
+              f"{r['faults'] if 'faults' in r else float('nan'):7.0f}{note}")
 
 
 def ratios(rows: list[dict]) -> list[dict]:
