@@ -174,17 +174,19 @@ def _elementwise(f, F):
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=lambda t: np.dtype(t).name)
 def test_beckmann_lambda_against_mpmath(dtype):
-    """The kernels' ``Lambda(v)`` (:func:`_beckmann_lambda`, ``exp`` and ``erfcx`` polynomials of the
-    arithmetic type) against mpmath at 30 digits, as only ``1 + Lambda`` is used: ``|error| / (1 +
-    Lambda)`` below 1e-15 in float64 (5e-16 measured) and 3e-7 in float32 (1.9e-7 measured, 1.6
-    float32 ulps), ``v`` from 1e-4 (grazing) to 10, 0 at ``inf``; and ``erfc = exp(-v^2) erfcx``
+    """The kernels' ``Lambda(v)`` (:func:`_beckmann_lambda`: ``exp`` and ``erfcx`` polynomials in
+    float64, a rational approximation of ``v (1 + Lambda)`` in float32) against mpmath at 30 digits, as
+    only ``1 + Lambda`` is used: ``|error| / (1 + Lambda)`` below 1e-15 in float64 (5e-16 measured) and
+    3e-7 in float32 (2.7e-7 measured, 2.3 float32 ulps), ``v`` from 1e-4 (grazing) to 10 and around
+    the float32 cut at 3.5, 0 at ``inf``; and ``erfc = exp(-v^2) erfcx``
     (:func:`_erfc_near` given mpmath's ``exp(-v^2)``) to 1e-15 relative on ``[0, 4]`` in float64."""
     import mpmath
     import numba
     k = kernels._kernels()
     lam = _elementwise(k._beckmann_lambda, np.dtype(dtype).type)
 
-    v = np.concatenate([np.geomspace(1e-4, 10.0, 1500), np.linspace(0.0, 8.0, 801)[1:]]).astype(dtype)
+    v = np.concatenate([np.geomspace(1e-4, 10.0, 1500), np.linspace(0.0, 8.0, 801)[1:],
+                        np.linspace(3.3, 3.7, 401)]).astype(dtype)
     with mpmath.workdps(30):
         x = [mpmath.mpf(float(t)) for t in v]
         ref = np.array([float((mpmath.exp(-t * t) / (t * mpmath.sqrt(mpmath.pi)) - mpmath.erfc(t)) / 2) for t in x])
