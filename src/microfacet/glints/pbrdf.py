@@ -713,6 +713,12 @@ if _kernels.AVAILABLE:
             accr[6 * j + 4] += co
             accr[6 * j + 5] += co
 
+    @_inline
+    def _column_sums(acc, L):  # pragma: no cover - compiled
+        """The six sums ``sum_j acc[6 j + term]`` of the column accumulators of :func:`_add_run`."""
+        return (acc[0:6 * L:6].sum(), acc[1:6 * L:6].sum(), acc[2:6 * L:6].sum(), acc[3:6 * L:6].sum(),
+                acc[4:6 * L:6].sum(), acc[5:6 * L:6].sum())
+
     @numba.njit(cache=True, nogil=True, error_model="numpy")
     def _footprint_range(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
                          exo):  # pragma: no cover - compiled
@@ -803,8 +809,7 @@ if _kernels.AVAILABLE:
                         else:
                             _add_linear(E, k0, j0, n, wr, acc, ix_, iy_, iz_, ox_, oy_, oz_)
                 ys = ye + 1
-            wsum, s0, s1, s2 = acc[0::6].sum(), acc[1::6].sum(), acc[2::6].sum(), acc[3::6].sum()
-            s3, s4 = acc[4::6].sum(), acc[5::6].sum()
+            wsum, s0, s1, s2, s3, s4 = _column_sums(acc, L)
             if wsum > 0:
                 out[p, 0], out[p, 1], out[p, 2] = s0 * inv4 / wsum, s1 / wsum, s2 / wsum
                 out[p, 3], out[p, 4] = s3 / wsum, s4 / wsum
@@ -819,27 +824,26 @@ if _kernels.AVAILABLE:
                                 prune, fp, h, wi, wo, exo, cost=cost)
         return out
 
-    @numba.njit(cache=True, parallel=True, nogil=True, error_model="numpy")
-    def _lobe_sums(E, W, h, wi, wo):  # pragma: no cover - compiled
-        """Per query ``q``: ``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of explicit lobes
-        (flat raw moments ``E (5 N,)``, weights ``W`` summing to 1): the sums of
-        :meth:`PatchBRDF.pndf` and :meth:`PatchBRDF.areas` (Eq. 9, 13, 17) in one pass."""
-        Q = h.shape[0]
-        out = np.zeros((Q, 5))
-        for q in numba.prange(Q):
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _lobe_range(start, stop, out, E, W, h, wi, wo):  # pragma: no cover - compiled
+        """Per query ``q`` of ``start:stop``, into ``out[q]``: ``(D_P(h), A_P(i), V_P(i),
+        A_P(o), V_P(o))`` of explicit lobes (flat raw moments ``E (5 N,)``, weights ``W``
+        summing to 1): the sums of :meth:`PatchBRDF.pndf` and :meth:`PatchBRDF.areas`
+        (Eq. 9, 13, 17) in one pass, the lobes as one run of :func:`_add_run`."""
+        acc, none = np.empty(6 * W.size), np.empty(0)
+        for q in range(start, stop):
             hz, xh, yh, inv4 = _half_slope(h[q])
-            qmax = _Q_MAX if hz > 0.0 else 0.0
-            ix_, iy_, iz_, ox_, oy_, oz_ = wi[q, 0], wi[q, 1], wi[q, 2], wo[q, 0], wo[q, 1], wo[q, 2]
-            s0 = s1 = s2 = s3 = s4 = 0.0
-            for k in range(W.shape[0]):
-                d, ai, vi, co, varo = _lobe_terms(E, k, xh, yh, qmax, ix_, iy_, iz_, ox_, oy_, oz_)
-                ao, vo = _area(co, varo)
-                s0 += W[k] * d
-                s1 += W[k] * ai
-                s2 += W[k] * vi
-                s3 += W[k] * ao
-                s4 += W[k] * vo
-            out[q, 0], out[q, 1], out[q, 2], out[q, 3], out[q, 4] = s0 * inv4, s1, s2, s3, s4
+            acc[:] = 0.0
+            _add_run(E, 0, 0, W.size, W, acc, xh, yh, _Q_MAX if hz > 0.0 else 0.0, wi[q, 0], wi[q, 1], wi[q, 2],
+                     wo[q, 0], wo[q, 1], wo[q, 2], False, none)
+            _, d, ai, vi, ao, vo = _column_sums(acc, W.size)
+            out[q, 0], out[q, 1], out[q, 2], out[q, 3], out[q, 4] = d * inv4, ai, vi, ao, vo
+
+    def _lobe_sums(E, W, h, wi, wo):
+        """``(Q, 5)`` sums of :func:`_lobe_range` over all queries, as tasks on the kernels'
+        thread pool (:func:`microfacet.kernels._launch_ranges`)."""
+        out = np.zeros((h.shape[0], 5))
+        _kernels._launch_ranges(_lobe_range, h.shape[0], out, E, W, h, wi, wo, cost=W.size)
         return out
 
     @numba.njit(cache=True, parallel=True, nogil=True)
