@@ -650,7 +650,7 @@ if _kernels.AVAILABLE:
     def _block_linear(b, kx, ky, kz):  # pragma: no cover - compiled
         """Whether every lobe of a block with bounds ``b`` (see
         :func:`~microfacet.glints.microsurface._block_bounds_compiled`) has projected areas
-        ``(c, c)`` toward ``k`` in :func:`_areas`: the smallest ``c`` over the block's mean
+        ``(c, c)`` toward ``k`` (:func:`_linear`, :func:`_area`): the smallest ``c`` over the block's mean
         slopes is positive and at least ``_AREA_T`` times the largest ``sigma``."""
         c = kz - max(kx * b[0], kx * b[1]) - max(ky * b[2], ky * b[3])
         var = kx * kx * b[4] * b[4] + ky * ky * b[5] * b[5] + 2.0 * abs(kx * ky) * b[6]
