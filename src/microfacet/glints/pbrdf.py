@@ -549,6 +549,9 @@ if _kernels.AVAILABLE:
     #: instead of library calls), so that the loops over a row of lobes vectorize; inlined
     #: in Numba's IR, with ``error_model="numpy"`` (no division checks in the loops).
     _inline = numba.njit(cache=True, inline="always", error_model="numpy")
+    #: The kernels that run them: fused multiply-adds (``contract``, which the inlined helpers
+    #: take; the only fast-math flag: 10-12 % faster, images within 4e-14 of the kernel without)
+    _kernel = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 
     @_inline
     def _area(c, var):  # pragma: no cover - compiled
@@ -605,7 +608,7 @@ if _kernels.AVAILABLE:
         ai, vi = _area(ci, vari)
         return _p22(xh, yh, mx, my, sxx, syy, sxy, qmax), ai, vi, co, varo
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    @_kernel
     def _area_excess_range(start, stop, E, k, out):  # pragma: no cover - compiled
         """``out[n] = V_n(k) - A_n(k) = E[s+] - c+ >= 0`` (:func:`_area`) of lobes
         ``start:stop`` of the flat raw moments ``E`` toward one direction ``k``."""
@@ -719,7 +722,7 @@ if _kernels.AVAILABLE:
         return (acc[0:6 * L:6].sum(), acc[1:6 * L:6].sum(), acc[2:6 * L:6].sum(), acc[3:6 * L:6].sum(),
                 acc[4:6 * L:6].sum(), acc[5:6 * L:6].sum())
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    @_kernel
     def _footprint_range(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
                          exo):  # pragma: no cover - compiled
         """Per footprint ``p`` of ``start:stop``, into ``out[p]``: ``(D_P(h), A_P(i), V_P(i),
@@ -824,7 +827,7 @@ if _kernels.AVAILABLE:
                                 prune, fp, h, wi, wo, exo, cost=cost)
         return out
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    @_kernel
     def _lobe_range(start, stop, out, E, W, h, wi, wo):  # pragma: no cover - compiled
         """Per query ``q`` of ``start:stop``, into ``out[q]``: ``(D_P(h), A_P(i), V_P(i),
         A_P(o), V_P(o))`` of explicit lobes (flat raw moments ``E (5 N,)``, weights ``W``
