@@ -534,12 +534,12 @@ if _kernels.AVAILABLE:
     #: ``t = c / sigma`` beyond which a lobe's projected area ``E[s+]`` is ``c`` to
     #: rounding: ``0 <= E[s+] - c = sigma (phi(t) - t Q(t)) <= sigma phi(t) / (1 + t^2)``
     #: (Mills ratio), so the relative error is below ``phi(t) / (t (1 + t^2)) < 1e-17``
-    #: (less than half an ulp) for ``t >= 8``; the erfc and exp are skipped there.
+    #: (less than half an ulp) for ``t >= 8``: the area is ``c`` there (:func:`_linear`; the
+    #: branch-free loops compute the erfc and exp of every lobe and select).
     _AREA_T = 8.0
     _AREA_T2 = _AREA_T * _AREA_T
     #: Mahalanobis distance^2 of a half vector's slope beyond which a lobe's slope density
-    #: (Eq. 4) is not evaluated: ``exp(-q / 2) < 1e-304`` (a tighter cut, 1e-30, measured
-    #: no faster).
+    #: (Eq. 4) is 0 (:func:`_p22`): ``exp(-q / 2) < 1e-304``.
     _Q_MAX = 1400.0
     _INV_2PI = 1.0 / (2.0 * math.pi)
     _INV_SQRT2 = 1.0 / _SQRT2
