@@ -363,10 +363,17 @@ def test_footprint_kernel_matches_reference_on_near_mirror_lobes():
     # the area shortcut is exact to rounding: E[s+] - c <= sigma phi(t) / (1 + t^2)
     for t in np.linspace(_AREA_T, 40.0, 50):
         full = 0.5 * t * erfc(-t / np.sqrt(2)) + np.exp(-0.5 * t * t) / np.sqrt(2 * np.pi)
-        assert _area(t, 1.0) == t and abs(full - t) <= 1e-16 * t
-    assert _area(0.3, 0.0) == 0.3 and _area(-0.3, 0.0) == 0.0
-    assert _area(1.0, 0.5) == pytest.approx(0.5 * erfc(-2 / np.sqrt(2)) + 0.5 * np.exp(-2) / np.sqrt(2 * np.pi),
-                                            rel=1e-14)
+        assert _area(t, 1.0) == (t, t) and abs(full - t) <= 1e-16 * t
+    assert _area(0.3, 0.0) == (0.3, 0.3) and _area(-0.3, 0.0) == (0.0, 0.0)
+    # elsewhere E[s+] = c Phi(t) + sigma phi(t) with the kernels' own exp and erfc
+    # (_exp_neg, _erfc_near): SciPy's erfc to rounding, relative to sigma (the smallest
+    # areas, far below the horizon, are a difference of nearly equal terms in both)
+    for sigma in (0.5, 0.01):
+        for t in np.linspace(-40.0, _AREA_T, 97):
+            c = t * sigma
+            want = 0.5 * c * erfc(-t / np.sqrt(2)) + sigma * np.exp(-0.5 * t * t) / np.sqrt(2 * np.pi)
+            got = _area(c, sigma * sigma)
+            assert got[0] == max(c, 0.0) and abs(got[1] - want) <= 2e-15 * max(want, sigma * 1e-2), (t, got, want)
 
 
 def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
@@ -392,7 +399,8 @@ def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
     ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.column_stack([uv, np.broadcast_to([cov[0, 0], cov[1, 1], cov[0, 1]], (len(uv), 3))])
     wo = np.broadcast_to(scene.wo, wi.shape)
-    _, ai, vi, ao, vo = _footprint_sums(ms.lobe_moments, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1],
+    E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64).reshape(-1)      # flat (5 N,)
+    _, ai, vi, ao, vo = _footprint_sums(E, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1],
                                         ms.cutoff, np.inf, fp, h, wi, np.ascontiguousarray(wo), np.zeros(0)).T
     factor = _g2_over_ao("correlated", ai, vi, ao, vo) / 4.0
     for k in (PRUNE_SIGMA, 3.0):
