@@ -137,29 +137,40 @@ def _float_type_impl(row):
 @_inline
 def _beckmann_lambda(F, v):
     """Beckmann ``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2`` (Table 2.III; 0 at ``v = inf``)
-    in ``F`` arithmetic, only ``1 + Lambda`` being used. Float64: with :func:`_exp_neg` and
-    :func:`_erfc_near`, absolute error 5e-16 against mpmath. Float32: ``P(v) / (v Q(v)) - 1``,
-    :data:`_LAMBDA_PQ32`, 0 beyond 3.5 (where ``Lambda < 1.5e-8``): 2.7e-7 of ``1 + Lambda`` with its
-    roundings (2.3 float32 ulps; the ``exp`` and ``erfcx`` polynomials it replaces: 1.7e-7), float32
-    Beckmann eval 3.1 -> 2.75 ms, pdf 1.65 -> 1.45 ms per 10^6 pairs on one core."""
+    in ``F`` arithmetic, only ``1 + Lambda`` being used, from the rational fits of
+    ``experiments/beckmann_lambda.py``. Float64: ``exp(-v^2) P(x) / (v Q(x))``, ``x = min(v, 6)``
+    (:data:`_LAMBDA_PQ64`: ``P / Q ~ v exp(v^2) Lambda``), 5.5e-16 of ``1 + Lambda`` against mpmath
+    (the ``exp(-v^2) erfcx(v)`` it replaces, with a 17-degree polynomial and two quotients more:
+    5e-16; Beckmann eval 8.4-8.8 -> 8.2 ms, pdf 3.75-3.80 -> 3.3-3.4 ms per 10^6 pairs on one
+    core). Float32: ``P(v) / (v Q(v)) - 1`` (:data:`_LAMBDA_PQ32`: ``P / Q ~ v (1 + Lambda)``, no
+    ``exp``), 0 beyond 3.5 (where ``Lambda < 1.5e-8``): 3.3e-7 of ``1 + Lambda`` with its roundings
+    (2.8 float32 ulps, near ``v = 3``, where ``P / (v Q)`` is close to 1; the ``exp`` and ``erfcx``
+    polynomials it replaces: 1.7e-7; float32 Beckmann eval 3.1 -> 2.75 ms, pdf 1.65 -> 1.45 ms)."""
     if _of_type(F, False, True):                     # float32 (the other branch is compiled out)
         x = min(v, F(_LAMBDA_MAX32))
         lam = _horner(_LAMBDA_PQ32[0], x) / (x * _horner(_LAMBDA_PQ32[1], x)) - F(1.0)
         return lam if (lam > F(0.0)) & (v < F(_LAMBDA_MAX32)) else F(0.0)
-    e = _exp_neg(F, -v * v)
-    lam = F(0.5) * (e / (v * F(_SQRT_PI)) - _erfc_near(F, v, e))
+    x = min(v, F(_LAMBDA_MAX64))
+    lam = _exp_neg(F, -v * v) * _horner(_LAMBDA_PQ64[0], x) / (v * _horner(_LAMBDA_PQ64[1], x))
     return lam if lam > F(0.0) else F(0.0)
 
 
-#: ``v (1 + Lambda(v)) ~ P(v) / Q(v)`` on ``[0, 3.5]`` for the float32 :func:`_beckmann_lambda`,
-#: coefficients in Horner order, degrees (6, 5), largest relative error of the fit 2.9e-8
-#: (``experiments/beckmann_lambda_float32.py`` fits them and says how).
-_LAMBDA_PQ32 = (np.array([0.006632183741929642, 0.020673125792782025, 0.05122680635640493,
-                          0.12944130607596321, 0.32346154688957446, 0.47491691143568315,
-                          0.28209479993175757], np.float32),
-                np.array([0.006335278001834323, 0.026127270524799923, 0.009148981346487683,
-                          0.30416724385127625, -0.08891365714515688, 1.0], np.float32))
-_LAMBDA_MAX32 = np.float32(3.5)
+#: The rational fits of :func:`_beckmann_lambda` (``experiments/beckmann_lambda.py`` fits them and
+#: says how), coefficients in Horner order: float32 ``v (1 + Lambda(v)) ~ P / Q`` on ``[0, 3.5]``,
+#: degrees (6, 5), 2.9e-8; float64 ``v exp(v^2) Lambda(v) ~ P / Q`` on ``[0, 6]``, degrees (6, 7),
+#: 8.1e-17 (both: the largest error of ``Lambda`` relative to ``1 + Lambda``).
+_LAMBDA_PQ32 = (np.array([0.006631364056879357, 0.02067196852187177, 0.05122319870200464,
+                          0.1294337854867778, 0.3234519727408768, 0.4749117736455794,
+                          0.282094799931098], np.float32),
+                np.array([0.0063344341707721845, 0.026126461222640333, 0.009143358508372078,
+                          0.30416559795295844, -0.08893187058398526, 1.0], np.float32))
+_LAMBDA_PQ64 = (np.array([5.059204435254722e-08, 0.00041165461182469324, 0.005521121319540883,
+                          0.033282710759376395, 0.11798546306570451, 0.23799856214075163,
+                          0.28209479177387814]),
+                np.array([0.0029283636850550416, 0.03901244036926986, 0.24150344189631062,
+                          0.887798224883823, 2.073417351510806, 3.0552292990837078,
+                          2.616136786858251, 1.0]))
+_LAMBDA_MAX32, _LAMBDA_MAX64 = np.float32(3.5), 6.0
 
 
 @_inline
