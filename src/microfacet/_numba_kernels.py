@@ -19,7 +19,7 @@ in the fixed Halley steps of its visible-slope and ``erfinv`` solves,
 compiled per distribution kind and arithmetic type ``F`` (float64 or float32; constants in
 them: :func:`eval_kernel` etc.); the helpers take ``F`` and write their constants as ``F(c)``
 (a float literal would promote float32 arithmetic to float64; constants that differ by type,
-such as the polynomials of Beckmann's ``exp`` and ``erfcx``, lower degrees in float32, are
+such as the polynomials of Beckmann's ``exp`` and ``Lambda``, lower degrees in float32, are
 chosen by :func:`_of_type`). Beckmann's visible-slope solve stays float64. The Fresnel kind,
 shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
@@ -284,18 +284,18 @@ def _erfcx_poly(degree):
     return np.array([float(a) for a in p])
 
 
-#: :func:`_erfcx_poly` of degree 17 (float64: 8e-16 relative to ``v = 4``) and 8 (float32), built on import.
-_ERFCX_POLY, _ERFCX_POLY32 = _erfcx_poly(17), _erfcx_poly(8).astype(np.float32)
+#: :func:`_erfcx_poly` of degree 17 (8e-16 relative to ``v = 4``), built on import.
+_ERFCX_POLY = _erfcx_poly(17)
 
 
 @_inline
 def _erfc_near(F, v, e):
-    """``erfc(v) = e erfcx(v)`` for ``v >= 0`` given ``e = exp(-v^2)`` in ``F`` arithmetic: Horner's
-    rule on :data:`_ERFCX_POLY` (float64: 8e-16 relative to ``v = 4`` and absolute, measured
-    against mpmath; float32 :data:`_ERFCX_POLY32`, 2e-7 absolute), ``erfcx(6) e`` beyond 6 (absolute
+    """``erfc(v) = e erfcx(v)`` for ``v >= 0`` given ``e = exp(-v^2)`` in ``F`` arithmetic (the
+    visible-slope solve's and the glint kernels', float64): Horner's rule on :data:`_ERFCX_POLY` (8e-16
+    relative to ``v = 4`` and absolute, measured against mpmath), ``erfcx(6) e`` beyond 6 (absolute
     error below 2e-17); arithmetic only, no table gathers (a piecewise Taylor series' 16 per call
     bound the loops that called it)."""
-    poly = _of_type(F, _ERFCX_POLY, _ERFCX_POLY32)
+    poly = _ERFCX_POLY
     s = F(_ERFCX_A) / (F(_ERFCX_K) + min(max(v, F(0.0)), F(_ERFCX_MAX))) - F(_ERFCX_B)
     p = poly[0]
     for j in range(1, poly.shape[0]):
@@ -536,8 +536,8 @@ def _smith_block_post(kind, shadowing, buf, m):
     (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
     loop vectorizes; in the rows' arithmetic type, :func:`_float_type`: float32 rows took float64
     arithmetic before, at half the SIMD width and the float64 polynomials' degrees; with
-    shadowing, in cache, one core: float32 5.8 -> 0.9 ns per pair, float64 5.1 -> 2.7 with this
-    round's ``exp`` and ``erfcx``); nothing for GGX. Without
+    shadowing, in cache, one core: float32 5.8 -> 0.9 ns per pair, float64 5.1 -> 2.7 with the
+    ``exp`` and ``erfcx`` polynomials :func:`_beckmann_lambda` took then); nothing for GGX. Without
     ``shadowing`` (``Lambda_i = 0``, ``W = A``: the pdf) one ``Lambda`` per pair, not two, and
     row 2 (``W``) is left as it is: callers read ``A`` (row 1) for it.
     Not inlined, so that it keeps its own fastmath ``contract``: its polynomials are chains of
