@@ -223,10 +223,7 @@ def _exp_neg(F, x):
     xc = xc if xc < F(0.0) else F(0.0)
     n = (xc * F(1.0 / math.log(2.0)) + rnd) - rnd
     r = (xc - n * ln2_hi) - n * ln2_lo
-    p = poly[0]
-    for j in range(1, poly.shape[0]):
-        p = poly[j] + r * p
-    return p * _two_to(F, n) if x > lo else F(0.0)
+    return _horner(poly, r) * _two_to(F, n) if x > lo else F(0.0)
 
 
 #: :func:`_erfc_near` fits ``erfcx`` on ``[0, _ERFCX_MAX]`` as a polynomial in ``s = 2 (tau - tau_M)
@@ -295,12 +292,8 @@ def _erfc_near(F, v, e):
     relative to ``v = 4`` and absolute, measured against mpmath), ``erfcx(6) e`` beyond 6 (absolute
     error below 2e-17); arithmetic only, no table gathers (a piecewise Taylor series' 16 per call
     bound the loops that called it)."""
-    poly = _ERFCX_POLY
     s = F(_ERFCX_A) / (F(_ERFCX_K) + min(max(v, F(0.0)), F(_ERFCX_MAX))) - F(_ERFCX_B)
-    p = poly[0]
-    for j in range(1, poly.shape[0]):
-        p = poly[j] + s * p
-    return e * p
+    return e * _horner(_ERFCX_POLY, s)
 
 
 @_inline
@@ -573,11 +566,7 @@ def _log_pos(x):
     n = float((b >> np.int64(52)) - np.int64(1023)) + (1.0 if big else 0.0)
     m = 0.5 * m if big else m
     f = (m - 1.0) / (m + 1.0)
-    f2 = f * f
-    p = _ATANH_TAYLOR[0]
-    for j in range(1, _ATANH_TAYLOR.shape[0]):
-        p = _ATANH_TAYLOR[j] + f2 * p
-    return n * _LN2_HI + (n * _LN2_LO + f * p)
+    return n * _LN2_HI + (n * _LN2_LO + f * _horner(_ATANH_TAYLOR, f * f))
 
 
 #: Giles' coefficients (Horner order) for ``w = -log(1 - y^2) < 5`` (in ``w - 2.5``) and beyond
@@ -794,11 +783,7 @@ _ERF_TAYLOR = np.array([2.0 / _SQRT_PI * (-1) ** n / (math.factorial(n) * (2 * n
 def _erf_small(x):
     """``erf(x)`` for ``|x| <= 1/2`` by its Taylor series ``2 / sqrt(pi) sum (-1)^n x^(2n+1) /
     (n! (2n + 1))`` to ``n = 13`` (truncation below 1e-19 relative), arithmetic only."""
-    x2 = x * x
-    p = _ERF_TAYLOR[0]
-    for j in range(1, _ERF_TAYLOR.shape[0]):
-        p = _ERF_TAYLOR[j] + x2 * p
-    return x * p
+    return x * _horner(_ERF_TAYLOR, x * x)
 
 
 @_inline
