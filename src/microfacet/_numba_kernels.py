@@ -84,6 +84,8 @@ _jit_float32 = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=
 #: For the per-element helpers of the kernels: Numba inlines them into its own IR (LLVM
 #: would not inline them two calls deep), so that they take the kernel's fastmath flags.
 _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+#: Loops whose latency is chains of multiply-adds: fused (``contract``, the only fast-math flag).
+_jit_contract = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
 
 
 # ------------------------------------------------------------------------ helpers
@@ -487,7 +489,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
     s1 = math.sqrt(F(1.0) - rho * rho)
-    oh_r, a_r, w_r, e_r, f_r, c_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
+    oh_r, a_r, w_r, e_r, f_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[6]
     dev_i, dev_o = dev[0], dev[1]
     for k in range(m):
         ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
@@ -523,7 +525,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
             dst[k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+@_jit_contract
 def _smith_block_post(kind, shadowing, buf, m):
     """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
     (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
@@ -694,16 +696,13 @@ def _visible_slope_quantile(u, cos_theta):
     average over uniform ``(u, cos theta)`` (the Newton-bisection from Mitsuba's fitted
     guess took 4.3)."""
     u = min(max(u, _U_MIN), 1.0 - _U_MIN)
-    c = min(max(cos_theta, 1e-12), 1.0)
-    s = math.sqrt((1.0 - c) * (1.0 + c))            # 1 - c^2 without the rounding of c^2
-    a = c / s
-    t = s / c
+    a, t = _visible_view(cos_theta)
     erfc_a, exp_a = math.erfc(a), math.exp(-a * a)
     z = (2.0 - erfc_a) + t * exp_a / _SQRT_PI        # erfc(-a) = 2 - erfc(a), a >= 0
     upper = u >= _UPPER                              # the upper tail: residual of 1 - F
     target = ((1.0 - u) if upper else u) * z
     lo, hi = -8.0, min(a, 8.0)
-    x = min(max(_visible_slope_guess(u, c), lo), hi)
+    x = min(max(_visible_slope_guess(u, min(max(cos_theta, 1e-12), 1.0)), lo), hi)
     for _ in range(64):
         e = math.exp(-x * x)
         r = target - _ccdf(x, t, a, erfc_a, exp_a, e) if upper else _cdf(x, t, e) - target
@@ -759,7 +758,7 @@ def _ggx_visible_std(F, u0, u1, cos_t):
     ``r cos phi``, ``r sin phi`` with ``phi = pi/2 - psi`` as ``r sin psi``, ``r cos psi``), with
     selects instead of branches."""
     c = min(max(cos_t, F(0.0)), F(1.0))
-    s = math.sqrt((F(1.0) - c) * (F(1.0) + c))
+    s = math.sqrt((F(1.0) - c) * (F(1.0) + c))      # geometry.sin_from_cos
     a, b = F(2.0) * u0 - F(1.0), F(2.0) * u1 - F(1.0)
     first = abs(a) > abs(b)                          # phi = pi/4 b/a; else phi = pi/2 - pi/4 a/b
     r = a if first else b
@@ -801,11 +800,11 @@ def _visible_view(cos_theta):
     """``(a, t) = (cot theta, tan theta)`` of the visible-slope CDF, ``cos theta`` clamped to
     ``[1e-12, 1]`` (as in :func:`_visible_slope_quantile`)."""
     c = min(max(cos_theta, 1e-12), 1.0)
-    s = math.sqrt((1.0 - c) * (1.0 + c))
+    s = math.sqrt((1.0 - c) * (1.0 + c))            # geometry.sin_from_cos
     return c / s, s / c
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+@_jit_contract
 def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
     """``out_rows[:, k]``: the standard Beckmann visible normal for a view at ``theta`` in the
     xz plane (``Beckmann.sample_visible_std``: ``x~ = Q2(u[2 k])``, ``y~ = erfinv(2 u[2 k + 1] -

@@ -40,6 +40,14 @@ def unit_deviation(w: np.ndarray) -> float:
     return float(e) if np.isfinite(e) else np.inf
 
 
+def sin_from_cos(c) -> np.ndarray:
+    """``sin theta = sqrt((1 - c)(1 + c))`` of ``c = cos theta`` in ``[0, 1]``: ``1 - c c`` loses
+    ``1 - c^2`` to the rounding of ``c^2`` near normal views (1e-9 of it at ``c = 1 - 8e-8``, which
+    cost the Beckmann visible-slope quantile 205 ulps)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.sqrt((1.0 - c) * (1.0 + c))
+
+
 def spherical_to_cartesian(theta, phi) -> np.ndarray:
     """Unit direction of elevation ``theta`` and azimuth ``phi`` (Eq. 1.2)."""
     theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import erfc, erfcx, erfinv
 
+from ..geometry import sin_from_cos
 from .base import SlopeDistribution
 
 __all__ = ["Beckmann", "visible_slope_cdf", "visible_slope_quantile"]
@@ -47,7 +48,7 @@ def _pdf(x, t):
 
 def _view(cos_theta):
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 1e-12, 1.0)
-    s = np.sqrt((1.0 - c) * (1.0 + c))            # 1 - c^2 without the rounding of c^2
+    s = sin_from_cos(c)
     with np.errstate(divide="ignore"):
         a = c / s
     t = s / c

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import square_to_concentric_disk
+from ..geometry import sin_from_cos, square_to_concentric_disk
 from .base import SlopeDistribution
 
 __all__ = ["GGX"]
@@ -62,7 +62,7 @@ class GGX(SlopeDistribution):
         visible-slope PDF of Eq. 2.15, equivalent to the quantiles of Table 2.V.
         """
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
-        s = np.sqrt((1.0 - c) * (1.0 + c))        # 1 - c^2 without the rounding of c^2
+        s = sin_from_cos(c)
         p = square_to_concentric_disk(u)
         t1, t2 = p[..., 0], p[..., 1]
         w = 0.5 * (1.0 + c)

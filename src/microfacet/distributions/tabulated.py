@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry import sin_from_cos
 from .base import SlopeDistribution
 
 __all__ = ["TabulatedIsotropic", "TabulatedAnisotropic", "theta_grid", "azimuthal_cosine_spectrum",
@@ -460,7 +461,7 @@ class TabulatedIsotropic(_Tabulated):
         """
         u = np.asarray(u, dtype=np.float64)
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
-        sn = np.sqrt((1.0 - c) * (1.0 + c))       # 1 - c^2 without the rounding of c^2
+        sn = sin_from_cos(c)
         a = np.minimum(c / np.maximum(sn, 1e-300), 1e8)
         a, u1, u2 = np.broadcast_arrays(a, u[..., 0], u[..., 1])
         shape = a.shape

@@ -529,7 +529,8 @@ if _kernels.AVAILABLE:
 
     import numba
 
-    from .._numba_kernels import _erfc_near, _exp_neg
+    from .._numba_kernels import _erfc_near, _exp_neg, _inline
+    from .._numba_kernels import _jit_contract as _kernel
 
     #: ``t = c / sigma`` beyond which a lobe's projected area ``E[s+]`` is ``c`` to
     #: rounding: ``0 <= E[s+] - c = sigma (phi(t) - t Q(t)) <= sigma phi(t) / (1 + t^2)``
@@ -544,14 +545,11 @@ if _kernels.AVAILABLE:
     _INV_2PI = 1.0 / (2.0 * math.pi)
     _INV_SQRT2 = 1.0 / _SQRT2
     _F = np.float64        # arithmetic type of the shared exp / erfc kernels
-    #: The per-lobe helpers: branch-free (selects, and the Smith kernels' polynomial
-    #: :func:`~microfacet._numba_kernels._exp_neg` / :func:`~microfacet._numba_kernels._erfc_near`
-    #: instead of library calls), so that the loops over a row of lobes vectorize; inlined
-    #: in Numba's IR, with ``error_model="numpy"`` (no division checks in the loops).
-    _inline = numba.njit(cache=True, inline="always", error_model="numpy")
-    #: The kernels that run them: fused multiply-adds (``contract``, which the inlined helpers
-    #: take; the only fast-math flag: 10-12 % faster, images within 4e-14 of the kernel without)
-    _kernel = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+    # The per-lobe helpers (``_inline``, the Smith kernels' decorator: inlined in Numba's IR,
+    # ``error_model="numpy"``) are branch-free (selects, and the Smith kernels' polynomial
+    # ``_exp_neg`` / ``_erfc_near`` instead of library calls), so that the loops over a row of
+    # lobes vectorize; the kernels that run them (``_kernel``) fuse multiply-adds (``contract``,
+    # which the inlined helpers take: 10-12 % faster, images within 4e-14 of the kernel without).
 
     @_inline
     def _area(c, var):  # pragma: no cover - compiled
