@@ -223,7 +223,7 @@ def test_beckmann_visible_block_matches_numpy():
         out, bk, xy = np.empty((3, k.BLOCK)), np.empty((4, k.BLOCK)), np.empty((2, c.size))
         for j0 in range(0, c.size, k.BLOCK):
             m = min(k.BLOCK, c.size - j0)
-            k._beckmann_visible_block(u[2 * j0:2 * (j0 + m)], c[j0:j0 + m], out, bk, m)
+            k._beckmann_visible_block(u, 2 * j0, c[j0:j0 + m], out[0], out[1], out[2], bk[0], bk[1], bk[2], bk[3], m)
             xy[0, j0:j0 + m], xy[1, j0:j0 + m] = -out[0, :m] / out[2, :m], -out[1, :m] / out[2, :m]
         return xy
 
@@ -355,7 +355,10 @@ def test_vectorizable_log_matches_mpmath():
 @pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=lambda t: np.dtype(t).name)
 def test_kernels_read_any_layout(dtype):
     """Strided, Fortran-ordered and broadcast inputs (copied block by block into a contiguous
-    scratch) give the results of C-contiguous ones (read through flat views), bit for bit."""
+    scratch) give the results of C-contiguous ones (read in place), bit for bit in float64; in
+    float32 to 2e-6 relative: the two are compiled apart, and the float32 kernels' fast-math
+    (contracted multiply-adds, approximate reciprocals) may round them differently (1.3e-6
+    measured; against float64 both are as accurate, 1.2e-6 and 1.4e-6 worst on 10^5 pairs)."""
     rng = np.random.default_rng(9)
     cu = mf.fresnel.Conductor.metal("Cu")
     brdf = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.5), fresnel=cu, dtype=dtype)
@@ -364,11 +367,12 @@ def test_kernels_read_any_layout(dtype):
     wo = np.asfortranarray(_dirs(rng, n).astype(dtype))
     u = rng.random((n, 2)).astype(dtype)
     one = wo[:1]
+    rtol = 0.0 if dtype == np.float64 else 2e-6
     for fast, ref in ((brdf.eval(wi, wo), brdf.eval(np.ascontiguousarray(wi), np.ascontiguousarray(wo))),
                       (brdf.pdf(wi, one), brdf.pdf(np.ascontiguousarray(wi), np.repeat(one, n, axis=0)))):
-        np.testing.assert_array_equal(fast, ref)
+        np.testing.assert_allclose(fast, ref, rtol=rtol, atol=0)
     for fast, ref in zip(brdf.sample(u, wo), brdf.sample(u, np.ascontiguousarray(wo))):
-        np.testing.assert_array_equal(fast, ref)
+        np.testing.assert_allclose(fast, ref, rtol=rtol, atol=0)
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32], ids=lambda t: np.dtype(t).name)

@@ -9,9 +9,10 @@ that needs it and writes what it can to the outputs, so that memory waits overla
 arithmetic: GGX sample 14.0 -> 10.5 ms, pdf 2.8 -> 2.2 ms per 10^6 on one core), written with
 selects instead of branches, on the operands of quotients and roots rather than their
 results (LLVM sinks a quotient used once into the branch of a conditional expression and
-then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through flat views indexed
-``3 k + axis`` (:func:`_flat_rows`), the scratch through 1-D rows and writing outputs
-through flat views: constant strides, so that LLVM vectorizes each stage that makes no
+then left the loop scalar, 6x slower), reading the ``(n, 3)`` inputs through flat arrays indexed
+``o + 3 k + axis`` (:func:`_flat_rows`; views and reshapes made once per call, not per block),
+the scratch through 1-D rows and writing outputs through flat arrays: constant strides, so
+that LLVM vectorizes each stage that makes no
 library call (all of GGX; Beckmann's ``exp`` and ``erfc`` are the kernels' own,
 :func:`_exp_neg` and :func:`_erfc_near`, polynomials and bit operations, no table loads, also
 in the fixed Halley steps of its visible-slope and ``erfinv`` solves,
@@ -29,7 +30,15 @@ is off in float64 but for ``contract`` in :func:`_smith_block_post` (the kernels
 moved some sampled GGX directions by 2e-8 and saved ~10 %); the float32 kernels take
 ``arcp``, ``afn`` and ``contract`` (:data:`_jit_float32`: eval 1.25x faster), which the
 helpers, inlined in Numba's IR (:data:`_inline`), inherit. Inlining doubled the cold
-compile (~7 s per kernel and dtype, once per install: ``cache=True``)."""
+compile (~7 s per kernel and dtype, once per install: ``cache=True``). The block loops of the
+eval, pdf and projected kernels run without reference counts (:data:`_loops64`).
+
+Hoisting the per-block ``reshape`` and views out of the block loops (this layout, one core,
+per 10^6 pairs, Cu Fresnel, medians of 3 processes against the kernels before): eval float64
+GGX 4.16 -> 3.84 ms, Beckmann 7.91 -> 6.15 ms, float32 GGX 1.81 -> 1.56 ms, Beckmann 2.75 -> 2.27
+ms; pdf float64 1.88 -> 1.61 / 3.12 -> 2.68 ms, float32 0.92 -> 0.80 / 1.48 -> 1.17 ms; GGX sample
+float64 9.6 -> 8.6 ms (the profile of float32 GGX eval had shown 13 % of its samples in the
+atomic reference counts and a reshape call per block)."""
 from __future__ import annotations
 
 import functools
@@ -86,6 +95,15 @@ _jit_float32 = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=
 _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 #: Loops whose latency is chains of multiply-adds: fused (``contract``, the only fast-math flag).
 _jit_contract = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"contract"})
+#: The block loops of the eval, pdf and projected kernels (float64; float32 with :data:`_jit_float32`'s
+#: flags), compiled without reference counts (Numba's ``_nrt=False``; their arrays are made by the
+#: kernel that calls them, :func:`_scratch`): with them, each array an inlined helper takes, and each
+#: view, cost an atomic increment and decrement per block (13 % of float32 GGX eval's profile samples;
+#: eval, Cu Fresnel, one core, per 10^6 pairs, medians of 4 processes: float32 GGX 1.59 -> 1.55 ms,
+#: Beckmann 2.56 -> 2.28 ms, float64 Beckmann 7.3 -> 6.3 ms). The sample kernel keeps its own arrays
+#: and its reference counts: with its ten rows as arguments, float32 GGX sample took 3.1 -> 3.6 ms.
+_loops64 = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_loops32 = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False, fastmath={"arcp", "afn", "contract"})
 
 
 # ------------------------------------------------------------------------ helpers
@@ -436,9 +454,9 @@ def _interp(tx, tv, ch, c):
 
 
 @_inline
-def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
-    """``out[3 k + ch] = F_ch(c_row[k]) * s_row[k]`` for ``k < m`` (a flat output block,
-    :func:`_flat_rows`): the Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]``
+def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m):
+    """``out[o + 3 k + ch] = F_ch(c_row[k]) * s_row[k]`` for ``k < m`` (a flat output, from its
+    element ``o``): the Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]``
     ``k``; ``tx``, ``tv`` the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
     over ``k`` per kind (the choice outside it: one loop with the choice inside, which LLVM
     does not unswitch, took GGX Cu eval 4.7 -> 18 ms and float32 2.0 -> 6.0 ms per 10^6 pairs
@@ -447,55 +465,58 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, m):
     GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms vectorize."""
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
     q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
+    o = max(o, 0)                                    # (see _flat_rows)
     if fk == IDEAL:
         for k in range(m):
             s = s_row[k]
-            out[3 * k], out[3 * k + 1], out[3 * k + 2] = s, s, s
+            out[o + 3 * k], out[o + 3 * k + 1], out[o + 3 * k + 2] = s, s, s
     elif fk == SCHLICK:
         for k in range(m):
             c, s = c_row[k], s_row[k]
-            out[3 * k] = _schlick(F, p0, c) * s
-            out[3 * k + 1] = _schlick(F, p1, c) * s
-            out[3 * k + 2] = _schlick(F, p2, c) * s
+            out[o + 3 * k] = _schlick(F, p0, c) * s
+            out[o + 3 * k + 1] = _schlick(F, p1, c) * s
+            out[o + 3 * k + 2] = _schlick(F, p2, c) * s
     elif fk == DIELECTRIC:
         for k in range(m):
             c, s = c_row[k], s_row[k]
-            out[3 * k] = _dielectric(F, p0, c) * s
-            out[3 * k + 1] = _dielectric(F, p1, c) * s
-            out[3 * k + 2] = _dielectric(F, p2, c) * s
+            out[o + 3 * k] = _dielectric(F, p0, c) * s
+            out[o + 3 * k + 1] = _dielectric(F, p1, c) * s
+            out[o + 3 * k + 2] = _dielectric(F, p2, c) * s
     elif fk == CONDUCTOR:
         for k in range(m):
             c, s = c_row[k], s_row[k]
-            out[3 * k] = _conductor(F, p0, q0, c) * s
-            out[3 * k + 1] = _conductor(F, p1, q1, c) * s
-            out[3 * k + 2] = _conductor(F, p2, q2, c) * s
+            out[o + 3 * k] = _conductor(F, p0, q0, c) * s
+            out[o + 3 * k + 1] = _conductor(F, p1, q1, c) * s
+            out[o + 3 * k + 2] = _conductor(F, p2, q2, c) * s
     else:
         for k in range(m):
             for ch in range(3):
-                out[3 * k + ch] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
+                out[o + 3 * k + ch] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, xn, yn, buf, measure, dev, dst,
-                     oh_row=True):
-    """``buf[0, k] = o.h`` (if ``oh_row``) and ``dst[k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
-    of the flat ``wi``, ``wo`` (``3 k + axis``: :func:`_flat_rows`)
+def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay, rho, xn, yn, rows, measure,
+                     dev_i, dev_o, dst, od, oh_row=True):
+    """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
+    of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
-    0 where invalid (see ``_projected_numpy``). Uses rows 0-6 of ``buf``, as 1-D arrays; if
+    0 where invalid (see ``_projected_numpy``). Uses the six scratch ``rows`` (1-D arrays of ``F``,
+    made once per kernel call: an array view made per block costs two atomic reference counts); if
     ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
-    to the rows ``dev[0]``, ``dev[1]`` (of ``F``). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
+    to the rows ``dev_i``, ``dev_o``. Without ``oh_row`` (the pdf), ``h = wi + wo`` is
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
     s1 = math.sqrt(F(1.0) - rho * rho)
-    oh_r, a_r, w_r, e_r, f_r, co_r = buf[0], buf[1], buf[2], buf[3], buf[4], buf[6]
-    dev_i, dev_o = dev[0], dev[1]
+    oh_r, a_r, w_r, e_r, f_r, co_r = rows
+    oi, oo, od = max(oi, 0), max(oo, 0), max(od, 0)  # (see _flat_rows)
     for k in range(m):
-        ix, iy, iz = F(wi[3 * k]), F(wi[3 * k + 1]), F(wi[3 * k + 2])
-        ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
+        ji, jo = oi + 3 * k, oo + 3 * k
+        ix, iy, iz = F(wi[ji]), F(wi[ji + 1]), F(wi[ji + 2])
+        ox, oy, oz = F(wo[jo]), F(wo[jo + 1]), F(wo[jo + 2])
         if measure:
-            dev_i[k], dev_o[k] = _deviation_at(F, wi, k), _deviation_at(F, wo, k)
+            dev_i[k], dev_o[k] = _deviation_at(F, wi, ji), _deviation_at(F, wo, jo)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         if oh_row:
@@ -514,34 +535,33 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, wo, m, ax, ay, rho, x
         area, w, c = _smith_pre(F, kind, shadowing, _view_root(F, kind, r2, co), co, r2_i, ci)
         f = (scale if ok else F(0.0)) / (iz if divide_cos_i & ok else F(1.0))
         if kind == GGX:                              # no Smith loop of its own: the value here
-            dst[k] = _projected_over(F, kind, e, f, c, w)
+            dst[od + k] = _projected_over(F, kind, e, f, c, w)
         else:
             a_r[k], e_r[k], f_r[k], co_r[k] = area, e, f, co
             if shadowing:
                 w_r[k] = w
     if kind != GGX:
-        _smith_block_post(kind, shadowing, buf, m)
+        _smith_block_post(kind, shadowing, a_r, w_r, e_r, co_r, m)
         for k in range(m):
-            dst[k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
+            dst[od + k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
 
 
 @_jit_contract
-def _smith_block_post(kind, shadowing, buf, m):
-    """Beckmann: :func:`_smith_post` and :func:`_ndf_post` on rows 1, 2, 6 and 3 of ``buf``
-    (its ``exp`` and ``erfc``, in a loop of their own, over rows taken as 1-D arrays: the
+def _smith_block_post(kind, shadowing, v_o, v_i, e, co, m):
+    """Beckmann: :func:`_smith_post` on the rows ``v_o``, ``v_i`` (then ``A``, ``W``) and ``co``, and
+    :func:`_ndf_post` on ``e`` (its ``exp`` and ``erfc``, in a loop of their own, over 1-D rows: the
     loop vectorizes; in the rows' arithmetic type, :func:`_float_type`: float32 rows took float64
     arithmetic before, at half the SIMD width and the float64 polynomials' degrees; with
     shadowing, in cache, one core: float32 5.8 -> 0.9 ns per pair, float64 5.1 -> 2.7 with the
     ``exp`` and ``erfcx`` polynomials :func:`_beckmann_lambda` took then); nothing for GGX. Without
     ``shadowing`` (``Lambda_i = 0``, ``W = A``: the pdf) one ``Lambda`` per pair, not two, and
-    row 2 (``W``) is left as it is: callers read ``A`` (row 1) for it.
+    ``v_i`` (``W``) is left as it is: callers read ``A`` for it.
     Not inlined, so that it keeps its own fastmath ``contract``: its polynomials are chains of
     multiply-adds whose latency bounds the loop, and fused they take Beckmann eval from 21 to
     18 ms per 10^6 pairs on one core (the kernels' worst relative error against the
     reference is unchanged, 8e-13)."""
     if kind != GGX:
-        F = _float_type(buf)
-        v_o, v_i, e, co = buf[1], buf[2], buf[3], buf[6]
+        F = _float_type(v_o)
         if shadowing:
             for k in range(m):
                 v_o[k], v_i[k] = _smith_post(F, v_o[k], v_i[k], co[k])
@@ -734,11 +754,11 @@ def _sin_cos(F, x):
 
 
 @_inline
-def _view_angles(F, kind, wo, k, ax, ay, rho, s1, xn, yn):
+def _view_angles(F, kind, wo, j, ax, ay, rho, s1, xn, yn):
     """``(cos theta, cos phi, sin phi, c_o, root)`` of the warped view ``o' = (a, b, c_o)`` (Eq. 3.3)
-    of the direction ``k`` of a flat ``wo`` (``3 k + axis``), ``root`` its :func:`_view_root`:
+    of the direction ``wo[j:j + 3]`` of a flat ``wo``, ``root`` its :func:`_view_root`:
     ``theta`` is 0 where ``a = b = 0``, ``pi/2`` where ``c_o <= 0``."""
-    ox, oy, oz = F(wo[3 * k]), F(wo[3 * k + 1]), F(wo[3 * k + 2])
+    ox, oy, oz = F(wo[j]), F(wo[j + 1]), F(wo[j + 2])
     a = ax * ox + rho * ay * oy
     b = ay * s1 * oy
     co = oz - ox * xn - oy * yn
@@ -805,10 +825,10 @@ def _visible_view(cos_theta):
 
 
 @_jit_contract
-def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
-    """``out_rows[:, k]``: the standard Beckmann visible normal for a view at ``theta`` in the
-    xz plane (``Beckmann.sample_visible_std``: ``x~ = Q2(u[2 k])``, ``y~ = erfinv(2 u[2 k + 1] -
-    1)``, ``cos theta = cos_row[k]``) for ``k < m``, in float64 (rows ``bk (4, BLOCK)``). The
+def _beckmann_visible_block(u, ou, cos_row, mx, my, mz, gx, gy, ok_x, ok_y, m):
+    """``(mx[k], my[k], mz[k])``: the standard Beckmann visible normal for a view at ``theta`` in the
+    xz plane (``Beckmann.sample_visible_std``: ``x~ = Q2(u[ou + 2 k])``, ``y~ = erfinv(2 u[ou + 2 k + 1] -
+    1)``, ``cos theta = cos_row[k]``) for ``k < m``, in float64 (scratch rows ``gx`` ... ``ok_y``). The
     guesses :func:`_visible_slope_guess` and :func:`_erfinv_guess` in a loop of their own (it
     vectorizes since their ``log`` is :func:`_log_pos`, not the library's: the block 24 -> 20 ns
     per view in cache, Beckmann sample 50 -> 34 ms per 10^6 on one core); then, in loops that vectorize (:func:`_exp_neg`, :func:`_erfc_near`
@@ -820,19 +840,19 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
     per view), and one of :func:`_erfinv`'s, with their stopping tests after the last. The lanes
     that fail them, lie in the upper tail (``u >= _UPPER``, solved on the complementary CDF) or
     beyond :data:`_TAIL` are solved again by those scalar functions."""
-    gx, gy, ok_x, ok_y = bk[0], bk[1], bk[2], bk[3]
-    uz = bk[2]                                       # u z until the flags of x~ replace it
+    uz = ok_x                                        # u z until the flags of x~ replace it
+    ou = max(ou, 0)                                  # (see _flat_rows)
     for k in range(m):                               # guesses
-        u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
+        u0 = min(max(float(u[ou + 2 * k]), _U_MIN), 1.0 - _U_MIN)
         gx[k] = _visible_slope_guess(u0, min(max(float(cos_row[k]), 1e-12), 1.0))
-        gy[k] = _erfinv_guess(2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
+        gy[k] = _erfinv_guess(2.0 * min(max(float(u[ou + 2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
     for k in range(m):                               # u z, the first Halley step of x~, y~'s step
-        u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
+        u0 = min(max(float(u[ou + 2 * k]), _U_MIN), 1.0 - _U_MIN)
         a, t = _visible_view(float(cos_row[k]))
         e_a = _exp_neg(np.float64, -a * a)
         uz[k] = u0 * ((2.0 - _erfc_near(np.float64, a, e_a)) + t * e_a / _SQRT_PI)
         gx[k] = _q2_cdf_step(min(max(gx[k], -8.0), min(a, 8.0)), t, uz[k])[1]
-        y = 2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0
+        y = 2.0 * min(max(float(u[ou + 2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0
         ay = abs(gy[k])
         e = _exp_neg(np.float64, -ay * ay)
         f = (1.0 - abs(y)) - _erfc_near(np.float64, ay, e) if abs(y) > 0.5 else _erf_small(min(ay, 0.5)) - abs(y)
@@ -841,7 +861,7 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
     for k in range(m):                               # the second
         gx[k] = _q2_cdf_step(gx[k], _visible_view(float(cos_row[k]))[1], uz[k])[1]
     for k in range(m):                               # the third, and the stopping test
-        u0 = min(max(float(u[2 * k]), _U_MIN), 1.0 - _U_MIN)
+        u0 = min(max(float(u[ou + 2 * k]), _U_MIN), 1.0 - _U_MIN)
         a, t = _visible_view(float(cos_row[k]))
         step, x = _q2_cdf_step(gx[k], t, uz[k])
         ok_x[k] = 1.0 if ((u0 < _UPPER) & (abs(step) <= 1e-12 * max(1.0, abs(x)))
@@ -849,13 +869,13 @@ def _beckmann_visible_block(u, cos_row, out_rows, bk, m):
         gx[k] = x
     for k in range(m):                               # the rare rest, scalar
         if ok_x[k] == 0.0:
-            gx[k] = _visible_slope_quantile(float(u[2 * k]), float(cos_row[k]))
+            gx[k] = _visible_slope_quantile(float(u[ou + 2 * k]), float(cos_row[k]))
         if ok_y[k] == 0.0:
-            gy[k] = _erfinv(2.0 * min(max(float(u[2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
+            gy[k] = _erfinv(2.0 * min(max(float(u[ou + 2 * k + 1]), _U_MIN), 1.0 - _U_MIN) - 1.0)
     for k in range(m):
         x, y = gx[k], gy[k]
         inv = 1.0 / math.sqrt(1.0 + x * x + y * y)
-        out_rows[0, k], out_rows[1, k], out_rows[2, k] = -x * inv, -y * inv, inv
+        mx[k], my[k], mz[k] = -x * inv, -y * inv, inv
 
 
 # ------------------------------------------------------------------------ kernels
@@ -878,14 +898,14 @@ _SLACK32 = 2.0**-20
 
 
 @_inline
-def _deviation_at(F, w, k):
-    """``| |w_k|^2 - 1 |`` of row ``k`` of a flat block ``w`` (``3 k + axis``, :func:`_flat_rows`)
+def _deviation_at(F, w, j):
+    """``| |w_k|^2 - 1 |`` of the direction ``w[j:j + 3]`` of a flat ``w`` (:func:`_flat_rows`)
     in ``F`` arithmetic: in float64 as :func:`microfacet.geometry.unit_deviation` (same operations,
     same order: the same value); in float32 within :data:`_SLACK32` of it. The kernels compute it in
     the loop that reads the block, so that ``MicrofacetBRDF``'s unit-length check takes no pass of
     its own (float64 arithmetic in the float32 kernels' loops halved their SIMD width, GGX eval
     2.0 -> 2.8 ms per 10^6)."""
-    x, y, z = F(w[3 * k]), F(w[3 * k + 1]), F(w[3 * k + 2])
+    x, y, z = F(w[j]), F(w[j + 1]), F(w[j + 2])
     return abs(x * x + y * y + z * z - F(1.0))
 
 
@@ -902,10 +922,10 @@ def _bits_impl(row):
 
 
 @_inline
-def _max_bits(row, m, top):
-    """``max(top, integer bits of row[:m])`` for non-negative ``row`` (:func:`_deviation_at`):
-    see :data:`_INF_BITS` (an integer maximum vectorizes, a float one that must see NaN does not)."""
-    bits = _bits(row)[0]
+def _max_bits(bits, m, top):
+    """``max(top, bits[:m])``, ``bits`` the integer view (:func:`_bits`, made once per kernel call) of a
+    non-negative row (:func:`_deviation_at`): see :data:`_INF_BITS` (an integer maximum vectorizes,
+    a float one that must see NaN does not)."""
     for k in range(m):
         top = max(top, np.int64(bits[k]))
     return top
@@ -936,39 +956,70 @@ def _unit_deviation(w):
     NaN or inf (:func:`_deviation_at`, :func:`_max_bits` on a flat view, a block at a time)."""
     a = w.reshape(w.size)
     row = np.empty(BLOCK)
+    bits = _bits(row)[0]
     top = np.int64(0)
     for j0 in range(0, w.shape[0], BLOCK):
         m = min(BLOCK, w.shape[0] - j0)
-        b = a[3 * j0:3 * (j0 + m)]
         for k in range(m):
-            row[k] = _deviation_at(np.float64, b, k)
-        top = _max_bits(row, m, top)
+            row[k] = _deviation_at(np.float64, a, 3 * (j0 + k))
+        top = _max_bits(bits, m, top)
     return _deviation(top, row)
 
 
-def _flat_rows(a, j0, m, scratch):
-    """Rows ``j0:j0 + m`` of ``a (n, w)`` as a flat C-contiguous array (``w k + axis``): a
-    view of a C-contiguous ``a``, else (a broadcast or strided ``a``) a copy into ``scratch``
-    (``w BLOCK`` elements). The loops index the result with a constant stride, which LLVM
-    vectorizes (interleaved loads); ``a[k, axis]`` has runtime strides, which it does not."""
-    return np.ascontiguousarray(a[j0:j0 + m]).reshape(-1)      # compiled: the overload below
+def _flat_rows(a, flat, j0, m, scratch):
+    """Rows ``j0:j0 + m`` of ``a (n, w)`` as ``(b, o)``, a flat C-contiguous ``b`` and the element
+    ``o >= 0`` where they start (``b[o + w k + axis]``): ``flat`` (:func:`_flat`) and ``w j0`` for a
+    C-contiguous ``a``, else (a broadcast or strided ``a``) a copy into ``scratch`` (``w BLOCK``
+    elements) and 0. The loops index the result with a constant stride, which LLVM vectorizes
+    (interleaved loads); ``a[k, axis]`` has runtime strides, which it does not. An offset, not a
+    view per block: a view costs two atomic reference counts, and a reshape per block a call
+    (~13 % of float32 GGX eval). The loops take ``max(o, 0)``: an offset not known to be
+    non-negative makes Numba wrap negative indices around, and the loops stop vectorizing."""
+    return np.ascontiguousarray(a[j0:j0 + m]).reshape(-1), 0      # compiled: the overload below
+
+
+def _flat(a):
+    """``a (n, w)`` as one flat array, made once per kernel call (C layout; else ``a`` itself, which
+    :func:`_flat_rows` copies a block at a time)."""
+
+
+@numba.extending.overload(_flat, inline="always")
+def _flat_impl(a):
+    if a.layout == "C":
+        return lambda a: a.reshape(a.size)
+    return lambda a: a
 
 
 @numba.extending.overload(_flat_rows, inline="always")
-def _flat_rows_impl(a, j0, m, scratch):
+def _flat_rows_impl(a, flat, j0, m, scratch):
     if a.layout == "C":
-        def view(a, j0, m, scratch):
-            w = a.shape[1]
-            return a.reshape(a.size)[w * j0:w * (j0 + m)]
+        def view(a, flat, j0, m, scratch):
+            return flat, max(a.shape[1] * j0, 0)
         return view
 
-    def copy(a, j0, m, scratch):
+    def copy(a, flat, j0, m, scratch):
         w = a.shape[1]
         for k in range(m):
             for c in range(w):
                 scratch[w * k + c] = a[j0 + k, c]
-        return scratch[:w * m]
+        return scratch, 0
     return copy
+
+
+def _loops(F):
+    """The decorator of block loops in ``F`` arithmetic (:data:`_loops64`, :data:`_loops32`)."""
+    return _loops64 if F is np.float64 else _loops32
+
+
+@_jit
+def _scratch(F, n_rows, wi, wo):
+    """What the block loops of the eval, pdf and projected kernels use, made once per call:
+    ``n_rows`` scratch rows of ``F``, the deviation rows of ``wi``, ``wo`` and their integer views
+    (:func:`_bits`), copy buffers for non-contiguous inputs (:func:`_flat_rows`) and flat views."""
+    buf, dev = np.empty((n_rows, BLOCK), F), np.empty((2, BLOCK), F)
+    rows = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5])
+    return (rows, dev[0], dev[1], _bits(dev[0])[0], _bits(dev[1])[0], np.empty(3 * BLOCK, wi.dtype),
+            np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo))
 
 
 @functools.cache
@@ -979,15 +1030,21 @@ def projected_kernel(kind, dtype=np.float64):
     ``dtype``, constants in them; the caller passes the scalar parameters as ``dtype``)."""
     F = np.dtype(dtype).type
 
-    @(_jit if F is np.float64 else _jit_float32)
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
-        si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
+    @_loops(F)
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch):
+        rows, dev_i, dev_o, _, _, si, so, wi_f, wo_f = scratch
+        oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, False, dev, s_out[j0:j0 + m])
-            oh_out[j0:j0 + m] = buf[0, :m]
+            (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
+            _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, False,
+                             dev_i, dev_o, s_out, j0)
+            for k in range(m):
+                oh_out[max(j0, 0) + k] = oh_r[k]
+
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
+        loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, _scratch(F, 6, wi, wo))
     return kernel
 
 
@@ -998,17 +1055,23 @@ def pdf_kernel(kind, dtype=np.float64):
     largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`)."""
     F = np.dtype(dtype).type
 
-    @(_jit if F is np.float64 else _jit_float32)
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
-        si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
+    @_loops(F)
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(F, kind, False, False, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, True, dev, out[j0:j0 + m], False)
-            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
-        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
+            (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
+            _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
+                             dev_i, dev_o, out, j0, False)
+            top_i, top_o = _max_bits(bits_i, m, top_i), _max_bits(bits_o, m, top_o)
+        return top_i, top_o
+
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
+        scratch = _scratch(F, 6, wi, wo)
+        top_i, top_o = loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch)
+        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
     return kernel
 
 
@@ -1019,19 +1082,25 @@ def eval_kernel(kind, dtype=np.float64):
     returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
 
-    @(_jit if F is np.float64 else _jit_float32)
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        buf, dev = np.empty((7, BLOCK), F), np.empty((2, BLOCK), F)
-        si, so = np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype)
-        out_flat = out.reshape(out.size)
+    @_loops(F)
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            _projected_block(F, kind, shadowing, divide_cos_i, _flat_rows(wi, j0, m, si), _flat_rows(wo, j0, m, so),
-                             m, ax, ay, rho, xn, yn, buf, True, dev, buf[1])
-            top_i, top_o = _max_bits(dev[0], m, top_i), _max_bits(dev[1], m, top_o)
-            _fresnel_block(F, fk, fp, tx, tv, buf[0], buf[1], out_flat[3 * j0:3 * (j0 + m)], m)
-        return _deviation(top_i, dev[0]), _deviation(top_o, dev[1])
+            (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
+            _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
+                             dev_i, dev_o, rows[1], 0)
+            top_i, top_o = _max_bits(bits_i, m, top_i), _max_bits(bits_o, m, top_o)
+            _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
+        return top_i, top_o
+
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
+        scratch = _scratch(F, 6, wi, wo)
+        top_i, top_o = loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv,
+                             out.reshape(out.size), scratch)
+        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
     return kernel
 
 
@@ -1048,34 +1117,38 @@ def sample_kernel(kind, dtype=np.float64):
         s1 = math.sqrt(F(1.0) - rho * rho)
         buf = np.empty((10, BLOCK), F)
         bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
+        gx, gy, ok_x, ok_y = bk[0], bk[1], bk[2], bk[3]
         su, so = np.empty(2 * BLOCK, u.dtype), np.empty(3 * BLOCK, wo.dtype)
+        u_f, wo_f = _flat(u), _flat(wo)
         outside, top_o, dev_o = 0, np.int64(0), buf[9]
-        wi_flat, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
+        bits_o = _bits(dev_o)[0]
+        wi_b, weight_flat = wi_out.reshape(wi_out.size), weight_out.reshape(weight_out.size)
         r0, r1, r2, r3, r4, r5, r6 = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
         r7, r8 = buf[7], buf[8]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
-            u_b, wo_b, pdf_b = _flat_rows(u, j0, m, su), _flat_rows(wo, j0, m, so), pdf_out[j0:]
-            wi_b = wi_flat[3 * j0:3 * (j0 + m)]
+            (u_b, ou), (wo_b, oo) = _flat_rows(u, u_f, j0, m, su), _flat_rows(wo, wo_f, j0, m, so)
+            jp = max(j0, 0)                          # (see _flat_rows)
             if kind == GGX:                          # the warped view and the standard visible normal
                 for k in range(m):
-                    dev_o[k] = _deviation_at(F, wo_b, k)
-                    u0, u1 = u_b[2 * k], u_b[2 * k + 1]
+                    dev_o[k] = _deviation_at(F, wo_b, oo + 3 * k)
+                    u0, u1 = u_b[ou + 2 * k], u_b[ou + 2 * k + 1]
                     r0[k] = F(_outside_unit(u0) + _outside_unit(u1))
-                    cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
+                    cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, oo + 3 * k, ax, ay, rho, s1, xn, yn)
                     r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u0), F(u1), cos_t)
                 for k in range(m):                   # (an integer sum in the loop above split its float32 lanes)
                     outside += 0 if r0[k] == F(0.0) else 1
             else:
                 for k in range(2 * m):
-                    outside += _outside_unit(u_b[k])
+                    outside += _outside_unit(u_b[ou + k])
                 for k in range(m):
-                    dev_o[k] = _deviation_at(F, wo_b, k)
-                    r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, k, ax, ay, rho, s1, xn, yn)
-                _beckmann_visible_block(u_b, r0, buf[3:6], bk, m)
-            top_o = _max_bits(dev_o, m, top_o)
+                    dev_o[k] = _deviation_at(F, wo_b, oo + 3 * k)
+                    r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, oo + 3 * k, ax, ay, rho, s1, xn, yn)
+                _beckmann_visible_block(u_b, ou, r0, r3, r4, r5, gx, gy, ok_x, ok_y, m)
+            top_o = _max_bits(bits_o, m, top_o)
             for k in range(m):
-                ox, oy, oz = F(wo_b[3 * k]), F(wo_b[3 * k + 1]), F(wo_b[3 * k + 2])
+                jo, ji = oo + 3 * k, 3 * (jp + k)
+                ox, oy, oz = F(wo_b[jo]), F(wo_b[jo + 1]), F(wo_b[jo + 2])
                 cp, sp = r1[k], r2[k]
                 mx, my, mz = cp * r3[k] - sp * r4[k], sp * r3[k] + cp * r4[k], r5[k]
                 hx = ax * mx - xn * mz                # slope map of Eq. 3.4 on the normal
@@ -1093,18 +1166,18 @@ def sample_kernel(kind, dtype=np.float64):
                 r0[k] = oh
                 area, w, c = _smith_pre(F, kind, shadowing, r8[k], co, r2_i, ci)
                 scale = scale if ok else F(0.0)
-                wi_b[3 * k], wi_b[3 * k + 1], wi_b[3 * k + 2] = ix, iy, iz
+                wi_b[ji], wi_b[ji + 1], wi_b[ji + 2] = ix, iy, iz
                 visible = (ci > F(0.0)) | (not shadowing)                         # G > 0
                 if kind == GGX:                      # no Smith loop of its own: pdf and weight here
-                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, area, w, c, e, scale, visible)
+                    pdf_out[jp + k], r2[k] = _pdf_and_ratio(F, kind, area, w, c, e, scale, visible)
                 else:
                     r1[k], r2[k], r5[k], r3[k], r4[k] = area, w, c, e, scale
                     r7[k] = F(1.0) if visible else F(0.0)
             if kind != GGX:
-                _smith_block_post(kind, shadowing, buf, m)
+                _smith_block_post(kind, shadowing, r1, r2, r3, r6, m)
                 for k in range(m):
-                    pdf_b[k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k] if shadowing else r1[k], r5[k], r3[k], r4[k],
-                                                     r7[k] > F(0.0))
-            _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat[3 * j0:3 * (j0 + m)], m)
+                    pdf_out[jp + k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k] if shadowing else r1[k], r5[k], r3[k],
+                                                            r4[k], r7[k] > F(0.0))
+            _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat, 3 * j0, m)
         return outside, _deviation(top_o, dev_o)
     return kernel
