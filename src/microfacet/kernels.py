@@ -29,8 +29,14 @@ import os
 
 import numpy as np
 
-__all__ = ["AVAILABLE", "compiled", "smith_projected", "smith_eval", "smith_pdf", "smith_sample",
+from . import _buffers
+
+__all__ = ["AVAILABLE", "compiled", "release_outputs", "smith_projected", "smith_eval", "smith_pdf", "smith_sample",
            "unit_deviation"]
+
+#: Give the memory that the cache of freed output arrays holds back to the system; returns its bytes
+#: (see :mod:`microfacet._buffers`: outputs of 1 MiB and more, ``MICROFACET_OUTPUT_CACHE_MB``).
+release_outputs = _buffers.release
 
 #: Numba is installed and not disabled by ``MICROFACET_NUMBA=0`` (checked without importing it).
 AVAILABLE = os.environ.get("MICROFACET_NUMBA", "1") != "0" and importlib.util.find_spec("numba") is not None
@@ -210,9 +216,10 @@ def _typed(dtype, params):
 def output(out, shape, dtype, name="out", inputs=()):
     """``out`` (an output array a caller passes to be written, as NumPy's ``out=``), or a new
     array if it is ``None``: ``ValueError`` naming ``name`` unless it is a writeable
-    C-contiguous ndarray of ``shape`` and ``dtype`` that shares no memory with ``inputs``."""
+    C-contiguous ndarray of ``shape`` and ``dtype`` that shares no memory with ``inputs``. New
+    arrays come from the cache of freed outputs (:mod:`microfacet._buffers`, :func:`release_outputs`)."""
     if out is None:
-        return np.empty(shape, dtype)
+        return _buffers.empty(shape, dtype)
     if not (isinstance(out, np.ndarray) and out.shape == shape and out.dtype == dtype
             and out.flags.c_contiguous and out.flags.writeable):
         got = (("read-only " if not out.flags.writeable else "") + ("non-contiguous " if not out.flags.c_contiguous else "")
