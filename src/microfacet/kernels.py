@@ -25,6 +25,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import itertools
+import math
 import os
 
 import numpy as np
@@ -121,7 +122,7 @@ def _launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     tasks = min(4 * t, n * cost // TASK_MIN, n)
     if t < 2 or n * cost < PARALLEL_MIN:
         return [kernel(0, n, *args)]
-    bounds = np.linspace(0, n, tasks + 1).astype(np.int64).tolist()
+    bounds = [n * i // tasks for i in range(tasks + 1)]
     results = [None] * tasks
     claim = itertools.count()                # next() is atomic under the GIL
 
@@ -176,6 +177,8 @@ def _fresnel_params(fresnel):
 
 def _rows(a, shape):
     """``a`` broadcast to ``shape + (last,)`` as ``(n, last)`` rows (a view where possible)."""
+    if a.ndim == 2 and a.shape[:1] == shape:
+        return a
     return np.broadcast_to(a, shape + a.shape[-1:]).reshape(-1, a.shape[-1])
 
 
@@ -189,8 +192,8 @@ def _brdf_params(brdf):
 
 
 def _shape_n(a, b):
-    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
-    return shape, int(np.prod(shape))
+    shape = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    return shape, math.prod(shape)
 
 
 def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
