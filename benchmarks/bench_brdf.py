@@ -60,6 +60,7 @@ from typing import Callable
 import numpy as np
 
 import microfacet as mf
+from microfacet import _buffers
 
 EVAL_GOAL_S = 0.1  # goal: eval on 1e6 directions in under 0.1 s
 ALPHA_X, ALPHA_Y = 0.2, 0.5
@@ -462,7 +463,7 @@ def main(argv: list[str] | None = None) -> int:
           f"mean slope = {MEAN_SLOPE}; conductor Fresnel ({METAL}) on both sides")
     print("glibc heap: " + (", ".join(f"{k}={os.environ[k]}" for k in HEAP_VARIABLES if k in os.environ)
                             if any(k in os.environ for k in HEAP_VARIABLES) else "default")
-          + f"; output cache: {mf._buffers._cache.limit >> 20} MiB (MICROFACET_OUTPUT_CACHE_MB; freed outputs "
+          + f"; output cache: {_buffers._cache.limit >> 20} MiB (MICROFACET_OUTPUT_CACHE_MB; freed outputs "
           "kept for reuse, as Dr.Jit keeps its allocations)")
     variant, why = (None, "skipped (--mitsuba none)") if args.mitsuba == "none" else pick_variant(args.mitsuba)
     print(f"mitsuba: {why}")
