@@ -496,16 +496,19 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m):
 
 @_inline
 def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay, rho, xn, yn, rows, measure,
-                     dev_i, dev_o, dst, od, oh_row=True):
+                     dev, top_i, top_o, dst, od, oh_row=True):
     """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``). Uses the six scratch ``rows`` (1-D arrays of ``F``,
-    made once per kernel call: an array view made per block costs two atomic reference counts); if
-    ``measure``, writes the unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation_at`)
-    to the rows ``dev_i``, ``dev_o``. Without ``oh_row`` (the pdf), ``h = wi + wo`` is
+    made once per kernel call: an array view made per block costs two atomic reference counts).
+    Returns ``(top_i, top_o)`` updated, if ``measure``, with the unit-length deviations of ``wi`` and
+    ``wo`` (:func:`_deviation_at`, as :func:`_max_bits`): in float64 their largest bits, taken in the
+    loop (Beckmann eval 10 % faster than the rows and a pass over them); in float32 through the rows
+    ``dev = (dev_i, dev_o, bits_i, bits_o)`` and :func:`_max_bits` (int64 lanes in the loop made
+    float32 eval 13-30 % slower). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
     s1 = math.sqrt(F(1.0) - rho * rho)
@@ -515,8 +518,11 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
         ji, jo = oi + 3 * k, oo + 3 * k
         ix, iy, iz = F(wi[ji]), F(wi[ji + 1]), F(wi[ji + 2])
         ox, oy, oz = F(wo[jo]), F(wo[jo + 1]), F(wo[jo + 2])
-        if measure:
-            dev_i[k], dev_o[k] = _deviation_at(F, wi, ji), _deviation_at(F, wo, jo)
+        if measure & _of_type(F, True, False):      # float64: the largest bits, in this loop
+            top_i = max(top_i, _bits_of(_deviation_at(F, wi, ji)))
+            top_o = max(top_o, _bits_of(_deviation_at(F, wo, jo)))
+        elif measure:                                 # float32: to rows (int64 lanes here halve its width)
+            dev[0][k], dev[1][k] = _deviation_at(F, wi, ji), _deviation_at(F, wo, jo)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         if oh_row:
@@ -544,6 +550,9 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
         _smith_block_post(kind, shadowing, a_r, w_r, e_r, co_r, m)
         for k in range(m):
             dst[od + k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
+    if measure & _of_type(F, False, True):
+        top_i, top_o = _max_bits(dev[2], m, top_i), _max_bits(dev[3], m, top_o)
+    return top_i, top_o
 
 
 @_jit_contract
@@ -921,6 +930,17 @@ def _bits_impl(row):
     return lambda row: (row.view(np.int64), _INF_BITS, 0.0)
 
 
+def _bits_of(x):
+    """The integer bits of a float64 or float32 ``x`` (as int64; see :data:`_INF_BITS`)."""
+
+
+@numba.extending.overload(_bits_of, inline="always")
+def _bits_of_impl(x):
+    if x == numba.types.float32:
+        return lambda x: np.int64(np.float32(x).view(np.int32))
+    return lambda x: np.float64(x).view(np.int64)
+
+
 @_inline
 def _max_bits(bits, m, top):
     """``max(top, bits[:m])``, ``bits`` the integer view (:func:`_bits`, made once per kernel call) of a
@@ -1032,13 +1052,14 @@ def projected_kernel(kind, dtype=np.float64):
 
     @_loops(F)
     def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch):
-        rows, dev_i, dev_o, _, _, si, so, wi_f, wo_f = scratch
+        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
+        dev = (dev_i, dev_o, bits_i, bits_o)
         oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
             _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, False,
-                             dev_i, dev_o, s_out, j0)
+                             dev, np.int64(0), np.int64(0), s_out, j0)
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
 
@@ -1058,13 +1079,13 @@ def pdf_kernel(kind, dtype=np.float64):
     @_loops(F)
     def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch):
         rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
+        dev = (dev_i, dev_o, bits_i, bits_o)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
-                             dev_i, dev_o, out, j0, False)
-            top_i, top_o = _max_bits(bits_i, m, top_i), _max_bits(bits_o, m, top_o)
+            top_i, top_o = _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
+                                            dev, top_i, top_o, out, j0, False)
         return top_i, top_o
 
     @_jit
@@ -1085,13 +1106,13 @@ def eval_kernel(kind, dtype=np.float64):
     @_loops(F)
     def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch):
         rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
+        dev = (dev_i, dev_o, bits_i, bits_o)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
-                             dev_i, dev_o, rows[1], 0)
-            top_i, top_o = _max_bits(bits_i, m, top_i), _max_bits(bits_o, m, top_o)
+            top_i, top_o = _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn,
+                                            rows, True, dev, top_i, top_o, rows[1], 0)
             _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
         return top_i, top_o
 
