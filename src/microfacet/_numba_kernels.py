@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import functools
 import math
+import threading
 
 import numba
 import numpy as np
@@ -1031,15 +1032,29 @@ def _loops(F):
     return _loops64 if F is np.float64 else _loops32
 
 
-@_jit
-def _scratch(F, n_rows, wi, wo):
-    """What the block loops of the eval, pdf and projected kernels use, made once per call:
-    ``n_rows`` scratch rows of ``F``, the deviation rows of ``wi``, ``wo`` and their integer views
-    (:func:`_bits`), copy buffers for non-contiguous inputs (:func:`_flat_rows`) and flat views."""
-    buf, dev = np.empty((n_rows, BLOCK), F), np.empty((2, BLOCK), F)
-    rows = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5])
-    return (rows, dev[0], dev[1], _bits(dev[0])[0], _bits(dev[1])[0], np.empty(3 * BLOCK, wi.dtype),
-            np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo))
+_local = threading.local()
+
+
+def _scratch(F, wi, wo):
+    """This thread's scratch for the block loops of the eval, pdf and projected kernels in ``F``
+    arithmetic (:data:`_loops64`), made once per thread and input types: 6 rows of ``F``, the
+    deviation rows and their integer views (:func:`_bits`), copy buffers for non-contiguous
+    inputs (:func:`_flat_rows`). (Made by the kernel, a compiled function that called the loops,
+    the loops were a closure variable of it, which Numba's cache keys by a per-process pickle:
+    the kernel was compiled again in every process, 0.2-0.5 s each.)"""
+    key = (F, wi.dtype, wo.dtype)
+    cache = _local.__dict__.setdefault("scratch", {})
+    if key not in cache:
+        buf, dev = np.empty((6, BLOCK), F), np.empty((2, BLOCK), F)
+        int_type = np.int64 if F is np.float64 else np.int32
+        cache[key] = (tuple(buf), dev[0], dev[1], dev[0].view(int_type), dev[1].view(int_type),
+                      np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype))
+    return cache[key]
+
+
+def _flat_py(a):
+    """:func:`_flat` (a flat view of a C-contiguous ``a``, else ``a``) in Python."""
+    return a.reshape(-1) if a.flags.c_contiguous else a
 
 
 @functools.cache
@@ -1051,8 +1066,8 @@ def projected_kernel(kind, dtype=np.float64):
     F = np.dtype(dtype).type
 
     @_loops(F)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch, wi_f, wo_f):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so = scratch
         dev = (dev_i, dev_o, bits_i, bits_o)
         oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
@@ -1063,9 +1078,8 @@ def projected_kernel(kind, dtype=np.float64):
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
 
-    @_jit
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, _scratch(F, 6, wi, wo))
+    def kernel(start, stop, wi, wo, *args):
+        loops(start, stop, wi, wo, *args, _scratch(F, wi, wo), _flat_py(wi), _flat_py(wo))
     return kernel
 
 
@@ -1077,8 +1091,8 @@ def pdf_kernel(kind, dtype=np.float64):
     F = np.dtype(dtype).type
 
     @_loops(F)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch, wi_f, wo_f):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so = scratch
         dev = (dev_i, dev_o, bits_i, bits_o)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
@@ -1086,13 +1100,10 @@ def pdf_kernel(kind, dtype=np.float64):
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
             top_i, top_o = _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
                                             dev, top_i, top_o, out, j0, False)
-        return top_i, top_o
+        return _deviation(top_i, dev_i), _deviation(top_o, dev_o)
 
-    @_jit
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        scratch = _scratch(F, 6, wi, wo)
-        top_i, top_o = loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch)
-        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
+    def kernel(start, stop, wi, wo, *args):
+        return loops(start, stop, wi, wo, *args, _scratch(F, wi, wo), _flat_py(wi), _flat_py(wo))
     return kernel
 
 
@@ -1104,8 +1115,9 @@ def eval_kernel(kind, dtype=np.float64):
     F = np.dtype(dtype).type
 
     @_loops(F)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch,
+              wi_f, wo_f):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so = scratch
         dev = (dev_i, dev_o, bits_i, bits_o)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
@@ -1114,14 +1126,11 @@ def eval_kernel(kind, dtype=np.float64):
             top_i, top_o = _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn,
                                             rows, True, dev, top_i, top_o, rows[1], 0)
             _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
-        return top_i, top_o
+        return _deviation(top_i, dev_i), _deviation(top_o, dev_o)
 
-    @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        scratch = _scratch(F, 6, wi, wo)
-        top_i, top_o = loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv,
-                             out.reshape(out.size), scratch)
-        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
+        return loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out.reshape(-1),
+                     _scratch(F, wi, wo), _flat_py(wi), _flat_py(wo))
     return kernel
 
 
