@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import functools
 import math
-import threading
 
 import numba
 import numpy as np
@@ -1027,34 +1026,41 @@ def _flat_rows_impl(a, flat, j0, m, scratch):
     return copy
 
 
-def _loops(F):
-    """The decorator of block loops in ``F`` arithmetic (:data:`_loops64`, :data:`_loops32`)."""
-    return _loops64 if F is np.float64 else _loops32
+#: The block loops of the kernels made so far, by ``(kernel, kind, dtype name)`` (:func:`_loops`).
+_LOOPS = {}
 
 
-_local = threading.local()
+def _loops(key):
+    """Compiles block loops in the arithmetic of ``key = (kernel, kind, dtype name)``
+    (:data:`_loops64`, :data:`_loops32`) and keeps them for :func:`_call_loops`."""
+    def decorate(function):
+        _LOOPS[key] = (_loops64 if key[2] == "float64" else _loops32)(function)
+        return _LOOPS[key]
+    return decorate
 
 
-def _scratch(F, wi, wo):
-    """This thread's scratch for the block loops of the eval, pdf and projected kernels in ``F``
-    arithmetic (:data:`_loops64`), made once per thread and input types: 6 rows of ``F``, the
-    deviation rows and their integer views (:func:`_bits`), copy buffers for non-contiguous
-    inputs (:func:`_flat_rows`). (Made by the kernel, a compiled function that called the loops,
-    the loops were a closure variable of it, which Numba's cache keys by a per-process pickle:
-    the kernel was compiled again in every process, 0.2-0.5 s each.)"""
-    key = (F, wi.dtype, wo.dtype)
-    cache = _local.__dict__.setdefault("scratch", {})
-    if key not in cache:
-        buf, dev = np.empty((6, BLOCK), F), np.empty((2, BLOCK), F)
-        int_type = np.int64 if F is np.float64 else np.int32
-        cache[key] = (tuple(buf), dev[0], dev[1], dev[0].view(int_type), dev[1].view(int_type),
-                      np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype))
-    return cache[key]
+def _call_loops(key, *args):
+    """``_LOOPS[key](*args)`` in compiled code, ``key`` a constant tuple: the kernels call their loops
+    through it, not as a closure variable, which Numba's cache keys by a pickle that differs from
+    one process to the next (the kernels were compiled again in every process, 0.2-0.5 s each)."""
 
 
-def _flat_py(a):
-    """:func:`_flat` (a flat view of a C-contiguous ``a``, else ``a``) in Python."""
-    return a.reshape(-1) if a.flags.c_contiguous else a
+@numba.extending.overload(_call_loops)
+def _call_loops_impl(key, *args):
+    if isinstance(key, numba.types.BaseTuple) and all(isinstance(t, numba.types.Literal) for t in key.types):
+        loops = _LOOPS[tuple(t.literal_value for t in key.types)]
+        return lambda key, *args: loops(*args)
+
+
+@_jit
+def _scratch(F, n_rows, wi, wo):
+    """What the block loops of the eval, pdf and projected kernels use, made once per call:
+    ``n_rows`` scratch rows of ``F``, the deviation rows of ``wi``, ``wo`` and their integer views
+    (:func:`_bits`), copy buffers for non-contiguous inputs (:func:`_flat_rows`) and flat views."""
+    buf, dev = np.empty((n_rows, BLOCK), F), np.empty((2, BLOCK), F)
+    rows = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5])
+    return (rows, dev[0], dev[1], _bits(dev[0])[0], _bits(dev[1])[0], np.empty(3 * BLOCK, wi.dtype),
+            np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo))
 
 
 @functools.cache
@@ -1064,10 +1070,11 @@ def projected_kernel(kind, dtype=np.float64):
     distribution ``kind`` in ``dtype`` arithmetic (the kernels are compiled per kind and
     ``dtype``, constants in them; the caller passes the scalar parameters as ``dtype``)."""
     F = np.dtype(dtype).type
+    key = ("projected", kind, np.dtype(dtype).name)
 
-    @_loops(F)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch, wi_f, wo_f):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so = scratch
+    @_loops(key)
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
         dev = (dev_i, dev_o, bits_i, bits_o)
         oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
@@ -1078,8 +1085,10 @@ def projected_kernel(kind, dtype=np.float64):
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
 
-    def kernel(start, stop, wi, wo, *args):
-        loops(start, stop, wi, wo, *args, _scratch(F, wi, wo), _flat_py(wi), _flat_py(wo))
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
+        _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out,
+                    _scratch(F, 6, wi, wo))
     return kernel
 
 
@@ -1089,10 +1098,11 @@ def pdf_kernel(kind, dtype=np.float64):
     density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair; returns the
     largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`)."""
     F = np.dtype(dtype).type
+    key = ("pdf", kind, np.dtype(dtype).name)
 
-    @_loops(F)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch, wi_f, wo_f):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so = scratch
+    @_loops(key)
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
         dev = (dev_i, dev_o, bits_i, bits_o)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
@@ -1100,10 +1110,13 @@ def pdf_kernel(kind, dtype=np.float64):
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
             top_i, top_o = _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
                                             dev, top_i, top_o, out, j0, False)
-        return _deviation(top_i, dev_i), _deviation(top_o, dev_o)
+        return top_i, top_o
 
-    def kernel(start, stop, wi, wo, *args):
-        return loops(start, stop, wi, wo, *args, _scratch(F, wi, wo), _flat_py(wi), _flat_py(wo))
+    @_jit
+    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
+        scratch = _scratch(F, 6, wi, wo)
+        top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch)
+        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
     return kernel
 
 
@@ -1113,11 +1126,11 @@ def eval_kernel(kind, dtype=np.float64):
     writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2);
     returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
+    key = ("eval", kind, np.dtype(dtype).name)
 
-    @_loops(F)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch,
-              wi_f, wo_f):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so = scratch
+    @_loops(key)
+    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch):
+        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
         dev = (dev_i, dev_o, bits_i, bits_o)
         top_i, top_o = np.int64(0), np.int64(0)
         for j0 in range(start, stop, BLOCK):
@@ -1126,11 +1139,14 @@ def eval_kernel(kind, dtype=np.float64):
             top_i, top_o = _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn,
                                             rows, True, dev, top_i, top_o, rows[1], 0)
             _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
-        return _deviation(top_i, dev_i), _deviation(top_o, dev_o)
+        return top_i, top_o
 
+    @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        return loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out.reshape(-1),
-                     _scratch(F, wi, wo), _flat_py(wi), _flat_py(wo))
+        scratch = _scratch(F, 6, wi, wo)
+        top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx,
+                                   tv, out.reshape(out.size), scratch)
+        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
     return kernel
 
 
