@@ -70,3 +70,14 @@ def test_results_into_reused_outputs_equal_those_into_passed_ones():
             np.testing.assert_array_equal(a, b)
         del got
         gc.collect()
+
+
+def test_a_bad_cache_size_is_named(monkeypatch):
+    monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", "lots")
+    with pytest.raises(ValueError, match="MICROFACET_OUTPUT_CACHE_MB"):
+        _buffers._limit()
+    monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", "-1")
+    with pytest.raises(ValueError, match="MICROFACET_OUTPUT_CACHE_MB"):
+        _buffers._limit()
+    monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", "0.5")
+    assert _buffers._limit() == 1 << 19

@@ -55,7 +55,19 @@ class _Cache:
             self.free, self.kept = {}, 0
 
 
-_cache = _Cache(int(float(os.environ.get("MICROFACET_OUTPUT_CACHE_MB", "1024")) * (1 << 20)))
+def _limit() -> int:
+    """``MICROFACET_OUTPUT_CACHE_MB`` in bytes (``ValueError`` naming it unless it is a number >= 0)."""
+    text = os.environ.get("MICROFACET_OUTPUT_CACHE_MB", "1024")
+    try:
+        mb = float(text)
+    except ValueError:
+        mb = -1.0
+    if not mb >= 0:
+        raise ValueError(f"MICROFACET_OUTPUT_CACHE_MB must be a number of MiB >= 0 (0: no cache), got {text!r}")
+    return int(mb * (1 << 20))
+
+
+_cache = _Cache(_limit())
 
 
 def empty(shape, dtype) -> np.ndarray:
