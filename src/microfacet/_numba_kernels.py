@@ -1053,11 +1053,12 @@ def _call_loops_impl(key, *args):
 
 
 @_jit
-def _scratch(F, n_rows, wi, wo):
-    """What the block loops of the eval, pdf and projected kernels use, made once per call:
-    ``n_rows`` scratch rows of ``F``, the deviation rows of ``wi``, ``wo`` and their integer views
-    (:func:`_bits`), copy buffers for non-contiguous inputs (:func:`_flat_rows`) and flat views."""
-    buf, dev = np.empty((n_rows, BLOCK), F), np.empty((2, BLOCK), F)
+def _scratch(F, wi, wo):
+    """What the block loops of the eval, pdf and projected kernels use, made once per call: the
+    six scratch rows of ``F`` (:func:`_projected_block`), the deviation rows of ``wi``, ``wo`` and their
+    integer views (:func:`_bits`), copy buffers for non-contiguous inputs (:func:`_flat_rows`) and
+    flat views."""
+    buf, dev = np.empty((6, BLOCK), F), np.empty((2, BLOCK), F)
     rows = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5])
     return (rows, dev[0], dev[1], _bits(dev[0])[0], _bits(dev[1])[0], np.empty(3 * BLOCK, wi.dtype),
             np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo))
@@ -1088,7 +1089,7 @@ def projected_kernel(kind, dtype=np.float64):
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
         _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out,
-                    _scratch(F, 6, wi, wo))
+                    _scratch(F, wi, wo))
     return kernel
 
 
@@ -1114,7 +1115,7 @@ def pdf_kernel(kind, dtype=np.float64):
 
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
-        scratch = _scratch(F, 6, wi, wo)
+        scratch = _scratch(F, wi, wo)
         top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch)
         return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
     return kernel
@@ -1143,7 +1144,7 @@ def eval_kernel(kind, dtype=np.float64):
 
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
-        scratch = _scratch(F, 6, wi, wo)
+        scratch = _scratch(F, wi, wo)
         top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx,
                                    tv, out.reshape(out.size), scratch)
         return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])

@@ -728,7 +728,7 @@ if _kernels.AVAILABLE:
 
     @_loops
     def _footprint_loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
-                         exo, ex_s, wr_s, acc_s, r0_s, r1_s, rw_s, rfull_s):  # pragma: no cover - compiled
+                         exo, ex, wr, acc, r0, r1, rw, rfull):  # pragma: no cover - compiled
         """Per footprint ``p`` of ``start:stop``, into ``out[p]``: ``(D_P(h), A_P(i), V_P(i),
         A_P(o), V_P(o))`` of the lobes of :func:`footprint_lobes` (same window, same
         weights), looping over the window instead of padding it; ``E`` the flat raw lobe
@@ -766,15 +766,13 @@ if _kernels.AVAILABLE:
             L = x1 - x0 + 1
             # footprint weights exp(-q/2): ex[jx] ey when uncorrelated (sxy = 0)
             ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
-            ex, wr, acc = ex_s[:L], wr_s[:L], acc_s[:6 * L]
-            r0, r1, rw, rfull = r0_s, r1_s, rw_s, rfull_s
             for jx in range(L):
                 du = (x0 + jx + 0.5) / nx - cu
                 ex[jx] = math.exp(ax * du * du)
             hz, xh, yh, inv4 = _half_slope(h[p])
             qp = qmax if hz > 0.0 else 0.0              # no density below the horizon
             ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
-            acc[:] = 0.0
+            acc[:6 * L] = 0.0
             ys = y0
             while ys <= y1:
                 ye, wys, by = _segment(ys, y1, ny, B)
