@@ -16,6 +16,7 @@ def _address(a):
 
 @pytest.fixture(autouse=True)
 def _empty_cache():
+    gc.collect()            # else earlier tests' garbage, collected mid-test, returns its outputs to the cache
     kernels.release_outputs()
     yield
     kernels.release_outputs()
