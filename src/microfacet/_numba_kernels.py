@@ -496,7 +496,7 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m):
 
 @_inline
 def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay, rho, xn, yn, rows, measure,
-                     dev, top_i, top_o, dst, od, oh_row=True):
+                     top_i, top_o, dst, od, oh_row=True):
     """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
@@ -505,10 +505,9 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
     0 where invalid (see ``_projected_numpy``). Uses the six scratch ``rows`` (1-D arrays of ``F``,
     made once per kernel call: an array view made per block costs two atomic reference counts).
     Returns ``(top_i, top_o)`` updated, if ``measure``, with the unit-length deviations of ``wi`` and
-    ``wo`` (:func:`_deviation_at`, as :func:`_max_bits`): in float64 their largest bits, taken in the
-    loop (Beckmann eval 10 % faster than the rows and a pass over them); in float32 through the rows
-    ``dev = (dev_i, dev_o, bits_i, bits_o)`` and :func:`_max_bits` (int64 lanes in the loop made
-    float32 eval 13-30 % slower). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
+    ``wo``: the largest :func:`_bits_of` of their :func:`_deviation_at`, taken in this loop in lanes of
+    ``F``'s width (rows and a pass over them, as the sample kernel's, took Beckmann eval 8-10 %
+    longer; int64 lanes in the float32 loop, 13-30 %). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
     s1 = math.sqrt(F(1.0) - rho * rho)
@@ -518,11 +517,9 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
         ji, jo = oi + 3 * k, oo + 3 * k
         ix, iy, iz = F(wi[ji]), F(wi[ji + 1]), F(wi[ji + 2])
         ox, oy, oz = F(wo[jo]), F(wo[jo + 1]), F(wo[jo + 2])
-        if measure & _of_type(F, True, False):      # float64: the largest bits, in this loop
+        if measure:
             top_i = max(top_i, _bits_of(_deviation_at(F, wi, ji)))
             top_o = max(top_o, _bits_of(_deviation_at(F, wo, jo)))
-        elif measure:                                 # float32: to rows (int64 lanes here halve its width)
-            dev[0][k], dev[1][k] = _deviation_at(F, wi, ji), _deviation_at(F, wo, jo)
         hx, hy, hz = ix + ox, iy + oy, iz + oz
         n2 = hx * hx + hy * hy + hz * hz
         if oh_row:
@@ -550,8 +547,6 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
         _smith_block_post(kind, shadowing, a_r, w_r, e_r, co_r, m)
         for k in range(m):
             dst[od + k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
-    if measure & _of_type(F, False, True):
-        top_i, top_o = _max_bits(dev[2], m, top_i), _max_bits(dev[3], m, top_o)
     return top_i, top_o
 
 
@@ -931,14 +926,21 @@ def _bits_impl(row):
 
 
 def _bits_of(x):
-    """The integer bits of a float64 or float32 ``x`` (as int64; see :data:`_INF_BITS`)."""
+    """The integer bits of a float64 or float32 ``x`` (int64 or int32, as wide as ``x``; see
+    :data:`_INF_BITS`)."""
 
 
 @numba.extending.overload(_bits_of, inline="always")
 def _bits_of_impl(x):
     if x == numba.types.float32:
-        return lambda x: np.int64(np.float32(x).view(np.int32))
+        return lambda x: np.float32(x).view(np.int32)
     return lambda x: np.float64(x).view(np.int64)
+
+
+@_inline
+def _no_bits(F):
+    """The start (0) of a maximum of :func:`_bits_of` of ``F`` values."""
+    return _of_type(F, np.int64(0), np.int32(0))
 
 
 @_inline
@@ -953,9 +955,9 @@ def _max_bits(bits, m, top):
 
 @_jit
 def _deviation(top, row):
-    """The float whose bits are ``top`` (:func:`_max_bits`) as float64, ``inf`` for NaN and inf;
-    plus :data:`_SLACK32` for a float32 ``row`` (then an upper bound of the exact deviation, where
-    that is below 1/2)."""
+    """The float whose bits are ``top`` (:func:`_max_bits`, or a maximum of :func:`_bits_of`) as float64,
+    ``inf`` for NaN and inf; plus :data:`_SLACK32` for a float32 ``row`` (then an upper bound of the
+    exact deviation, where that is below 1/2). ``row[0]`` is overwritten."""
     bits, inf_bits, slack = _bits(row)
     if top >= inf_bits:
         return math.inf
@@ -1055,13 +1057,11 @@ def _call_loops_impl(key, *args):
 @_jit
 def _scratch(F, wi, wo):
     """What the block loops of the eval, pdf and projected kernels use, made once per call: the
-    six scratch rows of ``F`` (:func:`_projected_block`), the deviation rows of ``wi``, ``wo`` and their
-    integer views (:func:`_bits`), copy buffers for non-contiguous inputs (:func:`_flat_rows`) and
-    flat views."""
-    buf, dev = np.empty((6, BLOCK), F), np.empty((2, BLOCK), F)
+    six scratch rows of ``F`` (:func:`_projected_block`), copy buffers for non-contiguous inputs
+    (:func:`_flat_rows`) and flat views."""
+    buf = np.empty((6, BLOCK), F)
     rows = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5])
-    return (rows, dev[0], dev[1], _bits(dev[0])[0], _bits(dev[1])[0], np.empty(3 * BLOCK, wi.dtype),
-            np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo))
+    return rows, np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo)
 
 
 @functools.cache
@@ -1075,14 +1075,13 @@ def projected_kernel(kind, dtype=np.float64):
 
     @_loops(key)
     def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
-        dev = (dev_i, dev_o, bits_i, bits_o)
+        rows, si, so, wi_f, wo_f = scratch
         oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
             _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, False,
-                             dev, np.int64(0), np.int64(0), s_out, j0)
+                             _no_bits(F), _no_bits(F), s_out, j0)
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
 
@@ -1103,21 +1102,21 @@ def pdf_kernel(kind, dtype=np.float64):
 
     @_loops(key)
     def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
-        dev = (dev_i, dev_o, bits_i, bits_o)
-        top_i, top_o = np.int64(0), np.int64(0)
+        rows, si, so, wi_f, wo_f = scratch
+        top_i, top_o = _no_bits(F), _no_bits(F)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
             top_i, top_o = _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
-                                            dev, top_i, top_o, out, j0, False)
+                                            top_i, top_o, out, j0, False)
         return top_i, top_o
 
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
         scratch = _scratch(F, wi, wo)
         top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch)
-        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
+        row = scratch[0][0]                          # (free now: _deviation's buffer)
+        return _deviation(np.int64(top_i), row), _deviation(np.int64(top_o), row)
     return kernel
 
 
@@ -1131,14 +1130,13 @@ def eval_kernel(kind, dtype=np.float64):
 
     @_loops(key)
     def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch):
-        rows, dev_i, dev_o, bits_i, bits_o, si, so, wi_f, wo_f = scratch
-        dev = (dev_i, dev_o, bits_i, bits_o)
-        top_i, top_o = np.int64(0), np.int64(0)
+        rows, si, so, wi_f, wo_f = scratch
+        top_i, top_o = _no_bits(F), _no_bits(F)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
             top_i, top_o = _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn,
-                                            rows, True, dev, top_i, top_o, rows[1], 0)
+                                            rows, True, top_i, top_o, rows[1], 0)
             _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
         return top_i, top_o
 
@@ -1147,7 +1145,8 @@ def eval_kernel(kind, dtype=np.float64):
         scratch = _scratch(F, wi, wo)
         top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx,
                                    tv, out.reshape(out.size), scratch)
-        return _deviation(top_i, scratch[1]), _deviation(top_o, scratch[2])
+        row = scratch[0][0]                          # (free now: _deviation's buffer)
+        return _deviation(np.int64(top_i), row), _deviation(np.int64(top_o), row)
     return kernel
 
 
