@@ -862,27 +862,48 @@ if _kernels.AVAILABLE:
         _kernels._launch_ranges(_lobe_range, h.shape[0], out, E, W, h, wi, wo, cost=W.size)
         return out
 
-    @numba.njit(cache=True, parallel=True, nogil=True)
-    def _footprint_merge(grid, nx, ny, ks2x, ks2y, cutoff, fp):  # pragma: no cover - compiled
-        """``W``-weighted average ``(P, 5)`` of the moments ``grid`` ``(ny * nx, 5)`` over
-        each footprint's window (the weights of :func:`footprint_lobes`)."""
-        P = fp.shape[0]
-        out = np.zeros((P, 5))
-        for p in numba.prange(P):
+    @_kernel
+    def _merge_range(start, stop, out, grid, nx, ny, ks2x, ks2y, cutoff, fp):  # pragma: no cover - compiled
+        """Per footprint ``p`` of ``start:stop``, into ``out[p]``: the ``W``-weighted average of the flat
+        moments ``grid`` ``(ny * nx * 5,)`` over its window (the weights of :func:`footprint_lobes`,
+        factored into per-column and per-row exponentials where the footprint is uncorrelated, as in
+        :func:`_footprint_loops`)."""
+        L = 1
+        for p in range(start, stop):
+            x0, x1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:8]
+            L = max(L, x1 - x0 + 1)
+        ex, xw = np.empty(L), np.empty(L, np.int64)
+        for p in range(start, stop):
             cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
-            wsum = 0.0
+            ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
+            for jx in range(x1 - x0 + 1):
+                du = (x0 + jx + 0.5) / nx - cu
+                ex[jx], xw[jx] = math.exp(ax * du * du), 5 * ((x0 + jx) % nx)
+            wsum, m0, m1, m2, m3, m4 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
             for iy in range(y0, y1 + 1):
                 dv = (iy + 0.5) / ny - cv
-                for ix in range(x0, x1 + 1):
-                    du = (ix + 0.5) / nx - cu
-                    w = math.exp(-0.5 * (syy * du * du + sxx * dv * dv - 2.0 * sxy * du * dv) / det)
+                cross, ey, row = axy * dv, math.exp(ay * dv * dv), 5 * nx * (iy % ny)
+                for jx in range(x1 - x0 + 1):
+                    if cross == 0.0:
+                        w = ex[jx] * ey
+                    else:       # one exp: the factors may over/underflow for thin footprints
+                        du = (x0 + jx + 0.5) / nx - cu
+                        w = math.exp(ax * du * du + ay * dv * dv + cross * du)
+                    k = row + xw[jx]
                     wsum += w
-                    k = (iy % ny) * nx + (ix % nx)
-                    for m in range(5):
-                        out[p, m] += w * grid[k, m]
+                    m0, m1, m2 = m0 + w * grid[k], m1 + w * grid[k + 1], m2 + w * grid[k + 2]
+                    m3, m4 = m3 + w * grid[k + 3], m4 + w * grid[k + 4]
             if wsum > 0:
-                for m in range(5):
-                    out[p, m] /= wsum
+                out[p, 0], out[p, 1], out[p, 2] = m0 / wsum, m1 / wsum, m2 / wsum
+                out[p, 3], out[p, 4] = m3 / wsum, m4 / wsum
+
+    def _footprint_merge(grid, nx, ny, ks2x, ks2y, cutoff, fp):
+        """``(P, 5)`` averages of :func:`_merge_range` over all footprints ``fp``, as tasks on the kernels'
+        thread pool (:func:`microfacet.kernels._launch_ranges`)."""
+        out = np.zeros((fp.shape[0], 5))
+        cost = int(_window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) / max(fp.shape[0], 1)) + 1
+        _kernels._launch_ranges(_merge_range, fp.shape[0], out, grid.reshape(-1), nx, ny, ks2x, ks2y, cutoff, fp,
+                                cost=cost)
         return out
 else:  # pragma: no cover - without numba
     _footprint_sums = _footprint_merge = _lobe_sums = _area_excess = None
@@ -896,9 +917,12 @@ def _window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) -> float:
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
     """Merged-lobe moments ``(P, 5)`` of Sec. 4.2.2 for each footprint (MIP level of
     ``ms.mip_level``, weights of that level's grid)."""
-    flat = np.ascontiguousarray(cov).reshape(-1, 4)
-    uniq, inverse = np.unique(flat, axis=0, return_inverse=True)   # images often share footprints
-    levels = np.array([ms.mip_level(u.reshape(2, 2)) for u in uniq])[inverse.reshape(-1)]
+    flat = np.asarray(cov).reshape(-1, 4)
+    if flat.shape[0] and np.all(flat == flat[:1]):                 # one footprint shape (a broadcast)
+        levels = np.full(flat.shape[0], ms.mip_level(flat[0].reshape(2, 2)))
+    else:                                                          # images often share footprints
+        uniq, inverse = np.unique(flat, axis=0, return_inverse=True)
+        levels = np.array([ms.mip_level(u.reshape(2, 2)) for u in uniq])[inverse.reshape(-1)]
     merged = np.empty((c.shape[0], 5))
     for lev in np.unique(levels):
         sel = np.flatnonzero(levels == lev)
