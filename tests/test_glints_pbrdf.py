@@ -355,9 +355,12 @@ def test_footprint_kernel_matches_reference_on_near_mirror_lobes():
     wi, wo = _upper(rng, P), _upper(rng, P)
     wi[:50, 2] *= 1e-3
     wi[:50] /= np.linalg.norm(wi[:50], axis=-1, keepdims=True)
-    for exact, cov in ((True, covs), (False, covs), (False, covs[P // 3 + 1])):     # one shared (2, 2) too
-        ref = eval_cos_footprints(ms, centers, cov, wi, wo, exact=exact, backend="numpy")
-        got = eval_cos_footprints(ms, centers, cov, wi, wo, exact=exact, backend="numba")
+    # one shared (2, 2) cov; one shared wo (an orthographic view: its areas tabulated, the light's
+    # erfc only for the lobes whose area toward it is not linear)
+    for exact, cov, view in ((True, covs, wo), (False, covs, wo), (False, covs[P // 3 + 1], wo),
+                             (True, covs, wo[7]), (False, covs, wo[7])):
+        ref = eval_cos_footprints(ms, centers, cov, wi, view, exact=exact, backend="numpy")
+        got = eval_cos_footprints(ms, centers, cov, wi, view, exact=exact, backend="numba")
         assert (ref > 0).mean() > 0.05
         np.testing.assert_allclose(got, ref, rtol=1e-11, atol=1e-14 * np.abs(ref).max())
     # the area shortcut is exact to rounding: E[s+] - c <= sigma phi(t) / (1 + t^2)
