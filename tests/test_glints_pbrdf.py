@@ -334,6 +334,32 @@ def test_cli_glints_render(tmp_path, capsys):
     assert "--light" in err and "missing.npz" in err and "Traceback" not in err
 
 
+def test_footprint_kernel_matches_reference_on_footprints_wider_than_its_gathering():
+    """Footprints with more lobes whose area toward the light is not linear than the compiled
+    kernel gathers at once (``_GATHER``: it sums and empties its list when full) give the NumPy
+    reference's image: windows of ~150 000 lobes (wrapping around a 256^2 map), a grazing light,
+    one shared view."""
+    from microfacet.glints import pbrdf as pb
+    if pb._footprint_sums is None:
+        pytest.skip("compiled kernels disabled")
+    ms = Microsurface.from_normal_map(scratched_normal_map(256, scratches=40, seed=2))
+    rng = np.random.default_rng(4)
+    centers, cov = rng.random((3, 2)), np.eye(2) * 0.25**2
+    wi = np.array([[0.96, 0.2, 0.02]] * 3) / np.linalg.norm([0.96, 0.2, 0.02])
+    wo = np.array([0.0, -0.5, 0.8]) / np.linalg.norm([0.0, -0.5, 0.8])
+    idx, W = footprint_lobes(ms.grid, centers, np.broadcast_to(cov, (3, 2, 2)), ms.cutoff)
+    E = ms.lobe_moments[idx]
+    c = wi[:, None, 2] - wi[:, None, 0] * E[..., 0] - wi[:, None, 1] * E[..., 1]
+    var = (wi[:, None, 0] ** 2 * (E[..., 2] - E[..., 0] ** 2) + wi[:, None, 1] ** 2 * (E[..., 3] - E[..., 1] ** 2)
+           + 2 * wi[:, None, 0] * wi[:, None, 1] * (E[..., 4] - E[..., 0] * E[..., 1]))
+    curved = (W > 0) & ~((c > 0) & (c * c >= pb._AREA_T2 * var))
+    assert curved.sum(axis=1).min() > 2 * pb._GATHER                # the list fills at least twice
+    ref = eval_cos_footprints(ms, centers, cov, wi, wo, backend="numpy")
+    got = eval_cos_footprints(ms, centers, cov, wi, wo, backend="numba")
+    assert np.all(ref > 0)
+    np.testing.assert_allclose(got, ref, rtol=1e-11, atol=0)
+
+
 def test_footprint_kernel_matches_reference_on_near_mirror_lobes():
     """The compiled kernel's shortcuts (separable footprint weights, projected area ``c``
     where ``c / sigma >= 8``) leave the sums equal to the NumPy reference: near-mirror

@@ -808,7 +808,7 @@ if _kernels.AVAILABLE:
             qp = qmax if hz > 0.0 else 0.0              # no density below the horizon
             ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
             acc[:6 * L] = 0.0
-            m = 0
+            m, excess = 0, 0.0                       # the gathered lobes of _add_run, their sum
             ys = y0
             while ys <= y1:
                 ye, wys, by = _segment(ys, y1, ny, B)
@@ -841,6 +841,8 @@ if _kernels.AVAILABLE:
                     for r in range(n_runs):
                         k0, j0, n = row + rw[r], r0[r] - x0, r1[r] - r0[r] + 1
                         if rfull[r] and tab:        # constant tab: a loop without the choice
+                            if m + n > curved[0].size:      # full: sum what it holds
+                                excess, m = excess + _excess_sum(curved, m), 0
                             m = _add_run(E, k0, j0, n, wr, acc, xh, yh, qp, ix_, iy_, iz_, ox_, oy_, oz_, True, exo,
                                          curved, m)
                         elif rfull[r]:
@@ -850,23 +852,28 @@ if _kernels.AVAILABLE:
                             _add_linear(E, k0, j0, n, wr, acc, ix_, iy_, iz_, ox_, oy_, oz_)
                 ys = ye + 1
             wsum, s0, s1, s2, s3, s4 = _column_sums(acc, L)
-            s2 += _excess_sum(curved, m)
+            s2 += excess + _excess_sum(curved, m)
             if wsum > 0:
                 out[p, 0], out[p, 1], out[p, 2] = s0 * inv4 / wsum, s1 / wsum, s2 / wsum
                 out[p, 3], out[p, 4] = s3 / wsum, s4 / wsum
+
+    #: Most lobes :func:`_footprint_range` gathers (:func:`_add_run`'s ``curved``, 3 x 512 KB) before
+    #: it sums them, so that a footprint over a large part of a map takes bounded scratch.
+    _GATHER = 1 << 16
 
     @_kernel
     def _footprint_range(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
                          exo):  # pragma: no cover - compiled
         """:func:`_footprint_loops` over the footprints ``start:stop``, with scratch for the widest
         of their windows (``L`` lobes: ``6 L`` accumulators, ``L // B + 2`` runs per block row) and
-        the largest (``K`` lobes: :func:`_add_run`'s ``curved``, where ``exo`` is tabulated)."""
+        :func:`_add_run`'s ``curved`` where ``exo`` is tabulated: the largest window's lobes, at most
+        :data:`_GATHER` (but a row: the loops sum it when full)."""
         L, K = 1, 1
         for p in range(start, stop):
             x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:10]
             L, K = max(L, x1 - x0 + 1), max(K, (x1 - x0 + 1) * (y1 - y0 + 1))
         nr = L // B + 2
-        K = K if exo.size > 0 else 0                 # (only with the tabulated view)
+        K = max(L, min(K, _GATHER)) if exo.size > 0 else 0     # (only with the tabulated view)
         _footprint_loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo,
                          np.empty(L), np.empty(L), np.empty(6 * L), np.empty(nr, np.int64), np.empty(nr, np.int64),
                          np.empty(nr, np.int64), np.empty(nr, np.bool_),
