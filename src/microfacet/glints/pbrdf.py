@@ -781,7 +781,8 @@ if _kernels.AVAILABLE:
         areas are unchanged; ``prune = inf`` visits every lobe. ``exo``: the lobes'
         :func:`_area_excess` toward ``wo`` when every footprint has the same ``wo`` (an
         orthographic view: one erfc per lobe instead of one per lobe and pixel), else
-        empty.
+        empty; ``curved``, the scratch where :func:`_add_run` gathers the lobes whose area toward
+        ``i`` is not linear.
 
         Each row of the window is added in runs of consecutive lobes of the same kind
         (pruned or not), column by column into ``6 L`` accumulators (:func:`_add_run`,
@@ -866,8 +867,8 @@ if _kernels.AVAILABLE:
                          exo):  # pragma: no cover - compiled
         """:func:`_footprint_loops` over the footprints ``start:stop``, with scratch for the widest
         of their windows (``L`` lobes: ``6 L`` accumulators, ``L // B + 2`` runs per block row) and
-        :func:`_add_run`'s ``curved`` where ``exo`` is tabulated: the largest window's lobes, at most
-        :data:`_GATHER` (but a row: the loops sum it when full)."""
+        :func:`_add_run`'s ``curved`` where ``exo`` is tabulated: room for the largest window's lobes,
+        at most :data:`_GATHER` but at least a row's (the loops sum the list when it is full)."""
         L, K = 1, 1
         for p in range(start, stop):
             x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:10]
