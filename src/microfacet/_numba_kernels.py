@@ -453,17 +453,23 @@ def _interp(tx, tv, ch, c):
     return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
 
 
-@_inline
 def _s_of(F, s_row, post, k):
     """The factor ``s`` of pair ``k`` of :func:`_fresnel_block`: ``s_row[k]``, or where ``post`` holds the
     rows ``(v_o, v_i, e, f, c_o)`` that :func:`_projected_block` leaves for a Beckmann block with
     shadowing, ``D G / (4 z_o) [/ z_i]`` from them (:func:`_smith_post`, :func:`_ndf_post`,
     :func:`_projected_over`; :func:`_beckmann_eval_post`)."""
-    if post is None:
-        return s_row[k]
-    v_o, v_i, e, f, co = post
-    w = _smith_post(F, v_o[k], v_i[k], co[k])[1]
-    return _projected_over(F, BECKMANN, _ndf_post(F, BECKMANN, e[k]), f[k], F(1.0), w)
+
+
+@numba.extending.overload(_s_of, inline="always")
+def _s_of_impl(F, s_row, post, k):
+    if isinstance(post, numba.types.NoneType):
+        return lambda F, s_row, post, k: s_row[k]
+
+    def s_of(F, s_row, post, k):
+        v_o, v_i, e, f, co = post
+        w = _smith_post(F, v_o[k], v_i[k], co[k])[1]
+        return _projected_over(F, BECKMANN, _ndf_post(F, BECKMANN, e[k]), f[k], F(1.0), w)
+    return s_of
 
 
 @_inline
