@@ -26,7 +26,7 @@ shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
 quotients where that is exact algebra (each docstring says how). ``error_model="numpy"``:
 a division by zero gives inf/NaN (then masked), as in NumPy, instead of raising. fastmath
-is off in float64 but for ``contract`` in :func:`_smith_block_post` and :func:`_beckmann_eval_post` (the kernels equal the reference to 1e-12; ``contract``/``arcp``/``nsz``
+is off in float64 but for ``contract`` in :func:`_smith_block_post` (the kernels equal the reference to 1e-12; ``contract``/``arcp``/``nsz``
 moved some sampled GGX directions by 2e-8 and saved ~10 %); the float32 kernels take
 ``arcp``, ``afn`` and ``contract`` (:data:`_jit_float32`: eval 1.25x faster), which the
 helpers, inlined in Numba's IR (:data:`_inline`), inherit. Inlining doubled the cold
@@ -453,71 +453,50 @@ def _interp(tx, tv, ch, c):
     return (tv[hi, ch] - tv[lo, ch]) / (tx[hi] - tx[lo]) * (c - tx[lo]) + tv[lo, ch]
 
 
-def _s_of(F, s_row, post, k):
-    """The factor ``s`` of pair ``k`` of :func:`_fresnel_block`: ``s_row[k]``, or where ``post`` holds the
-    rows ``(v_o, v_i, e, f, c_o)`` that :func:`_projected_block` leaves for a Beckmann block with
-    shadowing, ``D G / (4 z_o) [/ z_i]`` from them (:func:`_smith_post`, :func:`_ndf_post`,
-    :func:`_projected_over`; :func:`_beckmann_eval_post`)."""
-
-
-@numba.extending.overload(_s_of, inline="always")
-def _s_of_impl(F, s_row, post, k):
-    if isinstance(post, numba.types.NoneType):
-        return lambda F, s_row, post, k: s_row[k]
-
-    def s_of(F, s_row, post, k):
-        v_o, v_i, e, f, co = post
-        w = _smith_post(F, v_o[k], v_i[k], co[k])[1]
-        return _projected_over(F, BECKMANN, _ndf_post(F, BECKMANN, e[k]), f[k], F(1.0), w)
-    return s_of
-
-
 @_inline
-def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m, post=None):
-    """``out[o + 3 k + ch] = F_ch(c_row[k]) * s_k`` for ``k < m`` (a flat output, from its
-    element ``o``; ``s_k`` is ``s_row[k]``, or computed here from ``post``: :func:`_s_of`): the
-    Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv`` the
-    :class:`~microfacet.fresnel.Tabulated` grid and values), one loop over ``k`` per kind (the
-    choice outside it: one loop with the choice inside, which LLVM does not unswitch, took GGX Cu
-    eval 4.7 -> 18 ms and float32 2.0 -> 6.0 ms per 10^6 pairs on one core) with the three channels
-    inside, writing the output as it goes (interleaved stores; rows and a second pass to interleave
-    them cost GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms
-    vectorize."""
+def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m):
+    """``out[o + 3 k + ch] = F_ch(c_row[k]) * s_row[k]`` for ``k < m`` (a flat output, from its
+    element ``o``): the Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]``
+    ``k``; ``tx``, ``tv`` the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
+    over ``k`` per kind (the choice outside it: one loop with the choice inside, which LLVM
+    does not unswitch, took GGX Cu eval 4.7 -> 18 ms and float32 2.0 -> 6.0 ms per 10^6 pairs
+    on one core) with the three channels inside, writing the
+    output as it goes (interleaved stores; rows and a second pass to interleave them cost
+    GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms vectorize."""
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
     q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
     o = max(o, 0)                                    # (see _flat_rows)
     if fk == IDEAL:
         for k in range(m):
-            s = _s_of(F, s_row, post, k)
+            s = s_row[k]
             out[o + 3 * k], out[o + 3 * k + 1], out[o + 3 * k + 2] = s, s, s
     elif fk == SCHLICK:
         for k in range(m):
-            c, s = c_row[k], _s_of(F, s_row, post, k)
+            c, s = c_row[k], s_row[k]
             out[o + 3 * k] = _schlick(F, p0, c) * s
             out[o + 3 * k + 1] = _schlick(F, p1, c) * s
             out[o + 3 * k + 2] = _schlick(F, p2, c) * s
     elif fk == DIELECTRIC:
         for k in range(m):
-            c, s = c_row[k], _s_of(F, s_row, post, k)
+            c, s = c_row[k], s_row[k]
             out[o + 3 * k] = _dielectric(F, p0, c) * s
             out[o + 3 * k + 1] = _dielectric(F, p1, c) * s
             out[o + 3 * k + 2] = _dielectric(F, p2, c) * s
     elif fk == CONDUCTOR:
         for k in range(m):
-            c, s = c_row[k], _s_of(F, s_row, post, k)
+            c, s = c_row[k], s_row[k]
             out[o + 3 * k] = _conductor(F, p0, q0, c) * s
             out[o + 3 * k + 1] = _conductor(F, p1, q1, c) * s
             out[o + 3 * k + 2] = _conductor(F, p2, q2, c) * s
     else:
         for k in range(m):
-            s = _s_of(F, s_row, post, k)
             for ch in range(3):
-                out[o + 3 * k + ch] = _interp(tx, tv, ch, c_row[k]) * s
+                out[o + 3 * k + ch] = _interp(tx, tv, ch, c_row[k]) * s_row[k]
 
 
 @_inline
 def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay, rho, xn, yn, rows, measure,
-                     top_i, top_o, dst, od, oh_row=True, post=True):
+                     top_i, top_o, dst, od, oh_row=True):
     """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
@@ -564,25 +543,11 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
             a_r[k], e_r[k], f_r[k], co_r[k] = area, e, f, co
             if shadowing:
                 w_r[k] = w
-    if kind != GGX and post:
+    if kind != GGX:
         _smith_block_post(kind, shadowing, a_r, w_r, e_r, co_r, m)
         for k in range(m):
             dst[od + k] = _projected_over(F, kind, e_r[k], f_r[k], F(1.0), w_r[k] if shadowing else a_r[k])
     return top_i, top_o
-
-
-@_jit_contract
-def _beckmann_eval_post(fk, fp, tx, tv, oh, rows, out, o, m):
-    """float64 Beckmann eval with shadowing, after :func:`_projected_block` (``post=False``): its Smith
-    terms, the NDF's ``exp``, ``D G / (4 z_o) [/ z_i]`` and the Fresnel term in one loop
-    (:func:`_fresnel_block` with ``post = rows``, the block's ``(v_o, v_i, e, f, c_o)``): the loop's
-    ``exp`` and ``Lambda`` polynomials (multiply-adds) overlap the Fresnel term's roots and quotients.
-    One core, per 10^6 pairs, against the Smith loop, a loop for the quotient and the Fresnel loop
-    (alternated, medians of 3 processes): Cu 6.3 -> 5.5 ms, ideal -12 to -21 %, dielectric -4 to -7 %; Schlick
-    (multiply-adds only) took 7 % longer so, a tabulated term (a scalar search) 16 %, float32 13 %:
-    those keep the loops apart. ``contract``, as :func:`_smith_block_post` (the Fresnel term's
-    roundings change by an ulp; the kernels' tests against the reference hold at 1e-12)."""
-    _fresnel_block(_float_type(oh), fk, fp, tx, tv, oh, oh, out, o, m, rows)
 
 
 @_jit_contract
@@ -1170,13 +1135,9 @@ def eval_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            fused = (kind != GGX) & shadowing & _of_type(F, True, False) & (fk != SCHLICK) & (fk != TABULATED)
             top_i, top_o = _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn,
-                                            rows, True, top_i, top_o, rows[1], 0, True, not fused)
-            if fused:
-                _beckmann_eval_post(fk, fp, tx, tv, rows[0], rows[1:], out, 3 * j0, m)
-            else:
-                _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
+                                            rows, True, top_i, top_o, rows[1], 0)
+            _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
         return top_i, top_o
 
     @_jit
