@@ -761,6 +761,32 @@ if _kernels.AVAILABLE:
         return (acc[0:6 * L:6].sum(), acc[1:6 * L:6].sum(), acc[2:6 * L:6].sum(), acc[3:6 * L:6].sum(),
                 acc[4:6 * L:6].sum(), acc[5:6 * L:6].sum())
 
+    @_inline
+    def _column_weights(ex, L, x0, nx, cu, sxx, syy, sxy, det):  # pragma: no cover - compiled
+        """The footprint weights ``exp(-q / 2)`` (:func:`footprint_lobes`) of a window's columns:
+        ``ex[jx] = exp(ax du^2)`` for its ``L`` columns from ``x0``; returns ``(ax, ay, axy)`` of
+        ``-q / 2 = ax du^2 + ay dv^2 + axy du dv`` (covariance ``sxx, syy, sxy``, determinant ``det``)."""
+        ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
+        for jx in range(L):
+            du = (x0 + jx + 0.5) / nx - cu
+            ex[jx] = math.exp(ax * du * du)
+        return ax, ay, axy
+
+    @_inline
+    def _row_weights(wr, ex, L, x0, nx, cu, ax, ay, axy, dv):  # pragma: no cover - compiled
+        """``wr[:L]``: the footprint weights of the window row at ``dv`` (:func:`_column_weights`):
+        ``ex[jx] exp(ay dv^2)`` when uncorrelated (one exp per column and per row instead of one per
+        lobe), else ``exp(-q / 2)`` in one exp (the factors may over/underflow for thin footprints)."""
+        cross = axy * dv
+        if cross == 0.0:
+            ey = math.exp(ay * dv * dv)
+            for jx in range(L):
+                wr[jx] = ex[jx] * ey
+        else:
+            for jx in range(L):
+                du = (x0 + jx + 0.5) / nx - cu
+                wr[jx] = math.exp(ax * du * du + ay * dv * dv + cross * du)
+
     @_loops
     def _footprint_loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
                          exo, ex, wr, acc, r0, r1, rw, rfull, curved):  # pragma: no cover - compiled
@@ -800,11 +826,7 @@ if _kernels.AVAILABLE:
             if x1 < x0 or y1 < y0:
                 continue
             L = x1 - x0 + 1
-            # footprint weights exp(-q/2): ex[jx] ey when uncorrelated (sxy = 0)
-            ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
-            for jx in range(L):
-                du = (x0 + jx + 0.5) / nx - cu
-                ex[jx] = math.exp(ax * du * du)
+            ax, ay, axy = _column_weights(ex, L, x0, nx, cu, sxx, syy, sxy, det)
             hz, xh, yh, inv4 = _half_slope(h[p])
             qp = qmax if hz > 0.0 else 0.0              # no density below the horizon
             ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
@@ -828,16 +850,7 @@ if _kernels.AVAILABLE:
                         n_runs += 1
                     xs = xe + 1
                 for iy in range(ys, ye + 1):
-                    dv = (iy + 0.5) / ny - cv
-                    cross = axy * dv
-                    if cross == 0.0:
-                        ey = math.exp(ay * dv * dv)
-                        for jx in range(L):
-                            wr[jx] = ex[jx] * ey
-                    else:       # one exp: the factors may over/underflow for thin footprints
-                        for jx in range(L):
-                            du = (x0 + jx + 0.5) / nx - cu
-                            wr[jx] = math.exp(ax * du * du + ay * dv * dv + cross * du)
+                    _row_weights(wr, ex, L, x0, nx, cu, ax, ay, axy, (iy + 0.5) / ny - cv)
                     row = (wys + iy - ys) * nx
                     for r in range(n_runs):
                         k0, j0, n = row + rw[r], r0[r] - x0, r1[r] - r0[r] + 1
@@ -915,30 +928,25 @@ if _kernels.AVAILABLE:
     @_kernel
     def _merge_range(start, stop, out, grid, nx, ny, ks2x, ks2y, cutoff, fp):  # pragma: no cover - compiled
         """Per footprint ``p`` of ``start:stop``, into ``out[p]``: the ``W``-weighted average of the flat
-        moments ``grid`` ``(ny * nx * 5,)`` over its window (the weights of :func:`footprint_lobes`,
-        factored into per-column and per-row exponentials where the footprint is uncorrelated, as in
-        :func:`_footprint_loops`)."""
+        moments ``grid`` ``(ny * nx * 5,)`` over its window (the weights of :func:`footprint_lobes`:
+        :func:`_column_weights`, :func:`_row_weights`, as in :func:`_footprint_loops`)."""
         L = 1
         for p in range(start, stop):
             x0, x1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:8]
             L = max(L, x1 - x0 + 1)
-        ex, xw = np.empty(L), np.empty(L, np.int64)
+        ex, wr, xw = np.empty(L), np.empty(L), np.empty(L, np.int64)
         for p in range(start, stop):
             cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
-            ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
-            for jx in range(x1 - x0 + 1):
-                du = (x0 + jx + 0.5) / nx - cu
-                ex[jx], xw[jx] = math.exp(ax * du * du), 5 * ((x0 + jx) % nx)
+            n = x1 - x0 + 1
+            ax, ay, axy = _column_weights(ex, n, x0, nx, cu, sxx, syy, sxy, det)
+            for jx in range(n):
+                xw[jx] = 5 * ((x0 + jx) % nx)
             wsum, m0, m1, m2, m3, m4 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
             for iy in range(y0, y1 + 1):
-                dv = (iy + 0.5) / ny - cv
-                cross, ey, row = axy * dv, math.exp(ay * dv * dv), 5 * nx * (iy % ny)
-                for jx in range(x1 - x0 + 1):
-                    if cross == 0.0:
-                        w = ex[jx] * ey
-                    else:       # one exp: the factors may over/underflow for thin footprints
-                        du = (x0 + jx + 0.5) / nx - cu
-                        w = math.exp(ax * du * du + ay * dv * dv + cross * du)
+                _row_weights(wr, ex, n, x0, nx, cu, ax, ay, axy, (iy + 0.5) / ny - cv)
+                row = 5 * nx * (iy % ny)
+                for jx in range(n):
+                    w = wr[jx]
                     k = row + xw[jx]
                     wsum += w
                     m0, m1, m2 = m0 + w * grid[k], m1 + w * grid[k + 1], m2 + w * grid[k + 2]
