@@ -241,10 +241,13 @@ def bench_io_floor(inputs, repeats: int) -> list[dict]:
 
 
 def scaling(sizes: list[int], repeats: int) -> list[dict]:
-    """Best time per element, peak extra bytes per element (:func:`peak_memory`, whose
-    call is also the warm-up) and the process's peak RSS so far (the largest peak seen
-    since the peak is reset before each traced call) of eval, pdf and sample (GGX and
-    Beckmann, non-sheared) for each batch size; above ``10^6`` elements one timed run."""
+    """Best time per element, with new outputs and into outputs passed as ``out=``, peak extra
+    bytes per element (:func:`peak_memory`, whose call is also the warm-up) and the process's
+    peak RSS so far (the largest peak seen since the peak is reset before each traced call) of
+    eval, pdf and sample (GGX and Beckmann, non-sheared) for each batch size; above ``10^6``
+    elements one timed run. New outputs larger than the output cache
+    (``MICROFACET_OUTPUT_CACHE_MB``) are fresh memory at each call, whose pages the system
+    zeroes as the kernels first write them; ``out=`` times the kernels' own work."""
     rows, process_peak = [], None
     configs = our_configs()
     for n in sizes:
@@ -253,13 +256,18 @@ def scaling(sizes: list[int], repeats: int) -> list[dict]:
         runs = repeats if n <= 1_000_000 else 1
         for name in ("ggx", "beckmann"):
             b = configs[name]
-            ops = {"eval": lambda: b.eval(wi, wo), "pdf": lambda: b.pdf(wi, wo), "sample": lambda: b.sample(u, wo)}
+            ops = {"eval": lambda out=None: b.eval(wi, wo, out=out), "pdf": lambda out=None: b.pdf(wi, wo, out=out),
+                   "sample": lambda out=None: b.sample(u, wo, out=out)}
             for op, fn in ops.items():
                 mem = peak_memory(fn)
                 best = time_it(fn, runs, warm_up=False)["best_s"]
+                out = fn()                           # (its memory faulted in: the out= runs reuse it)
+                best_out = time_it(lambda: fn(out), runs, warm_up=False)["best_s"]
+                del out
                 if mem["peak_rss"] is not None:
                     process_peak = max(process_peak or 0, mem["peak_rss"], _rss()[1])
                 rows.append({"op": op, "distribution": name, "n": n, "runs": runs, "ns_per_element": best / n * 1e9,
+                             "ns_per_element_out": best_out / n * 1e9,
                              "peak_bytes_per_element": mem["traced"] / n,
                              "peak_rss_bytes_per_element": None if mem["rss"] is None else mem["rss"] / n,
                              "process_peak_rss_bytes": process_peak})
@@ -504,15 +512,15 @@ def main(argv: list[str] | None = None) -> int:
 
     scale_rows = scaling(sizes, args.repeats) if sizes else []
     if scale_rows:
-        print("\nscaling (best time per element; peak extra memory per element incl. the outputs: "
-              "tracemalloc, and the rise of the peak RSS; the process's peak RSS so far):")
-        print(f"  {'op':7s} {'distribution':9s} {'N':>10s} {'runs':>4s} {'ns/elem':>9s} {'bytes/elem':>11s} "
-              f"{'RSS B/elem':>11s} {'peak RSS':>10s}")
+        print("\nscaling (best time per element, new outputs and out=; peak extra memory per element incl. the "
+              "outputs: tracemalloc, and the rise of the peak RSS; the process's peak RSS so far):")
+        print(f"  {'op':7s} {'distribution':9s} {'N':>10s} {'runs':>4s} {'ns/elem':>9s} {'out= ns':>8s} "
+              f"{'bytes/elem':>11s} {'RSS B/elem':>11s} {'peak RSS':>10s}")
         for r in scale_rows:
             rss = "n/a" if r["peak_rss_bytes_per_element"] is None else f"{r['peak_rss_bytes_per_element']:.1f}"
             peak = "n/a" if r["process_peak_rss_bytes"] is None else f"{r['process_peak_rss_bytes'] / 2**30:.2f} GiB"
             print(f"  {r['op']:7s} {r['distribution']:9s} {r['n']:10d} {r['runs']:4d} {r['ns_per_element']:9.1f} "
-                  f"{r['peak_bytes_per_element']:11.1f} {rss:>11s} {peak:>10s}")
+                  f"{r['ns_per_element_out']:8.1f} {r['peak_bytes_per_element']:11.1f} {rss:>11s} {peak:>10s}")
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
     if load:
         print(f"\nload average at the end: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} ({os.cpu_count()} CPUs)")

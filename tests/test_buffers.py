@@ -77,8 +77,9 @@ def test_a_bad_cache_size_is_named(monkeypatch):
     monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", "lots")
     with pytest.raises(ValueError, match="MICROFACET_OUTPUT_CACHE_MB"):
         _buffers._limit()
-    monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", "-1")
-    with pytest.raises(ValueError, match="MICROFACET_OUTPUT_CACHE_MB"):
-        _buffers._limit()
+    for bad in ("-1", "nan", "inf"):
+        monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", bad)
+        with pytest.raises(ValueError, match="MICROFACET_OUTPUT_CACHE_MB"):
+            _buffers._limit()
     monkeypatch.setenv("MICROFACET_OUTPUT_CACHE_MB", "0.5")
     assert _buffers._limit() == 1 << 19

@@ -56,14 +56,14 @@ class _Cache:
 
 
 def _limit() -> int:
-    """``MICROFACET_OUTPUT_CACHE_MB`` in bytes (``ValueError`` naming it unless it is a number >= 0)."""
+    """``MICROFACET_OUTPUT_CACHE_MB`` in bytes (``ValueError`` naming it unless it is a finite number >= 0)."""
     text = os.environ.get("MICROFACET_OUTPUT_CACHE_MB", "1024")
     try:
         mb = float(text)
     except ValueError:
         mb = -1.0
-    if not mb >= 0:
-        raise ValueError(f"MICROFACET_OUTPUT_CACHE_MB must be a number of MiB >= 0 (0: no cache), got {text!r}")
+    if not 0 <= mb < float("inf"):
+        raise ValueError(f"MICROFACET_OUTPUT_CACHE_MB must be a finite number of MiB >= 0 (0: no cache), got {text!r}")
     return int(mb * (1 << 20))
 
 
