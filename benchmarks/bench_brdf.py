@@ -245,7 +245,8 @@ def scaling(sizes: list[int], repeats: int) -> list[dict]:
     bytes per element (:func:`peak_memory`, whose call is also the warm-up) and the process's
     peak RSS so far (the largest peak seen since the peak is reset before each traced call) of
     eval, pdf and sample (GGX and Beckmann, non-sheared) for each batch size; above ``10^6``
-    elements one timed run. New outputs larger than the output cache
+    elements best of 3 (the first call of a process into gigabytes of fresh memory took up to 10x
+    longer). New outputs larger than the output cache
     (``MICROFACET_OUTPUT_CACHE_MB``) are fresh memory at each call, whose pages the system
     zeroes as the kernels first write them; ``out=`` times the kernels' own work."""
     rows, process_peak = [], None
@@ -253,7 +254,7 @@ def scaling(sizes: list[int], repeats: int) -> list[dict]:
     for n in sizes:
         inputs = make_inputs(n, seed=1)
         wi, wo, u = inputs["wi"], inputs["wo"], inputs["u"]
-        runs = repeats if n <= 1_000_000 else 1
+        runs = repeats if n <= 1_000_000 else min(repeats, 3)
         for name in ("ggx", "beckmann"):
             b = configs[name]
             ops = {"eval": lambda out=None: b.eval(wi, wo, out=out), "pdf": lambda out=None: b.pdf(wi, wo, out=out),
