@@ -653,6 +653,16 @@ if _kernels.AVAILABLE:
         y0, y1 = int(math.ceil((cv - ry) * ny - 0.5)), int(math.floor((cv + ry) * ny - 0.5))
         return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
 
+    @numba.njit(cache=True, nogil=True)
+    def _widest(start, stop, fp, nx, ny, ks2x, ks2y, cutoff):  # pragma: no cover - compiled
+        """``(L, K)``: the most columns and the most lobes (at least 1) of the windows of the
+        footprints ``start:stop`` of ``fp`` (:func:`_window`), which size the range kernels' scratch."""
+        L, K = 1, 1
+        for p in range(start, stop):
+            x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:10]
+            L, K = max(L, x1 - x0 + 1), max(K, (x1 - x0 + 1) * (y1 - y0 + 1))
+        return L, K
+
     @numba.njit(cache=True, inline="always")
     def _block_linear(b, kx, ky, kz):  # pragma: no cover - compiled
         """Whether every lobe of a block with bounds ``b`` (see
@@ -882,10 +892,7 @@ if _kernels.AVAILABLE:
         of their windows (``L`` lobes: ``6 L`` accumulators, ``L // B + 2`` runs per block row) and
         :func:`_add_run`'s ``curved`` where ``exo`` is tabulated: room for the largest window's lobes,
         at most :data:`_GATHER` but at least a row's (the loops sum the list when it is full)."""
-        L, K = 1, 1
-        for p in range(start, stop):
-            x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:10]
-            L, K = max(L, x1 - x0 + 1), max(K, (x1 - x0 + 1) * (y1 - y0 + 1))
+        L, K = _widest(start, stop, fp, nx, ny, ks2x, ks2y, cutoff)
         nr = L // B + 2
         K = max(L, min(K, _GATHER)) if exo.size > 0 else 0     # (only with the tabulated view)
         _footprint_loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo,
@@ -930,10 +937,7 @@ if _kernels.AVAILABLE:
         """Per footprint ``p`` of ``start:stop``, into ``out[p]``: the ``W``-weighted average of the flat
         moments ``grid`` ``(ny * nx * 5,)`` over its window (the weights of :func:`footprint_lobes`:
         :func:`_column_weights`, :func:`_row_weights`, as in :func:`_footprint_loops`)."""
-        L = 1
-        for p in range(start, stop):
-            x0, x1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:8]
-            L = max(L, x1 - x0 + 1)
+        L = _widest(start, stop, fp, nx, ny, ks2x, ks2y, cutoff)[0]
         ex, wr, xw = np.empty(L), np.empty(L), np.empty(L, np.int64)
         for p in range(start, stop):
             cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
