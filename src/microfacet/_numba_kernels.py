@@ -565,11 +565,11 @@ def _beckmann_eval_block(fk, fp, rows, out, o, m):
     :func:`_projected_block` without ``smith``: the Smith terms, the NDF's ``exp``, the value and the
     Fresnel term in one loop (:func:`_beckmann_value`, as :func:`_fresnel_block`), so that the ``exp``
     and ``Lambda`` polynomials (multiply-adds) overlap the Fresnel term's roots and quotients. One
-    core, per 10^6 pairs, alternated, medians of 3 processes: Cu 5.92 -> 5.22 ms (-12 %), ideal
-    4.98 -> 3.87 ms (-23 %). Each fused loop costs ~2.5 s of cold compile (6.8 -> 12.0 s for this
+    core, per 10^6 pairs, alternated, medians of 3 processes: Cu 5.85 -> 5.18 ms (-12 %), ideal
+    5.29 -> 3.93 ms (-25 %). Each fused loop costs ~2.5 s of cold compile (6.8 -> 11.7 s for this
     kernel), so only the float64 Beckmann eval kernel compiles it (``fused`` in :func:`eval_kernel`),
-    and not for the dielectric term (-6 %); Schlick and tabulated terms and float32 gained nothing.
-    ``contract``, as :func:`_smith_block_post`."""
+    and not for the dielectric term (-6 %); fused, Schlick and tabulated terms took 7 % and 16 %
+    longer, float32 13 %. ``contract``, as :func:`_smith_block_post`."""
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
     q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
     oh, o = rows[0], max(o, 0)                       # (see _flat_rows)
