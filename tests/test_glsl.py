@@ -16,7 +16,7 @@ from microfacet.glsl import SHADERS, export_textures, source
 from microfacet.leadr import shading
 
 TOL = 1e-4
-#: Texture filtering by the GL (exact in llvmpipe; 8-bit weights on most GPUs) or in float32 (MF_MANUAL_BILINEAR)
+#: Texture filtering by the GL (exact in llvmpipe; quantized weights on GPUs: :func:`filter_quantum`) or in float32 (MF_MANUAL_BILINEAR)
 FILTERS = {"hardware": None, "manual": {"MF_MANUAL_BILINEAR": None}}
 
 
@@ -158,8 +158,44 @@ FRAME = "mat3 frame = mat3(fs.xyz, ft.xyz, fn.xyz);"
 ENV = "uniform highp sampler2D env; uniform int env_top; uniform float env_T; uniform int grid;"
 
 
+#: ``u`` of a 2-texel row at which the bilinear weight of texel 1 is ``k / 4096`` exactly (float32).
+PROBE_U = 0.25 + 0.5 * np.arange(4097) / 4096
+
+
+def filter_weights(gl, u, defines=None):
+    """The weight a bilinear lookup (``mf_sample_level``) gives texel 1 of a 2-texel row (values 0
+    and 1) at ``u``: the GL's filter, or with ``MF_MANUAL_BILINEAR`` the shader's."""
+    row = np.zeros((1, 2, 4), np.float32)
+    row[0, 1] = 1.0
+    return gl.evaluate("leadr", "result = mf_sample_level(probe, vec2(u.x, 0.5), 0, bvec2(false));",
+                       {"u": u[:, None]}, declarations="uniform highp sampler2D probe;",
+                       textures={"probe": ([row], (False, False))}, defines=defines)[:, 0].astype(float)
+
+
+@pytest.fixture(scope="module")
+def filter_quantum(gl):
+    """``None`` where the GL filters with float weights (llvmpipe), else the step ``2^-b`` of its
+    bilinear weights, read off :func:`filter_weights` (GPUs: NVIDIA H200, ``b = 8``)."""
+    levels = np.unique(filter_weights(gl, PROBE_U)).size
+    return None if levels == PROBE_U.size else 2.0 ** -round(np.log2(levels - 1))
+
+
+def test_filter_weights(gl, filter_quantum):
+    """The manual filter's weights are exact; the GL's are exact, or within a step of them, in order."""
+    exact = np.arange(PROBE_U.size) / 4096
+    assert np.array_equal(filter_weights(gl, PROBE_U, {"MF_MANUAL_BILINEAR": None}), exact)
+    w = filter_weights(gl, PROBE_U)
+    if filter_quantum is None:
+        assert np.array_equal(w, exact)
+    else:
+        assert np.all(np.diff(w) >= 0) and np.max(np.abs(w - exact)) <= filter_quantum
+
+
 @pytest.mark.parametrize("n,filtering", [(5, "hardware"), (8, "manual")])
-def test_leadr_env_grid(gl, n, filtering):
+def test_leadr_env_grid(gl, filter_quantum, n, filtering):
+    """``mf_env_specular`` vs the library; the hardware path, where the GL quantizes its weights by
+    ``q``, within the bound that gives: each bilinear tap within ``2 q max(env)`` (a step per axis
+    over the taps' range), the grid's weights summing to the shading of a white environment."""
     rng = np.random.default_rng(4)
     m = 3000
     e = random_moments(rng, m)
@@ -174,8 +210,14 @@ def test_leadr_env_grid(gl, n, filtering):
                       dict(moment_inputs(e), wo=wo, fs=s, ft=t, fn=nn), declarations=SURFACE + ENV,
                       textures={"env": ([lv.map for lv in env.levels], (True, False))}, defines=FILTERS[filtering],
                       uniforms=dict(f_a=ag.eta, f_b=ag.k, env_top=len(env.levels) - 1,
-                                    env_T=env.texture_size, grid=n))
-    assert rel_error(got[:, :3], ref) <= TOL
+                                    env_T=env.texture_size, grid=n))[:, :3]
+    if filtering == "hardware" and filter_quantum is not None:
+        white = shading.env_specular(e, wo, shading.MipEnvironment(np.ones((32, 64, 3), np.float32)),
+                                     (s, t, nn), n=n, fresnel=ag)
+        bound = 2 * filter_quantum * max(lv.map.max() for lv in env.levels) * white + TOL * np.abs(ref)
+        assert np.all(np.abs(got - ref) <= bound)
+    else:
+        assert rel_error(got, ref) <= TOL
 
 
 def test_leadr_sh_diffuse(gl):
@@ -197,8 +239,10 @@ def test_leadr_sh_diffuse(gl):
 
 
 @pytest.mark.parametrize("filtering", ["hardware", "manual"])
-def test_leadr_lookup(gl, filtering):
-    """The GLSL footprint lookup (anisotropic trilinear probes) vs mf.leadr.lookup."""
+def test_leadr_lookup(gl, filter_quantum, filtering):
+    """The GLSL footprint lookup (anisotropic trilinear probes) vs mf.leadr.lookup; the hardware
+    path, where the GL quantizes its weights by ``q``, within ``2 q`` times the texels' range (a
+    step per axis; probes and levels are convex combinations of taps)."""
     rng = np.random.default_rng(6)
     h = mf.leadr.gaussian_heightfield((64, 48), 0.3, correlation=4.0, seed=1)
     pyramid = mf.leadr.bake(h, 1.0, 0.1)
@@ -216,7 +260,14 @@ def test_leadr_lookup(gl, filtering):
                       declarations="uniform highp sampler2D e1234_map; uniform highp sampler2D e5_map; uniform int top;",
                       textures={"e1234_map": (tex["e1234"], (True, True)), "e5_map": (tex["e5"], (True, True))},
                       uniforms=dict(top=len(pyramid) - 1))
-    np.testing.assert_allclose(got, ref[:, [0, 1, 2, 4]], rtol=1e-4, atol=1e-5 * np.abs(ref).max())
+    ref = ref[:, [0, 1, 2, 4]]
+    atol = 1e-5 * np.abs(ref).max()
+    if filtering == "hardware" and filter_quantum is not None:
+        span = [np.ptp(np.concatenate([lv[..., c].ravel() for lv in tex["e1234"]])) for c in range(3)]
+        span.append(np.ptp(np.concatenate([lv.ravel() for lv in tex["e5"]])))
+        assert np.all(np.abs(got - ref) <= 1e-4 * np.abs(ref) + atol + 2 * filter_quantum * np.array(span))
+    else:
+        np.testing.assert_allclose(got, ref, rtol=1e-4, atol=atol)
 
 
 def export_textures_of(pyramid):
