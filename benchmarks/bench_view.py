@@ -54,10 +54,13 @@ def bench_chromium(data, args) -> dict:
     return out
 
 
-def bench_llvmpipe(data, args) -> dict:
+def bench_llvmpipe(data, args, defines=None) -> dict:
+    """The patch's frame times on the EGL context's GL (Mesa llvmpipe here; a GPU's where there is
+    one: ``experiments/glsl_gpu.py``), ``viewer.frag`` built with ``defines``."""
     import moderngl
     ctx = harness.context()
-    prog = ctx.program(vertex_shader=source("viewer.vert", "330"), fragment_shader=source("viewer.frag", "330"))
+    prog = ctx.program(vertex_shader=source("viewer.vert", "330"),
+                       fragment_shader=source("viewer.frag", "330", defines))
     meta = json.loads(data.blobs()["/meta.json"])
     tex = {}
     for prefix, levels in (("u_leadr", data.leadr), ("u_naive", data.naive)):

@@ -2,7 +2,9 @@
 """The GLSL tests on whatever GL this machine has (a GPU's, where the suite's CI runs Mesa
 llvmpipe): ``tests/test_glsl.py`` run once, every relative error its comparisons measure
 recorded, and the GL's bilinear filter probed (its weight levels; whether they are truncated
-or rounded 8-bit weights). Writes ``$OUT/glsl_gpu.json`` (or ``./``).
+or rounded 8-bit weights); with ``FRAMES=n``, the viewer's frame times at 1280x720 (naive,
+LEADR, 4x4 and 8x8 references; the GL's filter and ``MF_MANUAL_BILINEAR``; mean of ``n``
+frames, the 8x8 reference one). Writes ``$OUT/glsl_gpu.json`` (or ``./``).
 
 Usage (repository root; the NumPy path as the reference, no Numba compile)::
 
@@ -36,6 +38,28 @@ class Record:
             mod.rel_error = orig
 
 
+def frame_times(frames, width, height):
+    """``benchmarks/bench_view.py``'s patch frame times on this GL (256² map), point light and
+    environment, with the GL's filter and with ``MF_MANUAL_BILINEAR``: ``{config: {method: ms}}``."""
+    import argparse
+    import tempfile
+    from pathlib import Path
+    sys.path.insert(0, "benchmarks")
+    import bench_view as V
+    from microfacet.glsl.server import load_viewer_data
+    from microfacet.leadr import bake, figures, write_pyramid
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "map.exr"
+        write_pyramid(path, bake(figures.default_heightfield(256, 3), 1.0))
+        data = load_viewer_data(path)
+    out = {}
+    for light in (0, 1):
+        for name, defines in (("hardware", None), ("manual", {"MF_MANUAL_BILINEAR": None})):
+            args = argparse.Namespace(width=width, height=height, frames=frames, light_kind=light)
+            out[f"{('point', 'env')[light]} {name}"] = V.bench_llvmpipe(data, args, defines)
+    return out
+
+
 def main():
     import moderngl
     ctx = moderngl.create_standalone_context(backend="egl", require=330)
@@ -51,7 +75,9 @@ def main():
     probe["trunc8"] = bool(np.array_equal(np.floor(exact * 256) / 256, w))
     probe["round8"] = bool(np.array_equal(np.floor(exact * 256 + 0.5) / 256, w))
     print("probe", {k: v for k, v in probe.items() if k != "first"}, flush=True)
-    out = {"gl": info, "exit": int(code), "probe": probe, "errors": {k: max(v) for k, v in errors.items()},
+    frames = int(os.environ.get("FRAMES", "0"))
+    times = frame_times(frames, 1280, 720) if frames else None
+    out = {"gl": info, "exit": int(code), "probe": probe, "frame_ms": times, "errors": {k: max(v) for k, v in errors.items()},
            "all": errors}
     path = os.path.join(os.environ.get("OUT", "."), "glsl_gpu.json")
     with open(path, "w") as f:
