@@ -1099,6 +1099,14 @@ def _scratch(F, wi, wo):
     return rows, np.empty(3 * BLOCK, wi.dtype), np.empty(3 * BLOCK, wo.dtype), _flat(wi), _flat(wo)
 
 
+@_jit
+def _deviations(tops, scratch):
+    """The unit-length deviations of ``wi`` and ``wo`` (:func:`_deviation`) from the loops' largest bits
+    ``tops``, through a scratch row that is free once the loops are done."""
+    row = scratch[0][0]
+    return _deviation(np.int64(tops[0]), row), _deviation(np.int64(tops[1]), row)
+
+
 @functools.cache
 def projected_kernel(kind, dtype=np.float64):
     """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
@@ -1149,9 +1157,7 @@ def pdf_kernel(kind, dtype=np.float64):
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
         scratch = _scratch(F, wi, wo)
-        top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch)
-        row = scratch[0][0]                          # (free now: _deviation's buffer)
-        return _deviation(np.int64(top_i), row), _deviation(np.int64(top_o), row)
+        return _deviations(_call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch), scratch)
     return kernel
 
 
@@ -1183,10 +1189,8 @@ def eval_kernel(kind, dtype=np.float64):
     @_jit
     def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
         scratch = _scratch(F, wi, wo)
-        top_i, top_o = _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx,
-                                   tv, out.reshape(out.size), scratch)
-        row = scratch[0][0]                          # (free now: _deviation's buffer)
-        return _deviation(np.int64(top_i), row), _deviation(np.int64(top_o), row)
+        return _deviations(_call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp,
+                                       tx, tv, out.reshape(out.size), scratch), scratch)
     return kernel
 
 

@@ -905,9 +905,8 @@ if _kernels.AVAILABLE:
         kernels' thread pool (:func:`microfacet.kernels._launch_ranges`: a thread takes the
         next task when done, so that footprints of different cost balance)."""
         out = np.zeros((fp.shape[0], 5))
-        cost = int(_window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) / max(fp.shape[0], 1)) + 1
         _kernels._launch_ranges(_footprint_range, fp.shape[0], out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff,
-                                prune, fp, h, wi, wo, exo, cost=cost)
+                                prune, fp, h, wi, wo, exo, cost=_task_cost(fp, ks2x, ks2y, nx, ny, cutoff))
         return out
 
     @_kernel
@@ -963,9 +962,8 @@ if _kernels.AVAILABLE:
         """``(P, 5)`` averages of :func:`_merge_range` over all footprints ``fp``, as tasks on the kernels'
         thread pool (:func:`microfacet.kernels._launch_ranges`)."""
         out = np.zeros((fp.shape[0], 5))
-        cost = int(_window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) / max(fp.shape[0], 1)) + 1
         _kernels._launch_ranges(_merge_range, fp.shape[0], out, grid.reshape(-1), nx, ny, ks2x, ks2y, cutoff, fp,
-                                cost=cost)
+                                cost=_task_cost(fp, ks2x, ks2y, nx, ny, cutoff))
         return out
 else:  # pragma: no cover - without numba
     _footprint_sums = _footprint_merge = _lobe_sums = _area_excess = None
@@ -974,6 +972,12 @@ else:  # pragma: no cover - without numba
 def _window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) -> float:
     """About how many (footprint, lobe) pairs the windows of footprints ``fp`` hold."""
     return float(np.sum((2 * cutoff * np.sqrt(fp[:, 2] + ks2x) * nx + 1) * (2 * cutoff * np.sqrt(fp[:, 3] + ks2y) * ny + 1)))
+
+
+def _task_cost(fp, ks2x, ks2y, nx, ny, cutoff) -> int:
+    """Lobes per footprint of ``fp``'s windows (:func:`_window_pairs`), the ``cost`` of a footprint
+    for :func:`microfacet.kernels._launch_ranges`."""
+    return int(_window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) / max(fp.shape[0], 1)) + 1
 
 
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
