@@ -153,14 +153,14 @@ def _checks(names, results) -> dict:
 
 def _fresnel_params(fresnel):
     """``(kind, fp (2, 3), table x, table values)`` of a :mod:`microfacet.fresnel` term for
-    the kernels' ``_fresnel``, or ``None`` for another class."""
+    the kernels' ``_fresnel``, or ``None`` for another class (and a Schlick term with ``f90 != 1``)."""
     from . import fresnel as fr
     k = _kernels()
     fp = np.zeros((2, 3))
     t = type(fresnel)
     if t is fr.Ideal:
         return k.IDEAL, fp, *_NO_TABLE
-    if t is fr.Schlick:
+    if t is fr.Schlick and np.all(fresnel.f90 == 1.0):      # F90 != 1: the NumPy Fresnel path
         fp[0] = fresnel.f0
         return k.SCHLICK, fp, *_NO_TABLE
     if t is fr.Dielectric:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import drjit as dr
 
-__all__ = ["conductor", "dielectric", "schlick"]
+__all__ = ["conductor", "dielectric", "schlick", "f82_tint"]
 
 
 def conductor(c, eta, k):
@@ -38,8 +38,26 @@ def dielectric(c, eta):
     return dr.select((g2 >= 0.0) & dr.isfinite(f), f, 1.0)
 
 
-def schlick(c, f0):
-    """Schlick's approximation ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I)."""
+def schlick(c, f0, f90=1.0):
+    """Schlick's approximation with a grazing value, ``F = F0 + (F90 - F0)(1 - c)^5``
+    (Table 2.I for ``F90 = 1``), as :class:`microfacet.fresnel.Schlick`."""
     m = 1.0 - dr.clip(c, 0.0, 1.0)
     m2 = m * m
-    return f0 + (1.0 - f0) * (m2 * m2 * m)
+    return f0 + (f90 - f0) * (m2 * m2 * m)
+
+
+#: ``mu-bar = 1/7`` of the F82-tint term (:data:`microfacet.fresnel.F82_COS`)
+F82_COS = 1.0 / 7.0
+
+
+def f82_tint(c, f0, f82):
+    """The F82-tint metal Fresnel term (Hoffman 2019; Kutz et al. 2021; OpenPBR's metal),
+    as :class:`microfacet.fresnel.F82Tint`: ``F = F_S(c) - b c (1 - c)^6``,
+    ``b = (1 - f82) F_S(1/7) / ((1/7)(6/7)^6)``, ``F_S`` Schlick's term of ``f0``,
+    clamped to ``[0, 1]``."""
+    c = dr.clip(c, 0.0, 1.0)
+    m = 1.0 - c
+    m5 = (m * m) * (m * m) * m
+    mu_m = 1.0 - F82_COS
+    b = (1.0 - f82) * (f0 + (1.0 - f0) * mu_m**5) / (F82_COS * mu_m**6)
+    return dr.clip(f0 + (1.0 - f0) * m5 - b * (c * m5 * m), 0.0, 1.0)
