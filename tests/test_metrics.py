@@ -170,3 +170,45 @@ def test_sobol_is_scipys_sequence_and_a_shifted_net():
     for d in range(4):
         assert np.all(np.bincount((u[:, d] * 64).astype(int), minlength=64) == 16)
     assert not np.array_equal(u, sobol(1024, seed=4))
+
+
+# --- log error (Löw et al. 2012) -------------------------------------------------------
+
+def _ggx(alpha):
+    return mf.MicrofacetBRDF(mf.GGX(alpha=alpha), fresnel=mf.fresnel.Conductor.metal("Au"))
+
+
+def test_log_error_is_zero_for_the_reference_and_ordered_by_the_distance_of_the_fit():
+    from microfacet.metrics import LogError, log_error
+    ref = _ggx(0.3)
+    fits = {"same": ref, "near": _ggx(0.32), "far": _ggx(0.6)}
+    metric = LogError(ref, n=2**14)
+    e = metric(fits)
+    assert e["same"] == 0.0
+    assert 0.0 < e["near"] < e["far"]
+    assert metric(fits["near"]) == e["near"]                               # single and dict forms agree
+    assert log_error(ref, fits, n=2**14) == e                              # deterministic, function form
+
+
+def test_log_error_matches_its_definition_on_a_scaled_copy():
+    from microfacet.metrics import LogError, compared_pairs, uniform_directions
+    ref, s = _ggx(0.2), 1.5
+    wi, wo, w = compared_pairs(ref, uniform_directions(2**12, 3))
+    f = ref.eval_cos(wi, wo)
+    expected = np.sqrt(np.sum(w[:, None] * (np.log1p(s * f) - np.log1p(f)) ** 2) / (3 * np.sum(w)))
+    assert LogError(ref, n=2**12, seed=3)(Scaled(ref, s)) == pytest.approx(expected, rel=1e-12)
+
+
+def test_log_error_leaves_out_unmeasured_pairs_and_scores_non_finite_fits_inf():
+    from microfacet.metrics import LogError
+    ref = PartlyMeasured(_ggx(0.3), 1.0, where=lambda wi, wo: wi[..., 0] > 0)
+    wrong_there = Scaled(_ggx(0.3), 10.0, where=lambda wi, wo: wi[..., 0] > 0)
+    assert LogError(ref, n=2**12)(wrong_there) == 0.0
+    assert LogError(_ggx(0.3), n=2**12)(Scaled(_ggx(0.3), np.nan)) == float("inf")
+
+
+def test_log_error_changes_little_between_seeds():
+    from microfacet.metrics import LogError
+    ref, fit = _ggx(0.1), mf.MicrofacetBRDF(mf.Beckmann(alpha=0.14), fresnel=mf.fresnel.Conductor.metal("Au"))
+    a, b = LogError(ref, seed=0)(fit), LogError(ref, seed=1)(fit)
+    assert a > 0 and abs(a - b) < 0.01 * a
