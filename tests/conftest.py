@@ -47,7 +47,7 @@ CORPUS_CACHE = Path(os.environ.get("MICROFACET_CORPUS_CACHE")
                     or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus")
 #: A handful of corpus materials for tests, not tuned on: a mirror-like metal, a glossy
 #: metal, a metallic paint, a coated plastic, a fabric and an RGL paint.
-CORPUS_SAMPLE = ("merl/chrome", "merl/alum-bronze", "merl/blue-metallic-paint", "merl/specular-orange-phenolic",
+CORPUS_SAMPLE = ("merl/chrome", "merl/ss440", "merl/blue-metallic-paint", "merl/specular-orange-phenolic",
                  "merl/red-fabric", "rgl/ilm_solo_m_68_rgb")
 
 
