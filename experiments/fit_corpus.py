@@ -283,18 +283,14 @@ def abc_source() -> str:
         return "local evaluator (fit_corpus.LocalABC)"
 
 
-def abc_white_furnace(abc) -> float:
-    """Largest directional albedo of the ABC model's specular term with F = 1 (as
-    :func:`microfacet.metrics.white_furnace` does for microfacet lobes)."""
-    from microfacet.metrics import directional_albedo, white_furnace
-    try:
-        return white_furnace(abc)
-    except (ValueError, TypeError):
-        pass
-    p = getattr(abc, "p", None)
-    if p is None:
-        return float("nan")
-    return float(np.max(directional_albedo(LocalABC(p, white=True), (0.0, 30.0, 60.0, 75.0, 85.0, 89.0))))
+def abc_white_furnace(params: dict) -> float:
+    """Largest directional albedo over views 0-89 deg of the ABC model's specular term with
+    F = 1 (its parameters ``params`` of :func:`read_abc`), as
+    :func:`microfacet.metrics.white_furnace` measures microfacet lobes. ABC's ``D`` is not
+    normalized, so this may exceed 1."""
+    from microfacet.metrics import directional_albedo
+    views = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
+    return float(np.max(directional_albedo(LocalABC(params, white=True), views)))
 
 
 # ------------------------------------------------------------------------ fit files
@@ -447,9 +443,10 @@ def albedo_worst(ratios, ref_albedo) -> float:
     return float(r[np.argmax(np.abs(r - 1.0))])
 
 
-def evaluate(m: Material, work: Path, abc, size: int = SHEET_SIZE) -> dict:
-    """Every fit of ``m``'s fit file, its ABC fit (``abc``, MERL) and the baseline, scored
-    against the data; also writes the contact-sheet renders ``WORK/renders/KEY.npz``."""
+def evaluate(m: Material, work: Path, abc, abc_params: dict | None = None, size: int = SHEET_SIZE) -> dict:
+    """Every fit of ``m``'s fit file, its ABC fit (``abc``, MERL; parameters ``abc_params``)
+    and the baseline, scored against the data; also writes the contact-sheet renders
+    ``WORK/renders/KEY.npz``."""
     import microfacet as mf
     import microfacet.metrics as mm
     from microfacet.fit.outputs import analytic_from_json
@@ -516,7 +513,11 @@ def evaluate(m: Material, work: Path, abc, size: int = SHEET_SIZE) -> dict:
             rec.update(grid=g[name], uniform=u[name], log=float(log_metric(brdf)), image=float(image),
                        image_per_light=per_image, albedo=np.round(a, 4).tolist(),
                        albedo_worst=albedo_worst(a, ref_albedo), chroma=float(chroma))
-            rec["furnace"] = abc_white_furnace(brdf) if name == "abc" else float(mm.white_furnace(brdf))
+            try:
+                rec["furnace"] = (abc_white_furnace(abc_params) if name == "abc" and abc_params
+                                  else float("nan") if name == "abc" else float(mm.white_furnace(brdf)))
+            except (ValueError, TypeError) as e:         # a model white_furnace does not take
+                rec["furnace"], rec["furnace_error"] = None, f"{type(e).__name__}: {e}"
             tables = fresnel_tables(brdf)
             rec["fresnel_tv"] = max((tv_ratio(t) for t in tables), default=None)
         except Exception as e:                           # noqa: BLE001 - recorded per fit
@@ -617,7 +618,8 @@ def task_evaluate(m: Material, work: Path, data: Path) -> tuple[str, str | None]
     t0 = time.perf_counter()
     try:
         abc = abc_models(data).get(m.name) if m.group == "merl" else None
-        row = evaluate(m, work, abc)
+        params = read_abc(data / "anchors" / "abc_low2012_merl.csv").get(m.name) if abc is not None else None
+        row = evaluate(m, work, abc, params)
     except Exception as e:                               # noqa: BLE001
         row = {"group": m.group, "name": m.name, "key": m.key, "errors": {"evaluate": _error_text(e)},
                "traceback": traceback.format_exc()[-2000:]}
