@@ -212,3 +212,65 @@ def test_log_error_changes_little_between_seeds():
     ref, fit = _ggx(0.1), mf.MicrofacetBRDF(mf.Beckmann(alpha=0.14), fresnel=mf.fresnel.Conductor.metal("Au"))
     a, b = LogError(ref, seed=0)(fit), LogError(ref, seed=1)(fit)
     assert a > 0 and abs(a - b) < 0.01 * a
+
+
+# --- image error (Bieron & Peers 2020) ---------------------------------------------------
+
+def test_image_error_is_zero_for_the_reference_ordered_by_the_distance_and_deterministic():
+    from microfacet.metrics import ImageError, image_error
+    ref = _ggx(0.3)
+    fits = {"same": ref, "near": _ggx(0.32), "far": _ggx(0.6)}
+    metric = ImageError(ref, size=32)
+    e = metric(fits)
+    assert e["same"] == 0.0
+    assert 0.0 < e["near"] < e["far"]
+    assert metric(fits["far"]) == e["far"]                                  # single and dict forms agree
+    assert image_error(ref, fits, size=32) == e                             # deterministic
+
+
+def test_image_error_of_a_uniformly_scaled_fit_is_the_lightness_ratio():
+    from microfacet.metrics import ImageError
+    ref, s = mf.Lambertian(0.4), 1.331                                      # cube root: 1.1
+    e = ImageError(ref, size=32).details(Scaled(ref, s))
+    # in the cube-root part of the lightness curve T(s x) - T(x) = 1.16 (s^(1/3) - 1) x^(1/3), so
+    # the error lies between (s^(1/3) - 1) (dark toe excluded) and 1.16 (s^(1/3) - 1)
+    for value in e["per_image"]:
+        assert 0.1 * 0.95 < value < 0.116 * 1.05
+    assert e["chromaticity"] < 1e-12
+
+
+def test_render_images_environment_agrees_with_monte_carlo():
+    from microfacet.metrics import GRAZING_COS, render_images
+    from microfacet.render import Environment, Sphere, procedural_sky, shade_environment
+    from microfacet.metrics import ENV_MAP
+    brdf = _ggx(0.3)
+    image = render_images(brdf, size=24)[3]
+    sphere = Sphere(24)
+    mc = shade_environment(brdf, sphere.wo, sphere.frame, Environment(procedural_sky(*ENV_MAP)), 256,
+                           np.random.default_rng(1))
+    mc[sphere.wo[:, 2] < GRAZING_COS] = 0.0
+    mc = sphere.image(mc)
+    assert np.abs(image - mc).sum() / np.abs(mc).sum() < 0.08
+    directional = render_images(mf.Lambertian(1.0), size=24)[1]             # light 45 deg: E cos / pi
+    assert directional.max() == pytest.approx(1.0 / np.pi, rel=0.02)
+
+
+def test_image_error_leaves_out_unmeasured_pairs_and_measures_colour_casts():
+    from microfacet.metrics import ImageError, chromaticity_difference
+    ref = PartlyMeasured(_ggx(0.3), 1.0, where=lambda wi, wo: wi[..., 0] > 0.3)
+    wrong_there = Scaled(_ggx(0.3), 5.0, where=lambda wi, wo: wi[..., 0] > 0.3)
+    assert ImageError(ref, size=24)(wrong_there) == 0.0
+    grey = mf.Lambertian(0.5)
+    c = chromaticity_difference(grey, {"same": grey, "warm": mf.Lambertian((0.55, 0.5, 0.45))}, size=24)
+    assert c["same"] == 0.0 and 0.02 < c["warm"] < 0.06            # (r, g) moves by (0.033, 0)
+
+
+@pytest.mark.skipif(not (DATA / "merl" / "nickel.binary.gz").is_file(), reason="needs ../shared/data (MERL nickel)")
+def test_image_error_on_merl_data_uses_the_measured_mask_of_coverage():
+    from microfacet.metrics import _measured_pairs, measured_mask, uniform_directions
+    from microfacet.metrics import ImageError
+    data = mf.measured.load(DATA / "merl" / "nickel.binary.gz")
+    wi, wo, _ = uniform_directions(2**13, 2)
+    assert np.array_equal(_measured_pairs(data, wi, wo), measured_mask(data, wi, wo))
+    e = ImageError(data, size=24)({"data": data, "ggx": _ggx(0.1)})
+    assert e["data"] == 0.0 and e["ggx"] > 0.1
