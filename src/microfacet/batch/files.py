@@ -10,13 +10,12 @@ each of its outputs exists and is not older than the input.
 from __future__ import annotations
 
 import dataclasses
-import glob
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from ..errors import MicrofacetError
-from ..io.atomic import TMP_SUFFIX
+from ..io.atomic import remove_stale
 from ..io.names import input_name
 
 __all__ = ["input_name", "Item", "plan", "up_to_date", "remove_partials"]
@@ -97,18 +96,9 @@ def up_to_date(task, item: Item) -> bool:
         return False
 
 
-def remove_partials(task, items: Iterable[Item]) -> int:
+def remove_partials(task, items: Iterable[Item], other_hosts: bool = False) -> int:
     """Remove the temporary files (:func:`microfacet.io.atomic.atomic_path`) that a killed
-    or interrupted writer left beside the outputs of ``items``; returns how many."""
-    removed = 0
-    for item in items:
-        for out in task.outputs(item.out):
-            if not out.parent.is_dir():
-                continue
-            for tmp in out.parent.glob(f".{glob.escape(out.name)}.*{TMP_SUFFIX}"):
-                try:
-                    tmp.unlink()
-                    removed += 1
-                except OSError:
-                    pass
-    return removed
+    writer left beside the outputs of ``items`` (:func:`microfacet.io.atomic.remove_stale`:
+    those of dead processes; a live writer's are kept; with ``other_hosts``, other machines'
+    too); returns how many."""
+    return sum(len(remove_stale(out, other_hosts)) for item in items for out in task.outputs(item.out))

@@ -9,6 +9,15 @@ row and does not stop the others; temporary files left by a killed worker are re
 (``ok``, ``skipped``, ``error: reason``), time, peak memory and figures. Dask schedules,
 retries the tasks of workers that die and moves the data; the workers must see the input
 and output paths (a shared file system).
+
+Concurrency and faults: a batch holds its output folder's lock
+(:func:`microfacet.io.atomic.folder_lock`) while it runs, so a second batch into the same
+folder waits for the first (saying so in a warning) and then skips what the first did;
+temporary files are removed only when their writer is dead (another command writing the
+same output keeps its own); local worker processes exit when the batch's process dies,
+``kill -9`` included (:mod:`microfacet.batch.workers`); a Dask scheduler is reached within
+``connect_timeout`` seconds or the batch stops with one line saying what failed, before
+any file is touched.
 """
 from __future__ import annotations
 
@@ -16,7 +25,9 @@ import csv
 import io
 import os
 import signal
+import socket
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Sequence
@@ -26,11 +37,21 @@ from threadpoolctl import threadpool_limits
 
 from ..errors import MicrofacetError
 from ..io import write_text
+from ..io.atomic import folder_lock
 from . import memory
 from .files import Item, plan, remove_partials, up_to_date
 from .tasks import Task, get_task
+from .workers import exit_with
 
-__all__ = ["run", "execute", "summary_columns", "format_summary_csv", "format_summary_markdown"]
+__all__ = ["run", "execute", "summary_columns", "format_summary_csv", "format_summary_markdown",
+           "connect_scheduler", "SCHEDULER_SCHEMES", "CONNECT_TIMEOUT"]
+
+#: Seconds to reach a Dask scheduler (TCP connection and its first answer) by default.
+CONNECT_TIMEOUT = 10.0
+#: Dask scheduler address schemes a batch connects to (``host:port`` alone means ``tcp``).
+SCHEDULER_SCHEMES = ("tcp", "tls")
+#: Port of a Dask scheduler address without one (Dask's default).
+DEFAULT_SCHEDULER_PORT = 8786
 
 #: Errors that mean "this file cannot be done", reported in its row.
 FILE_ERRORS = (MicrofacetError, ValueError, OSError, ArithmeticError, MemoryError)
@@ -38,14 +59,15 @@ FILE_ERRORS = (MicrofacetError, ValueError, OSError, ArithmeticError, MemoryErro
 WARNING_SEPARATOR = " / "
 
 
-def execute(task: Task, item: Item) -> dict:
+def execute(task: Task, item: Item, other_hosts: bool = False) -> dict:
     """Run ``task`` on one file (in whichever process or machine): remove what an earlier
-    killed attempt left, reset the peak memory, run, and return the row's status
+    killed attempt left (temporaries of dead processes; with ``other_hosts``, those of other
+    machines too: a Dask rerun), reset the peak memory, run, and return the row's status
     (``ok`` or ``error: reason``), ``seconds`` (wall clock), ``cpu_seconds`` (this
     process's CPU time: all its threads), ``peak_mb``, ``warnings`` (the task's warning
     messages, e.g. repaired normal-map texels, joined by `` / ``) and figures. A failed
     file leaves none of its outputs."""
-    remove_partials(task, [item])
+    remove_partials(task, [item], other_hosts)
     item.out.parent.mkdir(parents=True, exist_ok=True)
     memory.reset_peak()
     t0, cpu0 = time.perf_counter(), time.process_time()
@@ -65,10 +87,13 @@ def execute(task: Task, item: Item) -> dict:
             "warnings": WARNING_SEPARATOR.join(" ".join(str(w.message).split()) for w in caught), **figures}
 
 
-def _init_worker(threads: int) -> None:
-    """A local worker leaves Ctrl-C to the parent (which stops the batch between files) and
-    runs compiled kernels on its share of the CPUs."""
+def _init_worker(threads: int, parent: int | None = None) -> None:
+    """A local worker leaves Ctrl-C to the parent (which stops the batch between files),
+    exits when the batch's process ``parent`` ends (:func:`~microfacet.batch.workers.exit_with`)
+    and runs compiled kernels on its share of the CPUs."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        exit_with(parent)
     import numba
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
@@ -90,7 +115,7 @@ def _run_local(task, items, jobs: int, report) -> None:
     if "forkserver" in methods:
         context.set_forkserver_preload([__name__])
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_init_worker,
-                               initargs=(memory.cpu_count() // jobs,))
+                               initargs=(memory.cpu_count() // jobs, os.getpid()))
     futures = {pool.submit(execute, task, item): item for item in items}
     pending = set(futures)
     try:
@@ -112,36 +137,113 @@ def _run_local(task, items, jobs: int, report) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _run_dask(task, items, scheduler, report, progress: bool) -> None:
-    """The tasks on a Dask cluster: ``scheduler`` is its address or a ``distributed.Client``.
-    Dask reruns the tasks of a worker that dies; a task that fails for another reason
-    (e.g. it killed its workers repeatedly) is reported as an error row."""
+def _scheduler_error(address: str, what: str) -> MicrofacetError:
+    return MicrofacetError(f"Dask scheduler {address}: {what}")
+
+
+def _probe(address: str, scheme: str, host: str, port: int, timeout: float) -> None:
+    """Open a TCP connection to the scheduler and, for ``tcp``, wait for its first bytes (a
+    Dask scheduler sends its handshake as soon as it accepts), within ``timeout`` seconds;
+    raise :class:`MicrofacetError` saying what failed."""
+    deadline = time.monotonic() + timeout
     try:
-        from distributed import Client, as_completed
+        sock = socket.create_connection((host, port), timeout=timeout)
+    except ConnectionRefusedError:
+        raise _scheduler_error(address, "connection refused (nothing listens on that port)") from None
+    except socket.gaierror as e:
+        raise _scheduler_error(address, f"unknown host {host!r} ({e.strerror})") from None
+    except TimeoutError:
+        raise _scheduler_error(address, f"no TCP connection within {timeout:g} s") from None
+    except OSError as e:
+        raise _scheduler_error(address, f"cannot connect ({e.strerror or e})") from None
+    with sock:
+        if scheme != "tcp":                 # TLS: the client speaks first
+            return
+        try:
+            sock.settimeout(max(deadline - time.monotonic(), 0.01))
+            first = sock.recv(1)
+        except TimeoutError:
+            raise _scheduler_error(address, f"accepted the connection but did not answer within {timeout:g} s "
+                                            "(not a Dask scheduler, or a hung one?)") from None
+        except OSError as e:
+            raise _scheduler_error(address, f"connection failed ({e.strerror or e})") from None
+        if not first:
+            raise _scheduler_error(address, "closed the connection without answering (not a Dask scheduler?)")
+
+
+def connect_scheduler(address: str, timeout: float = CONNECT_TIMEOUT):
+    """A ``distributed.Client`` of the Dask scheduler at ``address`` (``tcp://host:port``,
+    ``tls://host:port`` or ``host:port``; port 8786 if none), reached within ``timeout``
+    seconds, else :class:`MicrofacetError` in one line saying what failed: a scheme the batch
+    does not use (``inproc://`` exists only in the process that made the cluster: pass its
+    client), an unknown host, a refused connection, no TCP connection, a listener that never
+    answers, a client that does not start.
+
+    >>> client = connect_scheduler("tcp://127.0.0.1:8786", timeout=10)
+    """
+    try:
+        from distributed import Client
+        from distributed.comm.addressing import parse_address, parse_host_port
     except ImportError:
         raise MicrofacetError("--scheduler needs Dask: pip install 'microfacet[dask]'") from None
-    own = not isinstance(scheduler, Client)
-    client = Client(scheduler) if own else scheduler
+    if not (isinstance(timeout, (int, float)) and 0 < timeout < float("inf")):
+        raise ValueError(f"connect_timeout must be a positive number of seconds, got {timeout!r}")
+    address = str(address).strip()
     try:
-        futures = client.map(execute, [task] * len(items), items, pure=False,
-                             key=[f"microfacet-{task.name}-{i}-{time.time_ns()}" for i in range(len(items))])
-        index = {f.key: item for f, item in zip(futures, items)}
+        scheme, location = parse_address(address) if "://" in address else ("tcp", address)
+    except ValueError as e:
+        raise _scheduler_error(address, str(e)) from None
+    if scheme == "inproc":
+        raise _scheduler_error(address, "an inproc:// address works only inside the process that made the "
+                                        "cluster; pass its distributed.Client instead, or use tcp://HOST:PORT")
+    if scheme not in SCHEDULER_SCHEMES:
+        raise _scheduler_error(address, f"scheme {scheme!r} is not supported; give "
+                                        f"{' or '.join(s + '://HOST:PORT' for s in SCHEDULER_SCHEMES)}")
+    try:
+        host, port = parse_host_port(location, default_port=DEFAULT_SCHEDULER_PORT)
+    except (ValueError, TypeError) as e:
+        raise _scheduler_error(address, f"expected {scheme}://HOST:PORT ({e})") from None
+    _probe(address, scheme, host, int(port), timeout)
+    result: dict = {}
+
+    def start() -> None:                    # in a thread: a client that hangs cannot hang the batch
         try:
-            if progress:
-                from distributed import progress as dask_progress
-                dask_progress(futures)
-            for f in as_completed(futures):
-                try:
-                    result = f.result()
-                except Exception as e:          # the cluster gave up on this task
-                    result = {"status": f"error: {type(e).__name__}: {' '.join(str(e).split())}"}
-                report(index[f.key], result)
-        except KeyboardInterrupt:
-            client.cancel(futures)
-            raise
-    finally:
-        if own:
-            client.close()
+            result["client"] = Client(f"{scheme}://{location}", timeout=timeout)
+        except BaseException as e:          # noqa: BLE001 (reported below, in one line)
+            result["error"] = e
+
+    thread = threading.Thread(target=start, name="microfacet-dask-connect", daemon=True)
+    thread.start()
+    thread.join(timeout + 5.0)
+    if thread.is_alive():
+        raise _scheduler_error(address, f"the Dask client did not start within {timeout + 5.0:g} s")
+    if "error" in result:
+        e = result["error"]
+        raise _scheduler_error(address, f"{type(e).__name__}: {' '.join(str(e).split())}") from None
+    return result["client"]
+
+
+def _run_dask(task, items, client, report, progress: bool) -> None:
+    """The tasks on a Dask cluster through ``client`` (a ``distributed.Client``).
+    Dask reruns the tasks of a worker that dies; a task that fails for another reason
+    (e.g. it killed its workers repeatedly) is reported as an error row."""
+    from distributed import as_completed
+    futures = client.map(execute, [task] * len(items), items, other_hosts=True, pure=False,
+                         key=[f"microfacet-{task.name}-{i}-{time.time_ns()}" for i in range(len(items))])
+    index = {f.key: item for f, item in zip(futures, items)}
+    try:
+        if progress:
+            from distributed import progress as dask_progress
+            dask_progress(futures)
+        for f in as_completed(futures):
+            try:
+                result = f.result()
+            except Exception as e:          # the cluster gave up on this task
+                result = {"status": f"error: {type(e).__name__}: {' '.join(str(e).split())}"}
+            report(index[f.key], result)
+    except KeyboardInterrupt:
+        client.cancel(futures)
+        raise
 
 
 def summary_columns(task: Task) -> tuple[str, ...]:
@@ -197,7 +299,8 @@ def _previous_rows(out_dir: Path) -> dict[str, dict]:
 
 def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir: str | os.PathLike,
         jobs: int | None = None, scheduler=None, force: bool = False, recursive: bool = False,
-        progress: bool | None = None, **options) -> list[dict]:
+        progress: bool | None = None, connect_timeout: float = CONNECT_TIMEOUT, wait: bool = True,
+        **options) -> list[dict]:
     """Run ``task`` (``"bake"``, ``"glints"``, ``"fit"`` or a :class:`Task`, with
     ``options``) on ``inputs`` (a folder or a list of files), writing into ``out_dir``
     (module docstring for the guarantees).
@@ -216,10 +319,16 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
         Take a folder's subfolders too; outputs mirror the tree.
     progress : bool, optional
         Show a progress bar (default: when stderr is a terminal).
+    connect_timeout : float
+        Seconds to reach the ``scheduler`` address (:func:`connect_scheduler`).
+    wait : bool
+        When another batch writes into ``out_dir``: wait for it (default; a
+        ``RuntimeWarning`` says so), else raise :class:`microfacet.io.atomic.FolderBusy`.
 
     Returns the summary rows in input order (also written as ``summary.csv`` and
-    ``summary.md``). Raises :class:`MicrofacetError` for no inputs or a bad output folder;
-    ``KeyboardInterrupt`` after writing the summary of what was done.
+    ``summary.md``). Raises :class:`MicrofacetError` for no inputs, a bad output folder or a
+    scheduler that cannot be reached (then nothing is written); ``KeyboardInterrupt`` after
+    writing the summary of what was done.
     """
     task = get_task(task, **options)
     if jobs is not None and scheduler is not None:
@@ -228,7 +337,24 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     out_dir = Path(out_dir)
     items = plan(task, inputs, out_dir, recursive)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    own = isinstance(scheduler, (str, os.PathLike))
+    client = connect_scheduler(os.fspath(scheduler), connect_timeout) if own else scheduler
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+
+        def waiting(pid: int) -> None:
+            warnings.warn(f"{out_dir}: another batch ({f'process {pid}' if pid else 'another process'}) is "
+                          "writing into this folder; waiting for it to finish", RuntimeWarning, stacklevel=4)
+
+        with folder_lock(out_dir, wait=wait, on_wait=waiting):
+            return _run_locked(task, items, out_dir, jobs, client, force, progress)
+    finally:
+        if own:
+            client.close()
+
+
+def _run_locked(task: Task, items: list[Item], out_dir: Path, jobs, client, force: bool, progress) -> list[dict]:
+    """:func:`run` once it holds the output folder's lock (and a client, for Dask)."""
     previous = _previous_rows(out_dir)
     rows: dict[str, dict] = {}
     todo = []
@@ -241,7 +367,7 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
             todo.append(item)
     progress = sys.stderr.isatty() if progress is None else progress
     bar = None
-    if progress and scheduler is None:
+    if progress and client is None:
         from tqdm import tqdm
         bar = tqdm(total=len(todo), unit="file", desc=f"microfacet {task.name}", leave=False)
 
@@ -251,8 +377,8 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
             bar.update()
 
     try:
-        if scheduler is not None:
-            _run_dask(task, todo, scheduler, report, progress)
+        if client is not None:
+            _run_dask(task, todo, client, report, progress)
         else:
             if jobs is None:
                 jobs = memory.default_jobs(max((task.peak(i.source) for i in todo), default=0), len(todo))
@@ -263,7 +389,7 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
     finally:
         if bar is not None:
             bar.close()
-        remove_partials(task, items)
+        remove_partials(task, items, other_hosts=client is not None)
         ordered = [{"file": i.rel, **rows.get(i.rel, {"status": "not run: interrupted"})} for i in items]
         write_text(out_dir / "summary.csv", format_summary_csv(task, ordered))
         write_text(out_dir / "summary.md", format_summary_markdown(task, ordered))

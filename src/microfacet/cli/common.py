@@ -1,13 +1,16 @@
 """What every ``microfacet`` command shares: one-line usage errors, argument types and the
 output naming rule.
 
-Output naming rule (every command): ``-o OUT`` names the main output file. ``OUT`` ending
-with the command's suffix (``.npz``, ``.exr``, ``.png``, ``.md``) is used as it is; ``OUT``
-without a suffix gets it appended; an existing folder receives ``<input name><suffix>``.
-Any other suffix is an error, and so is an output (or a side output such as ``OUT.png``)
-that is the input itself. Outputs are checked (their folder created, and writable), before the work.
-A folder input (``bake``, ``glints``) is a batch: ``-o`` is the output folder, whose tree
-mirrors the input's (:mod:`microfacet.batch`).
+Output naming rule (every command; docs/cli.md): ``-o OUT`` names the main output file.
+``OUT`` ending with the command's suffix (``.npz``, ``.exr``, ``.png``, ``.md``) is used as
+it is; ``OUT`` without a suffix gets it appended; an existing folder, or ``OUT`` ending with
+a path separator (``-o new/``, created), receives ``<input name><suffix>``. Any other
+suffix is an error, and so are an empty ``OUT`` and a name that is only a suffix
+(``-o .exr``), and an output (or a side output such as ``OUT.png``) that is the input
+itself. Outputs are checked (their folder created, and writable), before the work; stale
+temporaries that a killed earlier run left for the same outputs are removed. A folder input
+(``bake``, ``glints``, ``fit``) is a batch: ``-o`` is the output folder, whose tree mirrors
+the input's (:mod:`microfacet.batch`), under the same rule for empty and suffix-only names.
 """
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ import argparse
 import os
 from pathlib import Path
 
-from ..io.atomic import check_writable
+from ..io.atomic import check_writable, remove_stale
 from ..io.names import input_name
 from ..errors import MicrofacetError
 
@@ -78,14 +81,51 @@ def add_normal_map_arguments(parser: argparse.ArgumentParser) -> None:
                              "channel (default)")
 
 
+#: Names that are only a suffix (``-o .exr``): errors, not hidden files.
+SUFFIX_ONLY = (".exr", ".png", ".npz", ".json", ".md", ".csv", ".html")
+
+
+def _separators() -> tuple[str, ...]:
+    return tuple(s for s in (os.sep, os.altsep, "/") if s)
+
+
+def check_output_name(output: str | os.PathLike) -> str:
+    """``output`` (the ``-o`` text) as a string, or :class:`MicrofacetError` when it is empty
+    or its last component is only a data suffix (``.exr``, ``out/.npz``)."""
+    text = os.fspath(output)
+    if not text.strip():
+        raise MicrofacetError("-o: empty output name; give a file or folder name")
+    name = text.rstrip("".join(_separators())).replace("\\", "/").rsplit("/", 1)[-1]
+    if name.lower() in SUFFIX_ONLY:
+        raise MicrofacetError(f"-o {text}: a name that is only a suffix; give a name before {name!r} "
+                              "(e.g. out" + name + ")")
+    return text
+
+
+def output_folder(output: str | os.PathLike) -> Path:
+    """The ``-o`` folder of a batch or the demo: ``output`` checked by
+    :func:`check_output_name` (a trailing separator is allowed: it is a folder anyway)."""
+    return Path(check_output_name(output))
+
+
 def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLike | None = None,
                 side: tuple[str, ...] = (), default_name: str = "") -> Path:
     """The main output of a command under the output naming rule (module docstring).
 
     ``side`` lists the suffixes of the files written beside it (``OUT.png``, ...); none of
-    them may be ``source``. The output's folder is created. Returns the main output path.
+    them may be ``source``. The output's folder is created, and stale temporaries of the
+    outputs (left by a killed run: :func:`microfacet.io.atomic.remove_stale`) are removed.
+    Returns the main output path.
+
+    >>> output_path("maps/", ".exr", "h.png")            # a trailing separator: a folder
+    PosixPath('maps/h.exr')
     """
-    out = Path(output)
+    text = check_output_name(output)
+    out = Path(text)
+    if text.endswith(_separators()):
+        if out.exists() and not out.is_dir():
+            raise MicrofacetError(f"{text}: exists and is not a folder")
+        out.mkdir(parents=True, exist_ok=True)
     if out.is_dir():
         name = input_name(source) if source is not None else default_name
         if not name:
@@ -104,6 +144,8 @@ def output_path(output: str | os.PathLike, suffix: str, source: str | os.PathLik
         raise MicrofacetError(f"{out.parent}: is not a folder")
     out.parent.mkdir(parents=True, exist_ok=True)
     check_writable(out)
+    for path in (out, *(out.with_suffix(s) for s in side)):
+        remove_stale(path)
     return out
 
 
@@ -120,6 +162,8 @@ def add_batch_options(parser) -> None:
     g.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask cluster, e.g. tcp://10.0.0.1:8786 (needs microfacet[dask] and "
                         "the files on a shared file system)")
+    g.add_argument("--scheduler-timeout", type=float_in(0.0, 3600.0, open_lo=True), default=None, metavar="S",
+                   help="seconds to reach the --scheduler before giving up with an error (default 10)")
     g.add_argument("--force", action="store_true",
                    help="redo files whose outputs are newer than their inputs (else skipped, so a "
                         "stopped batch resumes; use it after changing options)")
@@ -137,8 +181,9 @@ def run_batch(args, task: str, folder: str) -> int:
     task = task.with_options(**{k: getattr(args, k) for k in task.option_names() if hasattr(args, k)})
     if args.jobs is not None and args.scheduler is not None:
         raise MicrofacetError("--jobs and --scheduler exclude each other")
-    rows = run(task, folder, args.output, jobs=args.jobs, scheduler=args.scheduler, force=args.force,
-               recursive=args.recursive, progress=sys.stderr.isatty())
+    timeout = {} if args.scheduler_timeout is None else {"connect_timeout": args.scheduler_timeout}
+    rows = run(task, folder, output_folder(args.output), jobs=args.jobs, scheduler=args.scheduler,
+               force=args.force, recursive=args.recursive, progress=sys.stderr.isatty(), **timeout)
     print(format_summary_markdown(task, rows), end="")
     for r in rows:
         if r["status"] != "skipped" and r.get("warnings"):

@@ -24,7 +24,7 @@ def run(args) -> int:
 
     from ..io import write_text
     from ..validation import core_report, format_report
-    out = output_path(args.output, ".md", default_name="validate") if args.output else None
+    out = output_path(args.output, ".md", default_name="validate") if args.output is not None else None
     with tqdm(disable=not sys.stderr.isatty(), unit="step", desc="microfacet validate", leave=False) as bar:
         rows = core_report(quick=args.quick, progress=bar.update)
     text = format_report(rows)

@@ -3,18 +3,40 @@
 ``os.replace`` is atomic on POSIX and Windows when both paths are on the same file
 system, which a sibling in the destination folder guarantees: readers see either the
 old file or the complete new one, never a partial write.
+
+A temporary file is named ``.<name>.<pid>@<host>.<random>.tmp`` after its writer, so that
+a process killed while writing (``kill -9``, a crash: no cleanup runs) leaves a file the
+next writer of the same output recognises as stale (:func:`remove_stale`: its owner is a
+dead process of this host) and removes, while the temporaries of writers still running,
+e.g. a second command writing the same output, are left alone. :func:`folder_lock` lets
+one batch at a time write into a folder.
 """
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
+import re
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "check_writable", "write_bytes", "write_text"]
+__all__ = ["atomic_path", "check_writable", "write_bytes", "write_text", "temporary_owner", "remove_stale",
+           "folder_lock", "FolderBusy", "TMP_SUFFIX", "LOCK_NAME"]
 
 TMP_SUFFIX = ".tmp"
+#: The lock file of :func:`folder_lock` (hidden: a batch takes no hidden file as input).
+LOCK_NAME = ".microfacet.lock"
+#: ``<pid>@<host>.<random>`` of a temporary's name, or the ``<random>`` alone of the names
+#: written before the owner was recorded (``tempfile``'s 8 characters).
+_OWNED = re.compile(r"(\d+)@([A-Za-z0-9.-]+)\.[a-z0-9_]{8}")
+_LEGACY = re.compile(r"[a-z0-9_]{8}")
+
+
+def _host() -> str:
+    """This machine's name as it appears in temporary names (letters, digits, ``.``, ``-``)."""
+    return re.sub(r"[^A-Za-z0-9.-]", "-", socket.gethostname())[:64] or "localhost"
 
 
 def _umask() -> int:
@@ -27,7 +49,8 @@ def _umask() -> int:
 def _temporary(path: Path) -> Path:
     """A new empty temporary file beside ``path``; the OSError if there is none names ``path``."""
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=TMP_SUFFIX)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}@{_host()}.",
+                                   suffix=TMP_SUFFIX)
     except OSError as e:        # name the destination, not the temporary file
         raise OSError(e.errno, f"cannot write here: {e.strerror}", str(path)) from None
     os.close(fd)
@@ -62,6 +85,140 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def temporary_owner(tmp: str | os.PathLike, path: str | os.PathLike) -> tuple[int, str] | None | bool:
+    """Who wrote the temporary file ``tmp`` of the output ``path``: ``(pid, host)``; ``None``
+    for a temporary written before owners were recorded; ``False`` if ``tmp`` is not one of
+    ``path``'s temporaries (e.g. one of ``path.x.exr``'s, whose name starts alike)."""
+    name, prefix = Path(tmp).name, f".{Path(path).name}."
+    if not (name.startswith(prefix) and name.endswith(TMP_SUFFIX)):
+        return False
+    middle = name[len(prefix):-len(TMP_SUFFIX)]
+    owned = _OWNED.fullmatch(middle)
+    if owned:
+        return int(owned.group(1)), owned.group(2)
+    return None if _LEGACY.fullmatch(middle) else False
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` of this machine exists (a zombie counts as dead)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:         # another user's process
+        return True
+    try:                            # Linux: a killed process not yet reaped by its parent
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def remove_stale(path: str | os.PathLike, other_hosts: bool = False) -> list[Path]:
+    """Remove the temporaries of ``path`` (:func:`atomic_path`) whose writer is gone: those of
+    a dead process of this machine, and those written before owners were recorded; with
+    ``other_hosts``, those of other machines too (a batch that holds its folder's
+    :func:`folder_lock` and reruns a task whose worker died elsewhere). Temporaries of live
+    processes (another command writing the same output) are kept. Returns the paths removed.
+
+    >>> remove_stale("out/h.exr")       # after a kill -9 of 'microfacet bake h.png -o out/h.exr'
+    [PosixPath('out/.h.exr.4242@box.x1y2z3w4.tmp')]
+    """
+    path = Path(path)
+    removed = []
+    if not path.parent.is_dir():
+        return removed
+    host = _host()
+    try:
+        candidates = [p for p in path.parent.iterdir() if p.name.startswith(f".{path.name}.")]
+    except OSError:
+        return removed
+    for tmp in candidates:
+        owner = temporary_owner(tmp, path)
+        if owner is False:
+            continue
+        if owner is not None:
+            pid, where = owner
+            if (where == host and _alive(pid)) or (where != host and not other_hosts):
+                continue
+        try:
+            tmp.unlink()
+            removed.append(tmp)
+        except OSError:
+            pass
+    return removed
+
+
+class FolderBusy(OSError):
+    """Another process holds the folder's :func:`folder_lock` (and ``wait`` was false)."""
+
+
+def _lock_holder(fd: int) -> int:
+    """The pid written in a lock file, 0 if none can be read."""
+    try:
+        return int(os.pread(fd, 32, 0).split()[0])
+    except (ValueError, IndexError, OSError):
+        return 0
+
+
+@contextlib.contextmanager
+def folder_lock(folder: str | os.PathLike, wait: bool = True, on_wait=None) -> Iterator[Path]:
+    """Hold an exclusive lock on ``folder`` (``fcntl.flock`` on its :data:`LOCK_NAME` file,
+    which holds the holder's pid and is removed on release) for the block, so that two
+    batches never write into one folder at once. When another process holds it: with
+    ``wait``, call ``on_wait(pid)`` (the holder's pid, 0 if unknown) once and block until it
+    is released; else raise :class:`FolderBusy` naming the folder and the holder. The lock
+    dies with its process (``kill -9`` included: the file then stays, unlocked). Elsewhere
+    than POSIX it is a no-op.
+
+    >>> with folder_lock("out"):
+    ...     ...                             # write into out/
+    """
+    folder = Path(folder)
+    try:
+        import fcntl
+    except ImportError:                     # Windows: no flock
+        yield folder / LOCK_NAME
+        return
+    lock, told = folder / LOCK_NAME, False
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666 & ~_umask())
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as e:
+                if e.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                    raise
+                pid = _lock_holder(fd)
+                if not wait:
+                    holder = f"process {pid}" if pid else "another process"
+                    raise FolderBusy(errno.EBUSY, f"another microfacet batch ({holder}) is writing into this "
+                                                  "folder; wait for it or choose another output folder",
+                                     str(folder)) from None
+                if on_wait is not None and not told:
+                    on_wait(pid)
+                    told = True
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            try:                            # the holder before removed the file: lock the new one
+                same = os.path.samestat(os.fstat(fd), os.stat(lock))
+            except FileNotFoundError:
+                same = False
+            if not same:
+                continue
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            try:
+                yield lock
+            finally:
+                with contextlib.suppress(OSError):
+                    lock.unlink()           # while still held: a waiter then retries on a new file
+            return
+        finally:
+            os.close(fd)                    # releases the lock
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:

@@ -1,7 +1,9 @@
 """Minimal static HTML reports: a page of sections, tables of images and figures.
 
 Every string passed as text is escaped; ``body`` arguments are HTML fragments built by
-these functions. Paths are written relative to the page, so the folder can be moved.
+these functions. Paths are written relative to the page, so the folder can be moved. The
+page fits its window (body at most 1200 px wide): a table of images wider than the window
+shrinks its images (``max-width: 100%``) instead of widening the page.
 """
 from __future__ import annotations
 
@@ -14,7 +16,8 @@ _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
 h1 { font-size: 1.6em; } h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
 figure { margin: 1em 0; } figcaption { font-size: 0.9em; color: #444; }
-table.grid { border-collapse: collapse; }
+table.grid { border-collapse: collapse; max-width: 100%; }
+table.grid td img { max-width: 100%; height: auto; }
 table.grid td, table.grid th { padding: 3px; text-align: center; vertical-align: top; }
 table.grid th.row { font-weight: normal; font-size: 0.85em; text-align: right; vertical-align: middle; }
 table.grid small { color: #444; }
