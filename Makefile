@@ -9,23 +9,27 @@ SCALING ?= 1e4,1e5,1e6,1e7
 .PHONY: setup demo test bench clean
 
 $(VENV)/.installed: pyproject.toml
+	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask and view extras (pip)"
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask,view]"
 	touch $@
 
 # llvm_ad_rgb (Mitsuba plugins) needs a system libLLVM >= 16: installed where apt and root
-# are available; elsewhere the llvm tests skip with a one-line reason (they fail under CI=true).
+# are available (saying what and why first); elsewhere the llvm tests skip with a one-line
+# reason (they fail under CI=true). `make demo` runs this target too.
 setup: $(VENV)/.installed
 	@if ls /usr/lib/x86_64-linux-gnu/libLLVM-1[6-9]*.so* /usr/lib/x86_64-linux-gnu/libLLVM.so.1[6-9]* \
 	      /usr/lib/llvm-1[6-9]/lib/libLLVM*.so* 2>/dev/null | grep -q .; then :; \
 	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  echo "setup: installing the system package libllvm19 with apt-get (as root): Mitsuba's llvm_ad_rgb variant, used by the demo's Mitsuba section and its tests, needs libLLVM >= 16"; \
 	  apt-get update -qq && apt-get install -y -qq libllvm19 >/dev/null; \
 	else echo "setup: no libLLVM >= 16 and no root apt: Mitsuba llvm_ad_rgb tests will skip"; fi
 # GLSL tests (moderngl on EGL: Mesa llvmpipe) and viewer tests (Playwright on the system
 # Chromium; never 'playwright install'): system packages where apt and root are available.
 	@if [ -e /usr/lib/chromium/chromium ] && /sbin/ldconfig -p | grep -q libEGL_mesa; then :; \
 	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  echo "setup: installing the system packages chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 with apt-get (as root): the demo's real-time section and the viewer tests run the WebGL2 viewer in headless Chromium, the GLSL tests run on Mesa's EGL (llvmpipe)"; \
 	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 >/dev/null; \
 	else echo "setup: no chromium/Mesa EGL and no root apt: GLSL and viewer tests will skip"; fi
 

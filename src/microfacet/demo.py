@@ -30,6 +30,7 @@ from .brdf import BRDF, MicrofacetBRDF
 from .distributions import GGX, Beckmann
 from .errors import MicrofacetError
 from .io import html_figure, html_grid, html_page, write_exr, write_png, write_text
+from .io.atomic import staging_folder
 from .render import (DirectionalLight, Environment, Sphere, procedural_sky, save_lobe_figure,
                      shade_directional, shade_environment)
 
@@ -298,9 +299,13 @@ class _Inline:
         return _Deferred(fn, args)
 
 
-def _ignore_sigint() -> None:
-    """Worker initializer: Ctrl-C is handled by the parent, which cancels the pool."""
+def _ignore_sigint(parent: int | None = None) -> None:
+    """Worker initializer: Ctrl-C is handled by the parent, which cancels the pool; the
+    worker exits when the demo's process ``parent`` ends (``kill -9`` included)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        from .batch.workers import exit_with
+        exit_with(parent)
 
 
 @contextlib.contextmanager
@@ -311,7 +316,7 @@ def _pool(workers: int):
         yield _Inline()
         return
     pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_ignore_sigint)
+                               initializer=_ignore_sigint, initargs=(os.getpid(),))
     try:
         yield pool
     finally:
@@ -445,17 +450,30 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
 
     The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
     environment samples of panel ``j`` of figure ``i`` come from
-    ``default_rng([seed, i, j])``. Every file is written atomically. Returns the path of
-    ``index.html``.
+    ``default_rng([seed, i, j])``. All or nothing, as ``microfacet fit``: the files are
+    rendered into a hidden staging folder inside ``out_dir`` and moved into place only when
+    every one is written (``index.html`` last); a demo that fails (a full disk, Ctrl-C)
+    leaves ``out_dir`` as it was (:func:`microfacet.io.atomic.staging_folder`). Returns the
+    path of ``index.html``.
     """
     for name, v, lo in (("size", size, 8), ("spp", spp, 1), ("workers", workers, 1)):
         if isinstance(v, bool) or int(v) != v or v < lo:
             raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
     size, spp, seed = int(size), int(spp), int(seed)
+    if not os.fspath(out_dir).strip():
+        raise MicrofacetError("demo output folder: empty name; give a folder (e.g. -o demo-output)")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise MicrofacetError(f"{out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
+    with staging_folder(out, last="index.html") as stage:
+        _render_demo(stage, size, spp, seed, int(workers), progress, figures, fits, leadr, glints, viewer, mitsuba)
+    return out / "index.html"
+
+
+def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progress: bool, figures, fits,
+                 leadr: bool, glints: bool, viewer: bool, mitsuba: bool) -> Path:
+    """:func:`run_demo`'s files, written into the (staging) folder ``out``."""
     figures = thesis_figures() if figures is None else list(figures)
     env_map = procedural_sky()
     examples = fit_examples() if fits is None else list(fits)

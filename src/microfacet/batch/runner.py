@@ -77,7 +77,8 @@ def execute(task: Task, item: Item, other_hosts: bool = False) -> dict:
             warnings.simplefilter("always")
             figures, status = task(item.source, item.out), "ok"
     except FILE_ERRORS as e:
-        reason = " ".join(str(e).split()) or type(e).__name__
+        text = f"{e.filename}: {e.strerror}" if isinstance(e, OSError) and e.filename and e.strerror else str(e)
+        reason = " ".join(text.split()) or type(e).__name__
         figures, status = {}, f"error: {reason.removeprefix(f'{item.source}: ')}"
         for out in task.outputs(item.out):
             out.unlink(missing_ok=True)

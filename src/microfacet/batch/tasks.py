@@ -24,7 +24,8 @@ from ..errors import MicrofacetError
 from ..io.names import input_name
 from ..io.read import MEASURED_BRDF, read_decompressed
 
-__all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels"]
+__all__ = ["Task", "TASKS", "get_task", "bake_file", "glints_file", "fit_file", "image_pixels",
+           "slope_scale_warning", "PLAUSIBLE_ALPHA", "SUGGESTED_ALPHA"]
 
 #: Peak resident memory of a task in a worker process: a fixed part (interpreter, NumPy,
 #: SciPy, OpenEXR, Numba, matplotlib) plus bytes per input pixel, the least-squares line
@@ -99,6 +100,43 @@ class Task:
 
 
 # ---------------------------------------------------------------------------- bake
+#: Largest Beckmann roughness a height map's slopes plausibly have over the whole map: alpha 4
+#: is an RMS facet slope of 2.8 (70 degrees) per axis, steeper than any material's
+#: microgeometry; beyond it the preview and viewer are black and the heights are most likely
+#: in another unit than the map's width (pixels, millimetres), i.e. ``--scale`` is wrong.
+PLAUSIBLE_ALPHA = 4.0
+#: The roughness that the ``--scale`` suggested by :func:`slope_scale_warning` gives.
+SUGGESTED_ALPHA = 0.2
+
+
+def slope_scale_warning(source, top, scale: float, base=None) -> str | None:
+    """The warning for a height map baked at an implausible ``scale``, or ``None``.
+
+    ``top`` are the moments ``E1..E5`` of the pyramid's top level (the whole map), ``base``
+    the base roughness merged into them (:func:`microfacet.leadr.base_moments`'s argument).
+    The slopes' own roughness is ``alpha = sqrt(2 max(var_x, var_y))`` of the top level less
+    the base's variances (thesis Eq. 3.5-3.9); above :data:`PLAUSIBLE_ALPHA` the message gives
+    the scale that makes it :data:`SUGGESTED_ALPHA` (slopes scale linearly with ``scale``),
+    to one significant digit.
+
+    >>> slope_scale_warning("h.exr", top_moments, 1.0)
+    'h.exr: at --scale 1 the heights' slopes have roughness alpha 96.75 (...); --scale 0.002 gives alpha ~0.2'
+    """
+    from ..leadr import base_moments
+    E = np.asarray(top, dtype=np.float64).reshape(5)
+    var = np.array([E[2] - E[0] ** 2, E[3] - E[1] ** 2])
+    b = base_moments(base)
+    if b is not None:
+        var -= np.array([b[2] - b[0] ** 2, b[3] - b[1] ** 2])
+    alpha = float(np.sqrt(2.0 * max(float(var.max()), 0.0)))
+    if not alpha > PLAUSIBLE_ALPHA or scale == 0:
+        return None
+    suggested = float(f"{scale * SUGGESTED_ALPHA / alpha:.1g}")
+    return (f"{source}: at --scale {scale:g} the heights' slopes have roughness alpha {alpha:.4g} (above "
+            f"{PLAUSIBLE_ALPHA:g}: facets steeper than 70 degrees, a black preview; are the heights in another "
+            f"unit than the map's width?); --scale {suggested:g} gives alpha ~{SUGGESTED_ALPHA:g}")
+
+
 def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = False, border: str = "wrap",
               roughness: float | None = None, material: str | os.PathLike | None = None,
               encoding: str = "auto", z: str = "auto", compression: str = "none") -> dict:
@@ -137,6 +175,12 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
         out.unlink(missing_ok=True)
         raise
     lobe = leadr.from_moments(pyramid[-1][0, 0])
+    if not normal_map:
+        message = slope_scale_warning(source, pyramid[-1][0, 0], scale, base)
+        if message:
+            import warnings
+            from ..errors import HeightMapWarning
+            warnings.warn(message, HeightMapWarning, stacklevel=2)
     h, w = pyramid[0].shape[:2]
     return {"width": w, "height": h, "levels": len(pyramid), "alpha_x": float(lobe.alpha_x),
             "alpha_y": float(lobe.alpha_y), "rho": float(lobe.rho), "mean_x": float(lobe.xn),

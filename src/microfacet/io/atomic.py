@@ -17,13 +17,14 @@ import contextlib
 import errno
 import os
 import re
+import shutil
 import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 __all__ = ["atomic_path", "check_writable", "write_bytes", "write_text", "temporary_owner", "remove_stale",
-           "folder_lock", "FolderBusy", "TMP_SUFFIX", "LOCK_NAME"]
+           "folder_lock", "FolderBusy", "staging_folder", "TMP_SUFFIX", "LOCK_NAME", "STAGING_NAME"]
 
 TMP_SUFFIX = ".tmp"
 #: The lock file of :func:`folder_lock` (hidden: a batch takes no hidden file as input).
@@ -71,7 +72,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     The caller writes the complete file to the yielded path (e.g. a library that only
     accepts file names, such as OpenEXR). On success its data are flushed to disk, it
     gets the usual ``0o666 & ~umask`` permissions and replaces ``path`` atomically; on
-    any exception it is removed and the exception propagates, leaving ``path`` as it was.
+    any exception it is removed and the exception propagates, leaving ``path`` as it was
+    (an ``OSError`` that named no file or the temporary one, e.g. a full disk, is raised
+    again naming ``path``).
     """
     path = Path(path)
     tmp = _temporary(path)
@@ -81,6 +84,12 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
+    except OSError as e:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if e.errno and e.filename in (None, str(tmp)):       # name the destination (a full disk, ...)
+            raise OSError(e.errno, e.strerror or os.strerror(e.errno), str(path)) from None
+        raise
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
@@ -146,11 +155,49 @@ def remove_stale(path: str | os.PathLike, other_hosts: bool = False) -> list[Pat
             if (where == host and _alive(pid)) or (where != host and not other_hosts):
                 continue
         try:
-            tmp.unlink()
+            if tmp.is_dir() and not tmp.is_symlink():      # a staging folder (:func:`staging_folder`)
+                shutil.rmtree(tmp)
+            else:
+                tmp.unlink()
             removed.append(tmp)
         except OSError:
             pass
     return removed
+
+
+#: Name of the staging folders of :func:`staging_folder` (before their owner and ``.tmp``).
+STAGING_NAME = "microfacet-staging"
+
+
+@contextlib.contextmanager
+def staging_folder(folder: str | os.PathLike, last: str = "") -> Iterator[Path]:
+    """All or nothing for a set of files: yield a new hidden folder inside ``folder``
+    (``.microfacet-staging.<pid>@<host>.<random>.tmp``) to write them into; when the block
+    succeeds, move each of them (``os.replace``: no copy, no new disk space) to the same
+    relative path in ``folder``, replacing what is there, the file named ``last`` at the
+    end; when it fails (a full disk, Ctrl-C), remove the staging folder, leaving ``folder``
+    as it was. Staging folders of dead processes (a ``kill -9``) are removed first.
+
+    >>> with staging_folder("report", last="index.html") as stage:
+    ...     write_text(stage / "index.html", page)
+    """
+    folder = Path(folder)
+    remove_stale(folder / STAGING_NAME)
+    try:
+        stage = Path(tempfile.mkdtemp(dir=folder, prefix=f".{STAGING_NAME}.{os.getpid()}@{_host()}.",
+                                      suffix=TMP_SUFFIX))
+    except OSError as e:
+        raise OSError(e.errno, f"cannot write here: {e.strerror}", str(folder)) from None
+    try:
+        yield stage
+        files = sorted((p for p in stage.rglob("*") if not p.is_dir()),
+                       key=lambda p: (p.relative_to(stage).as_posix() == last, p.relative_to(stage).as_posix()))
+        for f in files:
+            target = folder / f.relative_to(stage)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(f, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 class FolderBusy(OSError):

@@ -5,6 +5,7 @@ Images are ``(H, W)`` or ``(H, W, C)`` arrays, row 0 at the top, with ``C`` = 1 
 """
 from __future__ import annotations
 
+import errno
 import os
 import threading
 from contextlib import contextmanager
@@ -17,7 +18,8 @@ from ..errors import MicrofacetError
 from .atomic import atomic_path
 from .read import read_bytes
 
-__all__ = ["read_exr", "write_exr", "EXR_MAGIC", "check_exr_magic", "COMPRESSIONS", "exr_compression", "exr_threads"]
+__all__ = ["read_exr", "write_exr", "EXR_MAGIC", "check_exr_magic", "COMPRESSIONS", "exr_compression", "exr_threads",
+           "exr_write_errors"]
 
 #: First four bytes of every OpenEXR file (``20000630`` little-endian).
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -66,6 +68,26 @@ def exr_threads():
                 OpenEXR.set_global_thread_count(_threads_before)
 
 
+#: System errors OpenEXR reports in the text of its ``RuntimeError`` (by their ``strerror``).
+_WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+@contextmanager
+def exr_write_errors(path: str | os.PathLike):
+    """Within the block, an OpenEXR write's ``RuntimeError`` (``Failed to write pixel data to
+    image file "...tmp". No space left on device.``) becomes an ``OSError`` naming ``path``,
+    with the system error it reports (``ENOSPC``, ...; else ``EIO`` and OpenEXR's message), so
+    that a command says it in one line: ``out.exr: No space left on device``."""
+    try:
+        yield
+    except RuntimeError as e:
+        text = " ".join(str(e).split())
+        code = next((c for c in _WRITE_ERRNOS if os.strerror(c).lower() in text.lower()), None)
+        if code is not None:
+            raise OSError(code, os.strerror(code), str(path)) from None
+        raise OSError(errno.EIO, f"cannot write the EXR file (OpenEXR: {text})", str(path)) from None
+
+
 def _as_channels(image) -> np.ndarray:
     """``image`` as a float ``(H, W, C)`` array, ``C`` in {1, 3, 4}."""
     a = np.asarray(image)
@@ -104,7 +126,7 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
                          f"{'half' if half else 'float32'}); nothing written (allow_nonfinite=True writes them)")
     channels = {name: np.ascontiguousarray(a[..., c]) for c, name in enumerate(_NAMES[a.shape[2]])}
     header = {"compression": exr_compression(compression), "type": OpenEXR.scanlineimage}
-    with atomic_path(path) as tmp, exr_threads():
+    with exr_write_errors(path), atomic_path(path) as tmp, exr_threads():
         OpenEXR.File(header, channels).write(str(tmp))
     return Path(path)
 

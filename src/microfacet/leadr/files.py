@@ -24,7 +24,7 @@ import OpenEXR
 
 from ..errors import HeightMapWarning, MicrofacetError
 from ..io.atomic import atomic_path
-from ..io.exr import check_exr_magic, exr_compression, exr_threads, write_exr
+from ..io.exr import check_exr_magic, exr_compression, exr_threads, exr_write_errors, write_exr
 from ..io.image import read_image
 from ..io.png import write_png_data
 from .mip import mip_sizes
@@ -58,7 +58,7 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -
         channels = {name: np.ascontiguousarray(level[..., c], dtype=np.float32)
                     for c, name in enumerate(CHANNELS)}
         parts.append(OpenEXR.Part(header, channels, f"mip{k}"))
-    with atomic_path(path) as tmp, exr_threads():
+    with exr_write_errors(path), atomic_path(path) as tmp, exr_threads():
         OpenEXR.File(parts).write(str(tmp))
     return Path(path)
 
