@@ -276,7 +276,7 @@ def test_fit_comparison_picture_is_written(tmp_path):
     path = save_fit_comparison(tmp_path / "cmp.png", {"data": data, "Beckmann": mf.MicrofacetBRDF(
         mf.Beckmann(alpha=0.2), fresnel=f)}, title="t", size=24, planes_deg=(0, 90))
     with Image.open(path) as im:
-        assert im.format == "PNG" and im.size == (800, 620)
+        assert im.format == "PNG" and im.size[0] >= 900 and im.size[1] > 2 * 24 + 330
     assert [p.name for p in tmp_path.iterdir()] == ["cmp.png"]
 
 
@@ -305,3 +305,39 @@ def test_fit_comparison_titles_sit_where_automatic_placement_puts_them(monkeypat
 def test_directional_light_rejects_bad_parameters(kwargs, word):
     with pytest.raises(ValueError, match=word):
         DirectionalLight(**kwargs)
+
+
+def test_fit_comparison_shows_five_brdfs_on_large_spheres_with_every_label_inside():
+    """3-5 BRDFs: spheres of the requested size pixel for pixel, every text inside the figure
+    and no two texts (titles, tick labels, legends, notes) overlapping."""
+    import io
+
+    from PIL import Image
+
+    from microfacet.render import compare
+    brdfs = {"data": mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), **{f"a long fit name {k}": mf.MicrofacetBRDF(
+        mf.GGX(alpha=0.1 + 0.1 * k)) for k in range(4)}}
+    notes = {name: "log 0.123 · image 0.456\nalbedo ratio 0.91–1.08" for name in list(brdfs)[1:]}
+    png = compare.fit_comparison_png(brdfs, "title", size=192, notes=notes)
+    with Image.open(io.BytesIO(png)) as im:
+        width, height = im.size
+    assert width >= 5 * 192 and height >= 2 * 192 + 330
+    fig = compare._comparison_figure(brdfs, "title", (0, 30, 60), (0,), 192, 100, notes)
+    renderer = fig.canvas.get_renderer()
+    fig.draw(renderer)
+    def in_view(axis, lim):
+        lo, hi = sorted(lim)
+        return [t.label1 for t in axis.get_major_ticks() if lo * (1 - 1e-9) <= t.get_loc() <= hi * (1 + 1e-9)]
+    texts = list(fig.texts) + [t for leg in fig.legends for t in leg.get_texts()]
+    for ax in fig.axes:
+        texts += [ax.title, ax.xaxis.label, ax.yaxis.label]
+        texts += in_view(ax.xaxis, ax.get_xlim()) + in_view(ax.yaxis, ax.get_ylim())
+        if ax.get_legend() is not None:
+            texts += list(ax.get_legend().get_texts()) + [ax.get_legend().get_title()]
+    boxes = [t.get_window_extent(renderer) for t in texts if t.get_visible() and t.get_text().strip()]
+    assert len(boxes) > 20
+    for b in boxes:
+        assert b.x0 >= 0 and b.y0 >= 0 and b.x1 <= width and b.y1 <= height
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not a.overlaps(b) or a.width == 0 or b.width == 0, (a, b)

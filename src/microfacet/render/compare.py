@@ -2,18 +2,22 @@
 
 One PNG, Matplotlib's object API on the Agg canvas (no pyplot state, no display):
 
-* top left: backscattering ``f_r(k, k)`` against ``theta_k`` (log scale), the quantity
+* bottom left: backscattering ``f_r(k, k)`` against ``theta_k`` (log scale), the quantity
   the power-iteration fit of thesis Ch. 4 starts from (Eq. 4.4-4.6);
-* top right: in-plane slices ``f_r(wi, wo) cos theta_i`` against signed ``theta_i`` for a
+* bottom right: in-plane slices ``f_r(wi, wo) cos theta_i`` against signed ``theta_i`` for a
   few view angles ``theta_o`` (the view at ``-theta_o``, as in :mod:`.lobes`), log scale
   so that peaks and the diffuse floor both show;
-* bottom: the BRDFs on small orthographic spheres under one directional light (the same
-  exposure for all, set by the first BRDF's 99.5th-percentile pixel), each with an
-  optional note below it (e.g. its fit errors).
+* top: the BRDFs on orthographic spheres (``size`` px, 192 by default, shown pixel for
+  pixel) under a directional light 35 deg from the view (:data:`COMPARE_LIGHT`) and, in a
+  second row, under a grazing light 75 deg from the view (:data:`GRAZING_LIGHT`): the same
+  exposure for all spheres of a row, set by the first BRDF's 99.5th-percentile pixel; an
+  optional note (e.g. fit errors) under each column;
 
 Colour BRDFs are plotted as luminance (Rec. 709 weights). The first BRDF is the
-reference (black); the grazing region ``cos theta < 0.1`` that fit errors exclude
-(:data:`microfacet.metrics.GRAZING_COS`) is shaded grey.
+reference (black); one legend below the plots names every colour. The grazing region
+``cos theta < 0.1`` that fit errors exclude (:data:`microfacet.metrics.GRAZING_COS`) is
+shaded grey. The figure is laid out in pixels (column width at least ``size + 40`` px), so
+labels, notes and legends never overlap, whatever the number of BRDFs (3-5 typical).
 """
 from __future__ import annotations
 
@@ -32,10 +36,15 @@ from .lights import DirectionalLight
 from .lobes import LUMINANCE, lobe_curve
 from .sphere import Sphere
 
-__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "COMPARE_LIGHT"]
+__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "COMPARE_LIGHT",
+           "GRAZING_LIGHT"]
 
 #: Light of the comparison spheres: up-left of the view, 35 deg from it, unit irradiance.
 COMPARE_LIGHT = DirectionalLight(direction=(-0.5, 0.5, 1.0), irradiance=1.0)
+#: Second light of the comparison spheres: from the right, 75 deg from the view.
+GRAZING_LIGHT = DirectionalLight(direction=(np.sin(np.radians(75.0)), 0.0, np.cos(np.radians(75.0))), irradiance=1.0)
+#: Default side of the comparison spheres, pixels.
+SPHERE_SIZE = 192
 _COLOURS = ("black", "#1f77b4", "#2ca02c", "#ff7f0e", "#d62728", "#9467bd")
 _VIEW_STYLES = ("-", "--", ":", "-.")
 _GRAZING_DEG = float(np.degrees(np.arccos(GRAZING_COS)))
@@ -66,6 +75,16 @@ def _positive(y: np.ndarray) -> np.ndarray:
     return np.where(y > 0, y, np.nan)
 
 
+def _log_ticks(ax) -> None:
+    """At most ~6 labelled decades on a log y axis, unlabelled minor ticks, small labels:
+    no two tick labels overlap."""
+    from matplotlib.ticker import LogLocator, NullFormatter
+    ax.yaxis.set_major_locator(LogLocator(base=10.0, numticks=6))
+    ax.yaxis.set_minor_locator(LogLocator(base=10.0, subs=(), numticks=6))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.tick_params(labelsize=7)
+
+
 def _plot_backscattering(ax, brdfs: Mapping, planes_deg: Sequence[float]) -> None:
     """Log-scale curves; the y range follows the reference (first) curve: from 1/30 of its
     minimum (at most 8 decades below the top) to 3x the largest value of any curve
@@ -79,9 +98,9 @@ def _plot_backscattering(ax, brdfs: Mapping, planes_deg: Sequence[float]) -> Non
                 hi = max(hi, float(np.max(f[inside])))
                 if k == 0:
                     lo = min(lo, float(np.min(f[inside])))
-            name = label + (f", φ = {plane:g}°" if len(planes_deg) > 1 else "")
             ax.plot(np.degrees(theta), _positive(f), _VIEW_STYLES[j % len(_VIEW_STYLES)],
-                    color=_COLOURS[k % len(_COLOURS)], lw=1.6 if k == 0 else 1.1, label=name)
+                    color=_COLOURS[k % len(_COLOURS)], lw=1.6 if k == 0 else 1.1,
+                    label=f"φ = {plane:g}°" if k == 0 and len(planes_deg) > 1 else None)
     ax.set_yscale("log")
     if 0 < lo < np.inf and hi > 0:
         top = max(hi, lo) * 3.0
@@ -90,8 +109,10 @@ def _plot_backscattering(ax, brdfs: Mapping, planes_deg: Sequence[float]) -> Non
     ax.set_xlim(0, 90)
     ax.set_xlabel("θ (deg)", fontsize=8)
     ax.set_title("backscattering f(k, k) (log)", fontsize=9, y=_TITLE_Y)
-    ax.tick_params(labelsize=7)
-    ax.legend(fontsize=6, frameon=False)
+    if len(planes_deg) > 1:
+        ax.legend(fontsize=7, frameon=True, framealpha=0.85, title="line style", title_fontsize=7,
+                  loc="upper right")
+    _log_ticks(ax)
 
 
 def _plot_slices(ax, brdfs: Mapping, views_deg: Sequence[float]) -> None:
@@ -114,20 +135,27 @@ def _plot_slices(ax, brdfs: Mapping, views_deg: Sequence[float]) -> None:
         ax.set_ylim(top * 1e-6, top * 3.0)
     ax.set_xlabel("θi (deg), view at −θo, plane φ = 0", fontsize=8)
     ax.set_title("in-plane f cos θi (log)", fontsize=9, y=_TITLE_Y)
-    ax.tick_params(labelsize=7)
-    ax.legend(fontsize=6, frameon=False, title="line style", title_fontsize=6)
+    _log_ticks(ax)
+    ax.legend(fontsize=7, frameon=True, framealpha=0.85, title="line style", title_fontsize=7, loc="lower center")
 
 
 def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = "",
                         views_deg: Sequence[float] = (0, 30, 60), planes_deg: Sequence[float] = (0,),
-                        size: int = 96, dpi: int = 100, notes: Mapping[str, str] | None = None) -> Path:
+                        size: int = SPHERE_SIZE, dpi: int = 100, notes: Mapping[str, str] | None = None) -> Path:
     """Write the comparison picture of :func:`fit_comparison_png` to ``path``, atomically;
     return ``path``."""
     return write_bytes(path, fit_comparison_png(brdfs, title, views_deg, planes_deg, size, dpi, notes))
 
 
+def _exposure(image: np.ndarray) -> float:
+    """Exposure (stops) putting the 99.5th-percentile luminance of ``image`` at 1."""
+    lum = image @ LUMINANCE
+    top = float(np.percentile(lum[lum > 0], 99.5)) if np.any(lum > 0) else 1.0
+    return float(np.log2(1.0 / top)) if np.isfinite(top) and top > 0 else 0.0
+
+
 def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[float] = (0, 30, 60),
-                       planes_deg: Sequence[float] = (0,), size: int = 96, dpi: int = 100,
+                       planes_deg: Sequence[float] = (0,), size: int = SPHERE_SIZE, dpi: int = 100,
                        notes: Mapping[str, str] | None = None) -> bytes:
     """The comparison picture (module docstring) of ``brdfs`` as PNG bytes, in memory (so
     that a caller can render it before writing any of its files).
@@ -135,8 +163,8 @@ def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[floa
     Parameters
     ----------
     brdfs : mapping of str -> BRDF
-        Label and BRDF, the reference (data) first, e.g. ``{"data": m, "tabulated fit":
-        fit, "GGX": fit.to_ggx(), "Beckmann": fit.to_beckmann()}``.
+        Label and BRDF, the reference (data) first, e.g. ``{"data": m, "best: lobe": best,
+        "tabulated fit": fit, "ABC": abc}`` (any number; 3-5 read best).
     title : str
         Figure title (e.g. the material name).
     views_deg : sequence of float
@@ -144,46 +172,95 @@ def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[floa
     planes_deg : sequence of float
         Azimuths of the backscattering curves (e.g. ``(0, 90)`` for anisotropic data).
     size : int
-        Side of each sphere image, pixels.
+        Side of each sphere image, pixels (shown pixel for pixel at ``dpi``).
+    dpi : int
+        Resolution of the PNG (the layout is in pixels at this resolution).
     notes : mapping of str -> str, optional
-        Text under the sphere of a label (e.g. fit errors); labels not in ``brdfs`` are
-        an error.
+        Text under the spheres of a label (e.g. fit errors, a few short lines); labels
+        not in ``brdfs`` are an error.
+
+    Example
+    -------
+    >>> import microfacet as mf
+    >>> png = fit_comparison_png({"data": mf.MicrofacetBRDF(mf.GGX(alpha=0.2)),
+    ...                           "fit": mf.MicrofacetBRDF(mf.GGX(alpha=0.25))}, "GGX", size=64)
+    >>> png[:4] == b"\\x89PNG"
+    True
     """
+    fig = _comparison_figure(brdfs, title, views_deg, planes_deg, size, dpi, notes)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], planes_deg: Sequence[float],
+                       size: int, dpi: int, notes: Mapping[str, str] | None):
+    """The Matplotlib figure of :func:`fit_comparison_png` (Agg canvas attached)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle
     if not brdfs:
         raise ValueError("save_fit_comparison needs at least one BRDF")
-    notes = dict(notes or {})
+    if int(size) != size or size < 8:
+        raise ValueError(f"size must be an integer >= 8, got {size!r}")
+    size = int(size)
+    notes = {k: str(v) for k, v in dict(notes or {}).items()}
     unknown = sorted(set(notes) - set(brdfs))
     if unknown:
         raise ValueError(f"save_fit_comparison: notes for labels not in brdfs: {unknown}")
     n = len(brdfs)
-    images = [render_sphere(b, size) for b in brdfs.values()]
-    lum = images[0] @ LUMINANCE
-    top = float(np.percentile(lum[lum > 0], 99.5)) if np.any(lum > 0) else 1.0
-    scale = 1.0 / top if np.isfinite(top) and top > 0 else 1.0
-    exposure = float(np.log2(scale))
+    rows = [[render_sphere(b, size, light) for b in brdfs.values()] for light in (COMPARE_LIGHT, GRAZING_LIGHT)]
+    exposures = [_exposure(images[0]) for images in rows]
 
-    fig = Figure(figsize=(max(8.0, 1.9 * n), 6.2 + (0.35 if notes else 0.0)))
+    # layout in pixels, from the top
+    note_lines = max((v.count("\n") + 1 for v in notes.values()), default=0)
+    cell = max(size + 40, 170)
+    width = max(900, n * cell + 40)
+    title_h, label_h, gap = (36 if title else 10), 22, 8
+    notes_h = 13 * note_lines + (10 if note_lines else 0)
+    plot_h, legend_h, footer_h = 330, 34, 34
+    spheres_h = 2 * (label_h + size + gap) + notes_h
+    height = title_h + spheres_h + plot_h + legend_h + footer_h
+
+    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, n, height_ratios=(1.35, 1.0))
-    half = max(1, n // 2)
-    _plot_backscattering(fig.add_subplot(grid[0, :half]), brdfs, planes_deg)
-    _plot_slices(fig.add_subplot(grid[0, half:]), brdfs, views_deg)
-    for k, (label, image) in enumerate(zip(brdfs, images, strict=True)):
-        ax = fig.add_subplot(grid[1, k])
-        ax.imshow(to_srgb8(image, exposure), interpolation="nearest")
-        ax.set_axis_off()
-        ax.set_title(label, fontsize=8, color=_COLOURS[k % len(_COLOURS)], y=_TITLE_Y)
+
+    def box(x, y, w, h):                             # pixels from the top-left -> figure fraction
+        return [x / width, 1.0 - (y + h) / height, w / width, h / height]
+
+    left = (width - n * cell) / 2.0
+    rows_top = title_h
+    labels = list(brdfs)
+    for r, (images, exposure) in enumerate(zip(rows, exposures)):
+        y = rows_top + r * (label_h + size + gap) + label_h
+        for k, (label, image) in enumerate(zip(labels, images)):
+            ax = fig.add_axes(box(left + k * cell + (cell - size) / 2.0, y, size, size))
+            ax.imshow(to_srgb8(image, exposure), interpolation="nearest")
+            ax.add_patch(Circle(((size - 1) / 2.0, (size - 1) / 2.0), size / 2.0, fill=False, lw=0.6,
+                                color="0.35"))       # the silhouette, where the sphere is dark
+            ax.set_axis_off()
+            if r == 0:
+                ax.set_title(label, fontsize=9, color=_COLOURS[k % len(_COLOURS)], y=_TITLE_Y)
+    for k, label in enumerate(labels):
         if label in notes:
-            ax.text(0.5, -0.04, notes[label], transform=ax.transAxes, ha="center", va="top", fontsize=6.5)
-    fig.text(0.5, 0.015, f"spheres: directional light, common exposure {exposure:+.2f} stops; "
-                         f"grey: grazing (cos θ < {GRAZING_COS:g}), excluded from fit errors",
-             ha="center", fontsize=7)
+            fig.text((left + (k + 0.5) * cell) / width, 1.0 - (rows_top + spheres_h - notes_h + 4) / height,
+                     notes[label], ha="center", va="top", fontsize=7.5, linespacing=1.25)
+    row_text = (f"spheres: light 35° from the view (top row, exposure {exposures[0]:+.2f} stops) and 75° "
+                f"(bottom row, {exposures[1]:+.2f} stops), the same exposure for every sphere of a row")
+
+    top = title_h + spheres_h + 26                  # room for the axes titles
+    axes_h = plot_h - 26 - 48                       # room below for tick labels and x labels
+    margin_l, margin_r, between = 70, 20, 80
+    axes_w = (width - margin_l - margin_r - between) / 2.0
+    _plot_backscattering(fig.add_axes(box(margin_l, top, axes_w, axes_h)), brdfs, planes_deg)
+    _plot_slices(fig.add_axes(box(margin_l + axes_w + between, top, axes_w, axes_h)), brdfs, views_deg)
+    handles = [Line2D([], [], color=_COLOURS[k % len(_COLOURS)], lw=1.6 if k == 0 else 1.2) for k in range(n)]
+    fig.legend(handles, labels, loc="center", ncol=min(n, 5), fontsize=8, frameon=False,
+               bbox_to_anchor=(0.5, 1.0 - (title_h + spheres_h + plot_h + legend_h / 2.0) / height))
+    fig.text(0.5, 1.0 - (height - footer_h / 2.0) / height,
+             row_text + f"\ncurves: grey band, grazing (cos θ < {GRAZING_COS:g}), excluded from fit errors",
+             ha="center", va="center", fontsize=7, linespacing=1.3)
     if title:
-        fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.9 if title else 0.95, bottom=0.1 if notes else 0.06,
-                        wspace=0.35, hspace=0.3)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
-    return buf.getvalue()
+        fig.suptitle(title, fontsize=11, y=1.0 - 6.0 / height, va="top")
+    return fig
