@@ -17,7 +17,7 @@ import numpy as np
 from ..geometry import spherical_to_cartesian
 from ..io import write_bytes
 
-__all__ = ["lobe_curve", "plot_lobes", "save_lobe_figure", "LUMINANCE"]
+__all__ = ["lobe_curve", "plot_lobes", "lobe_figure", "save_lobe_figure", "LUMINANCE"]
 
 #: Rec. 709 / sRGB luminance weights.
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -53,8 +53,12 @@ def plot_lobes(ax, brdf, theta_o_deg: Sequence[float] = (0, 30, 60, 80),
     for k, to in enumerate(theta_o_deg):
         ax.plot([-np.radians(to)] * 2, [0, top], color=_COLOURS[k % len(_COLOURS)], lw=0.6, alpha=0.6)
     ax.set_ylim(0, top)
-    ax.yaxis.set_major_locator(MaxNLocator(3, prune="lower"))
-    ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    # Rings at nice values up to 0.8 of the radius; only the outermost is labelled: side by
+    # side along the baseline, two labels such as "0.12" and "0.06" overlapped, and one label
+    # inside the rim's "-90°" gives the panel's scale.
+    ticks = [t for t in MaxNLocator(3).tick_values(0.0, 0.8 * top) if 0 < t <= 0.8 * top]
+    ax.set_yticks(ticks)
+    ax.set_yticklabels([""] * (len(ticks) - 1) + [FormatStrFormatter("%g")(ticks[-1])] if ticks else [])
     ax.set_rlabel_position(-90 + 8)
     ax.tick_params(labelsize=6)
     ax.set_title(title, fontsize=8)
@@ -64,7 +68,17 @@ def save_lobe_figure(path: str | os.PathLike, brdfs: Sequence, labels: Sequence[
                      theta_o_deg: Sequence[float] = (0, 30, 60, 80),
                      planes_deg: Sequence[float] = (0,), ncols: int | None = None,
                      dpi: int = 110) -> Path:
-    """One polar panel per BRDF, shared legend, written atomically as a PNG."""
+    """One polar panel per BRDF, shared legend, written atomically as a PNG (:func:`lobe_figure`)."""
+    fig = lobe_figure(brdfs, labels, theta_o_deg, planes_deg, ncols)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    return write_bytes(path, buf.getvalue())
+
+
+def lobe_figure(brdfs: Sequence, labels: Sequence[str], theta_o_deg: Sequence[float] = (0, 30, 60, 80),
+                planes_deg: Sequence[float] = (0,), ncols: int | None = None):
+    """The Matplotlib figure of :func:`save_lobe_figure` (Agg canvas): one polar panel per
+    BRDF (:func:`plot_lobes`) in ``ncols`` columns, and a shared legend."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     ncols = ncols or len(brdfs)
@@ -80,6 +94,4 @@ def save_lobe_figure(path: str | os.PathLike, brdfs: Sequence, labels: Sequence[
     height = row_h * nrows + legend_h
     fig.subplots_adjust(left=0.02, right=0.98, top=1 - 0.25 / height, bottom=(legend_h + 0.05) / height,
                         wspace=0.25, hspace=0.35)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
-    return write_bytes(path, buf.getvalue())
+    return fig
