@@ -336,6 +336,8 @@ def _white(brdf):
         return []
     if hasattr(brdf, "brdfs"):
         return [w for b in brdf.brdfs for w in _white(b)]
+    if hasattr(brdf, "coat") and hasattr(brdf, "base"):            # a layered BRDF: its coat's and base's lobes
+        return _white(brdf.coat) + _white(brdf.base)
     raise ValueError(f"white_furnace needs a MicrofacetBRDF, a Lambertian or a sum of them, "
                      f"got {type(brdf).__name__}")
 
@@ -591,8 +593,8 @@ def _scene(size: int) -> _Scene:
 
 def _finite(f) -> np.ndarray:
     """``f`` with negative and non-finite values set to 0 (black pixels, not NaN images)."""
-    f = np.asarray(f, dtype=np.float64)
-    return np.where(np.isfinite(f), np.maximum(f, 0.0), 0.0)
+    f = np.nan_to_num(np.asarray(f, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    return np.maximum(f, 0.0, out=f)
 
 
 _INDICATORS: dict = {}
