@@ -274,3 +274,10 @@ def test_image_error_on_merl_data_uses_the_measured_mask_of_coverage():
     assert np.array_equal(_measured_pairs(data, wi, wo), measured_mask(data, wi, wo))
     e = ImageError(data, size=24)({"data": data, "ggx": _ggx(0.1)})
     assert e["data"] == 0.0 and e["ggx"] > 0.1
+
+
+def test_image_error_of_a_fit_that_is_nan_somewhere_is_inf():
+    from microfacet.metrics import ImageError
+    ref = _ggx(0.3)
+    broken = Scaled(ref, np.nan, where=lambda wi, wo: wi[..., 0] > 0.5)
+    assert ImageError(ref, size=24)(broken) == float("inf")

@@ -592,8 +592,9 @@ def _scene(size: int) -> _Scene:
 
 
 def _finite(f) -> np.ndarray:
-    """``f`` with negative and non-finite values set to 0 (black pixels, not NaN images)."""
-    f = np.nan_to_num(np.asarray(f, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    """``f`` with negative values set to 0 and NaN to ``inf`` (a broken fit renders ``inf``
+    pixels, so its image error is ``inf``)."""
+    f = np.nan_to_num(np.asarray(f, dtype=np.float64), nan=np.inf, posinf=np.inf, neginf=0.0)
     return np.maximum(f, 0.0, out=f)
 
 
@@ -625,7 +626,7 @@ def _render_pixels(brdf, scene: _Scene, light_masks, env) -> np.ndarray:
     """``(4, N, 3)`` linear radiance of ``brdf`` (module section above): three directional
     images ``f cos theta_i`` (unit irradiance) where ``light_masks`` holds, and the
     environment image ``sum_k f(wi_k, wo) cos theta_ik Lw_k`` over the pairs of ``env``
-    (a list of ``(px, wi, wo, Lw)`` blocks); non-finite or negative ``f`` taken as 0.
+    (a list of ``(px, wi, wo, Lw)`` blocks); negative ``f`` taken as 0, NaN as ``inf``.
     ``light_masks=None``: the environment only."""
     out = np.zeros((4, scene.n_px, 3))
     for j, (wi, mask) in enumerate(zip(scene.light_wi, light_masks or ())):
@@ -732,7 +733,8 @@ class ImageError:
 
     The reference's images are rendered at construction; then the object is read-only,
     so threads may call one at once. ``ImageError(reference)(fit)`` is a float,
-    ``ImageError(reference)({name: fit})`` a dict of floats; :meth:`chromaticity` gives the
+    ``ImageError(reference)({name: fit})`` a dict of floats (``inf`` for a fit that is NaN or
+    infinite on some pair); :meth:`chromaticity` gives the
     chromaticity difference of the same renders (:func:`chromaticity_difference`).
 
     Example
