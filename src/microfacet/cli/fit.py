@@ -94,7 +94,10 @@ def run(args) -> int:
         row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
                        method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
                        albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture)
-    from ..fit.outputs import format_summary_markdown      # imported by fit_file, after its read started
-    print(format_summary_markdown([{"material": input_name(source), "file": source.name, "status": "ok",
-                                    "seconds": row["fit_seconds"], **row}]), end="")
+    import json
+    from ..fit.outputs import format_fits_table      # imported by fit_file, after its read started
+    summary = json.loads(target.with_suffix(".json").read_text())
+    print(f"{input_name(source)}: fits written to {target} (.json, .png); load one with "
+          f"microfacet.fit.load(path, model=NAME)")
+    print(format_fits_table(summary), end="")
     return 0

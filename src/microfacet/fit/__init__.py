@@ -8,6 +8,6 @@ fits an analytic GGX or Beckmann BRDF (with an optional Lambertian base, a
 :class:`SumBRDF`) to the data by least squares, started from that conversion.
 """
 from .analytic import SumBRDF, fit_analytic
-from .fitted import FORMAT, VERSION, FittedBRDF, fit, load
+from .fitted import FORMAT, VERSION, FittedBRDF, fit, fit_names, load
 
-__all__ = ["FORMAT", "VERSION", "FittedBRDF", "SumBRDF", "fit", "fit_analytic", "load"]
+__all__ = ["FORMAT", "VERSION", "FittedBRDF", "SumBRDF", "fit", "fit_analytic", "fit_names", "load"]

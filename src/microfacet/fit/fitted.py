@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 import os
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from .analytic import fit_analytic
 #: Conversions of :meth:`FittedBRDF.to_ggx` / :meth:`FittedBRDF.to_beckmann`.
 CONVERSIONS = ("moments", "least_squares")
 
-__all__ = ["FittedBRDF", "fit", "load", "FORMAT", "VERSION", "READABLE_VERSIONS"]
+__all__ = ["FittedBRDF", "fit", "load", "fit_names", "FORMAT", "VERSION", "READABLE_VERSIONS"]
 
 #: slack of the energy constraint: fit albedo <= data albedo + ENERGY_MARGIN at each view
 ENERGY_MARGIN = 0.01
@@ -255,9 +256,12 @@ class FittedBRDF(MicrofacetBRDF):
         (:mod:`microfacet.io.atomic`); returns ``path``."""
         return write_bytes(path, self.to_bytes())
 
-    def to_bytes(self) -> bytes:
+    def to_bytes(self, fits: dict | None = None, best: str | None = None) -> bytes:
         """The fit as the bytes of an ``.npz`` file, format :data:`FORMAT` version
         :data:`VERSION` (:meth:`save` writes them, :func:`load` reads them).
+        ``fits``: other fits of the same material to keep beside it, ``{name: spec}``
+        (:func:`microfacet.fit.spec.to_spec`), stored as the JSON string ``fits``, and
+        ``best`` the name :func:`load` returns for ``model="best"``.
 
         Fields: ``format``, ``version``, ``kind`` (``isotropic`` | ``anisotropic``), ``gaf``,
         ``shadowing``, ``ndf`` (the normalized standard ``D`` at the nodes), ``fresnel_cos``
@@ -280,6 +284,11 @@ class FittedBRDF(MicrofacetBRDF):
                       diffuse=self.diffuse)
         if self.anisotropic:
             arrays["projected_area"] = d.area_table
+        if fits:
+            if best is not None and best not in fits and best != "tabulated":
+                raise ValueError(f"best fit {best!r} is not among the fits {sorted(fits)}")
+            arrays["fits"] = np.array(json.dumps(fits))
+            arrays["best"] = np.array(best or "tabulated")
         buf = io.BytesIO()
         np.savez(buf, **arrays)
         return buf.getvalue()
@@ -503,11 +512,21 @@ _KEYS = ("format", "version", "kind", "gaf", "shadowing", "ndf", "fresnel_cos", 
          "iterations", "alpha_x", "alpha_y", "rho", "mean_slope")
 
 
-def load(path: str | os.PathLike) -> FittedBRDF:
-    """Read a fit written by :meth:`FittedBRDF.save` (any of :data:`READABLE_VERSIONS`);
-    raises :class:`MicrofacetError` naming the file when it is not a valid fit file of a
-    supported version, and saying what it is when it is another microfacet ``.npz``
-    (a glint microsurface of ``microfacet glints``)."""
+def load(path: str | os.PathLike, model: str | None = None):
+    """Read a fit written by :meth:`FittedBRDF.save` or ``microfacet fit`` (any of
+    :data:`READABLE_VERSIONS`): the tabulated :class:`FittedBRDF` (``model`` None or
+    ``"tabulated"``), or the fit named ``model`` among those the file keeps
+    (:func:`fit_names`; ``"best"``: the one ``microfacet fit`` chose by image error) as a
+    BRDF (:func:`microfacet.fit.spec.from_spec`). Raises :class:`MicrofacetError` naming
+    the file when it is not a valid fit file of a supported version, or naming the fits it
+    has when ``model`` is not one of them, and saying what it is when it is another
+    microfacet ``.npz`` (a glint microsurface of ``microfacet glints``).
+
+    Example
+    -------
+    >>> best = load("nickel.npz", model="best")          # doctest: +SKIP
+    >>> best.eval(wi, wo)                                 # doctest: +SKIP
+    """
     path = Path(path)
     data = load_npz(path, "a microfacet fit file")
     if "format" not in data and "magic" in data:
@@ -517,9 +536,40 @@ def load(path: str | os.PathLike) -> FittedBRDF:
                                   "(read it with microfacet.glints.Microsurface.load), not a microfacet fit file "
                                   "(written by 'microfacet fit' or FittedBRDF.save)")
     try:
-        return _from_arrays(data)
+        if model is None or model == "tabulated" or (model == "best" and "fits" not in data):
+            return _from_arrays(data)
+        fits, best = _fits_of(data)
+        name = best if model == "best" else model
+        if name == "tabulated":
+            return _from_arrays(data)
+        if name not in fits:
+            raise MicrofacetError(f"{path}: no fit named {model!r}; the file has: "
+                                  f"{', '.join(['best', 'tabulated', *fits])}")
+        from .spec import from_spec
+        return from_spec(fits[name])
     except (KeyError, ValueError, TypeError, IndexError) as e:
         raise MicrofacetError(f"{path}: invalid microfacet fit file: {e}") from None
+
+
+def _fits_of(data: dict) -> tuple[dict, str]:
+    if "fits" not in data:
+        return {}, "tabulated"
+    fits = json.loads(str(data["fits"]))
+    if not isinstance(fits, dict):
+        raise ValueError("fits is not a JSON object")
+    return fits, str(data["best"]) if "best" in data else "tabulated"
+
+
+def fit_names(path: str | os.PathLike) -> tuple[list[str], str]:
+    """``(names, best)``: the fits a fit file keeps (``"tabulated"`` first) and the name of
+    the best one (``"tabulated"`` in files that keep only it)."""
+    path = Path(path)
+    data = load_npz(path, "a microfacet fit file")
+    try:
+        fits, best = _fits_of(data)
+    except (ValueError, TypeError) as e:
+        raise MicrofacetError(f"{path}: invalid microfacet fit file: {e}") from None
+    return ["tabulated", *fits], best
 
 
 def _from_arrays(data: dict) -> FittedBRDF:

@@ -53,7 +53,8 @@ DIFFUSE = ("auto", "on", "off")
 NEGLIGIBLE_BASE = 2e-3
 _KINDS = ("tabulated", "ggx", "beckmann")
 #: Columns of ``summary.csv`` (``summary.md`` shows the same, formatted).
-SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "method",
+SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "best", "log_best", "image_best",
+                   "image_tabulated", "method",
                    *(f"error_{k}" for k in _KINDS), *(f"uniform_{k}" for k in _KINDS),
                    *(f"albedo_{k}" for k in _KINDS), "error_ggx_moments",
                    "ggx_alpha_x", "ggx_alpha_y", "ggx_rho", "ggx_diffuse",
@@ -227,6 +228,9 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     # moment conversions and the metrics of the tabulated and moment fits; every result as
     # computed serially
     metrics_job = in_background(_metrics, brdf)
+    models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
+    perceptual_job = in_background(_perceptual, brdf, models)
+    judges_job = in_background(_judges, brdf)
     t0 = time.perf_counter()
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
     t1 = time.perf_counter()
@@ -242,6 +246,10 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
     scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
     grid, uniform, albedo, furnace = ({k: v for part in scores for k, v in part[i].items()} for i in range(4))
+    perceptual, t3 = perceptual_job.result()
+    p_grid, p_uniform, p_albedo, _ = _scores(metrics, perceptual)
+    fits_summary, best = _perceptual_summary(judges_job.result(), {**named, **perceptual}, perceptual,
+                                             ({**grid, **p_grid}, {**uniform, **p_uniform}, {**albedo, **p_albedo}))
     chosen = moments if method == "moments" else {
         family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}
     fits = {"tabulated": fit, **chosen}
@@ -265,18 +273,102 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         "resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf,
         "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
         "tabulated_diffuse": bool(tabulated_diffuse),
+        "best": best, "fits": fits_summary, "seconds_perceptual": round(t3 - t1, 4),
     }
-    files = {out_npz: fit.to_bytes(), out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
+    specs = {k: v["model"] for k, v in fits_summary.items() if k != "tabulated"}
+    files = {out_npz: fit.to_bytes(fits=specs, best=best),
+             out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
     if picture:                                     # rendered before any file is written (1.5-3 s)
         from ..render import fit_comparison_png
-        labels = {"tabulated": "tabulated fit", "ggx": f"GGX ({_label(names['ggx'])})",
-                  "beckmann": f"Beckmann ({_label(names['beckmann'])})"}
-        notes = {labels[k]: _note(grid[names[k]], uniform[names[k]], albedo[names[k]]) for k in fits}
+        from .perceptual import select
+        every = {**named, **perceptual}
+        second = "tabulated" if best != "tabulated" else select(
+            {k: v["metrics"]["image"] for k, v in fits_summary.items() if k != "tabulated"})
+        labels = {best: f"best: {best}", second: "tabulated fit" if second == "tabulated" else f"best analytic: {second}"}
+        shown = {labels[k]: every[k] for k in (best, second)}
+        notes = {labels[k]: _fit_note(fits_summary[k]["metrics"]) for k in (best, second)}
         files[out_npz.with_suffix(".png")] = fit_comparison_png(
-            {"data": brdf, **{labels[k]: b for k, b in fits.items()}}, title=title or material_name(out_npz),
+            {"data": brdf, **shown}, title=title or material_name(out_npz),
             planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
     _write_all(files)
     return summary
+
+
+#: The models of :mod:`microfacet.fit.perceptual` that every fit tries (``coat=True`` adds ``"coat"``).
+PERCEPTUAL_MODELS = ("lobe", "two_lobes")
+#: Sphere size (px) of the image error that chooses the best fit (:class:`microfacet.metrics.ImageError`).
+IMAGE_SIZE = 32
+#: Pairs of the log error reported per fit (:class:`microfacet.metrics.LogError`).
+LOG_PAIRS = 2**15
+#: Views (deg) of the energy check ``max_albedo``: the largest directional albedo of a fit.
+ENERGY_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
+
+
+def _perceptual(brdf, models) -> tuple[dict, float]:
+    """``({name: BRDF}, end time)`` of :func:`microfacet.fit.perceptual.fit_models`."""
+    from .perceptual import fit_models
+    return fit_models(brdf, models), time.perf_counter()
+
+
+def _judges(brdf) -> tuple:
+    """The data's side of the log and image errors."""
+    from ..metrics import ImageError, LogError
+    return LogError(brdf, n=LOG_PAIRS), ImageError(brdf, size=IMAGE_SIZE)
+
+
+def _energy(brdf) -> float:
+    """The largest directional albedo of ``brdf`` (RGB, views :data:`ENERGY_VIEWS_DEG`): <= 1 conserves energy."""
+    from ..metrics import directional_albedo
+    return float(np.max(directional_albedo(brdf, ENERGY_VIEWS_DEG)))
+
+
+def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) -> tuple[dict, str]:
+    """``({name: {"model": spec, "metrics": {...}}}, best)`` for every fit of ``named``
+    (the tabulated fit's model is ``"tabulated"``): the legacy metrics ``legacy = (grid,
+    uniform, albedo)`` where computed, the log and image errors, chromaticity difference
+    and largest albedo; the best is the fit of least image error."""
+    from .perceptual import select
+    from .spec import to_spec
+    log_error, image_error = judges
+    grid, uniform, albedo = legacy
+    out = {}
+    for name, b in named.items():
+        details = image_error.details(b)
+        metrics = {"log": round(log_error(b), 6), "image": round(details["image"], 6),
+                   "chromaticity": round(details["chromaticity"], 6), "grid": grid.get(name),
+                   "uniform": uniform.get(name), "albedo_ratio": np.asarray(albedo[name]).round(4).tolist(),
+                   "albedo_ratio_worst": round(_worst(albedo[name]), 4), "max_albedo": round(_energy(b), 4)}
+        out[name] = {"model": "tabulated" if name == "tabulated" else _spec_or_none(to_spec, b), "metrics": metrics}
+    best = select({k: v["metrics"]["image"] for k, v in out.items()})
+    return out, best
+
+
+def _spec_or_none(to_spec, brdf):
+    try:
+        return to_spec(brdf)
+    except ValueError:                       # e.g. a moment conversion's tabulated distribution
+        return None
+
+
+def _fit_note(metrics: dict) -> str:
+    """Two lines of figures under a sphere of the picture."""
+    return (f"image {metrics['image']:.3f} · log {metrics['log']:.4f}\n"
+            f"albedo ratio {metrics['albedo_ratio_worst']:.2f}")
+
+
+def format_fits_table(summary: dict) -> str:
+    """A short table of every fit of a ``microfacet fit`` summary, one row per fit, the
+    best marked ``*``, for a terminal."""
+    rows = [("fit", "log err", "image err", "grid err", "albedo", "max albedo")]
+    for name, entry in summary["fits"].items():
+        m = entry["metrics"]
+        rows.append((("* " if name == summary["best"] else "  ") + name, f"{m['log']:.4f}", f"{m['image']:.3f}",
+                     "" if m["grid"] is None else f"{m['grid']:.3f}", f"{m['albedo_ratio_worst']:.2f}",
+                     f"{m['max_albedo']:.3f}"))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
+    return "\n".join(lines) + ("\n* best: least image error (spheres under 3 lights and an environment, "
+                                f"{IMAGE_SIZE} px); log: cosine-weighted log error; albedo: worst ratio fit/data\n")
 
 
 def _key(named: dict, brdf) -> str:
@@ -310,6 +402,10 @@ def summary_row(name: str, path, fmt: str, summary: dict | None, status: str = "
         errors = summary["errors"]
         row["seconds"] = round(summary["seconds"] + summary.get("seconds_least_squares", 0.0), 4)
         row["method"] = summary["method"]
+        if "fits" in summary:
+            best = summary["fits"][summary["best"]]["metrics"]
+            row.update(best=summary["best"], log_best=best["log"], image_best=best["image"],
+                       image_tabulated=summary["fits"]["tabulated"]["metrics"]["image"])
         for kind in _KINDS:
             row[f"error_{kind}"] = errors[kind]
             row[f"uniform_{kind}"] = errors["uniform"][kind]

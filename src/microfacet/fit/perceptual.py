@@ -1,0 +1,571 @@
+"""Fits that look like the material: analytic models fitted in log space, chosen by image error.
+
+A measured BRDF ``f_d`` is fitted by models of the library's protocol, each by minimizing
+the cosine-weighted log error of Löw et al. 2012 (their metric E2, also Bagher et al. 2016):
+
+    E^2 = sum_pairs w sum_c (ln(1 + f_c cos th_i) - ln(1 + f_d,c cos th_i))^2 / (3 sum w)
+
+over pairs ``(wi, wo)`` distributed uniformly in solid angle (importance-sampled at the
+specular peak, :func:`microfacet.metrics.uniform_directions`, grazing pairs left out), with
+the directional albedo held as a constraint rather than weighed: at views 0/30/60/75 deg
+each channel's albedo stays within ``[1 - ALBEDO_BELOW, 1 + ALBEDO_ABOVE]`` of the data's
+and at every view up to 89 deg the total stays below 1 (penalty residuals of weight
+:data:`PENALTY`, then an exact projection of the upper bounds). The models
+(:data:`MODELS`), all with GGX lobes and the height-correlated Smith GAF (Heitz 2014):
+
+* ``"lobe"``: one lobe with Schlick's Fresnel ``F = f0 + (f90 - f0)(1 - cos th_d)^5``
+  (``f0`` RGB, ``f90`` grey) plus a Lambertian base ``k_d``;
+* ``"two_lobes"``: a sharp core and a wide halo, each with its own Schlick term, plus a
+  base (metals and metallic paints: Cook & Torrance 1982 used two lobes for the same
+  reason; Löw et al. 2012 Sec. 6);
+* ``"coat"``: a dielectric coat of index ``eta`` and its own roughness over a base (a lobe
+  plus a Lambertian term) lit through the coat's transmission,
+  ``f = f_coat + (1 - E_c(mu_i))(1 - E_c(mu_o)) f_base``
+  (:class:`microfacet.layered.LayeredBRDF`; Kelemen & Szirmay-Kalos 2001).
+
+Each model is linear in its reflectances given its nonlinear parameters ``q`` (log
+roughnesses, the coat's index): ``f = C(q) + A(q) y``. The fit scans ``q``, solves ``y``
+for each scanned ``q`` by a bounded linearized least squares (:func:`.extract.box_qp`),
+then refines the best starts by a projected Levenberg-Marquardt method on ``(q, y)``
+(Jacobian exact in ``y``, forward differences in ``q``). :func:`fit_models` returns every
+model's BRDF; :func:`select` picks the one whose rendered spheres look most like the data's
+(Bieron & Peers 2020: choose by image error, not by the fitting metric).
+
+Example
+-------
+>>> import microfacet as mf                                          # doctest: +SKIP
+>>> data = mf.measured.load("nickel.binary.gz")                     # doctest: +SKIP
+>>> fits = mf.fit.perceptual.fit_models(data)                       # doctest: +SKIP
+>>> sorted(fits)                                                    # doctest: +SKIP
+['lobe', 'two_lobes']
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, measured_mask, measurement_directions,
+                       uniform_directions)
+from .extract import box_qp
+
+__all__ = ["MODELS", "Geometry", "Target", "Model", "target", "fit_model", "fit_models", "select",
+           "lobe_factor", "PENALTY"]
+
+#: The models of :func:`fit_models`, in the order they are fitted.
+MODELS = ("lobe", "two_lobes", "coat")
+#: Weight of the energy penalty residuals (a 1 % excess costs ~(0.01 PENALTY)^2).
+PENALTY = 10.0
+#: Weight of the penalty below the albedo band (data whose albedo falls faster with the
+#: view than any model's cannot be held to both sides).
+PENALTY_BELOW = 0.0
+#: Albedo band around the data's at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`.
+ALBEDO_BELOW, ALBEDO_ABOVE = 0.05, 0.01
+#: Channels whose data albedo is below this are not held to the band (noise).
+ALBEDO_FLOOR = 0.03
+#: Views (deg) at which the total albedo must stay below ``1 - ENERGY_MARGIN``.
+ENERGY_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
+ENERGY_MARGIN = 2e-3
+#: Roughness bounds of every lobe.
+ALPHA_MIN, ALPHA_MAX = 2e-3, 1.0
+#: Index bounds of the coat.
+ETA_MIN, ETA_MAX = 1.2, 2.2
+
+
+#: Compression of ``u = f cos th_i`` in which the fit is made: ``"log"``, ``ln(1 + u)``
+#: (Löw et al. 2012), or ``"cbrt"``, ``(u + eps)^(1/3)`` (Bagher et al. 2016; the cube
+#: root of the lightness curve that the image error compares).
+COMPRESSION = "cbrt"
+_CBRT_EPS = 1e-4
+
+
+def compress(u: np.ndarray) -> np.ndarray:
+    """The compression :data:`COMPRESSION` of ``u = f cos th_i >= 0``."""
+    if COMPRESSION == "log":
+        return np.log1p(u)
+    return np.cbrt(u + _CBRT_EPS)
+
+
+def compress_slope(u: np.ndarray) -> np.ndarray:
+    """The derivative of :func:`compress` at ``u``."""
+    if COMPRESSION == "log":
+        return 1.0 / (1.0 + u)
+    return 1.0 / (3.0 * np.cbrt(u + _CBRT_EPS) ** 2)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Cosines of a set of pairs: ``cos th_i``, ``cos th_o``, ``cos th_h``, ``cos th_d``, each ``(n,)``."""
+    cos_i: np.ndarray
+    cos_o: np.ndarray
+    cos_h: np.ndarray
+    cos_d: np.ndarray
+
+    @classmethod
+    def of(cls, wi: np.ndarray, wo: np.ndarray) -> "Geometry":
+        h = wi + wo
+        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+        return cls(wi[:, 2].copy(), wo[:, 2].copy(), h[:, 2].copy(), np.clip(np.sum(wi * h, -1), 0.0, 1.0))
+
+    def __len__(self) -> int:
+        return len(self.cos_i)
+
+
+def _smith_lambda(alpha: float, mu: np.ndarray) -> np.ndarray:
+    """GGX's ``Lambda(mu) = (sqrt(1 + alpha^2 tan^2) - 1) / 2`` (Heitz 2014, Eq. 72), cancellation-free."""
+    t2 = alpha * alpha * (1.0 - mu * mu) / (mu * mu)
+    return t2 / (2.0 * (np.sqrt(1.0 + t2) + 1.0))
+
+
+def lobe_factor(alpha: float, g: Geometry) -> np.ndarray:
+    """``D G2 / (4 cos th_i cos th_o)`` of an isotropic GGX lobe (Eq. 2.1 without ``F``;
+    Walter et al. 2007's ``D``, the height-correlated Smith ``G2 = 1 / (1 + Lambda_i +
+    Lambda_o)``, Heitz 2014 Eq. 99): equal to ``MicrofacetBRDF(GGX(alpha)).eval`` with
+    ``F = 1`` to rounding (tested)."""
+    a2 = alpha * alpha
+    c2 = g.cos_h * g.cos_h
+    d = a2 / (np.pi * (c2 * (a2 - 1.0) + 1.0) ** 2)
+    g2 = 1.0 / (1.0 + _smith_lambda(alpha, g.cos_i) + _smith_lambda(alpha, g.cos_o))
+    return d * g2 / (4.0 * g.cos_i * g.cos_o)
+
+
+def dielectric(eta: float, c: np.ndarray) -> np.ndarray:
+    """Unpolarized Fresnel reflectance of a dielectric of index ``eta`` (as :class:`microfacet.fresnel.Dielectric`)."""
+    g = np.sqrt(np.maximum(eta * eta + c * c - 1.0, 0.0))
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + b * b)
+
+
+@dataclass(frozen=True)
+class _AlbedoQuadrature:
+    """Half-vector quadrature of the directional albedo at ``n`` views spaced in ``mu``."""
+    mu: np.ndarray
+    geometry: Geometry
+    w: np.ndarray
+    view: np.ndarray
+
+
+def _coat_quadrature(n_mu: int = 24, n_theta: int = 40, n_phi: int = 16) -> _AlbedoQuadrature:
+    mu = np.concatenate([[1e-3], np.linspace(0.02, 1.0, n_mu - 1) ** 1.5])
+    views = np.degrees(np.arccos(mu))
+    wi, wo, w, view = albedo_directions(views, 0.0, n_theta, n_phi)
+    return _AlbedoQuadrature(mu, Geometry.of(wi, wo), w, view)
+
+
+_COAT_NODES: list = []
+
+
+def coat_albedo(alpha: float, eta: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(mu, E_c(mu))``: directional albedo of a GGX lobe of roughness ``alpha`` with the
+    dielectric Fresnel of index ``eta`` (single scattering), at 24 views by a half-vector
+    quadrature (within ~1e-3 of :func:`microfacet.metrics.directional_albedo`)."""
+    if not _COAT_NODES:
+        _COAT_NODES.append(_coat_quadrature())
+    q = _COAT_NODES[0]
+    f = lobe_factor(alpha, q.geometry) * dielectric(eta, q.geometry.cos_d) * q.geometry.cos_i
+    e = np.bincount(q.view, q.w * np.where(np.isfinite(f), f, 0.0), minlength=len(q.mu))
+    return q.mu, np.minimum(e, 1.0)
+
+
+@dataclass(frozen=True)
+class Model:
+    """A model ``f = c(q) + B(q) Y(y)`` of nonlinear parameters ``q`` and reflectances ``y``.
+
+    ``basis(q, g) -> (c (n,) grey or None, B (n, K))``: the model's basis functions at the
+    pairs ``g``; ``mix (3, K, len(y))``: the reflectance of basis ``k`` in channel ``c`` is
+    ``mix[c, k] @ y``; ``brdf(q, y)`` the library BRDF; ``starts(previous)`` the scanned
+    ``q``'s (``previous``: the fitted ``(q, y)`` of earlier models by name)."""
+    name: str
+    q_bounds: tuple[np.ndarray, np.ndarray]
+    mix: np.ndarray
+    basis: Callable
+    brdf: Callable
+    starts: Callable
+
+    @property
+    def n_y(self) -> int:
+        return self.mix.shape[-1]
+
+
+def _schlick_basis(s: np.ndarray, g: Geometry) -> list[np.ndarray]:
+    """A lobe factor ``s`` weighted by Schlick's ``f0`` and ``f90`` terms: ``s (1 - m^5)``, ``s m^5``, ``m = 1 - cos th_d``."""
+    m = 1.0 - g.cos_d
+    m5 = (m * m) * (m * m) * m
+    return [s * (1.0 - m5), s * m5]
+
+
+def _lobes_mix(n_lobes: int) -> np.ndarray:
+    """``mix`` of ``n_lobes`` Schlick lobes (``f0`` RGB, grey ``f90`` each) and a Lambertian base (RGB)."""
+    k, n = 2 * n_lobes + 1, 4 * n_lobes + 3
+    mix = np.zeros((3, k, n))
+    for c in range(3):
+        for j in range(n_lobes):
+            mix[c, 2 * j, 4 * j + c] = 1.0
+            mix[c, 2 * j + 1, 4 * j + 3] = 1.0
+        mix[c, 2 * n_lobes, 4 * n_lobes + c] = 1.0
+    return mix
+
+
+def _lobes_basis(q, g):
+    columns = [b for lq in q for b in _schlick_basis(lobe_factor(np.exp(lq), g), g)]
+    return None, np.stack(columns + [np.full(len(g), 1.0 / np.pi)], axis=1)
+
+
+def _ggx_lobe(alpha, f0, f90):
+    from ..brdf import MicrofacetBRDF
+    from ..distributions import GGX
+    from ..fresnel import Schlick
+    return MicrofacetBRDF(GGX(alpha=float(alpha)), fresnel=Schlick(np.clip(f0, 0, 1), float(np.clip(f90, 0, 1))))
+
+
+def _luminance(rgb) -> float:
+    return float(np.dot([0.2126, 0.7152, 0.0722], rgb))
+
+
+def _sum(parts, weights):
+    from .analytic import SumBRDF
+    return parts[0] if len(parts) == 1 else SumBRDF(*parts, weights=np.maximum(weights, 0.02))
+
+
+def _lobes_brdf(q, y):
+    """Lobes (each ``f0`` RGB, ``f90``) and a Lambertian base, as a SumBRDF (base dropped when negligible)."""
+    from ..brdf import Lambertian
+    parts, weights = [], []
+    for j, lq in enumerate(q):
+        f0, f90 = y[4 * j:4 * j + 3], y[4 * j + 3]
+        parts.append(_ggx_lobe(np.exp(lq), f0, f90))
+        weights.append(_luminance(f0) + 0.05 * f90)
+    kd = np.clip(y[-3:], 0.0, 1.0)
+    if np.max(kd) >= 2e-3:
+        parts.append(Lambertian(kd))
+        weights.append(_luminance(kd))
+    return _sum(parts, weights)
+
+
+def _lobe_starts(previous):
+    return [np.array([np.log(a)]) for a in (0.002, 0.006, 0.02, 0.06, 0.15, 0.35, 0.8)]
+
+
+def _two_lobe_starts(previous):
+    starts = [np.log([core, min(core * ratio, 0.9)]) for core in (0.002, 0.008, 0.03, 0.1) for ratio in (4.0, 15.0)]
+    if "lobe" in previous:                       # the one-lobe fit plus an empty halo: no worse than it
+        q, y = previous["lobe"]
+        starts.append((np.append(q, np.log(0.5)), np.concatenate([y[:4], np.zeros(4), y[4:]])))
+    return starts
+
+
+def _coat_basis(q, g):
+    alpha_c, eta, alpha_b = np.exp(q[0]), q[1], np.exp(q[2])
+    mu, e = coat_albedo(alpha_c, eta)
+    t = (1.0 - np.interp(g.cos_i, mu, e)) * (1.0 - np.interp(g.cos_o, mu, e))
+    coat = lobe_factor(alpha_c, g) * dielectric(eta, g.cos_d)
+    _, base = _lobes_basis(q[2:], g)
+    return coat, base * t[:, None]
+
+
+def _coat_brdf(q, y):
+    from ..brdf import MicrofacetBRDF
+    from ..distributions import GGX
+    from ..fresnel import Dielectric
+    from ..layered import LayeredBRDF
+    coat = MicrofacetBRDF(GGX(alpha=float(np.exp(q[0]))), fresnel=Dielectric(float(q[1])))
+    return LayeredBRDF(coat, _lobes_brdf(q[2:], y))
+
+
+def _coat_starts(previous):
+    return [np.array([np.log(ac), 1.5, np.log(ab)]) for ac in (0.004, 0.02, 0.08) for ab in (0.1, 0.4)]
+
+
+def _log_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.full(n, np.log(ALPHA_MIN)), np.full(n, np.log(ALPHA_MAX))
+
+
+#: The models by name.
+MODEL_SPECS = {
+    "lobe": Model("lobe", _log_bounds(1), _lobes_mix(1), _lobes_basis, _lobes_brdf, _lobe_starts),
+    "two_lobes": Model("two_lobes", _log_bounds(2), _lobes_mix(2), _lobes_basis, _lobes_brdf, _two_lobe_starts),
+    "coat": Model("coat", (np.array([np.log(ALPHA_MIN), ETA_MIN, np.log(ALPHA_MIN)]),
+                           np.array([np.log(ALPHA_MAX), ETA_MAX, np.log(ALPHA_MAX)])), _lobes_mix(1),
+                  _coat_basis, _coat_brdf, _coat_starts),
+}
+
+
+@dataclass(frozen=True)
+class Target:
+    """The data's side of the objective.
+
+    ``geometry`` holds the fitted pairs (first ``n_pairs``) then the albedo nodes;
+    ``sqrt_w`` the pairs' normalized weights' roots, ``log_data`` ``ln(1 + f_d cos th_i)``;
+    ``albedo_w``/``albedo_view`` the nodes' weights (times ``cos th_i``) and views
+    (:data:`ENERGY_VIEWS_DEG`), ``ratio_mask`` the nodes counted in the albedo ratios,
+    ``albedo_data`` the data's albedo at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`."""
+    geometry: Geometry
+    n_pairs: int
+    sqrt_w: np.ndarray
+    log_data: np.ndarray   # compress(f_d cos th_i)
+    f_data: np.ndarray
+    albedo_w: np.ndarray
+    albedo_view: np.ndarray
+    ratio_mask: np.ndarray
+    albedo_data: np.ndarray
+
+    @property
+    def view_starts(self) -> np.ndarray:
+        """Index of each view's first albedo node (nodes are grouped by view, in order)."""
+        return np.searchsorted(self.albedo_view, np.arange(self.albedo_view.max() + 1))
+
+
+def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16,
+           albedo_grid: tuple[int, int] = (32, 16)) -> Target:
+    """The data's side of the objective for ``reference`` (any BRDF; MERL samples not
+    measured are left out). The fitted pairs are an equal-weight mixture of ``n`` Sobol
+    pairs uniform in solid angle (seed ``seed``: not the seed-0 pairs of
+    :class:`microfacet.metrics.LogError`, so that the reported error is held out) and a
+    ``grid^3`` grid of MERL coordinates (:func:`microfacet.metrics.measurement_directions`,
+    dense at the specular peak, as the MERL samples Löw et al. 2012 fitted), so that the
+    peak, which carries a glossy material's energy, is not left to ~2 % of the weight;
+    ``albedo_grid``: the albedo quadrature (half-vector ``theta x phi`` nodes per view)."""
+    wi, wo, w = uniform_directions(n, seed)
+    gi, go = measurement_directions(grid)
+    w = np.concatenate([w / w.sum(), np.full(len(gi), 1.0 / len(gi))])
+    wi, wo = np.concatenate([wi, gi]), np.concatenate([wo, go])
+    keep = measured_mask(reference, wi, wo)
+    wi, wo, w = wi[keep], wo[keep], w[keep]
+    f = np.asarray(reference.eval(wi, wo), dtype=np.float64)
+    ok = np.all(np.isfinite(f), axis=-1) & np.all(f >= 0, axis=-1)
+    wi, wo, w, f = wi[ok], wo[ok], w[ok], f[ok]
+    if len(w) < 64:
+        raise ValueError("the reference has too few measured pairs to fit")
+    # robust to isolated outliers (e.g. a corrupt sample): clamp to 50x the 99.9th percentile
+    f = np.minimum(f, 50.0 * max(float(np.quantile(f, 0.999)), 1e-6))
+    views = tuple(ALBEDO_VIEWS_DEG) + tuple(v for v in ENERGY_VIEWS_DEG if v not in ALBEDO_VIEWS_DEG)
+    ai, ao, aw, av = albedo_directions(views, 0.0, *albedo_grid)
+    ratio = (ai[:, 2] >= GRAZING_COS) & (av < len(ALBEDO_VIEWS_DEG)) & measured_mask(reference, ai, ao)
+    fa = np.zeros((len(aw), 3))
+    fa[ratio] = np.asarray(reference.eval(ai[ratio], ao[ratio]), dtype=np.float64)
+    fa = np.where(np.isfinite(fa) & (fa >= 0), fa, 0.0)
+    aw = aw * ai[:, 2]
+    data_albedo = np.stack([np.bincount(av[ratio], aw[ratio] * fa[ratio, c], minlength=len(ALBEDO_VIEWS_DEG))
+                            for c in range(3)], -1)
+    geometry = Geometry.of(np.concatenate([wi, ai]), np.concatenate([wo, ao]))
+    w = w / (3.0 * w.sum())
+    return Target(geometry, len(w), np.sqrt(w), compress(f * wi[:, 2:3]), f, aw, av, ratio, data_albedo)
+
+
+class _Problem:
+    """The residuals of one model against a :class:`Target`, and their Jacobian."""
+
+    def __init__(self, model: Model, t: Target):
+        self.model, self.t = model, t
+        self.lo = np.concatenate([model.q_bounds[0], np.zeros(model.n_y)])
+        self.hi = np.concatenate([model.q_bounds[1], np.ones(model.n_y)])
+        self.nq = len(model.q_bounds[0])
+        ok = t.albedo_data > ALBEDO_FLOOR
+        self.band_mask = ok
+
+    def values(self, q, y):
+        """``(f (n, 3), c, B)`` at all pairs and albedo nodes."""
+        c, basis = self.model.basis(q, self.t.geometry)
+        f = basis @ (self.model.mix @ y).T
+        if c is not None:
+            f += c[:, None]
+        return np.where(np.isfinite(f), f, 0.0), c, basis
+
+    def albedo(self, f, mask=None):
+        """Albedo ``(views, 3)`` of values ``f`` at the albedo nodes (``mask``: the ratio nodes)."""
+        t = self.t
+        w = t.albedo_w if mask is None else t.albedo_w * mask
+        return np.add.reduceat(f[t.n_pairs:] * w[:, None], t.view_starts, axis=0)
+
+    def residuals(self, x, jacobian: bool = False):
+        """The residuals at ``x = (q, y)``: the weighted log differences (pairs x RGB), the
+        albedo band's and the energy bound's penalties; with ``jacobian``, also ``d r / d x``."""
+        t, nq = self.t, self.nq
+        q, y = x[:nq], x[nq:]
+        f, c, basis = self.values(q, y)
+        n = t.n_pairs
+        ci = t.geometry.cos_i[:n, None]
+        u = np.maximum(f[:n], 0.0) * ci
+        r_fit = t.sqrt_w[:, None] * (compress(u) - t.log_data)
+        r_band, r_energy, band_scale, energy_active = self._energy(f)
+        r = np.concatenate([r_fit.ravel(), r_band.ravel(), r_energy.ravel()])
+        if not jacobian:
+            return r
+        # d f / d x: exact in y, forward differences in q
+        jf = np.empty(f.shape + (len(x),))
+        jf[..., nq:] = self._linear_jacobian(basis)
+        for k in range(nq):
+            h = 1e-5 * max(1.0, abs(q[k]))
+            qk = q.copy()
+            qk[k] += h
+            jf[..., k] = (self.values(qk, y)[0] - f) / h
+        d = (t.sqrt_w[:, None] * ci * compress_slope(u))[..., None]
+        j_fit = (d * jf[:n]).reshape(-1, len(x))
+        j_band = (band_scale[..., None] * self._albedo_jacobian(jf, t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)])
+        j_energy = energy_active[..., None] * PENALTY * self._albedo_jacobian(jf, None)
+        return r, np.concatenate([j_fit, j_band.reshape(-1, len(x)), j_energy.reshape(-1, len(x))])
+
+    def _linear_jacobian(self, basis):
+        """``d f / d y`` ``(n, 3, len(y))`` (one matrix product)."""
+        mix = self.model.mix
+        flat = mix.transpose(1, 0, 2).reshape(mix.shape[1], -1)
+        return (np.where(np.isfinite(basis), basis, 0.0) @ flat).reshape(len(basis), 3, mix.shape[2])
+
+    def _albedo_jacobian(self, jf, mask):
+        t = self.t
+        w = t.albedo_w if mask is None else t.albedo_w * mask
+        return np.add.reduceat(jf[t.n_pairs:] * w[:, None, None], t.view_starts, axis=0)
+
+    def _energy(self, f):
+        """Penalty residuals of the albedo band (:data:`PENALTY` above it, :data:`PENALTY_BELOW`
+        below: the bound above is the constraint) and of the energy bound, and the derivative
+        factors of their active entries."""
+        ratio_albedo = self.albedo(f, self.t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
+        ad = np.where(self.band_mask, self.t.albedo_data, 1.0)
+        ratio = ratio_albedo / ad
+        excess = np.where(self.band_mask, ratio - np.clip(ratio, 1.0 - ALBEDO_BELOW, 1.0 + ALBEDO_ABOVE), 0.0)
+        weight = np.where(excess > 0, PENALTY, PENALTY_BELOW)
+        band_scale = np.where(excess != 0.0, weight / ad, 0.0)
+        total = self.albedo(f)
+        over = np.maximum(total - (1.0 - ENERGY_MARGIN), 0.0)
+        return weight * excess, PENALTY * over, band_scale, (over > 0).astype(float)
+
+    def linear_start(self, q) -> np.ndarray:
+        """``y`` minimizing, in the box, the log error linearized about the data
+        (``ln(1 + u) ~ ln(1 + u_d) + (u - u_d) / (1 + u_d)``) plus the albedo band's
+        residuals taken as equalities (the data's albedo at the ratio views)."""
+        t = self.t
+        c, basis = self.model.basis(q, t.geometry)
+        basis = np.where(np.isfinite(basis), basis, 0.0)
+        c = np.zeros(len(basis)) if c is None else np.where(np.isfinite(c), c, 0.0)
+        a = self._linear_jacobian(basis)
+        n = t.n_pairs
+        ci = t.geometry.cos_i[:n, None]
+        wt = t.sqrt_w[:, None] * ci * compress_slope(t.f_data * ci)
+        rows = [(a[:n] * wt[..., None]).reshape(-1, a.shape[-1])]
+        rhs = [((t.f_data - c[:n, None]) * wt).ravel()]
+        ad = np.where(self.band_mask, t.albedo_data, 1.0)
+        scale = np.where(self.band_mask, PENALTY_BELOW / ad, 0.0)
+        rows.append((self._albedo_jacobian(a, t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)] * scale[..., None])
+                    .reshape(-1, a.shape[-1]))
+        c_albedo = self.albedo(np.repeat(c[:, None], 3, axis=1), t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
+        rhs.append(((t.albedo_data - c_albedo) * scale).ravel())
+        m, b = np.concatenate(rows), np.concatenate(rhs)
+        h = m.T @ m
+        h += np.eye(len(h)) * (1e-10 * np.trace(h) / len(h) + 1e-30)
+        return box_qp(h, m.T @ b, np.zeros(len(h)), np.ones(len(h)))
+
+
+def _levenberg_marquardt(problem: _Problem, x0: np.ndarray, max_iter: int = 40, tol: float = 1e-6) -> tuple:
+    """Projected Levenberg-Marquardt on the box ``[lo, hi]``: ``(x, cost)``. Variables held
+    at a bound by the gradient are frozen for the step (Bertsekas 1982's projection idea);
+    the damping adapts by Nielsen's rule."""
+    lo, hi = problem.lo, problem.hi
+    x = np.clip(x0, lo, hi)
+    r, jac = problem.residuals(x, jacobian=True)
+    cost = float(r @ r)
+    lam, nu = 1e-3, 2.0
+    for _ in range(max_iter):
+        g = jac.T @ r
+        held = ((x <= lo + 1e-12) & (g > 0)) | ((x >= hi - 1e-12) & (g < 0))
+        free = ~held
+        if not np.any(free):
+            break
+        h = (jac.T @ jac)[np.ix_(free, free)]
+        diag = np.maximum(np.diag(h), 1e-12 * max(np.max(np.diag(h)), 1e-300))
+        improved = False
+        for _ in range(12):
+            step = np.zeros_like(x)
+            try:
+                step[free] = -np.linalg.solve(h + lam * np.diag(diag), g[free])
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            xn = np.clip(x + step, lo, hi)
+            rn = problem.residuals(xn)
+            cn = float(rn @ rn)
+            if np.isfinite(cn) and cn < cost:
+                improved = True
+                break
+            lam *= nu
+            nu *= 2.0
+        if not improved:
+            break
+        done = cost - cn <= tol * cost
+        x, cost = xn, cn
+        lam, nu = max(lam / 3.0, 1e-12), 2.0
+        if done:
+            break
+        r, jac = problem.residuals(x, jacobian=True)
+    return x, cost
+
+
+def fit_model(t: Target, model: Model, previous: dict | None = None, refine: int = 2) -> tuple[np.ndarray, float]:
+    """``(x, cost)`` of ``model`` fitted to ``t``: every start of ``model.starts(previous)``
+    with its linearized ``y`` (:meth:`_Problem.linear_start`), the ``refine`` best by
+    :func:`_levenberg_marquardt`; ``x = (q, y)``."""
+    problem = _Problem(model, t)
+    scored = []
+    for start in model.starts(previous or {}):
+        q, y = start if isinstance(start, tuple) else (start, None)
+        q = np.clip(q, *model.q_bounds)
+        x = np.concatenate([q, problem.linear_start(q) if y is None else y])
+        r = problem.residuals(x)
+        scored.append((float(r @ r), x))
+    scored.sort(key=lambda s: s[0])
+    best = min((_levenberg_marquardt(problem, x) for _, x in scored[:refine]), key=lambda s: s[1])
+    return _project(problem, best[0]), best[1]
+
+
+def _project(problem: _Problem, x: np.ndarray) -> np.ndarray:
+    """Scale each channel's reflectances so that the albedo upper bounds hold exactly
+    (band top at the ratio views, ``1 - ENERGY_MARGIN`` at every energy view)."""
+    nq, t = problem.nq, problem.t
+    q, y = x[:nq], x[nq:].copy()
+    for _ in range(3):
+        f, c, a = problem.values(q, y)
+        ratio_albedo = problem.albedo(f, t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
+        limit = np.where(problem.band_mask, (1.0 + ALBEDO_ABOVE) * t.albedo_data, np.inf)
+        total = problem.albedo(f)
+        s = np.minimum(np.min(np.where(ratio_albedo > limit, limit / np.maximum(ratio_albedo, 1e-300), 1.0), 0),
+                       np.min(np.where(total > 1.0 - ENERGY_MARGIN,
+                                       (1.0 - ENERGY_MARGIN) / np.maximum(total, 1e-300), 1.0), 0))
+        if np.all(s >= 1.0):
+            break
+        # per channel: the reflectances that feed channel c only, or all channels (grey f90)
+        feeds = np.any(problem.model.mix != 0, axis=1)                     # (3, n_y)
+        for k in range(len(y)):
+            channels = np.flatnonzero(feeds[:, k])
+            y[k] *= float(np.min(s[channels])) * (1.0 - 1e-9) if len(channels) else 1.0
+    return np.concatenate([q, y])
+
+
+def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None) -> dict:
+    """Every model of ``models`` (names of :data:`MODELS`) fitted to ``reference``:
+    ``{name: BRDF}``, each a BRDF of the library (``eval``, ``pdf``, ``sample``). Linear
+    algebra runs on one BLAS thread (the matrices are small; idle BLAS threads spin)."""
+    from threadpoolctl import threadpool_limits
+    unknown = set(models) - set(MODELS)
+    if unknown:
+        raise ValueError(f"models must be among {MODELS}, got {sorted(unknown)}")
+    with threadpool_limits(1):
+        t = target(reference) if t is None else t
+        fitted, out = {}, {}
+        for name in (m for m in MODELS if m in models):
+            model = MODEL_SPECS[name]
+            x, _ = fit_model(t, model, fitted)
+            nq = len(model.q_bounds[0])
+            fitted[name] = (x[:nq], x[nq:])
+            out[name] = model.brdf(*fitted[name])
+    return out
+
+
+def select(scores: dict) -> str:
+    """The name of least score (e.g. :class:`microfacet.metrics.ImageError` values);
+    ties go to the earlier (simpler) model."""
+    finite = {k: v for k, v in scores.items() if np.isfinite(v)}
+    if not finite:
+        raise ValueError("no candidate fit has a finite score")
+    return min(finite, key=lambda k: (finite[k], list(scores).index(k)))
