@@ -275,7 +275,11 @@ def _coat_brdf(q, y):
 
 
 def _coat_starts(previous):
-    return [np.array([np.log(ac), 1.5, np.log(ab)]) for ac in (0.004, 0.02, 0.08) for ab in (0.1, 0.4)]
+    starts = [np.array([np.log(ac), 1.5, np.log(ab)]) for ac in (0.004, 0.02, 0.08) for ab in (0.1, 0.4)]
+    if "lobe" in previous:                   # the one lobe's highlight as the coat's, over a rough base
+        alpha = previous["lobe"][0][0]
+        starts += [np.array([alpha, eta, np.log(ab)]) for eta in (1.25, 1.5) for ab in (0.1, 0.4)]
+    return starts
 
 
 def _log_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -318,7 +322,7 @@ class Target:
 
 
 def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16,
-           albedo_grid: tuple[int, int] = (32, 16)) -> Target:
+           albedo_grid: tuple[int, int] = (64, 16)) -> Target:
     """The data's side of the objective for ``reference`` (any BRDF; MERL samples not
     measured are left out). The fitted pairs are an equal-weight mixture of ``n`` Sobol
     pairs uniform in solid angle (seed ``seed``: not the seed-0 pairs of
