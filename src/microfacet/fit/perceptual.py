@@ -301,13 +301,15 @@ class Target:
     """The data's side of the objective.
 
     ``geometry`` holds the fitted pairs (first ``n_pairs``) then the albedo nodes;
-    ``sqrt_w`` the pairs' normalized weights' roots, ``log_data`` ``ln(1 + f_d cos th_i)``;
+    ``sqrt_w`` the pairs' normalized weights' roots, ``scale`` the factor of each pair's
+    ``u = f cos th_i`` before compression, ``log_data`` ``compress(scale u_d)``;
     ``albedo_w``/``albedo_view`` the nodes' weights (times ``cos th_i``) and views
     (:data:`ENERGY_VIEWS_DEG`), ``ratio_mask`` the nodes counted in the albedo ratios,
     ``albedo_data`` the data's albedo at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`."""
     geometry: Geometry
     n_pairs: int
     sqrt_w: np.ndarray
+    scale: np.ndarray
     log_data: np.ndarray   # compress(f_d cos th_i)
     f_data: np.ndarray
     albedo_w: np.ndarray
@@ -321,29 +323,59 @@ class Target:
         return np.searchsorted(self.albedo_view, np.arange(self.albedo_view.max() + 1))
 
 
-def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16,
+def _image_pairs(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(wi, wo, image)``: the lit pixels of ``size``-px orthographic spheres under the
+    directional lights of :data:`microfacet.metrics.IMAGE_LIGHTS_DEG` (both cosines at
+    least :data:`~microfacet.metrics.GRAZING_COS`), each pixel one pair, and its image index."""
+    from ..metrics import IMAGE_LIGHTS_DEG
+    from ..render.sphere import Sphere
+    sphere = Sphere(size)
+    wis, wos, index = [], [], []
+    for j, (angle, azimuth) in enumerate(IMAGE_LIGHTS_DEG):
+        a, b = np.radians(angle), np.radians(azimuth)
+        wi = sphere.to_local(np.array([np.sin(a) * np.cos(b), np.sin(a) * np.sin(b), np.cos(a)]))
+        lit = (wi[:, 2] >= GRAZING_COS) & (sphere.wo[:, 2] >= GRAZING_COS)
+        wis.append(wi[lit]), wos.append(sphere.wo[lit]), index.append(np.full(int(lit.sum()), j))
+    return np.concatenate(wis), np.concatenate(wos), np.concatenate(index)
+
+
+def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16, image_size: int = 24,
            albedo_grid: tuple[int, int] = (64, 16)) -> Target:
     """The data's side of the objective for ``reference`` (any BRDF; MERL samples not
-    measured are left out). The fitted pairs are an equal-weight mixture of ``n`` Sobol
-    pairs uniform in solid angle (seed ``seed``: not the seed-0 pairs of
-    :class:`microfacet.metrics.LogError`, so that the reported error is held out) and a
-    ``grid^3`` grid of MERL coordinates (:func:`microfacet.metrics.measurement_directions`,
-    dense at the specular peak, as the MERL samples Löw et al. 2012 fitted), so that the
-    peak, which carries a glossy material's energy, is not left to ~2 % of the weight;
-    ``albedo_grid``: the albedo quadrature (half-vector ``theta x phi`` nodes per view)."""
+    measured are left out). Up to three sets of pairs, each with an equal share of the weight:
+
+    * ``n`` Sobol pairs uniform in solid angle (seed ``seed``: not the seed-0 pairs of
+      :class:`microfacet.metrics.LogError`, so that the reported error is held out);
+    * a ``grid^3`` grid of MERL coordinates (:func:`microfacet.metrics.measurement_directions`,
+      dense at the specular peak, as the MERL samples Löw et al. 2012 fitted), so that the
+      peak, which carries a glossy material's energy, is not left to ~2 % of the weight;
+    * the pixels of ``image_size``-px spheres (0: none) under the image error's three
+      directional lights (:func:`_image_pairs`), each compared relative to its image's
+      99th-percentile value as the image error's lightness does (Bieron & Peers 2020 fit
+      in image space);
+
+    and ``albedo_grid``: the albedo quadrature (half-vector ``theta x phi`` nodes per view)."""
     wi, wo, w = uniform_directions(n, seed)
     gi, go = measurement_directions(grid)
-    w = np.concatenate([w / w.sum(), np.full(len(gi), 1.0 / len(gi))])
-    wi, wo = np.concatenate([wi, gi]), np.concatenate([wo, go])
+    ii, io, image = _image_pairs(image_size) if image_size else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    sets = [np.zeros(len(w)), np.ones(len(gi)), 2.0 + image]       # 0 uniform, 1 grid, 2 + j image j
+    w = np.concatenate([w / w.sum(), np.full(len(gi), 1.0 / len(gi)), np.full(len(ii), 1.0 / max(len(ii), 1))])
+    wi, wo, group = np.concatenate([wi, gi, ii]), np.concatenate([wo, go, io]), np.concatenate(sets)
     keep = measured_mask(reference, wi, wo)
-    wi, wo, w = wi[keep], wo[keep], w[keep]
+    wi, wo, w, group = wi[keep], wo[keep], w[keep], group[keep]
     f = np.asarray(reference.eval(wi, wo), dtype=np.float64)
     ok = np.all(np.isfinite(f), axis=-1) & np.all(f >= 0, axis=-1)
-    wi, wo, w, f = wi[ok], wo[ok], w[ok], f[ok]
+    wi, wo, w, f, group = wi[ok], wo[ok], w[ok], f[ok], group[ok]
     if len(w) < 64:
         raise ValueError("the reference has too few measured pairs to fit")
     # robust to isolated outliers (e.g. a corrupt sample): clamp to 50x the 99.9th percentile
     f = np.minimum(f, 50.0 * max(float(np.quantile(f, 0.999)), 1e-6))
+    u = f * wi[:, 2:3]
+    scale = np.ones(len(w))
+    for j in np.unique(group[group >= 2]):                     # each image relative to its white
+        pixels = group == j
+        white = float(np.percentile(u[pixels] @ np.array([0.2126, 0.7152, 0.0722]), 99.0))
+        scale[pixels] = 1.0 / white if white > 0 else 1.0
     views = tuple(ALBEDO_VIEWS_DEG) + tuple(v for v in ENERGY_VIEWS_DEG if v not in ALBEDO_VIEWS_DEG)
     ai, ao, aw, av = albedo_directions(views, 0.0, *albedo_grid)
     ratio = (ai[:, 2] >= GRAZING_COS) & (av < len(ALBEDO_VIEWS_DEG)) & measured_mask(reference, ai, ao)
@@ -355,7 +387,7 @@ def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16,
                             for c in range(3)], -1)
     geometry = Geometry.of(np.concatenate([wi, ai]), np.concatenate([wo, ao]))
     w = w / (3.0 * w.sum())
-    return Target(geometry, len(w), np.sqrt(w), compress(f * wi[:, 2:3]), f, aw, av, ratio, data_albedo)
+    return Target(geometry, len(w), np.sqrt(w), scale, compress(u * scale[:, None]), f, aw, av, ratio, data_albedo)
 
 
 class _Problem:
@@ -391,7 +423,8 @@ class _Problem:
         f, c, basis = self.values(q, y)
         n = t.n_pairs
         ci = t.geometry.cos_i[:n, None]
-        u = np.maximum(f[:n], 0.0) * ci
+        scale = t.scale[:, None]
+        u = np.maximum(f[:n], 0.0) * ci * scale
         r_fit = t.sqrt_w[:, None] * (compress(u) - t.log_data)
         r_band, r_energy, band_scale, energy_active = self._energy(f)
         r = np.concatenate([r_fit.ravel(), r_band.ravel(), r_energy.ravel()])
@@ -405,7 +438,7 @@ class _Problem:
             qk = q.copy()
             qk[k] += h
             jf[..., k] = (self.values(qk, y)[0] - f) / h
-        d = (t.sqrt_w[:, None] * ci * compress_slope(u))[..., None]
+        d = (t.sqrt_w[:, None] * ci * scale * compress_slope(u))[..., None]
         j_fit = (d * jf[:n]).reshape(-1, len(x))
         j_band = (band_scale[..., None] * self._albedo_jacobian(jf, t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)])
         j_energy = energy_active[..., None] * PENALTY * self._albedo_jacobian(jf, None)
@@ -447,7 +480,8 @@ class _Problem:
         a = self._linear_jacobian(basis)
         n = t.n_pairs
         ci = t.geometry.cos_i[:n, None]
-        wt = t.sqrt_w[:, None] * ci * compress_slope(t.f_data * ci)
+        k = t.scale[:, None]
+        wt = t.sqrt_w[:, None] * ci * k * compress_slope(t.f_data * ci * k)
         rows = [(a[:n] * wt[..., None]).reshape(-1, a.shape[-1])]
         rhs = [((t.f_data - c[:n, None]) * wt).ravel()]
         ad = np.where(self.band_mask, t.albedo_data, 1.0)
