@@ -8,6 +8,11 @@ from pathlib import Path
 
 import pytest
 
+#: The suite tests the compiled kernels where they apply, so a BRDF compiles its kernel at its first
+#: call (microfacet.kernels.COMPILE "wait"; the library's default runs NumPy while the kernel compiles
+#: in the background, tested in tests/test_cold_start.py). Set before microfacet is imported.
+os.environ.setdefault("MICROFACET_COMPILE", "wait")
+
 DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 
 

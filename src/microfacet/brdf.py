@@ -247,6 +247,7 @@ class MicrofacetBRDF(BRDF):
         if np.dtype(dtype) not in (np.float32, np.float64):
             raise ValueError(f"dtype must be numpy.float32 or numpy.float64, got {dtype!r}")
         self.dtype = np.dtype(dtype)
+        distribution.check_dtype(self.dtype)
         self.distribution = distribution
         self.fresnel = _fresnel.Ideal() if fresnel is None else fresnel
         self.gaf_model = gaf
@@ -318,7 +319,7 @@ class MicrofacetBRDF(BRDF):
     def _projected_unit(self, wi, wo, divide_cos_i: bool = False):
         """:meth:`_projected` of directions already checked by ``_dirs``."""
         if self.gaf_model == "smith":
-            fast = kernels.smith_projected(self.distribution, self.shadowing, wi, wo, divide_cos_i)
+            fast = kernels.smith_projected(self.distribution, self.shadowing, wi, wo, divide_cos_i, background=True)
             if fast is not None:
                 return fast
         return self._projected_numpy(wi, wo, divide_cos_i)
@@ -336,13 +337,15 @@ class MicrofacetBRDF(BRDF):
     def _eval(self, wi, wo, divide_cos_i: bool, out=None) -> np.ndarray:
         """``F D G / (4 z_o) [/ z_i]``: one compiled pass for Smith BRDFs with scalar
         parameters and a :mod:`microfacet.fresnel` term (:func:`microfacet.kernels.smith_eval`),
-        :meth:`_projected` times the Fresnel term otherwise (the reference)."""
-        d, fast = _fused(lambda wi, wo: kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype, out),
+        :meth:`_projected` times the Fresnel term otherwise (the reference; while the eval kernel
+        compiles in the background, :meth:`_projected_numpy`: see :mod:`microfacet.kernels`)."""
+        d, fast = _fused(lambda wi, wo: kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype, out, background=True),
                          self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
-        oh, s = self._projected_unit(d["wi"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False),
-                                     divide_cos_i)
+        wi, wo = d["wi"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False)
+        projected = self._projected_numpy if kernels.covers(self) else self._projected_unit
+        oh, s = projected(wi, wo, divide_cos_i)
         return _into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
@@ -358,7 +361,8 @@ class MicrofacetBRDF(BRDF):
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
         pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
-        d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype, out), self.dtype == np.float32,
+        d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype, out, background=True),
+                         self.dtype == np.float32,
                          wi=wi, wo=wo)
         if fast is not None:
             return fast
@@ -391,7 +395,8 @@ class MicrofacetBRDF(BRDF):
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
         :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
-        d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype, out), self.dtype == np.float32,
+        d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype, out, background=True),
+                         self.dtype == np.float32,
                          wo=wo, u=u)
         if fast is not None:
             return fast

@@ -19,6 +19,20 @@ without a pass of its own over the inputs.
 Numba is imported, and each kernel compiled (or loaded from Numba's on-disk cache,
 ``cache=True``), on first use, not when :mod:`microfacet` is imported: the kernels live
 in :mod:`microfacet._numba_kernels`, and :func:`compiled` compiles functions on demand.
+
+Cold start (``MICROFACET_COMPILE``, :data:`COMPILE`): a kernel compiles in ~5-20 s (once per
+install and signature; Numba's cache then loads it in milliseconds). By default
+(``background``) the BRDF methods (``MicrofacetBRDF.eval`` ...) and the functions of
+:func:`compiled` do not wait for it: a call whose kernel is not ready in this process queues
+its compilation (or its load from the cache) on one background thread and runs the NumPy
+reference, batches of up to :data:`BACKGROUND_MAX` pairs; larger batches, and every call once
+the kernel is ready, run the kernel (a larger batch waits for it). The two paths agree to
+1e-12 (float64; ``tests/test_kernels.py``) and to the float32 kernels' accuracy (1e-5) for
+float32 BRDFs, so a result may move by that much between a call made while its kernel
+compiles and one made after. ``wait`` compiles the kernel at the first call, before running
+it, as the public functions of this module (``smith_eval`` ...) always do. :func:`precompile`
+(``python -m microfacet.kernels --precompile``, run by ``make setup``) fills Numba's cache
+ahead of time; see ``docs/performance.md``.
 """
 from __future__ import annotations
 
@@ -27,13 +41,15 @@ import importlib.util
 import itertools
 import math
 import os
+import queue
+import threading
 
 import numpy as np
 
-from . import _buffers
+from . import _background, _buffers
 
-__all__ = ["AVAILABLE", "compiled", "release_outputs", "smith_projected", "smith_eval", "smith_pdf", "smith_sample",
-           "unit_deviation"]
+__all__ = ["AVAILABLE", "BACKGROUND_MAX", "COMPILE", "Compiled", "compiled", "covers", "precompile", "ready", "release_outputs",
+           "smith_projected", "smith_eval", "smith_pdf", "smith_sample", "unit_deviation"]
 
 #: Give the memory that the cache of freed output arrays holds back to the system; returns its bytes
 #: (see :mod:`microfacet._buffers`: outputs of 1 MiB and more, ``MICROFACET_OUTPUT_CACHE_MB``).
@@ -43,6 +59,27 @@ release_outputs = _buffers.release
 AVAILABLE = os.environ.get("MICROFACET_NUMBA", "1") != "0" and importlib.util.find_spec("numba") is not None
 
 
+def _compile_mode() -> str:
+    mode = os.environ.get("MICROFACET_COMPILE", "background").strip().lower() or "background"
+    if mode not in ("background", "wait"):
+        raise ValueError(f"MICROFACET_COMPILE must be 'background' or 'wait', got {mode!r}")
+    return mode
+
+
+#: ``MICROFACET_COMPILE``: ``"background"`` (default) or ``"wait"``: what a BRDF method or a
+#: :func:`compiled` function does while its kernel is not compiled yet in this process (module docstring).
+COMPILE = _compile_mode()
+#: Largest batch (pairs) that runs the NumPy reference while its kernel compiles in the background
+#: (``COMPILE == "background"``); a larger batch waits for the kernel. The NumPy path takes ~0.1-0.5 s
+#: per 2^20 pairs (eval to sample; ~40 passes over memory, ~0.3 GB of temporaries), a cold kernel 5-20 s.
+BACKGROUND_MAX = 1 << 20
+
+#: The distribution and Fresnel kinds of :mod:`microfacet._numba_kernels` (``BECKMANN``, ``GGX``;
+#: ``IDEAL`` ... ``TABULATED``), spelled here so that choosing a kernel does not import Numba (tested equal).
+_BECKMANN, _GGX = 0, 1
+_IDEAL, _SCHLICK, _DIELECTRIC, _CONDUCTOR, _TABULATED = range(5)
+
+
 @functools.cache
 def _kernels():
     """The compiled kernels' module (imports Numba)."""
@@ -50,26 +87,182 @@ def _kernels():
     return _numba_kernels
 
 
+class Compiled:
+    """``function`` compiled by ``numba.njit(cache=True, nogil=True)`` on demand (NumPy array
+    expressions fused into one loop; the same source, so the NumPy function stays the reference).
+    A call runs the compiled function for its argument types, compiling (or loading) it first
+    with :data:`COMPILE` ``"wait"``; with ``"background"`` a call whose compiled function is not
+    ready runs ``function`` itself (NumPy) and queues the compilation (the module docstring),
+    arrays of up to :data:`BACKGROUND_MAX` elements. Example::
+
+        f = Compiled(lambda c, eta, k: ...)      # kernels.compiled(...)
+        f(np.linspace(0, 1, 5), 1.5, 2.0)
+    """
+
+    def __init__(self, function):
+        self.py_func = function
+        functools.update_wrapper(self, function)
+
+    @functools.cached_property
+    def dispatcher(self):
+        """The Numba dispatcher of ``function`` (imports Numba)."""
+        import numba
+        return numba.njit(cache=True, nogil=True)(self.py_func)
+
+    def __call__(self, *args):
+        n = max((a.size for a in args if isinstance(a, np.ndarray)), default=1)
+        k = _kernel((self,), args, n, True)
+        return self.py_func(*args) if k is None else k(*args)
+
+
 def compiled(function):
-    """``numba.njit(cache=True)(function)``: the same source compiled (NumPy array
-    expressions fused into one loop), so the NumPy function stays the reference; ``None``
-    without Numba. Callers build it on first use and keep it (a dispatcher loads from
-    Numba's cache in milliseconds, a ``numba.vectorize`` ufunc takes ~0.5 s to build)."""
+    """:class:`Compiled` ``function`` (``numba.njit(cache=True)`` on demand, the NumPy function
+    as its fallback while it compiles), or ``None`` without Numba. Callers build it on first
+    use and keep it (a dispatcher loads from Numba's cache in milliseconds, a ``numba.vectorize``
+    ufunc takes ~0.5 s to build)."""
     if not AVAILABLE:
         return None
+    return Compiled(function)
+
+
+# -------------------------------------------------------------- compiling on demand
+#: The kernels ready in this process (compiled or loaded from Numba's cache), by ``(maker,
+#: argument types)`` (:func:`_kernel`): the Numba dispatcher to call.
+_READY: dict = {}
+#: Keys queued for, or being compiled on, the background thread; keys whose compilation failed
+#: there (their calls then compile on the calling thread, which raises the error).
+_QUEUED: set = set()
+_FAILED: set = set()
+_JOBS: queue.SimpleQueue = queue.SimpleQueue()
+_WORKER_LOCK = threading.Lock()
+_WORKER: list = []
+#: Scalar argument types whose Numba type follows from the type alone (``numba.typeof(t())``).
+_SCALARS = (bool, int, float, np.bool_, np.int64, np.float64, np.float32)
+
+
+def _arg_type(a):
+    """What Numba's dispatcher selects a compiled version by, for argument ``a``, without importing
+    Numba: an array's dtype, ndim, layout (``C``, ``F`` or ``A``, as ``numba.typeof``), read-only and
+    aligned flags; a scalar's type (:data:`_SCALARS`); ``None`` for anything else."""
+    if isinstance(a, np.ndarray):
+        layout = "C" if a.flags.c_contiguous else "F" if a.flags.f_contiguous else "A"
+        return a.dtype.str, a.ndim, layout, not a.flags.writeable, a.flags.aligned
+    t = type(a)
+    return t if t in _SCALARS else None
+
+
+def _numba_type(t):
+    """The Numba type of an :func:`_arg_type`."""
     import numba
-    return numba.njit(cache=True, nogil=True)(function)
+    if isinstance(t, tuple):
+        dtype, ndim, layout, readonly, aligned = t
+        return numba.types.Array(numba.from_dtype(np.dtype(dtype)), ndim, layout, readonly=readonly, aligned=aligned)
+    return numba.typeof(t())
+
+
+def _dispatcher(maker):
+    """The Numba dispatcher of ``maker``: ``(name, *params)`` of :mod:`microfacet._numba_kernels`
+    (``("eval_kernel", kind, dtype)`` -> ``eval_kernel(kind, dtype)``, ``("_unit_deviation",)``), or
+    ``(Compiled,)``."""
+    name, *params = maker
+    if isinstance(name, Compiled):
+        return name.dispatcher
+    k = getattr(_kernels(), name)
+    return k(*params) if params else k
+
+
+def _compile(k, types) -> None:
+    """Compiles the dispatcher ``k`` for the :func:`_arg_type` s ``types``, or loads it from Numba's
+    cache, holding an exclusive lock on a file in that cache's folder (``fcntl.flock``; none where
+    that is unavailable): Numba writes a function's cache index without one, so two processes that
+    compile versions of a function at once can leave the index pointing at the other's code (numba
+    issue #4807; seen here as wrong sample weights after test runs in parallel); with it the second
+    process waits, then loads what the first saved."""
+    sig = tuple(map(_numba_type, types))
+    try:
+        import fcntl
+        folder = k._cache.cache_path                 # None without cache=True
+        os.makedirs(folder, exist_ok=True)
+        lock = open(os.path.join(folder, "microfacet-compile.lock"), "ab")
+    except (ImportError, AttributeError, OSError, TypeError):
+        k.compile(sig)
+        return
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            k.compile(sig)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _work() -> None:
+    """The background thread: compiles (or loads from Numba's cache) the queued kernels, in order."""
+    while True:
+        key = _JOBS.get()
+        try:
+            k = _dispatcher(key[0])
+            _compile(k, key[1])
+            _READY[key] = k
+        except BaseException:                    # compiled again on the calling thread, which raises
+            _FAILED.add(key)
+        finally:
+            _QUEUED.discard(key)
+
+
+def _queue(key) -> None:
+    if key in _QUEUED:
+        return
+    _QUEUED.add(key)
+    _JOBS.put(key)
+    with _WORKER_LOCK:
+        if not _WORKER:
+            _WORKER.append(_background.in_background(_work))
+
+
+def _kernel(maker, args, n: int, background: bool):
+    """The dispatcher of ``maker`` (:func:`_dispatcher`) to call on ``args`` (a batch of ``n``
+    pairs), or ``None``: the caller runs its NumPy reference. ``None`` only with ``background``, in
+    :data:`COMPILE` ``"background"`` mode, for ``n`` up to :data:`BACKGROUND_MAX`, while the kernel for
+    these argument types is not ready in this process: its compilation is then queued on the
+    background thread (:func:`_work`). Otherwise the dispatcher, compiled for them first if needed
+    (:func:`_compile`, or loaded from Numba's cache; waiting for the background thread if it is
+    compiling it)."""
+    types = tuple(map(_arg_type, args))
+    key = (maker, types)
+    k = _READY.get(key)
+    if k is not None:
+        return k
+    if background and COMPILE == "background" and n <= BACKGROUND_MAX and None not in types and key not in _FAILED:
+        _queue(key)
+        return None
+    k = _dispatcher(maker)
+    if None not in types:
+        _compile(k, types)
+        _READY[key] = k
+    return k
+
+
+def ready(wait: float | None = 0.0) -> bool:
+    """Whether no kernel is queued or compiling on the background thread (``COMPILE ==
+    "background"``), after waiting up to ``wait`` seconds for it (``None``: until it is done).
+    Example: ``mf.kernels.ready(wait=None)`` before timing a loop."""
+    import time
+    end = None if wait is None else time.monotonic() + wait
+    while _QUEUED:
+        if end is not None and time.monotonic() >= end:
+            return False
+        time.sleep(0.01)
+    return True
 
 
 def _smith_params(distribution):
     """``(kind, alpha_x, alpha_y, rho, x~n, y~n)`` of a scalar Beckmann or GGX, else ``None``."""
-    from .distributions import GGX as _GGX, Beckmann as _Beckmann
+    from .distributions import GGX, Beckmann
     d = distribution
-    if not AVAILABLE or type(d) not in (_Beckmann, _GGX) \
+    if not AVAILABLE or type(d) not in (Beckmann, GGX) \
             or any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
         return None
-    k = _kernels()
-    return (k.GGX if type(d) is _GGX else k.BECKMANN, float(d.alpha_x), float(d.alpha_y), float(d.rho),
+    return (_GGX if type(d) is GGX else _BECKMANN, float(d.alpha_x), float(d.alpha_y), float(d.rho),
             float(d.xn), float(d.yn))
 
 
@@ -155,31 +348,39 @@ def _fresnel_params(fresnel):
     """``(kind, fp (2, 3), table x, table values)`` of a :mod:`microfacet.fresnel` term for
     the kernels' ``_fresnel``, or ``None`` for another class (and a Schlick term with ``f90 != 1``)."""
     from . import fresnel as fr
-    k = _kernels()
     fp = np.zeros((2, 3))
     t = type(fresnel)
     if t is fr.Ideal:
-        return k.IDEAL, fp, *_NO_TABLE
+        return _IDEAL, fp, *_NO_TABLE
     if t is fr.Schlick and np.all(fresnel.f90 == 1.0):      # F90 != 1: the NumPy Fresnel path
         fp[0] = fresnel.f0
-        return k.SCHLICK, fp, *_NO_TABLE
+        return _SCHLICK, fp, *_NO_TABLE
     if t is fr.Dielectric:
         fp[0] = fresnel.eta
-        return k.DIELECTRIC, fp, *_NO_TABLE
+        return _DIELECTRIC, fp, *_NO_TABLE
     if t is fr.Conductor:
         fp[0], fp[1] = fresnel.eta, fresnel.k
-        return k.CONDUCTOR, fp, *_NO_TABLE
+        return _CONDUCTOR, fp, *_NO_TABLE
     if t is fr.Tabulated:
-        return (k.TABULATED, fp, np.ascontiguousarray(fresnel.cos_theta_d),
+        return (_TABULATED, fp, np.ascontiguousarray(fresnel.cos_theta_d),
                 np.ascontiguousarray(fresnel.values))
     return None
 
 
+def _frozen(a):
+    """A read-only view of the input array ``a``: the kernels read their inputs as read-only arrays
+    whether the caller's are writeable or not, one compiled version instead of two (Numba compiles
+    per read-only flag)."""
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
 def _rows(a, shape):
-    """``a`` broadcast to ``shape + (last,)`` as ``(n, last)`` rows (a view where possible)."""
+    """``a`` broadcast to ``shape + (last,)`` as ``(n, last)`` read-only rows (a view where possible)."""
     if a.ndim == 2 and a.shape[:1] == shape:
-        return a
-    return np.broadcast_to(a, shape + a.shape[-1:]).reshape(-1, a.shape[-1])
+        return _frozen(a)
+    return _frozen(np.broadcast_to(a, shape + a.shape[-1:]).reshape(-1, a.shape[-1]))
 
 
 def _brdf_params(brdf):
@@ -191,21 +392,38 @@ def _brdf_params(brdf):
     return None if f is None else (d, f)
 
 
+def covers(brdf) -> bool:
+    """Whether the fused kernels (:func:`smith_eval`; :func:`smith_pdf` and :func:`smith_sample` for
+    visible-normal sampling) cover ``brdf``: Numba available, a Smith GAF, a scalar Beckmann or GGX
+    and a :mod:`microfacet.fresnel` term they know. Imports neither Numba nor the kernels."""
+    return _brdf_params(brdf) is not None
+
+
 def _shape_n(a, b):
     shape = a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
     return shape, math.prod(shape)
 
 
-def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool):
+def _output_like(dtype, ndim: int):
+    """An empty array of the type of a kernel's output (C-contiguous, writeable, ``dtype``, ``ndim``
+    dimensions), to choose the kernel (:func:`_kernel`) before the output is made."""
+    return np.empty((0,) * ndim, dtype)
+
+
+def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool, background: bool = False):
     """``(o.h, D G / (4 z_o) [/ z_i])`` by the compiled kernel, or ``None`` when it does
-    not apply (no Numba, array parameters, another distribution)."""
+    not apply (no Numba, array parameters, another distribution) or, with ``background``,
+    while it compiles (:func:`_kernel`; the caller runs the NumPy reference)."""
     d = _smith_params(distribution)
     if d is None:
         return None
     shape, n = _shape_n(wi, wo)
+    args = (_rows(wi, shape), _rows(wo, shape), *d[1:], bool(shadowing), bool(divide_cos_i))
+    k = _kernel(("projected_kernel", d[0]), (0, 0, *args, *(_output_like(np.float64, 1),) * 2), n, background)
+    if k is None:
+        return None
     oh, s = np.empty(n), np.empty(n)
-    _launch_ranges(_kernels().projected_kernel(d[0]), n, _rows(wi, shape), _rows(wo, shape), *d[1:],
-                   bool(shadowing), bool(divide_cos_i), oh, s)
+    _launch_ranges(k, n, *args, oh, s)
     return oh.reshape(shape), s.reshape(shape)
 
 
@@ -233,36 +451,43 @@ def output(out, shape, dtype, name="out", inputs=()):
     return out
 
 
-def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None):
+def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None, background: bool = False):
     """``(f, checks)``: ``f = F D G / (4 z_o) [/ z_i]`` RGB ``(..., 3)`` of a Smith ``brdf``
     (Eq. 2.1) by one compiled pass with the Fresnel term inside, computed and written as
     ``dtype`` (into ``out`` if given: :func:`output`), and the unit-length deviations of ``wi``
     and ``wo`` measured in that pass (:func:`_checks`; ``f`` is meaningless if they fail), or
     ``None`` when the kernel does not apply (no Numba, array parameters, another distribution,
-    GAF or Fresnel class)."""
+    GAF or Fresnel class) or, with ``background``, while it compiles (:func:`_kernel`)."""
     p = _brdf_params(brdf)
     if p is None:
         return None
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(wi, wo)
+    args = (_rows(wi, shape), _rows(wo, shape), *_typed(dtype, d), brdf.shadowing, bool(divide_cos_i), fk,
+            _frozen(f[0].astype(dtype)), *map(_frozen, f[1:]))
+    k = _kernel(("eval_kernel", kind, np.dtype(dtype)), (0, 0, *args, _output_like(dtype, 2)), n, background)
+    if k is None:
+        return None
     out = output(out, shape + (3,), dtype, "out", (wi, wo))
-    r = _launch_ranges(_kernels().eval_kernel(kind, np.dtype(dtype)), n, _rows(wi, shape), _rows(wo, shape),
-                       *_typed(dtype, d), brdf.shadowing, bool(divide_cos_i), fk, f[0].astype(dtype), *f[1:],
-                       out.reshape(-1, 3))
+    r = _launch_ranges(k, n, *args, out.reshape(-1, 3))
     return out, _checks(("wi", "wo"), r)
 
 
-def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None):
+def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None, background: bool = False):
     """``(pdf, checks)``: the visible-normal sampling density ``D(h) / (4 A(o))`` (Eq. 2.17) of
     a Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``), and
-    the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply."""
+    the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply
+    (or, with ``background``, while it compiles)."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
     shape, n = _shape_n(wi, wo)
+    args = (_rows(wi, shape), _rows(wo, shape), *_typed(dtype, p[0][1:]))
+    k = _kernel(("pdf_kernel", p[0][0], np.dtype(dtype)), (0, 0, *args, _output_like(dtype, 1)), n, background)
+    if k is None:
+        return None
     out = output(out, shape, dtype, "out", (wi, wo))
-    r = _launch_ranges(_kernels().pdf_kernel(p[0][0], np.dtype(dtype)), n, _rows(wi, shape), _rows(wo, shape),
-                       *_typed(dtype, p[0][1:]), out.reshape(-1))
+    r = _launch_ranges(k, n, *args, out.reshape(-1))
     return out, _checks(("wi", "wo"), r)
 
 
@@ -280,28 +505,131 @@ def sample_outputs(out, shape, dtype, inputs=()):
     return tuple(arrays)
 
 
-def smith_sample(brdf, u, wo, dtype=np.float64, out=None):
+def smith_sample(brdf, u, wo, dtype=np.float64, out=None, background: bool = False):
     """``((wi, weight, pdf), checks)``: visible-normal sampling (Sec. 2.2, 3.2, Eq. 2.23) of a
     Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``'s
     arrays: :func:`sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
-    ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply."""
+    ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply (or,
+    with ``background``, while it compiles)."""
     p = _brdf_params(brdf)
     if p is None or not brdf._samples_visible:
         return None
     (kind, *d), (fk, *f) = p
     shape, n = _shape_n(u, wo)
+    args = (_rows(u, shape), _rows(wo, shape), *_typed(dtype, d), brdf.shadowing, fk, _frozen(f[0].astype(dtype)),
+            *map(_frozen, f[1:]))
+    k = _kernel(("sample_kernel", kind, np.dtype(dtype)),
+                (0, 0, *args, _output_like(dtype, 2), _output_like(dtype, 2), _output_like(dtype, 1)), n, background)
+    if k is None:
+        return None
     wi, weight, pdf = sample_outputs(out, shape, dtype, (u, wo))
-    r = _launch_ranges(_kernels().sample_kernel(kind, np.dtype(dtype)), n, _rows(u, shape), _rows(wo, shape),
-                       *_typed(dtype, d), brdf.shadowing, fk, f[0].astype(dtype), *f[1:],
-                       wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
+    r = _launch_ranges(k, n, *args, wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
     return (wi, weight, pdf), _checks(("u", "wo"), r)
 
 
-def unit_deviation(w: np.ndarray) -> float:
+def unit_deviation(w: np.ndarray, background: bool = True) -> float:
     """:func:`microfacet.geometry.unit_deviation` (``max | |w|^2 - 1 |``, ``inf`` on NaN/inf)
     in one compiled pass over a C-contiguous float64 or float32 ``w (..., 3)``; the NumPy reference
-    for other arrays or without Numba."""
+    for other arrays, without Numba or, with ``background`` (the default: this is the BRDFs' input
+    check), while the pass compiles (:func:`_kernel`). Example: ``unit_deviation(np.array([[0, 0, 1.0]]))`` is 0."""
     from .geometry import unit_deviation as reference
     if not AVAILABLE or w.dtype not in (np.float64, np.float32) or not w.flags.c_contiguous or w.size == 0:
         return reference(w)
-    return float(_kernels()._unit_deviation(w.reshape(-1, 3)))
+    rows = _frozen(w.reshape(-1, 3))
+    k = _kernel(("_unit_deviation",), (rows,), len(rows), background)
+    return reference(w) if k is None else float(k(rows))
+
+
+# ------------------------------------------------------------------------ ahead of time
+#: What :func:`precompile` compiles: per dtype, the eval, pdf and sample kernels of both distributions
+#: for the input layouts that the library's callers make (both inputs C-contiguous rows, either one a
+#: broadcast direction; sample: ``u`` rows with ``wo`` rows or one ``wo``), the projected kernel in
+#: float64 (glints, fits), the unit-length check and the conductor Fresnel term.
+PRECOMPILE_DTYPES = ("float64", "float32")
+
+
+def _precompile_calls(dtype):
+    """``[(name, call)]``: calls that compile (or load) the kernels of :data:`PRECOMPILE_DTYPES` ``dtype``."""
+    from . import fresnel as fr
+    from .brdf import MicrofacetBRDF
+    from .distributions import GGX, Beckmann
+    F = np.dtype(dtype)
+    rows = np.array([[0.0, 0.6, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, 1.0], [0.28, 0.96, 0.0]], F)
+    one, u = rows[0].copy(), np.full((4, 2), 0.5, F)
+    calls = []
+    for D in (Beckmann, GGX):
+        b = MicrofacetBRDF(D(alpha_x=0.3, alpha_y=0.2), fresnel=fr.Conductor.metal("Cu"), dtype=F)
+        name = f"{D.__name__} {F.name}"
+        for wi, wo, layout in ((rows, rows, "rows, rows"), (rows, one, "rows, one"), (one, rows, "one, rows")):
+            calls.append((f"{name} eval ({layout})", functools.partial(smith_eval, b, wi, wo, True, F)))
+            calls.append((f"{name} pdf ({layout})", functools.partial(smith_pdf, b, wi, wo, F)))
+            if F == np.float64:
+                calls.append((f"{name} projected ({layout})",
+                              functools.partial(smith_projected, b.distribution, True, wi, wo, True)))
+        for wo, layout in ((rows, "rows"), (one, "one")):
+            calls.append((f"{name} sample (u rows, wo {layout})", functools.partial(smith_sample, b, u, wo, F)))
+    calls.append((f"unit deviation {F.name}", functools.partial(unit_deviation, rows, False)))
+    if F == np.float64:
+        def conductor():
+            global COMPILE
+            saved, COMPILE = COMPILE, "wait"
+            try:
+                fr.Conductor.metal("Cu")(np.linspace(0.0, 1.0, 5))
+            finally:
+                COMPILE = saved
+        calls.append(("conductor Fresnel float64", conductor))
+    return calls
+
+
+def precompile(dtypes=PRECOMPILE_DTYPES, progress=None) -> int:
+    """Compiles the kernels that the library's BRDFs use (:func:`_precompile_calls`) into Numba's
+    on-disk cache, or loads those already there, so that later processes load them in milliseconds
+    instead of compiling them at first use (5-20 s each). One kernel at a time, in this process:
+    Numba's cache is not safe for processes that compile versions of one function at once
+    (:func:`_compile`). ``progress(name, seconds)`` is called after each. Returns how many kernels
+    were compiled or loaded; 0 without Numba. Run by ``make setup`` as ``python -m microfacet.kernels
+    --precompile`` (``docs/performance.md``).
+
+    Example: ``mf.kernels.precompile(dtypes=("float64",))``."""
+    import time
+    if not AVAILABLE:
+        return 0
+    calls = [c for dtype in dtypes for c in _precompile_calls(dtype)]
+    for name, call in calls:
+        t = time.perf_counter()
+        call()
+        if progress is not None:
+            progress(name, time.perf_counter() - t)
+    return len(calls)
+
+
+def main(argv=None) -> int:
+    """``python -m microfacet.kernels --precompile [--dtypes float64,float32]``: :func:`precompile`,
+    printing each kernel's time."""
+    import argparse
+    import time
+    p = argparse.ArgumentParser(prog="python -m microfacet.kernels",
+                                description="Compile the microfacet BRDF kernels into Numba's on-disk cache ahead of "
+                                            "time (or check that they load from it).")
+    p.add_argument("--precompile", action="store_true", required=True, help="compile the kernels now")
+    p.add_argument("--dtypes", default=",".join(PRECOMPILE_DTYPES), metavar="LIST",
+                   help=f"comma-separated arithmetic types (default {','.join(PRECOMPILE_DTYPES)})")
+    p.add_argument("-q", "--quiet", action="store_true", help="print only the total")
+    args = p.parse_args(argv)
+    dtypes = [d.strip() for d in args.dtypes.split(",") if d.strip()]
+    bad = [d for d in dtypes if d not in PRECOMPILE_DTYPES]
+    if bad or not dtypes:
+        p.error(f"--dtypes must list some of {', '.join(PRECOMPILE_DTYPES)}, got {args.dtypes!r}")
+    if not AVAILABLE:
+        print("microfacet.kernels: Numba is not installed (or MICROFACET_NUMBA=0): nothing to compile")
+        return 0
+    start = time.perf_counter()
+    n = precompile(dtypes, None if args.quiet else lambda name, t: print(f"  {t:6.2f} s  {name}", flush=True))
+    print(f"microfacet.kernels: {n} kernels compiled or loaded from Numba's cache in "
+          f"{time.perf_counter() - start:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":                      # run as microfacet.kernels, not as a second copy of it
+    from microfacet.kernels import main as _main
+    raise SystemExit(_main())
