@@ -726,8 +726,9 @@ def material_rows(rows: list[dict]) -> list[dict]:
     for r in rows:
         best = r.get("best")
         b, t, a, z = _fit(r, best), _fit(r, "tabulated"), _fit(r, "abc"), _fit(r, "baseline")
-        tvs = [f.get("fresnel_tv") for k, f in (r.get("fits") or {}).items()
-               if k not in ("abc", "baseline") and _num(f.get("fresnel_tv"))]
+        tvs = {k: f.get("fresnel_tv") for k, f in (r.get("fits") or {}).items()
+               if k not in ("abc", "baseline") and _num(f.get("fresnel_tv"))}
+        tv_fit = max(tvs, key=tvs.get) if tvs else ""
         fit_errors = {k: v for k, v in r.get("errors", {}).items() if k != "baseline"}
         per_fit_errors = {k: f["error"] for k, f in (r.get("fits") or {}).items() if "error" in f}
         out.append({
@@ -742,7 +743,7 @@ def material_rows(rows: list[dict]) -> list[dict]:
             "furnace_best": b.get("furnace"),
             "furnace_max": max((f.get("furnace") for k, f in (r.get("fits") or {}).items()
                                 if k not in ("abc", "baseline") and _num(f.get("furnace"))), default=None),
-            "tv_ratio": max(tvs, default=None), "tv_baseline": z.get("fresnel_tv"),
+            "tv_ratio": tvs.get(tv_fit), "tv_fit": tv_fit, "tv_baseline": z.get("fresnel_tv"),
             "seconds": r.get("wall_seconds"), "fit_seconds": r.get("fit_seconds"),
             "error": "; ".join(f"{k}: {v}" for k, v in {**fit_errors, **per_fit_errors}.items()),
             "baseline_error": r.get("errors", {}).get("baseline", ""),
@@ -858,13 +859,14 @@ def format_page(table, g, meta) -> str:
               "log / image: cosine-weighted log error and sphere-image error of the best fit, the tabulated fit, "
               "ABC (MERL) and today's default (416aa6c). albedo: the best fit's ratio fit/data farthest from 1. "
               "chroma: the best fit's chromaticity difference. furnace: the largest white furnace of the file's "
-              "fits. TV/range: worst Fresnel table of the file's fits (today's default in brackets). s: fit_file "
+              "fits. TV/range: worst Fresnel table of the file's fits and that fit (today's default in brackets). s: fit_file "
               "wall seconds.", "",
               "| group | material | best | log best | log tab | log ABC | log today | img best | img tab | img ABC "
               "| img today | albedo | chroma | furnace | TV/range | s | error |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in table:
-        tv = _c(r["tv_ratio"], 2) + (f" ({_c(r['tv_baseline'], 1)})" if _num(r["tv_baseline"]) else "")
+        tv = (_c(r["tv_ratio"], 2) + (f" {r['tv_fit']}" if r["tv_fit"] else "")
+              + (f" ({_c(r['tv_baseline'], 1)})" if _num(r["tv_baseline"]) else ""))
         lines.append("| " + " | ".join([r["group"], r["name"], r["best"] or "–", _c(r["log_best"]),
                                         _c(r["log_tabulated"]), _c(r["log_abc"]), _c(r["log_baseline"]),
                                         _c(r["image_best"]), _c(r["image_tabulated"]), _c(r["image_abc"]),
