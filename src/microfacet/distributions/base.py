@@ -16,7 +16,15 @@ import numpy as np
 
 from ..geometry import dot, normalize
 
-__all__ = ["SlopeDistribution"]
+__all__ = ["SlopeDistribution", "MIN_ALPHA"]
+
+#: Smallest accepted roughness ``alpha_x``, ``alpha_y`` per result type. Below ``1e-100`` (about
+#: the cube root of float64's smallest normal number) the NDF's ``1 / (alpha_x alpha_y)`` and the
+#: division-free ``/ z^4`` of its evaluation leave float64's range (GGX evaluated NaN from
+#: ``alpha <= 1e-153``); a float32 :class:`microfacet.MicrofacetBRDF` accepts ``alpha >= 1e-9``
+#: (its kernels evaluated NaN or inf, and sampled NaN directions, from ``alpha <= 1e-18``;
+#: ``1e-9`` keeps a factor ``>= 1e9`` of float32's range for correlation and grazing pairs).
+MIN_ALPHA = {np.dtype(np.float64): 1e-100, np.dtype(np.float32): 1e-9}
 
 
 def _param(value, name: str) -> np.ndarray:
@@ -30,6 +38,16 @@ def _positive(value, name: str) -> np.ndarray:
     v = _param(value, name)
     if np.any(v <= 0):
         raise ValueError(f"{name} must be > 0, got {value!r}")
+    return v
+
+
+def _roughness(value, name: str) -> np.ndarray:
+    """``value`` as a roughness: finite and ``>= MIN_ALPHA[float64]`` (``ValueError`` naming ``name``)."""
+    v = _positive(value, name)
+    low = MIN_ALPHA[np.dtype(np.float64)]
+    if np.any(v < low):
+        raise ValueError(f"{name} must be >= {low:g} (smaller roughness leaves float64's range), "
+                         f"got {float(np.min(v))!r}")
     return v
 
 
@@ -59,8 +77,8 @@ class SlopeDistribution:
             alpha_x = alpha_y = alpha
         elif alpha_x is None or alpha_y is None:
             raise ValueError("give alpha, or both alpha_x and alpha_y")
-        self.alpha_x = _positive(alpha_x, "alpha_x" if alpha is None else "alpha")
-        self.alpha_y = _positive(alpha_y, "alpha_y" if alpha is None else "alpha")
+        self.alpha_x = _roughness(alpha_x, "alpha_x" if alpha is None else "alpha")
+        self.alpha_y = _roughness(alpha_y, "alpha_y" if alpha is None else "alpha")
         self.rho = _param(rho, "rho")
         if np.any(np.abs(self.rho) >= 1):
             raise ValueError(f"rho must lie in (-1, 1), got {rho!r}")
@@ -81,12 +99,32 @@ class SlopeDistribution:
         ``alpha_y^2 = (a1^2 + a2^2 - (a1^2 - a2^2) cos 2phi)/2``,
         ``rho = (a1^2 - a2^2) cos phi sin phi / (alpha_x alpha_y)``.
         """
-        a1, a2 = _positive(alpha1, "alpha1") ** 2, _positive(alpha2, "alpha2") ** 2
+        a1, a2 = _roughness(alpha1, "alpha1") ** 2, _roughness(alpha2, "alpha2") ** 2
         phi = _param(phi, "phi")
         ax = np.sqrt(0.5 * (a1 + a2 + (a1 - a2) * np.cos(2 * phi)))
         ay = np.sqrt(0.5 * (a1 + a2 - (a1 - a2) * np.cos(2 * phi)))
         rho = (a1 - a2) * np.cos(phi) * np.sin(phi) / (ax * ay)
         return cls(alpha_x=ax, alpha_y=ay, rho=rho, mean_slope=mean_slope)
+
+    def check_dtype(self, dtype) -> None:
+        """``ValueError`` (one line, naming the parameter and the smallest accepted value) if a
+        roughness of this distribution is below ``MIN_ALPHA[dtype]``, the smallest one results of
+        ``dtype`` represent (:class:`microfacet.MicrofacetBRDF` calls it with its ``dtype``).
+
+        >>> from microfacet import Beckmann
+        >>> Beckmann(alpha=1e-12).check_dtype(np.float32)
+        Traceback (most recent call last):
+        ...
+        ValueError: alpha_x must be >= 1e-09 for dtype float32 (smaller roughness leaves float32's range; use float64), got 1e-12
+        """
+        dtype = np.dtype(dtype)
+        low = MIN_ALPHA.get(dtype)
+        if low is None:
+            return
+        for name, v in (("alpha_x", self.alpha_x), ("alpha_y", self.alpha_y)):
+            if np.any(v < low):
+                raise ValueError(f"{name} must be >= {low:g} for dtype {dtype} (smaller roughness leaves "
+                                 f"{dtype}'s range; use float64), got {float(np.min(v))!r}")
 
     @property
     def ellipse(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
