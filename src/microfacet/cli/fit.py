@@ -40,8 +40,13 @@ def add(sub) -> None:
         "fit", help="fit measured BRDFs (tabulated fit by power iterations, least-squares GGX and Beckmann)",
         description="Fit a measured BRDF (MERL .binary(.gz), RGL .bsdf, UTIA .bin; recognised by "
                     "content) by power iterations (thesis Ch. 4), then GGX and Beckmann BRDFs by least "
-                    "squares started from its moment conversion. For a file: writes OUT.npz (the "
-                    "tabulated fit, loadable by microfacet.fit.load), OUT.json (GGX and Beckmann fits "
+                    "squares started from its moment conversion, and analytic models fitted in a "
+                    "compressed (cube-root) space with the albedo held at or below the data's: one GGX "
+                    "lobe + base, a core and a halo lobe + base, and with --coat a dielectric coat over "
+                    "a base (microfacet.fit.perceptual); the best fit is the one whose rendered spheres "
+                    "look most like the data's (image error). For a file: writes OUT.npz (every fit: "
+                    "microfacet.fit.load(OUT.npz) is the tabulated fit, load(OUT.npz, model='best' or a "
+                    "name) any other), OUT.json (every fit with its metrics under \"fits\", \"best\"; GGX and Beckmann fits "
                     "with their Fresnel term and diffuse base, every fit of both methods, fit times, and "
                     "three metrics per fit: the grid error, the uniform-pairs error and the albedo "
                     "ratios fit/data, plus the white furnace) and OUT.png (comparison picture with the "
@@ -72,8 +77,10 @@ def add(sub) -> None:
                         "grid^2 + uniform^2 + W^2 mean((albedo fit/data - 1)^2) over views 0/30/60/75 deg "
                         f"and RGB (default {ALBEDO_WEIGHT:g}; 0: fit the shape only, ~4: albedo within ~10 %%)")
     p.add_argument("--coat", action="store_true",
-                   help="add a coat to the least-squares fits: a second GGX/Beckmann lobe with its own "
-                        "7-node Fresnel table (clear coats, metallic paints; slower: 1-10 s per fit)")
+                   help="also fit a layered coat (a dielectric coat of its own roughness and index over a "
+                        "lobe + base, microfacet.layered.LayeredBRDF) and add a coat to the least-squares "
+                        "fits: a second GGX/Beckmann lobe with its own 7-node Fresnel table (clear coats, "
+                        "metallic paints; slower: 1-10 s per fit)")
     p.add_argument("--no-picture", dest="picture", action="store_false",
                    help="do not draw OUT.png (saves ~0.7 s of matplotlib per file; single files only: a "
                         "folder's up-to-date check wants the picture)")
