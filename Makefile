@@ -32,6 +32,10 @@ setup: $(VENV)/.installed
 	  echo "setup: installing the system packages chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 with apt-get (as root): the demo's real-time section and the viewer tests run the WebGL2 viewer in headless Chromium, the GLSL tests run on Mesa's EGL (llvmpipe)"; \
 	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 >/dev/null; \
 	else echo "setup: no chromium/Mesa EGL and no root apt: GLSL and viewer tests will skip"; fi
+# Numba kernels compiled into Numba's cache now (~2-4 min on 2 cores the first time, seconds once
+# cached), not at their first use in the demo or the tests (python -m microfacet.kernels --help;
+# docs/performance.md). The cache is src/microfacet/__pycache__ (git-ignored) or $$NUMBA_CACHE_DIR.
+	$(PY) -m microfacet.kernels --precompile --quiet
 
 demo: setup
 	$(VENV)/bin/microfacet demo -o $(OUT)

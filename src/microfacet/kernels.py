@@ -70,8 +70,9 @@ def _compile_mode() -> str:
 #: :func:`compiled` function does while its kernel is not compiled yet in this process (module docstring).
 COMPILE = _compile_mode()
 #: Largest batch (pairs) that runs the NumPy reference while its kernel compiles in the background
-#: (``COMPILE == "background"``); a larger batch waits for the kernel. The NumPy path takes ~0.1-0.5 s
-#: per 2^20 pairs (eval to sample; ~40 passes over memory, ~0.3 GB of temporaries), a cold kernel 5-20 s.
+#: (``COMPILE == "background"``); a larger batch waits for the kernel. Per 2^20 pairs the NumPy path
+#: takes ~0.3-1 s (eval, pdf, GGX sample; Beckmann sample ~5 s) and ~0.4 GB, a cold kernel 5-30 s
+#: (benchmarks/results/cold_start.md).
 BACKGROUND_MAX = 1 << 20
 
 #: The distribution and Fresnel kinds of :mod:`microfacet._numba_kernels` (``BECKMANN``, ``GGX``;
@@ -195,8 +196,31 @@ def _compile(k, types) -> None:
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
+def _forget_in_child() -> None:
+    """After ``fork``: the child has no background thread; its queue starts empty."""
+    global _JOBS, _WORKER_LOCK
+    _JOBS, _WORKER_LOCK = queue.SimpleQueue(), threading.Lock()
+    _QUEUED.clear()
+    _WORKER.clear()
+
+
+def _fork_safely() -> None:
+    """Makes ``os.fork`` wait for a compile in progress (holding Numba's compiler lock over the fork,
+    as :mod:`logging` does with its locks): a child forked while the background thread held it
+    would wait for it forever at its first compile."""
+    from numba.core.compiler_lock import global_compiler_lock
+
+    def child():
+        global_compiler_lock.release()
+        _forget_in_child()
+    os.register_at_fork(before=global_compiler_lock.acquire, after_in_parent=global_compiler_lock.release,
+                        after_in_child=child)
+
+
 def _work() -> None:
     """The background thread: compiles (or loads from Numba's cache) the queued kernels, in order."""
+    if hasattr(os, "register_at_fork"):
+        _fork_safely()
     while True:
         key = _JOBS.get()
         try:
@@ -541,15 +565,18 @@ def unit_deviation(w: np.ndarray, background: bool = True) -> float:
 
 
 # ------------------------------------------------------------------------ ahead of time
-#: What :func:`precompile` compiles: per dtype, the eval, pdf and sample kernels of both distributions
-#: for the input layouts that the library's callers make (both inputs C-contiguous rows, either one a
-#: broadcast direction; sample: ``u`` rows with ``wo`` rows or one ``wo``), the projected kernel in
-#: float64 (glints, fits), the unit-length check and the conductor Fresnel term.
+#: The arithmetic types :func:`precompile` can compile for (``MicrofacetBRDF(dtype=...)``), and
+#: those it compiles by default (float32 BRDFs are opt-in: ``--dtypes float64,float32``).
 PRECOMPILE_DTYPES = ("float64", "float32")
+PRECOMPILE_DEFAULT = ("float64",)
 
 
 def _precompile_calls(dtype):
-    """``[(name, call)]``: calls that compile (or load) the kernels of :data:`PRECOMPILE_DTYPES` ``dtype``."""
+    """``[(name, call)]``: calls that compile (or load) the kernels of one arithmetic type ``dtype``: the
+    eval and pdf kernels of both distributions for the input layouts that the library's callers make
+    (both inputs C-contiguous rows, or either one a single direction broadcast), sample (``u`` rows
+    with ``wo`` rows or one ``wo``), in float64 the projected kernel (glints, fits: rows or one ``wo``)
+    and the conductor Fresnel term, and the unit-length check."""
     from . import fresnel as fr
     from .brdf import MicrofacetBRDF
     from .distributions import GGX, Beckmann
@@ -563,7 +590,7 @@ def _precompile_calls(dtype):
         for wi, wo, layout in ((rows, rows, "rows, rows"), (rows, one, "rows, one"), (one, rows, "one, rows")):
             calls.append((f"{name} eval ({layout})", functools.partial(smith_eval, b, wi, wo, True, F)))
             calls.append((f"{name} pdf ({layout})", functools.partial(smith_pdf, b, wi, wo, F)))
-            if F == np.float64:
+            if F == np.float64 and layout != "one, rows":
                 calls.append((f"{name} projected ({layout})",
                               functools.partial(smith_projected, b.distribution, True, wi, wo, True)))
         for wo, layout in ((rows, "rows"), (one, "one")):
@@ -581,7 +608,7 @@ def _precompile_calls(dtype):
     return calls
 
 
-def precompile(dtypes=PRECOMPILE_DTYPES, progress=None) -> int:
+def precompile(dtypes=PRECOMPILE_DEFAULT, progress=None) -> int:
     """Compiles the kernels that the library's BRDFs use (:func:`_precompile_calls`) into Numba's
     on-disk cache, or loads those already there, so that later processes load them in milliseconds
     instead of compiling them at first use (5-20 s each). One kernel at a time, in this process:
@@ -604,7 +631,7 @@ def precompile(dtypes=PRECOMPILE_DTYPES, progress=None) -> int:
 
 
 def main(argv=None) -> int:
-    """``python -m microfacet.kernels --precompile [--dtypes float64,float32]``: :func:`precompile`,
+    """``python -m microfacet.kernels --precompile [--dtypes float64,float32] [-q]``: :func:`precompile`,
     printing each kernel's time."""
     import argparse
     import time
@@ -612,8 +639,9 @@ def main(argv=None) -> int:
                                 description="Compile the microfacet BRDF kernels into Numba's on-disk cache ahead of "
                                             "time (or check that they load from it).")
     p.add_argument("--precompile", action="store_true", required=True, help="compile the kernels now")
-    p.add_argument("--dtypes", default=",".join(PRECOMPILE_DTYPES), metavar="LIST",
-                   help=f"comma-separated arithmetic types (default {','.join(PRECOMPILE_DTYPES)})")
+    p.add_argument("--dtypes", default=",".join(PRECOMPILE_DEFAULT), metavar="LIST",
+                   help=f"comma-separated arithmetic types among {','.join(PRECOMPILE_DTYPES)} "
+                        f"(default {','.join(PRECOMPILE_DEFAULT)})")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the total")
     args = p.parse_args(argv)
     dtypes = [d.strip() for d in args.dtypes.split(",") if d.strip()]
