@@ -18,13 +18,15 @@ from ..geometry import dot, normalize
 
 __all__ = ["SlopeDistribution", "MIN_ALPHA"]
 
-#: Smallest accepted roughness ``alpha_x``, ``alpha_y`` per result type. Below ``1e-100`` (about
-#: the cube root of float64's smallest normal number) the NDF's ``1 / (alpha_x alpha_y)`` and the
-#: division-free ``/ z^4`` of its evaluation leave float64's range (GGX evaluated NaN from
-#: ``alpha <= 1e-153``); a float32 :class:`microfacet.MicrofacetBRDF` accepts ``alpha >= 1e-9``
-#: (its kernels evaluated NaN or inf, and sampled NaN directions, from ``alpha <= 1e-18``;
-#: ``1e-9`` keeps a factor ``>= 1e9`` of float32's range for correlation and grazing pairs).
-MIN_ALPHA = {np.dtype(np.float64): 1e-100, np.dtype(np.float32): 1e-9}
+#: Smallest accepted roughness ``alpha_x``, ``alpha_y`` per result type: about 100 (float64) and
+#: 17 (float32) units in the last place of 1. Directions are resolved to about one such unit, so
+#: a narrower lobe is not resolved at its own rounded samples: its NDF at the half vector of a
+#: sampled pair, recomputed from the rounded directions, underflows (float64 alpha 1e-100, or
+#: float32 alpha 1e-9: 20-80 % of the sheared samples had pdf 0), and further down the arithmetic
+#: leaves the type's range (GGX evaluated NaN from alpha <= 1e-153 in float64 and 1e-18 in
+#: float32; Beckmann float32 sampled NaN directions from 1e-19). The distribution checks float64's
+#: bound; a float32 :class:`microfacet.MicrofacetBRDF` checks float32's (:meth:`SlopeDistribution.check_dtype`).
+MIN_ALPHA = {np.dtype(np.float64): 1e-14, np.dtype(np.float32): 1e-6}
 
 
 def _param(value, name: str) -> np.ndarray:
@@ -46,7 +48,7 @@ def _roughness(value, name: str) -> np.ndarray:
     v = _positive(value, name)
     low = MIN_ALPHA[np.dtype(np.float64)]
     if np.any(v < low):
-        raise ValueError(f"{name} must be >= {low:g} (smaller roughness leaves float64's range), "
+        raise ValueError(f"{name} must be >= {low:g} (a narrower lobe is below float64's direction resolution), "
                          f"got {float(np.min(v))!r}")
     return v
 
@@ -115,7 +117,7 @@ class SlopeDistribution:
         >>> Beckmann(alpha=1e-12).check_dtype(np.float32)
         Traceback (most recent call last):
         ...
-        ValueError: alpha_x must be >= 1e-09 for dtype float32 (smaller roughness leaves float32's range; use float64), got 1e-12
+        ValueError: alpha_x must be >= 1e-06 for dtype float32 (a narrower lobe is below float32's direction resolution; use float64), got 1e-12
         """
         dtype = np.dtype(dtype)
         low = MIN_ALPHA.get(dtype)
@@ -123,8 +125,8 @@ class SlopeDistribution:
             return
         for name, v in (("alpha_x", self.alpha_x), ("alpha_y", self.alpha_y)):
             if np.any(v < low):
-                raise ValueError(f"{name} must be >= {low:g} for dtype {dtype} (smaller roughness leaves "
-                                 f"{dtype}'s range; use float64), got {float(np.min(v))!r}")
+                raise ValueError(f"{name} must be >= {low:g} for dtype {dtype} (a narrower lobe is below "
+                                 f"{dtype}'s direction resolution; use float64), got {float(np.min(v))!r}")
 
     @property
     def ellipse(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
