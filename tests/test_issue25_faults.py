@@ -496,5 +496,5 @@ def test_bad_scheduler_addresses_are_one_line_errors(address, words, maps_folder
 
 def test_connect_timeout_must_be_positive(maps_folder, tmp_path):
     pytest.importorskip("distributed", reason="needs dask[distributed] (microfacet[dask])")
-    with pytest.raises(ValueError, match="connect_timeout"):
+    with pytest.raises(ValueError, match="connect_timeout must be a positive number of seconds"):
         mf.batch.run("bake", maps_folder, tmp_path / "out", scheduler="tcp://127.0.0.1:1", connect_timeout=0)
