@@ -283,6 +283,16 @@ def _coat_basis(kind: str, cos_d) -> np.ndarray:
     return np.stack([1.0 - m5, m5], axis=-1)
 
 
+#: A fitted Fresnel table's total variation may be at most this times its range (max - min).
+TABLE_TV_LIMIT = 2.0
+
+
+def _smooth_table(values: np.ndarray) -> bool:
+    """Whether a table's total variation is at most :data:`TABLE_TV_LIMIT` times its range."""
+    tv = float(np.sum(np.abs(np.diff(values))))
+    return tv <= TABLE_TV_LIMIT * float(np.ptp(values)) + 1e-12
+
+
 class _Problem:
     """One model on the data: the projected objective ``E(q)`` (module docstring). ``q`` is
     ``log alpha`` (or ``log alpha_x, log alpha_y, rho``), then ``log alpha_c`` of the coat."""
@@ -459,26 +469,53 @@ class _Problem:
     def _solve_linear(self, H, g, k, rows):
         """Per channel, ``y`` in ``[0, 1]`` (``x = Q y + x0``, :meth:`_linear_map`) minimizing
         ``E_c`` under ``rows x <= 1 - ENERGY_MARGIN`` (:meth:`energy_rows`; computed only when
-        :meth:`_may_gain`; ``rows=None``: the box alone)."""
+        :meth:`_may_gain`; ``rows=None``: the box alone). A Fresnel table whose total
+        variation exceeds :data:`TABLE_TV_LIMIT` times its range is solved again with a
+        second-difference penalty ``lam |D2 t|^2``, ``lam`` growing tenfold until it is not
+        (a straight table, the limit, has the variation of its range)."""
         Q, x0 = self._linear_map()
         total, coef = 0.0, np.zeros((3, Q.shape[1]))
+        tables = self._table_blocks()
         for c in range(3):
             Hy = Q.T @ H[c] @ Q
             Hy += (1e-12 * max(float(np.max(np.diag(Hy))), 1e-300)) * np.eye(len(Hy))
             hx0 = H[c] @ x0
             gy = Q.T @ (g[c] - hx0)
             ky = k[c] - 2.0 * g[c] @ x0 + x0 @ hx0
-            lo, hi = np.zeros(len(gy)), np.ones(len(gy))
-            y = np.linalg.solve(Hy, gy)
-            if np.any(y < 0.0) or np.any(y > 1.0):
-                y = box_qp(Hy, gy, lo, hi)
-            if rows is not None and self._may_gain(Q @ y + x0):
-                r = rows() @ Q
-                limit = 1.0 - ENERGY_MARGIN - rows() @ x0
-                y = _energy_constrained(Hy, gy, y, (lo, hi), (r, np.repeat(limit[:, None], 3, 1)), c, True)
+            y = self._solve_channel(Hy, gy, Q, x0, rows, c)
+            scale = float(np.mean(np.diag(Hy)))
+            for lam in 10.0 ** np.arange(-6, 7):
+                if all(_smooth_table(y[b]) for b in tables):
+                    break
+                penalty = np.zeros_like(Hy)
+                for b in tables:
+                    d2 = np.diff(np.eye(b.stop - b.start), 2, axis=0)
+                    penalty[b, b] = lam * scale * d2.T @ d2
+                y = self._solve_channel(Hy + penalty, gy, Q, x0, rows, c)
             total += float(y @ Hy @ y - 2.0 * gy @ y + ky)
             coef[c] = y
         return max(total, 0.0), coef
+
+    def _table_blocks(self) -> list:
+        """Slices of ``y`` holding Fresnel tables (the lobe's, the coat's)."""
+        n = len(TABLE_NODES)
+        blocks = [slice(0, n)] if self.fresnel == "table" else []
+        if self.coat and self.coat_fresnel == "table":
+            start = n if self.fresnel == "table" else 1
+            blocks.append(slice(start, start + n))
+        return blocks
+
+    def _solve_channel(self, Hy, gy, Q, x0, rows, c):
+        """``y`` of one channel: the box QP, then the energy constraint where it may bind."""
+        lo, hi = np.zeros(len(gy)), np.ones(len(gy))
+        y = np.linalg.solve(Hy, gy)
+        if np.any(y < 0.0) or np.any(y > 1.0):
+            y = box_qp(Hy, gy, lo, hi)
+        if rows is not None and self._may_gain(Q @ y + x0):
+            r = rows() @ Q
+            limit = 1.0 - ENERGY_MARGIN - rows() @ x0
+            y = _energy_constrained(Hy, gy, y, (lo, hi), (r, np.repeat(limit[:, None], 3, 1)), c, True)
+        return y
 
     def _may_gain(self, x) -> bool:
         """False when ``x = (v, c, k_d)`` surely reflects at most ``1 - ENERGY_MARGIN``
