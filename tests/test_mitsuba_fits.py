@@ -181,3 +181,52 @@ def test_unsupported_node_is_named(llvm):
     fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), 16)
     with pytest.raises(ValueError, match="no Mitsuba BSDF for a FittedBRDF"):
         mitsuba_bsdf_of(SumBRDF(fit, mf.Lambertian(0.5)))
+
+
+# ------------------------------------------------------------------ mf_fitted use=
+@pytest.fixture(scope="module")
+def fit_file(tmp_path_factory):
+    """A fit file as ``microfacet fit`` writes it: the tabulated fit and analytic fits by name
+    (specs of :func:`microfacet.fit.spec.to_spec`), ``best`` = "coat"."""
+    from microfacet.fit.spec import to_spec
+    path = tmp_path_factory.mktemp("fits") / "fits.npz"
+    tabulated = mf.fit.fit(TREES["lobe"], 24, diffuse=True)
+    fits = {name: to_spec(TREES[name]) for name in ("lobe", "two_lobes", "coat", "coat_lambert")}
+    path.write_bytes(tabulated.to_bytes(fits=fits, best="coat"))
+    return str(path)
+
+
+@pytest.mark.parametrize("use_", [None, "best", "lobe", "two_lobes", "coat", "coat_lambert", "tabulated"])
+def test_fitted_renders_the_named_fit(llvm, fit_file, use_):
+    """``mf_fitted`` with ``use`` (default "best") renders ``microfacet.fit.load(path, model=use)``:
+    eval and pdf equal the library's."""
+    brdf = mf.fit.load(fit_file, model=use_ or "best")
+    wi, wo = direction_pairs(brdf, np.random.default_rng(5), 12000)
+    d = {"type": "mf_fitted", "filename": fit_file} | ({} if use_ is None else {"use": use_})
+    f, pdf = plugin_eval_pdf(mi.load_dict(d), "llvm_ad_rgb", wi, wo)
+    e = assert_close("eval", f, brdf.eval_cos(wi, wo))
+    p = assert_close("pdf", pdf, brdf.pdf(wi, wo))
+    print(f"mf_fitted use={use_}: eval max rel {e:.2e}, pdf max rel {p:.2e}")
+
+
+def test_fitted_best_is_the_coat_in_scalar_rgb(fit_file):
+    use("scalar_rgb")
+    brdf = mf.fit.load(fit_file, model="best")
+    assert isinstance(brdf, LayeredBRDF)
+    wi, wo = direction_pairs(brdf, np.random.default_rng(6), 8000)
+    f, pdf = plugin_eval_pdf(mi.load_dict({"type": "mf_fitted", "filename": fit_file}), "scalar_rgb", wi, wo)
+    assert_close("eval", f, brdf.eval_cos(wi, wo))
+    assert_close("pdf", pdf, brdf.pdf(wi, wo))
+
+
+def test_fitted_chi2_of_the_best_fit(llvm, fit_file, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _chi2(lambda: mi.load_dict({"type": "mf_fitted", "filename": fit_file}), "mf_fitted best")
+
+
+def test_fitted_unknown_name_lists_the_fits(llvm, fit_file):
+    from test_mitsuba_plugins import load_error
+    last = load_error({"type": "mf_fitted", "filename": fit_file, "use": "phong"})
+    assert "mf_fitted: parameter 'use'" in last and "best, tabulated, lobe, two_lobes, coat, coat_lambert" in last \
+        and "'phong'" in last, last
+    assert "\n" not in last
