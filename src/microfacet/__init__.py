@@ -22,7 +22,7 @@ _NAMES = {"BRDF": "brdf", "Lambertian": "brdf", "MicrofacetBRDF": "brdf",
           "GGX": "distributions", "Beckmann": "distributions", "SlopeDistribution": "distributions"}
 #: Submodules reachable as attributes (``mf.metrics``, ``mf.render``, ...) without an import.
 _SUBMODULES = frozenset({"batch", "brdf", "distributions", "fit", "fresnel", "geometry", "glints", "io", "kernels",
-                         "leadr", "measured", "metrics", "render", "validation"})
+                         "layered", "leadr", "measured", "metrics", "render", "validation"})
 
 
 def __getattr__(name: str):
