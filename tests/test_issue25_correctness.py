@@ -13,6 +13,7 @@ integration error directly (:func:`test_mitsuba_harness_trapezoid_resolution`).
 from __future__ import annotations
 
 import functools
+import re
 import os
 import subprocess
 import sys
@@ -274,3 +275,255 @@ def test_smallest_accepted_roughness_is_finite(D, dtype, path, monkeypatch):
             assert not np.any(np.isnan(v)), f"{kw}: NaN {name}"
         assert np.all(np.isfinite(s_wi)) and np.all(np.isfinite(weight)), kw
         np.testing.assert_allclose(np.linalg.norm(s_wi[ok].astype(np.float64), axis=-1), 1.0, atol=1e-5)
+
+
+# ----------------------------------------------------------------------- item 12
+from microfacet.cli import main  # noqa: E402
+from microfacet.errors import MicrofacetError  # noqa: E402
+
+
+@pytest.fixture
+def glint_file(tmp_path):
+    """A small microsurface file (16 x 12 map, h = 1) and a writer of altered copies."""
+    rng = np.random.default_rng(0)
+    good = mf.glints.Microsurface.from_slopes(rng.normal(0.0, 0.2, (16, 12, 2)), sigma_eps=0.05).save(tmp_path / "good.npz")
+
+    def altered(name, **arrays):
+        import io
+        import zipfile
+        z = dict(np.load(good))
+        z.update(arrays)
+        path = tmp_path / f"{name}.npz"
+        with zipfile.ZipFile(path, "w") as zf:
+            for key, a in z.items():
+                buf = io.BytesIO()
+                np.lib.format.write_array(buf, np.asarray(a))
+                zf.writestr(f"{key}.npy", buf.getvalue())
+        return path
+    return good, altered
+
+
+@pytest.mark.parametrize("case, message", [
+    ("h=0", "h (seed spacing, texels) must lie in [0.0625, 10000], got 0.0"),
+    ("h=-1", "h (seed spacing, texels) must lie in [0.0625, 10000], got -1.0"),
+    ("h=1e300", "h (seed spacing, texels) must lie in [0.0625, 10000], got 1e+300"),
+    ("slopes", "the lobe grid 16 x 12 does not match the 20 x 12 slope map at h=1"),
+    ("lobes", "the lobe grid 4 x 12 does not match the 16 x 12 slope map at h=1"),
+])
+def test_corrupt_glint_file_is_refused_in_one_line(glint_file, case, message, tmp_path, capsys):
+    """A glint file whose spacing is 0, negative or huge, or whose slope map and lobe grid
+    disagree, is refused by ``load`` and by ``glints render`` (one line, exit 1; they rendered)."""
+    good, altered = glint_file
+    z = dict(np.load(good))
+    if case.startswith("h="):
+        path = altered(case, params=np.array([float(case[2:]), *z["params"][1:]]))
+    elif case == "slopes":
+        path = altered(case, slopes=np.zeros((20, 12, 2), np.float32))
+    else:
+        path = altered(case, central=z["central"][:4])
+    with pytest.raises(MicrofacetError, match=re.escape(message)) as e:
+        mf.glints.Microsurface.load(path)
+    assert str(e.value).startswith(str(path)) and "\n" not in str(e.value)
+    assert main(["glints", "render", str(path), "-o", str(tmp_path / f"{case}.png"), "--size", "8"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+    assert not (tmp_path / f"{case}.png").exists()
+
+
+def test_glint_spacing_bounds(tmp_path, capsys):
+    """``--spacing 1e-320`` is a one-line argument error (it was "cannot convert float infinity
+    to integer"); the library refuses such an ``h`` naming it; the CLI's bounds are the library's."""
+    from microfacet.cli.glints import SPACING_RANGE as cli_range
+    from microfacet.glints.microsurface import SPACING_RANGE
+    assert cli_range == SPACING_RANGE
+    assert main(["glints", str(tmp_path / "none.png"), "-o", str(tmp_path / "g.npz"), "--spacing", "1e-320"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--spacing: must lie in [0.0625, 10000], got 1e-320" in err
+    slopes = np.zeros((8, 8, 2))
+    for h in (1e-320, 0.0, -1.0, np.inf, np.nan, 2e4):
+        with pytest.raises(ValueError, match=r"^h \(seed spacing, texels\) must lie in"):
+            mf.glints.Microsurface.from_slopes(slopes, h=h)
+
+
+def _height_png(path):
+    from PIL import Image
+    Image.fromarray((np.random.default_rng(1).random((16, 16)) * 40).astype(np.uint8)).save(path)
+
+
+@pytest.fixture
+def tree(tmp_path):
+    """IN/h.png, IN/a/h.png, IN/a/loop -> .. (a symlink loop), IN/b/h.png (made unreadable by
+    the tests), IN/c -> ../ext (a symlinked folder, followed), ext/h.png."""
+    root = tmp_path / "in"
+    for d in ("", "a", "b"):
+        (root / d).mkdir(parents=True, exist_ok=True)
+        _height_png(root / d / "h.png")
+    (tmp_path / "ext").mkdir()
+    _height_png(tmp_path / "ext" / "h.png")
+    os.symlink("..", root / "a" / "loop")
+    os.symlink("../ext", root / "c")
+    return root
+
+
+def _rows(out_dir):
+    import csv
+    with open(out_dir / "summary.csv", newline="") as f:
+        return {r["file"]: r["status"] for r in csv.DictReader(f)}
+
+
+def test_recursive_bake_reports_unreadable_folders_and_symlink_loops(tree, tmp_path, monkeypatch, capsys):
+    """``bake DIR --recursive``: an unreadable subfolder and a symlink loop each get a summary
+    row (exit status 1), the rest is baked, a symlinked folder is followed (they were skipped
+    without a row, exit 0). The unreadable folder is simulated (the tests may run as root)."""
+    scandir = os.scandir
+
+    def denied(path):
+        if os.fspath(path) == os.fspath(tree / "b"):
+            raise PermissionError(13, "Permission denied", os.fspath(path))
+        return scandir(path)
+    monkeypatch.setattr(os, "scandir", denied)
+    out = tmp_path / "out"
+    assert main(["bake", str(tree), "-o", str(out), "--recursive", "--jobs", "1"]) == 1
+    rows = _rows(out)
+    assert rows == {"h.png": "ok", "a/h.png": "ok", "c/h.png": "ok",
+                    "a/loop/": "not run: symlink loop (a link to a folder above it)",
+                    "b/": "error: cannot read the folder (Permission denied)"}, rows
+    assert "2 of 5 files failed" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(os.geteuid() == 0 if hasattr(os, "geteuid") else True,
+                    reason="root reads folders whatever their mode (the simulated test above covers it)")
+def test_recursive_bake_reports_a_folder_without_read_permission(tree, tmp_path):
+    (tree / "b").chmod(0)
+    try:
+        rows = mf.batch.run("bake", tree, tmp_path / "out", recursive=True, jobs=1)
+    finally:
+        (tree / "b").chmod(0o755)
+    assert {r["file"]: r["status"] for r in rows}["b/"].startswith("error: cannot read the folder")
+
+
+def _exr(path, size=64):
+    import OpenEXR
+    img = np.random.default_rng(0).random((size, size, 3)).astype(np.float32)
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, {"RGB": img}).write(str(path))
+    return bytearray(path.read_bytes())
+
+
+def _with_window(data: bytearray, width: int, height: int) -> bytearray:
+    """``data`` (an EXR) with its data and display windows set to ``width x height``."""
+    import struct
+    out = bytearray(data)
+    for name in (b"dataWindow\0box2i\0", b"displayWindow\0box2i\0"):
+        at = out.find(name) + len(name) + 4
+        out[at:at + 16] = struct.pack("<4i", 0, 0, width - 1, height - 1)
+    return out
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbled"])
+def test_corrupt_exr_is_one_line_without_openexr_noise(damage, tmp_path, capfd):
+    """A corrupt EXR gives one line naming the file and OpenEXR's cause (its C library's first
+    error, not its binding's "file has 0 parts"); nothing of OpenEXR's own output reaches the
+    terminal (file descriptors 1 and 2: it printed up to 513 lines)."""
+    data = _exr(tmp_path / "good.exr")
+    if damage == "truncated":
+        data = data[: len(data) // 2]
+    else:
+        for i in range(len(data) // 2, len(data), 7):
+            data[i] ^= 0x5A
+    path = tmp_path / f"{damage}.exr"
+    path.write_bytes(bytes(data))
+    capfd.readouterr()
+    with pytest.raises(MicrofacetError) as e:
+        mf.io.read_exr(path)
+    message = str(e.value)
+    assert message.startswith(f"{path}: unreadable or corrupt EXR (") and "EXR_ERR" in message and "0 parts" not in message
+    assert capfd.readouterr() == ("", "")
+    with pytest.raises(MicrofacetError, match="EXR_ERR"):
+        mf.leadr.read_pyramid(path)
+    assert capfd.readouterr() == ("", "")
+    assert main(["bake", str(path), "-o", str(tmp_path / "out/")]) == 1
+    out, err = capfd.readouterr()
+    assert out == "" and err.count("\n") == 1 and "EXR_ERR" in err
+
+
+def test_huge_exr_reports_the_memory_it_needs(tmp_path, capfd):
+    """An EXR whose header claims 100000^2 pixels is refused before any allocation, naming the
+    size and the memory it would take (it said "file has 0 parts", the 37 GiB on stdout)."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    need = 100_000**2 * 3 * 12
+    if total >= need:
+        pytest.skip(f"this machine has {total / 2**30:.0f} GiB, enough to read a 100000^2 RGB EXR")
+    path = tmp_path / "huge.exr"
+    path.write_bytes(bytes(_with_window(_exr(tmp_path / "good.exr"), 100_000, 100_000)))
+    capfd.readouterr()
+    with pytest.raises(MicrofacetError, match=r"100000 x 100000 pixels, 3 channels: reading needs 335\.3 GiB, "
+                                              r"more than this machine's .* GiB of memory"):
+        mf.io.read_exr(path)
+    assert capfd.readouterr() == ("", "")
+
+
+def test_libpng_warnings_become_one_python_warning(tmp_path, capfd):
+    """libpng's warnings on a readable PNG (bad ancillary chunks) are not printed; one
+    ``UserWarning`` naming the file lists them."""
+    import struct
+    import zlib
+
+    import imagecodecs
+    data = imagecodecs.png_encode(np.zeros((8, 8, 3), np.uint8))
+    at = data.find(b"IDAT") - 4
+
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+    path = tmp_path / "warn.png"
+    path.write_bytes(data[:at] + chunk(b"iCCP", b"x\0\0garbage") + chunk(b"sRGB", b"\x09") + data[at:])
+    capfd.readouterr()
+    with pytest.warns(UserWarning, match=r"warn\.png: read despite libpng warnings: iCCP: too short; sRGB: invalid"):
+        assert mf.io.png.read_png_data(path).shape == (8, 8, 3)
+    assert capfd.readouterr() == ("", "")
+
+
+# ----------------------------------------------------------------------- item 13
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(max_iter=0), "max_iter must be an integer >= 1, got 0"),
+    (dict(tol=float("nan")), "tol must be a finite number > 0, got nan"),
+    (dict(tol=-1.0), "tol must be a finite number > 0, got -1.0"),
+    (dict(resolution_phi=0), "resolution_phi must be an integer >= 4, got 0"),
+    (dict(anisotropic=True, resolution_phi=2), "resolution_phi must be an integer >= 4, got 2"),
+    (dict(diffuse_iterations=-1), "diffuse_iterations must be an integer >= 1, got -1"),
+    (dict(diffuse=True, diffuse_iterations=0), "diffuse_iterations must be an integer >= 1, got 0"),
+])
+def test_fit_arguments_are_checked(kwargs, message):
+    """``fit.fit``'s stopping and sampling arguments: one-line ``ValueError`` naming the
+    parameter, before any work (``max_iter=0`` raised UnboundLocalError; the others ran)."""
+    brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+        mf.fit.fit(brdf, 8, **kwargs)
+
+
+def test_write_pyramid_refuses_nonfinite_moments(tmp_path):
+    """``leadr.write_pyramid`` refuses NaN, inf and float32 overflow (as ``write_exr``; it wrote
+    them, and ``read_pyramid`` then refused the file); nothing is written."""
+    from microfacet.leadr.mip import mip_pyramid
+    base = np.random.default_rng(0).random((8, 8, 5))
+    for value, level in ((np.nan, 0), (np.inf, 1), (1e300, 2)):
+        pyramid = [lv.copy() for lv in mip_pyramid(base)]
+        pyramid[level][0, 0, 3] = value
+        path = tmp_path / "p.exr"
+        with pytest.raises(ValueError, match=rf"p\.exr: pyramid level {level} has 1 NaN or infinite values"):
+            mf.leadr.write_pyramid(path, pyramid)
+        assert not path.exists() and not list(tmp_path.iterdir())
+    mf.leadr.write_pyramid(tmp_path / "ok.exr", mip_pyramid(base))
+    assert len(mf.leadr.read_pyramid(tmp_path / "ok.exr")) == len(mip_pyramid(base))
+
+
+def test_lookup_refuses_negative_footprints():
+    """``leadr.lookup``: a negative width (scalar, per point, or one of ``(du, dv)``) is a
+    ``ValueError`` naming the footprint; footprint axes (2 x 2) may have any sign."""
+    from microfacet.leadr.mip import mip_pyramid
+    pyramid = mip_pyramid(np.random.default_rng(0).random((8, 8, 5)))
+    uv = np.array([[0.5, 0.5], [0.2, 0.7]])
+    for footprint in (-1.0, [0.1, -0.1], (0.1, -0.2), [[0.1, 0.1], [0.2, -0.3]]):
+        with pytest.raises(ValueError, match=r"^footprint widths must be >= 0, got -"):
+            mf.leadr.lookup(pyramid, uv, footprint)
+    axes = np.array([[0.1, -0.05], [-0.02, 0.1]])
+    assert np.all(np.isfinite(mf.leadr.lookup(pyramid, uv, np.broadcast_to(axes, (2, 2, 2)))))

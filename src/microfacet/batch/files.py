@@ -1,7 +1,9 @@
 """Which files a batch reads and writes.
 
 Inputs: a folder's non-hidden regular files that the task takes (with ``recursive``, those
-of its subfolders too, except the output folder), or a list of files. Outputs mirror the
+of its subfolders too, symlinked ones included, except the output folder), or a list of files.
+A subfolder that cannot be read, or a symlink back to a folder above it (a loop), is an
+:class:`Item` with a ``problem``: the batch reports it in its summary row and runs nothing there. Outputs mirror the
 input tree: ``IN/a/b/h.png`` -> ``OUT/a/b/h.exr`` (the name rule of every command:
 :func:`input_name`); when two inputs of a folder would share a name (``h.png``, ``h.exr``)
 the later one, in name order, keeps its suffix (``h.exr.exr``). A file is up to date when
@@ -28,18 +30,61 @@ class Item:
     source: Path
     rel: str
     out: Path
+    #: Why this entry (a subfolder) is not run, the status of its summary row; "" for a file.
+    problem: str = ""
 
 
 def _visible(path: Path, root: Path) -> bool:
     return not any(part.startswith(".") for part in path.relative_to(root).parts)
 
 
-def _folder_files(task, folder: Path, out_dir: Path, recursive: bool) -> list[Path]:
-    found = folder.rglob("*") if recursive else folder.iterdir()
-    out_dir = out_dir.resolve()
-    inside = folder.resolve() in out_dir.parents          # outputs of an earlier run are no inputs
-    return sorted(p for p in found if p.is_file() and _visible(p, folder) and task.accepts(p)
-                  and not (inside and out_dir in p.resolve().parents))
+def _walk(folder: Path, out_dir: Path, recursive: bool) -> tuple[list[Path], list[tuple[Path, str]]]:
+    """``(files, problems)`` under ``folder``: its non-hidden regular files (and, with
+    ``recursive``, its subfolders', symlinked ones followed, the output folder skipped), and
+    ``(subfolder, status)`` for each subfolder that could not be read or that is a symlink
+    to a folder above it (a loop)."""
+    files: list[Path] = []
+    problems: list[tuple[Path, str]] = []
+
+    def visit(d: Path, ancestors: frozenset) -> None:
+        try:
+            with os.scandir(d) as it:
+                entries = sorted(it, key=lambda e: e.name)
+        except OSError as e:
+            if d == folder:
+                raise MicrofacetError(f"{d}: cannot read the folder ({e.strerror or e})") from None
+            problems.append((d, f"error: cannot read the folder ({e.strerror or type(e).__name__})"))
+            return
+        for e in entries:
+            if e.name.startswith("."):
+                continue
+            p = Path(e.path)
+            try:
+                is_dir = e.is_dir()
+                is_file = not is_dir and e.is_file()
+            except OSError:
+                continue
+            if is_file:
+                files.append(p)
+            elif is_dir and recursive:
+                try:
+                    st = p.stat()
+                except OSError as err:
+                    problems.append((p, f"error: cannot read the folder ({err.strerror or type(err).__name__})"))
+                    continue
+                if (st.st_dev, st.st_ino) in ancestors:
+                    problems.append((p, "not run: symlink loop (a link to a folder above it)"))
+                elif p.resolve() != out_dir:                  # outputs of an earlier run are no inputs
+                    visit(p, ancestors | {(st.st_dev, st.st_ino)})
+
+    st = folder.stat()
+    visit(folder, frozenset({(st.st_dev, st.st_ino)}))
+    return files, problems
+
+
+def _folder_files(task, folder: Path, out_dir: Path, recursive: bool) -> tuple[list[Path], list[tuple[Path, str]]]:
+    files, problems = _walk(folder, out_dir.resolve(), recursive)
+    return sorted(p for p in files if task.accepts(p)), problems
 
 
 def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir: str | os.PathLike,
@@ -57,12 +102,13 @@ def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir:
         root = Path(inputs)
         if not root.is_dir():
             raise MicrofacetError(f"{root}: not a folder")
-        files = _folder_files(task, root, out_dir, recursive)
-        if not files:
+        files, problems = _folder_files(task, root, out_dir, recursive)
+        if not files and not problems:
             raise MicrofacetError(f"{root}: no {task.name} inputs"
                                   f"{' (' + ', '.join(task.inputs) + ')' if task.inputs else ''}"
                                   f"{'' if recursive else ' (subfolders need --recursive)'}")
     else:
+        problems = []
         files = [Path(p) for p in inputs]
         if not files:
             raise MicrofacetError("no input files")
@@ -79,9 +125,12 @@ def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir:
             name = p.name
         used.add((rel.parent, name))
         items.append(Item(p, rel.as_posix(), out_dir / rel.parent / f"{name}{task.suffixes[0]}"))
+    for d, status in problems:
+        rel = d.relative_to(root)
+        items.append(Item(d, f"{rel.as_posix()}/", out_dir / rel, status))
     sources = {p.resolve() for p in files}
     for item in items:
-        for out in task.outputs(item.out):
+        for out in (() if item.problem else task.outputs(item.out)):
             if out.resolve() in sources:
                 raise MicrofacetError(f"{out}: output would overwrite an input; choose another output folder")
     return items
@@ -101,4 +150,5 @@ def remove_partials(task, items: Iterable[Item], other_hosts: bool = False) -> i
     writer left beside the outputs of ``items`` (:func:`microfacet.io.atomic.remove_stale`:
     those of dead processes; a live writer's are kept; with ``other_hosts``, other machines'
     too); returns how many."""
-    return sum(len(remove_stale(out, other_hosts)) for item in items for out in task.outputs(item.out))
+    return sum(len(remove_stale(out, other_hosts)) for item in items if not item.problem
+               for out in task.outputs(item.out))

@@ -360,7 +360,9 @@ def _run_locked(task: Task, items: list[Item], out_dir: Path, jobs, client, forc
     rows: dict[str, dict] = {}
     todo = []
     for item in items:
-        if not force and up_to_date(task, item):
+        if item.problem:                    # a subfolder not run (files.plan): its row says why
+            rows[item.rel] = {"status": item.problem, "seconds": "", "cpu_seconds": "", "peak_mb": ""}
+        elif not force and up_to_date(task, item):
             old = previous.get(item.rel, {})
             rows[item.rel] = {**{k: old.get(k, "") for k in (*task.columns, "warnings")}, "status": "skipped",
                               "seconds": "", "cpu_seconds": "", "peak_mb": ""}

@@ -8,6 +8,9 @@ from .common import int_at_least
 #: microfacet.demo's DEFAULT_SIZE, DEFAULT_SPP and DEFAULT_SEED (tested), spelled here so
 #: that --help does not import the demo (and with it the whole library).
 DEFAULT_SIZE, DEFAULT_SPP, DEFAULT_SEED = 128, 64, 0
+#: Most environment samples per pixel --spp takes: 64 times the default (the demo's render time
+#: grows with it, ~30 s at the default; a typo such as 64000000 would run for days).
+MAX_SPP = 4096
 
 
 def add(sub) -> None:
@@ -20,8 +23,8 @@ def add(sub) -> None:
     p.add_argument("-o", "--output", metavar="DIR", required=True, help="output folder (created if needed)")
     p.add_argument("--size", type=int_at_least(8), default=DEFAULT_SIZE, metavar="PX",
                    help=f"sphere image side in pixels (default {DEFAULT_SIZE})")
-    p.add_argument("--spp", type=int_at_least(1), default=DEFAULT_SPP, metavar="N",
-                   help=f"environment samples per pixel (default {DEFAULT_SPP})")
+    p.add_argument("--spp", type=int_at_least(1, MAX_SPP), default=DEFAULT_SPP, metavar="N",
+                   help=f"environment samples per pixel, in [1, {MAX_SPP}] (default {DEFAULT_SPP})")
     p.add_argument("--seed", type=int_at_least(0), default=DEFAULT_SEED, help=f"random seed (default {DEFAULT_SEED})")
     p.add_argument("-j", "--jobs", type=int_at_least(1), default=None, metavar="N",
                    help="worker processes (default: usable CPUs, at most 4); results do not depend on it")

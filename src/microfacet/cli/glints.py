@@ -8,6 +8,11 @@ from pathlib import Path
 from .common import (PROG, Parser, add_batch_options, add_normal_map_arguments, finite_float, float_in,
                      int_at_least, output_path, run_batch)
 
+#: ``microfacet.glints.microsurface.SPACING_RANGE``, spelled here so that parsing does not import
+#: the glints modules (Numba; tested equal).
+SPACING_RANGE = (1.0 / 16.0, 1e4)
+
+
 def add(sub) -> None:
     p = sub.add_parser(
         "glints", help="build a normal map's Beckmann lobe mixture for glints (.npz); "
@@ -25,8 +30,8 @@ def add(sub) -> None:
     p.add_argument("-o", "--output", metavar="OUT.npz", required=True,
                    help="output microsurface (.npz added if missing; an existing folder takes the map's name); "
                         "the output folder when NORMAL_MAP is a folder")
-    p.add_argument("--spacing", type=float_in(0.0, 1e4, open_lo=True), default=1.0, metavar="H",
-                   help="seed spacing h in texels (default 1: one lobe per texel)")
+    p.add_argument("--spacing", type=float_in(*SPACING_RANGE), default=1.0, metavar="H",
+                   help="seed spacing h in texels, in [1/16, 10000] (default 1: one lobe per texel)")
     p.add_argument("--sigma-eps", type=float_in(0.0, 10.0, open_lo=True), default=0.01, metavar="S",
                    help="floor of the lobes' slope standard deviations, in (0, 10] (default 0.01)")
     add_normal_map_arguments(p)

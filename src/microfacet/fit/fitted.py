@@ -443,6 +443,12 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     """
     if gaf not in GAFS:
         raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
+    for name, v, low in (("max_iter", max_iter, 1), ("diffuse_iterations", diffuse_iterations, 1),
+                         ("resolution_phi", 4 if resolution_phi is None else resolution_phi, 4)):
+        if not (isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= low):
+            raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+    if not (isinstance(tol, (int, float, np.integer, np.floating)) and np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a finite number > 0, got {tol!r}")
     if albedo_weight is None:
         albedo_weight = 0.0 if anisotropic else ALBEDO_WEIGHT
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):

@@ -56,13 +56,46 @@ from ..leadr.mip import mip_pyramid, mip_sizes
 from ..leadr.moments import from_moments
 
 __all__ = ["LobeMixture", "load_slopes", "interpolate_slopes", "lobe_moments", "lobe_moments_reference",
-           "FORMAT_VERSION", "FWHM_PER_SIGMA"]
+           "FORMAT_VERSION", "FWHM_PER_SIGMA", "SPACING_RANGE", "lobe_grid"]
 
 FORMAT_VERSION = 2       # 2: float32 central moments, uncompressed; 1 (float64 raw) still loads
 #: Full width at half maximum of a Gaussian in units of its standard deviation.
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
 MAX_RHO = 0.99
 _MAGIC = "microfacet.glints.Microsurface"
+#: Accepted seed spacings ``h`` in texels: up to 16 lobes per texel and axis, at most one per 1e4 texels.
+SPACING_RANGE = (1.0 / 16.0, 1e4)
+
+
+def lobe_grid(resolution, h) -> tuple[int, int]:
+    """Lobe grid ``(ny, nx) = (max(1, round(H / h)), max(1, round(W / h)))`` of a map of
+    ``resolution`` ``(H, W)`` texels and seed spacing ``h`` (Sec. 3: one lobe per ``h x h``
+    texels); ``ValueError`` naming ``h`` outside :data:`SPACING_RANGE`.
+
+    >>> lobe_grid((512, 256), 2.0)
+    (256, 128)
+    """
+    lo, hi = SPACING_RANGE
+    try:
+        v = float(h)
+    except (TypeError, ValueError):
+        raise ValueError(f"h (seed spacing, texels) must be a number, got {h!r}") from None
+    if not lo <= v <= hi:
+        raise ValueError(f"h (seed spacing, texels) must lie in [{lo:g}, {hi:g}], got {h!r}")
+    hgt, wid = (int(n) for n in resolution)
+    return max(1, int(round(hgt / v))), max(1, int(round(wid / v)))
+
+
+def _check_layout(grid_shape, slopes_shape, h) -> None:
+    """``ValueError`` unless ``slopes`` is an ``(H, W, 2)`` map whose :func:`lobe_grid` at ``h``
+    is the lobe grid ``grid_shape[:2]``."""
+    if len(slopes_shape) != 3 or slopes_shape[2] != 2 or 0 in slopes_shape:
+        raise ValueError(f"slopes must be an (H, W, 2) array, got shape {tuple(slopes_shape)}")
+    expected = lobe_grid(slopes_shape[:2], h)
+    if tuple(grid_shape[:2]) != expected:
+        raise ValueError(f"the lobe grid {grid_shape[0]} x {grid_shape[1]} does not match the "
+                         f"{slopes_shape[0]} x {slopes_shape[1]} slope map at h={float(h):g} "
+                         f"(expected {expected[0]} x {expected[1]})")
 
 
 # --------------------------------------------------------------------------- normal maps
@@ -613,6 +646,7 @@ class LobeMixture:
         if not _all_finite(grid):
             raise ValueError("lobe moments must be finite")
         self._check_params(sigma_eps, cutoff, slope_cutoff)
+        _check_layout(grid.shape, np.shape(slopes), h)
         if copy or not (grid.flags.c_contiguous and grid.flags.writeable):
             grid = np.array(grid, dtype=np.float64, order="C")
         _floor_moments_compiled(grid.reshape(-1, 5), float(sigma_eps))     # in place
@@ -682,7 +716,7 @@ class LobeMixture:
         path_or_array : path or (H, W, C) array
             Normal map (see :func:`load_slopes` for ``encoding`` and ``z``).
         h : float
-            Seed spacing in texels (the paper uses 1).
+            Seed spacing in texels (the paper uses 1), in :data:`SPACING_RANGE`.
         sigma_eps : float
             Floor of each lobe's principal slope standard deviations (Sec. 3.2, 0.01).
         samples : int
@@ -702,14 +736,11 @@ class LobeMixture:
         slopes = np.asarray(slopes)
         if slopes.ndim != 3 or slopes.shape[2] != 2 or 0 in slopes.shape:
             raise ValueError(f"slopes must be an (H, W, 2) array, got shape {slopes.shape}")
-        if not (np.isfinite(h) and h > 0):
-            raise ValueError(f"h must be > 0 (texels), got {h!r}")
+        ny, nx = lobe_grid(slopes.shape[:2], h)
         if not (np.isfinite(sigma_eps) and sigma_eps > 0):
             raise ValueError(f"sigma_eps must be > 0, got {sigma_eps!r}")
         if int(samples) < 1:
             raise ValueError(f"samples must be >= 1, got {samples!r}")
-        hgt, wid = slopes.shape[:2]
-        nx, ny = max(1, int(round(wid / h))), max(1, int(round(hgt / h)))
         # the lobes of the float32 slopes the microsurface keeps (and files store), so that a
         # built and a loaded one agree; the float64 input is released before the moments
         slopes = np.asarray(slopes, dtype=np.float32)
@@ -975,6 +1006,7 @@ class LobeMixture:
             if version == 1:
                 return cls(moments, slopes, h=h, sigma_eps=eps, cutoff=cutoff, slope_cutoff=scut, copy=False)
             cls._check_params(eps, cutoff, scut)
+            _check_layout(moments.shape, slopes.shape, h)
         except ValueError as e:
             raise MicrofacetError(f"{path}: corrupt microsurface file ({e})") from None
         # format 2: raw moments floored in the same pass (finite: float32 squares in float64;

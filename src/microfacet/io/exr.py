@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import threading
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,10 +17,11 @@ import OpenEXR
 
 from ..errors import MicrofacetError
 from .atomic import atomic_path
+from .quiet import native_output_captured
 from .read import read_bytes
 
 __all__ = ["read_exr", "write_exr", "EXR_MAGIC", "check_exr_magic", "COMPRESSIONS", "exr_compression", "exr_threads",
-           "exr_write_errors"]
+           "exr_write_errors", "exr_read_errors"]
 
 #: First four bytes of every OpenEXR file (``20000630`` little-endian).
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -88,6 +90,75 @@ def exr_write_errors(path: str | os.PathLike):
         raise OSError(errno.EIO, f"cannot write the EXR file (OpenEXR: {text})", str(path)) from None
 
 
+#: What OpenEXR's Python binding prints when it drops a part it cannot read (it then raises
+#: "file has 0 parts"): the real cause follows the dash.
+_DROPPED_PART = re.compile(r"Exception raised reading pixel data for part \d+ - (.+)")
+
+
+def _read_cause(path: Path, text: str, error: Exception) -> str:
+    """The cause of a failed read, from OpenEXR's captured output ``text`` (its C library's first
+    ``EXR_ERR`` line, else the cause its binding gave for a dropped part) or the exception (may be None)."""
+    lines = [ln.strip().removeprefix(f"{path}:").strip() for ln in text.splitlines() if ln.strip()]
+    native = [ln for ln in lines if "EXR_ERR" in ln]
+    if native:
+        return native[0]
+    dropped = _DROPPED_PART.search(text)
+    if dropped:
+        return dropped.group(1).strip()
+    if error is None:
+        return "unknown cause"
+    return " ".join(str(error).split()) or type(error).__name__
+
+
+def _memory_bytes() -> int | None:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_size(path: Path, headers) -> None:
+    """``MicrofacetError`` naming the size when reading the parts of ``headers`` (``dataWindow``,
+    ``channels``) as float32 arrays and their float64 copy would need more than this machine's memory."""
+    need, dims = 0, None
+    for h in headers:
+        lo, hi = (np.asarray(v, dtype=np.int64) for v in h["dataWindow"])
+        w, hgt = (hi - lo + 1).tolist()
+        n = len(h.get("channels", ())) or 1
+        need += max(w, 0) * max(hgt, 0) * n * (4 + 8)
+        dims = dims or (w, hgt, n)
+    total = _memory_bytes()
+    if total and need > total:
+        raise MicrofacetError(f"{path}: {dims[0]} x {dims[1]} pixels, {dims[2]} channels: reading needs "
+                              f"{need / 2**30:.1f} GiB, more than this machine's {total / 2**30:.1f} GiB of memory")
+
+
+@contextmanager
+def exr_read_errors(path: str | os.PathLike):
+    """Within the block (OpenEXR reads of ``path``), OpenEXR's own messages on stdout/stderr are
+    captured, not printed, and an exception becomes one :class:`MicrofacetError` naming the file
+    and the cause OpenEXR gave (``trunc.exr: unreadable or corrupt EXR ((EXR_ERR_BAD_CHUNK_LEADER)
+    ...)``, not its binding's "file has 0 parts")."""
+    path = Path(path)
+    text: list[str] = []
+    try:
+        with native_output_captured(text):
+            yield
+    except MicrofacetError:
+        raise
+    except Exception as e:  # OpenEXR raises RuntimeError/others for corrupt files
+        raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({_read_cause(path, ''.join(text), e)})") from None
+    if _DROPPED_PART.search("".join(text)):    # a part the binding dropped without raising
+        raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({_read_cause(path, ''.join(text), None)})")
+
+
+def read_headers(path: str | os.PathLike) -> list[dict]:
+    """The headers of the parts of the EXR file ``path`` (OpenEXR's ``header_only`` read, quiet:
+    :func:`exr_read_errors`)."""
+    with exr_read_errors(path):
+        return [p.header for p in OpenEXR.File(str(path), header_only=True).parts]
+
+
 def _as_channels(image) -> np.ndarray:
     """``image`` as a float ``(H, W, C)`` array, ``C`` in {1, 3, 4}."""
     a = np.asarray(image)
@@ -147,18 +218,18 @@ def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarr
     Raises
     ------
     MicrofacetError
-        If the file is missing, not an EXR (magic number), unreadable or truncated, has
+        If the file is missing, not an EXR (magic number), unreadable or truncated (OpenEXR's
+        own messages are not printed: :func:`exr_read_errors`), too large for this machine's
+        memory (the size is read from its header first), has
         neither ``R, G, B`` nor ``Y`` channels, or holds NaN/inf (unless ``allow_nonfinite``).
         The message names the file and the problem.
     """
     path = Path(path)
     check_exr_magic(path)
-    try:
-        with exr_threads():
-            channels = OpenEXR.File(str(path), separate_channels=True).channels()
+    _check_size(path, read_headers(path)[:1])
+    with exr_read_errors(path), exr_threads():
+        channels = OpenEXR.File(str(path), separate_channels=True).channels()
         pixels = {name: np.asarray(ch.pixels) for name, ch in channels.items()}
-    except Exception as e:  # OpenEXR raises RuntimeError/others for corrupt files
-        raise MicrofacetError(f"{path}: unreadable or corrupt EXR ({e})") from None
     names = next((n for n in (_NAMES[4], _NAMES[3], _NAMES[1]) if set(n) <= set(pixels)), None)
     if names is None:
         raise MicrofacetError(f"{path}: needs R, G, B or Y channels, found {sorted(pixels) or 'none'}")

@@ -14,6 +14,7 @@ white saturate per channel; the EXR keeps the data.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import imagecodecs
@@ -21,6 +22,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from .atomic import write_bytes
+from .quiet import log_captured, native_output_captured
 from .read import read_bytes
 
 __all__ = ["tonemap", "srgb_encode", "to_srgb8", "write_png", "read_png_data", "write_png_data",
@@ -77,10 +79,16 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
     data = read_bytes(path, "a PNG file")
     if not data.startswith(PNG_MAGIC):
         raise MicrofacetError(f"{path}: not a PNG file (bad signature)")
-    try:
-        a = imagecodecs.png_decode(data)
+    text: list[str] = []
+    try:        # libpng's warnings: through imagecodecs' logger, or on stderr (other builds)
+        with native_output_captured(text), log_captured("imagecodecs", text):
+            a = imagecodecs.png_decode(data)
     except Exception:  # PngError, ValueError, ...: libpng's message may hold garbage bytes, so not echoed
         raise MicrofacetError(f"{path}: unreadable or corrupt PNG (libpng could not decode it)") from None
+    notes = [" ".join(ln.strip().removeprefix("PNG warning:").split()) for ln in "\n".join(text).splitlines() if ln.strip()]
+    if notes:
+        warnings.warn(f"{path}: read despite libpng warnings: {'; '.join(notes[:5])}"
+                      f"{f' (and {len(notes) - 5} more)' if len(notes) > 5 else ''}", UserWarning, stacklevel=2)
     if a.dtype not in (np.uint8, np.uint16) or a.ndim not in (2, 3) or 0 in a.shape:
         raise MicrofacetError(f"{path}: unsupported PNG sample layout ({a.dtype}, shape {a.shape})")
     return a

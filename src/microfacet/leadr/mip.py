@@ -190,6 +190,9 @@ def _trilinear(pyramid, u, v, lod, wrap: bool) -> np.ndarray:
 def _footprint_axes(footprint, shape) -> tuple[np.ndarray, np.ndarray]:
     """Two footprint axes ``(..., 2)`` in uv units from the accepted footprint forms."""
     f = np.asarray(footprint, dtype=np.float64)
+    widths = f.shape == shape or f.ndim == 0 or (f.shape[-1:] == (2,) and f.shape[:-1] in (shape, ()))
+    if widths and np.any(f < 0):                              # axes (2 x 2) may point anywhere
+        raise ValueError(f"footprint widths must be >= 0, got {float(np.min(f))!r}")
     if f.shape == shape or f.ndim == 0:                       # isotropic width
         f = np.broadcast_to(f, shape)
         z = np.zeros(shape)
