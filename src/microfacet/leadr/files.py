@@ -35,12 +35,14 @@ __all__ = ["write_pyramid", "pyramid_file", "read_pyramid", "load_height_map", "
 CHANNELS = ("E1", "E2", "E3", "E4", "E5")
 
 
-def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -> Path:
+def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none",
+                  allow_nonfinite: bool = False) -> Path:
     """Write a moment pyramid (list of ``(H_k, W_k, 5)``, level 0 first) as a multi-part
     float32 EXR (module docstring), atomically, on all cores; returns ``path``.
 
     Refuses (``ValueError`` naming the file and level) NaN, infinite values and values beyond
-    float32's range, which :func:`read_pyramid` would refuse. ``compression`` is a lossless
+    float32's range, which :func:`read_pyramid` would refuse, unless ``allow_nonfinite`` (as
+    :func:`microfacet.io.write_exr`; e.g. to test readers). ``compression`` is a lossless
     name of :data:`microfacet.io.exr.COMPRESSIONS`. The default
     ``none`` is chosen by measurement (README, "LEAN/LEADR"): float32 moments barely compress
     (``zip`` saves 0-16 % of the bytes at 4-10x the write time on a 4096² map)."""
@@ -61,9 +63,9 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none") -
             channels = {name: np.ascontiguousarray(level[..., c], dtype=np.float32)
                         for c, name in enumerate(CHANNELS)}
         bad = sum(np.count_nonzero(~np.isfinite(a)) for a in channels.values())
-        if bad:             # as write_exr: read_pyramid refuses them
+        if bad and not allow_nonfinite:             # as write_exr: read_pyramid refuses them
             raise ValueError(f"{path}: pyramid level {k} has {bad} NaN or infinite values (after "
-                             "conversion to float32); nothing written")
+                             "conversion to float32); nothing written (allow_nonfinite=True writes them)")
         parts.append(OpenEXR.Part(header, channels, f"mip{k}"))
     with exr_write_errors(path), atomic_path(path) as tmp, exr_threads():
         OpenEXR.File(parts).write(str(tmp))
