@@ -2,13 +2,14 @@
 import re
 import subprocess
 import sys
+from html import escape
 
 import numpy as np
 import pytest
 from PIL import Image
 
 from microfacet.cli import main
-from microfacet.demo import LEADR_STEPS, fit_examples, thesis_figures
+from microfacet.demo import ABC_LABEL, LEADR_STEPS, fit_materials, thesis_figures
 from microfacet.io import read_exr
 
 SMALL = ["--size", "16", "--spp", "2", "--no-viewer", "--no-mitsuba"]   # tests/test_viewer.py, test_mitsuba_demo.py
@@ -37,20 +38,27 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
     srcs = re.findall(r'<img src="([^"]+)"', html)
     figures = thesis_figures()
     n_panels = sum(len(f.panels) for f in figures)
-    # environment, 2 renders per panel, lobes per figure, a comparison picture per fitted
-    # material, and the LEADR section's images (3 per light and level)
+    # environment, 2 renders per panel, lobes per figure, per fitted material a comparison
+    # picture and its spheres under the environment (data, 2 fits, ABC where published), and
+    # the LEADR section's images (3 per light and level)
     leadr_srcs = [s for s in srcs if s.startswith("leadr/")]
     assert len(leadr_srcs) == LEADR_STEPS
     glints_srcs = [s for s in srcs if s.startswith("glints/")]
     assert len(glints_srcs) == 5                   # normal map, exact, approx., naive x 2
-    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_examples()) + LEADR_STEPS + 5
+    examples, note = fit_materials(quick=True)                  # a small demo fits one material
+    fit_srcs = [s for s in srcs if s.startswith("fitting/")]
+    assert len(fit_srcs) == sum(1 + 3 + (ex.abc is not None) for ex in examples)
+    assert (ABC_LABEL in html) == any(ex.abc is not None for ex in examples)
+    assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_srcs) + LEADR_STEPS + 5
     for src in srcs:
         with Image.open(demo_dir / src) as im:
             assert im.format == "PNG"
     for key in ("Fig. 2.2", "Fig. 2.3", "Fig. 2.4", "Fig. 2.5", "Fig. 2.6", "2 samples per pixel", "α = 0.05",
-                "Fitting: power iterations", "GGX α = 0.2, gold", "LEADR", "Glints"):
+                "Fitting measured materials", examples[0].label, "best: ", "LEADR", "Glints"):
         assert key in html
-    exrs = sorted(p for p in demo_dir.rglob("*.exr") if p.parent.name not in ("leadr", "glints"))
+    assert escape(note) in html                                 # what the materials are (corpus or not)
+    exrs = sorted(p for p in demo_dir.rglob("*.exr") if p.parent.name not in ("leadr", "glints", "fitting"))
+    assert len(list((demo_dir / "fitting").glob("*.exr"))) == len(fit_srcs) - len(examples)
     assert len(exrs) == 1 + 2 * n_panels
     assert len(list((demo_dir / "leadr").glob("*.exr"))) == LEADR_STEPS
     for path in exrs:

@@ -5,8 +5,9 @@ Each figure varies one ingredient of the microfacet BRDF (Eq. 2.1): the Fresnel 
 anisotropic roughness (2.5) and its orientation (2.6). Every BRDF is rendered on an
 orthographic sphere under a directional light and under a small environment (Monte
 Carlo with the BRDF's own importance sampling), written as EXR (data) and PNG (preview),
-plotted as polar lobes, and gathered in ``index.html``. A last section fits built-in
-analytic materials by power iterations (thesis Ch. 4) and compares the fits.
+plotted as polar lobes, and gathered in ``index.html``. The fitting section fits measured
+materials of the shared corpus (or, without it, built-in analytic ones) as ``microfacet
+fit`` does and shows data, best fit, tabulated fit and the published ABC fit side by side.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import contextlib
 import functools
 import multiprocessing
 import os
+import shutil
 import signal
 import warnings
 from collections.abc import Sequence
@@ -29,13 +31,15 @@ from . import fresnel as fr
 from .brdf import BRDF, MicrofacetBRDF
 from .distributions import GGX, Beckmann
 from .errors import MicrofacetError
-from .io import html_figure, html_grid, html_page, write_exr, write_png, write_text
+from .io import html_figure, html_grid, html_page, write_bytes, write_exr, write_png, write_text
 from .io.atomic import staging_folder
 from .render import (DirectionalLight, Environment, Sphere, procedural_sky, save_lobe_figure,
                      shade_directional, shade_environment)
 
 __all__ = ["Panel", "DemoFigure", "thesis_figures", "render_panel", "run_demo", "default_workers",
-           "FitExample", "fit_examples", "fit_section", "FIT_RESOLUTION",
+           "FitExample", "fit_examples", "fit_section", "fit_materials", "fit_and_picture", "fit_demo_material",
+           "corpus_examples", "corpus_file", "corpus_cache", "shared_data", "shown_fits", "fit_sizes",
+           "CORPUS_MATERIALS", "ABC_LABEL", "preview_exposure",
            "DEFAULT_SIZE", "DEFAULT_SPP", "DEFAULT_SEED", "LIGHT"]
 
 DEFAULT_SIZE = 128      # sphere image side, pixels
@@ -164,95 +168,320 @@ def thesis_figures() -> list[DemoFigure]:
 
 
 # ------------------------------------------------------------------------ fitting
-#: Elevation resolution of the demo's tabulated fits.
-FIT_RESOLUTION = 64
+#: Corpus materials of the fitting section (names in the shared Neural-BRDF corpus,
+#: ``../shared/data/nbrdf``): a glossy metal, a mirror-like metal, a coated plastic and a
+#: metallic paint.
+CORPUS_MATERIALS = ("merl/nickel", "merl/chrome", "merl/specular-orange-phenolic", "merl/blue-metallic-paint")
+#: Side (px) of the comparison picture's spheres at the default demo size (the size of
+#: ``microfacet fit``'s picture); smaller demos scale it down.
+FIT_SPHERE_SIZE = 192
+#: Largest side (px) of the fitting section's environment-lit spheres.
+FIT_ENV_SIZE = 96
+#: Label of the published ABC fit (Löw et al. 2012) in the fitting pictures.
+ABC_LABEL = "ABC (Löw 2012)"
 
 
 @dataclass(frozen=True)
 class FitExample:
-    """A built-in material of the fitting section, with the parameters that made it."""
+    """A material of the fitting section, given by exactly one of: ``brdf`` (a built-in
+    analytic BRDF, its parameters in ``label``), ``path`` (a measured file, any format of
+    :func:`microfacet.measured.load`) or ``corpus`` (a name of the shared Neural-BRDF
+    corpus, e.g. ``"merl/nickel"``, converted on first use by :func:`corpus_file`);
+    ``abc``: its published ABC fit (:func:`microfacet.anchors.read_abc`) where there is one.
+
+    >>> ex = FitExample("nickel", "merl/nickel", corpus="merl/nickel")
+    >>> data = ex.material()          # doctest: +SKIP (needs ../shared)
+    """
 
     key: str
     label: str
-    brdf: MicrofacetBRDF
+    brdf: BRDF | None = None
+    path: Path | None = None
+    corpus: str = ""
+    abc: BRDF | None = None
+
+    def __post_init__(self):
+        given = sum(x is not None and x != "" for x in (self.brdf, self.path, self.corpus))
+        if given != 1:
+            raise ValueError(f"FitExample {self.key!r}: give exactly one of brdf, path and corpus")
+
+    def material(self) -> BRDF:
+        """The material itself: ``brdf``, or the measured file read by
+        :func:`microfacet.measured.load` (a corpus name converted first)."""
+        if self.brdf is not None:
+            return self.brdf
+        from .measured import load
+        return load(self.path if self.path is not None else corpus_file(self.corpus))
 
 
 def fit_examples() -> list[FitExample]:
-    """Analytic materials the demo fits as if they were measured: a GGX and a Beckmann
-    conductor, so that each analytic fit has a known answer and the other shows what it
-    misses."""
+    """The built-in materials, fitted where the shared corpus is absent: a GGX and a
+    Beckmann conductor, analytic materials with known parameters."""
     return [FitExample("ggx_gold", "GGX α = 0.2, gold",
                        MicrofacetBRDF(GGX(alpha=0.2), fresnel=fr.Conductor.metal("Au"))),
             FitExample("beckmann_copper", "Beckmann α = 0.35, copper",
                        MicrofacetBRDF(Beckmann(alpha=0.35), fresnel=fr.Conductor.metal("Cu")))]
 
 
-def _rgb_text(v) -> str:
-    return "(" + ", ".join(f"{float(c):.3f}" for c in np.ravel(v)) + ")"
+def shared_data() -> Path:
+    """The shared data folder: ``$MICROFACET_DATA``, else ``../shared/data`` beside the
+    repository (where ``tests/conftest.py`` finds it); absent from a user's clone."""
+    return Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[2].parent / "shared" / "data")
 
 
-def _alpha_text(brdf) -> str:
-    d = brdf.distribution
-    ax, ay, rho = float(d.alpha_x), float(d.alpha_y), float(d.rho)
-    if abs(ax - ay) <= 1e-6 * max(ax, ay) and abs(rho) < 1e-9:
-        return f"α = {ax:.4f}"
-    return f"αx = {ax:.4f}, αy = {ay:.4f}, ρ = {rho:+.4f}"
+def corpus_cache() -> Path:
+    """Where corpus materials are converted to (35 MB each, kept between runs):
+    ``$MICROFACET_CORPUS_CACHE``, else ``$XDG_CACHE_HOME/microfacet/corpus``, else
+    ``~/.cache/microfacet/corpus`` (the test suite's cache)."""
+    return Path(os.environ.get("MICROFACET_CORPUS_CACHE")
+                or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus")
 
 
-def _fit_row(example: FitExample, ggx, beckmann, errors: dict) -> str:
-    cells = [example.label, _alpha_text(ggx), _alpha_text(beckmann),
-             f"{_rgb_text(example.brdf.fresnel(1.0))} / {_rgb_text(ggx.fresnel(1.0))}"]
-    cells += [f"{errors[k]:.4f}" for k in ("tabulated", "ggx moments", "beckmann moments", "ggx", "beckmann")]
-    return "<tr>" + "".join(f"<td>{escape(c)}</td>" for c in cells) + "</tr>"
+def _converter(data: Path) -> Path:
+    return data.parent / "tools" / "nbrdf_to_merl.py"
+
+
+def corpus_file(name: str, data: str | os.PathLike | None = None) -> Path:
+    """The MERL-format file of corpus material ``name`` (``"merl/nickel"``, ``"rgl/..."``),
+    converted from its network ``DATA/nbrdf/NAME.npz`` by ``DATA/../tools/nbrdf_to_merl.py``
+    (~1.5 s) on first use into :func:`corpus_cache`, atomically (concurrent demos and tests
+    may convert the same one). ``data``: default :func:`shared_data`. ``MicrofacetError``
+    naming the missing file or the failed conversion."""
+    import subprocess
+    import sys
+    import tempfile
+    data = shared_data() if data is None else Path(data)
+    net, tool = data / "nbrdf" / f"{name}.npz", _converter(data)
+    for path, what in ((net, f"corpus material {name!r}"), (tool, "the corpus converter")):
+        if not path.is_file():
+            raise MicrofacetError(f"{path}: {what} not found (set MICROFACET_DATA to the shared data folder)")
+    out = corpus_cache() / f"{name.replace('/', '__')}.binary"
+    if out.is_file():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=".", suffix=".binary.tmp")
+    os.close(fd)
+    try:
+        run = subprocess.run([sys.executable, str(tool), str(net), "-o", tmp], capture_output=True, text=True,
+                             timeout=600)
+        if run.returncode != 0:
+            why = (run.stderr.strip().splitlines() or [f"exit status {run.returncode}"])[-1]
+            raise MicrofacetError(f"{net}: conversion by {tool.name} failed: {why}")
+        os.replace(tmp, out)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    return out
+
+
+def corpus_examples(names: Sequence[str] = CORPUS_MATERIALS,
+                    data: str | os.PathLike | None = None) -> list[FitExample] | None:
+    """The corpus materials ``names`` as :class:`FitExample` (MERL ones with their ABC fit
+    from ``DATA/anchors/abc_low2012_merl.csv`` where listed), or ``None`` where the shared
+    data (networks and converter) are absent. Nothing is converted yet."""
+    data = shared_data() if data is None else Path(data)
+    if not (data / "nbrdf").is_dir() or not _converter(data).is_file():
+        return None
+    abc_csv = data / "anchors" / "abc_low2012_merl.csv"
+    from .anchors import read_abc
+    abc = read_abc(abc_csv) if abc_csv.is_file() else {}
+    out = []
+    for name in names:
+        group, _, material = name.partition("/")
+        out.append(FitExample(material, name, corpus=name, abc=abc.get(material) if group == "merl" else None))
+    return out
+
+
+def fit_materials(quick: bool = False, data: str | os.PathLike | None = None) -> tuple[list[FitExample], str]:
+    """The fitting section's materials and a sentence saying what they are: the corpus
+    materials :data:`CORPUS_MATERIALS` where the shared data are (:func:`corpus_examples`),
+    else the built-in :func:`fit_examples`, the sentence saying that the corpus was not
+    found. ``quick``: the first material only (small demos, tests)."""
+    data = shared_data() if data is None else Path(data)
+    corpus = corpus_examples(data=data)
+    if corpus is None:
+        examples = fit_examples()
+        note = (f"The shared corpus was not found (looked for {data / 'nbrdf'} and {_converter(data)}; set "
+                "MICROFACET_DATA to the shared data folder): the demo's built-in analytic materials stand in "
+                "for measured ones, without published fits.")
+    else:
+        examples = corpus
+        note = (f"Materials of the shared Neural-BRDF corpus ({data / 'nbrdf'}), each converted to a MERL-format "
+                f"file by {_converter(data).name} (cached in {corpus_cache()}).")
+    return (examples[:1] if quick else examples), note
+
+
+def fit_sizes(size: int) -> tuple[int, int]:
+    """Sphere sides (px) of the fitting section for a demo of ``size``: the comparison
+    picture's (:data:`FIT_SPHERE_SIZE` at the default 128) and the environment row's."""
+    return max(32, min(FIT_SPHERE_SIZE, 3 * size // 2)), max(16, min(FIT_ENV_SIZE, size))
+
+
+def shown_fits(summary: dict) -> list[tuple[str, str]]:
+    """``(label, fit name)`` of the fits the demo shows from a ``microfacet fit`` summary:
+    the best (least image error) and the tabulated fit, or, where the tabulated fit is the
+    best, the best analytic fit (of least image error among those with a model)."""
+    fits, best = summary["fits"], summary["best"]
+    out = [(f"best: {best}", best)]
+    if best != "tabulated":
+        out.append(("tabulated fit", "tabulated"))
+    else:
+        analytic = {k: v["metrics"]["image"] for k, v in fits.items() if k != "tabulated" and v["model"] is not None}
+        if analytic:
+            name = min(analytic, key=analytic.get)
+            out.append((f"best analytic: {name}", name))
+    return out
+
+
+def _metrics_note(metrics: dict) -> str:
+    """Two lines of figures under a sphere of the fitting picture."""
+    text = f"image {metrics['image']:.3f} · log {metrics['log']:.4f}"
+    if "albedo_ratio_worst" in metrics:
+        text += f"\nalbedo ratio {metrics['albedo_ratio_worst']:.2f}"
+    return text
+
+
+def fit_demo_material(example: FitExample, work: str | os.PathLike) -> tuple[dict, Path]:
+    """Fit ``example`` as ``microfacet fit`` does (:func:`microfacet.fit.outputs.fit_material`,
+    the CLI's defaults, no picture) into ``work/KEY.npz`` (with ``KEY.json``); returns the
+    summary (``OUT.json``'s dict) and the ``.npz`` path."""
+    from .fit.outputs import fit_material
+    npz = Path(work) / f"{example.key}.npz"
+    return fit_material(example.material(), npz, picture=False), npz
+
+
+def fit_and_picture(example: FitExample, work: str | os.PathLike, size: int) -> dict:
+    """The fitting section's work for one material (a task of the demo's process pool):
+    :func:`fit_demo_material`, the ABC fit's errors against the data (the same judges as
+    the fits': :data:`microfacet.fit.outputs.IMAGE_SIZE`-px image error and
+    :data:`~microfacet.fit.outputs.LOG_PAIRS`-pair log error), the comparison picture
+    (:func:`microfacet.render.fit_comparison_png`) of data | best | tabulated | ABC with
+    each one's errors, and the environment images of :func:`microfacet.metrics.render_images`.
+
+    Returns ``{"summary", "npz", "shown": [(label, fit name)], "abc": {"image", "log",
+    "chromaticity"} or None, "picture": PNG bytes, "environment": {label: (S, S, 3) image}}``.
+    """
+    from .fit import load
+    from .fit.outputs import IMAGE_SIZE, LOG_PAIRS
+    from .metrics import ImageError, LogError, render_images
+    from .render import fit_comparison_png
+    picture_size, env_size = fit_sizes(size)
+    data = example.material()
+    summary, npz = fit_demo_material(example, work)
+    shown = shown_fits(summary)
+    brdfs = {"data": data, **{label: load(npz, model=name) for label, name in shown}}
+    notes = {label: _metrics_note(summary["fits"][name]["metrics"]) for label, name in shown}
+    abc = None
+    if example.abc is not None:
+        details = ImageError(data, size=IMAGE_SIZE).details(example.abc)
+        abc = {"image": details["image"], "chromaticity": details["chromaticity"],
+               "log": LogError(data, n=LOG_PAIRS)(example.abc)}
+        brdfs[ABC_LABEL] = example.abc
+        notes[ABC_LABEL] = _metrics_note(abc)
+    picture = fit_comparison_png(brdfs, title=f"fit of {example.label}", size=picture_size, notes=notes)
+    environment = {label: render_images(b, size=env_size, reference=data)[3] for label, b in brdfs.items()}
+    return {"summary": summary, "npz": npz, "shown": shown, "abc": abc, "picture": picture,
+            "environment": environment}
+
+
+def preview_exposure(image: np.ndarray) -> float:
+    """Stops putting the 99.5th-percentile luminance of ``image`` at 1 (0 for a black image)."""
+    lum = image @ np.array([0.2126, 0.7152, 0.0722])
+    lit = lum[lum > 0]
+    top = float(np.percentile(lit, 99.5)) if lit.size else 0.0
+    return float(np.log2(1.0 / top)) if np.isfinite(top) and top > 0 else 0.0
+
+
+def _slug(label: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in label.split(":")[0].split(" (")[0].lower()).strip("_")
+
+
+def _fit_table(examples: Sequence[FitExample], results: Sequence[dict]) -> str:
+    head = ("material", "best fit", "image error: best / tabulated / ABC", "log error: best / tabulated / ABC",
+            "worst albedo ratio (best)", "fits tried")
+    rows = []
+    for ex, r in zip(examples, results, strict=True):
+        fits, best = r["summary"]["fits"], r["summary"]["best"]
+        abc = r["abc"]
+
+        def trio(key, digits, fits=fits, best=best, abc=abc):
+            vals = [fits[best]["metrics"][key], fits["tabulated"]["metrics"][key]] + ([abc[key]] if abc else [])
+            return " / ".join(f"{v:.{digits}f}" for v in vals) + ("" if abc else " / —")
+        cells = (ex.label, best, trio("image", 3), trio("log", 4),
+                 f"{fits[best]['metrics']['albedo_ratio_worst']:.2f}", ", ".join(fits))
+        rows.append("<tr>" + "".join(f"<td>{escape(c)}</td>" for c in cells) + "</tr>")
+    return ('<table class="grid"><tr>' + "".join(f"<th>{escape(h)}</th>" for h in head) + "</tr>"
+            + "".join(rows) + "</table>")
+
+
+def _figures(result: dict, label: str) -> dict | None:
+    """The errors of the BRDF shown as ``label`` in a :func:`fit_and_picture` result (None for the data)."""
+    if label == "data":
+        return None
+    if label == ABC_LABEL:
+        return result["abc"]
+    return result["summary"]["fits"][dict(result["shown"])[label]]["metrics"]
 
 
 def fit_section(out: Path, size: int, examples: Sequence[FitExample] | None = None,
-                progress=None) -> str:
-    """Fit each built-in material by power iterations (``mf.fit.fit``) and by least squares
-    (``mf.fit.fit_analytic``, started from the moment conversion), write its comparison
-    picture under ``out/fitting/`` and return the HTML section."""
-    from . import fit as fitting
-    from .metrics import describe_fit_error, fit_error
-    from .render import save_fit_comparison
-    examples = fit_examples() if examples is None else list(examples)
-    (out / "fitting").mkdir(exist_ok=True)
-    rows, pictures = [], []
-    for ex in examples:
-        fit = fitting.fit(ex.brdf, resolution=FIT_RESOLUTION)
-        ls = {model: fitting.fit_analytic(ex.brdf, model, fresnel="conductor", start=fit, n=16, n_uniform=2**11)
-              for model in ("ggx", "beckmann")}
-        fits = {"tabulated": fit, "ggx moments": fit.to_ggx(), "beckmann moments": fit.to_beckmann(), **ls}
-        errors = fit_error(ex.brdf, fits)
-        save_fit_comparison(out / "fitting" / f"{ex.key}.png",
-                            {"material": ex.brdf, "tabulated fit": fit, "GGX least squares": ls["ggx"],
-                             "Beckmann least squares": ls["beckmann"]},
-                            title=f"fit of {ex.label}", size=max(32, min(size, 96)),
-                            notes={"tabulated fit": f"error {errors['tabulated']:.4f}",
-                                   "GGX least squares": f"error {errors['ggx']:.4f}",
-                                   "Beckmann least squares": f"error {errors['beckmann']:.4f}"})
-        rows.append(_fit_row(ex, ls["ggx"], ls["beckmann"], errors))
-        pictures.append(html_figure(f"fitting/{ex.key}.png", f"{ex.label}: the material (black), its "
-                                    "tabulated fit, and the GGX and Beckmann least-squares fits.",
-                                    css_class="lobes"))
+                progress=None, results: Sequence | None = None, note: str = "") -> str:
+    """Fit each material of ``examples`` (default: :func:`fit_materials`) as ``microfacet
+    fit`` does and write its pictures under ``out/fitting/``: the comparison picture of
+    data | best fit | tabulated fit | ABC (MERL materials with a published fit) under two
+    lights with backscattering and in-plane curves, and the same under the environment;
+    return the HTML section. ``results``: the materials' :func:`fit_and_picture` results or
+    futures of them (``.result()``), as :func:`run_demo` computes them in its pool; default
+    computed here, the fit files into a temporary folder. ``note``: what the materials are."""
+    from .fit.outputs import IMAGE_SIZE, LOG_PAIRS
+    from .metrics import describe_image_error, describe_log_error
+    if examples is None:
+        examples, note = fit_materials()
+    examples = list(examples)
+    if results is None:
+        import tempfile
+        with tempfile.TemporaryDirectory() as work:
+            done = [fit_and_picture(ex, work, size) for ex in examples]
+        return fit_section(out, size, examples, progress, done, note)
+    folder = out / "fitting"
+    folder.mkdir(exist_ok=True)
+    done, parts = [], []
+    for ex, task in zip(examples, results, strict=True):
+        r = task.result() if hasattr(task, "result") else task
+        done.append(r)
+        write_bytes(folder / f"{ex.key}.png", r["picture"])
+        labels = list(r["environment"])
+        exposure = preview_exposure(r["environment"]["data"])
+        cells = []
+        for label in labels:
+            stem = f"{ex.key}-environment-{_slug(label)}"
+            write_exr(folder / f"{stem}.exr", r["environment"][label])
+            write_png(folder / f"{stem}.png", r["environment"][label], exposure)
+            figures = _figures(r, label)
+            cells.append((f"fitting/{stem}.png",
+                          label + (f": image {figures['image']:.3f}, log {figures['log']:.4f}" if figures else "")))
+        shown = " | ".join(labels)
+        parts.append(html_figure(f"fitting/{ex.key}.png",
+                                 f"{ex.label}: {shown} under a light 35° (top) and 75° (bottom) from the view, "
+                                 "backscattering and in-plane curves, each fit's image and log errors.",
+                                 css_class="lobes")
+                     + html_grid([(f"{ex.label}, environment", cells)]))
         if progress:
             progress(1)
-    head = ("material", "GGX fit (least squares)", "Beckmann fit (least squares)",
-            "F(θd = 0) true / fitted (RGB)", "error tabulated", "error GGX moments", "error Beckmann moments",
-            "error GGX least squares", "error Beckmann least squares")
-    table = ('<table class="grid"><tr>' + "".join(f"<th>{escape(h)}</th>" for h in head) + "</tr>"
-             + "".join(rows) + "</table>")
-    intro = (f"Built-in analytic materials fitted as if they were measured: mf.fit.fit (resolution "
-             f"{FIT_RESOLUTION}) retrieves a tabulated NDF from the backscattering f(k, k) by power "
-             "iterations, then the Fresnel term; to_ggx() and to_beckmann() convert it by moments "
-             "(thesis App. C), and mf.fit.fit_analytic refines GGX and Beckmann fits (conductor "
-             "Fresnel) by least squares against the material itself. The GGX material has a known GGX "
-             "answer and the Beckmann material a known Beckmann answer; the cross-family least-squares "
-             "fits keep the highlight where the moment conversions lose it. Fit a file with "
-             "microfacet fit INPUT -o OUT.npz.")
-    return ('<section id="fitting"><h2>Fitting: power iterations (thesis Ch. 4) and least squares</h2>'
-            f"<p>{escape(intro)}</p>{table}"
-            f"<p><small>{escape('Errors: ' + describe_fit_error() + '.')}</small></p>"
-            + "".join(pictures) + "</section>")
+    env = fit_sizes(size)[1]
+    intro = (f"{note} Each is fitted as microfacet fit FILE -o OUT.npz does (microfacet.fit.outputs.fit_material, "
+             "the CLI's defaults): the tabulated fit (power iterations, thesis Ch. 4), its GGX and Beckmann moment "
+             "conversions, least-squares GGX and Beckmann fits and the perceptual fits (one GGX lobe + "
+             "Schlick Fresnel + Lambertian base, core + halo lobes), the best being the one of least image "
+             "error. Shown: the data, the best fit, the tabulated fit (or, where it is the best, the best "
+             "analytic fit) and, for MERL materials, the published ABC fit of Löw et al. 2012, whose errors are "
+             f"computed here by the same judges. The environment row: the image error's studio environment "
+             f"({env} px, a deterministic quadrature, the same exposure across the row). Load a fit with "
+             "microfacet.fit.load(OUT.npz, model=\"best\").")
+    metrics = (f"Image error: {describe_image_error(IMAGE_SIZE)}. Log error: {describe_log_error(LOG_PAIRS)}. "
+               "Albedo ratio: the directional albedo of the fit over the data's, farthest from 1 over views and "
+               "channels.")
+    return ('<section id="fitting"><h2>Fitting measured materials: data, best fit, tabulated fit, ABC</h2>'
+            f"<p>{escape(intro)}</p>{_fit_table(examples, done)}<p><small>{escape(metrics)}</small></p>"
+            + "".join(parts) + "</section>")
 
 
 # ------------------------------------------------------------------------ running
@@ -377,7 +606,7 @@ def default_workers() -> int:
 LEADR_LEVELS = (1, 2, 3, 4, 5)
 LEADR_STEPS = 2 * 3 * len(LEADR_LEVELS)   # progress steps of leadr_section (lights x images x levels)
 GLINTS_STEPS = 4                           # progress steps of glints_section
-MITSUBA_STEPS = 12                         # progress steps of microfacet.mitsuba.demo (tested equal)
+MITSUBA_STEPS = 16                         # progress steps of microfacet.mitsuba.demo (tested equal)
 
 
 def _optional_section(key: str, title: str, install: str, render, errors) -> str:
@@ -401,11 +630,12 @@ def _viewer_section(out) -> str:
                              "make setup installs Chromium and Playwright", render, (ImportError, MicrofacetError))
 
 
-def _mitsuba_section(out, progress=None) -> str:
-    """The Mitsuba 3 section (no Mitsuba, or a Mitsuba that cannot run a variant: a note)."""
+def _mitsuba_section(out, progress=None, fits=None) -> str:
+    """The Mitsuba 3 section (no Mitsuba, or a Mitsuba that cannot run a variant: a note);
+    ``fits``: ``[(FitExample, fit file)]`` whose best fits it renders."""
     def render():
         from .mitsuba.demo import demo_section
-        return demo_section(out, progress=progress)
+        return demo_section(out, progress=progress, fits=fits)
     return _optional_section("mitsuba", "Rendering in Mitsuba 3", "pip install 'microfacet[mitsuba]'", render,
                              (ImportError, RuntimeError))
 
@@ -432,7 +662,9 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         Defaults to :func:`thesis_figures`.
     fits : sequence of FitExample, optional
         Materials of the fitting section (:func:`fit_section`); defaults to
-        :func:`fit_examples`, an empty sequence leaves the section out.
+        :func:`fit_materials` (the shared corpus's :data:`CORPUS_MATERIALS`, else the
+        built-in :func:`fit_examples`; below 64 pixels the first one only), an empty
+        sequence leaves the section out. The Mitsuba section renders their best fits.
     leadr : bool
         Include the LEADR section (Fig. 5.3: naive MIP vs LEADR against a supersampled
         reference, :func:`microfacet.leadr.figures.leadr_section`).
@@ -476,13 +708,15 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
     """:func:`run_demo`'s files, written into the (staging) folder ``out``."""
     figures = thesis_figures() if figures is None else list(figures)
     env_map = procedural_sky()
-    examples = fit_examples() if fits is None else list(fits)
+    examples, note = fit_materials(quick=size < 64) if fits is None else (list(fits), "")
+    work = out / ".fits"                                   # the fit files: not part of the report
     total = (sum(len(f.panels) + 1 for f in figures) + 1 + len(examples) + (LEADR_STEPS if leadr else 0)
              + (GLINTS_STEPS if glints else 0) + (MITSUBA_STEPS if mitsuba else 0))
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
         tasks = [[pool.submit(render_panel, p.brdf, f.light, size, env_map, spp, (seed, i, j))
                   for j, p in enumerate(f.panels)] for i, f in enumerate(figures)]
+        fit_tasks = [pool.submit(fit_and_picture, ex, work, size) for ex in examples]
         _save(out, "environment", env_map)
         bar.update(1)
         sections = [_intro_html(size, spp, seed)]
@@ -501,7 +735,7 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
                 bar.update(1)
             sections.append(_figure_html(fig, cells, "lobes.png", spp))
         if examples:
-            sections.append(fit_section(out, size, examples, progress=bar.update))
+            sections.append(fit_section(out, size, examples, progress=bar.update, results=fit_tasks, note=note))
         if leadr:
             from .leadr.figures import leadr_section
             fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
@@ -512,8 +746,10 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
             small = {} if size >= 64 else {"map_size": 128, "width": 64, "reference_spp": 32, "naive_spp": 4}
             sections.append(glints_section(out, progress=bar.update, **small))
         if mitsuba:
-            sections.append(_mitsuba_section(out, progress=bar.update))
+            fitted = [(ex, work / f"{ex.key}.npz") for ex in examples]
+            sections.append(_mitsuba_section(out, progress=bar.update, fits=fitted or None))
         if viewer:
             sections.append(_viewer_section(out))
+    shutil.rmtree(work, ignore_errors=True)
     title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4), LEADR (Fig. 5.3) and glints"
     return write_text(out / "index.html", html_page(title, "\n".join(sections)))

@@ -3,13 +3,11 @@
 Three scenes, each render timed (wall clock of ``mi.render``, kernel compilation included
 for the first render of each plugin in ``llvm_ad_rgb``):
 
-1. measured materials fitted by power iterations (``mf.fit.fit``) on spheres under an
-   environment: with the shared data (``$MICROFACET_DATA``, else ``../shared/data`` beside
-   the repository; :func:`shared_rgl_files`), the RGL files rendered by Mitsuba's
-   ``measured`` (the reference) vs ``mf_fitted`` tabulated vs ``mf_fitted use=ggx``
-   (``to_ggx()``, App. C); without them the demo's built-in materials
-   (:func:`microfacet.demo.fit_examples`), ``mf_microfacet`` being the reference. Each
-   with the relative RMS error against the reference at more samples per pixel;
+1. the best fits of the demo's fitting section (:func:`microfacet.demo.fit_materials`:
+   corpus materials with the shared data, else built-in ones), each fit file's ``best`` fit
+   rendered by ``mf_fitted`` (``use="best"``) under the demo's directional light
+   (orthographic camera) beside the library's own render of the same fit and of the data,
+   with their relative RMS difference, and under the environment;
 2. a LEADR-mapped plane receding to the horizon (``mf.leadr.bake`` of
    :func:`microfacet.leadr.figures.default_heightfield`): naive MIP mapping (each level a
    single facet of the averaged normal, :func:`microfacet.leadr.naive_pyramid`) vs
@@ -26,6 +24,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -36,14 +35,14 @@ import numpy as np
 
 from ..io import html_grid, write_exr, write_png
 
-__all__ = ["demo_section", "choose_variant", "relative_rms", "shared_rgl_files"]
+__all__ = ["demo_section", "choose_variant", "relative_rms", "shared_rgl_files", "highlight_mask", "MATERIALS", "LIBRARY_SUPERSAMPLE"]
 
 _LLVM_PROBE = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); import drjit as dr; "
                "x = dr.arange(mi.Float, 4); dr.eval(x * x); print(dr.sum(x))")
-#: Elevation resolution of the section's tabulated fits.
-FIT_RESOLUTION = 32
-#: Materials rendered (the first ones of :func:`_material_sources`).
-MATERIALS = 2
+#: Materials rendered, at most (the first ones of the fitting section's).
+MATERIALS = 4
+#: Points per pixel side of the library's renders beside Mitsuba's (box-filtered).
+LIBRARY_SUPERSAMPLE = 4
 
 
 def choose_variant() -> str:
@@ -102,86 +101,107 @@ def _metal(name: str) -> dict:
     return {"eta": _rgb(eta), "k": _rgb(k)}
 
 
-def _truth_dict(brdf) -> dict:
-    """``mf_microfacet`` parameters of a demo material (a conductor microfacet BRDF)."""
-    from ..distributions import GGX, Beckmann
-    d = brdf.distribution
-    kind = {GGX: "ggx", Beckmann: "beckmann"}[type(d)]
-    return {"type": "mf_microfacet", "distribution": kind, "alpha_u": float(d.alpha_x),
-            "alpha_v": float(d.alpha_y), "rho": float(d.rho),
-            "eta": _rgb(brdf.fresnel.eta), "k": _rgb(brdf.fresnel.k)}
+def _library_render(brdf, size: int, light) -> np.ndarray:
+    """The library's own render of ``brdf``: an orthographic unit sphere under the
+    directional ``light`` (:func:`microfacet.render.shade_directional`), shaded at
+    :data:`LIBRARY_SUPERSAMPLE`² points per pixel and box-filtered, as Mitsuba's box
+    filter integrates each pixel; black background."""
+    from ..render import Sphere, shade_directional
+    k = LIBRARY_SUPERSAMPLE
+    sphere = Sphere(size * k)
+    image = sphere.image(shade_directional(brdf, sphere.wo, sphere.to_local(light.w), light.rgb))
+    return image.reshape(size, k, size, k, 3).mean(axis=(1, 3))
 
 
-def _material_sources() -> tuple[list[tuple[str, str, dict, object]], str]:
-    """``(key, label, reference BSDF dict, BRDF to fit)`` of each material, and what they are:
-    the shared RGL files (Mitsuba's ``measured``; fitted with a Lambertian base) or the
-    demo's built-in materials (single lobes)."""
-    from .. import measured
-    files = shared_rgl_files()
-    if files:
-        return ([(f.stem, f.stem, {"type": "measured", "filename": str(f)}, measured.load(f))
-                 for f in files[:MATERIALS]],
-                "rgl")
-    from ..demo import fit_examples
-    return [(ex.key, ex.label, _truth_dict(ex.brdf), ex.brdf) for ex in fit_examples()], "builtin"
+def highlight_mask(image, fraction: float = 0.01) -> np.ndarray:
+    """Pixels ``(H, W)`` of ``image`` among its brightest ``fraction`` (luminance) of lit pixels."""
+    lum = np.asarray(image, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    lit = lum[lum > 0]
+    return lum > np.quantile(lit, 1.0 - fraction) if lit.size else np.zeros(lum.shape, dtype=bool)
 
 
-def _materials(mi, folder: Path, size: int, spp: int, reference_spp: int, tick) -> str:
-    """Scene 1: each material (reference BSDF), its tabulated fit and the fit's GGX
-    conversion on spheres; errors against the reference at ``reference_spp``."""
-    from .. import fit as fitting
+def _orthographic(mi, size: int) -> dict:
+    """An orthographic camera on +z looking at the origin, its image the square [-1, 1]²
+    (the library's :class:`microfacet.render.Sphere` view)."""
+    return {"type": "orthographic",
+            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0], up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent"}}
+
+
+def _fits(folder: Path, fits) -> list[tuple[object, Path]]:
+    """``[(FitExample, fit file in folder)]``: ``fits`` copied into ``folder`` (the files
+    the section renders travel with it), or, with ``fits=None``, the first
+    :data:`MATERIALS` materials of :func:`microfacet.demo.fit_materials` fitted into it."""
+    from ..demo import fit_demo_material, fit_materials
+    if fits is None:
+        examples, _ = fit_materials()
+        return [(ex, fit_demo_material(ex, folder)[1]) for ex in examples[:MATERIALS]]
+    out = []
+    for ex, path in list(fits)[:MATERIALS]:
+        target = folder / f"{ex.key}.npz"
+        shutil.copyfile(path, target)
+        out.append((ex, target))
+    return out
+
+
+def _materials(mi, folder: Path, size: int, spp: int, tick, fits) -> str:
+    """Scene 1: the best fit of each demo material rendered by ``mf_fitted`` (``use="best"``)
+    under the environment, and under a directional light beside the library's own render
+    of the same fit (and of the data); the relative RMS difference of the two renders."""
+    from ..demo import LIGHT, preview_exposure
+    from ..fit import fit_names, load
     from ..render import procedural_sky
     env = write_exr(folder / "environment.exr", procedural_sky())
-    sources, kind = _material_sources()
-    reference_label = {"rgl": "Mitsuba measured (the data)", "builtin": "mf_microfacet (the material)"}[kind]
-    rows, table = [], []
-    for key, label, reference, brdf in sources[:MATERIALS]:
-        t = time.perf_counter()
-        fit = fitting.fit(brdf, resolution=FIT_RESOLUTION, diffuse=kind == "rgl")
-        fit_path = fit.save(folder / f"{key}_fit.npz")
-        t_fit = time.perf_counter() - t
-        bsdfs = {"reference": reference, "truth": reference,
-                 "tabulated": {"type": "mf_fitted", "filename": str(fit_path), "use": "tabulated"},
-                 "ggx": {"type": "mf_fitted", "filename": str(fit_path), "use": "ggx"}}
-        images, cells = {}, []
-        for name, bsdf in bsdfs.items():
-            scene = {"type": "scene", "integrator": {"type": "path", "max_depth": 2},
-                     "sensor": _camera(mi, [0, 0, 4.2], [0, 0, 0], size, size, 30),
-                     "light": {"type": "envmap", "filename": str(env)},
-                     "sphere": {"type": "sphere", "bsdf": bsdf}}
-            n = reference_spp if name == "reference" else spp
-            images[name], seconds = _render(mi, scene, n, seed=1 if name == "reference" else 0)
-            tick(1)
-            if name == "reference":
-                continue
-            caption = {"truth": reference_label, "tabulated": "mf_fitted tabulated", "ggx": "mf_fitted use=ggx"}[name]
-            err = relative_rms(images[name], images["reference"])
-            cells.append((_save(folder, f"{key}_{name}", images[name]),
-                          f"{caption}, {n} spp: {seconds:.2f} s, rel. error {err:.3f}"))
-        rows.append((label, cells))
-        table.append((label, t_fit))
-    tick(4 * (MATERIALS - len(rows)))
-    notes = "".join(f"<li>{escape(label)}: fitted in {t:.2f} s (resolution {FIT_RESOLUTION})</li>"
-                    for label, t in table)
-    text = _MATERIALS_TEXT[kind].format(size=size, spp=spp, ref=reference_spp)
-    return f"<h3>Fitted materials on spheres</h3><p>{escape(text)}</p>{html_grid(rows)}<ul>{notes}</ul>"
-
-
-_MATERIALS_TEXT = {
-    "rgl": ("The RGL materials of the shared data, each fitted by power iterations with a Lambertian "
-            "base (mf.fit.fit(..., diffuse=True); the GGX conversion carries no base) and rendered on a sphere under the demo's environment ({size}×{size} "
-            "px, {spp} spp, path tracer) by Mitsuba's own measured plugin (the data), by the tabulated "
-            "fit (mf_fitted) and by its GGX conversion by moments (mf_fitted use=ggx). Errors: relative "
-            "RMS against measured at {ref} spp (another seed); measured's own error is the Monte Carlo "
-            "noise floor."),
-    "builtin": ("The demo's built-in materials stand in for measured ones (no shared data here: set "
-                "MICROFACET_DATA to a folder with rgl/*.bsdf to render those beside Mitsuba's measured): "
-                "each is fitted by power iterations (mf.fit.fit) and rendered on a sphere under the demo's "
-                "environment ({size}×{size} px, {spp} spp, path tracer) as the material itself "
-                "(mf_microfacet, the truth), the tabulated fit (mf_fitted) and its GGX conversion by "
-                "moments (mf_fitted use=ggx). Errors: relative RMS against the material rendered at "
-                "{ref} spp (another seed); the material's own error is the Monte Carlo noise floor."),
-}
+    w = LIGHT.w
+    light = {"type": "directional", "direction": [float(-c) for c in w], "irradiance": _rgb(LIGHT.rgb)}
+    rows, notes = [], []
+    materials = _fits(folder, fits)
+    for ex, path in materials:
+        best = fit_names(path)[1]
+        fit = load(path, model="best")
+        bsdf = {"type": "mf_fitted", "filename": str(path), "use": "best"}
+        library = _library_render(fit, size, LIGHT)
+        data = _library_render(ex.material(), size, LIGHT)
+        tick(1)
+        direct, t_direct = _render(mi, {"type": "scene", "integrator": {"type": "path", "max_depth": 2},
+                                        "sensor": _orthographic(mi, size), "light": light,
+                                        "sphere": {"type": "sphere", "bsdf": bsdf}}, spp)
+        tick(1)
+        lit, t_lit = _render(mi, {"type": "scene", "integrator": {"type": "path", "max_depth": 2},
+                                  "sensor": _camera(mi, [0, 0, 4.2], [0, 0, 0], size, size, 30),
+                                  "light": {"type": "envmap", "filename": str(env)},
+                                  "sphere": {"type": "sphere", "bsdf": bsdf}}, spp)
+        tick(1)
+        exposure = preview_exposure(data)
+        diff = relative_rms(direct, library)
+        keep = ~highlight_mask(library)
+        rest = relative_rms(direct[keep], library[keep])
+        cells = [(_save(folder, f"{ex.key}_data", data, exposure), "the data, library render (directional)"),
+                 (_save(folder, f"{ex.key}_library", library, exposure),
+                  f"best fit {best}, library render (directional)"),
+                 (_save(folder, f"{ex.key}_direct", direct, exposure),
+                  f"mf_fitted use=best, {spp} spp: {t_direct:.2f} s, rel. difference {diff:.3f} "
+                  f"({rest:.3f} outside the highlight)"),
+                 (_save(folder, f"{ex.key}_environment", lit),
+                  f"mf_fitted use=best, environment, {spp} spp: {t_lit:.2f} s")]
+        rows.append((f"{ex.label} ({best})", cells))
+        notes.append((ex.label, best, diff, rest))
+    tick(3 * (MATERIALS - len(materials)))
+    text = (f"The best fit of each material of the fitting section (the fit microfacet fit chose by image error, "
+            f"in the file it wrote) rendered by mf_fitted (use=\"best\", its default) on a sphere: under "
+            f"the demo's directional light through an orthographic camera ({size}×{size} px, {spp} spp, box filter), "
+            f"beside the library's own render of the same fit (microfacet.fit.load(OUT.npz, model=\"best\"), "
+            f"{LIBRARY_SUPERSAMPLE}×{LIBRARY_SUPERSAMPLE} points per pixel) and of the data, the three at one "
+            f"exposure; and under the demo's environment (perspective camera, path tracer). Rel. difference: "
+            f"relative RMS of the Mitsuba render against the library's, over the image and outside the highlight "
+            f"(the brightest 1 % of the lit pixels): what remains is how each integrates a pixel (Mitsuba by "
+            f"Monte Carlo at {spp} spp, the library on a {LIBRARY_SUPERSAMPLE}×{LIBRARY_SUPERSAMPLE} grid), "
+            f"which matters where the highlight and its glow vary within a pixel; both fall with more samples "
+            f"and grid points.")
+    listed = "".join(f"<li>{escape(label)}: best fit {escape(best)}, Mitsuba vs library rel. difference "
+                     f"{diff:.3f}, {rest:.3f} outside the highlight</li>" for label, best, diff, rest in notes)
+    return f"<h3>Best fits on spheres</h3><p>{escape(text)}</p>{html_grid(rows)}<ul>{listed}</ul>"
 
 
 _INTEGRATORS: dict[str, type] = {}
@@ -302,7 +322,7 @@ def _glints(mi, folder: Path, size: int, spp: int, tick) -> str:
 
 
 #: Progress steps of :func:`demo_section` (renders).
-STEPS = 2 * 4 + 3 + 1   # microfacet.demo.MITSUBA_STEPS (tested equal)
+STEPS = 3 * MATERIALS + 3 + 1   # microfacet.demo.MITSUBA_STEPS (tested equal)
 
 
 #: Defaults of :func:`demo_section`: vectorized (llvm) and scalar variants (Python runs
@@ -312,14 +332,18 @@ DEFAULTS = {"llvm": {"size": 96, "leadr_width": 256, "spp": 64, "reference_spp":
 
 
 def demo_section(out, size: int | None = None, spp: int | None = None, reference_spp: int | None = None,
-                 variant: str | None = None, progress=None, leadr_width: int | None = None) -> str:
+                 variant: str | None = None, progress=None, leadr_width: int | None = None,
+                 fits=None) -> str:
     """Render the Mitsuba scenes under ``out/mitsuba/`` and return the HTML section.
 
     ``size``: side in pixels of the sphere and glint images; ``leadr_width``: width of the
     LEADR plane (``× width/2``; default ``size`` where ``size`` is given); ``spp``: samples
     per pixel (``reference_spp`` for the references); ``None`` takes :data:`DEFAULTS` of
     the variant; ``variant``: a Mitsuba RGB variant, default :func:`choose_variant`.
-    ``progress(n)`` is called as renders complete. Raises ``ImportError`` without Mitsuba.
+    ``progress(n)`` is called as renders complete. ``fits``: ``[(FitExample, fit file)]``
+    of :mod:`microfacet.demo`'s fitting section, whose best fits scene 1 renders (the
+    first :data:`MATERIALS`); default: the demo's materials fitted here
+    (:func:`microfacet.demo.fit_demo_material`). Raises ``ImportError`` without Mitsuba.
     """
     variant = choose_variant() if variant is None else variant
     defaults = dict(DEFAULTS["scalar" if variant.startswith("scalar") else "llvm"])
@@ -341,7 +365,7 @@ def demo_section(out, size: int | None = None, spp: int | None = None, reference
     folder = Path(out) / "mitsuba"
     folder.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
-    parts = [_materials(mi, folder, size, spp, reference_spp, tick),
+    parts = [_materials(mi, folder, size, spp, tick, fits),
              _leadr(mi, folder, leadr_width, spp, reference_spp, tick),
              _glints(mi, folder, size, spp, tick)]
     total = time.perf_counter() - t
