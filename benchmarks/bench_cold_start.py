@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import shutil
 import statistics
 import subprocess
@@ -42,15 +43,18 @@ def quick_start() -> str:
     return m.group(1)
 
 
-def timed(cmd, cache: Path, mode: str, cwd: Path) -> float:
-    """Wall seconds of ``cmd`` in a fresh process with ``NUMBA_CACHE_DIR=cache`` and ``MICROFACET_COMPILE=mode``."""
+def timed(cmd, cache: Path, mode: str, cwd: Path) -> tuple[float, float]:
+    """Wall and CPU (user + system, its child processes included) seconds of ``cmd`` in a fresh
+    process with ``NUMBA_CACHE_DIR=cache`` and ``MICROFACET_COMPILE=mode``."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), MICROFACET_COMPILE=mode)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     r = subprocess.run(cmd, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     elapsed = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(map(str, cmd))} failed:\n{r.stderr[-2000:]}")
-    return elapsed
+    return elapsed, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def load() -> str:
@@ -59,7 +63,7 @@ def load() -> str:
 
 def series(label, cmd, mode, runs, work, warm_cache=None) -> tuple[str, list[float], str]:
     """``runs`` cold runs (each a new empty cache), or warm runs (``warm_cache`` filled first)."""
-    times, loads = [], []
+    times, cpus, loads = [], [], []
     for i in range(runs):
         if warm_cache is None:
             cache = work / f"cache-{label}-{mode}-{i}".replace(" ", "_")
@@ -67,9 +71,11 @@ def series(label, cmd, mode, runs, work, warm_cache=None) -> tuple[str, list[flo
         else:
             cache = warm_cache
         loads.append(load())
-        times.append(timed(cmd, cache, mode, work))
-        print(f"  {label:42s} {mode:10s} {times[-1]:7.2f} s   load {loads[-1]}", flush=True)
-    return label, times, f"{mode}"
+        wall, cpu = timed(cmd, cache, mode, work)
+        times.append(wall)
+        cpus.append(cpu)
+        print(f"  {label:42s} {mode:10s} {wall:7.2f} s wall {cpu:7.2f} s CPU   load {loads[-1]}", flush=True)
+    return label, times, cpus, mode, loads
 
 
 def main() -> None:
@@ -117,11 +123,13 @@ def main() -> None:
     lines = ["# Cold start (issue 25, item 3)", "",
              f"`python benchmarks/bench_cold_start.py --runs {args.runs}{' --demo' if args.demo else ''}`, "
              f"{time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} CPUs, load average at the end {load()} "
-             "(a shared machine: compare within this table). Wall seconds of fresh processes; cold: "
+             "(a shared machine: compare within this table; CPU seconds vary less with the load than wall seconds). Wall and CPU (user + system, child processes included) seconds of fresh processes; cold: "
              "`NUMBA_CACHE_DIR` a new empty folder per run; warm: a folder filled by `--precompile` and a first run.",
-             "", "| what | MICROFACET_COMPILE | runs | min s | median s |", "|---|---|---:|---:|---:|"]
-    for label, times, mode in rows:
-        lines.append(f"| {label} | {mode} | {len(times)} | {min(times):.2f} | {statistics.median(times):.2f} |")
+             "", "| what | MICROFACET_COMPILE | runs | wall min s | wall median s | CPU median s | load averages |",
+             "|---|---|---:|---:|---:|---:|---|"]
+    for label, times, cpus, mode, loads in rows:
+        lines.append(f"| {label} | {mode} | {len(times)} | {min(times):.2f} | {statistics.median(times):.2f} | "
+                     f"{statistics.median(cpus):.2f} | {'; '.join(loads)} |")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text("\n".join(lines) + "\n")
     print(f"wrote {RESULTS}")
