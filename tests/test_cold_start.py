@@ -148,10 +148,12 @@ def test_quick_start_with_an_empty_numba_cache(tmp_path):
 
 @pytest.mark.slow
 def test_precompile_fills_the_cache_that_a_later_process_loads(tmp_path):
-    """``python -m microfacet.kernels --precompile --dtypes float64`` into an empty cache; then a
-    new process in ``wait`` mode runs eval, pdf and sample (rows and a broadcast view) and the
-    projected kernel, loading every kernel from the cache: none is compiled (``data saved``)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), NUMBA_DEBUG_CACHE="1", MICROFACET_COMPILE="wait")
+    """``python -m microfacet.kernels --precompile --dtypes float64`` into the project's cache (as
+    ``make setup`` does: filled there, so this run loads; an empty cache costs ~150 s of CPU, too
+    long for the suite); then a new process in ``wait`` mode runs eval, pdf and sample (rows and
+    a broadcast view) and the projected kernel, loading every kernel from the cache: none is
+    compiled (``data saved``)."""
+    env = dict(os.environ, NUMBA_DEBUG_CACHE="1", MICROFACET_COMPILE="wait")
     pre = subprocess.run([sys.executable, "-m", "microfacet.kernels", "--precompile", "--dtypes", "float64"],
                          env=env, capture_output=True, text=True, timeout=1800)
     assert pre.returncode == 0, pre.stderr[-2000:]
