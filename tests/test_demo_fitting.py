@@ -111,8 +111,6 @@ def _check_section(tmp_path, example, result, html):
         assert (tmp_path / src).stat().st_size > 0 and (tmp_path / src).with_suffix(".exr").is_file()
         image = result["environment"][label]
         assert np.isfinite(image).all() and image.max() > 0, label
-    for label, name in result["shown"]:
-        assert f"{label}: image {fits[name]['metrics']['image']:.3f}" in html
 
 
 def test_the_section_of_a_builtin_material_says_the_corpus_is_missing(tmp_path):
@@ -135,5 +133,4 @@ def test_the_section_of_a_corpus_material_shows_its_abc_fit(tmp_path):
     data = load(path)
     assert result["abc"]["image"] == pytest.approx(ImageError(data, size=IMAGE_SIZE)(example.abc), rel=1e-9)
     assert result["abc"]["log"] == pytest.approx(LogError(data, n=LOG_PAIRS)(example.abc), rel=1e-9)
-    assert f"{demo.ABC_LABEL}: image {result['abc']['image']:.3f}" in html
     _check_section(tmp_path, example, result, html)

@@ -190,7 +190,7 @@ class FitExample:
     ``abc``: its published ABC fit (:func:`microfacet.anchors.read_abc`) where there is one.
 
     >>> ex = FitExample("nickel", "merl/nickel", corpus="merl/nickel")
-    >>> data = ex.material()          # doctest: +SKIP (needs ../shared)
+    >>> data = ex.material()          # doctest: +SKIP
     """
 
     key: str
@@ -413,15 +413,6 @@ def _fit_table(examples: Sequence[FitExample], results: Sequence[dict]) -> str:
             + "".join(rows) + "</table>")
 
 
-def _figures(result: dict, label: str) -> dict | None:
-    """The errors of the BRDF shown as ``label`` in a :func:`fit_and_picture` result (None for the data)."""
-    if label == "data":
-        return None
-    if label == ABC_LABEL:
-        return result["abc"]
-    return result["summary"]["fits"][dict(result["shown"])[label]]["metrics"]
-
-
 def fit_section(out: Path, size: int, examples: Sequence[FitExample] | None = None,
                 progress=None, results: Sequence | None = None, note: str = "") -> str:
     """Fit each material of ``examples`` (default: :func:`fit_materials`) as ``microfacet
@@ -455,9 +446,7 @@ def fit_section(out: Path, size: int, examples: Sequence[FitExample] | None = No
             stem = f"{ex.key}-environment-{_slug(label)}"
             write_exr(folder / f"{stem}.exr", r["environment"][label])
             write_png(folder / f"{stem}.png", r["environment"][label], exposure)
-            figures = _figures(r, label)
-            cells.append((f"fitting/{stem}.png",
-                          label + (f": image {figures['image']:.3f}, log {figures['log']:.4f}" if figures else "")))
+            cells.append((f"fitting/{stem}.png", label))           # the errors: in the table and picture
         shown = " | ".join(labels)
         parts.append(html_figure(f"fitting/{ex.key}.png",
                                  f"{ex.label}: {shown} under a light 35° (top) and 75° (bottom) from the view, "

@@ -18,8 +18,11 @@ def add(sub) -> None:
         "demo", help="render the thesis Figs. 2.2-2.6 demo report and a fitting section (HTML, PNG, EXR)",
         description="Render spheres and polar lobe plots showing the Fresnel term, the GAF, "
                     "isotropic and anisotropic roughness and its orientation (thesis Figs. "
-                    "2.2-2.6) under a directional light and an environment, and fits of built-in "
-                    "analytic materials by power iterations (Ch. 4), into DIR/index.html.")
+                    "2.2-2.6) under a directional light and an environment, fits of measured "
+                    "materials (the shared corpus where $MICROFACET_DATA or ../shared/data has it, "
+                    "else built-in ones) as `microfacet fit` makes them beside the data and the "
+                    "published ABC fits, LEADR, glints, Mitsuba and the real-time viewer, into "
+                    "DIR/index.html (docs/demo.md).")
     p.add_argument("-o", "--output", metavar="DIR", required=True, help="output folder (created if needed)")
     p.add_argument("--size", type=int_at_least(8), default=DEFAULT_SIZE, metavar="PX",
                    help=f"sphere image side in pixels (default {DEFAULT_SIZE})")
