@@ -558,6 +558,17 @@ def _json_default(o):
     return str(o)
 
 
+def _rounded(obj, digits: int = 5):
+    """``obj`` with every float rounded to ``digits`` significant digits (smaller JSON)."""
+    if isinstance(obj, float):
+        return float(f"{obj:.{digits}g}") if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _rounded(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_rounded(v, digits) for v in obj]
+    return obj
+
+
 def _error_text(e: BaseException) -> str:
     text = f"{type(e).__name__}: {e}".strip()
     return text.splitlines()[0][:300] if text else type(e).__name__
@@ -674,12 +685,14 @@ def phase_fit(materials, work, jobs, force):
         if m.file.is_file() and (force or not js.is_file() or js.stat().st_mtime < code):
             todo.append((m, work))
     print(f"fit: {len(todo)} to fit ({len(materials) - len(todo)} up to date)", flush=True)
+    load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     res = run_pool(task_fit, todo, jobs, "fit")
     wall = time.perf_counter() - t0
     info = {"n": len(todo), "jobs": jobs, "wall_seconds": wall, "sum_seconds": sum(s for *_, s in res),
             "failed": {k: e for k, e, _ in res if e}, "date": datetime.datetime.now().isoformat(timespec="seconds"),
-            "commit": _git("rev-parse", "--short", "HEAD")}
+            "commit": _git("rev-parse", "--short", "HEAD"),
+            "load_average": [round(load0, 1), round(os.getloadavg()[0], 1)]}
     if todo:
         _write_json(work / f"fit_phase_{len(todo)}.json", info)
         if len(todo) == len(materials):
@@ -831,20 +844,20 @@ def format_page(table, g, meta) -> str:
     def listed(f):
         return "" if not f else " — " + ", ".join(f[:12]) + (f" and {len(f) - 12} more" if len(f) > 12 else "")
     lines.append(f"- Directional albedo of the best fit within {ALBEDO_TOL:.0%} at 0/30/60/75° (channels with "
-                 f"albedo > {ALBEDO_FLOOR}): {n - len(g['albedo']['failing'])}/{n} {yes(not g['albedo']['failing'])}"
+                 f"albedo > {ALBEDO_FLOOR}): {n - len(g['albedo']['failing'])}/{n} pass, {yes(not g['albedo']['failing'])}"
                  f"{listed(g['albedo']['failing'])}.")
     lines.append(f"- Chromaticity of the best fit's spheres within {CHROMA_TOL} of the data: "
-                 f"{n - len(g['chroma']['failing'])}/{n} {yes(not g['chroma']['failing'])}"
+                 f"{n - len(g['chroma']['failing'])}/{n} pass, {yes(not g['chroma']['failing'])}"
                  f"{listed(g['chroma']['failing'])}.")
-    lines.append(f"- White furnace <= 1 for every fit of the file: {n - len(g['furnace']['failing'])}/{n} "
+    lines.append(f"- White furnace <= 1 for every fit of the file: {n - len(g['furnace']['failing'])}/{n} pass, "
                  f"{yes(not g['furnace']['failing'])}{listed(g['furnace']['failing'])}.")
     tv = g["fresnel_tv"]
     lines.append(f"- Fresnel tables' total variation <= {TV_FACTOR:g}x range (every table of every fit): "
-                 f"{tv['n_with_tables'] - len(tv['failing'])}/{tv['n_with_tables']} materials with tables "
+                 f"{tv['n_with_tables'] - len(tv['failing'])}/{tv['n_with_tables']} materials with tables pass, "
                  f"{yes(not tv['failing'])}{listed(tv['failing'])}; today's default fails it on "
                  f"{tv['baseline_failing']}.")
     ff = g["fit_failures"]
-    lines.append(f"- Every material fits: {n - len(ff)}/{g['n_expected']} {yes(not ff and n == g['n_expected'])}"
+    lines.append(f"- Every material fits: {n - len(ff)}/{g['n_expected']} fit, {yes(not ff and n == g['n_expected'])}"
                  f"{listed(ff)}. Today's default failed on {len(g['baseline_failures'])}"
                  f"{listed(g['baseline_failures'])}.")
     w = g["corpus_wall"]
@@ -852,7 +865,9 @@ def format_page(table, g, meta) -> str:
         lines.append(f"- Corpus fit wall time with --jobs {w['jobs']}: {w['wall_seconds'] / 60:.1f} min for "
                      f"{w['n']} materials (goal: 119 in <= 15 min); per material median "
                      f"{_c(g['fit_seconds']['median'], 2)} s, max {_c(g['fit_seconds']['max'], 2)} s (fit_file wall "
-                     f"in a worker, no picture; {w['date']}, commit {w['commit']}).")
+                     f"in a worker, no picture; {w['date']}, commit {w['commit']}"
+                     + (f"; 1-min load average {w['load_average'][0]} at the start, {w['load_average'][1]} at the end "
+                        f"(a shared machine)" if w.get("load_average") else "") + ").")
     else:
         lines.append("- Corpus fit wall time: not measured in one run of every material yet.")
     lines += ["", "## Per material", "",
@@ -946,12 +961,17 @@ def contact_sheets(rows: list[dict], work: Path, prefix: Path, size: int = SHEET
 
 
 def _quantize_png(png: bytes) -> bytes:
-    """The PNG re-encoded as an 8-bit palette image when Pillow is there (smaller files)."""
+    """The PNG re-encoded as an 8-bit palette image, dithered, when Pillow is there (files
+    ~3x smaller than 24-bit)."""
     try:
         from PIL import Image
     except ImportError:
         return png
-    im = Image.open(io.BytesIO(png)).convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+    rgb = Image.open(io.BytesIO(png)).convert("RGB")
+    palette = rgb.quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+    # Floyd-Steinberg dithering against that palette: without it, smooth shading posterizes
+    # into contour rings that are not in the renders
+    im = rgb.quantize(palette=palette, dither=Image.Dither.FLOYDSTEINBERG)
     out = io.BytesIO()
     im.save(out, format="PNG", optimize=True)
     return out.getvalue()
@@ -984,7 +1004,9 @@ def phase_report(materials, work, out_prefix: Path, command: str, n_corpus: int,
         meta["sheets"] = [p.name for p in contact_sheets(rows, work, out_prefix)]
     page = format_page(table, g, meta)
     _atomic_write(out_prefix.with_suffix(".md"), page.encode())
-    _write_json(out_prefix.with_suffix(".json"), {"meta": meta, "goals": g, "materials": table, "raw": rows})
+    page_json = _rounded({"meta": meta, "goals": g, "materials": table, "raw": rows})
+    _atomic_write(out_prefix.with_suffix(".json"), (json.dumps(page_json, separators=(",", ":"),
+                                                                default=_json_default) + "\n").encode())
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(table[0]) if table else ["group"])
     w.writeheader()
