@@ -9,10 +9,10 @@ SCALING ?= 1e4,1e5,1e6,1e7
 .PHONY: setup demo test bench clean
 
 $(VENV)/.installed: pyproject.toml
-	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask and view extras (pip)"
+	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask, view and export extras (pip)"
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask,view]"
+	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask,view,export]"
 	touch $@
 
 # llvm_ad_rgb (Mitsuba plugins) needs a system libLLVM >= 16: installed where apt and root

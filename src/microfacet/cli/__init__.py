@@ -5,7 +5,8 @@ core models numerically; ``microfacet fit INPUT -o OUT`` fits measured BRDFs;
 ``microfacet bake MAP -o OUT.exr`` prefilters a height or normal map into a LEAN/LEADR
 moment pyramid; ``microfacet glints NORMAL_MAP -o OUT.npz`` builds a glint microsurface and
 ``microfacet glints render OUT.npz -o IMG.png`` renders one; ``microfacet view PYRAMID.exr``
-serves the WebGL2 viewer on 127.0.0.1. Outputs follow one naming
+serves the WebGL2 viewer on 127.0.0.1; ``microfacet export FIT.npz --to gltf|mtlx|usd -o OUT``
+writes a fit as a glTF, MaterialX or USD material. Outputs follow one naming
 rule (:mod:`microfacet.cli.common`). Bad input prints one line on stderr and exits with a
 non-zero status, without a traceback; long work shows a progress bar only on a terminal.
 """
@@ -26,12 +27,12 @@ from collections.abc import Sequence  # noqa: E402
 
 from .. import __version__  # noqa: E402
 from ..errors import MicrofacetError  # noqa: E402
-from . import bake, demo, fit, glints, validate, view  # noqa: E402
+from . import bake, demo, export, fit, glints, validate, view  # noqa: E402
 from .common import EXIT_ERROR, EXIT_INTERRUPTED, EXIT_USAGE, PROG, Parser  # noqa: E402
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = (demo, validate, fit, bake, glints, view)
+COMMANDS = (demo, validate, fit, bake, glints, view, export)
 
 
 def build_parser() -> argparse.ArgumentParser:

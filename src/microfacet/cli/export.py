@@ -1,0 +1,43 @@
+"""``microfacet export FIT.npz --to gltf|mtlx|usd -o OUT``: a fit as a glTF, MaterialX or USD material."""
+from __future__ import annotations
+
+import sys
+
+from .common import output_path
+
+FORMAT_SUFFIX = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda"}
+
+
+def add(sub) -> None:
+    p = sub.add_parser(
+        "export", help="export a fit as a glTF (.glb), MaterialX (.mtlx) or USD (.usda) material",
+        description="Map the analytic model of FIT.npz (from 'microfacet fit'; --model best: the best fit by "
+                    "image error, or the best analytic one when that is the tabulated fit) to glTF 2.0 (a .glb "
+                    "sphere: metallicRoughness, KHR_materials_specular/ior/anisotropy/clearcoat), MaterialX (an "
+                    "exact pbrlib graph and an open_pbr_surface) or USD (UsdPreviewSurface and the OpenPBR "
+                    "surface bound to a sphere). Beside OUT: OUT.export.json and OUT.export.md, what the format "
+                    "could not carry and the image error of the exported material (read back from OUT) against "
+                    "the library's fit and the tabulated fit, measured now. Formulas: docs/export.md.")
+    p.add_argument("fit", metavar="FIT.npz", help="fit file written by 'microfacet fit'")
+    p.add_argument("--to", required=True, choices=sorted(FORMAT_SUFFIX), help="output format")
+    p.add_argument("--model", default="best", metavar="NAME",
+                   help="fit of the file to export: best (default) or a name (microfacet.fit.fit_names)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="output file (.glb/.mtlx/.usda added if missing) or folder (FIT's name)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from ..export import export
+    suffix = FORMAT_SUFFIX[args.to]
+    out = output_path(args.output, suffix, source=args.fit)
+    report = export(args.fit, args.to, out, model=args.model)
+    e = report["image_error"]
+    print(f"{report['file']}: {report['model']} as {args.to}; report {report['file']}.export.md")
+    for k, v in e["exported_vs_fit"].items():
+        tab = e.get("exported_vs_tabulated", {}).get(k)
+        print(f"  {k}: image error {v:.4f} vs the fit" + ("" if tab is None else f", {tab:.4f} vs the tabulated fit"
+                                                         f" (the fit itself {e['fit_vs_tabulated']:.4f})"))
+    for line in report["lost"]:
+        print(f"  not carried: {line}", file=sys.stderr)
+    return 0

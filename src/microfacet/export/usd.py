@@ -1,0 +1,191 @@
+"""USD (``.usda``) materials of library BRDFs: a UsdPreviewSurface, plus the MaterialX
+OpenPBR surface under the ``mtlx`` render context, bound to a sphere.
+
+UsdPreviewSurface (USD 2.x specification) is isotropic GGX with ``alpha = roughness^2``
+(Hydra Storm): the ellipse becomes ``roughness = (alpha1 alpha2)^(1/4)``; a metal
+(no base) is ``metallic 1``, ``diffuseColor = F(0)``; otherwise the specular workflow,
+``specularColor = f0`` (Schlick towards 1 at grazing) and ``diffuseColor`` the base; a coat
+is ``clearcoat 1``, ``clearcoatRoughness = sqrt(alpha_coat)``. The OpenPBR inputs are those
+of :func:`microfacet.export.mtlx.openpbr_inputs`.
+
+Example
+-------
+>>> import microfacet as mf
+>>> inputs, lost = preview_inputs(mf.MicrofacetBRDF(mf.GGX(alpha=0.04)))
+>>> round(inputs["roughness"], 3), inputs["metallic"]
+(0.2, 1.0)
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .analysis import analyse, schlick_of
+
+__all__ = ["preview_inputs", "preview_brdf", "write_usda", "read_bound_inputs", "validation_errors", "MTLX_SHADER_ID"]
+
+#: The shader id of MaterialX's OpenPBR surface node definition.
+MTLX_SHADER_ID = "ND_open_pbr_surface_surfaceshader"
+
+
+def preview_inputs(brdf) -> tuple[dict, list[str]]:
+    """``(inputs, lost)``: UsdPreviewSurface inputs of a library BRDF tree (module docstring)."""
+    from .gltf import _metal_f0
+    a = analyse(brdf)
+    lost: list[str] = []
+    p: dict = {"useSpecularWorkflow": 0, "metallic": 0.0, "roughness": 1.0, "diffuseColor": [0.0, 0.0, 0.0],
+               "specularColor": [0.0, 0.0, 0.0]}
+    if a.lobes:
+        lobe = a.lobes[0]
+        p["roughness"] = float(min((lobe.alpha1 * lobe.alpha2) ** 0.25, 1.0))
+        if not lobe.isotropic:
+            lost.append("anisotropy dropped: UsdPreviewSurface is isotropic (alpha = sqrt(alpha1 alpha2))")
+        if lobe.family != "ggx":
+            lost.append("Beckmann lobe exported as GGX")
+        for other in a.lobes[1:]:
+            lost.append(f"second lobe (alpha {other.alpha1:.4g}) dropped")
+        metal = _metal_f0(lobe.fresnel) if a.base is None else None
+        if metal is not None:
+            p.update(metallic=1.0, diffuseColor=metal.tolist())
+        else:
+            f0, f90 = schlick_of(lobe.fresnel)
+            if np.any(np.abs(f90 - 1.0) > 1e-3):
+                lost.append(f"Schlick f90 {np.round(f90, 3).tolist()} exported as 1 (UsdPreviewSurface)")
+            p.update(useSpecularWorkflow=1, specularColor=f0.tolist())
+            if a.base is not None:
+                p["diffuseColor"] = a.base.tolist()
+    else:
+        p["diffuseColor"] = a.base.tolist()
+    if a.coat is not None:
+        p.update(clearcoat=1.0, clearcoatRoughness=float(math.sqrt(math.sqrt(a.coat.alpha1 * a.coat.alpha2))))
+        lost.append("coat index exported as UsdPreviewSurface's fixed 1.5")
+    return p, lost
+
+
+def preview_brdf(p: dict):
+    """The library BRDF of UsdPreviewSurface inputs (the inverse mapping): GGX
+    ``alpha = roughness^2`` with Schlick towards 1 (``diffuseColor`` as F0 when metallic,
+    ``specularColor`` in the specular workflow, 0.04 otherwise) plus the Lambertian
+    ``diffuseColor`` (non-metals), under a dielectric 1.5 coat when ``clearcoat`` is set."""
+    from .. import fresnel as fr
+    from ..brdf import Lambertian, MicrofacetBRDF
+    from ..distributions import GGX
+    from ..fit.analytic import SumBRDF
+    alpha = max(float(p.get("roughness", 0.5)) ** 2, 1e-4)
+    metallic = float(p.get("metallic", 0.0))
+    if p.get("useSpecularWorkflow", 0):
+        f0 = np.asarray(p.get("specularColor", [0, 0, 0]), float)
+        metallic = 0.0
+    else:
+        f0 = metallic * np.asarray(p.get("diffuseColor", [0, 0, 0]), float) + (1 - metallic) * 0.04
+    out = MicrofacetBRDF(GGX(alpha=alpha), fr.Schlick(np.clip(f0, 0, 1), 1.0))
+    diffuse = (1 - metallic) * np.asarray(p.get("diffuseColor", [0, 0, 0]), float)
+    if np.any(diffuse > 0):
+        out = SumBRDF(out, Lambertian(np.clip(diffuse, 0, 1)))
+    if float(p.get("clearcoat", 0.0)) > 0:
+        from ..layered import LayeredBRDF
+        rc = max(float(p.get("clearcoatRoughness", 0.01)) ** 2, 1e-4)
+        out = LayeredBRDF(MicrofacetBRDF(GGX(alpha=rc), fr.Dielectric(1.5)), out)
+    return out
+
+
+def write_usda(brdf, path, mtlx_file: str | None = None, mtlx: bool = True) -> tuple[Path, list[str]]:
+    """Write ``path`` (``.usda``): ``/Root/Sphere`` (a ``Sphere`` prim and a ``Mesh`` copy, for
+    importers that bind only meshes) bound to ``/Root/Materials/Microfacet`` whose
+    ``outputs:surface`` is the UsdPreviewSurface and ``outputs:mtlx:surface`` the OpenPBR
+    surface (``info:id`` :data:`MTLX_SHADER_ID`; ``mtlx_file``, the exported ``.mtlx``, is
+    noted in the material's ``customData``); ``mtlx=False``: the preview surface only.
+    ``pxr.UsdValidation`` passes the file without errors except, for the OpenPBR shader, a
+    ``MissingShaderIdInRegistry`` where USD was built without MaterialX (usd-core).
+    Returns ``(path, lost)``."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
+
+    from .gltf import sphere_mesh
+    from .mtlx import openpbr_inputs
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    preview, lost = preview_inputs(brdf)
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, "/Root")
+    stage.SetDefaultPrim(root.GetPrim())
+    UsdGeom.Sphere.Define(stage, "/Root/Sphere").GetRadiusAttr().Set(1.0)
+    pos, nrm, _, _, idx = sphere_mesh(32, 64)
+    mesh = UsdGeom.Mesh.Define(stage, "/Root/SphereMesh")
+    mesh.GetPointsAttr().Set([Gf.Vec3f(*map(float, p)) for p in pos])
+    mesh.GetFaceVertexCountsAttr().Set([3] * (len(idx) // 3))
+    mesh.GetFaceVertexIndicesAttr().Set([int(i) for i in idx])
+    mesh.GetNormalsAttr().Set([Gf.Vec3f(*map(float, n)) for n in nrm])
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    mesh.GetSubdivisionSchemeAttr().Set(UsdGeom.Tokens.none)
+    mesh.GetExtentAttr().Set([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
+    UsdGeom.Sphere(stage.GetPrimAtPath("/Root/Sphere")).GetExtentAttr().Set([Gf.Vec3f(-1, -1, -1),
+                                                                              Gf.Vec3f(1, 1, 1)])
+    UsdGeom.Xformable(mesh).AddTranslateOp().Set(Gf.Vec3d(3.0, 0.0, 0.0))
+    material = UsdShade.Material.Define(stage, "/Root/Materials/Microfacet")
+    shader = UsdShade.Shader.Define(stage, "/Root/Materials/Microfacet/PreviewSurface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    for k, v in preview.items():
+        if isinstance(v, list):
+            shader.CreateInput(k, Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*map(float, v)))
+        elif k == "useSpecularWorkflow":
+            shader.CreateInput(k, Sdf.ValueTypeNames.Int).Set(int(v))
+        else:
+            shader.CreateInput(k, Sdf.ValueTypeNames.Float).Set(float(v))
+    material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    opbr, lost_p = openpbr_inputs(brdf) if mtlx else ({}, [])
+    lost += [f"mtlx (open_pbr_surface): {x}" for x in lost_p]
+    ms = UsdShade.Shader.Define(stage, "/Root/Materials/Microfacet/OpenPBR")
+    ms.CreateIdAttr(MTLX_SHADER_ID)
+    for k, v in opbr.items():
+        if k == "tangent_rotation":
+            lost.append("mtlx (open_pbr_surface) in USD: the anisotropy direction (rotated tangent) is in the .mtlx "
+                        "file only")
+        elif isinstance(v, list):
+            ms.CreateInput(k, Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*map(float, v)))
+        else:
+            ms.CreateInput(k, Sdf.ValueTypeNames.Float).Set(float(v))
+    if mtlx:
+        material.CreateSurfaceOutput("mtlx").ConnectToSource(ms.ConnectableAPI(), "surface")
+    else:
+        stage.RemovePrim(ms.GetPath())
+    if mtlx_file:
+        material.GetPrim().SetCustomDataByKey("microfacet:mtlx", str(mtlx_file))
+    for prim in ("/Root/Sphere", "/Root/SphereMesh"):
+        p = stage.GetPrimAtPath(prim)
+        UsdShade.MaterialBindingAPI.Apply(p).Bind(material)
+    stage.GetRootLayer().Save()
+    return path, lost
+
+
+def validation_errors(path) -> list[tuple[str, str, str]]:
+    """``(name, prim path or "", message)`` of each error ``pxr.UsdValidation`` (all its
+    registered validators) reports on the USD file ``path``."""
+    from pxr import Usd, UsdValidation
+    reg = UsdValidation.ValidationRegistry()
+    ctx = UsdValidation.ValidationContext(reg.GetOrLoadAllValidators())
+    out = []
+    for e in ctx.Validate(Usd.Stage.Open(str(path))):
+        if e.GetType() == UsdValidation.ValidationErrorType.Error:
+            sites = [str(s.GetPrim().GetPath()) for s in e.GetSites() if s.IsPrim()]
+            out.append((e.GetName(), sites[0] if sites else "", e.GetMessage()))
+    return out
+
+
+def read_bound_inputs(path, prim: str = "/Root/Sphere", context: str = "") -> dict:
+    """The inputs (name -> value) of the surface shader bound to ``prim`` in a USD file, for
+    the render ``context`` (``""``: universal, UsdPreviewSurface; ``"mtlx"``: OpenPBR)."""
+    from pxr import Usd, UsdShade
+    stage = Usd.Stage.Open(str(path))
+    if not stage:
+        raise ValueError(f"{path}: USD could not open the file")
+    mat, _ = UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(prim)).ComputeBoundMaterial()
+    shader = mat.ComputeSurfaceSource(context)[0]
+    out = {}
+    for i in shader.GetInputs():
+        v = i.Get()
+        out[i.GetBaseName()] = list(v) if hasattr(v, "__len__") and not isinstance(v, str) else v
+    return out
