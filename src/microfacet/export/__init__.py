@@ -149,6 +149,9 @@ def export(source, to: str, out, model: str = "best", compare_models: bool = Tru
     from ..metrics import ImageError
     if to not in _WRITERS:
         raise ValueError(f"to must be one of {', '.join(FORMATS)}, got {to!r}")
+    if to == "usd":                                 # before any kernel compiles in the background (usd.import_pxr)
+        from .usd import import_pxr
+        import_pxr()
     out = Path(out)
     if out.suffix.lower() != SUFFIXES[to]:
         out = out.with_name(out.name + SUFFIXES[to])

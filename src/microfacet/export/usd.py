@@ -24,10 +24,19 @@ import numpy as np
 
 from .analysis import analyse, schlick_of
 
-__all__ = ["preview_inputs", "preview_brdf", "write_usda", "read_bound_inputs", "validation_errors", "MTLX_SHADER_ID"]
+__all__ = ["preview_inputs", "preview_brdf", "write_usda", "read_bound_inputs", "validation_errors", "import_pxr", "MTLX_SHADER_ID"]
 
 #: The shader id of MaterialX's OpenPBR surface node definition.
 MTLX_SHADER_ID = "ND_open_pbr_surface_surfaceshader"
+
+
+def import_pxr():
+    """Import ``pxr`` once no kernel compiles on the background thread: loading pxr's
+    libraries while that thread imports Numba's deadlocks (both inside the dynamic loader)."""
+    from .. import kernels
+    kernels.ready(wait=None)
+    import pxr.Usd  # noqa: F401
+    return pxr
 
 
 def preview_inputs(brdf) -> tuple[dict, list[str]]:
@@ -100,6 +109,7 @@ def write_usda(brdf, path, mtlx_file: str | None = None, mtlx: bool = True) -> t
     ``pxr.UsdValidation`` passes the file without errors except, for the OpenPBR shader, a
     ``MissingShaderIdInRegistry`` where USD was built without MaterialX (usd-core).
     Returns ``(path, lost)``."""
+    import_pxr()
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
 
     from .gltf import sphere_mesh
@@ -164,6 +174,7 @@ def write_usda(brdf, path, mtlx_file: str | None = None, mtlx: bool = True) -> t
 def validation_errors(path) -> list[tuple[str, str, str]]:
     """``(name, prim path or "", message)`` of each error ``pxr.UsdValidation`` (all its
     registered validators) reports on the USD file ``path``."""
+    import_pxr()
     from pxr import Usd, UsdValidation
     reg = UsdValidation.ValidationRegistry()
     ctx = UsdValidation.ValidationContext(reg.GetOrLoadAllValidators())
@@ -178,6 +189,7 @@ def validation_errors(path) -> list[tuple[str, str, str]]:
 def read_bound_inputs(path, prim: str = "/Root/Sphere", context: str = "") -> dict:
     """The inputs (name -> value) of the surface shader bound to ``prim`` in a USD file, for
     the render ``context`` (``""``: universal, UsdPreviewSurface; ``"mtlx"``: OpenPBR)."""
+    import_pxr()
     from pxr import Usd, UsdShade
     stage = Usd.Stage.Open(str(path))
     if not stage:
