@@ -21,7 +21,7 @@ __all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "Microface
 _NAMES = {"BRDF": "brdf", "Lambertian": "brdf", "MicrofacetBRDF": "brdf",
           "GGX": "distributions", "Beckmann": "distributions", "SlopeDistribution": "distributions"}
 #: Submodules reachable as attributes (``mf.metrics``, ``mf.render``, ...) without an import.
-_SUBMODULES = frozenset({"batch", "brdf", "distributions", "fit", "fresnel", "geometry", "glints", "io", "kernels",
+_SUBMODULES = frozenset({"anchors", "batch", "brdf", "distributions", "export", "fit", "fresnel", "geometry", "glints", "io", "kernels",
                          "layered", "leadr", "measured", "metrics", "render", "validation"})
 
 
