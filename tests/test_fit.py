@@ -860,11 +860,165 @@ def test_albedo_weight_brings_the_fit_to_the_data_albedo(path):
     albedo weight: directional albedo within 10 % of the data's at 0/30/60/75 degrees, RGB
     (``metrics.albedo_ratios``), on every shared material but gold paint, whose data put
     energy at grazing views where the lobe has little (README: 13 % at 75 degrees, 42 %
-    without the albedo term); and everywhere the term brings the albedo closer than
-    without it (weight 0: the energy constraint alone)."""
+    without the albedo term), and violet acrylic, whose fit met 10 % only with a Fresnel
+    table flipping between 0 and 0.1 across theta_d (issue 24; with a table of total
+    variation <= 2x its range: 16 % at 75 degrees); and everywhere the term brings the
+    albedo closer than without it (weight 0: the energy constraint alone)."""
     from microfacet.metrics import albedo_ratios
     m = mf.measured.load(path)
     fits = {w: mf.fit.fit(m, 90, diffuse=True, albedo_weight=w) for w in (0.0, mf.fit.fitted.ALBEDO_WEIGHT)}
     worst = {w: float(np.max(np.abs(r - 1.0))) for w, r in albedo_ratios(m, fits).items()}
     assert worst[mf.fit.fitted.ALBEDO_WEIGHT] < worst[0.0]
-    assert worst[mf.fit.fitted.ALBEDO_WEIGHT] <= (0.15 if path.name.startswith("gold") else 0.10), worst
+    bound = {"gold": 0.15, "violet": 0.20}.get(path.name.split("-")[0], 0.10)
+    assert worst[mf.fit.fitted.ALBEDO_WEIGHT] <= bound, worst
+
+
+# ------------------------------------------------------------ smooth Fresnel tables (issue 24)
+def test_table_variation():
+    assert extract.table_variation([0.0, 1.0, 0.0, 1.0]) == 3.0
+    assert extract.table_variation([0.2, 0.3, 0.5, 0.9]) == pytest.approx(1.0)
+    assert extract.table_variation([0.4, 0.4, 0.4]) == 1.0                    # constant
+    np.testing.assert_allclose(extract.table_variation(np.array([[0, 1], [1, 1], [0, 0.5]])), [2.0, 1.0])
+
+
+def _flipping_problem(n_d=41, seed=5):
+    """A Fresnel-like QP whose box-constrained optimum flips between 0 and 1: a weak
+    smooth data term (a rising table) plus a strong term on a few oscillating rows."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, n_d)
+    target = 0.3 + 0.5 * t**4
+    rows = rng.normal(size=(6, n_d)) * np.sin(np.outer(np.arange(6) + 8, t * np.pi)) ** 2
+    h = 1e-3 * np.eye(n_d) + rows.T @ rows
+    g = 1e-3 * target + rows.T @ (rows @ target + rng.normal(scale=5.0, size=6))
+    return h, g, target
+
+
+def test_smooth_table_qp_bounds_the_variation():
+    h, g, target = _flipping_problem()
+    n_d = len(g)
+    lo, hi = np.zeros(n_d), np.ones(n_d)
+    raw = extract.box_qp(h, g, lo, hi)
+    assert extract.table_variation(raw) > 10.0                    # the unregularized solve flips
+    x, mu = extract.smooth_table_qp(h, g, (lo, hi), n_d)
+    assert extract.table_variation(x) <= extract.TV_MAX and np.all((x >= 0) & (x <= 1))
+    assert np.isfinite(mu) and mu > 1e-6
+    # a bound no table meets (below 1): the monotone projection, whose variation is its range
+    x1, mu1 = extract.smooth_table_qp(h, g, (lo, hi), n_d, tv_max=0.5)
+    assert mu1 == np.inf and extract.table_variation(x1) == pytest.approx(1.0)
+    # a smooth problem is left at the default smoothing
+    xs, mus = extract.smooth_table_qp(np.eye(n_d), target, (lo, hi), n_d)
+    assert mus == 1e-6 and np.allclose(xs, target, atol=1e-4)
+
+
+def test_spd_solve_handles_semidefinite_systems():
+    """A sum of terms of very different scales (a stiff data term, a low-rank albedo term)
+    that Cholesky rejects: solved, and box_qp on it too."""
+    rng = np.random.default_rng(2)
+    n = 30
+    r = rng.normal(size=(3, n))
+    h = 1e12 * (r.T @ r)
+    h[0, 0] += 1.0
+    b = h @ np.linspace(0.1, 0.9, n)
+    with pytest.raises(np.linalg.LinAlgError):
+        np.linalg.cholesky(h)
+    x = extract.spd_solve(h, b)
+    assert np.all(np.isfinite(x)) and np.linalg.norm(h @ x - b) <= 1e-6 * np.linalg.norm(b)
+    y = extract.box_qp(h, b, np.zeros(n), np.ones(n))
+    assert np.all(np.isfinite(y)) and np.all((y >= 0) & (y <= 1))
+
+
+SMOOTH_CORPUS = ("merl/chrome", "merl/ss440", "merl/black-obsidian", "rgl/ilm_solo_m_68_rgb")
+
+
+@pytest.mark.parametrize("name", SMOOTH_CORPUS)
+def test_corpus_fits_have_smooth_fresnel_tables(corpus, name):
+    """Every Fresnel table of a fit of a corpus material, and of its moment conversions
+    against the data (those of ``mf_fitted use=ggx``), varies by at most 2x its range per
+    channel (it flipped between 0 and 1, 5-46x); ss440, black-obsidian and ilm_solo_m_68 failed
+    with 'Matrix is not positive definite'."""
+    m = mf.measured.load(corpus(name))
+    f = mf.fit.fit(m)
+    tables = {"fit": f.fresnel.values, "ggx": f.to_ggx(reference=m).fresnel.values,
+              "beckmann": f.to_beckmann(reference=m).fresnel.values}
+    for kind, values in tables.items():
+        assert np.all((values >= 0) & (values <= 1)), kind
+        assert np.all(extract.table_variation(values) <= extract.TV_MAX), (kind, extract.table_variation(values))
+
+
+# ------------------------------------------------------------ huge samples (issue 25 item 11)
+def _write_merl(path, brdf):
+    """``brdf`` sampled at the MERL grid (Matusik et al. 2003), written as a MERL file."""
+    from microfacet.geometry import hd_to_io
+    from microfacet.measured import merl
+    ih, i_d, ip = np.meshgrid(np.arange(90), np.arange(90), np.arange(180), indexing="ij")
+    h = spherical_to_cartesian((ih / 90.0) ** 2 * (np.pi / 2), np.zeros(ih.shape))
+    d = spherical_to_cartesian(i_d / 90.0 * (np.pi / 2), ip / 180.0 * np.pi)
+    wi, wo = hd_to_io(h.reshape(-1, 3), d.reshape(-1, 3))
+    f = np.where(((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None], brdf.eval(wi, wo), 0.0)
+    raw = np.ascontiguousarray((f / merl.SCALE).T).astype("<f8")
+    path.write_bytes(merl.HEADER + raw.tobytes())
+    return raw.reshape(3, 90, 90, 180)
+
+
+@pytest.fixture(scope="module")
+def synthetic_merl(tmp_path_factory):
+    """A GGX + Schlick lobe over a Lambertian base as a MERL file, and its raw samples."""
+    lobe = _input(mf.GGX, shadowing=True, alpha=0.15)
+    brdf = mf.fit.SumBRDF(lobe, mf.Lambertian([0.1, 0.05, 0.02]))
+    path = tmp_path_factory.mktemp("merl") / "clean.binary"
+    return path, _write_merl(path, brdf)
+
+
+def _with(raw, path, change):
+    bad = raw.copy()
+    change(bad)
+    from microfacet.measured import merl
+    path.write_bytes(merl.HEADER + bad.astype("<f8").tobytes())
+    return path
+
+
+@pytest.mark.parametrize("value", [1e300, 1.75e308])
+def test_one_huge_sample_does_not_change_the_fit(synthetic_merl, tmp_path, value):
+    """A single sample of 1e300 or 1.75e308 (finite) in the lobe is ignored as unmeasured,
+    with a warning naming the file: the fit is that of the clean file (it changed alpha and
+    k_d, or stopped with 'Matrix is not positive definite')."""
+    path, raw = synthetic_merl
+
+    def spike(r):
+        r[:, 6, 20, 30] = value
+
+    bad = _with(raw, tmp_path / "spike.binary", spike)
+    clean = mf.fit.fit(mf.measured.load(path), 48)
+    with pytest.warns(RuntimeWarning, match=r"spike\.binary: 1 sample"):
+        fitted = mf.fit.fit(mf.measured.load(bad), 48)
+    np.testing.assert_allclose(fitted.distribution.ndf_table, clean.distribution.ndf_table, rtol=1e-3, atol=1e-9)
+    np.testing.assert_allclose(fitted.fresnel.values, clean.fresnel.values, atol=2e-3)
+    assert fitted.to_ggx().distribution.alpha_x == pytest.approx(clean.to_ggx().distribution.alpha_x, rel=1e-3)
+
+
+def test_all_huge_samples_are_refused_at_once(synthetic_merl, tmp_path):
+    """A file whose samples are all 1e300: one line naming the file and the count, before
+    any solve (it spun ~580 s on NaNs)."""
+    import time
+    path, raw = synthetic_merl
+
+    def fill(r):
+        r[...] = 1e300
+
+    bad = _with(raw, tmp_path / "huge.binary", fill)
+    t = time.perf_counter()
+    with pytest.raises(MicrofacetError, match=r"huge\.binary: 1458000 of 1458000 measured samples exceed"):
+        mf.fit.fit(mf.measured.load(bad), 48)
+    assert time.perf_counter() - t < 10.0
+
+
+def test_overflowing_analytic_input_is_refused():
+    """Not a file: values beyond float64's squares are refused with one line, not solved."""
+    lobe = _input(mf.GGX, alpha=0.3)
+
+    class Huge(mf.BRDF):
+        def eval(self, wi, wo):
+            return 1e200 * lobe.eval(wi, wo)
+
+    with pytest.raises(MicrofacetError, match="backscattering reaches"):
+        mf.fit.fit(Huge(), 16)

@@ -24,7 +24,9 @@ keeps the eigenproblem linear and nonnegative).
 """
 from __future__ import annotations
 
+import os
 import threading
+import warnings
 
 import numpy as np
 
@@ -34,7 +36,8 @@ from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
            "smith_kernel_anisotropic", "AzimuthalKernel", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
-           "fresnel_samples", "solve_fresnel", "box_qp", "chi2_residual", "albedo_rows", "extract_fresnel"]
+           "fresnel_samples", "solve_fresnel", "smooth_table_qp", "table_variation", "TV_MAX", "box_qp", "chi2_residual", "albedo_rows", "extract_fresnel",
+           "screen_measured", "MEASURED_MAX"]
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
 BACKSCATTER_GAFS = ("masking", "height_correlated")
@@ -62,6 +65,43 @@ def backscattering(brdf, theta, phi=0.0) -> np.ndarray:
     """Luminance of ``f_r(o, o)`` at ``o = (theta, phi)``, garbage set to 0 (Eq. 4.1)."""
     o = _directions(theta, phi)
     return _clean(luminance(_clean(brdf.eval(o, o))))
+
+
+#: Largest plausible value of a measured BRDF (sr^-1): a MERL sample of a mirror-like metal
+#: reaches a few 1e3 (chrome 3.9e3); above this a value is an overflow or a corrupt sample.
+MEASURED_MAX = 1e6
+#: Share of the measured samples above :data:`MEASURED_MAX` that :func:`screen_measured`
+#: ignores (as unmeasured) rather than refuses.
+IGNORED_SHARE = 1e-3
+
+
+def screen_measured(brdf):
+    """``brdf``, or for a MERL BRDF (:class:`~microfacet.measured.MERLBRDF`) with samples
+    above :data:`MEASURED_MAX` (finite but huge: 1e300, 1.75e308, which overflow the fit's
+    products into NaN), a copy in which they are unmeasured (interpolated from their
+    measured neighbours, as the MERL reader treats missing samples) when they are few (at
+    most :data:`IGNORED_SHARE` of the measured samples; a ``RuntimeWarning`` names the file
+    and their count), or a :class:`~microfacet.errors.MicrofacetError` naming the file and
+    the count when they are more. Costs one pass over the table (~5 ms) when all is well.
+    Example: ``fit(screen_measured(load(path)))`` (:func:`microfacet.fit.fit` calls it)."""
+    from ..measured import MERLBRDF
+    if not isinstance(brdf, MERLBRDF):
+        return brdf
+    values, valid = brdf.values, brdf.valid
+    top = float(np.max(values))
+    if not top > MEASURED_MAX:
+        return brdf
+    bad = valid & np.any(values > MEASURED_MAX, axis=-1)
+    n_bad, n_valid = int(np.count_nonzero(bad)), int(np.count_nonzero(valid))
+    if n_bad == 0:
+        return brdf
+    name = os.fspath(brdf.path)
+    if n_bad > IGNORED_SHARE * n_valid:
+        raise MicrofacetError(f"{name}: {n_bad} of {n_valid} measured samples exceed {MEASURED_MAX:g} sr^-1 "
+                              f"(largest {top:.3g}): not a physical BRDF (overflow or a corrupt file)")
+    warnings.warn(f"{name}: {n_bad} sample(s) above {MEASURED_MAX:g} sr^-1 (largest {top:.3g}) ignored "
+                  "as unmeasured", RuntimeWarning, stacklevel=3)
+    return MERLBRDF(values, valid & ~bad, brdf.path)
 
 
 # ------------------------------------------------------------------ Smith kernel
@@ -323,8 +363,12 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     Without the diffuse term (``k_d0 = 0``, configurations with ``f_id = 0`` dropped) and
     without the bounds and the smoothing, the solution at nodes sampled only there is
     ``sum f / sum f_id``, the ``f_id``-weighted mean of ``f / f_id`` (Eq. 4.11). The second-
-    difference penalty only fills nodes that no configuration sees. The bounded problem is
-    solved on its normal equations (``n x n``) by :func:`box_qp`. ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
+    difference penalty (weight ``smoothing`` times the mean diagonal of the normal
+    equations) only fills nodes that no configuration sees, unless the table would vary by
+    more than :data:`TV_MAX` times its range: then it is raised until it does not
+    (:func:`smooth_table_qp`; without it, measured materials gave tables flipping between 0
+    and 1 across ``theta_d`` under the albedo term and constraint).
+    Each channel's problem is solved on its normal equations (``n x n``) by :func:`box_qp`. ``kd_max`` ``(3,)`` bounds ``k_d`` per channel (e.g. by the
     backscattering, which the base may not exceed).
 
     ``albedo = (a, a_data)`` (:func:`albedo_rows`) adds the energy constraints
@@ -383,25 +427,25 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
             h += np.bincount(ca * n_var + cb, weights=wva * vb, minlength=n_var * n_var)
         b += np.stack([np.bincount(ca, weights=wva * f[:, c], minlength=n_var) for c in range(3)], axis=1)
     h = h.reshape(n_var, n_var)
-    lap = np.diff(np.eye(n_d), 2, axis=0)
-    h[:n_d, :n_d] += smoothing * np.trace(h) / n_var * (lap.T @ lap) + 1e-14 * np.trace(h) * np.eye(n_d)
-    if diffuse:
-        h[n_d, n_d] += 1e-14 * np.trace(h)
+    if not np.all(np.isfinite(h)) or not np.all(np.isfinite(b)):
+        raise MicrofacetError("fit: the Fresnel system is not finite (the BRDF's values overflow float64 "
+                              "products: are they physical?)")
     lo = np.zeros(n_var)
     x = np.empty((n_var, 3))
     energy = None if albedo is None else (albedo[0], np.asarray(albedo[1], np.float64) + energy_margin)
-    for c in range(3):
+    mu = None
+    for c in (1, 0, 2):                    # green first: its smoothing starts the others' search
         hi = np.ones(n_var)
         if diffuse and kd_max is not None:
             hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
         hc, bc = h, b[:, c]
         if albedo is not None and albedo_weight > 0:
+            # the data term divided by the data's energy (a relative misfit), plus the albedo term
             energy_c = max(float(np.sum(w * f[:, c] ** 2)), 1e-300)
             ha, ba = _albedo_objective(albedo, c, diffuse, albedo_weight)
-            hc, bc = hc + energy_c * ha, bc + energy_c * ba
-        x[:, c] = box_qp(hc, bc, lo, hi)
-        if energy is not None:
-            x[:, c] = _energy_constrained(hc, bc, x[:, c], (lo, hi), energy, c, diffuse)
+            hc, bc = hc / energy_c + ha, bc / energy_c + ba
+        x[:, c], mu = smooth_table_qp(hc, bc, (lo, hi), n_d, smoothing,
+                                      None if energy is None else (energy, c, diffuse), hint=mu)
     rgb = x[:n_d]
     kd = x[n_d] if diffuse else np.zeros(3)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
@@ -415,6 +459,125 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
         seen = a_data > 0
         misfit += albedo_weight**2 * float(np.mean((a_fit[seen] / a_data[seen] - 1.0) ** 2))
     return out + (misfit,)
+
+
+#: Largest total variation of a fitted Fresnel table over its range, per channel
+#: (:func:`smooth_table_qp`; issue: tables alternating between 0 and 1 across ``theta_d``).
+TV_MAX = 2.0
+#: Smoothing weights ``mu`` tried by :func:`smooth_table_qp` past the default (a factor 10
+#: apart: the penalty's smoothing length, ~``mu^(1/4)`` nodes, grows 1.8x a step; at the
+#: top, ~18 nodes, the energy-constrained solve is still well conditioned), and the first
+#: one tried (the smallest that meets the bound on most measured materials).
+SMOOTHING_STEPS = tuple(10.0**e for e in range(-5, 6))
+SMOOTHING_START = 100.0
+
+
+def table_variation(values) -> np.ndarray:
+    """Total variation of a table over its range, per column: ``sum_k |F_{k+1} - F_k| /
+    (max F - min F)`` (1 for a monotone table, 1 for a constant one; ``values`` ``(n,)`` or
+    ``(n, C)``). Fresnel tables of the fits keep it at most :data:`TV_MAX`. Example:
+    ``table_variation([0, 1, 0, 1]) == 3.0``."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v.reshape(len(v), -1)
+    tv = np.sum(np.abs(np.diff(v, axis=0)), axis=0)
+    span = np.max(v, axis=0) - np.min(v, axis=0)
+    flat = span <= 1e-12 * np.maximum(np.max(np.abs(v), axis=0), 1e-300)
+    out = np.where(flat, 1.0, tv / np.where(flat, 1.0, span))
+    return out if np.ndim(values) > 1 else float(out[0])
+
+
+def smooth_table_qp(h: np.ndarray, g: np.ndarray, bounds, n_d: int, smoothing: float = 1e-6, energy=None,
+                    tv_max: float = TV_MAX, hint=None):
+    """``argmin 1/2 x^T h x - g^T x + mu s / 2 |Delta^2 x[:n_d]|^2`` under ``bounds`` (and,
+    with ``energy = ((a, a_data), c, diffuse)``, the albedo rows of :func:`_energy_constrained`)
+    whose table ``x[:n_d]`` varies by at most ``tv_max`` times its range
+    (:func:`table_variation`): a second-difference Tikhonov penalty (Tikhonov & Arsenin
+    1977; Twomey 1963) scaled to the data, ``s`` the mean diagonal of ``h`` over the table's
+    nodes, with the smallest ``mu`` among ``smoothing`` and :data:`SMOOTHING_STEPS` above it
+    for which the bound holds (a walk from ``hint``, e.g. another channel's, or
+    :data:`SMOOTHING_START`, down while it holds or up until it holds; each solve started
+    from the nearest one's solution). Each problem is solved by :func:`box_qp` (then :func:`_energy_constrained`).
+    ``mu = smoothing`` (1e-6: it only fills nodes no configuration sees) when the bound
+    holds there, as for every smooth Fresnel term of an analytic BRDF (round trips
+    unchanged). If no ``mu`` meets it, the table is the weighted monotone (isotonic,
+    pool-adjacent-violators; Ayer et al. 1955) projection of the smoothest solution,
+    nondecreasing or nonincreasing whichever is nearer, scaled down to meet the albedo
+    rows: its variation is then its range. ``x[n_d:]`` (a diffuse base) is not penalized.
+    Returns ``(x, mu)`` (``mu`` inf for the monotone projection)."""
+    lo, hi = bounds
+    lap = np.diff(np.eye(n_d), 2, axis=0)
+    penalty = lap.T @ lap
+    scale = max(float(np.trace(h[:n_d, :n_d])) / n_d, 1e-300)
+    ridge = 1e-14 * max(float(np.trace(h)), 1e-300)
+    solved = {}
+
+    def solve(i):
+        """``(x, h + penalty, bound holds)`` at ``mus[i]``, started from the nearest solved one.
+        Solved for ``z = sqrt(diag) x`` (Jacobi scaling: a stiff penalty otherwise leaves the
+        projected Newton steps of :func:`box_qp` on the variables held at a bound tiny)."""
+        if i not in solved:
+            hm = h.copy()
+            hm[:n_d, :n_d] += mus[i] * scale * penalty
+            hm[np.diag_indices_from(hm)] += ridge
+            d = np.sqrt(np.diag(hm))
+            hs, gs = hm / d[:, None] / d[None, :], g / d
+            near = min(solved, key=lambda j: abs(j - i), default=None)
+            z = box_qp(hs, gs, lo * d, hi * d, x0=None if near is None else solved[near][0] * d)
+            if energy is not None:
+                (a, a_data), c, diffuse = energy
+                a = np.array(a, dtype=np.float64)
+                a[:, :len(d)] /= d
+                z = _energy_constrained(hs, gs, z, (lo * d, hi * d), (a, a_data), c, diffuse)
+            x = z / d
+            solved[i] = (x, hm, table_variation(x[:n_d]) <= tv_max)
+        return solved[i]
+
+    mus = [smoothing] + [m for m in SMOOTHING_STEPS if m > smoothing]
+    if solve(0)[2]:
+        return solve(0)[0], mus[0]
+    start = hint if hint in mus[1:] else min((m for m in mus[1:] if m >= SMOOTHING_START), default=mus[-1])
+    i = mus.index(start)
+    if solve(i)[2]:                              # down while the bound holds
+        while i > 1 and solve(i - 1)[2]:
+            i -= 1
+        return solve(i)[0], mus[i]
+    while i + 1 < len(mus):                      # up until it holds
+        i += 1
+        if solve(i)[2]:
+            return solve(i)[0], mus[i]
+    x, hm, _ = solve(i)
+    return _monotone_table(x, hm, n_d, energy), np.inf
+
+
+def _monotone_table(x, h, n_d: int, energy) -> np.ndarray:
+    """``x`` with its table ``x[:n_d]`` replaced by its isotonic regression (weights the
+    diagonal of ``h``), in the direction of least weighted change, then scaled down so that
+    the albedo rows of ``energy`` hold (all rows are nonnegative)."""
+    w = np.maximum(np.diag(h)[:n_d], 1e-300)
+    t = x[:n_d]
+    up, down = _isotonic(t, w), _isotonic(t[::-1], w[::-1])[::-1]
+    x = x.copy()
+    x[:n_d] = up if np.sum(w * (up - t) ** 2) <= np.sum(w * (down - t) ** 2) else down
+    if energy is not None:
+        (a, a_data), c, diffuse = energy
+        rows = _albedo_rows_of(a, diffuse)
+        excess = np.max((rows @ x) / np.maximum(a_data[:, c], 1e-300))
+        if excess > 1.0:
+            x = x / excess
+    return x
+
+
+def _isotonic(y: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted nondecreasing least-squares fit of ``y`` (pool adjacent violators)."""
+    means, weights, counts = [], [], []
+    for yi, wi in zip(y, w):
+        means.append(float(yi)), weights.append(float(wi)), counts.append(1)
+        while len(means) > 1 and means[-2] > means[-1]:
+            m2, w2, c2 = means.pop(), weights.pop(), counts.pop()
+            w1 = weights[-1]
+            means[-1] = (means[-1] * w1 + m2 * w2) / (w1 + w2)
+            weights[-1], counts[-1] = w1 + w2, counts[-1] + c2
+    return np.repeat(means, counts)
 
 
 def _albedo_rows_of(a, diffuse: bool) -> np.ndarray:
@@ -487,9 +650,28 @@ def golden_section(f, a: float, b: float, xatol: float, lower=None) -> tuple[flo
 def spd_solve(h: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``h^-1 b`` for a symmetric positive definite ``h`` by its Cholesky factor
     ``h = L L^T`` (``L^T x = L^-1 b``; NumPy only, so a fit does not import
-    ``scipy.linalg``, ~0.03 s); ``numpy.linalg.LinAlgError`` if ``h`` is not positive definite."""
-    el = np.linalg.cholesky(h)
-    return np.linalg.solve(el.T, np.linalg.solve(el, b))
+    ``scipy.linalg``, ~0.03 s). A matrix that is positive semidefinite but not numerically
+    definite (rounding in a sum of terms of very different scales, e.g. a sharp lobe's data
+    term with a low-rank albedo term; unseen nodes) is solved with its diagonal scaled to 1
+    (Jacobi) and a ridge of 1e-12, then 1e-9 and 1e-6 of that unit diagonal (Tikhonov), and
+    by least squares (``numpy.linalg.lstsq``, minimum norm) if even that fails."""
+    try:
+        el = np.linalg.cholesky(h)
+        return np.linalg.solve(el.T, np.linalg.solve(el, b))
+    except np.linalg.LinAlgError:
+        pass
+    d = np.sqrt(np.maximum(np.abs(np.diag(h)), 1e-300))
+    hs = h / d[:, None] / d[None, :]
+    bs = b / (d[:, None] if np.ndim(b) > 1 else d)
+    for ridge in (1e-12, 1e-9, 1e-6):
+        try:
+            el = np.linalg.cholesky(hs + ridge * np.eye(len(hs)))
+        except np.linalg.LinAlgError:
+            continue
+        y = np.linalg.solve(el.T, np.linalg.solve(el, bs))
+        return y / (d[:, None] if np.ndim(b) > 1 else d)
+    y = np.linalg.lstsq(hs, bs, rcond=None)[0]
+    return y / (d[:, None] if np.ndim(b) > 1 else d)
 
 
 def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float = 1e-12,
@@ -503,13 +685,18 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     ``g = r^T y``. ``x0``: the start (projected on the box; default the unconstrained
     minimizer projected), e.g. the solution of a nearby problem, whose active set it guesses."""
     scale = max(float(np.max(np.abs(g))), 1e-300)
+    if not np.isfinite(scale + float(np.sum(h))):
+        raise MicrofacetError("fit: a least-squares system is not finite (do the BRDF's values overflow?)")
     # np.clip, np.ix_, np.linalg.norm and np.array_equal spelled with ufuncs and masks (the
     # same values): this loop runs ~10^4 times in a coat fit's energy-constrained solves
     x = np.minimum(np.maximum(spd_solve(h, g) if x0 is None else x0, lo), hi)
+    # the gradient's rounding error (~eps |h| |x|): a stiff h (a strong smoothing penalty)
+    # cannot bring it below tol |g|
+    floor = max(tol * scale, 4e-16 * float(np.max(np.abs(h).sum(axis=1))) * float(np.max(np.abs(x))))
     for _ in range(max_iter):
         grad = h @ x - g
         step = x - np.minimum(np.maximum(x - grad, lo), hi)
-        if np.max(np.abs(step)) <= tol * scale:
+        if np.max(np.abs(step)) <= floor:
             break
         eps = min(float(np.sqrt(step.dot(step))), 1e-3)
         held = ((x <= lo + eps) & (grad > 0)) | ((x >= hi - eps) & (grad < 0))
@@ -592,7 +779,9 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     all by the same stratified ``n_u x n_u`` importance sampling of the defensive mixture
     ``1/2`` visible normals of ``ideal`` + ``1/2`` cosine lobe (each on the whole grid,
     weights of the balance heuristic), so that a model equal to the data has exactly the
-    data's estimate (the base's column is the estimate of 1, not 1). Returns ``(a,
+    data's estimate (the base's column is the estimate of 1, not 1). Directions where the
+    data are not finite or negative (garbage at grazing angles) are left out of both the
+    rows and the data's albedo, so that they compare over the same directions. Returns ``(a,
     a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``; ``brdf=None``: the model's rows alone
     (``a_data`` None), e.g. to bound a fit's own albedo."""
     from ..brdf import Lambertian
@@ -608,6 +797,16 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     pdf = 0.5 * ideal.pdf(wi, wo) + 0.5 * np.concatenate([Lambertian(1.0).pdf(wi_s, wo_v), pdf_c], axis=1)
     ok = (pdf > 0) & (wi[..., 2] > 0)
     inv = np.where(ok, 1.0 / np.where(ok, pdf, 1.0), 0.0) / (2 * len(u))
+    f = None
+    if brdf is not None:
+        # per strategy: the data's values on the cosine samples repeat from fit to fit (a
+        # measured BRDF remembers its last direction sets)
+        f = np.concatenate([np.asarray(brdf.eval(w, wo_v), dtype=np.float64) for w in (wi_s, wi_c)], axis=1)
+        # directions where the data are garbage (NaN, infinite, negative) leave both sides
+        # of the comparison, not only the data's (which would read them as black)
+        seen = np.all(np.isfinite(f) & (f >= 0), axis=-1)
+        if not np.all(seen):
+            inv = np.where(seen, inv, 0.0)
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
     # cos theta_d = o . h = sqrt((1 + i . o) / 2) for unit i, o (no half vector per sample)
     k0_s, t_s = _hats(np.sqrt(np.maximum(0.5 * (1.0 + dot(wi_s, wo_v)), 0.0)), n_d)
@@ -618,12 +817,9 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     a[:, :n_d] = (np.bincount(key, weights=(fid * (1.0 - t)).ravel(), minlength=size)
                   + np.bincount(key + 1, weights=(fid * t).ravel(), minlength=size)).reshape(v_count, n_d)
     a[:, n_d] = np.sum(np.maximum(wi[..., 2], 0.0) / np.pi * inv, axis=1)
-    if brdf is None:
+    if f is None:
         return a, None
-    # per strategy: the data's values on the cosine samples repeat from fit to fit (a
-    # measured BRDF remembers its last direction sets)
-    f = np.concatenate([np.asarray(brdf.eval(w, wo_v), dtype=np.float64) for w in (wi_s, wi_c)], axis=1) * wi[..., 2:]
-    f = np.where(np.isfinite(f) & (f > 0), f, 0.0) * inv[..., None]
+    f = np.where(np.isfinite(f) & (f > 0), f * wi[..., 2:], 0.0) * inv[..., None]
     return a, f.sum(axis=1)
 
 

@@ -454,6 +454,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
     model = _backscatter_model(backscatter_gaf, shadowing)
+    brdf = extract.screen_measured(brdf)         # huge samples: ignored if few, refused if many
     n = int(resolution)
     if n < 4:
         raise ValueError(f"resolution must be >= 4, got {resolution!r}")
@@ -467,6 +468,9 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     else:
         phi = None
         f_back = extract.backscattering(brdf, theta[:-1])
+    if not float(np.max(f_back)) <= 1e100:       # the normal equations square the values
+        raise MicrofacetError(f"fit: {brdf!r}: backscattering reaches {float(np.max(f_back)):.3g}, beyond what "
+                              "a fit's float64 arithmetic holds (are the values physical?)")
     samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1), isotropic=not anisotropic)
     views = _energy_views(anisotropic)
 
