@@ -874,6 +874,9 @@ def test_albedo_weight_brings_the_fit_to_the_data_albedo(path):
 
 
 # ------------------------------------------------------------ smooth Fresnel tables (issue 24)
+TV_BOUND = extract.TV_MAX * (1.0 + extract.TV_ROUNDING)     # 2x the range, to rounding
+
+
 def test_table_variation():
     assert extract.table_variation([0.0, 1.0, 0.0, 1.0]) == 3.0
     assert extract.table_variation([0.2, 0.3, 0.5, 0.9]) == pytest.approx(1.0)
@@ -900,7 +903,7 @@ def test_smooth_table_qp_bounds_the_variation():
     raw = extract.box_qp(h, g, lo, hi)
     assert extract.table_variation(raw) > 10.0                    # the unregularized solve flips
     x, mu = extract.smooth_table_qp(h, g, (lo, hi), n_d)
-    assert extract.table_variation(x) <= extract.TV_MAX and np.all((x >= 0) & (x <= 1))
+    assert extract.table_variation(x) <= TV_BOUND and np.all((x >= 0) & (x <= 1))
     assert np.isfinite(mu) and mu > 1e-6
     # a bound no table meets (below 1): the monotone projection, whose variation is its range
     x1, mu1 = extract.smooth_table_qp(h, g, (lo, hi), n_d, tv_max=0.5)
@@ -942,7 +945,7 @@ def test_corpus_fits_have_smooth_fresnel_tables(corpus, name):
               "beckmann": f.to_beckmann(reference=m).fresnel.values}
     for kind, values in tables.items():
         assert np.all((values >= 0) & (values <= 1)), kind
-        assert np.all(extract.table_variation(values) <= extract.TV_MAX), (kind, extract.table_variation(values))
+        assert np.all(extract.table_variation(values) <= TV_BOUND), (kind, extract.table_variation(values))
 
 
 # ------------------------------------------------------------ huge samples (issue 25 item 11)

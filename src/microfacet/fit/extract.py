@@ -464,6 +464,10 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
 #: Largest total variation of a fitted Fresnel table over its range, per channel
 #: (:func:`smooth_table_qp`; issue: tables alternating between 0 and 1 across ``theta_d``).
 TV_MAX = 2.0
+#: Relative slack of that bound for rounding: a table with one bump between equal ends has
+#: a variation of exactly twice its range, which rounding would otherwise pass or fail at
+#: random (and two evaluation paths of the same fit choose different smoothings).
+TV_ROUNDING = 1e-6
 #: Smoothing weights ``mu`` tried by :func:`smooth_table_qp` past the default (a factor 10
 #: apart: the penalty's smoothing length, ~``mu^(1/4)`` nodes, grows 1.8x a step; at the
 #: top, ~18 nodes, the energy-constrained solve is still well conditioned), and the first
@@ -491,7 +495,7 @@ def smooth_table_qp(h: np.ndarray, g: np.ndarray, bounds, n_d: int, smoothing: f
     """``argmin 1/2 x^T h x - g^T x + mu s / 2 |Delta^2 x[:n_d]|^2`` under ``bounds`` (and,
     with ``energy = ((a, a_data), c, diffuse)``, the albedo rows of :func:`_energy_constrained`)
     whose table ``x[:n_d]`` varies by at most ``tv_max`` times its range
-    (:func:`table_variation`): a second-difference Tikhonov penalty (Tikhonov & Arsenin
+    (:func:`table_variation`, to :data:`TV_ROUNDING`): a second-difference Tikhonov penalty (Tikhonov & Arsenin
     1977; Twomey 1963) scaled to the data, ``s`` the mean diagonal of ``h`` over the table's
     nodes, with the smallest ``mu`` among ``smoothing`` and :data:`SMOOTHING_STEPS` above it
     for which the bound holds (a walk from ``hint``, e.g. another channel's, or
@@ -529,7 +533,7 @@ def smooth_table_qp(h: np.ndarray, g: np.ndarray, bounds, n_d: int, smoothing: f
                 a[:, :len(d)] /= d
                 z = _energy_constrained(hs, gs, z, (lo * d, hi * d), (a, a_data), c, diffuse)
             x = z / d
-            solved[i] = (x, hm, table_variation(x[:n_d]) <= tv_max)
+            solved[i] = (x, hm, table_variation(x[:n_d]) <= tv_max * (1.0 + TV_ROUNDING))
         return solved[i]
 
     mus = [smoothing] + [m for m in SMOOTHING_STEPS if m > smoothing]
