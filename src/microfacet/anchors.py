@@ -42,7 +42,7 @@ import os
 
 import numpy as np
 
-from .brdf import BRDF
+from .brdf import BRDF, uniforms, unit_directions
 from .errors import MicrofacetError
 from .geometry import cosine_hemisphere_pdf, reflect, spherical_to_cartesian, square_to_cosine_hemisphere
 
@@ -54,26 +54,6 @@ _SGD_FIELDS = ("rhoD", "rhoS", "alpha", "p", "f0", "f1", "kap", "lambda", "c", "
 #: Columns of ``sgd_bagher2012_merl.csv`` after ``material`` (the ``error_*`` columns, the
 #: paper's fit error, are read but not used).
 SGD_COLUMNS = tuple(f"{f}_{c}" for f in _SGD_FIELDS for c in "rgb")
-_UNIT_TOLERANCE = 1e-5
-
-
-def _directions(w, name: str) -> np.ndarray:
-    """``w`` as float64 unit directions ``(..., 3)``; ``ValueError`` naming ``name`` otherwise."""
-    w = np.asarray(w, dtype=np.float64)
-    if w.shape[-1:] != (3,):
-        raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
-    if w.size and not np.all(np.abs(np.sum(w * w, axis=-1) - 1.0) <= _UNIT_TOLERANCE):
-        raise ValueError(f"{name} must be unit vectors (normalize them first)")
-    return w
-
-
-def _uniforms(u) -> np.ndarray:
-    u = np.asarray(u, dtype=np.float64)
-    if u.shape[-1:] != (2,):
-        raise ValueError(f"u must have a last axis of size 2, got shape {u.shape}")
-    if u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0):
-        raise ValueError("u must lie in [0, 1] (uniform random numbers)")
-    return u
 
 
 def _rgb(values, name: str) -> np.ndarray:
@@ -101,7 +81,7 @@ class _Published(BRDF):
     """Common evaluation scaffold: ``f_r`` from :meth:`_f` over the upper hemisphere pairs."""
 
     def _pairs(self, wi, wo):
-        wi, wo = np.broadcast_arrays(_directions(wi, "wi"), _directions(wo, "wo"))
+        wi, wo = np.broadcast_arrays(unit_directions(wi, "wi"), unit_directions(wo, "wo"))
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         h = wi + wo
         h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
@@ -120,7 +100,7 @@ class _Published(BRDF):
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)``."""
-        wi = _directions(wi, "wi")
+        wi = unit_directions(wi, "wi")
         f = self.eval(wi, wo) * np.maximum(wi[..., 2:3], 0.0)
         if out is not None:
             np.copyto(out, f)
@@ -211,7 +191,7 @@ class ABC(_Published):
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of :meth:`sample`: ``s p_lobe + (1 - s) cos theta_i / pi``."""
-        wi, wo = np.broadcast_arrays(_directions(wi, "wi"), _directions(wo, "wo"))
+        wi, wo = np.broadcast_arrays(unit_directions(wi, "wi"), unit_directions(wo, "wo"))
         s = self.spec_fraction
         p = (1.0 - s) * self._cosine_pdf(wi, wo)
         if s > 0:
@@ -224,7 +204,7 @@ class ABC(_Published):
     def sample(self, u, wo, out=None):
         """``(wi, weight, pdf)``: the lobe (probability ``spec_fraction``; half vector from
         ``D cos theta_h``, closed-form inverse) or the cosine, ``weight = eval_cos / pdf``."""
-        wo, u = _directions(wo, "wo"), _uniforms(u)
+        wo, u = unit_directions(wo, "wo"), uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         u = np.broadcast_to(u, shape + (2,))
         wo = np.broadcast_to(wo, shape + (3,))
@@ -300,7 +280,7 @@ class SGD(_Published):
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """``cos theta_i / pi`` (0 where either direction is below the horizon)."""
-        wi, wo = np.broadcast_arrays(_directions(wi, "wi"), _directions(wo, "wo"))
+        wi, wo = np.broadcast_arrays(unit_directions(wi, "wi"), unit_directions(wo, "wo"))
         p = self._cosine_pdf(wi, wo)
         if out is not None:
             np.copyto(out, p)
@@ -309,7 +289,7 @@ class SGD(_Published):
 
     def sample(self, u, wo, out=None):
         """Cosine-weighted ``(wi, weight, pdf)``, ``weight = eval_cos / pdf``."""
-        wo, u = _directions(wo, "wo"), _uniforms(u)
+        wo, u = unit_directions(wo, "wo"), uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         wo = np.broadcast_to(wo, shape + (3,))

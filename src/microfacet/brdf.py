@@ -21,7 +21,7 @@ from .distributions.base import SlopeDistribution
 from .geometry import (cosine_hemisphere_pdf, dot, half_vector, reflect,
                        square_to_cosine_hemisphere)
 
-__all__ = ["BRDF", "MicrofacetBRDF", "Lambertian", "GAFS", "UNIT_TOLERANCE"]
+__all__ = ["BRDF", "MicrofacetBRDF", "Lambertian", "GAFS", "UNIT_TOLERANCE", "unit_directions", "uniforms"]
 
 GAFS = ("smith", "vgroove", "normal_map")
 
@@ -94,6 +94,17 @@ def _uniforms(u, float32: bool = False) -> np.ndarray:
     u = _as_uniforms(u, float32)
     _check_uniforms(u)
     return u
+
+
+def unit_directions(w, name: str) -> np.ndarray:
+    """``w`` as float64 unit directions ``(..., 3)``, checked as every BRDF method checks its
+    ``wi``/``wo`` (one-line ``ValueError`` naming ``name``); for BRDFs defined elsewhere."""
+    return _dirs(w, name)
+
+
+def uniforms(u) -> np.ndarray:
+    """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]``, checked as :meth:`BRDF.sample` does."""
+    return _uniforms(u)
 
 
 def _fused(kernel, float32: bool, **inputs):

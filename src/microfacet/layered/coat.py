@@ -39,7 +39,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from .. import kernels
-from ..brdf import BRDF, UNIT_TOLERANCE, MicrofacetBRDF
+from ..brdf import BRDF, MicrofacetBRDF, uniforms, unit_directions
 from ..distributions import GGX, Beckmann
 
 __all__ = ["LayeredBRDF", "coat_albedo", "albedo_table", "lobe_albedo", "sampled_albedo", "lerp", "grid", "luminance",
@@ -243,27 +243,6 @@ def luminance(rgb) -> np.ndarray:
     return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
 
 
-def _directions(w, name: str) -> np.ndarray:
-    """``w`` as float64 unit directions ``(..., 3)``; ``ValueError`` naming ``name`` otherwise."""
-    w = np.asarray(w, dtype=np.float64)
-    if w.shape[-1:] != (3,):
-        raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
-    if not kernels.unit_deviation(np.ascontiguousarray(w)) <= UNIT_TOLERANCE:
-        raise ValueError(f"{name} must be unit vectors (| |w|^2 - 1 | <= {UNIT_TOLERANCE:g}; normalize them first)")
-    return w
-
-
-def _uniforms(u) -> np.ndarray:
-    u = np.asarray(u, dtype=np.float64)
-    if u.shape[-1:] != (2,):
-        raise ValueError(f"u must have a last axis of size 2, got shape {u.shape}")
-    if u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0):
-        bad = ~((u >= 0.0) & (u <= 1.0))
-        raise ValueError(f"u must lie in [0, 1] (uniform random numbers), got {float(u[bad][0])!r} "
-                         f"({int(bad.sum())} value(s) outside)")
-    return u
-
-
 def _into(out, result: np.ndarray, inputs) -> np.ndarray:
     if out is None:
         return result
@@ -367,8 +346,8 @@ class LayeredBRDF(BRDF):
         """The coat's sampler where ``u[..., 0] < p(mu_o)``, the base's elsewhere (``u[..., 0]``
         rescaled to ``[0, 1]``); returns ``(wi, eval_cos / pdf, pdf)`` of the mixture. Samples
         that the chosen sampler fails (pdf 0) have weight 0 and pdf 0."""
-        wo = _directions(wo, "wo")
-        u = _uniforms(u)
+        wo = unit_directions(wo, "wo")
+        u = uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         u = np.broadcast_to(u, shape + (2,))
         wo_b = np.broadcast_to(wo, shape + (3,))
