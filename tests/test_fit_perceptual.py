@@ -59,6 +59,20 @@ def test_two_lobes_recover_core_and_halo():
     assert judge(fits["two_lobes"]) < 0.5 * judge(fits["lobe"])          # one lobe cannot be both
 
 
+def test_mixture_follows_a_heavy_tail():
+    """A lobe whose tail falls as (1 - cos th_h)^-1.1 (Löw et al. 2012's ABC form, heavier
+    than any GGX lobe's ^-2): the mixture of GGX lobes halves one lobe's errors, within energy."""
+    from microfacet.anchors import ABC
+    from microfacet.metrics import LogError
+    data = ABC(kd=[0.2, 0.1, 0.05], A=[30.0, 28.0, 26.0], B=2000.0, C=1.1, ior=1.5)
+    fits = perceptual.fit_models(data, ("lobe", "mixture"))
+    log, image = LogError(data, n=2**14), ImageError(data, size=32)
+    assert log(fits["mixture"]) < 0.6 * log(fits["lobe"])
+    assert image(fits["mixture"]) < 0.7 * image(fits["lobe"])
+    assert all(type(b).__name__ in ("MicrofacetBRDF", "Lambertian") for b in fits["mixture"].brdfs)
+    assert np.max(directional_albedo(fits["mixture"], (0, 30, 60, 75, 85, 89))) <= 1.0 + 1e-3
+
+
 def test_coat_model_is_a_layered_brdf_within_energy():
     coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.02), fresnel=mf.fresnel.Dielectric(1.5))
     from microfacet.layered import LayeredBRDF
@@ -129,7 +143,7 @@ def fitted_file(tmp_path_factory):
 def test_fit_file_keeps_every_fit_and_the_best(fitted_file):
     path, summary = fitted_file
     names, best = mf.fit.fit_names(path)
-    assert names[0] == "tabulated" and {"lobe", "two_lobes"} <= set(names)
+    assert names[0] == "tabulated" and {"lobe", "two_lobes", "mixture"} <= set(names)
     assert best == summary["best"] and best in names
     images = {k: v["metrics"]["image"] for k, v in summary["fits"].items()}
     assert images[best] == min(images.values())
@@ -166,7 +180,7 @@ def test_corpus_materials_fit_within_energy_and_beat_the_old_default(name, corpu
     summary = fit_material(data, tmp_path / "fit.npz", picture=False)
     best = mf.fit.load(tmp_path / "fit.npz", model="best")
     assert np.max(directional_albedo(best, (0, 30, 60, 75, 85, 89))) <= 1.0 + 2e-3
-    for fit_name in ("lobe", "two_lobes"):
+    for fit_name in ("lobe", "two_lobes", "mixture"):
         ratios = AlbedoRatios(data)(mf.fit.load(tmp_path / "fit.npz", model=fit_name))
         counted = AlbedoRatios(data).ref > 0.03
         assert np.all(ratios[counted] <= 1.01 + 0.015), (fit_name, ratios)

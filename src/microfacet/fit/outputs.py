@@ -295,7 +295,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
 
 
 #: The models of :mod:`microfacet.fit.perceptual` that every fit tries (``coat=True`` adds ``"coat"``).
-PERCEPTUAL_MODELS = ("lobe", "two_lobes")
+PERCEPTUAL_MODELS = ("lobe", "two_lobes", "mixture")
 #: Sphere size (px) of the image error that chooses the best fit (:class:`microfacet.metrics.ImageError`).
 IMAGE_SIZE = 32
 #: Pairs of the log error reported per fit (:class:`microfacet.metrics.LogError`).

@@ -18,6 +18,12 @@ and at every view up to 89 deg the total stays below 1 (penalty residuals of wei
 * ``"two_lobes"``: a sharp core and a wide halo, each with its own Schlick term, plus a
   base (metals and metallic paints: Cook & Torrance 1982 used two lobes for the same
   reason; Löw et al. 2012 Sec. 6);
+* ``"mixture"``: a sum of GGX lobes on a fixed ladder of roughnesses ``alpha_0 1.5^k``
+  (``alpha_0`` fitted in ``[ALPHA_MIN, 1.5 ALPHA_MIN]``, 16 rungs up to 1), each with its
+  own Schlick term, plus a base: a non-negative mixture of GGX distributions is a
+  distribution whose tail can fall as slowly as the data's (Löw et al. 2012's ABC fits have
+  ``D ~ (1 - cos th_h)^-C`` with ``C`` ~1-2 where one GGX lobe falls as ``^-2``); lobes left
+  empty by the bounds are dropped;
 * ``"coat"``: a dielectric coat of index ``eta`` and its own roughness over a base (a lobe
   plus a Lambertian term) lit through the coat's transmission,
   ``f = f_coat + (1 - E_c(mu_i))(1 - E_c(mu_o)) f_base``
@@ -54,7 +60,7 @@ __all__ = ["MODELS", "Geometry", "Target", "Model", "target", "fit_model", "fit_
            "lobe_factor", "PENALTY"]
 
 #: The models of :func:`fit_models`, in the order they are fitted.
-MODELS = ("lobe", "two_lobes", "coat")
+MODELS = ("lobe", "two_lobes", "mixture", "coat")
 #: Weight of the energy penalty residuals (a 1 % excess costs ~(0.01 PENALTY)^2).
 PENALTY = 10.0
 #: Weight of the penalty below the albedo band (data whose albedo falls faster with the
@@ -235,6 +241,8 @@ def _lobes_brdf(q, y):
     parts, weights = [], []
     for j, lq in enumerate(q):
         f0, f90 = y[4 * j:4 * j + 3], y[4 * j + 3]
+        if max(np.max(f0), f90) < EMPTY_LOBE:    # an empty lobe (most of the mixture's)
+            continue
         parts.append(_ggx_lobe(np.exp(lq), f0, f90))
         weights.append(_luminance(f0) + 0.05 * f90)
     kd = np.clip(y[-3:], 0.0, 1.0)
@@ -242,6 +250,30 @@ def _lobes_brdf(q, y):
         parts.append(Lambertian(kd))
         weights.append(_luminance(kd))
     return _sum(parts, weights)
+
+
+#: A lobe whose ``f0`` and ``f90`` are all below this is left out of the BRDF (its
+#: albedo is below ~1e-3 at every view).
+EMPTY_LOBE = 1e-3
+#: Roughness ratio between the lobes of the ``"mixture"`` model, and their number.
+MIXTURE_RATIO, MIXTURE_LOBES = 1.5, 16
+
+
+def _ladder(q) -> np.ndarray:
+    """Log roughnesses of the mixture's lobes: ``alpha_0 RATIO^k``, capped at :data:`ALPHA_MAX`."""
+    return np.minimum(q[0] + np.log(MIXTURE_RATIO) * np.arange(MIXTURE_LOBES), np.log(ALPHA_MAX))
+
+
+def _mixture_basis(q, g):
+    return _lobes_basis(_ladder(q), g)
+
+
+def _mixture_brdf(q, y):
+    return _lobes_brdf(_ladder(q), y)
+
+
+def _mixture_starts(previous):
+    return [np.array([np.log(ALPHA_MIN) + 0.5 * np.log(MIXTURE_RATIO)])]
 
 
 def _lobe_starts(previous):
@@ -290,6 +322,8 @@ def _log_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
 MODEL_SPECS = {
     "lobe": Model("lobe", _log_bounds(1), _lobes_mix(1), _lobes_basis, _lobes_brdf, _lobe_starts),
     "two_lobes": Model("two_lobes", _log_bounds(2), _lobes_mix(2), _lobes_basis, _lobes_brdf, _two_lobe_starts),
+    "mixture": Model("mixture", (np.array([np.log(ALPHA_MIN)]), np.array([np.log(ALPHA_MIN * MIXTURE_RATIO)])),
+                     _lobes_mix(MIXTURE_LOBES), _mixture_basis, _mixture_brdf, _mixture_starts),
     "coat": Model("coat", (np.array([np.log(ALPHA_MIN), ETA_MIN, np.log(ALPHA_MIN)]),
                            np.array([np.log(ALPHA_MAX), ETA_MAX, np.log(ALPHA_MAX)])), _lobes_mix(1),
                   _coat_basis, _coat_brdf, _coat_starts),
