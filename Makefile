@@ -6,13 +6,13 @@ OUT    ?= demo-output
 # batch sizes of `make bench`'s scaling table (1e8 needs ~12 GB: SCALING=1e4,1e5,1e6,1e7,1e8)
 SCALING ?= 1e4,1e5,1e6,1e7
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench docs clean
 
 $(VENV)/.installed: pyproject.toml
-	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask, view and export extras (pip)"
+	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask, view, export and docs extras (pip)"
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask,view,export]"
+	$(PY) -m pip install --quiet -e ".[test,mitsuba,dask,view,export,docs]"
 	touch $@
 
 # llvm_ad_rgb (Mitsuba plugins) needs a system libLLVM >= 16: installed where apt and root
@@ -43,10 +43,14 @@ demo: setup
 test: setup
 	$(PY) -m pytest -q -n auto --maxprocesses 4
 
+# the docs site (mkdocs.yml: MkDocs + Material + mkdocstrings), warnings as errors, into site/
+docs: $(VENV)/.installed
+	DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
 bench: setup
 	$(PY) benchmarks/bench_brdf.py --scaling $(SCALING)
 	$(PY) benchmarks/bench_measured.py
 	$(PY) benchmarks/bench_view.py
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache
+	rm -rf $(VENV) $(OUT) .pytest_cache site

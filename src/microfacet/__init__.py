@@ -13,7 +13,7 @@ import importlib
 
 from .errors import MicrofacetError
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 __all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError",
            "SlopeDistribution", "batch", "fit", "fresnel", "geometry", "glints", "leadr", "measured"]
 

@@ -326,10 +326,18 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
         When another batch writes into ``out_dir``: wait for it (default; a
         ``RuntimeWarning`` says so), else raise :class:`microfacet.io.atomic.FolderBusy`.
 
-    Returns the summary rows in input order (also written as ``summary.csv`` and
-    ``summary.md``). Raises :class:`MicrofacetError` for no inputs, a bad output folder or a
-    scheduler that cannot be reached (then nothing is written); ``KeyboardInterrupt`` after
-    writing the summary of what was done.
+    Returns
+    -------
+    list of dict
+        The summary rows in input order (also written as ``summary.csv`` and ``summary.md``).
+
+    Raises
+    ------
+    MicrofacetError
+        For no inputs, a bad output folder or a scheduler that cannot be reached (then
+        nothing is written).
+    KeyboardInterrupt
+        After writing the summary of what was done.
     """
     task = get_task(task, **options)
     if jobs is not None and scheduler is not None:

@@ -67,6 +67,8 @@ class SlopeDistribution:
     mean_slope : (float, float)
         Mean slope ``(x~n, y~n)`` of the sheared (noncentral) surface (Eq. 3.2).
 
+    Notes
+    -----
     Subclasses provide the standard-form functions ``p22_std``, ``p1_std``,
     ``lambda_std``, ``sample_visible_std``, ``sample_p22_std`` and
     ``second_moment_std``.

@@ -562,6 +562,8 @@ class TabulatedAnisotropic(_Tabulated):
         Elevation resolution of the projected-area table (default ``n_theta``); its nodes
         ``theta = pi/2 sin^2(pi s / 2)`` are dense at the normal and at grazing angles.
 
+    Notes
+    -----
     ``ln D`` is first refined :data:`PHI_REFINE` times in azimuth by periodic cubic
     (Catmull-Rom) interpolation of the node values (linear next to zeros of the table),
     then interpolated log-bilinearly on the refined grid: cubic accuracy in ``phi`` with

@@ -16,10 +16,10 @@ format could not carry, and the image error (:class:`microfacet.metrics.ImageErr
 Bieron & Peers 2020) of the exported material — re-read from the written file and rebuilt as
 a library BRDF by the inverse mapping — against the library's fit, measured at export time
 (and, for a fit file, against its tabulated fit, the closest stand-in for the data, with
-the same figure for every other analytic fit of the file). docs/export.md has every formula.
+the same figure for every other analytic fit of the file). The user guide "Exports" has every formula.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> report = export(mf.MicrofacetBRDF(mf.GGX(alpha=0.1)), "gltf", "sphere.glb")   # doctest: +SKIP
 >>> report["image_error"]["exported_vs_fit"]                                      # doctest: +SKIP

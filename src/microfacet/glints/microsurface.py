@@ -721,8 +721,8 @@ class LobeMixture:
             Floor of each lobe's principal slope standard deviations (Sec. 3.2, 0.01).
         samples : int
             Quadrature points per texel and axis for the lobe moments (Eq. 6).
-        cutoff, slope_cutoff : float
-            Truncation of the footprint weights (standard deviations of ``Sigma_P +
+        **kwargs
+            ``cutoff``, ``slope_cutoff`` (float): truncation of the footprint weights (standard deviations of ``Sigma_P +
             sigma_k^2``) and of the lobes' slope boxes of the hierarchy (Sec. 5).
         """
         return cls.from_slopes(load_slopes(path_or_array, encoding, z), h, sigma_eps,

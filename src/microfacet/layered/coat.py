@@ -264,6 +264,8 @@ class LayeredBRDF(BRDF):
         :class:`~microfacet.MicrofacetBRDF`, :class:`microfacet.fit.SumBRDF`, another
         :class:`LayeredBRDF`...
 
+    Notes
+    -----
     ``sample`` picks the coat with probability ``p(mu_o)`` (:meth:`coat_probability`), the
     base otherwise (the first uniform, rescaled, drives the chosen sampler); ``pdf`` is the
     mixture ``p pdf_c + (1 - p) pdf_b`` and the weight ``eval_cos / pdf``. Construction

@@ -1,0 +1,155 @@
+"""Pages generated at docs-build time (mkdocs-gen-files).
+
+* ``cli-reference.md``: every ``microfacet`` command and subcommand, walked from the argparse
+  parser of :func:`microfacet.cli.build_parser` (usage, description, one table row per
+  argument), so the reference is the parser itself.
+* ``results/*.md``: the Markdown that the experiments and benchmarks write
+  (``experiments/results/*.md``, ``benchmarks/results/*.md``), included as written, with the
+  pictures they link to; ``results/index.md`` lists them with the command that regenerates each.
+* ``changelog.md``: ``CHANGELOG.md``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+from pathlib import Path
+
+import mkdocs_gen_files
+
+ROOT = Path(__file__).resolve().parents[2]
+os.environ["COLUMNS"] = "100"  # argparse wraps help at the terminal width: fix it
+
+# -- CLI reference --------------------------------------------------------------------------
+
+
+def _subparsers(parser: argparse.ArgumentParser):
+    """``[(name, subparser, help)]`` of the parser's subcommands, in definition order."""
+    out = []
+    for action in parser._actions:  # argparse keeps no public list of its actions
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {a.dest: a.help for a in action._choices_actions}
+            for name, sub in action.choices.items():
+                out.append((name, sub, helps.get(name) or ""))
+    return out
+
+
+def _cell(text) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _argument_rows(parser: argparse.ArgumentParser) -> list[str]:
+    rows = []
+    for action in parser._actions:
+        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
+            continue
+        if action.help == argparse.SUPPRESS:
+            continue
+        names = ", ".join(f"`{s}`" for s in action.option_strings) or f"`{action.metavar or action.dest}`"
+        if action.option_strings and action.nargs != 0:
+            names += f" `{action.metavar or action.dest.upper()}`"
+        choices = ", ".join(f"`{c}`" for c in action.choices) if action.choices else ""
+        default = action.default
+        shown = "" if default in (None, False, argparse.SUPPRESS) or not action.option_strings else f"`{default}`"
+        help_text = (action.help or "") % {"default": default, "prog": parser.prog} if action.help else ""
+        rows.append(f"| {names} | {_cell(help_text)} | {choices} | {shown} |")
+    return rows
+
+
+def _command(parser: argparse.ArgumentParser, name: str, summary: str, depth: int) -> list[str]:
+    lines = [f"{'#' * depth} `{name}`", ""]
+    if summary:
+        lines += [_cell(summary), ""]
+    lines += ["```text", parser.format_usage().strip(), "```", ""]
+    if parser.description:
+        lines += [parser.description.strip(), ""]
+    rows = _argument_rows(parser)
+    if rows:
+        lines += ["| argument | meaning | choices | default |", "|---|---|---|---|", *rows, ""]
+    if parser.epilog:
+        lines += ["```text", parser.epilog.strip(), "```", ""]
+    for sub_name, sub, sub_help in _subparsers(parser):
+        lines += _command(sub, f"{name} {sub_name}", sub_help, min(depth + 1, 4))
+    return lines
+
+
+def cli_reference() -> str:
+    from microfacet.cli import build_parser
+
+    parser = build_parser()
+    lines = ["# Command-line reference", "",
+             "Generated from the `argparse` parsers of `microfacet.cli` when the docs are built: "
+             "every command, its usage line and its arguments. The rules that every command "
+             "follows (output naming, batches, faults) are in [Command-line conventions](cli.md).", ""]
+    lines += _command(parser, parser.prog, "", 2)
+    return "\n".join(lines) + "\n"
+
+
+# -- results pages --------------------------------------------------------------------------
+
+#: results file stem -> (title when the file has none, the command that writes it)
+RESULTS = {
+    "table_4_1": ("Table 4.I: power-iteration fits of analytic NDFs", "python experiments/table_4_1.py --resolution 360 --out experiments/results/table_4_1.md"),
+    "fit_corpus": ("Fit corpus", "python experiments/fit_corpus.py"),
+    "fit_measured": ("Fits of the measured materials", "python experiments/fit_measured.py --data DATA --anisotropic"),
+    "fit_energy": ("Energy of the tabulated fits", "python experiments/fit_energy.py --data DATA --resolution 90 --weights 0,2,4,8 --out experiments/results/fit_energy.md"),
+    "fit_moments": ("Moment conversions and their Fresnel tables", "python experiments/fit_moments.py --data DATA"),
+    "leadr_validation": ("LEADR validation", "python experiments/leadr_validation.py"),
+    "glints_pndf_validation": ("Glints P-NDF validation", "python experiments/glints_pndf_validation.py"),
+    "sheared_chi2": ("Sheared lobes at grazing views: chi-square", "python experiments/sheared_chi2.py"),
+    "glsl_gpu": ("GLSL shaders on an NVIDIA GPU", "python experiments/glsl_gpu.py"),
+    "cold_start": ("Cold start", "python benchmarks/bench_cold_start.py"),
+}
+RESULT_DIRS = (ROOT / "experiments" / "results", ROOT / "benchmarks" / "results")
+LINK = re.compile(r"\]\(([^)#\s]+)\)")
+
+
+def results_pages() -> list[tuple[str, str]]:
+    """Write one page per results file (its text as written) and copy the files it links to."""
+    listed = []
+    for folder in RESULT_DIRS:
+        for md in sorted(folder.glob("*.md")):
+            text = md.read_text(encoding="utf-8")
+            title, command = RESULTS.get(md.stem, (md.stem.replace("_", " ").capitalize(), ""))
+            source = md.relative_to(ROOT).as_posix()
+            header = [] if text.lstrip().startswith("# ") else [f"# {title}", ""]
+            note = [f"!!! note \"Generated\"",
+                    f"    This page is `{source}` as the script wrote it"
+                    + (f" (`{command}`)." if command else "."), ""]
+            body = text.splitlines()
+            if header:
+                page = header + note + body
+            else:  # keep the file's own title first
+                page = body[:1] + [""] + note + body[1:]
+            with mkdocs_gen_files.open(f"results/{md.name}", "w") as f:
+                f.write("\n".join(page) + "\n")
+            for target in LINK.findall(text):
+                if "://" in target:
+                    continue
+                path = (md.parent / target)
+                if path.is_file():
+                    with mkdocs_gen_files.open(f"results/{target}", "wb") as f:
+                        f.write(path.read_bytes())
+            first = next((l[2:] for l in body if l.startswith("# ")), title)
+            listed.append((md.name, first, command))
+    return listed
+
+
+def results_index(listed) -> str:
+    lines = ["# Results", "",
+             "The experiments (`experiments/*.py`) and benchmarks (`benchmarks/*.py`) write their "
+             "figures as Markdown into `experiments/results/` and `benchmarks/results/`; these pages "
+             "include those files as written when the docs are built (rerun the command, rebuild "
+             "the docs). Each file states its date or machine where the script records them.", "",
+             "| page | regenerated by |", "|---|---|"]
+    for name, title, command in listed:
+        lines.append(f"| [{_cell(title)}]({name}) | {'`' + command + '`' if command else ''} |")
+    return "\n".join(lines) + "\n"
+
+
+with mkdocs_gen_files.open("cli-reference.md", "w") as f:
+    f.write(cli_reference())
+with mkdocs_gen_files.open("results/index.md", "w") as f:
+    f.write(results_index(results_pages()))
+with mkdocs_gen_files.open("changelog.md", "w") as f:
+    f.write((ROOT / "CHANGELOG.md").read_text(encoding="utf-8"))
