@@ -82,6 +82,10 @@ def cli_reference() -> str:
              "every command, its usage line and its arguments. The rules that every command "
              "follows (output naming, batches, faults) are in [Command-line conventions](cli.md).", ""]
     lines += _command(parser, parser.prog, "", 2)
+    # `microfacet glints render ...` is a second parser that `main` dispatches to
+    from microfacet.cli import glints
+    for name, sub, sub_help in _subparsers(glints.render_parser()):
+        lines += _command(sub, f"{parser.prog} glints {name}", sub_help, 3)
     return "\n".join(lines) + "\n"
 
 

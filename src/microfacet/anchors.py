@@ -19,8 +19,8 @@ references a fit of this project is compared with.
   (``c = i.h``), ``G = g1(i) g1(o)``, ``g1(k) = clamp(1 + lambda (1 - exp(c_ max(0, th_k -
   theta0)^k)), 0, 1)``.
 
-:func:`read_abc` and :func:`read_sgd` read the parameter tables of ``../shared/data/anchors``
-(``abc_low2012_merl.csv``, ``sgd_bagher2012_merl.csv``; columns in that README) into
+:func:`read_abc` and :func:`read_sgd` read the parameter tables of ``DATA/anchors`` (the data folder)
+(``abc_low2012_merl.csv``, ``sgd_bagher2012_merl.csv``; columns in that folder's README) into
 ``{material: BRDF}``. Neither model conserves energy by construction (``A`` and ``kap``
 are free scales): their white-furnace albedo is whatever the fit made it.
 
@@ -32,7 +32,7 @@ importance samplers of their densities (``weight = eval_cos / pdf``).
 Example
 -------
 >>> from microfacet.anchors import read_abc
->>> fits = read_abc("../shared/data/anchors/abc_low2012_merl.csv")   # doctest: +SKIP
+>>> fits = read_abc("DATA/anchors/abc_low2012_merl.csv")              # doctest: +SKIP
 >>> fits["nickel"].eval_cos(wi, wo)                                   # doctest: +SKIP
 """
 from __future__ import annotations

@@ -1,0 +1,108 @@
+"""The documentation: docstring examples run (doctest), the README stays short and names the
+commands CI and a newcomer need, the getting-started recipe runs, and the docs site builds
+with warnings as errors (mkdocs --strict also fails on broken internal links and anchors)."""
+import doctest
+import importlib
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import DATA
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: modules whose docstring examples are run (their other examples are marked +SKIP: they need
+#: optional packages or files)
+DOCTEST_MODULES = (
+    "microfacet.metrics", "microfacet.anchors", "microfacet.io.quiet", "microfacet.render.compare",
+    "microfacet.distributions.base", "microfacet.glints.microsurface", "microfacet.demo",
+    "microfacet.cli.common", "microfacet.batch.workers", "microfacet.fit.fitted",
+    "microfacet.export", "microfacet.export.gltf", "microfacet.export.mtlx", "microfacet.export.usd",
+    "microfacet.export.analysis",
+)
+
+
+@pytest.mark.parametrize("name", DOCTEST_MODULES)
+def test_docstring_examples_run(name, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # examples that write files write them here
+    module = importlib.import_module(name)
+    finder = doctest.DocTestFinder()
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    tests = [t for t in finder.find(module, name) if t.examples]
+    assert tests, f"{name} has no docstring examples"
+    for t in tests:
+        runner.run(t)
+    result = runner.summarize(verbose=False)
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed (output above)"
+
+
+def test_readme_is_short_and_names_the_commands():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    lines = text.splitlines()
+    assert len(lines) <= 200, f"README.md has {len(lines)} lines"
+    head = "\n".join(lines[:10])
+    assert "make demo" in head and "make test" in head          # the two commands, at the top
+    for needle in ("microfacet fit", "mf_fitted", "--to gltf", "--to mtlx", "--to usd", "Blender",
+                   "microfacet bake", "microfacet glints", "microfacet view", 'pip install "microfacet[all]"'):
+        assert needle in text, needle
+    # every relative link of the README points at a file of the repository
+    for target in re.findall(r"\]\(([^)#\s]+)\)|src=\"([^\"]+)\"", text):
+        target = next(t for t in target if t)
+        if "://" not in target:
+            assert (ROOT / target).exists(), f"README links to a missing file: {target}"
+
+
+def _blocks(page: str, lang: str) -> list[str]:
+    return re.findall(rf"^```{lang}\n(.*?)^```", page, re.S | re.M)
+
+
+@pytest.mark.slow
+def test_getting_started_recipe_runs(tmp_path):
+    """The five-line fit -> render recipe of docs/getting-started.md, run as written on a MERL
+    file: `microfacet fit` then the Python block, which writes sphere.png."""
+    merl = DATA / "merl" / "nickel.binary.gz"
+    if not merl.is_file():
+        pytest.skip(f"shared data absent: {merl}")
+    page = (ROOT / "docs" / "getting-started.md").read_text(encoding="utf-8")
+    section = page.split("## Fit a measured material and render it", 1)[1].split("\n## ", 1)[0]
+    (command,), (code,) = _blocks(section, "sh"), _blocks(section, "python")
+    assert len(code.strip().splitlines()) == 5
+    (tmp_path / "nickel.binary.gz").symlink_to(merl)
+    exe = Path(sys.executable).with_name("microfacet")
+    args = [str(exe)] + command.split("#")[0].split()[1:]
+    r = subprocess.run(args, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "sphere.png").stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_docs_build_strictly(tmp_path):
+    """`mkdocs build --strict` (as `make docs`): no warning (unparsable docstrings, broken
+    internal links or anchors, pages missing from the nav), within 60 s; the generated pages
+    are there."""
+    mkdocs = Path(sys.executable).with_name("mkdocs")
+    if not mkdocs.exists():
+        pytest.skip("mkdocs is not installed (pip install -e '.[docs]')")
+    env = dict(os.environ, DISABLE_MKDOCS_2_WARNING="true", NO_MKDOCS_2_WARNING="1")
+    site = tmp_path / "site"
+    t = time.perf_counter()
+    r = subprocess.run([str(mkdocs), "build", "--strict", "--site-dir", str(site)], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=300)
+    elapsed = time.perf_counter() - t
+    assert r.returncode == 0, (r.stdout + r.stderr)[-4000:]
+    assert "WARNING" not in r.stderr, r.stderr[-4000:]
+    assert elapsed < 60, f"docs build took {elapsed:.0f} s"
+    cli = (site / "cli-reference.html").read_text(encoding="utf-8")
+    for command in ("fit", "bake", "glints", "glints render", "view", "export", "demo", "validate"):
+        assert f"microfacet {command}</code>" in cli, command
+    assert 'id="microfacet.fit.fit_analytic"' in (site / "api" / "fit.html").read_text(encoding="utf-8")
+    assert 'id="microfacet.brdf.MicrofacetBRDF"' in (site / "api" / "microfacet.html").read_text(encoding="utf-8")
+    for md in (ROOT / "experiments" / "results").glob("*.md"):
+        assert (site / "results" / md.with_suffix(".html").name).is_file(), md.name
