@@ -3,8 +3,8 @@
 A new large array is memory fresh from the system: each of its pages faults in (zeroed by
 the kernel) the first time the kernels write it. glibc returns a freed block of more than
 its trim threshold (~48 MB after the first frees) to the system, so a batch whose outputs
-exceed it pays that again at every call: GGX ``sample`` of 10^6 pairs (56 MB of outputs)
-took 12.4 ms against 4.7 ms into outputs passed with ``out=`` (2 threads, this machine).
+exceed it pays that again at every call, and writing fresh outputs is then markedly slower
+than writing into outputs passed with ``out=`` (``benchmarks/bench_brdf.py``).
 Dr.Jit, under Mitsuba, keeps freed memory for reuse; so does this cache: the memory of an
 output array is kept when the array (and every view of it) is freed, up to
 ``MICROFACET_OUTPUT_CACHE_MB`` (default 1024; 0 turns the cache off), and handed to the next

@@ -16,8 +16,7 @@ import os
 
 # Before NumPy loads: the commands' parallel work is their own (Numba kernels, threads,
 # processes); OpenBLAS's pool only spins on the second core after each small BLAS call
-# (`microfacet fit nickel.binary.gz --no-picture`: 1.58-1.81 -> 1.29-1.34 s wall, 1.6 ->
-# 1.3 s CPU at load 3; a caller's own setting wins).
+# (a caller's own setting wins).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402

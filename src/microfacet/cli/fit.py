@@ -22,7 +22,7 @@ def numpy_kernels(enabled: bool = True):
     """Within the block, with ``enabled``, every evaluation runs its NumPy reference
     (``microfacet.kernels.AVAILABLE`` False, restored after), so Numba is never imported.
     A single isotropic fit evaluates batches of at most 131,072 pairs, for which importing
-    Numba and loading its cached kernels (~0.2 s CPU) costs more than it saves (README, Fitting)."""
+    Numba and loading its cached kernels costs more than it saves (``benchmarks/bench_fit_command.py``)."""
     if not enabled:
         yield
         return

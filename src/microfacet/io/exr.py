@@ -28,9 +28,9 @@ EXR_MAGIC = b"\x76\x2f\x31\x01"
 
 _NAMES = {1: ("Y",), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
-#: The lossless OpenEXR compressions (float32 round-trips bit for bit), by name. Measured on a
-#: 4096² LEADR pyramid (README, "LEAN/LEADR"): ``none`` writes 4-10x faster than ``zip``, whose
-#: files are only 0-16 % smaller; ``zstd`` needs OpenEXR >= 3.4 to read.
+#: The lossless OpenEXR compressions (float32 round-trips bit for bit), by name. On LEADR
+#: pyramids ``none`` writes several times faster than ``zip``, whose files are barely smaller
+#: (``benchmarks/bench_leadr.py``); ``zstd`` needs OpenEXR >= 3.4 to read.
 COMPRESSIONS = {"none": OpenEXR.NO_COMPRESSION, "rle": OpenEXR.RLE_COMPRESSION,
                 "zips": OpenEXR.ZIPS_COMPRESSION, "zip": OpenEXR.ZIP_COMPRESSION,
                 "piz": OpenEXR.PIZ_COMPRESSION, "zstd": OpenEXR.ZSTD_COMPRESSION}

@@ -44,8 +44,8 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none",
     float32's range, which :func:`read_pyramid` would refuse, unless ``allow_nonfinite`` (as
     :func:`microfacet.io.write_exr`; e.g. to test readers). ``compression`` is a lossless
     name of :data:`microfacet.io.exr.COMPRESSIONS`. The default
-    ``none`` is chosen by measurement (README, "LEAN/LEADR"): float32 moments barely compress
-    (``zip`` saves 0-16 % of the bytes at 4-10x the write time on a 4096² map)."""
+    ``none`` is chosen because float32 moments barely compress: ``zip`` saves few bytes at
+    several times the write time (``benchmarks/bench_leadr.py``)."""
     compression_type = exr_compression(compression)
     levels = [np.asarray(level) for level in pyramid]
     if not levels:
