@@ -57,6 +57,13 @@ class Dielectric(Fresnel):
     ``F = 1/2 (g-c)^2/(g+c)^2 [1 + (c(g+c)-1)^2/(c(g-c)+1)^2]`` with
     ``c = cos theta_d`` and ``g^2 = eta^2 + c^2 - 1``; total internal reflection
     (``g^2 < 0``, possible for ``eta < 1``) gives ``F = 1``.
+
+    Examples
+    --------
+    >>> from microfacet.fresnel import Dielectric
+    >>> Dielectric(1.5)([1.0, 0.0]).round(4)       # 0.04 at normal incidence, 1 at grazing
+    array([[0.04, 0.04, 0.04],
+           [1.  , 1.  , 1.  ]])
     """
 
     def __init__(self, eta=1.5):
@@ -83,10 +90,15 @@ class Schlick(Fresnel):
     ``f0`` (normal incidence) and ``f90`` (grazing, default 1) are scalars or RGB triples in
     ``[0, 1]``; ``F`` lies between them, monotone in ``c``. As an approximation of
     :class:`Dielectric` (``f0`` from ``eta``, ``f90 = 1``) it errs by at most 0.036 for
-    ``eta = 1.5``, at 85 degrees. Example::
+    ``eta = 1.5``, at 85 degrees.
 
-        Schlick(0.04)(1.0)                       # -> [0.04, 0.04, 0.04]
-        Schlick([0.9, 0.6, 0.5], f90=0.8)(0.0)   # -> [0.8, 0.8, 0.8]
+    Examples
+    --------
+    >>> from microfacet.fresnel import Schlick
+    >>> Schlick(0.04)(1.0).round(4)
+    array([0.04, 0.04, 0.04])
+    >>> Schlick([0.9, 0.6, 0.5], f90=0.8)(0.0).round(4)
+    array([0.8, 0.8, 0.8])
     """
 
     def __init__(self, f0=0.04, f90=1.0):
@@ -170,6 +182,15 @@ class Conductor(Fresnel):
     ``R_s = (a^2 + b^2 + c^2 - 2ac)/(a^2 + b^2 + c^2 + 2ac)`` and
     ``R_p = R_s ((a^2 + b^2) c^2 + s^4 - 2 a c s^2)/((a^2 + b^2) c^2 + s^4 + 2 a c s^2)``,
     ``s^2 = 1 - c^2``. With ``k = 0`` it is :class:`Dielectric`.
+
+    Examples
+    --------
+    >>> from microfacet.fresnel import Conductor, Dielectric
+    >>> gold = Conductor.metal("Au")
+    >>> bool(gold(1.0)[0] > gold(1.0)[2])                # reddish at normal incidence
+    True
+    >>> bool(abs(Conductor(1.5, 0.0)(0.5) - Dielectric(1.5)(0.5)).max() < 1e-12)
+    True
     """
 
     #: Approximate RGB complex indices (R ~ 650 nm, G ~ 550 nm, B ~ 450 nm) of common metals.
@@ -227,6 +248,13 @@ class Tabulated(Fresnel):
 
     ``cos_theta_d`` is an increasing ``(N,)`` grid and ``values`` its ``(N, 3)`` RGB
     samples (e.g. the Fresnel term extracted by the fitting of Ch. 4, Eq. 4.11).
+
+    Examples
+    --------
+    >>> from microfacet.fresnel import Tabulated
+    >>> table = Tabulated([0.0, 1.0], [[1.0, 1.0, 1.0], [0.2, 0.4, 0.6]])
+    >>> table(0.5).round(4)
+    array([0.6, 0.7, 0.8])
     """
 
     def __init__(self, cos_theta_d, values):

@@ -49,7 +49,15 @@ def sin_from_cos(c) -> np.ndarray:
 
 
 def spherical_to_cartesian(theta, phi) -> np.ndarray:
-    """Unit direction of elevation ``theta`` and azimuth ``phi`` (Eq. 1.2)."""
+    """Unit direction of elevation ``theta`` and azimuth ``phi`` (Dupuy 2015, Eq. 1.2).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.geometry import spherical_to_cartesian
+    >>> spherical_to_cartesian(np.pi / 2, 0.0).round(12)      # on the horizon, along x
+    array([1., 0., 0.])
+    """
     theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
     s = np.sin(theta)
     return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
