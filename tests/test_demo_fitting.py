@@ -65,7 +65,7 @@ def test_a_fit_example_takes_exactly_one_source():
 def test_shown_fits_are_the_best_and_the_tabulated_or_the_best_analytic():
     def summary(best, images):
         return {"best": best, "fits": {k: {"model": None if k.endswith("_moments") else {"type": "x"},
-                                           "metrics": {"image": v}} for k, v in images.items()}}
+                                           "metrics": {"image": v, "log": 0.01}} for k, v in images.items()}}
     images = {"tabulated": 0.3, "ggx_moments": 0.05, "lobe": 0.2, "two_lobes": 0.1}
     assert demo.shown_fits(summary("two_lobes", images)) == [("best: two_lobes", "two_lobes"),
                                                               ("tabulated fit", "tabulated")]

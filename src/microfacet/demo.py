@@ -318,14 +318,15 @@ def fit_sizes(size: int) -> tuple[int, int]:
 
 def shown_fits(summary: dict) -> list[tuple[str, str]]:
     """``(label, fit name)`` of the fits the demo shows from a ``microfacet fit`` summary:
-    the best (least image error) and the tabulated fit, or, where the tabulated fit is the
-    best, the best analytic fit (of least image error among those with a model)."""
+    the best and the tabulated fit, or, where the tabulated fit is the best, the best
+    analytic fit (of least :func:`microfacet.fit.outputs.best_score` among those with a model)."""
+    from .fit.outputs import best_score
     fits, best = summary["fits"], summary["best"]
     out = [(f"best: {best}", best)]
     if best != "tabulated":
         out.append(("tabulated fit", "tabulated"))
     else:
-        analytic = {k: v["metrics"]["image"] for k, v in fits.items() if k != "tabulated" and v["model"] is not None}
+        analytic = {k: best_score(v["metrics"]) for k, v in fits.items() if k != "tabulated" and v["model"] is not None}
         if analytic:
             name = min(analytic, key=analytic.get)
             out.append((f"best analytic: {name}", name))

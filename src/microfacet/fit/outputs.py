@@ -283,7 +283,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         from .perceptual import select
         every = {**named, **perceptual}
         second = "tabulated" if best != "tabulated" else select(
-            {k: v["metrics"]["image"] for k, v in fits_summary.items() if k != "tabulated"})
+            {k: best_score(v["metrics"]) for k, v in fits_summary.items() if k != "tabulated"})
         labels = {best: f"best: {best}", second: "tabulated fit" if second == "tabulated" else f"best analytic: {second}"}
         shown = {labels[k]: every[k] for k in (best, second)}
         notes = {labels[k]: _fit_note(fits_summary[k]["metrics"]) for k in (best, second)}
@@ -326,7 +326,7 @@ def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) ->
     """``({name: {"model": spec, "metrics": {...}}}, best)`` for every fit of ``named``
     (the tabulated fit's model is ``"tabulated"``): the legacy metrics ``legacy = (grid,
     uniform, albedo)`` where computed, the log and image errors, chromaticity difference
-    and largest albedo; the best is the fit of least image error."""
+    and largest albedo; the best is the fit of least :func:`best_score`."""
     from .perceptual import select
     from .spec import to_spec
     log_error, image_error = judges
@@ -339,8 +339,18 @@ def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) ->
                    "uniform": uniform.get(name), "albedo_ratio": np.asarray(albedo[name]).round(4).tolist(),
                    "albedo_ratio_worst": round(_worst(albedo[name]), 4), "max_albedo": round(_energy(b), 4)}
         out[name] = {"model": "tabulated" if name == "tabulated" else _spec_or_none(to_spec, b), "metrics": metrics}
-    best = select({k: v["metrics"]["image"] for k, v in out.items()})
+    best = select({k: best_score(v["metrics"]) for k, v in out.items()})
     return out, best
+
+
+def best_score(metrics: dict) -> float:
+    """The score that chooses the best fit: image error times log error (the square of their
+    geometric mean). The image error says whether spheres look like the data's under a few
+    lights (Bieron & Peers 2020); the log error whether the whole BRDF, on pairs uniform in
+    solid angle, holds (Löw et al. 2012). Either alone chooses fits that fail the other: a
+    tabulated fit can render a metal's highlight best yet miss its halo by twice the log
+    error of an analytic one."""
+    return float(metrics["image"]) * float(metrics["log"])
 
 
 def _spec_or_none(to_spec, brdf):
@@ -367,7 +377,7 @@ def format_fits_table(summary: dict) -> str:
                      f"{m['max_albedo']:.3f}"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
-    return "\n".join(lines) + ("\n* best: least image error (spheres under 3 lights and an environment, "
+    return "\n".join(lines) + ("\n* best: least image error x log error (images: spheres under 3 lights and an environment, "
                                 f"{IMAGE_SIZE} px); log: cosine-weighted log error; albedo: worst ratio fit/data\n")
 
 
