@@ -227,6 +227,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     # of the metrics beside the tabulated fit, then the two least-squares fits beside the
     # moment conversions and the metrics of the tabulated and moment fits; every result as
     # computed serially
+    _import_numba()
     metrics_job = in_background(_metrics, brdf)
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_job = in_background(_perceptual, brdf, models)
@@ -292,6 +293,16 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
             planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
     _write_all(files)
     return summary
+
+
+def _import_numba() -> None:
+    """Import Numba, if installed, on this thread before the fit's threads start: two threads
+    whose first use of a kernel imports Numba at once can deadlock in its package imports
+    (``_DeadlockError`` on ``numba.core.compiler_lock``)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        pass
 
 
 #: The models of :mod:`microfacet.fit.perceptual` that every fit tries (``coat=True`` adds ``"coat"``).
