@@ -6,7 +6,7 @@ OUT    ?= demo-output
 # batch sizes of `make bench`'s scaling table (1e8 needs ~12 GB: SCALING=1e4,1e5,1e6,1e7,1e8)
 SCALING ?= 1e4,1e5,1e6,1e7
 
-.PHONY: setup demo test bench docs clean
+.PHONY: setup setup-blender setup-npm demo test bench docs clean
 
 $(VENV)/.installed: pyproject.toml
 	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask, view, export and docs extras (pip)"
@@ -36,6 +36,40 @@ setup: $(VENV)/.installed
 # cached), not at their first use in the demo or the tests (python -m microfacet.kernels --help;
 # docs/performance.md). The cache is src/microfacet/__pycache__ (git-ignored) or $$NUMBA_CACHE_DIR.
 	$(PY) -m microfacet.kernels --precompile --quiet
+# Exports tested in their real consumers: Blender (bpy 4.5, ~950 MB, its own venv) and three.js +
+# gltf-validator (npm, 24 MB): under CI=true or when asked (make setup BLENDER=1 NPM=1); elsewhere
+# their tests skip with a one-line reason.
+	@if [ "$$CI" = true ] || [ -n "$(BLENDER)" ]; then $(MAKE) --no-print-directory setup-blender; fi
+	@if [ "$$CI" = true ] || [ -n "$(NPM)" ]; then $(MAKE) --no-print-directory setup-npm; fi
+
+# Blender 4.5 as a Python module pins numpy<2 (this project runs NumPy 2): a separate venv, used by
+# microfacet export --to blender in a subprocess (docs/export.md). The wheel is cp311 (Python 3.11).
+BLENDER_VENV := .venv-blender
+BLENDER_PYTHON ?= $(shell command -v python3.11 || echo $(PYTHON))
+setup-blender: $(BLENDER_VENV)/.installed
+$(BLENDER_VENV)/.installed:
+	@if /sbin/ldconfig -p | grep -q libxkbcommon.so.0 && /sbin/ldconfig -p | grep -q libXi.so.6 \
+	      && /sbin/ldconfig -p | grep -q libSM.so.6; then :; \
+	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  echo "setup-blender: installing the system packages libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libice6 libgl1 libxext6 with apt-get (as root): Blender's Python module (bpy) loads them, no display needed"; \
+	  apt-get update -qq && apt-get install -y -qq libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libice6 libgl1 libxext6 >/dev/null; \
+	else echo "setup-blender: X11 client libraries missing and no root apt: bpy may not import"; fi
+	@echo "setup-blender: creating $(BLENDER_VENV) with bpy 4.5 (Blender as a Python module: ~950 MB installed, ~21 s; pins numpy<2, so apart from $(VENV))"
+	$(BLENDER_PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install --quiet "bpy==4.5.*"
+	touch $@
+
+# three.js (the .glb export's renderer test in headless Chromium) and Khronos gltf-validator, in the
+# git-ignored folder .npm-export (node 20 / npm 10)
+NPM_DIR := .npm-export
+setup-npm: $(NPM_DIR)/.installed
+$(NPM_DIR)/.installed:
+	@if command -v npm >/dev/null 2>&1; then \
+	  echo "setup-npm: installing three@0.187 and gltf-validator@2.0.0-dev.3.10 into $(NPM_DIR) (npm, 24 MB)"; \
+	  mkdir -p $(NPM_DIR) && ( [ -f $(NPM_DIR)/package.json ] || echo '{"private": true}' > $(NPM_DIR)/package.json ) && \
+	  ( cd $(NPM_DIR) && npm install --no-audit --no-fund --silent three@0.187 gltf-validator@2.0.0-dev.3.10 ) && \
+	  touch $@; \
+	else echo "setup-npm: npm not found (install nodejs 20 / npm 10): the three.js export tests will skip"; fi
 
 demo: setup
 	$(VENV)/bin/microfacet demo -o $(OUT)
@@ -53,4 +87,4 @@ bench: setup
 	$(PY) benchmarks/bench_view.py
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache site
+	rm -rf $(VENV) $(OUT) .pytest_cache site $(BLENDER_VENV) $(NPM_DIR)

@@ -5,17 +5,19 @@ import sys
 
 from .common import output_path
 
-FORMAT_SUFFIX = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda"}
+FORMAT_SUFFIX = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda", "blender": ".blend"}
 
 
 def add(sub) -> None:
     p = sub.add_parser(
-        "export", help="export a fit as a glTF (.glb), MaterialX (.mtlx) or USD (.usda) material",
+        "export", help="export a fit as a glTF (.glb), MaterialX (.mtlx), USD (.usda) or Blender (.blend) material",
         description="Map the analytic model of FIT.npz (from 'microfacet fit'; --model best: the best fit by "
                     "image error, or the best analytic one when that is the tabulated fit) to glTF 2.0 (a .glb "
                     "sphere: metallicRoughness, KHR_materials_specular/ior/anisotropy/clearcoat), MaterialX (an "
-                    "exact pbrlib graph and an open_pbr_surface) or USD (UsdPreviewSurface and the OpenPBR "
-                    "surface bound to a sphere). Beside OUT: OUT.export.json and OUT.export.md, what the format "
+                    "exact pbrlib graph and an open_pbr_surface), USD (UsdPreviewSurface and the OpenPBR "
+                    "surface bound to a sphere) or Blender (a .blend Cycles material, OUT.blender.json and the "
+                    "add-on microfacet_blender.zip; needs 'make setup-blender'). Beside OUT: OUT.export.json "
+                    "and OUT.export.md, what the format "
                     "could not carry and the image error of the exported material (read back from OUT) against "
                     "the library's fit and the tabulated fit, measured now. Formulas: docs/export.md.")
     p.add_argument("fit", metavar="FIT.npz", help="fit file written by 'microfacet fit'")

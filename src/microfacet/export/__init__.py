@@ -10,6 +10,9 @@ fit the analytic fit of least image error) or any analytic BRDF tree
 * ``"mtlx"``: a ``.mtlx`` with an exact pbrlib graph and an ``open_pbr_surface`` (:mod:`.mtlx`);
 * ``"usd"``: a ``.usda`` with a UsdPreviewSurface and the OpenPBR surface bound to a sphere
   (:mod:`.usd`);
+* ``"blender"``: a ``.blend`` (Cycles material on a sphere, written by the interpreter that has
+  ``bpy`` 4.5), its description ``OUT.blender.json`` and the add-on ``microfacet_blender.zip``
+  that imports fit files (:mod:`.blender`);
 
 and writes beside ``out`` the report ``out + ".export.json"`` / ``".export.md"``: what the
 format could not carry, and the image error (:class:`microfacet.metrics.ImageError`,
@@ -34,14 +37,17 @@ from pathlib import Path
 from ..errors import MicrofacetError
 from .analysis import Analysis, Lobe, analyse, schlick_of
 from .gltf import GltfBRDF, alphas_of, gltf_brdf, gltf_material, read_material, roughness_anisotropy, write_glb
+from .blender import (BlenderBRDF, blender_brdf, blender_material, blender_python, render_cycles, write_addon,
+                      write_blend)
 from .mtlx import mtlx_document, openpbr_brdf, openpbr_inputs, pbrlib_brdf
 
 __all__ = ["export", "choose_model", "FORMATS", "SUFFIXES", "Analysis", "Lobe", "analyse", "schlick_of",
            "GltfBRDF", "alphas_of", "gltf_brdf", "gltf_material", "read_material", "roughness_anisotropy",
-           "write_glb", "mtlx_document", "openpbr_brdf", "openpbr_inputs", "pbrlib_brdf"]
+           "write_glb", "mtlx_document", "openpbr_brdf", "openpbr_inputs", "pbrlib_brdf", "BlenderBRDF", "blender_brdf",
+           "blender_material", "blender_python", "render_cycles", "write_addon", "write_blend"]
 
 #: Formats of :func:`export` and the suffix of each one's file.
-SUFFIXES = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda"}
+SUFFIXES = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda", "blender": ".blend"}
 FORMATS = tuple(SUFFIXES)
 #: Size (px) of the image-error renders measured at export time.
 IMAGE_SIZE = 32
@@ -117,7 +123,18 @@ def _usd(brdf, out: Path, options: dict):
     return {"UsdPreviewSurface": preview_brdf(inputs)}, lost, {"UsdPreviewSurface": inputs}
 
 
-_WRITERS = {"gltf": _gltf, "mtlx": _mtlx, "usd": _usd}
+def _blender(brdf, out: Path, options: dict):
+    desc, lost = blender_material(brdf, name=options.get("name", "microfacet"))
+    write_blend(desc, out)
+    material = out.with_suffix(".blender.json")
+    material.write_text(json.dumps(desc, indent=1) + "\n")
+    addon = write_addon(out.parent / "microfacet_blender.zip")
+    back = json.loads(material.read_text())
+    return ({"blender": blender_brdf(back)}, lost,
+            {"material": back, "material_file": str(material), "addon": str(addon)})
+
+
+_WRITERS = {"gltf": _gltf, "mtlx": _mtlx, "usd": _usd, "blender": _blender}
 
 
 def _markdown(report: dict) -> str:
@@ -143,12 +160,15 @@ def export(source, to: str, out, model: str = "best", compare_models: bool = Tru
     (module docstring) and return the report dict: ``{"format", "file", "source", "model",
     "lost", "image_error": {"exported_vs_fit": {material: e}, "exported_vs_tabulated",
     "fit_vs_tabulated"}, "other_models", "mapping"}``. ``options``: ``name`` (glTF material),
-    ``mesh`` (glTF: False for the material only), ``mtlx_file`` (USD: the ``.mtlx`` to note).
+    ``mesh`` (glTF: False for the material only), ``mtlx_file`` (USD: the ``.mtlx`` to note);
+    ``name`` is also the Blender material's name.
     ``compare_models``: for a fit file, also export every other analytic fit in memory and
     measure it against the tabulated fit (``other_models``)."""
     from ..metrics import ImageError
     if to not in _WRITERS:
         raise ValueError(f"to must be one of {', '.join(FORMATS)}, got {to!r}")
+    if to == "blender":                             # one line saying what to do, before any work
+        blender_python()
     if to == "usd":                                 # before any kernel compiles in the background (usd.import_pxr)
         from .usd import import_pxr
         import_pxr()
