@@ -29,6 +29,7 @@ Example
 from __future__ import annotations
 
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -264,7 +265,7 @@ def write_glb(material: dict, path, mesh: bool = True) -> Path:
     import pygltflib as g
     path = Path(path)
     used = sorted(material.get("extensions", {}))
-    gl = g.GLTF2(asset=g.Asset(version="2.0", generator="microfacet.export"), extensionsUsed=used or None)
+    gl = g.GLTF2(asset=g.Asset(version="2.0", generator="microfacet.export"), extensionsUsed=used)
     gl.materials = [g.Material(name=material.get("name"),
                                pbrMetallicRoughness=g.PbrMetallicRoughness(**material["pbrMetallicRoughness"]),
                                extensions=material.get("extensions", {}))]
@@ -291,7 +292,13 @@ def write_glb(material: dict, path, mesh: bool = True) -> Path:
         gl.scene = 0
         gl.set_binary_blob(blob)
     path.parent.mkdir(parents=True, exist_ok=True)
-    gl.save_binary(str(path))
+    if mesh:
+        gl.save_binary(str(path))
+    else:                                           # a JSON chunk only: an empty BIN chunk is a validator error
+        text = gl.to_json(separators=(",", ":")).encode()
+        text += b" " * (-len(text) % 4)
+        header = struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(text))
+        path.write_bytes(header + struct.pack("<I4s", len(text), b"JSON") + text)
     return path
 
 
