@@ -127,3 +127,18 @@ def test_stock_threejs_schlick_is_the_remaining_deviation(glbs, three):
         exact = _rel_l1(three.render(path, SIZE, LIGHT, exact_schlick=True), ref)
     print(f"dielectric_iso: stock three.js Schlick relL1 {e:.5f} (exact power {exact:.5f})")
     assert exact < e < 0.015
+
+
+def test_consumer_section_shows_each_consumer_with_its_error(tmp_path):
+    """The demo-ready comparison: the library, Cycles and three.js renders of one material."""
+    _modules()
+    from microfacet.export.blender import blender_python
+    from microfacet.export.consumers import consumer_section
+    if blender_python(required=False) is None:
+        _skip_or_fail("bpy absent: make setup-blender")
+    brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX.from_ellipse(0.3, 0.1, 0.5), fr.Schlick([0.05, 0.05, 0.06], 1.0)),
+                   mf.Lambertian([0.4, 0.1, 0.05]))
+    text = consumer_section(brdf, tmp_path, "a plastic", size=48)
+    assert text.count("<img") == 3 and "not rendered" not in text
+    assert all((tmp_path / f"consumers_{i}.png").stat().st_size > 0 for i in range(3))
+    assert "Blender (Cycles): relL1" in text and "three.js: relL1" in text

@@ -39,12 +39,14 @@ from .analysis import Analysis, Lobe, analyse, schlick_of
 from .gltf import GltfBRDF, alphas_of, gltf_brdf, gltf_material, read_material, roughness_anisotropy, write_glb
 from .blender import (BlenderBRDF, blender_brdf, blender_material, blender_python, render_cycles, write_addon,
                       write_blend)
+from .consumers import consumer_renders, consumer_section
 from .mtlx import mtlx_document, openpbr_brdf, openpbr_inputs, pbrlib_brdf
 
 __all__ = ["export", "choose_model", "FORMATS", "SUFFIXES", "Analysis", "Lobe", "analyse", "schlick_of",
            "GltfBRDF", "alphas_of", "gltf_brdf", "gltf_material", "read_material", "roughness_anisotropy",
            "write_glb", "mtlx_document", "openpbr_brdf", "openpbr_inputs", "pbrlib_brdf", "BlenderBRDF", "blender_brdf",
-           "blender_material", "blender_python", "render_cycles", "write_addon", "write_blend"]
+           "blender_material", "blender_python", "render_cycles", "write_addon", "write_blend", "consumer_renders",
+           "consumer_section"]
 
 #: Formats of :func:`export` and the suffix of each one's file.
 SUFFIXES = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda", "blender": ".blend"}
