@@ -181,3 +181,18 @@ def test_addon_installs_and_imports_a_fit_file(tmp_path):
     assert {"ShaderNodeBsdfMetallic", "ShaderNodeBsdfDiffuse", "ShaderNodeTangent"} <= kinds
     assert all(d in (None, "GGX") for _, d in out["fit"]["nodes"])
     assert out["json"]["desc"] == desc and "(ggx)" in out["fit"]["name"]
+
+
+def test_cli_exports_a_fit_file_to_blender(tmp_path, capsys):
+    _bpy_python()
+    from microfacet.cli import main
+    from microfacet.fit.spec import to_spec
+    tab = mf.fit.fit(CASES["conductor_aniso"], resolution=16)
+    fit_path = tmp_path / "m.npz"
+    fit_path.write_bytes(tab.to_bytes(fits={"ggx": to_spec(CASES["conductor_aniso"])}, best="ggx"))
+    assert main(["export", str(fit_path), "--to", "blender", "-o", str(tmp_path / "out")]) == 0
+    rep = json.loads((tmp_path / "out.blend.export.json").read_text())
+    assert rep["model"] == "ggx" and rep["image_error"]["exported_vs_fit"]["blender"] < 1e-9
+    assert np.isfinite(rep["image_error"]["exported_vs_tabulated"]["blender"])
+    assert (tmp_path / "out.blend").is_file() and (tmp_path / "microfacet_blender.zip").is_file()
+    assert "blender" in capsys.readouterr().out
