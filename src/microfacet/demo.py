@@ -620,6 +620,18 @@ def _viewer_section(out) -> str:
                              "make setup installs Chromium and Playwright", render, (ImportError, MicrofacetError))
 
 
+def _exports_section(out, example: FitExample, fit_file: Path) -> str:
+    """One fitted material's best analytic fit rendered by the library, Blender (Cycles)
+    and three.js (:func:`microfacet.export.consumers.consumer_section`)."""
+    def render():
+        from .export import choose_model
+        from .export.consumers import consumer_section
+        name, brdf, _ = choose_model(fit_file)
+        return consumer_section(brdf, out / "exports", f"{example.label}: its {name} fit", href="exports/")
+    return _optional_section("exports", "Exported materials in Blender and three.js",
+                             "make setup-blender, make setup-npm", render, (ImportError, MicrofacetError, OSError))
+
+
 def _mitsuba_section(out, progress=None, fits=None) -> str:
     """The Mitsuba 3 section (no Mitsuba, or a Mitsuba that cannot run a variant: a note);
     ``fits``: ``[(FitExample, fit file)]`` whose best fits it renders."""
@@ -634,7 +646,7 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
              workers: int = 1, progress: bool = False,
              figures: Sequence[DemoFigure] | None = None,
              fits: Sequence[FitExample] | None = None, leadr: bool = True, glints: bool = True,
-             viewer: bool = True, mitsuba: bool = True) -> Path:
+             viewer: bool = True, mitsuba: bool = True, exports: bool = True) -> Path:
     """Render every figure into ``out_dir`` and write ``out_dir/index.html`` (last).
 
     Parameters
@@ -669,6 +681,11 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         Include the Mitsuba 3 section (the ``microfacet.mitsuba`` plugins in scenes,
         :func:`microfacet.mitsuba.demo.demo_section`); where Mitsuba is missing the section
         says so and a warning is printed.
+    exports : bool
+        Include the exports section: the first fitting material's best fit exported to
+        Blender and glTF and rendered by Cycles and three.js beside the library
+        (:func:`microfacet.export.consumers.consumer_section`); a consumer that is not
+        installed is named with what installs it.
 
     The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
     environment samples of panel ``j`` of figure ``i`` come from
@@ -689,12 +706,13 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         raise MicrofacetError(f"{out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
     with staging_folder(out, last="index.html") as stage:
-        _render_demo(stage, size, spp, seed, int(workers), progress, figures, fits, leadr, glints, viewer, mitsuba)
+        _render_demo(stage, size, spp, seed, int(workers), progress, figures, fits, leadr, glints, viewer, mitsuba,
+                     exports)
     return out / "index.html"
 
 
 def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progress: bool, figures, fits,
-                 leadr: bool, glints: bool, viewer: bool, mitsuba: bool) -> Path:
+                 leadr: bool, glints: bool, viewer: bool, mitsuba: bool, exports: bool = False) -> Path:
     """:func:`run_demo`'s files, written into the (staging) folder ``out``."""
     figures = thesis_figures() if figures is None else list(figures)
     env_map = procedural_sky()
@@ -738,6 +756,8 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
         if mitsuba:
             fitted = [(ex, work / f"{ex.key}.npz") for ex in examples]
             sections.append(_mitsuba_section(out, progress=bar.update, fits=fitted or None))
+        if exports and examples:
+            sections.append(_exports_section(out, examples[0], work / f"{examples[0].key}.npz"))
         if viewer:
             sections.append(_viewer_section(out))
     shutil.rmtree(work, ignore_errors=True)

@@ -35,6 +35,8 @@ def add(sub) -> None:
                    help="leave out the real-time section (WebGL2 viewer renders in headless Chromium, ~35 s)")
     p.add_argument("--no-mitsuba", action="store_true",
                    help="leave out the Mitsuba 3 section (the microfacet.mitsuba plugins in scenes)")
+    p.add_argument("--no-exports", action="store_true",
+                   help="leave out the exports section (a fit rendered by Blender's Cycles and three.js)")
     p.set_defaults(run=run)
 
 
@@ -42,6 +44,6 @@ def run(args) -> int:
     from ..demo import default_workers, run_demo
     index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
                      workers=args.jobs or default_workers(), progress=sys.stderr.isatty(), viewer=not args.no_viewer,
-                     mitsuba=not args.no_mitsuba)
+                     mitsuba=not args.no_mitsuba, exports=not args.no_exports)
     print(index)
     return 0

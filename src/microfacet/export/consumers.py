@@ -47,9 +47,12 @@ def rel_l1(image: np.ndarray, reference: np.ndarray) -> float:
 def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT) -> tuple[dict, dict, dict]:
     """``(images, errors, missing)``: ``{"microfacet": ..., "Blender (Cycles)": ...,
     "three.js": ...}`` renders, each consumer's relL1 against the library's, and
-    ``{consumer: why it was not rendered}`` for those not installed (one line each)."""
+    ``{consumer: why it was not rendered}`` for those not installed (one line each).
+    ``images`` also holds ``"glTF as held"``: the library's render of the glTF material
+    as exported (one lobe + base: what the format can hold), against which three.js's
+    own fidelity is ``errors["three.js vs glTF as held"]``."""
     from .blender import blender_material, blender_python, render_cycles, write_blend
-    from .gltf import gltf_material, write_glb
+    from .gltf import gltf_brdf, gltf_material, write_glb
     from .threejs import ThreeRenderer, chromium, npm_modules
     images = {"microfacet": library_render(brdf, size, light)}
     missing = {}
@@ -67,14 +70,18 @@ def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT) -> tuple[d
             glb = write_glb(mat, Path(tmp) / "m.glb")
             with ThreeRenderer() as r:
                 images["three.js"] = r.render(glb, size, light)
+            images["glTF as held"] = library_render(gltf_brdf(mat), size, light)
     errors = {k: rel_l1(v, images["microfacet"]) for k, v in images.items() if k != "microfacet"}
+    if "three.js" in images:
+        errors["three.js vs glTF as held"] = rel_l1(images["three.js"], images["glTF as held"])
     return images, errors, missing
 
 
-def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4) -> str:
+def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4, href: str = "") -> str:
     """Render :func:`consumer_renders`, write ``consumers_<n>.png`` under ``out`` (one exposure
     for all, :func:`microfacet.io.write_png`) and return an HTML ``<section>`` with the
-    pictures and each consumer's error against the library."""
+    pictures (``href``: the prefix of their links, e.g. ``"exports/"`` for a page one folder
+    up) and each consumer's error against the library."""
     from ..io import write_png
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -87,9 +94,13 @@ def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4) -> str
         stem = f"consumers_{i}.png"
         write_png(out / stem, img, exposure)
         note = "reference" if name == "microfacet" else f"relL1 {100 * errors[name]:.2f} %"
-        cells.append(f'<figure><img src="{stem}" alt="{html.escape(name)}"><figcaption>{html.escape(name)}: '
+        if name == "three.js":
+            note += f" ({100 * errors['three.js vs glTF as held']:.2f} % against the glTF material as held)"
+        cells.append(f'<figure><img src="{href}{stem}" alt="{html.escape(name)}"><figcaption>{html.escape(name)}: '
                      f"{note}</figcaption></figure>")
     cells += [f"<p>{html.escape(k)}: not rendered ({html.escape(v)})</p>" for k, v in missing.items()]
     return (f'<section id="consumers"><h2>{html.escape(label)} in Blender and three.js</h2>'
             "<p>The exported material (.blend, .glb) rendered by each consumer under one directional light, "
-            "multiple-scattering boosts off, against the library's render.</p>" + "".join(cells) + "</section>")
+            "multiple-scattering boosts off, against the library's render of the fit. \"glTF as held\" is the library's "
+            "render of what a glTF material can hold (one lobe and a base): its difference from the fit is the export's own, "
+            "not three.js's.</p>" + "".join(cells) + "</section>")
