@@ -73,6 +73,18 @@ def test_mixture_follows_a_heavy_tail():
     assert np.max(directional_albedo(fits["mixture"], (0, 30, 60, 75, 85, 89))) <= 1.0 + 1e-3
 
 
+def test_dielectric_mixture_darkens_the_body_at_grazing():
+    """A plastic whose diffuse body is seen through its surface: the dielectric mixture's
+    second base follows the rim that a Lambertian base cannot (image error below half)."""
+    lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.08), fresnel=mf.fresnel.Dielectric(1.5))
+    data = mf.fit.SumBRDF(lobe, mf.TransmittedLambertian([0.7, 0.3, 0.1]))
+    fits = perceptual.fit_models(data, ("mixture", "dielectric_mixture"))
+    image = ImageError(data, size=32)
+    assert image(fits["dielectric_mixture"]) < 0.5 * image(fits["mixture"])
+    assert any(isinstance(b, mf.TransmittedLambertian) for b in fits["dielectric_mixture"].brdfs)
+    assert np.max(directional_albedo(fits["dielectric_mixture"], (0, 30, 60, 75, 85, 89))) <= 1.0 + 1e-3
+
+
 def test_coat_model_is_a_layered_brdf_within_energy():
     coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.02), fresnel=mf.fresnel.Dielectric(1.5))
     from microfacet.layered import LayeredBRDF
@@ -143,7 +155,7 @@ def fitted_file(tmp_path_factory):
 def test_fit_file_keeps_every_fit_and_the_best(fitted_file):
     path, summary = fitted_file
     names, best = mf.fit.fit_names(path)
-    assert names[0] == "tabulated" and {"lobe", "two_lobes", "mixture"} <= set(names)
+    assert names[0] == "tabulated" and {"lobe", "two_lobes", "mixture", "dielectric_mixture"} <= set(names)
     assert best == summary["best"] and best in names
     scores = {k: v["metrics"]["image"] * v["metrics"]["log"] for k, v in summary["fits"].items()}
     assert scores[best] == min(scores.values())
@@ -180,7 +192,7 @@ def test_corpus_materials_fit_within_energy_and_beat_the_old_default(name, corpu
     summary = fit_material(data, tmp_path / "fit.npz", picture=False)
     best = mf.fit.load(tmp_path / "fit.npz", model="best")
     assert np.max(directional_albedo(best, (0, 30, 60, 75, 85, 89))) <= 1.0 + 2e-3
-    for fit_name in ("lobe", "two_lobes", "mixture"):
+    for fit_name in ("lobe", "two_lobes", "mixture", "dielectric_mixture"):
         ratios = AlbedoRatios(data)(mf.fit.load(tmp_path / "fit.npz", model=fit_name))
         counted = AlbedoRatios(data).ref > 0.03
         assert np.all(ratios[counted] <= 1.01 + 0.015), (fit_name, ratios)

@@ -51,6 +51,8 @@ def _trees():
         "aniso_table": mf.MicrofacetBRDF(mf.GGX(alpha_x=0.15, alpha_y=0.4, rho=0.3, mean_slope=(0.1, -0.05)),
                                          fresnel=table),
         "ideal_vgroove": mf.MicrofacetBRDF(mf.Beckmann(alpha=0.25), gaf="vgroove"),
+        "dielectric_mixture": SumBRDF(lobe, halo, mf.Lambertian(0.05), mf.TransmittedLambertian([0.5, 0.2, 0.1]),
+                                      weights=(0.3, 0.2, 0.1, 0.4)),
     }
 
 
@@ -73,7 +75,7 @@ def test_eval_pdf_match_library(llvm, name):
     print(f"{name}: eval max rel {e:.2e}, pdf max rel {p:.2e}")
 
 
-@pytest.mark.parametrize("name", ["lobe", "coat", "coat_lambert"])
+@pytest.mark.parametrize("name", ["lobe", "coat", "coat_lambert", "dielectric_mixture"])
 def test_scalar_variant_matches_library(name):
     use("scalar_rgb")
     brdf = TREES[name]

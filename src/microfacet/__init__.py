@@ -14,14 +14,14 @@ import importlib
 from .errors import MicrofacetError
 
 __version__ = "0.2.0"
-__all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError",
+__all__ = ["BRDF", "Beckmann", "GGX", "Lambertian", "MicrofacetBRDF", "MicrofacetError", "TransmittedLambertian",
            "SlopeDistribution", "batch", "fit", "fresnel", "geometry", "glints", "leadr", "measured"]
 
 #: Public names defined in a submodule: name -> that submodule.
-_NAMES = {"BRDF": "brdf", "Lambertian": "brdf", "MicrofacetBRDF": "brdf",
+_NAMES = {"BRDF": "brdf", "Lambertian": "brdf", "MicrofacetBRDF": "brdf", "TransmittedLambertian": "diffuse",
           "GGX": "distributions", "Beckmann": "distributions", "SlopeDistribution": "distributions"}
 #: Submodules reachable as attributes (``mf.metrics``, ``mf.render``, ...) without an import.
-_SUBMODULES = frozenset({"anchors", "batch", "brdf", "distributions", "export", "fit", "fresnel", "geometry", "glints", "io", "kernels",
+_SUBMODULES = frozenset({"anchors", "batch", "brdf", "diffuse", "distributions", "export", "fit", "fresnel", "geometry", "glints", "io", "kernels",
                          "layered", "leadr", "measured", "metrics", "render", "validation"})
 
 

@@ -328,11 +328,12 @@ class AlbedoRatios:
 def _white(brdf):
     """The microfacet lobes of ``brdf`` with a white Fresnel term (``F = 1``): a
     :class:`~microfacet.MicrofacetBRDF`, or the lobes of a sum BRDF (``brdfs``); other
-    terms (a Lambertian base) are dropped."""
+    terms (a Lambertian base, with or without its surface's transmittance) are dropped."""
     from .brdf import Lambertian, MicrofacetBRDF
+    from .diffuse import TransmittedLambertian
     if isinstance(brdf, MicrofacetBRDF):
         return [MicrofacetBRDF(brdf.distribution, gaf=brdf.gaf_model, shadowing=brdf.shadowing)]
-    if isinstance(brdf, Lambertian):
+    if isinstance(brdf, (Lambertian, TransmittedLambertian)):
         return []
     if hasattr(brdf, "brdfs"):
         return [w for b in brdf.brdfs for w in _white(b)]

@@ -108,6 +108,7 @@ def analyse(brdf) -> Analysis:
     """The :class:`Analysis` of a BRDF tree (module docstring); :class:`MicrofacetError`
     naming the part that has no counterpart (a tabulated NDF, a sum holding a coat)."""
     from ..brdf import Lambertian, MicrofacetBRDF
+    from ..diffuse import TransmittedLambertian
     from ..fit.analytic import SumBRDF
     if type(brdf).__name__ == "LayeredBRDF":
         inner = analyse(brdf.base)
@@ -116,16 +117,29 @@ def analyse(brdf) -> Analysis:
         inner.coat = _lobe(brdf.coat, "coat")
         return inner
     parts = list(brdf.brdfs) if isinstance(brdf, SumBRDF) else [brdf]
-    lobes, base = [], None
+    lobes, base, notes = [], None, []
     for p in parts:
         if isinstance(p, MicrofacetBRDF):
             lobes.append(_lobe(p, "lobe"))
-        elif isinstance(p, Lambertian):
-            base = p.reflectance.copy() if base is None else base + p.reflectance
+        elif isinstance(p, (Lambertian, TransmittedLambertian)):
+            r = p.reflectance if isinstance(p, Lambertian) else equivalent_lambertian(p)
+            base = r.copy() if base is None else base + r
+            if isinstance(p, TransmittedLambertian):
+                notes.append(f"diffuse seen through its surface (eta {p.eta:g}: darker at grazing angles) exported as "
+                             "a Lambertian of the same mean albedo")
         else:
-            raise MicrofacetError(f"{type(p).__name__} does not export (MicrofacetBRDF, Lambertian, SumBRDF, "
-                                  "LayeredBRDF only)")
+            raise MicrofacetError(f"{type(p).__name__} does not export (MicrofacetBRDF, Lambertian, "
+                                  "TransmittedLambertian, SumBRDF, LayeredBRDF only)")
     if not lobes and base is None:
         raise MicrofacetError("nothing to export")
     lobes.sort(key=lambda lobe: -lobe.albedo)
-    return Analysis(lobes, None if base is None else np.clip(base, 0.0, 1.0))
+    return Analysis(lobes, None if base is None else np.clip(base, 0.0, 1.0), notes=notes)
+
+
+def equivalent_lambertian(brdf, n: int = 256) -> np.ndarray:
+    """The reflectance of the Lambertian whose albedo, averaged over views (cosine-weighted),
+    equals that of a :class:`~microfacet.diffuse.TransmittedLambertian`:
+    ``R (2 int_0^1 mu t(mu) dmu / t(1))^2`` (midpoint rule, ``n`` nodes: ~1e-5)."""
+    mu = (np.arange(n) + 0.5) / n
+    a = 2.0 * np.mean(mu * brdf.transmittance(mu)) / float(brdf.transmittance(np.ones(1))[0])
+    return brdf.reflectance * a * a

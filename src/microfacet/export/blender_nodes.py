@@ -218,13 +218,21 @@ def _walk(spec: dict, weight: float, lost: list, closures: list) -> None:
         closures += _lobe(spec, weight, lost)
     elif kind == "lambertian":
         closures.append({"node": "diffuse", "color": _rgb(np.asarray(spec["reflectance"], float) * weight)})
+    elif kind == "transmitted_lambertian":
+        from ..diffuse import TransmittedLambertian
+        from .analysis import equivalent_lambertian
+        r = equivalent_lambertian(TransmittedLambertian(spec["reflectance"], spec.get("eta", 1.5)))
+        closures.append({"node": "diffuse", "color": _rgb(r * weight)})
+        lost.append("diffuse seen through its surface (darker at grazing angles) exported as a Diffuse BSDF of the "
+                    "same mean albedo")
     elif kind == "sum":
         for p in spec["parts"]:                   # a sum's "weights" are sampling weights: f = sum f_j
             _walk(p, weight, lost, closures)
     elif kind == "layered":
         raise ValueError("a coat over a coated base does not export (one coat only)")
     else:
-        raise ValueError(f"BRDF spec type {kind!r} does not export (microfacet, lambertian, sum, layered)")
+        raise ValueError(f"BRDF spec type {kind!r} does not export (microfacet, lambertian, transmitted_lambertian, sum, "
+                         "layered)")
 
 
 def closures_of_spec(spec: dict, name: str = "microfacet") -> tuple[dict, list]:

@@ -91,7 +91,7 @@ def gltf_material(brdf, name: str = "microfacet") -> tuple[dict, list[str]]:
     of a library BRDF tree (module docstring) and one line for each thing it could not carry."""
     from .. import fresnel as fr
     a = analyse(brdf)
-    lost: list[str] = []
+    lost: list[str] = list(a.notes)
     pbr = {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}
     ext: dict = {}
     mat = {"name": name, "pbrMetallicRoughness": pbr, "extensions": ext}

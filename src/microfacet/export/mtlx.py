@@ -138,7 +138,7 @@ def openpbr_inputs(brdf) -> tuple[dict, list[str]]:
     from .. import fresnel as fr
     from .gltf import _metal_f0
     a = analyse(brdf)
-    lost: list[str] = []
+    lost: list[str] = list(a.notes)
     p: dict = {"base_weight": 1.0, "specular_weight": 1.0, "base_diffuse_roughness": 0.0}
     if not a.lobes:
         p.update(base_color=a.base.tolist(), base_metalness=0.0, specular_weight=0.0)
@@ -248,8 +248,8 @@ def mtlx_document(brdf, openpbr: bool = True):
     graph) and, with ``openpbr``, ``M_microfacet_openpbr`` (an ``open_pbr_surface``)."""
     mx = _mx()
     doc = mx.createDocument()
-    lost: list[str] = []
     a = analyse(brdf)
+    lost: list[str] = list(a.notes)
     _pbrlib(mx, doc, a, lost)
     if openpbr:
         p, lost_p = openpbr_inputs(brdf)

@@ -43,7 +43,7 @@ def preview_inputs(brdf) -> tuple[dict, list[str]]:
     """``(inputs, lost)``: UsdPreviewSurface inputs of a library BRDF tree (module docstring)."""
     from .gltf import _metal_f0
     a = analyse(brdf)
-    lost: list[str] = []
+    lost: list[str] = list(a.notes)
     p: dict = {"useSpecularWorkflow": 0, "metallic": 0.0, "roughness": 1.0, "diffuseColor": [0.0, 0.0, 0.0],
                "specularColor": [0.0, 0.0, 0.0]}
     if a.lobes:

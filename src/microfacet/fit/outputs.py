@@ -306,7 +306,7 @@ def _import_numba() -> None:
 
 
 #: The models of :mod:`microfacet.fit.perceptual` that every fit tries (``coat=True`` adds ``"coat"``).
-PERCEPTUAL_MODELS = ("lobe", "two_lobes", "mixture")
+PERCEPTUAL_MODELS = ("lobe", "two_lobes", "mixture", "dielectric_mixture")
 #: Sphere size (px) of the image error that chooses the best fit (:class:`microfacet.metrics.ImageError`).
 IMAGE_SIZE = 32
 #: Pairs of the log error reported per fit (:class:`microfacet.metrics.LogError`).

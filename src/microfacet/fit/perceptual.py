@@ -24,6 +24,10 @@ and at every view up to 89 deg the total stays below 1 (penalty residuals of wei
   distribution whose tail can fall as slowly as the data's (Löw et al. 2012's ABC fits have
   ``D ~ (1 - cos th_h)^-C`` with ``C`` ~1-2 where one GGX lobe falls as ``^-2``); lobes left
   empty by the bounds are dropped;
+* ``"dielectric_mixture"``: the mixture with a second base, the diffuse body seen through
+  its smooth surface (:class:`microfacet.diffuse.TransmittedLambertian`, index
+  :data:`BODY_ETA`): darker at grazing angles where the lobes' Fresnel terms brighten, so
+  that a paint's or plastic's albedo can stay flat with the view as the data's does;
 * ``"coat"``: a dielectric coat of index ``eta`` and its own roughness over a base (a lobe
   plus a Lambertian term) lit through the coat's transmission,
   ``f = f_coat + (1 - E_c(mu_i))(1 - E_c(mu_o)) f_base``
@@ -60,7 +64,7 @@ __all__ = ["MODELS", "Geometry", "Target", "Model", "target", "fit_model", "fit_
            "lobe_factor", "PENALTY"]
 
 #: The models of :func:`fit_models`, in the order they are fitted.
-MODELS = ("lobe", "two_lobes", "mixture", "coat")
+MODELS = ("lobe", "two_lobes", "mixture", "dielectric_mixture", "coat")
 #: Weight of the energy penalty residuals (a 1 % excess costs ~(0.01 PENALTY)^2).
 PENALTY = 10.0
 #: Weight of the penalty below the albedo band (data whose albedo falls faster with the
@@ -272,6 +276,44 @@ def _mixture_brdf(q, y):
     return _lobes_brdf(_ladder(q), y)
 
 
+#: Index of the surface that the ``"dielectric_mixture"`` model's second base is seen through.
+BODY_ETA = 1.5
+
+
+def _transmittance(mu: np.ndarray) -> np.ndarray:
+    """``t(mu) / t(1)`` of :class:`microfacet.diffuse.TransmittedLambertian` at :data:`BODY_ETA`."""
+    return (1.0 - dielectric(BODY_ETA, mu)) / (1.0 - dielectric(BODY_ETA, np.ones(1)))
+
+
+def _dielectric_mix() -> np.ndarray:
+    """The mixture's ``mix`` with a third base (RGB): the diffuse seen through the surface."""
+    base = _lobes_mix(MIXTURE_LOBES)
+    k, n = base.shape[1:]
+    mix = np.zeros((3, k + 1, n + 3))
+    mix[:, :k, :n] = base
+    for c in range(3):
+        mix[c, k, n + c] = 1.0
+    return mix
+
+
+def _dielectric_basis(q, g):
+    _, basis = _mixture_basis(q, g)
+    body = _transmittance(g.cos_i) * _transmittance(g.cos_o) / np.pi
+    return None, np.concatenate([basis, body[:, None]], axis=1)
+
+
+def _dielectric_brdf(q, y):
+    from ..diffuse import TransmittedLambertian
+    mixture = _mixture_brdf(q, y[:-3])
+    parts = list(getattr(mixture, "brdfs", [mixture]))
+    weights = list(getattr(mixture, "weights", [1.0]))
+    body = np.clip(y[-3:], 0.0, 1.0)
+    if np.max(body) >= 2e-3:
+        parts.append(TransmittedLambertian(body, BODY_ETA))
+        weights.append(_luminance(body))
+    return _sum(parts, weights)
+
+
 def _mixture_starts(previous):
     return [np.array([np.log(ALPHA_MIN) + 0.5 * np.log(MIXTURE_RATIO)])]
 
@@ -318,12 +360,15 @@ def _log_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.full(n, np.log(ALPHA_MIN)), np.full(n, np.log(ALPHA_MAX))
 
 
+MODEL_BOUNDS_MIXTURE = (np.array([np.log(ALPHA_MIN)]), np.array([np.log(ALPHA_MIN * MIXTURE_RATIO)]))
 #: The models by name.
 MODEL_SPECS = {
     "lobe": Model("lobe", _log_bounds(1), _lobes_mix(1), _lobes_basis, _lobes_brdf, _lobe_starts),
     "two_lobes": Model("two_lobes", _log_bounds(2), _lobes_mix(2), _lobes_basis, _lobes_brdf, _two_lobe_starts),
-    "mixture": Model("mixture", (np.array([np.log(ALPHA_MIN)]), np.array([np.log(ALPHA_MIN * MIXTURE_RATIO)])),
-                     _lobes_mix(MIXTURE_LOBES), _mixture_basis, _mixture_brdf, _mixture_starts),
+    "mixture": Model("mixture", MODEL_BOUNDS_MIXTURE, _lobes_mix(MIXTURE_LOBES), _mixture_basis, _mixture_brdf,
+                     _mixture_starts),
+    "dielectric_mixture": Model("dielectric_mixture", MODEL_BOUNDS_MIXTURE, _dielectric_mix(), _dielectric_basis,
+                                _dielectric_brdf, _mixture_starts),
     "coat": Model("coat", (np.array([np.log(ALPHA_MIN), ETA_MIN, np.log(ALPHA_MIN)]),
                            np.array([np.log(ALPHA_MAX), ETA_MAX, np.log(ALPHA_MAX)])), _lobes_mix(1),
                   _coat_basis, _coat_brdf, _coat_starts),

@@ -7,6 +7,7 @@ A fit file (``microfacet fit``'s ``OUT.npz``) stores each analytic fit as the sp
   "alpha_y", "rho", "mean_slope"}, "fresnel": FRESNEL, "gaf", "shadowing"}`` — a
   :class:`microfacet.MicrofacetBRDF` (Eq. 2.1);
 * ``{"type": "lambertian", "reflectance": [r, g, b]}``;
+* ``{"type": "transmitted_lambertian", "reflectance": [r, g, b], "eta": eta}`` (:class:`microfacet.diffuse.TransmittedLambertian`);
 * ``{"type": "sum", "parts": [...], "weights": [...]}`` — :class:`microfacet.fit.SumBRDF`;
 * ``{"type": "layered", "coat": MICROFACET, "base": SPEC}`` —
   :class:`microfacet.layered.LayeredBRDF`;
@@ -73,6 +74,7 @@ def fresnel_from_spec(spec: dict):
 def to_spec(brdf) -> dict:
     """The spec (module docstring) of an analytic BRDF tree."""
     from ..brdf import Lambertian, MicrofacetBRDF
+    from ..diffuse import TransmittedLambertian
     from ..distributions import GGX, Beckmann
     from .analytic import SumBRDF
     if isinstance(brdf, MicrofacetBRDF):
@@ -86,6 +88,8 @@ def to_spec(brdf) -> dict:
                 "fresnel": fresnel_spec(brdf.fresnel), "gaf": brdf.gaf_model, "shadowing": bool(brdf.shadowing)}
     if isinstance(brdf, Lambertian):
         return {"type": "lambertian", "reflectance": _list(brdf.reflectance)}
+    if isinstance(brdf, TransmittedLambertian):
+        return {"type": "transmitted_lambertian", "reflectance": _list(brdf.reflectance), "eta": brdf.eta}
     if isinstance(brdf, SumBRDF):
         return {"type": "sum", "parts": [to_spec(b) for b in brdf.brdfs], "weights": _list(brdf.weights)}
     if type(brdf).__name__ == "LayeredBRDF":      # microfacet.layered, not imported for the others (SciPy)
@@ -96,6 +100,7 @@ def to_spec(brdf) -> dict:
 def from_spec(spec: dict):
     """The BRDF of a :func:`to_spec` spec; ``ValueError`` naming what is wrong."""
     from ..brdf import Lambertian, MicrofacetBRDF
+    from ..diffuse import TransmittedLambertian
     from ..distributions import GGX, Beckmann
     from .analytic import SumBRDF
     kind = spec.get("type") if isinstance(spec, dict) else None
@@ -110,9 +115,11 @@ def from_spec(spec: dict):
                               shadowing=spec.get("shadowing", True))
     if kind == "lambertian":
         return Lambertian(spec["reflectance"])
+    if kind == "transmitted_lambertian":
+        return TransmittedLambertian(spec["reflectance"], spec.get("eta", 1.5))
     if kind == "sum":
         return SumBRDF(*(from_spec(p) for p in spec["parts"]), weights=spec.get("weights"))
     if kind == "layered":
         from ..layered import LayeredBRDF
         return LayeredBRDF(from_spec(spec["coat"]), from_spec(spec["base"]))
-    raise ValueError(f"unknown BRDF spec type {kind!r} (known: microfacet, lambertian, sum, layered)")
+    raise ValueError(f"unknown BRDF spec type {kind!r} (known: microfacet, lambertian, transmitted_lambertian, sum, layered)")

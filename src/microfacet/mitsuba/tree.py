@@ -8,6 +8,7 @@ A tree is what ``microfacet.fit.load(path, model=...)`` returns for an analytic 
   ``Dielectric(eta)``, ``Tabulated`` or ``Ideal``. Its ``eval``, ``pdf`` and sampler are
   ``mf_microfacet``'s (:mod:`.bsdf`: the same lobe code, with the Fresnel term of the tree);
 * :class:`microfacet.Lambertian` (``k_d z_i / pi``, cosine sampling);
+* :class:`microfacet.diffuse.TransmittedLambertian` (a Lambertian under a smooth dielectric surface);
 * :class:`microfacet.fit.SumBRDF` ``(*parts, weights)``: the sum, sampled as the library's
   mixture (part ``j`` with probability ``w_j``, chosen by ``sample1``, rescaled for the part);
 * :class:`microfacet.layered.LayeredBRDF` ``(coat, base)``: ``f_c + (1 - E_c(z_i))(1 - E_c(z_o)) f_b``
@@ -35,6 +36,7 @@ import numpy as np
 
 from .. import fresnel as _fr
 from ..brdf import Lambertian, MicrofacetBRDF
+from ..diffuse import TransmittedLambertian
 from ..distributions import GGX as _GGX, Beckmann as _Beckmann
 from . import bsdf as _bsdf
 from . import fresnel as _fresnel
@@ -44,7 +46,7 @@ from .tabulated import InterpolatedColor, Table
 __all__ = ["mitsuba_bsdf_of", "component_of", "fresnel_term", "bsdf_class", "SUPPORTED"]
 
 #: The BRDF classes a tree may be built of (their names).
-SUPPORTED = ("MicrofacetBRDF", "Lambertian", "SumBRDF", "LayeredBRDF")
+SUPPORTED = ("MicrofacetBRDF", "Lambertian", "TransmittedLambertian", "SumBRDF", "LayeredBRDF")
 
 
 # ------------------------------------------------------------------ constants
@@ -135,6 +137,23 @@ class _Lambertian:
     def sample(self, ctx, si, sample1, sample2, active):
         light = mi.warp.square_to_cosine_hemisphere(sample2)
         return light, active & (si.wi.z > 0) & (light.z > 0)
+
+
+class _TransmittedLambertian(_Lambertian):
+    """``R z_i / pi t(z_i) t(z_o) / t(1)^2``, ``t = 1 - F_dielectric(eta)``
+    (:class:`microfacet.diffuse.TransmittedLambertian`), cosine-weighted sampling."""
+
+    def __init__(self, brdf):
+        super().__init__(brdf)
+        self.eta = float(brdf.eta)
+        self.t1 = float(brdf.transmittance(np.ones(1))[0])
+
+    def _t(self, mu):
+        return dr.select(mu > 0, 1.0 - _fresnel.dielectric(dr.clip(mu, 0.0, 1.0), self.eta), 0.0)
+
+    def eval_pdf(self, ctx, si, light, active):
+        value, pdf = super().eval_pdf(ctx, si, light, active)
+        return value * (self._t(si.wi.z) * self._t(light.z) / (self.t1 * self.t1)), pdf
 
 
 class _Sum:
@@ -257,6 +276,8 @@ def component_of(brdf):
                          "mf_fitted use=tabulated")
     if isinstance(brdf, MicrofacetBRDF):
         return _lobe_class()(brdf)
+    if isinstance(brdf, TransmittedLambertian):
+        return _TransmittedLambertian(brdf)
     if isinstance(brdf, Lambertian):
         return _Lambertian(brdf)
     if isinstance(brdf, SumBRDF):
