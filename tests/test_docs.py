@@ -23,7 +23,8 @@ DOCTEST_MODULES = (
     "microfacet.distributions.base", "microfacet.glints.microsurface", "microfacet.demo",
     "microfacet.cli.common", "microfacet.batch.workers", "microfacet.fit.fitted",
     "microfacet.export", "microfacet.export.gltf", "microfacet.export.mtlx", "microfacet.export.usd",
-    "microfacet.export.analysis", "microfacet.fresnel", "microfacet.geometry",
+    "microfacet.export.analysis", "microfacet.fresnel", "microfacet.geometry", "microfacet.diffuse",
+    "microfacet.fit.spec",
 )
 
 

@@ -24,7 +24,7 @@ Example
 >>> b = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=mf.fresnel.Schlick(0.04))
 >>> to_spec(b)["distribution"]["alpha_x"]
 0.2
->>> from_spec(to_spec(b)).distribution.alpha_x
+>>> float(from_spec(to_spec(b)).distribution.alpha_x)
 0.2
 """
 from __future__ import annotations
