@@ -36,6 +36,9 @@ setup: $(VENV)/.installed
 # cached), not at their first use in the demo or the tests (python -m microfacet.kernels --help;
 # docs/performance.md). The cache is src/microfacet/__pycache__ (git-ignored) or $$NUMBA_CACHE_DIR.
 	$(PY) -m microfacet.kernels --precompile --quiet
+# The measured-BRDF readers', LEADR and glints kernels (the demo's fitting, LEADR and glints sections and
+# their tests; ~2-3 min on 2 cores the first time): microfacet.kernels_extra.
+	$(PY) -m microfacet.kernels_extra --precompile --quiet
 # Exports tested in their real consumers: Blender (bpy 4.5, ~950 MB, its own venv) and three.js +
 # gltf-validator (npm, 24 MB): under CI=true or when asked (make setup BLENDER=1 NPM=1); elsewhere
 # their tests skip with a one-line reason.

@@ -37,8 +37,15 @@ def compiled_kernels():
 
 
 def _rows(a, k: int) -> np.ndarray:
-    """``a`` as a C-contiguous ``(N, k)`` float64 array (a copy only if needed)."""
-    return np.ascontiguousarray(np.reshape(a, (-1, k)), dtype=np.float64)
+    """``a`` as a read-only C-contiguous ``(N, k)`` float64 array (a copy only if needed). Read-only
+    whether or not a copy was made: Numba compiles a loop once per read-only flag of its arguments,
+    and a broadcast view is read-only while a copy is not (two versions of each loop, each compiled
+    at first use, instead of the one that ``python -m microfacet.kernels_extra --precompile`` makes)."""
+    rows = np.ascontiguousarray(np.reshape(a, (-1, k)), dtype=np.float64)
+    if rows.flags.writeable:
+        rows = rows.view()
+        rows.flags.writeable = False
+    return rows
 
 
 def file_error(path, what: str) -> MicrofacetError:
