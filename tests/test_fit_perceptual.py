@@ -207,3 +207,17 @@ def test_a_tabulated_gem_passes_the_white_furnace(corpus):
     from microfacet.metrics import white_furnace
     fit = mf.fit.fit(mf.measured.load(corpus("rgl/cc_blue_agat_rgb")))
     assert white_furnace(fit) <= 1.0
+
+
+def test_a_failed_moment_conversion_leaves_the_other_fits(tmp_path, monkeypatch):
+    """A moment conversion whose Fresnel solve fails (data of implausible values) is left out
+    of the candidates and named in the summary; the fit file is written."""
+    from microfacet.fit.outputs import fit_material
+
+    def fails(self, reference=None, **kwargs):
+        raise MicrofacetError("fit: the Fresnel system is not finite")
+    monkeypatch.setattr(mf.fit.FittedBRDF, "to_beckmann", fails)
+    summary = fit_material(_plastic(), tmp_path / "f.npz", resolution=32, picture=False)
+    assert "not finite" in summary["moments_failed"]["beckmann"]
+    assert "beckmann_moments" not in summary["fits"] and "ggx_moments" in summary["fits"]
+    assert mf.fit.fit_names(tmp_path / "f.npz")[1] == summary["best"]

@@ -237,7 +237,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     t1 = time.perf_counter()
     least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight,
                                 coat) for model in (("ggx", "beckmann") if method == "least_squares" else ())]
-    moments = {"ggx": fit.to_ggx(reference=brdf), "beckmann": fit.to_beckmann(reference=brdf)}
+    moments, moments_failed = _moment_fits(fit, brdf, required=method == "moments")
     first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
     metrics = metrics_job.result()
     scores = [_scores(metrics, first)]
@@ -276,6 +276,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         "tabulated_diffuse": bool(tabulated_diffuse),
         "best": best, "fits": fits_summary, "seconds_perceptual": round(t3 - t1, 4),
     }
+    if moments_failed:
+        summary["moments_failed"] = moments_failed
     specs = {k: v["model"] for k, v in fits_summary.items() if k != "tabulated"}
     files = {out_npz: fit.to_bytes(fits=specs, best=best),
              out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
@@ -293,6 +295,22 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
             planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
     _write_all(files)
     return summary
+
+
+def _moment_fits(fit, brdf, required: bool) -> tuple[dict, dict]:
+    """``({family: BRDF}, {family: why it failed})``: the GGX and Beckmann fits of the tabulated
+    fit's moments. A conversion whose Fresnel solve fails on data of implausible values is
+    left out of the candidates (and said so in the summary) unless ``required`` (``--method
+    moments``, whose headline fits they are)."""
+    out, failed = {}, {}
+    for family in ("ggx", "beckmann"):
+        try:
+            out[family] = getattr(fit, f"to_{family}")(reference=brdf)
+        except MicrofacetError as e:
+            if required:
+                raise
+            failed[family] = str(e)
+    return out, failed
 
 
 def _import_numba() -> None:
