@@ -679,7 +679,7 @@ def phase_baseline(materials, work, tree, jobs, force):
     return {"n": len(todo), "wall_seconds": time.perf_counter() - t0, "failed": {k: e for k, e, _ in res if e}}
 
 
-def phase_fit(materials, work, jobs, force):
+def phase_fit(materials, work, jobs, force, whole: bool = True):
     code = fit_code_mtime()
     todo = []
     for m in materials:
@@ -697,7 +697,7 @@ def phase_fit(materials, work, jobs, force):
             "load_average": [round(load0, 1), round(os.getloadavg()[0], 1)]}
     if todo:
         _write_json(work / f"fit_phase_{len(todo)}.json", info)
-        if len(todo) == len(materials):
+        if whole and len(todo) == len(materials):       # the whole corpus, not an --only subset
             _write_json(work / "fit_phase_full.json", info)
     return info
 
@@ -1051,7 +1051,7 @@ def main(argv=None) -> int:
         if info:
             print(f"baseline: {info['n']} in {info['wall_seconds']:.1f} s, failed: {info['failed']}", flush=True)
     if "fit" in phases:
-        info = phase_fit(materials, a.work, a.jobs, a.force)
+        info = phase_fit(materials, a.work, a.jobs, a.force, whole=len(materials) == len(everything))
         print(f"fit: {info['n']} in {info['wall_seconds']:.1f} s wall (--jobs {a.jobs}), failed: {info['failed']}",
               flush=True)
     if "evaluate" in phases:
