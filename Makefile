@@ -6,6 +6,10 @@ OUT    ?= demo-output
 # batch sizes of `make bench`'s scaling table (1e8 needs ~12 GB: SCALING=1e4,1e5,1e6,1e7,1e8)
 SCALING ?= 1e4,1e5,1e6,1e7
 
+# arithmetic types of the BRDF kernels that make setup compiles (the tests use float32 ones too)
+PRECOMPILE_DTYPES ?= $(if $(filter true,$(CI)),float64$(comma)float32,float64)
+comma := ,
+
 .PHONY: setup setup-blender setup-npm demo test bench docs clean
 
 $(VENV)/.installed: pyproject.toml
@@ -32,13 +36,14 @@ setup: $(VENV)/.installed
 	  echo "setup: installing the system packages chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 with apt-get (as root): the demo's real-time section and the viewer tests run the WebGL2 viewer in headless Chromium, the GLSL tests run on Mesa's EGL (llvmpipe)"; \
 	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 >/dev/null; \
 	else echo "setup: no chromium/Mesa EGL and no root apt: GLSL and viewer tests will skip"; fi
-# Numba kernels compiled into Numba's cache now (~2-4 min on 2 cores the first time, seconds once
-# cached), not at their first use in the demo or the tests (python -m microfacet.kernels --help;
-# docs/performance.md). The cache is src/microfacet/__pycache__ (git-ignored) or $$NUMBA_CACHE_DIR.
-	$(PY) -m microfacet.kernels --precompile --quiet
-# The measured-BRDF readers', LEADR and glints kernels (the demo's fitting, LEADR and glints sections and
-# their tests; ~2-3 min on 2 cores the first time): microfacet.kernels_extra.
-	$(PY) -m microfacet.kernels_extra --precompile --quiet
+# Numba kernels compiled into Numba's cache now, not at their first use in the demo or the tests
+# (docs/performance.md): the BRDF kernels (python -m microfacet.kernels --help; float32 ones too under
+# CI=true, for the tests) beside the measured-BRDF readers', LEADR and glints kernels
+# (microfacet.kernels_extra), two processes (they compile different functions): ~2-4 min on 2 cores
+# the first time, seconds once cached. The cache is src/microfacet/__pycache__ (git-ignored) or $$NUMBA_CACHE_DIR.
+	@$(PY) -m microfacet.kernels_extra --precompile --quiet & extra=$$!; \
+	$(PY) -m microfacet.kernels --precompile --quiet --dtypes $(PRECOMPILE_DTYPES); brdf=$$?; \
+	wait $$extra && exit $$brdf
 # Exports tested in their real consumers: Blender (bpy 4.5, ~950 MB, its own venv) and three.js +
 # gltf-validator (npm, 24 MB): under CI=true or when asked (make setup BLENDER=1 NPM=1); elsewhere
 # their tests skip with a one-line reason.

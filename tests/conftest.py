@@ -18,6 +18,9 @@ DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parent
 
 def pytest_addoption(parser):
     parser.addoption("--slow", action="store_true", help="also run the long validation sweeps (@slow)")
+    parser.addoption("--store-durations", action="store_true",
+                     help=f"merge the seconds (setup + call + teardown) of the tests run into {DURATIONS.name}, "
+                          "by which the suite runs its slowest tests first")
 
 
 def pytest_configure(config):
@@ -29,12 +32,64 @@ def run_slow(config) -> bool:
 
 
 def pytest_collection_modifyitems(config, items):
+    items[:] = slowest_first(items, known_durations())
     if run_slow(config):
         return
     skip = pytest.mark.skip(reason="slow validation sweep: runs in CI (CI=true) or with --slow")
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+#: Seconds of the slower tests (setup + call + teardown) of a full run, by node id: the order in
+#: which the suite runs them (``pytest --store-durations`` merges a run's into it).
+DURATIONS = Path(__file__).with_name("durations.json")
+#: Tests at least this slow (seconds, :data:`DURATIONS`) count as slow for the order.
+SLOW_TEST_S = 1.0
+
+
+def known_durations() -> dict:
+    """:data:`DURATIONS` as ``{node id: seconds}`` (empty if absent or unreadable)."""
+    import json
+    try:
+        return {str(k): float(v) for k, v in json.loads(DURATIONS.read_text()).items()}
+    except (OSError, ValueError, AttributeError):
+        return {}
+
+
+def slowest_first(items, seconds: dict) -> list:
+    """``items`` with the modules that hold the slowest tests first (by their slowest test, per
+    ``seconds``) and, within each module, its slow tests first (slowest first), the rest in their
+    order: ``pytest -n`` deals tests out in this order, so the long ones start early instead of
+    ending the run on one worker while the others idle. A module's tests stay together (its
+    module-scoped fixtures are set up once per worker, as in file order); without ``seconds`` the
+    order is unchanged."""
+    if not seconds:
+        return list(items)
+    by_module: dict = {}
+    for i, item in enumerate(items):
+        t = seconds.get(item.nodeid, 0.0)
+        by_module.setdefault(item.nodeid.split("::")[0], []).append((-t if t >= SLOW_TEST_S else 0.0, i, item))
+    modules = sorted(by_module.values(), key=lambda tests: (min(t for t, _, _ in tests), tests[0][1]))
+    return [item for tests in modules for _, _, item in sorted(tests, key=lambda x: x[:2])]
+
+
+_RUN_SECONDS: dict = {}
+
+
+def pytest_runtest_logreport(report):
+    """Sums each test's phases for ``--store-durations`` (under ``pytest -n`` the workers' reports
+    reach the controlling process, which writes the file)."""
+    _RUN_SECONDS[report.nodeid] = _RUN_SECONDS.get(report.nodeid, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session):
+    import json
+    if not session.config.getoption("--store-durations") or hasattr(session.config, "workerinput"):
+        return
+    merged = {**known_durations(), **{k: round(v, 2) for k, v in _RUN_SECONDS.items()}}
+    slow = {k: v for k, v in sorted(merged.items(), key=lambda kv: -kv[1]) if v >= SLOW_TEST_S}
+    DURATIONS.write_text(json.dumps(slow, indent=0) + "\n")
 
 
 def default_sigint() -> None:
