@@ -59,3 +59,22 @@ def test_precompiled_groups_cover_the_demo_sections_and_measured_files(tmp_path)
             "    b.eval(w, w[::-1]); b.eval_cos(w, w[0]); b.sample(rng.random((1000, 2)), w)\n")
     saved, loaded, out = _saved_and_loaded(code)
     assert loaded >= 10 and saved == 0, out[-3000:]
+
+
+def test_fortran_ordered_rows_run_the_c_rows_kernels():
+    """Rows in Fortran order (Dr.Jit arrays seen through NumPy, the Mitsuba plugins' path) are read
+    as C rows: the same values, and no compiled version of their own (the demo's Mitsuba section
+    compiled one per kernel at its first use, outside what ``make setup`` precompiles)."""
+    code = ("import numpy as np, microfacet as mf\n"
+            "b = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.04))\n"
+            "rng = np.random.default_rng(1)\n"
+            "w = rng.normal(size=(2, 500, 3)); w[..., 2] = abs(w[..., 2]); w /= np.linalg.norm(w, axis=-1)[..., None]\n"
+            "wi, wo = w\n"
+            "c = b.eval(wi, wo), b.eval_cos(wi, wo)\n"
+            "print('MARKER', flush=True)\n"
+            "f = b.eval(wi, np.asfortranarray(wo)), b.eval_cos(np.asfortranarray(wi), wo)\n"
+            "assert np.asfortranarray(wo).flags.f_contiguous and not np.asfortranarray(wo).flags.c_contiguous\n"
+            "assert all(np.array_equal(x, y) for x, y in zip(c, f))\n")
+    saved, loaded, out = _saved_and_loaded(code)
+    after = out[out.index("MARKER"):]
+    assert after.count("data saved") == 0, after[-3000:]

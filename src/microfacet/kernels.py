@@ -401,7 +401,11 @@ def _frozen(a):
 
 
 def _rows(a, shape):
-    """``a`` broadcast to ``shape + (last,)`` as ``(n, last)`` read-only rows (a view where possible)."""
+    """``a`` broadcast to ``shape + (last,)`` as ``(n, last)`` read-only rows (a view where possible;
+    a copy of Fortran-ordered rows, such as Dr.Jit's arrays seen through NumPy, so that the kernels
+    see C-contiguous or broadcast rows only: the layouts that ``precompile`` compiles)."""
+    if a.ndim == 2 and a.flags.f_contiguous and not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a)
     if a.ndim == 2 and a.shape[:1] == shape:
         return _frozen(a)
     return _frozen(np.broadcast_to(a, shape + a.shape[-1:]).reshape(-1, a.shape[-1]))

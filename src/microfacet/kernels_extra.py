@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -86,10 +87,14 @@ def _leadr() -> None:
 
 def _glints() -> None:
     """The demo's glints section on a 32^2 normal map and an 8-pixel plane (microsurface build,
-    P-BRDF footprint loops exact and approximate, naive renderer, white furnace)."""
-    from .glints.figures import glints_section
+    P-BRDF footprint loops exact and approximate, naive renderer, white furnace), and a
+    microsurface file written and read back (``microfacet glints``, the Mitsuba glints plugin)."""
+    from .glints import Microsurface
+    from .glints.figures import glints_section, scratched_normal_map
     with tempfile.TemporaryDirectory(prefix="microfacet-precompile-") as d:
         glints_section(d, map_size=32, width=8, reference_spp=2, naive_spp=1)
+        ms = Microsurface.from_normal_map(scratched_normal_map(32, scratches=4, seed=0))
+        Microsurface.load(ms.save(Path(d) / "microsurface.npz"))
 
 
 _CALLS = {"measured": _measured, "leadr": _leadr, "glints": _glints}
