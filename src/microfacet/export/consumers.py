@@ -44,13 +44,15 @@ def rel_l1(image: np.ndarray, reference: np.ndarray) -> float:
     return float(np.abs(image[inside] - reference[inside]).sum() / np.abs(reference[inside]).sum())
 
 
-def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT) -> tuple[dict, dict, dict]:
+def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT, three=None) -> tuple[dict, dict, dict]:
     """``(images, errors, missing)``: ``{"microfacet": ..., "Blender (Cycles)": ...,
     "three.js": ...}`` renders, each consumer's relL1 against the library's, and
     ``{consumer: why it was not rendered}`` for those not installed (one line each).
     ``images`` also holds ``"glTF as held"``: the library's render of the glTF material
     as exported (one lobe + base: what the format can hold), against which three.js's
-    own fidelity is ``errors["three.js vs glTF as held"]``."""
+    own fidelity is ``errors["three.js vs glTF as held"]``. ``three``: an open
+    :class:`~microfacet.export.threejs.ThreeRenderer` to use (Playwright's sync API runs one
+    browser session per thread), else one is opened and closed here."""
     from .blender import blender_material, blender_python, render_cycles, write_blend
     from .gltf import gltf_brdf, gltf_material, write_glb
     from .threejs import ThreeRenderer, chromium, npm_modules
@@ -68,8 +70,11 @@ def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT) -> tuple[d
         else:
             mat, _ = gltf_material(brdf)
             glb = write_glb(mat, Path(tmp) / "m.glb")
-            with ThreeRenderer() as r:
-                images["three.js"] = r.render(glb, size, light)
+            if three is not None:
+                images["three.js"] = three.render(glb, size, light)
+            else:
+                with ThreeRenderer() as r:
+                    images["three.js"] = r.render(glb, size, light)
             images["glTF as held"] = library_render(gltf_brdf(mat), size, light)
     errors = {k: rel_l1(v, images["microfacet"]) for k, v in images.items() if k != "microfacet"}
     if "three.js" in images:
@@ -77,15 +82,15 @@ def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT) -> tuple[d
     return images, errors, missing
 
 
-def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4, href: str = "") -> str:
+def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4, href: str = "", three=None) -> str:
     """Render :func:`consumer_renders`, write ``consumers_<n>.png`` under ``out`` (one exposure
     for all, :func:`microfacet.io.write_png`) and return an HTML ``<section>`` with the
     pictures (``href``: the prefix of their links, e.g. ``"exports/"`` for a page one folder
-    up) and each consumer's error against the library."""
+    up) and each consumer's error against the library (``three``: as :func:`consumer_renders`)."""
     from ..io import write_png
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    images, errors, missing = consumer_renders(brdf, size, spp)
+    images, errors, missing = consumer_renders(brdf, size, spp, three=three)
     lum = images["microfacet"] @ np.array([0.2126, 0.7152, 0.0722])
     top = float(np.percentile(lum[lum > 0], 99.5)) if np.any(lum > 0) else 1.0
     exposure = float(np.log2(1.0 / top)) if top > 0 else 0.0

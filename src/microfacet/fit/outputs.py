@@ -314,13 +314,14 @@ def _moment_fits(fit, brdf, required: bool) -> tuple[dict, dict]:
 
 
 def _import_numba() -> None:
-    """Import Numba, if installed, on this thread before the fit's threads start: two threads
-    whose first use of a kernel imports Numba at once can deadlock in its package imports
-    (``_DeadlockError`` on ``numba.core.compiler_lock``)."""
-    try:
+    """Import Numba, where the kernels will use it (:data:`microfacet.kernels.AVAILABLE`; the
+    command's single-file fit runs the NumPy references and never imports it), on this
+    thread before the fit's threads start: two threads whose first use of a kernel imports
+    Numba at once can deadlock in its package imports (``_DeadlockError`` on
+    ``numba.core.compiler_lock``)."""
+    from .. import kernels
+    if kernels.AVAILABLE:
         import numba  # noqa: F401
-    except ImportError:
-        pass
 
 
 #: The models of :mod:`microfacet.fit.perceptual` that every fit tries (``coat=True`` adds ``"coat"``).
