@@ -1,19 +1,26 @@
 #!/usr/bin/env python3
-"""First-run times (issue 25, item 3): the README quick start and ``microfacet fit FILE`` with an
-empty Numba cache (cold) and a filled one (warm), in ``MICROFACET_COMPILE`` ``background`` (the
-default: NumPy while the kernels compile on a background thread) and ``wait`` (every kernel
-compiled at its first call, as before), ``python -m microfacet.kernels --precompile`` into an empty
-cache and into a filled one, and with ``--demo`` ``microfacet demo --no-viewer --no-mitsuba`` cold,
-after ``--precompile`` and warm.
+"""First-run times (issue 25, item 3), as a new user meets them: from a fresh clone of this
+repository's ``HEAD`` (its ``src`` on ``PYTHONPATH``, this interpreter's dependencies) and, with
+``--wheel``, from the wheel built from that clone and installed into a clean virtual environment.
 
-Each figure is the wall time of a fresh process (``NUMBA_CACHE_DIR`` a new empty folder for cold
-runs, one filled by a first run for warm ones), min and median of ``--runs``; the machine's load
-average is printed beside them, since a shared machine's times vary (compare ratios within one run).
+Measured, each in a fresh process with ``NUMBA_CACHE_DIR`` a new empty folder (cold) or a folder
+filled by the precompile steps of ``make setup`` (after setup):
+
+* the README quick start (goal <= 5 s cold), in ``MICROFACET_COMPILE`` ``background`` (the
+  default: NumPy while the kernels compile on a background thread) and ``wait``;
+* ``microfacet fit FILE`` of a corpus MERL file (goal <= 3 s cold);
+* ``make setup``'s compile steps (``python -m microfacet.kernels --precompile`` and
+  ``python -m microfacet.kernels_extra --precompile``) into the empty cache, and again (loads);
+* with ``--demo``: ``microfacet demo -o DIR`` as ``make demo`` runs it, after those steps (goal
+  <= 90 s), and with ``--demo-cold`` also with an empty cache (minutes).
+
+Wall and CPU (user + system, child processes included) seconds, min and median of ``--runs``; the
+machine's load average is printed beside each (a shared machine: compare within one table).
 Writes ``benchmarks/results/cold_start.md``.
 
 Usage::
 
-    python benchmarks/bench_cold_start.py [--runs 3] [--demo] [--file MERL_FILE]
+    python benchmarks/bench_cold_start.py [--runs 2] [--wheel] [--demo] [--demo-cold] [--file MERL_FILE]
 """
 from __future__ import annotations
 
@@ -30,106 +37,153 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-FILE = Path(os.environ.get("MICROFACET_DATA", ROOT.parent / "shared" / "data")) / "merl" / "nickel.binary.gz"
+DATA = Path(os.environ.get("MICROFACET_DATA") or ROOT.parent / "shared" / "data")
+CORPUS = Path(os.environ.get("MICROFACET_CORPUS_CACHE")
+              or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus")
+FILES = (CORPUS / "merl__nickel.binary", DATA / "merl" / "nickel.binary.gz")
 RESULTS = ROOT / "benchmarks" / "results" / "cold_start.md"
-BIN = Path(sys.executable).parent
 
 
-def quick_start() -> str:
+def quick_start(readme: Path) -> str:
     """The README's quick start code block."""
-    m = re.search(r"^## Quick start\n.*?^```python\n(.*?)^```", (ROOT / "README.md").read_text(), re.S | re.M)
+    m = re.search(r"^## Quick start\n.*?^```python\n(.*?)^```", readme.read_text(), re.S | re.M)
     if m is None:
-        raise SystemExit("README.md has no '## Quick start' python block")
+        raise SystemExit(f"{readme} has no '## Quick start' python block")
     return m.group(1)
-
-
-def timed(cmd, cache: Path, mode: str, cwd: Path) -> tuple[float, float]:
-    """Wall and CPU (user + system, its child processes included) seconds of ``cmd`` in a fresh
-    process with ``NUMBA_CACHE_DIR=cache`` and ``MICROFACET_COMPILE=mode``."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), MICROFACET_COMPILE=mode)
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t = time.perf_counter()
-    r = subprocess.run(cmd, cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    elapsed = time.perf_counter() - t
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if r.returncode != 0:
-        raise SystemExit(f"{' '.join(map(str, cmd))} failed:\n{r.stderr[-2000:]}")
-    return elapsed, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def load() -> str:
     return " / ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
-def series(label, cmd, mode, runs, work, warm_cache=None) -> tuple[str, list[float], str]:
-    """``runs`` cold runs (each a new empty cache), or warm runs (``warm_cache`` filled first)."""
-    times, cpus, loads = [], [], []
-    for i in range(runs):
-        if warm_cache is None:
-            cache = work / f"cache-{label}-{mode}-{i}".replace(" ", "_")
-            cache.mkdir()
-        else:
-            cache = warm_cache
-        loads.append(load())
-        wall, cpu = timed(cmd, cache, mode, work)
-        times.append(wall)
-        cpus.append(cpu)
-        print(f"  {label:42s} {mode:10s} {wall:7.2f} s wall {cpu:7.2f} s CPU   load {loads[-1]}", flush=True)
-    return label, times, cpus, mode, loads
+class Install:
+    """How to run the package: ``python`` and the environment of one installation."""
+
+    def __init__(self, label: str, python: str, env: dict, readme: Path):
+        self.label, self.python, self.env, self.readme = label, python, env, readme
+
+    def timed(self, args, cache: Path, cwd: Path, mode: str = "background") -> tuple[float, float]:
+        """Wall and CPU seconds of ``python args`` in a fresh process (``NUMBA_CACHE_DIR=cache``)."""
+        env = dict(self.env, NUMBA_CACHE_DIR=str(cache), MICROFACET_COMPILE=mode)
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t = time.perf_counter()
+        r = subprocess.run([self.python, *map(str, args)], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+        elapsed = time.perf_counter() - t
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if r.returncode != 0:
+            raise SystemExit(f"{self.label}: {' '.join(map(str, args))} failed:\n{r.stdout[-1000:]}\n{r.stderr[-3000:]}")
+        return elapsed, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def clone_install(work: Path) -> Install:
+    """A fresh ``git clone`` of ``HEAD``: its ``src`` first on ``PYTHONPATH``, with this interpreter."""
+    dest = work / "clone"
+    subprocess.run(["git", "clone", "-q", str(ROOT), str(dest)], check=True)
+    env = dict(os.environ, PYTHONPATH=str(dest / "src"))
+    head = subprocess.run(["git", "-C", str(dest), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
+    return Install(f"fresh clone ({head})", sys.executable, env, dest / "README.md")
+
+
+def wheel_install(work: Path, clone: Path) -> tuple[Install, float]:
+    """The wheel built from ``clone``, installed into a clean venv; and the install's seconds."""
+    dist = work / "dist"
+    subprocess.run([sys.executable, "-m", "build", "--wheel", "--outdir", str(dist), str(clone)], check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wheel = next(dist.glob("microfacet-*.whl"))
+    venv = work / "venv"
+    t = time.perf_counter()
+    subprocess.run(["python3", "-m", "venv", str(venv)], check=True)
+    subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet", str(wheel)], check=True,
+                   stderr=subprocess.DEVNULL)
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "MICROFACET_DATA")}
+    return Install(f"wheel ({wheel.name}, clean venv)", str(venv / "bin" / "python"), env, clone / "README.md"), \
+        time.perf_counter() - t
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--runs", type=int, default=3)
-    p.add_argument("--demo", action="store_true", help="also time microfacet demo (minutes)")
-    p.add_argument("--file", type=Path, default=FILE, help="MERL file for microfacet fit")
+    p.add_argument("--runs", type=int, default=2)
+    p.add_argument("--wheel", action="store_true", help="also from a wheel in a clean venv")
+    p.add_argument("--demo", action="store_true", help="also time microfacet demo after the precompile steps")
+    p.add_argument("--demo-cold", action="store_true", help="also time microfacet demo with an empty cache (minutes)")
+    p.add_argument("--file", type=Path, default=next((f for f in FILES if f.exists()), FILES[0]),
+                   help="MERL file for microfacet fit (default: the corpus's nickel)")
     args = p.parse_args()
     rows = []
+
+    def series(inst, label, cmd, runs, work, cache=None, mode="background"):
+        """``runs`` runs, each with a new empty cache (``cache`` None) or with ``cache``."""
+        times, cpus, loads = [], [], []
+        for i in range(runs):
+            c = cache
+            if c is None:
+                c = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
+            loads.append(load())
+            wall, cpu = inst.timed(cmd, c, work, mode)
+            times.append(wall)
+            cpus.append(cpu)
+            print(f"  {inst.label[:14]:14s} {label:44s} {mode:10s} {wall:7.2f} s wall {cpu:7.2f} s CPU   load {loads[-1]}",
+                  flush=True)
+        rows.append((inst.label, label, mode, times, cpus, loads))
+
     with tempfile.TemporaryDirectory(prefix="bench-cold-") as tmp:
         work = Path(tmp)
-        script = work / "quick_start.py"
-        script.write_text(quick_start())
-        qs = [sys.executable, str(script)]
-        warm = work / "warm"
-        warm.mkdir()
-        print("quick start", flush=True)
-        rows.append(series("quick start, cold", qs, "background", args.runs, work))
-        rows.append(series("quick start, cold", qs, "wait", args.runs, work))
-        timed([sys.executable, "-m", "microfacet.kernels", "--precompile", "-q"], warm, "wait", work)
-        timed(qs, warm, "wait", work)
-        rows.append(series("quick start, warm", qs, "background", args.runs, work, warm))
-        rows.append(series("quick start, warm", qs, "wait", args.runs, work, warm))
-        if args.file.exists():
-            fit = [str(BIN / "microfacet"), "fit", str(args.file), "-o", str(work / "nickel.npz")]
-            print("fit", flush=True)
-            rows.append(series("microfacet fit nickel, cold", fit, "background", args.runs, work))
-            rows.append(series("microfacet fit nickel, warm", fit, "background", args.runs, work, warm))
-        else:
-            print(f"fit: {args.file} is absent: not timed")
-        print("precompile", flush=True)
-        pre = [sys.executable, "-m", "microfacet.kernels", "--precompile", "-q"]
-        rows.append(series("precompile (float64), empty cache", pre, "wait", 1, work))
-        rows.append(series("precompile (float64), filled cache", pre, "wait", args.runs, work, warm))
-        if args.demo:
-            demo = [str(BIN / "microfacet"), "demo", "-o", str(work / "demo"), "--no-viewer", "--no-mitsuba"]
-            print("demo", flush=True)
-            rows.append(series("demo --no-viewer --no-mitsuba, cold", demo, "background", 1, work))
-            after = work / "after-precompile"
-            after.mkdir()
-            timed(pre, after, "wait", work)
-            rows.append(series("demo ..., after --precompile only", demo, "background", 1, work, after))
-            rows.append(series("demo ..., warm (second run)", demo, "background", 1, work, after))
-        shutil.rmtree(work / "demo", ignore_errors=True)
+        installs = [clone_install(work)]
+        if args.wheel:
+            inst, seconds = wheel_install(work, work / "clone")
+            print(f"wheel installed in {seconds:.1f} s", flush=True)
+            installs.append(inst)
+        for inst in installs:
+            run = work / re.sub(r"\W+", "-", inst.label)[:20]
+            run.mkdir()
+            script = run / "quick_start.py"
+            script.write_text(quick_start(inst.readme))
+            qs = [script]
+            fit = ["-m", "microfacet", "fit", args.file, "-o", run / "fit.npz"]
+            pre = ["-m", "microfacet.kernels", "--precompile", "-q"]
+            extra = ["-m", "microfacet.kernels_extra", "--precompile", "-q"]
+            print(inst.label, flush=True)
+            series(inst, "quick start, empty cache", qs, args.runs, run)
+            if inst is installs[0]:                 # every kernel compiled at its first call, as before
+                series(inst, "quick start, empty cache", qs, 1, run, mode="wait")
+            if args.file.exists():
+                series(inst, f"microfacet fit {args.file.name}, empty cache", fit, args.runs, run)
+            else:
+                print(f"fit: {args.file} is absent: not timed")
+            filled = run / "filled"
+            filled.mkdir()
+            series(inst, "precompile BRDF kernels, empty cache", pre, 1, filled.parent, filled, "wait")
+            series(inst, "precompile measured/LEADR/glints, empty cache", extra, 1, filled.parent, filled, "wait")
+            series(inst, "precompile BRDF kernels, filled cache", pre, 1, run, filled, "wait")
+            series(inst, "precompile measured/LEADR/glints, filled cache", extra, 1, run, filled, "wait")
+            series(inst, "quick start, after precompile", qs, args.runs, run, filled)
+            if args.file.exists():
+                series(inst, f"microfacet fit {args.file.name}, after precompile", fit, args.runs, run, filled)
+            if args.demo and inst is installs[0]:       # make demo: from the repository
+                demo = ["-m", "microfacet", "demo", "-o", run / "demo"]
+                series(inst, "microfacet demo, after precompile", demo, 1, run, filled)
+                shutil.rmtree(run / "demo", ignore_errors=True)
+            if args.demo_cold and inst is installs[0]:
+                demo = ["-m", "microfacet", "demo", "-o", run / "demo-cold"]
+                series(inst, "microfacet demo, empty cache", demo, 1, run)
+                shutil.rmtree(run / "demo-cold", ignore_errors=True)
     lines = ["# Cold start (issue 25, item 3)", "",
-             f"`python benchmarks/bench_cold_start.py --runs {args.runs}{' --demo' if args.demo else ''}`, "
-             f"{time.strftime('%Y-%m-%d %H:%M')}, {os.cpu_count()} CPUs, load average at the end {load()} "
-             "(a shared machine: compare within this table; CPU seconds vary less with the load than wall seconds). Wall and CPU (user + system, child processes included) seconds of fresh processes; cold: "
-             "`NUMBA_CACHE_DIR` a new empty folder per run; warm: a folder filled by `--precompile` and a first run.",
-             "", "| what | MICROFACET_COMPILE | runs | wall min s | wall median s | CPU median s | load averages |",
-             "|---|---|---:|---:|---:|---:|---|"]
-    for label, times, cpus, mode, loads in rows:
-        lines.append(f"| {label} | {mode} | {len(times)} | {min(times):.2f} | {statistics.median(times):.2f} | "
-                     f"{statistics.median(cpus):.2f} | {'; '.join(loads)} |")
+             f"`python benchmarks/bench_cold_start.py --runs {args.runs}{' --wheel' if args.wheel else ''}"
+             f"{' --demo' if args.demo else ''}{' --demo-cold' if args.demo_cold else ''}`, "
+             f"{time.strftime('%Y-%m-%d %H:%M')}, niceness {os.nice(0)}, {os.cpu_count()} CPUs shared with other work (load averages "
+             "1 / 5 / 15 min at the start of each run beside it; at the end "
+             f"{load()}). Wall and CPU (user + system, child processes included) seconds of fresh processes. "
+             "Empty cache: `NUMBA_CACHE_DIR` a new empty folder per run; after precompile: the folder that "
+             "`python -m microfacet.kernels --precompile` and `python -m microfacet.kernels_extra --precompile` "
+             "(`make setup`'s compile steps) filled. Goals: quick start <= 5 s and `microfacet fit` <= 3 s "
+             "with an empty cache, `make demo` <= 90 s after `make setup`.",
+             "", "| install | what | MICROFACET_COMPILE | runs | wall min s | wall median s | CPU median s | load averages |",
+             "|---|---|---|---:|---:|---:|---:|---|"]
+    for inst, label, mode, times, cpus, loads in rows:
+        lines.append(f"| {inst} | {label} | {mode} | {len(times)} | {min(times):.2f} | "
+                     f"{statistics.median(times):.2f} | {statistics.median(cpus):.2f} | {'; '.join(loads)} |")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text("\n".join(lines) + "\n")
     print(f"wrote {RESULTS}")

@@ -79,22 +79,39 @@ def synthetic_rgl(rng, phi_i=(0.0,), n_theta: int = 4) -> dict:
 
 
 def _leadr() -> None:
-    """The demo's LEADR section on a 16^2 height map (height moments, MIP reductions)."""
+    """The demo's LEADR section on a 16^2 height map (height moments, MIP reductions), and
+    ``microfacet bake`` of a 16-bit PNG height map (integer heights into the pyramid's levels)."""
+    from .batch.tasks import bake_file
+    from .io.png import write_png_data
     from .leadr.figures import leadr_section
     with tempfile.TemporaryDirectory(prefix="microfacet-precompile-") as d:
         leadr_section(d, size=16, levels=(1, 2), display=16)
+        y, x = np.mgrid[0:16, 0:16] / 16.0
+        height = write_png_data(Path(d) / "height.png", np.round(
+            (0.5 + 0.25 * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y)) * 65535).astype(np.uint16))
+        bake_file(height, Path(d) / "height.exr")
 
 
 def _glints() -> None:
     """The demo's glints section on a 32^2 normal map and an 8-pixel plane (microsurface build,
     P-BRDF footprint loops exact and approximate, naive renderer, white furnace), and a
-    microsurface file written and read back (``microfacet glints``, the Mitsuba glints plugin)."""
+    microsurface file written and read back (the Mitsuba glints plugin), ``microfacet glints`` of an
+    8-bit PNG normal map."""
+    from .batch.tasks import glints_file
     from .glints import Microsurface
     from .glints.figures import glints_section, scratched_normal_map
+    from .io.png import write_png_data
     with tempfile.TemporaryDirectory(prefix="microfacet-precompile-") as d:
         glints_section(d, map_size=32, width=8, reference_spp=2, naive_spp=1)
-        ms = Microsurface.from_normal_map(scratched_normal_map(32, scratches=4, seed=0))
+        normals = scratched_normal_map(32, scratches=4, seed=0)
+        ms = Microsurface.from_normal_map(normals)
         Microsurface.load(ms.save(Path(d) / "microsurface.npz"))
+        patch = ms.pbrdf((0.37, 0.61), np.eye(2) * (2.0 / 32) ** 2)     # a P-BRDF's protocol (Mitsuba, sweeps)
+        wo = np.tile([0.0, 0.6, 0.8], (8, 1))
+        patch.eval_cos(np.tile([0.6, 0.0, 0.8], (8, 1)), wo)
+        patch.sample(np.random.default_rng(0).random((8, 2)), wo)
+        png = write_png_data(Path(d) / "normals.png", np.round((normals + 1.0) * 127.5).astype(np.uint8))
+        glints_file(png, Path(d) / "glints.npz")                    # microfacet glints of an 8-bit PNG
 
 
 _CALLS = {"measured": _measured, "leadr": _leadr, "glints": _glints}

@@ -316,6 +316,8 @@ class PatchBRDF(BRDF):
             return (self.pndf(h),) + self.areas(wi) + self.areas(wo)
         shape = np.broadcast_shapes(h.shape, wi.shape, wo.shape)
         flat = [np.ascontiguousarray(np.broadcast_to(d, shape).reshape(-1, 3)) for d in (h, wi, wo)]
+        for f in flat:      # read-only, copied or not: one compiled version of the loop, not one per flag
+            f.flags.writeable = False
         out = [v.reshape(shape[:-1]) for v in _lobe_sums(self.moments.reshape(-1), self.weights, *flat).T]
         if not self.exact:
             out[1:3] = _merged_area(out[2], self.merged, wi)
