@@ -72,7 +72,7 @@ def test_best_fit_renders_as_the_library_renders_it(tmp_path):
 def test_section_without_fits_fits_the_demo_materials(tmp_path, monkeypatch):
     """Called alone, the section fits the demo's materials itself (no shared data here: the
     built-in ones, as microfacet fit does) and renders each file's best fit."""
-    import microfacet.demo as demo
+    import microfacet.demo_materials as demo          # where the demo's materials live
     monkeypatch.setenv("MICROFACET_DATA", str(tmp_path / "no_data"))
     examples = demo.fit_examples()[:1]
     monkeypatch.setattr(demo, "fit_examples", lambda: examples)      # one material: keep the test short

@@ -30,7 +30,7 @@ import math
 import numba
 import numpy as np
 
-from . import merl, utia
+from .grids import MERL_SHAPE, UTIA_PHI_STEP, UTIA_SHAPE, UTIA_THETA_STEP
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 _pjit = numba.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
@@ -40,9 +40,9 @@ _HALF_PI = math.pi / 2
 _TWO_OVER_PI = 2.0 / math.pi
 _TWO_PI = 2.0 * math.pi
 BLOCK = 256                              # pairs per block of the loops
-_NH, _ND, _NP = merl.SHAPE
-_NT, _NF = utia.SHAPE[1:3]                              # UTIA theta and phi nodes
-_THETA_STEP, _PHI_STEP = float(utia.THETA_STEP), float(utia.PHI_STEP)
+_NH, _ND, _NP = MERL_SHAPE
+_NT, _NF = UTIA_SHAPE[1:3]                              # UTIA theta and phi nodes
+_THETA_STEP, _PHI_STEP = UTIA_THETA_STEP, UTIA_PHI_STEP
 _UTIA_STRIDES = (_NF * _NT * _NF, _NT * _NF, _NF, 1)
 
 

@@ -31,10 +31,11 @@ import numpy as np
 
 from ..geometry import half_vector
 from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_error
+from .grids import MERL_SHAPE
 
 __all__ = ["MERLBRDF", "SHAPE", "SCALE", "is_merl", "read_merl"]
 
-SHAPE = (90, 90, 180)                                   # (theta_h, theta_d, phi_d) bins
+SHAPE = MERL_SHAPE                                      # (theta_h, theta_d, phi_d) bins
 SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 HEADER = np.array(SHAPE, dtype="<i4").tobytes()
 N_SAMPLES = SHAPE[0] * SHAPE[1] * SHAPE[2]

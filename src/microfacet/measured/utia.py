@@ -16,13 +16,14 @@ import numpy as np
 
 from ..geometry import cartesian_to_spherical
 from .base import MeasuredBRDF, check_finite, compiled_kernels, file_error
+from .grids import UTIA_PHI_STEP, UTIA_SHAPE, UTIA_THETA_STEP
 
 __all__ = ["UTIABRDF", "SHAPE", "N_BYTES", "is_utia", "read_utia", "srgb_decode"]
 
-SHAPE = (3, 6, 48, 6, 48)                     # [channel, theta_i, phi_i, theta_v, phi_v]
+SHAPE = UTIA_SHAPE                            # [channel, theta_i, phi_i, theta_v, phi_v]
 N_BYTES = int(np.prod(SHAPE)) * 8             # 1,990,656
-THETA_STEP = np.radians(15.0)
-PHI_STEP = np.radians(7.5)
+THETA_STEP = np.float64(UTIA_THETA_STEP)
+PHI_STEP = np.float64(UTIA_PHI_STEP)
 
 
 def is_utia(data: bytes) -> bool:

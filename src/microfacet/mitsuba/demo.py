@@ -133,7 +133,7 @@ def _fits(folder: Path, fits) -> list[tuple[object, Path]]:
     """``[(FitExample, fit file in folder)]``: ``fits`` copied into ``folder`` (the files
     the section renders travel with it), or, with ``fits=None``, the first
     :data:`MATERIALS` materials of :func:`microfacet.demo.fit_materials` fitted into it."""
-    from ..demo import fit_demo_material, fit_materials
+    from ..demo_materials import fit_demo_material, fit_materials
     if fits is None:
         examples, _ = fit_materials()
         return [(ex, fit_demo_material(ex, folder)[1]) for ex in examples[:MATERIALS]]
@@ -149,7 +149,7 @@ def _materials(mi, folder: Path, size: int, spp: int, tick, fits) -> str:
     """Scene 1: the best fit of each demo material rendered by ``mf_fitted`` (``use="best"``)
     under the environment, and under a directional light beside the library's own render
     of the same fit (and of the data); the relative RMS difference of the two renders."""
-    from ..demo import LIGHT, preview_exposure
+    from ..demo_materials import LIGHT, preview_exposure
     from ..fit import fit_names, load
     from ..render import procedural_sky
     env = write_exr(folder / "environment.exr", procedural_sky())
