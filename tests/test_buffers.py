@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import microfacet as mf
-from microfacet import _buffers, kernels
+from microfacet import _buffers, kernels, protocol
 
 BIG = (1 << 18, 3)                       # 6 MiB of float64: from the cache
 
@@ -23,13 +23,13 @@ def _empty_cache():
 
 
 def test_a_freed_output_is_reused_and_a_live_view_keeps_its_memory():
-    a = kernels.output(None, BIG, np.float64)
+    a = protocol.output(None, BIG, np.float64)
     assert a.shape == BIG and a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
     where = _address(a)
     view = a[10:]
     del a
     gc.collect()
-    b = kernels.output(None, BIG, np.float64)             # the view still holds the first buffer
+    b = protocol.output(None, BIG, np.float64)             # the view still holds the first buffer
     where_b, size = _address(b), BIG[0] * BIG[1] * 8
     assert where_b != where and _buffers._cache.kept == 0
     view[:] = 1.0
@@ -38,15 +38,15 @@ def test_a_freed_output_is_reused_and_a_live_view_keeps_its_memory():
     del view, b
     gc.collect()
     assert _buffers._cache.kept == 2 * size
-    c = kernels.output(None, BIG, np.float64)             # one of the two, the other waits
+    c = protocol.output(None, BIG, np.float64)             # one of the two, the other waits
     assert _address(c) in (where, where_b) and _buffers._cache.kept == size
     assert kernels.release_outputs() == size and _buffers._cache.kept == 0
 
 
 def test_small_outputs_and_a_cache_turned_off_are_plain_arrays(monkeypatch):
-    assert kernels.output(None, (100, 3), np.float64).flags.owndata
+    assert protocol.output(None, (100, 3), np.float64).flags.owndata
     monkeypatch.setattr(_buffers._cache, "limit", 0)
-    assert kernels.output(None, BIG, np.float32).flags.owndata
+    assert protocol.output(None, BIG, np.float32).flags.owndata
 
 
 def test_the_cache_keeps_at_most_its_limit():

@@ -41,14 +41,15 @@ def _dirs(rng, n):
 
 def _eval_key(brdf):
     """The dispatcher of ``brdf``'s float64 eval kernel (Numba imported)."""
-    return kernels._dispatcher(("eval_kernel", kernels._brdf_params(brdf)[0][0], np.dtype(np.float64)))
+    return kernels._dispatcher(("eval_kernel", brdf.params.kind, np.dtype(np.float64)))
 
 
 def test_kind_constants_match_the_kernels():
-    """kernels.py spells the kernels' kind constants so that choosing a kernel does not import Numba."""
+    """microfacet.params spells the kernels' kind constants so that choosing a kernel does not import Numba."""
+    from microfacet import params
     k = kernels._kernels()
-    assert (kernels._BECKMANN, kernels._GGX) == (k.BECKMANN, k.GGX)
-    assert (kernels._IDEAL, kernels._SCHLICK, kernels._DIELECTRIC, kernels._CONDUCTOR, kernels._TABULATED) == \
+    assert (params.BECKMANN, params.GGX) == (k.BECKMANN, k.GGX)
+    assert (params.IDEAL, params.SCHLICK, params.DIELECTRIC, params.CONDUCTOR, params.TABULATED) == \
         (k.IDEAL, k.SCHLICK, k.DIELECTRIC, k.CONDUCTOR, k.TABULATED)
 
 

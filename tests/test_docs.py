@@ -24,7 +24,7 @@ DOCTEST_MODULES = (
     "microfacet.cli.common", "microfacet.batch.workers", "microfacet.fit.fitted",
     "microfacet.export", "microfacet.export.gltf", "microfacet.export.mtlx", "microfacet.export.usd",
     "microfacet.export.analysis", "microfacet.fresnel", "microfacet.geometry", "microfacet.diffuse",
-    "microfacet.fit.spec",
+    "microfacet.fit.spec", "microfacet.params", "microfacet.protocol",
 )
 
 

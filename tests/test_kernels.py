@@ -385,7 +385,7 @@ def test_input_checks_fused_into_the_kernels(dtype, monkeypatch):
     ``_uniforms``, message for message, for one bad value at the start, in the middle or at the
     end of a batch run as several tasks, or in a broadcast input; values within the tolerance pass."""
     from microfacet._numba_kernels import _SLACK32
-    from microfacet.brdf import UNIT_TOLERANCE, _dirs as dirs, _uniforms as uniforms
+    from microfacet.protocol import UNIT_TOLERANCE, directions as dirs, uniforms
     from microfacet.geometry import unit_deviation
     f32 = dtype == np.float32
     monkeypatch.setattr(kernels, "threads", lambda: 2)            # tasks on 2 threads, also where Numba has 1

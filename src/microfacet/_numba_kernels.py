@@ -21,8 +21,11 @@ compiled per distribution kind and arithmetic type ``F`` (float64 or float32; co
 them: :func:`eval_kernel` etc.); the helpers take ``F`` and write their constants as ``F(c)``
 (a float literal would promote float32 arithmetic to float64; constants that differ by type,
 such as the polynomials of Beckmann's ``exp`` and ``Lambda``, lower degrees in float32, are
-chosen by :func:`_of_type`). Beckmann's visible-slope solve stays float64. The Fresnel kind,
-shadowing and ``/ cos theta_i`` are arguments, tested outside the loops.
+chosen by :func:`_of_type`). Beckmann's visible-slope solve stays float64. The model's
+parameters come in one record, :class:`microfacet.params.SmithParams` (a named tuple: Numba
+reads its fields, ``p.ax``, ``p.fresnel.fp``, as values of a struct; a kernel takes ``(start,
+stop, p, inputs..., out)``); its Fresnel kind and shadowing, and the ``/ cos theta_i`` flag,
+are tested outside the loops.
 The per-element helpers are the NumPy reference's equations, rearranged to save
 quotients where that is exact algebra (each docstring says how). ``error_model="numpy"``:
 a division by zero gives inf/NaN (then masked), as in NumPy, instead of raising. fastmath
@@ -108,11 +111,12 @@ _loops32 = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False, f
 
 # ------------------------------------------------------------------------ helpers
 @_inline
-def _warp(ax, ay, rho, s1, xn, yn, kx, ky, kz):
-    """``(a^2 + b^2, c)`` of the warped direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3)."""
-    a = ax * kx + rho * ay * ky
-    b = ay * s1 * ky
-    return a * a + b * b, kz - kx * xn - ky * yn
+def _warp(p, s1, kx, ky, kz):
+    """``(a^2 + b^2, c)`` of the warped direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3) for the
+    record ``p`` (:class:`microfacet.params.SmithParams`), ``s1 = sqrt(1 - rho^2)``."""
+    a = p.ax * kx + p.rho * p.ay * ky
+    b = p.ay * s1 * ky
+    return a * a + b * b, kz - kx * p.xn - ky * p.yn
 
 
 @_inline
@@ -325,11 +329,12 @@ def _smith_post(F, v_o, v_i, co):
 
 
 @_inline
-def _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz):
+def _ndf_pre(F, kind, p, s1, hx, hy, hz):
     """``D(h) = P_std(x / z, y / z) / (z^4 alpha_x alpha_y sqrt(1 - rho^2))`` for ``hz > 0``
     (Eq. 2.11, 3.2, Table 2.II, division-free) as ``(e, scale)`` for :func:`_ndf_over`: GGX
     ``(pi r^2, 1 / det)``, ``r = z^2 + x^2 + y^2``; Beckmann ``((x^2 + y^2) / (2 z^2),
     1 / (pi z^4 det))``, whose ``exp`` :func:`_ndf_post` takes."""
+    ax, ay, rho, xn, yn = p.ax, p.ay, p.rho, p.xn, p.yn
     inv_det = F(1.0) / (ax * ay * s1)                   # loop invariants: hoisted
     x = (-hx - xn * hz) * (F(1.0) / ax)
     y = (ax * (-hy - yn * hz) - rho * ay * (-hx - xn * hz)) * inv_det
@@ -454,15 +459,17 @@ def _interp(tx, tv, ch, c):
 
 
 @_inline
-def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m):
+def _fresnel_block(F, f, c_row, s_row, out, o, m):
     """``out[o + 3 k + ch] = F_ch(c_row[k]) * s_row[k]`` for ``k < m`` (a flat output, from its
-    element ``o``): the Fresnel term of kind ``fk`` (``fp[0]`` is ``f0`` or ``eta``, ``fp[1]``
-    ``k``; ``tx``, ``tv`` the :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
+    element ``o``): the Fresnel term of the record ``f`` (:class:`microfacet.params.FresnelParams`:
+    kind ``fk``, ``fp[0]`` is ``f0`` or ``eta``, ``fp[1]`` ``k``; ``tx``, ``tv`` the
+    :class:`~microfacet.fresnel.Tabulated` grid and values), one loop
     over ``k`` per kind (the choice outside it: one loop with the choice inside, which LLVM
     does not unswitch, took GGX Cu eval 4.7 -> 18 ms and float32 2.0 -> 6.0 ms per 10^6 pairs
     on one core) with the three channels inside, writing the
     output as it goes (interleaved stores; rows and a second pass to interleave them cost
     GGX sample 1 ms (7 %) more per 10^6 pairs on one core), so that the analytic terms vectorize."""
+    fk, fp, tx, tv = f.kind, f.fp, f.tx, f.tv
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
     q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
     o = max(o, 0)                                    # (see _flat_rows)
@@ -495,14 +502,15 @@ def _fresnel_block(F, fk, fp, tx, tv, c_row, s_row, out, o, m):
 
 
 @_inline
-def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay, rho, xn, yn, rows, measure,
-                     top_i, top_o, dst, od, oh_row=True, smith=True):
+def _projected_block(F, kind, p, shadowing, divide_cos_i, wi, oi, wo, oo, m, rows, measure, top_i, top_o, dst, od,
+                     oh_row=True, smith=True):
     """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
-    0 where invalid (see ``_projected_numpy``). Uses the six scratch ``rows`` (1-D arrays of ``F``,
+    0 where invalid (see ``_projected_numpy``), for the record ``p`` (:class:`microfacet.params.SmithParams`;
+    ``shadowing`` apart: the pdf takes ``False`` whatever ``p.shadowing``). Uses the six scratch ``rows`` (1-D arrays of ``F``,
     made once per kernel call: an array view made per block costs two atomic reference counts).
     Returns ``(top_i, top_o)`` updated, if ``measure``, with the unit-length deviations of ``wi`` and
     ``wo``: the largest :func:`_bits_of` of their :func:`_deviation_at`, taken in this loop in lanes of
@@ -510,7 +518,7 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
     longer; int64 lanes in the float32 loop, 13-30 %). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
-    s1 = math.sqrt(F(1.0) - rho * rho)
+    s1 = math.sqrt(F(1.0) - p.rho * p.rho)
     oh_r, a_r, w_r, e_r, f_r, co_r = rows
     oi, oo, od = max(oi, 0), max(oo, 0), max(od, 0)  # (see _flat_rows)
     for k in range(m):
@@ -526,11 +534,11 @@ def _projected_block(F, kind, shadowing, divide_cos_i, wi, oi, wo, oo, m, ax, ay
             inv = F(1.0) / math.sqrt(n2 if n2 > F(0.0) else F(math.inf))       # 0 at n2 = 0
             hx, hy, hz = hx * inv, hy * inv, hz * inv
         oh = ox * hx + oy * hy + oz * hz
-        r2, co = _warp(ax, ay, rho, s1, xn, yn, ox, oy, oz)
-        r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
+        r2, co = _warp(p, s1, ox, oy, oz)
+        r2_i, ci = _warp(p, s1, ix, iy, iz)
         ok = ((iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
               & ((ci > F(0.0)) | (not shadowing)))
-        e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
+        e, scale = _ndf_pre(F, kind, p, s1, hx, hy, hz if hz > F(0.0) else F(1.0))
         if oh_row:
             oh_r[k] = oh
         else:
@@ -560,7 +568,7 @@ def _beckmann_value(rows, k):
 
 
 @_jit_contract
-def _beckmann_eval_block(fk, fp, rows, out, o, m):
+def _beckmann_eval_block(f, rows, out, o, m):
     """float64 Beckmann eval with shadowing and an ideal or conductor Fresnel term, after
     :func:`_projected_block` without ``smith``: the Smith terms, the NDF's ``exp``, the value and the
     Fresnel term in one loop (:func:`_beckmann_value`, as :func:`_fresnel_block`), so that the ``exp``
@@ -569,7 +577,9 @@ def _beckmann_eval_block(fk, fp, rows, out, o, m):
     5.29 -> 3.93 ms (-25 %). Each fused loop costs ~2.5 s of cold compile (6.8 -> 11.7 s for this
     kernel), so only the float64 Beckmann eval kernel compiles it (``fused`` in :func:`eval_kernel`),
     and not for the dielectric term (-6 %); fused, Schlick and tabulated terms took 7 % and 16 %
-    longer, float32 13 %. ``contract``, as :func:`_smith_block_post`."""
+    longer, float32 13 %. ``contract``, as :func:`_smith_block_post`. ``f``: the Fresnel record
+    (:class:`microfacet.params.FresnelParams`)."""
+    fk, fp = f.kind, f.fp
     p0, p1, p2 = fp[0, 0], fp[0, 1], fp[0, 2]
     q0, q1, q2 = fp[1, 0], fp[1, 1], fp[1, 2]
     oh, o = rows[0], max(o, 0)                       # (see _flat_rows)
@@ -793,14 +803,14 @@ def _sin_cos(F, x):
 
 
 @_inline
-def _view_angles(F, kind, wo, j, ax, ay, rho, s1, xn, yn):
+def _view_angles(F, kind, p, s1, wo, j):
     """``(cos theta, cos phi, sin phi, c_o, root)`` of the warped view ``o' = (a, b, c_o)`` (Eq. 3.3)
-    of the direction ``wo[j:j + 3]`` of a flat ``wo``, ``root`` its :func:`_view_root`:
+    of the direction ``wo[j:j + 3]`` of a flat ``wo`` for the record ``p``, ``root`` its :func:`_view_root`:
     ``theta`` is 0 where ``a = b = 0``, ``pi/2`` where ``c_o <= 0``."""
     ox, oy, oz = F(wo[j]), F(wo[j + 1]), F(wo[j + 2])
-    a = ax * ox + rho * ay * oy
-    b = ay * s1 * oy
-    co = oz - ox * xn - oy * yn
+    a = p.ax * ox + p.rho * p.ay * oy
+    b = p.ay * s1 * oy
+    co = oz - ox * p.xn - oy * p.yn
     c = max(co, F(0.0))
     r2 = a * a + b * b
     root = _view_root(F, kind, r2, co)
@@ -1109,101 +1119,108 @@ def _deviations(tops, scratch):
 
 @functools.cache
 def projected_kernel(kind, dtype=np.float64):
-    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out)`` writing
-    ``o.h`` and ``D G / (4 z_o) [/ z_i]`` per pair (:func:`_projected_block`) of the
-    distribution ``kind`` in ``dtype`` arithmetic (the kernels are compiled per kind and
-    ``dtype``, constants in them; the caller passes the scalar parameters as ``dtype``)."""
+    """Kernel ``(start, stop, p, wi, wo, divide_cos_i, out)`` writing ``o.h`` and ``D G / (4 z_o)
+    [/ z_i]`` per pair (:func:`_projected_block`) into ``out = (oh_out, s_out)``, for the record ``p``
+    (:class:`microfacet.params.SmithParams`; its Fresnel term unused) of the distribution ``kind``
+    in ``dtype`` arithmetic (the kernels are compiled per kind and ``dtype``, constants in them;
+    the record's scalars are of ``dtype``)."""
     F = np.dtype(dtype).type
     key = ("projected", kind, np.dtype(dtype).name)
 
     @_loops(key)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out, scratch):
+    def loops(start, stop, p, wi, wo, divide_cos_i, oh_out, s_out, scratch):
         rows, si, so, wi_f, wo_f = scratch
         oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, False,
+            _projected_block(F, kind, p, p.shadowing, divide_cos_i, bi, oi, bo, oo, m, rows, False,
                              _no_bits(F), _no_bits(F), s_out, j0)
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
 
     @_jit
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out):
-        _call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, oh_out, s_out,
-                    _scratch(F, wi, wo))
+    def kernel(start, stop, p, wi, wo, divide_cos_i, out):
+        _call_loops(key, start, stop, p, wi, wo, divide_cos_i, out[0], out[1], _scratch(F, wi, wo))
     return kernel
 
 
 @functools.cache
 def pdf_kernel(kind, dtype=np.float64):
-    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, out)`` writing the visible-normal sampling
-    density ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair; returns the
+    """Kernel ``(start, stop, p, wi, wo, out)`` writing the visible-normal sampling density
+    ``D(h) / (4 A(o))`` (Eq. 2.17, ``A(o) = c_o (1 + Lambda(o))``) per pair for the record ``p``
+    (:class:`microfacet.params.SmithParams`; shadowing and Fresnel term unused); returns the
     largest unit-length deviations of its ``wi`` and ``wo`` (:func:`_deviation`)."""
     F = np.dtype(dtype).type
     key = ("pdf", kind, np.dtype(dtype).name)
 
     @_loops(key)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch):
+    def loops(start, stop, p, wi, wo, out, scratch):
         rows, si, so, wi_f, wo_f = scratch
         top_i, top_o = _no_bits(F), _no_bits(F)
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            top_i, top_o = _projected_block(F, kind, False, False, bi, oi, bo, oo, m, ax, ay, rho, xn, yn, rows, True,
+            top_i, top_o = _projected_block(F, kind, p, False, False, bi, oi, bo, oo, m, rows, True,
                                             top_i, top_o, out, j0, False)
         return top_i, top_o
 
     @_jit
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, out):
+    def kernel(start, stop, p, wi, wo, out):
         scratch = _scratch(F, wi, wo)
-        return _deviations(_call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, out, scratch), scratch)
+        return _deviations(_call_loops(key, start, stop, p, wi, wo, out, scratch), scratch)
     return kernel
 
 
 @functools.cache
 def eval_kernel(kind, dtype=np.float64):
-    """Kernel ``(wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out)``
-    writing ``F D G / (4 z_o) [/ z_i]`` RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2);
-    returns the deviations of its ``wi`` and ``wo``, as :func:`pdf_kernel`."""
+    """Kernel ``(start, stop, p, wi, wo, divide_cos_i, out)`` writing ``F D G / (4 z_o) [/ z_i]``
+    RGB per pair into ``out (n, 3)`` (Eq. 2.1, Listing 2.2) for the record ``p``
+    (:class:`microfacet.params.SmithParams`); returns the deviations of its ``wi`` and ``wo``, as
+    :func:`pdf_kernel`."""
     F = np.dtype(dtype).type
     key = ("eval", kind, np.dtype(dtype).name)
     fused = kind == BECKMANN and F is np.float64     # (a constant: Numba prunes `if fused` elsewhere)
 
     @_loops(key)
-    def loops(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out, scratch):
+    def loops(start, stop, p, wi, wo, divide_cos_i, out, scratch):
         rows, si, so, wi_f, wo_f = scratch
         top_i, top_o = _no_bits(F), _no_bits(F)
-        later = shadowing & ((fk == IDEAL) | (fk == CONDUCTOR))
+        f = p.fresnel
+        later = p.shadowing & ((f.kind == IDEAL) | (f.kind == CONDUCTOR))
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            top_i, top_o = _projected_block(F, kind, shadowing, divide_cos_i, bi, oi, bo, oo, m, ax, ay, rho, xn, yn,
-                                            rows, True, top_i, top_o, rows[1], 0, True, not (fused and later))
+            top_i, top_o = _projected_block(F, kind, p, p.shadowing, divide_cos_i, bi, oi, bo, oo, m, rows, True,
+                                            top_i, top_o, rows[1], 0, True, not (fused and later))
             if fused and later:
-                _beckmann_eval_block(fk, fp, rows, out, 3 * j0, m)
+                _beckmann_eval_block(f, rows, out, 3 * j0, m)
             else:
-                _fresnel_block(F, fk, fp, tx, tv, rows[0], rows[1], out, 3 * j0, m)
+                _fresnel_block(F, f, rows[0], rows[1], out, 3 * j0, m)
         return top_i, top_o
 
     @_jit
-    def kernel(start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp, tx, tv, out):
+    def kernel(start, stop, p, wi, wo, divide_cos_i, out):
         scratch = _scratch(F, wi, wo)
-        return _deviations(_call_loops(key, start, stop, wi, wo, ax, ay, rho, xn, yn, shadowing, divide_cos_i, fk, fp,
-                                       tx, tv, out.reshape(out.size), scratch), scratch)
+        return _deviations(_call_loops(key, start, stop, p, wi, wo, divide_cos_i, out.reshape(out.size), scratch),
+                           scratch)
     return kernel
 
 
 @functools.cache
 def sample_kernel(kind, dtype=np.float64):
-    """Kernel ``(u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out)`` of
-    visible-normal sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``):
+    """Kernel ``(start, stop, p, u, wo, out)``, ``out = (wi_out, weight_out, pdf_out)``, of visible-normal
+    sampling of ``f_r cos theta_i`` (Sec. 2.2, 3.2; ``MicrofacetBRDF.sample``) for the record ``p``
+    (:class:`microfacet.params.SmithParams`):
     ``wi`` reflected about ``h ~ D_o``, weight ``F G / G1(o)`` (Eq. 2.23), pdf ``D(h) / (4 A(o))``;
     returns how many of its ``u`` lie outside ``[0, 1]`` and the deviation of its ``wo``."""
     F = np.dtype(dtype).type
 
     @(_jit if F is np.float64 else _jit_float32)
-    def kernel(start, stop, u, wo, ax, ay, rho, xn, yn, shadowing, fk, fp, tx, tv, wi_out, weight_out, pdf_out):
+    def kernel(start, stop, p, u, wo, out):
+        wi_out, weight_out, pdf_out = out
+        shadowing, xn, yn = p.shadowing, p.xn, p.yn
+        ax, ay, rho = p.ax, p.ay, p.rho
         s1 = math.sqrt(F(1.0) - rho * rho)
         buf = np.empty((10, BLOCK), F)
         bk = np.empty((4, BLOCK))                    # Beckmann's float64 rows
@@ -1224,7 +1241,7 @@ def sample_kernel(kind, dtype=np.float64):
                     dev_o[k] = _deviation_at(F, wo_b, oo + 3 * k)
                     u0, u1 = u_b[ou + 2 * k], u_b[ou + 2 * k + 1]
                     r0[k] = F(_outside_unit(u0) + _outside_unit(u1))
-                    cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, oo + 3 * k, ax, ay, rho, s1, xn, yn)
+                    cos_t, r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, p, s1, wo_b, oo + 3 * k)
                     r3[k], r4[k], r5[k] = _ggx_visible_std(F, F(u0), F(u1), cos_t)
                 for k in range(m):                   # (an integer sum in the loop above split its float32 lanes)
                     outside += 0 if r0[k] == F(0.0) else 1
@@ -1233,7 +1250,7 @@ def sample_kernel(kind, dtype=np.float64):
                     outside += _outside_unit(u_b[ou + k])
                 for k in range(m):
                     dev_o[k] = _deviation_at(F, wo_b, oo + 3 * k)
-                    r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, wo_b, oo + 3 * k, ax, ay, rho, s1, xn, yn)
+                    r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, p, s1, wo_b, oo + 3 * k)
                 _beckmann_visible_block(u_b, ou, r0, r3, r4, r5, gx, gy, ok_x, ok_y, m)
             top_o = _max_bits(bits_o, m, top_o)
             for k in range(m):
@@ -1251,8 +1268,8 @@ def sample_kernel(kind, dtype=np.float64):
                 ix, iy, iz = F(2.0) * oh * hx - ox, F(2.0) * oh * hy - oy, F(2.0) * oh * hz - oz
                 co = r6[k]
                 ok = (iz > F(0.0)) & (oz > F(0.0)) & (oh > F(0.0)) & (hz > F(0.0)) & (co > F(0.0))
-                r2_i, ci = _warp(ax, ay, rho, s1, xn, yn, ix, iy, iz)
-                e, scale = _ndf_pre(F, kind, ax, ay, rho, s1, xn, yn, hx, hy, hz if hz > F(0.0) else F(1.0))
+                r2_i, ci = _warp(p, s1, ix, iy, iz)
+                e, scale = _ndf_pre(F, kind, p, s1, hx, hy, hz if hz > F(0.0) else F(1.0))
                 r0[k] = oh
                 area, w, c = _smith_pre(F, kind, shadowing, r8[k], co, r2_i, ci)
                 scale = scale if ok else F(0.0)
@@ -1268,6 +1285,12 @@ def sample_kernel(kind, dtype=np.float64):
                 for k in range(m):
                     pdf_out[jp + k], r2[k] = _pdf_and_ratio(F, kind, r1[k], r2[k] if shadowing else r1[k], r5[k], r3[k],
                                                             r4[k], r7[k] > F(0.0))
-            _fresnel_block(F, fk, fp, tx, tv, r0, r2, weight_flat, 3 * j0, m)
+            _fresnel_block(F, p.fresnel, r0, r2, weight_flat, 3 * j0, m)
         return outside, _deviation(top_o, dev_o)
     return kernel
+
+
+#: Public names of the helpers that other compiled modules share (:mod:`microfacet.glints.pbrdf`):
+#: the decorators of inlined helpers and of multiply-add loops, ``exp`` of a non-positive
+#: argument and ``erfc`` given ``exp(-v^2)``.
+inline, jit_contract, exp_neg, erfc_near = _inline, _jit_contract, _exp_neg, _erfc_near

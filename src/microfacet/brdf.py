@@ -17,6 +17,9 @@ import numpy as np
 
 from . import fresnel as _fresnel
 from . import kernels
+from . import protocol
+from .params import SmithParams, smith_params
+from .protocol import UNIT_TOLERANCE, directions, into, into_sample
 from .distributions.base import SlopeDistribution
 from .geometry import (cosine_hemisphere_pdf, dot, half_vector, reflect,
                        square_to_cosine_hemisphere)
@@ -26,102 +29,39 @@ __all__ = ["BRDF", "MicrofacetBRDF", "Lambertian", "GAFS", "UNIT_TOLERANCE", "un
 GAFS = ("smith", "vgroove", "normal_map")
 
 
-#: Largest accepted ``| |w|^2 - 1 |`` of a direction (``|w|`` within about ``1 +- 5e-6``):
-#: unit vectors rounded to float32 pass (their error is ~1e-7); within it ``f_r`` moves by
-#: ~1e-5 relative (1 % too long changes it by 2.2 %), so directions are used as given.
-UNIT_TOLERANCE = 1e-5
-
-
-def _as_dirs(w, name: str, float32: bool = False) -> np.ndarray:
-    """``w`` as float64 directions ``(..., 3)`` (float32 arrays stay float32 if ``float32``, for
-    the compiled kernels, which read either); ``ValueError`` naming ``name`` if the last axis is not 3."""
-    w = np.asarray(w)
-    if not (float32 and w.dtype == np.float32):
-        w = w.astype(np.float64, copy=False)
-    if w.shape[-1:] != (3,):
-        raise ValueError(f"{name} must have a last axis of size 3, got shape {w.shape}")
-    return w
-
-
-def _check_unit(w, name: str, deviation=None) -> None:
-    """``ValueError`` naming ``name`` if a vector of ``w`` is not unit length within
-    :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included). ``deviation``: the largest
-    ``| |w|^2 - 1 |`` (or an upper bound of it) if a kernel measured it while reading ``w``, else,
-    and where that fails, one compiled pass (:func:`microfacet.kernels.unit_deviation`)."""
-    if deviation is None or not deviation <= UNIT_TOLERANCE:
-        deviation = kernels.unit_deviation(w)
-    if not deviation <= UNIT_TOLERANCE:
-        n2 = np.sum(w * w, axis=-1)
-        bad = np.argwhere(~(np.abs(n2 - 1.0) <= UNIT_TOLERANCE))[0]
-        where = f" at index {tuple(bad.tolist())}" if w.ndim > 1 else ""
-        raise ValueError(f"{name} must be unit vectors (| |w|^2 - 1 | <= {UNIT_TOLERANCE:g}; "
-                         f"normalize them first), got {w[tuple(bad)].tolist()} of length "
-                         f"{np.sqrt(n2[tuple(bad)]):.9g}{where}")
-
-
-def _dirs(w, name: str, float32: bool = False) -> np.ndarray:
-    """``w`` as unit directions ``(..., 3)`` (the convention of every BRDF method): :func:`_as_dirs`
-    and :func:`_check_unit`."""
-    w = _as_dirs(w, name, float32)
-    _check_unit(w, name)
-    return w
-
-
-def _as_uniforms(u, float32: bool = False) -> np.ndarray:
-    """``u`` as float64 uniforms ``(..., 2)`` (float32 arrays stay float32 if ``float32``);
-    ``ValueError`` if the last axis is not 2."""
-    u = np.asarray(u)
-    if not (float32 and u.dtype == np.float32):
-        u = u.astype(np.float64, copy=False)
-    if u.shape[-1:] != (2,):
-        raise ValueError(f"u must have a last axis of size 2, got shape {u.shape}")
-    return u
-
-
-def _check_uniforms(u, name: str = "u", outside=None) -> None:
-    """``ValueError`` if a value of ``u`` lies outside ``[0, 1]`` (NaN too). ``outside``: nonzero
-    if a kernel found one while reading ``u``, else two NumPy passes."""
-    if outside is None:
-        outside = u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0)
-    if outside:
-        bad = ~((u >= 0.0) & (u <= 1.0))
-        raise ValueError(f"{name} must lie in [0, 1] (uniform random numbers), got {float(u[bad][0])!r} "
-                         f"({int(bad.sum())} value(s) outside)")
-
-
-def _uniforms(u, float32: bool = False) -> np.ndarray:
-    """``u`` as uniforms ``(..., 2)`` in ``[0, 1]``: :func:`_as_uniforms` and :func:`_check_uniforms`."""
-    u = _as_uniforms(u, float32)
-    _check_uniforms(u)
-    return u
+#: Kept for the fitting modules until they import :mod:`microfacet.protocol` themselves
+#: (issue 27: the lead's files); new code imports the public names there.
+_into, _into_sample = protocol.into, protocol.into_sample
 
 
 def unit_directions(w, name: str) -> np.ndarray:
     """``w`` as float64 unit directions ``(..., 3)``, checked as every BRDF method checks its
-    ``wi``/``wo`` (one-line ``ValueError`` naming ``name``); for BRDFs defined elsewhere."""
-    return _dirs(w, name)
+    ``wi``/``wo`` (one-line ``ValueError`` naming ``name``; :func:`microfacet.protocol.directions`)."""
+    return directions(w, name)
 
 
 def uniforms(u) -> np.ndarray:
-    """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]``, checked as :meth:`BRDF.sample` does."""
-    return _uniforms(u)
+    """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]``, checked as :meth:`BRDF.sample` does
+    (:func:`microfacet.protocol.uniforms`)."""
+    return protocol.uniforms(u)
 
 
 def _fused(kernel, float32: bool, **inputs):
     """``(arrays, result)``: ``inputs`` (directions ``wi``/``wo``, uniforms ``u``; keyword order
-    is the order of their checks) converted as by :func:`_dirs` / :func:`_uniforms`, and the
+    is the order of their checks) converted as by :func:`microfacet.protocol.directions` / :func:`~microfacet.protocol.uniforms`, and the
     result of ``kernel(**arrays)``, a :mod:`microfacet.kernels` function that returns ``(result,
     checks)`` (the inputs' measures, taken while it read them: no pass of their own) or ``None``
     where it does not apply (then ``result`` is ``None`` and the inputs are checked here).
-    A bad input raises the ``ValueError`` of :func:`_dirs` / :func:`_uniforms`, whose messages are
+    A bad input raises the ``ValueError`` of :func:`microfacet.protocol.directions` / :func:`~microfacet.protocol.uniforms`, whose messages are
     built from the inputs, after the kernel (its outputs are dropped); a malformed input or shapes
-    that do not broadcast raise after the checks of the inputs before them, as :func:`_dirs`
+    that do not broadcast raise after the checks of the inputs before them, as :func:`~microfacet.protocol.directions`
     called in turn would."""
     arrays = {}
-    checks = {name: _check_uniforms if name == "u" else _check_unit for name in inputs}
+    checks = {name: protocol.check_uniforms if name == "u" else protocol.check_unit for name in inputs}
     try:
         for name, value in inputs.items():
-            arrays[name] = _as_uniforms(value, float32) if name == "u" else _as_dirs(value, name, float32)
+            arrays[name] = protocol.as_uniforms(value, float32) if name == "u" else \
+                protocol.as_directions(value, name, float32)
         fast = kernel(**arrays)
     except ValueError:
         for name, a in arrays.items():
@@ -131,25 +71,6 @@ def _fused(kernel, float32: bool, **inputs):
     for name, a in arrays.items():
         checks[name](a, name, measures.get(name))
     return arrays, None if fast is None else fast[0]
-
-
-def _into(out, result: np.ndarray, inputs) -> np.ndarray:
-    """``result``, or ``out`` with ``result`` copied in (:func:`microfacet.kernels.output`)."""
-    if out is None:
-        return result
-    np.copyto(kernels.output(out, result.shape, result.dtype, "out", tuple(inputs)), result)
-    return out
-
-
-def _into_sample(out, result, inputs):
-    """``(wi, weight, pdf)`` ``result``, or ``out``'s three arrays with it copied in
-    (:func:`microfacet.kernels.sample_outputs`)."""
-    if out is None:
-        return result
-    out = kernels.sample_outputs(out, result[2].shape, result[2].dtype, tuple(inputs))
-    for o, a in zip(out, result):
-        np.copyto(o, a)
-    return out
 
 
 class BRDF:
@@ -162,11 +83,11 @@ class BRDF:
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
         """BRDF value ``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
-        wi = _dirs(wi, "wi")
+        wi = directions(wi, "wi")
         zi = wi[..., 2:3]
         fc = self.eval_cos(wi, wo)
         f = np.divide(fc, zi, out=np.zeros(np.broadcast_shapes(fc.shape, zi.shape)), where=zi > 0)
-        return _into(out, f, (wi, wo))
+        return into(out, f, (wi, wo))
 
     def sample(self, u, wo, out=None):  # pragma: no cover - interface
         """Importance-sample ``f_r cos theta_i``: ``(wi, weight, pdf)`` from uniforms
@@ -195,22 +116,22 @@ class Lambertian(BRDF):
         return f"Lambertian(reflectance={self.reflectance.tolist()})"
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        wi, wo = directions(wi, "wi"), directions(wo, "wo")
         zi, zo = wi[..., 2], wo[..., 2]
-        return _into(out, np.where((zi > 0) & (zo > 0), zi / np.pi, 0.0)[..., None] * self.reflectance, (wi, wo))
+        return into(out, np.where((zi > 0) & (zo > 0), zi / np.pi, 0.0)[..., None] * self.reflectance, (wi, wo))
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
-        return _into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
+        wi, wo = directions(wi, "wi"), directions(wo, "wo")
+        return into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
 
     def sample(self, u, wo, out=None):
-        wo = _dirs(wo, "wo")
-        u = _uniforms(u)
+        wo = directions(wo, "wo")
+        u = protocol.uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         ok = (wo[..., 2] > 0) & (wi[..., 2] > 0)
         pdf = np.where(ok, cosine_hemisphere_pdf(wi), 0.0)
-        return _into_sample(out, (wi, np.where(ok[..., None], self.reflectance, 0.0), pdf), (u, wo))
+        return into_sample(out, (wi, np.where(ok[..., None], self.reflectance, 0.0), pdf), (u, wo))
 
 
 class MicrofacetBRDF(BRDF):
@@ -264,6 +185,30 @@ class MicrofacetBRDF(BRDF):
         self.gaf_model = gaf
         self.shadowing = bool(shadowing)
 
+    #: The attributes :attr:`params` is made of: assigning one makes it again.
+    _RECORD_OF = frozenset({"distribution", "fresnel", "gaf_model", "shadowing", "dtype"})
+
+    def __setattr__(self, name, value):
+        super().__setattr__(name, value)
+        if name in self._RECORD_OF:
+            self.__dict__.pop("_params", None)
+
+    @property
+    def params(self) -> SmithParams | None:
+        """The frozen record of this BRDF for the compiled kernels (:class:`microfacet.params.SmithParams`:
+        kind, roughness, correlation, mean slope, shadowing, Fresnel term, as scalars of :attr:`dtype`),
+        made once, at first use, and passed whole to them; ``None`` where they do not cover the BRDF
+        (another GAF than Smith, array parameters, another distribution or Fresnel class: the NumPy
+        path). Made again when an attribute it is made of is assigned; a distribution or Fresnel
+        term changed in place is not seen (make a new BRDF)."""
+        try:
+            return self.__dict__["_params"]
+        except KeyError:
+            p = None if self.gaf_model != "smith" else smith_params(self.distribution, self.fresnel,
+                                                                     self.shadowing, self.dtype)
+            self.__dict__["_params"] = p
+            return p
+
     def __repr__(self) -> str:
         dtype = "" if self.dtype == np.float64 else f", dtype=numpy.{self.dtype}"
         return (f"MicrofacetBRDF({self.distribution!r}, fresnel={self.fresnel!r}, "
@@ -295,7 +240,7 @@ class MicrofacetBRDF(BRDF):
         V-groove: ``min(1, 2 z_i z_h / ih, 2 z_o z_h / oh)``. Normal map: ``z_o z_h / oh``.
         Without shadowing only the ``o`` factors remain.
         """
-        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        wi, wo = directions(wi, "wi"), directions(wo, "wo")
         h = half_vector(wi, wo) if h is None else np.asarray(h, dtype=np.float64)
         return self._gaf(wi, wo, h, dot(wi, h), dot(wo, h))
 
@@ -319,16 +264,27 @@ class MicrofacetBRDF(BRDF):
         return np.where(ok, g, 0.0)
 
     # ---------------------------------------------------------------- protocol
+    def _out(self, out, a, b, last):
+        """``out`` checked for a compiled kernel (:func:`microfacet.protocol.output`: the result of
+        inputs ``a``, ``b``, shape ``(..., *last)``; ``last=None``: :func:`~microfacet.protocol.sample_outputs`),
+        or ``None``: no ``out`` given, or no kernel for this BRDF (the NumPy path checks it)."""
+        if out is None or self.params is None:
+            return None
+        shape = protocol.pair_shape(a, b)
+        if last is None:
+            return protocol.sample_outputs(out, shape, self.dtype, (a, b))
+        return protocol.output(out, shape + last, self.dtype, "out", (a, b))
+
     def _projected(self, wi, wo, divide_cos_i: bool = False):
         """``(o.h, D G / (4 z_o))`` at the half vector (``/ z_i`` if asked), 0 where invalid.
 
         Smith BRDFs with scalar parameters use the fused compiled kernel
         (:mod:`microfacet.kernels`); :meth:`_projected_numpy` is the reference.
         """
-        return self._projected_unit(_dirs(wi, "wi"), _dirs(wo, "wo"), divide_cos_i)
+        return self._projected_unit(directions(wi, "wi"), directions(wo, "wo"), divide_cos_i)
 
     def _projected_unit(self, wi, wo, divide_cos_i: bool = False):
-        """:meth:`_projected` of directions already checked by ``_dirs``."""
+        """:meth:`_projected` of directions already checked (:func:`microfacet.protocol.directions`)."""
         if self.gaf_model == "smith":
             fast = kernels.smith_projected(self.distribution, self.shadowing, wi, wo, divide_cos_i, background=True)
             if fast is not None:
@@ -350,14 +306,15 @@ class MicrofacetBRDF(BRDF):
         parameters and a :mod:`microfacet.fresnel` term (:func:`microfacet.kernels.smith_eval`),
         :meth:`_projected` times the Fresnel term otherwise (the reference; while the eval kernel
         compiles in the background, :meth:`_projected_numpy`: see :mod:`microfacet.kernels`)."""
-        d, fast = _fused(lambda wi, wo: kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype, out, background=True),
-                         self.dtype == np.float32, wi=wi, wo=wo)
+        def compiled(wi, wo):
+            return kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype, self._out(out, wi, wo, (3,)), True)
+        d, fast = _fused(compiled, self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
         wi, wo = d["wi"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False)
         projected = self._projected_numpy if kernels.covers(self) else self._projected_unit
         oh, s = projected(wi, wo, divide_cos_i)
-        return _into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
+        return into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
@@ -372,12 +329,12 @@ class MicrofacetBRDF(BRDF):
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
         pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
-        d, fast = _fused(lambda wi, wo: kernels.smith_pdf(self, wi, wo, self.dtype, out, background=True),
-                         self.dtype == np.float32,
-                         wi=wi, wo=wo)
+        def compiled(wi, wo):
+            return kernels.smith_pdf(self, wi, wo, self.dtype, self._out(out, wi, wo, ()), True)
+        d, fast = _fused(compiled, self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
-        return _into(out, self._pdf_numpy(d["wi"].astype(np.float64, copy=False),
+        return into(out, self._pdf_numpy(d["wi"].astype(np.float64, copy=False),
                                           d["wo"].astype(np.float64, copy=False)).astype(self.dtype, copy=False),
                      d.values())
 
@@ -406,13 +363,13 @@ class MicrofacetBRDF(BRDF):
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
         :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
-        d, fast = _fused(lambda wo, u: kernels.smith_sample(self, u, wo, self.dtype, out, background=True),
-                         self.dtype == np.float32,
-                         wo=wo, u=u)
+        def compiled(wo, u):
+            return kernels.smith_sample(self, u, wo, self.dtype, self._out(out, u, wo, None), True)
+        d, fast = _fused(compiled, self.dtype == np.float32, wo=wo, u=u)
         if fast is not None:
             return fast
         result = self._sample_numpy(d["u"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False))
-        return _into_sample(out, tuple(a.astype(self.dtype, copy=False) for a in result), d.values())
+        return into_sample(out, tuple(a.astype(self.dtype, copy=False) for a in result), d.values())
 
     def _sample_numpy(self, u, wo):
         """NumPy reference of :meth:`sample` (unit ``wo``, uniforms ``u``)."""

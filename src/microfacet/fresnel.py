@@ -1,6 +1,9 @@
 """Microfacet Fresnel terms ``F(theta_d)`` (thesis Sec. 2.1, Table 2.I).
 
-Every term maps ``cos(theta_d)`` of shape ``(...)`` to RGB reflectance ``(..., 3)``.
+Every term maps ``cos(theta_d)`` of shape ``(...)`` to RGB reflectance ``(..., 3)``, and
+describes itself to the compiled kernels by :meth:`Fresnel.kernel_params` (a
+:class:`microfacet.params.FresnelParams` record; ``None`` for terms the kernels do not
+compute, which then take the NumPy path).
 """
 from __future__ import annotations
 
@@ -9,6 +12,7 @@ import functools
 import numpy as np
 
 from . import kernels
+from .params import CONDUCTOR, DIELECTRIC, IDEAL, SCHLICK, TABULATED, FresnelParams, read_only
 
 __all__ = ["Fresnel", "Ideal", "Dielectric", "Schlick", "F82Tint", "Conductor", "Tabulated"]
 
@@ -43,12 +47,22 @@ class Fresnel:
         args = ", ".join(f"{k}={np.round(v, 4).tolist()}" for k, v in vars(self).items())
         return f"{type(self).__name__}({args})"
 
+    def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
+        """This term's record for the compiled kernels (:class:`microfacet.params.FresnelParams`,
+        ``fp`` as ``dtype``), or ``None`` where they do not compute it: this base class, and
+        subclasses of the terms below (which may change the formula). Example:
+        ``Conductor.metal("Cu").kernel_params().kind == microfacet.params.CONDUCTOR``."""
+        return None
+
 
 class Ideal(Fresnel):
     """Ideal mirror microfacets, ``F = 1`` (Eq. 2.3)."""
 
     def __call__(self, cos_theta_d) -> np.ndarray:
         return np.ones(np.shape(cos_theta_d) + (3,))
+
+    def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
+        return FresnelParams.analytic(IDEAL, dtype) if type(self) is Ideal else None
 
 
 class Dielectric(Fresnel):
@@ -80,6 +94,10 @@ class Dielectric(Fresnel):
             b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
             f = 0.5 * a * a * (1.0 + b * b)
         return np.where(g2 < 0.0, 1.0, np.where(np.isfinite(f), f, 1.0))
+
+
+    def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
+        return FresnelParams.analytic(DIELECTRIC, dtype, self.eta) if type(self) is Dielectric else None
 
 
 class Schlick(Fresnel):
@@ -115,6 +133,12 @@ class Schlick(Fresnel):
         m = 1.0 - np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)
         m2 = m * m
         return self.f0 + (self.f90 - self.f0) * (m2 * m2 * m)[..., None]
+
+    def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
+        """The kernels compute ``f90 = 1`` (Table 2.I); other ``f90`` take the NumPy path."""
+        if type(self) is not Schlick or not np.all(self.f90 == 1.0):
+            return None
+        return FresnelParams.analytic(SCHLICK, dtype, self.f0)
 
 
 #: ``mu-bar = 1/7`` of :class:`F82Tint`: the cosine (~81.8 degrees) where ``f82`` tints
@@ -223,6 +247,9 @@ class Conductor(Fresnel):
         flat = np.ascontiguousarray(c).reshape(-1)
         return np.stack([f(flat, eta, k).reshape(c.shape) for eta, k in zip(self.eta, self.k)], axis=-1)
 
+    def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
+        return FresnelParams.analytic(CONDUCTOR, dtype, self.eta, self.k) if type(self) is Conductor else None
+
 
 def conductor_reflectance(c, eta, k):
     """One channel of :class:`Conductor` at ``c = cos theta_d`` (arrays or scalars; the
@@ -273,3 +300,10 @@ class Tabulated(Fresnel):
     def __call__(self, cos_theta_d) -> np.ndarray:
         c = np.asarray(cos_theta_d, dtype=np.float64)
         return np.stack([np.interp(c, self.cos_theta_d, v) for v in self.values.T], axis=-1)
+
+    def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
+        """The table, read by the kernels in float64 whatever ``dtype`` (as ``np.interp``)."""
+        if type(self) is not Tabulated:
+            return None
+        return FresnelParams(TABULATED, read_only(np.zeros((2, 3), dtype)),
+                             read_only(np.ascontiguousarray(self.cos_theta_d)), read_only(np.ascontiguousarray(self.values)))

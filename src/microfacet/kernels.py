@@ -46,9 +46,9 @@ import threading
 
 import numpy as np
 
-from . import _background, _buffers
+from . import _background, _buffers, params
 
-__all__ = ["AVAILABLE", "BACKGROUND_MAX", "COMPILE", "Compiled", "compiled", "covers", "precompile", "ready", "release_outputs",
+__all__ = ["AVAILABLE", "BACKGROUND_MAX", "COMPILE", "Compiled", "compiled", "covers", "launch", "launch_ranges", "ready", "release_outputs",
            "smith_projected", "smith_eval", "smith_pdf", "smith_sample", "unit_deviation"]
 
 #: Give the memory that the cache of freed output arrays holds back to the system; returns its bytes
@@ -74,12 +74,6 @@ COMPILE = _compile_mode()
 #: takes ~0.3-1 s (eval, pdf, GGX sample; Beckmann sample ~5 s) and ~0.4 GB, a cold kernel 5-30 s
 #: (benchmarks/results/cold_start.md).
 BACKGROUND_MAX = 1 << 20
-
-#: The distribution and Fresnel kinds of :mod:`microfacet._numba_kernels` (``BECKMANN``, ``GGX``;
-#: ``IDEAL`` ... ``TABULATED``), spelled here so that choosing a kernel does not import Numba (tested equal).
-_BECKMANN, _GGX = 0, 1
-_IDEAL, _SCHLICK, _DIELECTRIC, _CONDUCTOR, _TABULATED = range(5)
-
 
 @functools.cache
 def _kernels():
@@ -137,6 +131,8 @@ _FAILED: set = set()
 _JOBS: queue.SimpleQueue = queue.SimpleQueue()
 _WORKER_LOCK = threading.Lock()
 _WORKER: list = []
+#: The tag of a tuple's :func:`_arg_type`.
+_TUPLE = "tuple"
 #: Scalar argument types whose Numba type follows from the type alone (``numba.typeof(t())``).
 _SCALARS = (bool, int, float, np.bool_, np.int64, np.float64, np.float32)
 
@@ -144,17 +140,25 @@ _SCALARS = (bool, int, float, np.bool_, np.int64, np.float64, np.float32)
 def _arg_type(a):
     """What Numba's dispatcher selects a compiled version by, for argument ``a``, without importing
     Numba: an array's dtype, ndim, layout (``C``, ``F`` or ``A``, as ``numba.typeof``), read-only and
-    aligned flags; a scalar's type (:data:`_SCALARS`); ``None`` for anything else."""
+    aligned flags; a scalar's type (:data:`_SCALARS`); a tuple's (a named tuple's too, such as the
+    kernels' :class:`~microfacet.params.SmithParams` record) class and element types; ``None`` for
+    anything else."""
     if isinstance(a, np.ndarray):
         layout = "C" if a.flags.c_contiguous else "F" if a.flags.f_contiguous else "A"
         return a.dtype.str, a.ndim, layout, not a.flags.writeable, a.flags.aligned
     t = type(a)
+    if isinstance(a, tuple):
+        items = tuple(map(_arg_type, a))
+        return None if None in items else (_TUPLE, t, items)
     return t if t in _SCALARS else None
 
 
 def _numba_type(t):
     """The Numba type of an :func:`_arg_type`."""
     import numba
+    if isinstance(t, tuple) and t[0] is _TUPLE:
+        _, cls, items = t
+        return numba.types.BaseTuple.from_types([_numba_type(i) for i in items], None if cls is tuple else cls)
     if isinstance(t, tuple):
         dtype, ndim, layout, readonly, aligned = t
         return numba.types.Array(numba.from_dtype(np.dtype(dtype)), ndim, layout, readonly=readonly, aligned=aligned)
@@ -279,24 +283,11 @@ def ready(wait: float | None = 0.0) -> bool:
     return True
 
 
-def _smith_params(distribution):
-    """``(kind, alpha_x, alpha_y, rho, x~n, y~n)`` of a scalar Beckmann or GGX, else ``None``."""
-    from .distributions import GGX, Beckmann
-    d = distribution
-    if not AVAILABLE or type(d) not in (Beckmann, GGX) \
-            or any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
-        return None
-    return (_GGX if type(d) is GGX else _BECKMANN, float(d.alpha_x), float(d.alpha_y), float(d.rho),
-            float(d.xn), float(d.yn))
-
-
-_NO_TABLE = (np.zeros(2), np.zeros((2, 3)))
-
 #: Batches smaller than this run on the calling thread only: waking worker threads costs
 #: 4-8 ms on a loaded machine (measured: eval of 1e4 directions 0.27 ms on one thread,
 #: 4-7 ms on two, 2 cores at load 4-5), more than the work.
 PARALLEL_MIN = 1 << 16
-#: Pairs per task of :func:`_launch_ranges` (at least).
+#: Pairs per task of :func:`launch_ranges` (at least).
 TASK_MIN = 1 << 15
 
 
@@ -306,7 +297,7 @@ def threads() -> int:
     return numba.get_num_threads()
 
 
-def _launch(kernel, n: int, *args) -> None:
+def launch(kernel, n: int, *args) -> None:
     """``kernel(*args)`` of a Numba ``parallel=True`` (``prange``) kernel over ``n`` elements,
     on one thread below :data:`PARALLEL_MIN` (for kernels that are not range kernels)."""
     if n >= PARALLEL_MIN:
@@ -321,13 +312,17 @@ def _launch(kernel, n: int, *args) -> None:
         numba.set_num_threads(t)
 
 
+#: The names these had before they were public (``benchmarks/bench_brdf.py``).
+_launch = launch
+
+
 @functools.cache
 def _pool(n: int):
     from concurrent.futures import ThreadPoolExecutor
     return ThreadPoolExecutor(n, thread_name_prefix="microfacet")
 
 
-def _launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
+def launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     """``kernel(start, stop, *args)`` over ``0:n`` (the Smith kernels, which work through a
     range; ``cost`` elements per index, e.g. a row's texels): on the calling thread below
     :data:`PARALLEL_MIN` elements, else as up to 4 tasks of at least :data:`TASK_MIN` elements
@@ -356,6 +351,9 @@ def _launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     return results
 
 
+_launch_ranges = launch_ranges
+
+
 def _checks(names, results) -> dict:
     """``{name: measure}`` of the input checks that the eval, pdf and sample kernels make while
     they read their inputs, over their tasks' ``results`` (per task, one measure per name):
@@ -368,38 +366,6 @@ def _checks(names, results) -> dict:
     return dict(zip(names, map(max, zip(*results))))
 
 
-def _fresnel_params(fresnel):
-    """``(kind, fp (2, 3), table x, table values)`` of a :mod:`microfacet.fresnel` term for
-    the kernels' ``_fresnel``, or ``None`` for another class (and a Schlick term with ``f90 != 1``)."""
-    from . import fresnel as fr
-    fp = np.zeros((2, 3))
-    t = type(fresnel)
-    if t is fr.Ideal:
-        return _IDEAL, fp, *_NO_TABLE
-    if t is fr.Schlick and np.all(fresnel.f90 == 1.0):      # F90 != 1: the NumPy Fresnel path
-        fp[0] = fresnel.f0
-        return _SCHLICK, fp, *_NO_TABLE
-    if t is fr.Dielectric:
-        fp[0] = fresnel.eta
-        return _DIELECTRIC, fp, *_NO_TABLE
-    if t is fr.Conductor:
-        fp[0], fp[1] = fresnel.eta, fresnel.k
-        return _CONDUCTOR, fp, *_NO_TABLE
-    if t is fr.Tabulated:
-        return (_TABULATED, fp, np.ascontiguousarray(fresnel.cos_theta_d),
-                np.ascontiguousarray(fresnel.values))
-    return None
-
-
-def _frozen(a):
-    """A read-only view of the input array ``a``: the kernels read their inputs as read-only arrays
-    whether the caller's are writeable or not, one compiled version instead of two (Numba compiles
-    per read-only flag)."""
-    v = a.view()
-    v.flags.writeable = False
-    return v
-
-
 def _rows(a, shape):
     """``a`` broadcast to ``shape + (last,)`` as ``(n, last)`` read-only rows (a view where possible;
     a copy of Fortran-ordered rows, such as Dr.Jit's arrays seen through NumPy, so that the kernels
@@ -407,24 +373,27 @@ def _rows(a, shape):
     if a.ndim == 2 and a.flags.f_contiguous and not a.flags.c_contiguous:
         a = np.ascontiguousarray(a)
     if a.ndim == 2 and a.shape[:1] == shape:
-        return _frozen(a)
-    return _frozen(np.broadcast_to(a, shape + a.shape[-1:]).reshape(-1, a.shape[-1]))
+        return params.read_only(a)
+    return params.read_only(np.broadcast_to(a, shape + a.shape[-1:]).reshape(-1, a.shape[-1]))
 
 
-def _brdf_params(brdf):
-    """Kernel parameters of a Smith :class:`~microfacet.brdf.MicrofacetBRDF`, or ``None``."""
-    if brdf.gaf_model != "smith":
+def _record(brdf, dtype=None):
+    """The :class:`~microfacet.params.SmithParams` record of a Smith ``brdf`` for the kernels
+    (``brdf.params``, built when the BRDF was made; made again for a ``dtype`` other than the
+    BRDF's), or ``None``: no Numba, or a BRDF they do not cover."""
+    if not AVAILABLE:
         return None
-    d = _smith_params(brdf.distribution)          # None without Numba: do not import it
-    f = None if d is None else _fresnel_params(brdf.fresnel)
-    return None if f is None else (d, f)
+    p = getattr(brdf, "params", None)
+    if p is None or dtype is None or np.dtype(dtype) == brdf.dtype:
+        return p
+    return params.smith_params(brdf.distribution, brdf.fresnel, brdf.shadowing, dtype)
 
 
 def covers(brdf) -> bool:
     """Whether the fused kernels (:func:`smith_eval`; :func:`smith_pdf` and :func:`smith_sample` for
     visible-normal sampling) cover ``brdf``: Numba available, a Smith GAF, a scalar Beckmann or GGX
     and a :mod:`microfacet.fresnel` term they know. Imports neither Numba nor the kernels."""
-    return _brdf_params(brdf) is not None
+    return _record(brdf) is not None
 
 
 def _shape_n(a, b):
@@ -442,62 +411,36 @@ def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool, b
     """``(o.h, D G / (4 z_o) [/ z_i])`` by the compiled kernel, or ``None`` when it does
     not apply (no Numba, array parameters, another distribution) or, with ``background``,
     while it compiles (:func:`_kernel`; the caller runs the NumPy reference)."""
-    d = _smith_params(distribution)
-    if d is None:
+    p = params.smith_params(distribution, None, shadowing) if AVAILABLE else None
+    if p is None:
         return None
     shape, n = _shape_n(wi, wo)
-    args = (_rows(wi, shape), _rows(wo, shape), *d[1:], bool(shadowing), bool(divide_cos_i))
-    k = _kernel(("projected_kernel", d[0]), (0, 0, *args, *(_output_like(np.float64, 1),) * 2), n, background)
+    args = (p, _rows(wi, shape), _rows(wo, shape), bool(divide_cos_i))
+    k = _kernel(("projected_kernel", p.kind), (0, 0, *args, (_output_like(np.float64, 1),) * 2), n, background)
     if k is None:
         return None
     oh, s = np.empty(n), np.empty(n)
-    _launch_ranges(k, n, *args, oh, s)
+    launch_ranges(k, n, *args, (oh, s))
     return oh.reshape(shape), s.reshape(shape)
-
-
-def _typed(dtype, params):
-    """``params`` as scalars of ``dtype``, the kernels' arithmetic type (float64 arguments
-    would promote float32 arithmetic)."""
-    F = np.dtype(dtype).type
-    return [F(p) for p in params]
-
-
-def output(out, shape, dtype, name="out", inputs=()):
-    """``out`` (an output array a caller passes to be written, as NumPy's ``out=``), or a new
-    array if it is ``None``: ``ValueError`` naming ``name`` unless it is a writeable
-    C-contiguous ndarray of ``shape`` and ``dtype`` that shares no memory with ``inputs``. New
-    arrays come from the cache of freed outputs (:mod:`microfacet._buffers`, :func:`release_outputs`)."""
-    if out is None:
-        return _buffers.empty(shape, dtype)
-    if not (isinstance(out, np.ndarray) and out.shape == shape and out.dtype == dtype
-            and out.flags.c_contiguous and out.flags.writeable):
-        got = (("read-only " if not out.flags.writeable else "") + ("non-contiguous " if not out.flags.c_contiguous else "")
-               + f"{out.dtype} array of shape {out.shape}") if isinstance(out, np.ndarray) else type(out).__name__
-        raise ValueError(f"{name} must be a writeable C-contiguous {np.dtype(dtype)} array of shape {shape}, got {got}")
-    if any(np.may_share_memory(out, a) for a in inputs):
-        raise ValueError(f"{name} must not share memory with the inputs")
-    return out
 
 
 def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None, background: bool = False):
     """``(f, checks)``: ``f = F D G / (4 z_o) [/ z_i]`` RGB ``(..., 3)`` of a Smith ``brdf``
     (Eq. 2.1) by one compiled pass with the Fresnel term inside, computed and written as
-    ``dtype`` (into ``out`` if given: :func:`output`), and the unit-length deviations of ``wi``
+    ``dtype`` (into ``out`` if given, an array checked by :func:`microfacet.protocol.output`), and the unit-length deviations of ``wi``
     and ``wo`` measured in that pass (:func:`_checks`; ``f`` is meaningless if they fail), or
     ``None`` when the kernel does not apply (no Numba, array parameters, another distribution,
     GAF or Fresnel class) or, with ``background``, while it compiles (:func:`_kernel`)."""
-    p = _brdf_params(brdf)
+    p = _record(brdf, dtype)
     if p is None:
         return None
-    (kind, *d), (fk, *f) = p
     shape, n = _shape_n(wi, wo)
-    args = (_rows(wi, shape), _rows(wo, shape), *_typed(dtype, d), brdf.shadowing, bool(divide_cos_i), fk,
-            _frozen(f[0].astype(dtype)), *map(_frozen, f[1:]))
-    k = _kernel(("eval_kernel", kind, np.dtype(dtype)), (0, 0, *args, _output_like(dtype, 2)), n, background)
+    args = (p, _rows(wi, shape), _rows(wo, shape), bool(divide_cos_i))
+    k = _kernel(("eval_kernel", p.kind, np.dtype(dtype)), (0, 0, *args, _output_like(dtype, 2)), n, background)
     if k is None:
         return None
-    out = output(out, shape + (3,), dtype, "out", (wi, wo))
-    r = _launch_ranges(k, n, *args, out.reshape(-1, 3))
+    out = _buffers.empty(shape + (3,), dtype) if out is None else out
+    r = launch_ranges(k, n, *args, out.reshape(-1, 3))
     return out, _checks(("wi", "wo"), r)
 
 
@@ -506,52 +449,37 @@ def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None, background: bool = False
     a Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``), and
     the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply
     (or, with ``background``, while it compiles)."""
-    p = _brdf_params(brdf)
-    if p is None or not brdf._samples_visible:
+    p = _record(brdf, dtype)
+    if p is None:
         return None
     shape, n = _shape_n(wi, wo)
-    args = (_rows(wi, shape), _rows(wo, shape), *_typed(dtype, p[0][1:]))
-    k = _kernel(("pdf_kernel", p[0][0], np.dtype(dtype)), (0, 0, *args, _output_like(dtype, 1)), n, background)
+    args = (p, _rows(wi, shape), _rows(wo, shape))
+    k = _kernel(("pdf_kernel", p.kind, np.dtype(dtype)), (0, 0, *args, _output_like(dtype, 1)), n, background)
     if k is None:
         return None
-    out = output(out, shape, dtype, "out", (wi, wo))
-    r = _launch_ranges(k, n, *args, out.reshape(-1))
+    out = _buffers.empty(shape, dtype) if out is None else out
+    r = launch_ranges(k, n, *args, out.reshape(-1))
     return out, _checks(("wi", "wo"), r)
-
-
-def sample_outputs(out, shape, dtype, inputs=()):
-    """``(wi, weight, pdf)`` of a sample of ``shape``: ``out``'s three arrays (:func:`output`,
-    named ``out[0]`` ... ``out[2]``, distinct), or new ones if it is ``None``."""
-    if out is None:
-        out = (None,) * 3
-    elif not (isinstance(out, tuple) and len(out) == 3):
-        raise ValueError(f"out must be a tuple of three arrays (wi, weight, pdf), got {type(out).__name__}")
-    arrays = [output(o, shape + last, dtype, f"out[{j}]", inputs)
-              for j, (o, last) in enumerate(zip(out, ((3,), (3,), ())))]
-    if any(np.may_share_memory(a, b) for j, a in enumerate(arrays) for b in arrays[j + 1:]):
-        raise ValueError("out's three arrays must not share memory")
-    return tuple(arrays)
 
 
 def smith_sample(brdf, u, wo, dtype=np.float64, out=None, background: bool = False):
     """``((wi, weight, pdf), checks)``: visible-normal sampling (Sec. 2.2, 3.2, Eq. 2.23) of a
     Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``'s
-    arrays: :func:`sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
+    arrays, checked by :func:`microfacet.protocol.sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
     ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply (or,
     with ``background``, while it compiles)."""
-    p = _brdf_params(brdf)
-    if p is None or not brdf._samples_visible:
+    p = _record(brdf, dtype)
+    if p is None:
         return None
-    (kind, *d), (fk, *f) = p
     shape, n = _shape_n(u, wo)
-    args = (_rows(u, shape), _rows(wo, shape), *_typed(dtype, d), brdf.shadowing, fk, _frozen(f[0].astype(dtype)),
-            *map(_frozen, f[1:]))
-    k = _kernel(("sample_kernel", kind, np.dtype(dtype)),
-                (0, 0, *args, _output_like(dtype, 2), _output_like(dtype, 2), _output_like(dtype, 1)), n, background)
+    args = (p, _rows(u, shape), _rows(wo, shape))
+    k = _kernel(("sample_kernel", p.kind, np.dtype(dtype)),
+                (0, 0, *args, (_output_like(dtype, 2), _output_like(dtype, 2), _output_like(dtype, 1))), n, background)
     if k is None:
         return None
-    wi, weight, pdf = sample_outputs(out, shape, dtype, (u, wo))
-    r = _launch_ranges(k, n, *args, wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1))
+    wi, weight, pdf = (_buffers.empty(shape + (3,), dtype), _buffers.empty(shape + (3,), dtype),
+                       _buffers.empty(shape, dtype)) if out is None else out
+    r = launch_ranges(k, n, *args, (wi.reshape(-1, 3), weight.reshape(-1, 3), pdf.reshape(-1)))
     return (wi, weight, pdf), _checks(("u", "wo"), r)
 
 
@@ -563,105 +491,11 @@ def unit_deviation(w: np.ndarray, background: bool = True) -> float:
     from .geometry import unit_deviation as reference
     if not AVAILABLE or w.dtype not in (np.float64, np.float32) or not w.flags.c_contiguous or w.size == 0:
         return reference(w)
-    rows = _frozen(w.reshape(-1, 3))
+    rows = params.read_only(w.reshape(-1, 3))
     k = _kernel(("_unit_deviation",), (rows,), len(rows), background)
     return reference(w) if k is None else float(k(rows))
 
 
-# ------------------------------------------------------------------------ ahead of time
-#: The arithmetic types :func:`precompile` can compile for (``MicrofacetBRDF(dtype=...)``), and
-#: those it compiles by default (float32 BRDFs are opt-in: ``--dtypes float64,float32``).
-PRECOMPILE_DTYPES = ("float64", "float32")
-PRECOMPILE_DEFAULT = ("float64",)
-
-
-def _precompile_calls(dtype):
-    """``[(name, call)]``: calls that compile (or load) the kernels of one arithmetic type ``dtype``: the
-    eval and pdf kernels of both distributions for the input layouts that the library's callers make
-    (both inputs C-contiguous rows, or either one a single direction broadcast), sample (``u`` rows
-    with ``wo`` rows or one ``wo``), in float64 the projected kernel (glints, fits: rows or one ``wo``)
-    and the conductor Fresnel term, and the unit-length check."""
-    from . import fresnel as fr
-    from .brdf import MicrofacetBRDF
-    from .distributions import GGX, Beckmann
-    F = np.dtype(dtype)
-    rows = np.array([[0.0, 0.6, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, 1.0], [0.28, 0.96, 0.0]], F)
-    one, u = rows[0].copy(), np.full((4, 2), 0.5, F)
-    calls = []
-    for D in (Beckmann, GGX):
-        b = MicrofacetBRDF(D(alpha_x=0.3, alpha_y=0.2), fresnel=fr.Conductor.metal("Cu"), dtype=F)
-        name = f"{D.__name__} {F.name}"
-        for wi, wo, layout in ((rows, rows, "rows, rows"), (rows, one, "rows, one"), (one, rows, "one, rows")):
-            calls.append((f"{name} eval ({layout})", functools.partial(smith_eval, b, wi, wo, True, F)))
-            calls.append((f"{name} pdf ({layout})", functools.partial(smith_pdf, b, wi, wo, F)))
-            if F == np.float64 and layout != "one, rows":
-                calls.append((f"{name} projected ({layout})",
-                              functools.partial(smith_projected, b.distribution, True, wi, wo, True)))
-        for wo, layout in ((rows, "rows"), (one, "one")):
-            calls.append((f"{name} sample (u rows, wo {layout})", functools.partial(smith_sample, b, u, wo, F)))
-    calls.append((f"unit deviation {F.name}", functools.partial(unit_deviation, rows, False)))
-    if F == np.float64:
-        def conductor():
-            global COMPILE
-            saved, COMPILE = COMPILE, "wait"
-            try:
-                fr.Conductor.metal("Cu")(np.linspace(0.0, 1.0, 5))
-            finally:
-                COMPILE = saved
-        calls.append(("conductor Fresnel float64", conductor))
-    return calls
-
-
-def precompile(dtypes=PRECOMPILE_DEFAULT, progress=None) -> int:
-    """Compiles the kernels that the library's BRDFs use (:func:`_precompile_calls`) into Numba's
-    on-disk cache, or loads those already there, so that later processes load them in milliseconds
-    instead of compiling them at first use (5-20 s each). One kernel at a time, in this process:
-    Numba's cache is not safe for processes that compile versions of one function at once
-    (:func:`_compile`). ``progress(name, seconds)`` is called after each. Returns how many kernels
-    were compiled or loaded; 0 without Numba. Run by ``make setup`` as ``python -m microfacet.kernels
-    --precompile`` (``docs/performance.md``).
-
-    Example: ``mf.kernels.precompile(dtypes=("float64",))``."""
-    import time
-    if not AVAILABLE:
-        return 0
-    calls = [c for dtype in dtypes for c in _precompile_calls(dtype)]
-    for name, call in calls:
-        t = time.perf_counter()
-        call()
-        if progress is not None:
-            progress(name, time.perf_counter() - t)
-    return len(calls)
-
-
-def main(argv=None) -> int:
-    """``python -m microfacet.kernels --precompile [--dtypes float64,float32] [-q]``: :func:`precompile`,
-    printing each kernel's time."""
-    import argparse
-    import time
-    p = argparse.ArgumentParser(prog="python -m microfacet.kernels",
-                                description="Compile the microfacet BRDF kernels into Numba's on-disk cache ahead of "
-                                            "time (or check that they load from it).")
-    p.add_argument("--precompile", action="store_true", required=True, help="compile the kernels now")
-    p.add_argument("--dtypes", default=",".join(PRECOMPILE_DEFAULT), metavar="LIST",
-                   help=f"comma-separated arithmetic types among {','.join(PRECOMPILE_DTYPES)} "
-                        f"(default {','.join(PRECOMPILE_DEFAULT)})")
-    p.add_argument("-q", "--quiet", action="store_true", help="print only the total")
-    args = p.parse_args(argv)
-    dtypes = [d.strip() for d in args.dtypes.split(",") if d.strip()]
-    bad = [d for d in dtypes if d not in PRECOMPILE_DTYPES]
-    if bad or not dtypes:
-        p.error(f"--dtypes must list some of {', '.join(PRECOMPILE_DTYPES)}, got {args.dtypes!r}")
-    if not AVAILABLE:
-        print("microfacet.kernels: Numba is not installed (or MICROFACET_NUMBA=0): nothing to compile")
-        return 0
-    start = time.perf_counter()
-    n = precompile(dtypes, None if args.quiet else lambda name, t: print(f"  {t:6.2f} s  {name}", flush=True))
-    print(f"microfacet.kernels: {n} kernels compiled or loaded from Numba's cache in "
-          f"{time.perf_counter() - start:.1f} s")
-    return 0
-
-
-if __name__ == "__main__":                      # run as microfacet.kernels, not as a second copy of it
-    from microfacet.kernels import main as _main
-    raise SystemExit(_main())
+if __name__ == "__main__":                      # python -m microfacet.kernels --precompile (make setup)
+    from microfacet.precompile import main
+    raise SystemExit(main())

@@ -41,12 +41,12 @@ HALF_PI = 0.5 * np.pi
 _U_MIN = 2.0**-53
 _GL_T, _GL_W = np.polynomial.legendre.leggauss(8)
 _GL_T, _GL_W = 0.5 * (_GL_T + 1.0), 0.5 * _GL_W          # on [0, 1]
-_GL4_T, _GL4_W = np.polynomial.legendre.leggauss(4)
-_GL4_T, _GL4_W = 0.5 * (_GL4_T + 1.0), 0.5 * _GL4_W
+GL4_T, GL4_W = np.polynomial.legendre.leggauss(4)
+GL4_T, GL4_W = 0.5 * (GL4_T + 1.0), 0.5 * GL4_W
 _Y_SPLIT = 2
 #: Largest elevation of the fine sampling grids: slopes up to 1e7 (the mass beyond is
 #: below 1e-13 for any table, as ``P <= D_max / r^4``).
-_THETA_CAP = np.arctan(1e7)
+THETA_CAP = np.arctan(1e7)
 
 
 def theta_grid(n: int) -> np.ndarray:
@@ -377,7 +377,7 @@ class TabulatedIsotropic(_Tabulated):
     @staticmethod
     def _fine_s(xi):
         """Fine-grid coordinate ``s`` of the slope magnitude ``xi = tan(s^2 theta_cap)``."""
-        return np.sqrt(np.minimum(np.arctan(xi), _THETA_CAP) / _THETA_CAP)
+        return np.sqrt(np.minimum(np.arctan(xi), THETA_CAP) / THETA_CAP)
 
     def _build_sampling_tables(self, m: int) -> None:
         """Marginal ``P1``, tail mass ``L0(xi) = int_xi^inf P1`` and first tail moment
@@ -385,14 +385,14 @@ class TabulatedIsotropic(_Tabulated):
         the conditional CDFs of ``|y~| = tan eta`` given ``|x~| = xi_k`` on a refined
         elevation grid, linear in ``eta`` between its nodes (Sec. 4.4, App. A)."""
         self.s_fine = np.linspace(0.0, 1.0, m)
-        th = self.s_fine**2 * _THETA_CAP
+        th = self.s_fine**2 * THETA_CAP
         self.xi = np.tan(th)
         # y = tan(eta) on the elevation grid of the table refined _Y_SPLIT times (dense
         # at y = 0 where sharp lobes live); P(xi, y) sec^2 eta stays smooth up to grazing
-        eta = np.minimum(theta_grid(_Y_SPLIT * (self.n_theta - 1) + 1), _THETA_CAP)
+        eta = np.minimum(theta_grid(_Y_SPLIT * (self.n_theta - 1) + 1), THETA_CAP)
         ea, eb = eta[:-1, None], eta[1:, None]
-        es = (ea + (eb - ea) * _GL4_T).ravel()                                        # (q(n-1) 4,)
-        mass = row_masses(self.xi, np.tan(es) ** 2, ((eb - ea) * _GL4_W).ravel() / np.cos(es) ** 2,
+        es = (ea + (eb - ea) * GL4_T).ravel()                                        # (q(n-1) 4,)
+        mass = row_masses(self.xi, np.tan(es) ** 2, ((eb - ea) * GL4_W).ravel() / np.cos(es) ** 2,
                           self.log_ndf)
         cdf = np.concatenate([np.zeros((m, 1)), np.cumsum(mass, axis=1)], axis=1)
         eta = np.broadcast_to(eta, (m, len(eta)))
@@ -402,7 +402,7 @@ class TabulatedIsotropic(_Tabulated):
         with np.errstate(invalid="ignore", divide="ignore"):
             self.y_cdf = np.where(half[:, None] > 0, cdf / half[:, None], np.linspace(0, 1, cdf.shape[1]))
         # tails, integrated from xi = inf inward (trapezoid in s; dxi/ds = 2 s cap sec^2)
-        dxi_ds = 2.0 * self.s_fine * _THETA_CAP / np.cos(th) ** 2
+        dxi_ds = 2.0 * self.s_fine * THETA_CAP / np.cos(th) ** 2
         self.dxi_ds = dxi_ds
         self.L0 = self._tail_integral(self.p1_fine * dxi_ds)
         self.L1 = self._tail_integral(self.L0 * dxi_ds)
@@ -521,7 +521,7 @@ class TabulatedIsotropic(_Tabulated):
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(f0 > f1, (f0 - target) / (f0 - f1), 0.5)
         s = self.s_fine[k] + np.clip(t, 0.0, 1.0) * (s_end - self.s_fine[k])
-        return np.tan(s * s * _THETA_CAP)
+        return np.tan(s * s * THETA_CAP)
 
     def _conditional_y(self, xi, u2):
         """``y~`` from the conditional CDF of ``|y~|`` given ``|x~| = xi`` (sign from ``u2``)."""

@@ -70,7 +70,7 @@ def _f0_to_ior(f0: float) -> float:
     return float((1.0 + q) / (1.0 - q))
 
 
-def _metal_f0(fresnel) -> np.ndarray | None:
+def metal_f0(fresnel) -> np.ndarray | None:
     """``F(0 deg)`` of a Fresnel term that is a metal's (F(90 deg) = 1), else None."""
     from .. import fresnel as fr
     if isinstance(fresnel, fr.Ideal):
@@ -112,7 +112,7 @@ def gltf_material(brdf, name: str = "microfacet") -> tuple[dict, list[str]]:
         pbr["roughnessFactor"] = r
         if s_aniso > 0:
             ext["KHR_materials_anisotropy"] = {"anisotropyStrength": s_aniso, "anisotropyRotation": lobe.phi}
-        metal = None if a.base is not None or len(a.lobes) > 1 else _metal_f0(lobe.fresnel)
+        metal = None if a.base is not None or len(a.lobes) > 1 else metal_f0(lobe.fresnel)
         if metal is not None:
             pbr["metallicFactor"] = 1.0
             pbr["baseColorFactor"] = _rgb(metal) + [1.0]

@@ -136,7 +136,7 @@ def openpbr_inputs(brdf) -> tuple[dict, list[str]]:
     """``(inputs, lost)``: the ``open_pbr_surface`` inputs (name -> float or RGB list) of a
     library BRDF tree (module docstring) and what they could not carry."""
     from .. import fresnel as fr
-    from .gltf import _metal_f0
+    from .gltf import metal_f0
     a = analyse(brdf)
     lost: list[str] = list(a.notes)
     p: dict = {"base_weight": 1.0, "specular_weight": 1.0, "base_diffuse_roughness": 0.0}
@@ -153,7 +153,7 @@ def openpbr_inputs(brdf) -> tuple[dict, list[str]]:
     p.update(specular_roughness=math.sqrt(r2), specular_roughness_anisotropy=aniso)
     if aniso > 0:
         p["tangent_rotation"] = lobe.phi      # not an input: written as geometry_tangent (rotate3d)
-    metal = _metal_f0(lobe.fresnel) if a.base is None else None
+    metal = metal_f0(lobe.fresnel) if a.base is None else None
     if metal is not None or a.base is None:
         if isinstance(lobe.fresnel, fr.F82Tint):
             f0, f82 = lobe.fresnel.f0, lobe.fresnel.f82

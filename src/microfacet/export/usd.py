@@ -41,7 +41,7 @@ def import_pxr():
 
 def preview_inputs(brdf) -> tuple[dict, list[str]]:
     """``(inputs, lost)``: UsdPreviewSurface inputs of a library BRDF tree (module docstring)."""
-    from .gltf import _metal_f0
+    from .gltf import metal_f0
     a = analyse(brdf)
     lost: list[str] = list(a.notes)
     p: dict = {"useSpecularWorkflow": 0, "metallic": 0.0, "roughness": 1.0, "diffuseColor": [0.0, 0.0, 0.0],
@@ -55,7 +55,7 @@ def preview_inputs(brdf) -> tuple[dict, list[str]]:
             lost.append("Beckmann lobe exported as GGX")
         for other in a.lobes[1:]:
             lost.append(f"second lobe (alpha {other.alpha1:.4g}) dropped")
-        metal = _metal_f0(lobe.fresnel) if a.base is None else None
+        metal = metal_f0(lobe.fresnel) if a.base is None else None
         if metal is not None:
             p.update(metallic=1.0, diffuseColor=metal.tolist())
         else:

@@ -855,3 +855,8 @@ def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_p
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
     Algorithm 2): ``(cos_theta_d, rgb, k_d)``."""
     return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h, isotropic), ideal, diffuse=diffuse)
+
+
+#: Public names of the helpers that :mod:`microfacet.fit.analytic` and :mod:`microfacet.fit.fitted`
+#: share (issue 27: no module imports another's private names).
+kept, distribution_key, energy_constrained = _kept, _distribution_key, _energy_constrained

@@ -221,7 +221,7 @@ if _kernels.AVAILABLE:
 
     import numba
 
-    from .microsurface import _bilinear_slopes
+    from .microsurface import bilinear_slopes
 
     _U53 = 2.0**-53
     _SQRT_PI = math.sqrt(math.pi)
@@ -277,7 +277,7 @@ if _kernels.AVAILABLE:
                 u2 = numba.float64(b >> numba.uint64(11)) * _U53
                 r = math.sqrt(-2.0 * math.log1p(-u1))
                 z1, z2 = r * math.cos(2.0 * math.pi * u2), r * math.sin(2.0 * math.pi * u2)
-                mx, my = _bilinear_slopes(slopes, (uv[p, 0] + L[0, 0] * z1 + L[0, 1] * z2) * wid - 0.5,
+                mx, my = bilinear_slopes(slopes, (uv[p, 0] + L[0, 0] * z1 + L[0, 1] * z2) * wid - 0.5,
                                           (uv[p, 1] + L[1, 0] * z1 + L[1, 1] * z2) * hgt - 0.5)
                 co = wo[2] - wo[0] * mx - wo[1] * my
                 ci = wi[p, 2] - wi[p, 0] * mx - wi[p, 1] * my

@@ -63,6 +63,8 @@ FORMAT_VERSION = 2       # 2: float32 central moments, uncompressed; 1 (float64 
 FWHM_PER_SIGMA = 2.0 * np.sqrt(2.0 * np.log(2.0))
 MAX_RHO = 0.99
 _MAGIC = "microfacet.glints.Microsurface"
+#: The tag that marks a file written by :meth:`Microsurface.save` (read by the fit files too).
+MAGIC = _MAGIC
 #: Accepted seed spacings ``h`` in texels: up to 16 lobes per texel and axis, at most one per 1e4 texels.
 SPACING_RANGE = (1.0 / 16.0, 1e4)
 
@@ -154,7 +156,7 @@ def lobe_moments_reference(slopes, nx: int, ny: int, samples: int = 4) -> np.nda
 
 
 @numba.njit(cache=True, inline="always")
-def _bilinear_slopes(s, x, y):  # pragma: no cover - compiled
+def bilinear_slopes(s, x, y):  # pragma: no cover - compiled
     """Slope ``(x~, y~)`` of the bilinearly interpolated, wrapped map ``s (H, W, 2)`` at the
     continuous texel coordinates ``(x, y)`` (texel centres at integers; compiled
     :func:`interpolate_slopes` at ``uv = ((x + 1/2) / W, (y + 1/2) / H)``)."""
@@ -182,7 +184,7 @@ def _lobe_moments(s, nx, ny, o, g):  # pragma: no cover - compiled
                 y = (iy + 0.5) * hy + o[b] - 0.5
                 for a in range(o.size):
                     w = g[a] * g[b]
-                    sx, sy = _bilinear_slopes(s, (ix + 0.5) * hx + o[a] - 0.5, y)
+                    sx, sy = bilinear_slopes(s, (ix + 0.5) * hx + o[a] - 0.5, y)
                     acc[0] += w * sx
                     acc[1] += w * sy
                     acc[2] += w * sx * sx

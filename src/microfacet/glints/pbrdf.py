@@ -63,7 +63,8 @@ import numpy as np
 from scipy.special import erfc
 
 from .. import fresnel as _fresnel
-from ..brdf import BRDF, _dirs, _into, _into_sample, _uniforms
+from ..brdf import BRDF
+from ..protocol import directions, into, into_sample, uniforms
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector, reflect
 from .microsurface import BLOCK, FWHM_PER_SIGMA, LobeMixture
@@ -265,7 +266,7 @@ class PatchBRDF(BRDF):
 
     def pndf(self, h) -> np.ndarray:
         """P-NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9), weights normalized to ``sum W = 1``."""
-        h = _dirs(h, "h")
+        h = directions(h, "h")
         if self.weight_sum <= 0:
             return np.zeros(h.shape[:-1])
         if self._compiled:         # the compiled sums (their area columns unused)
@@ -278,7 +279,7 @@ class PatchBRDF(BRDF):
         area of the microfacets ``int <k,h>+ D_P = A_P (1 + Lambda_P)`` (Eq. 13-15);
         with ``exact=False`` ``A_P = V_P / (1 + Lambda_m)`` of the merged lobe (Sec.
         4.2.2, :func:`_merged_area`)."""
-        k = _dirs(k, "k")
+        k = directions(k, "k")
         if self.lobes is None:
             z = np.zeros(k.shape[:-1])
             return z, z
@@ -326,7 +327,7 @@ class PatchBRDF(BRDF):
 
     def _projected(self, wi, wo):
         """``(o.h, D_P G2 / (4 A_P(o)), valid)``."""
-        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        wi, wo = directions(wi, "wi"), directions(wo, "wo")
         h = half_vector(wi, wo)
         oh, ih = dot(wo, h), dot(wi, h)
         ok = _local_ok(wi, wo, h, oh, ih)
@@ -337,39 +338,39 @@ class PatchBRDF(BRDF):
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``f_P(o, i) A_P(i) = F G2 D_P / (4 A_P(o))`` (Eq. 7), RGB ``(..., 3)``."""
         oh, s = self._projected(wi, wo)
-        return _into(out, self.fresnel(oh) * s[..., None], (wi, wo))
+        return into(out, self.fresnel(oh) * s[..., None], (wi, wo))
 
     def f_p(self, wi, wo) -> np.ndarray:
         """The symmetric P-BRDF of Eq. 7, ``F G2 D_P / (4 A_P(o) A_P(i))``, RGB."""
         oh, s = self._projected(wi, wo)
-        ai, ao = self.areas(_dirs(wi, "wi"))[0], self.areas(_dirs(wo, "wo"))[0]
+        ai, ao = self.areas(directions(wi, "wi"))[0], self.areas(directions(wo, "wo"))[0]
         with np.errstate(divide="ignore", invalid="ignore"):      # Eq. 7 needs A_P > 0 on both sides
             s = np.where((ai > 0) & (ao > 0), s / np.where(ai > 0, ai, 1.0), 0.0)
         return self.fresnel(oh) * s[..., None]
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of :meth:`sample`: ``D_P(h) z_h / (4 o.h)`` (Sec. 5)."""
-        wi, wo = _dirs(wi, "wi"), _dirs(wo, "wo")
+        wi, wo = directions(wi, "wi"), directions(wo, "wo")
         h = half_vector(wi, wo)
         oh = dot(wo, h)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (oh > 0) & (self.weight_sum > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             p = self.pndf(h) * h[..., 2] / (4.0 * np.where(ok, oh, 1.0))
-        return _into(out, np.where(ok, p, 0.0), (wi, wo))
+        return into(out, np.where(ok, p, 0.0), (wi, wo))
 
     def sample(self, u, wo, out=None):
         """Footprint position, then normal (Sec. 5): lobe ``i`` with probability
         ``W_i / sum W`` from ``u[..., 0]`` (rescaled and reused), a normal of slope density
         ``P_i`` (``mf.Beckmann.sample_p22``), ``wi`` the reflection of ``wo``.
         Returns ``(wi, weight, pdf)`` with ``weight = eval_cos / pdf`` (0 where pdf is 0)."""
-        wo = _dirs(wo, "wo")
-        u = _uniforms(u)
+        wo = directions(wo, "wo")
+        u = uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
         wof = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
         if self.lobes is None:
             z = np.zeros(shape)
-            return _into_sample(out, (np.broadcast_to(wo, shape + (3,)) * [-1, -1, 1], np.zeros(shape + (3,)), z),
+            return into_sample(out, (np.broadcast_to(wo, shape + (3,)) * [-1, -1, 1], np.zeros(shape + (3,)), z),
                                 (u, wo))
         j = np.minimum(np.searchsorted(self._cdf, u[:, 0], side="right"), len(self._cdf) - 1)
         lo = np.where(j > 0, self._cdf[np.maximum(j - 1, 0)], 0.0)
@@ -381,7 +382,7 @@ class PatchBRDF(BRDF):
         f = self.eval_cos(wi, wof)
         with np.errstate(divide="ignore", invalid="ignore"):
             weight = np.where((pdf > 0)[:, None], f / np.where(pdf > 0, pdf, 1.0)[:, None], 0.0)
-        return _into_sample(out, (wi.reshape(shape + (3,)), weight.reshape(shape + (3,)), pdf.reshape(shape)), (u, wo))
+        return into_sample(out, (wi.reshape(shape + (3,)), weight.reshape(shape + (3,)), pdf.reshape(shape)), (u, wo))
 
     # ---------------------------------------------------------------- diagnostics
     def albedo(self, wo, order: int = 24) -> float:
@@ -498,8 +499,8 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
-    wi = np.broadcast_to(_dirs(wi, "wi"), (P, 3))
-    wo = np.broadcast_to(_dirs(wo, "wo"), (P, 3))
+    wi = np.broadcast_to(directions(wi, "wi"), (P, 3))
+    wo = np.broadcast_to(directions(wo, "wo"), (P, 3))
     out = np.zeros((P, 3))
     E_all = np.asarray(ms.lobe_moments, dtype=np.float64)
     for s in range(0, P, block):
@@ -531,8 +532,10 @@ if _kernels.AVAILABLE:
 
     import numba
 
-    from .._numba_kernels import _erfc_near, _exp_neg, _inline
-    from .._numba_kernels import _jit_contract as _kernel
+    from .._numba_kernels import erfc_near as _erfc_near
+    from .._numba_kernels import exp_neg as _exp_neg
+    from .._numba_kernels import inline as _inline
+    from .._numba_kernels import jit_contract as _kernel
 
     #: The per-footprint loop (:func:`_footprint_loops`): ``contract``, as :data:`_kernel`, and no
     #: reference counts (Numba's ``_nrt=False``; its scratch comes from :func:`_footprint_range`):
@@ -631,7 +634,7 @@ if _kernels.AVAILABLE:
         linear in the mean slopes (:func:`_area_excess_range`), tabulated once when every
         pixel shares ``k``."""
         out = np.empty(E.size // 5)
-        _kernels._launch_ranges(_area_excess_range, out.size, E, np.ascontiguousarray(k, dtype=np.float64), out)
+        _kernels.launch_ranges(_area_excess_range, out.size, E, np.ascontiguousarray(k, dtype=np.float64), out)
         return out
 
     @numba.njit(cache=True, inline="always")
@@ -904,10 +907,10 @@ if _kernels.AVAILABLE:
 
     def _footprint_sums(E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo):
         """``(P, 5)`` sums of :func:`_footprint_range` over all footprints, as tasks on the
-        kernels' thread pool (:func:`microfacet.kernels._launch_ranges`: a thread takes the
+        kernels' thread pool (:func:`microfacet.kernels.launch_ranges`: a thread takes the
         next task when done, so that footprints of different cost balance)."""
         out = np.zeros((fp.shape[0], 5))
-        _kernels._launch_ranges(_footprint_range, fp.shape[0], out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff,
+        _kernels.launch_ranges(_footprint_range, fp.shape[0], out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff,
                                 prune, fp, h, wi, wo, exo, cost=_task_cost(fp, ks2x, ks2y, nx, ny, cutoff))
         return out
 
@@ -928,9 +931,9 @@ if _kernels.AVAILABLE:
 
     def _lobe_sums(E, W, h, wi, wo):
         """``(Q, 5)`` sums of :func:`_lobe_range` over all queries, as tasks on the kernels'
-        thread pool (:func:`microfacet.kernels._launch_ranges`)."""
+        thread pool (:func:`microfacet.kernels.launch_ranges`)."""
         out = np.zeros((h.shape[0], 5))
-        _kernels._launch_ranges(_lobe_range, h.shape[0], out, E, W, h, wi, wo, cost=W.size)
+        _kernels.launch_ranges(_lobe_range, h.shape[0], out, E, W, h, wi, wo, cost=W.size)
         return out
 
     @_kernel
@@ -962,9 +965,9 @@ if _kernels.AVAILABLE:
 
     def _footprint_merge(grid, nx, ny, ks2x, ks2y, cutoff, fp):
         """``(P, 5)`` averages of :func:`_merge_range` over all footprints ``fp``, as tasks on the kernels'
-        thread pool (:func:`microfacet.kernels._launch_ranges`)."""
+        thread pool (:func:`microfacet.kernels.launch_ranges`)."""
         out = np.zeros((fp.shape[0], 5))
-        _kernels._launch_ranges(_merge_range, fp.shape[0], out, grid.reshape(-1), nx, ny, ks2x, ks2y, cutoff, fp,
+        _kernels.launch_ranges(_merge_range, fp.shape[0], out, grid.reshape(-1), nx, ny, ks2x, ks2y, cutoff, fp,
                                 cost=_task_cost(fp, ks2x, ks2y, nx, ny, cutoff))
         return out
 else:  # pragma: no cover - without numba
@@ -978,7 +981,7 @@ def _window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) -> float:
 
 def _task_cost(fp, ks2x, ks2y, nx, ny, cutoff) -> int:
     """Lobes per footprint of ``fp``'s windows (:func:`_window_pairs`), the ``cost`` of a footprint
-    for :func:`microfacet.kernels._launch_ranges`."""
+    for :func:`microfacet.kernels.launch_ranges`."""
     return int(_window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) / max(fp.shape[0], 1)) + 1
 
 
@@ -1015,8 +1018,8 @@ def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, pr
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
     cov = np.broadcast_to(np.asarray(covs, dtype=np.float64), (P, 2, 2))
-    wi = np.ascontiguousarray(np.broadcast_to(_dirs(wi, "wi"), (P, 3)))
-    wo1 = _dirs(wo, "wo")
+    wi = np.ascontiguousarray(np.broadcast_to(directions(wi, "wi"), (P, 3)))
+    wo1 = directions(wo, "wo")
     wo = np.ascontiguousarray(np.broadcast_to(wo1, (P, 3)))
     ny, nx = ms.grid
     ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2

@@ -38,7 +38,7 @@ import functools
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from .. import kernels
+from .. import protocol
 from ..brdf import BRDF, MicrofacetBRDF, uniforms, unit_directions
 from ..distributions import GGX, Beckmann
 
@@ -246,7 +246,7 @@ def luminance(rgb) -> np.ndarray:
 def _into(out, result: np.ndarray, inputs) -> np.ndarray:
     if out is None:
         return result
-    np.copyto(kernels.output(out, result.shape, result.dtype, "out", tuple(inputs)), result)
+    np.copyto(protocol.output(out, result.shape, result.dtype, "out", tuple(inputs)), result)
     return out
 
 
@@ -371,7 +371,7 @@ class LayeredBRDF(BRDF):
         result = (wi, weight, np.where(ok, pdf, 0.0))
         if out is None:
             return result
-        out = kernels.sample_outputs(out, shape, np.dtype(np.float64), (u, wo))
+        out = protocol.sample_outputs(out, shape, np.dtype(np.float64), (u, wo))
         for o, a in zip(out, result):
             np.copyto(o, a)
         return out

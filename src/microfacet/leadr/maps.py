@@ -20,7 +20,7 @@ import numpy as np
 
 from ..distributions import Beckmann
 from ..io.normalmap import normals_to_slopes, read_slopes
-from ..kernels import _launch_ranges
+from ..kernels import launch_ranges
 from .mip import mip_pyramid, mip_sizes
 from .moments import convolve, to_moments
 
@@ -215,7 +215,7 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
         raise ValueError(f"out must be the float32 levels of a {h} x {w} map's pyramid")
     planar = np.empty((5, h, w), dtype=np.float32) if out is None else np.moveaxis(out[0], -1, 0)
     with np.errstate(over="ignore", invalid="ignore"):
-        bad = _launch_ranges(_height_moments, h, np.ascontiguousarray(xi), 0.5 * w * float(scale),
+        bad = launch_ranges(_height_moments, h, np.ascontiguousarray(xi), 0.5 * w * float(scale),
                              0.5 * h * float(scale), border == "wrap", base, planar, cost=w)
     if sum(bad):
         raise ValueError(OVERFLOW)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ..kernels import _launch_ranges
+from ..kernels import launch_ranges
 
 __all__ = ["mip_pyramid", "mip_sizes", "downsample_weights", "lookup", "MAX_ANISOTROPY"]
 
@@ -121,11 +121,11 @@ def downsample(level: np.ndarray, size: tuple[int, int] | None = None, out: np.n
         raise ValueError(f"out must have shape {(ho, wo, nc)}, got {out.shape}")
     src, dst = np.moveaxis(a, -1, 0), np.moveaxis(out, -1, 0)        # (C, H, W) views
     if (h, w) == (2 * ho, 2 * wo):                      # even sizes: the plain 2x2 average
-        _launch_ranges(_downsample_2x2, nc * ho, src, dst, cost=4 * wo)
+        launch_ranges(_downsample_2x2, nc * ho, src, dst, cost=4 * wo)
         return out
     iy, wy = downsample_weights(h, ho)
     ix, wx = downsample_weights(w, wo)
-    _launch_ranges(_downsample, nc * ho, src, iy, wy, ix, wx, dst, cost=iy.shape[1] * ix.shape[1] * wo)
+    launch_ranges(_downsample, nc * ho, src, iy, wy, ix, wx, dst, cost=iy.shape[1] * ix.shape[1] * wo)
     return out
 
 

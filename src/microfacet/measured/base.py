@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from .. import kernels
-from ..brdf import BRDF, _into, _into_sample, _uniforms
-from ..brdf import _dirs as as_dirs   # the one direction check of every BRDF
+from ..brdf import BRDF
+from ..protocol import directions as as_dirs   # the one direction check of every BRDF
+from ..protocol import into, into_sample, output, sample_outputs, uniforms
 from ..errors import MicrofacetError
 from ..geometry import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 
@@ -102,10 +103,10 @@ class MeasuredBRDF(BRDF):
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         k = self._kernel()
         if k is None:
-            return _into(out, self._eval_cos_numpy(wi, wo) if cosine else self._eval_numpy(wi, wo), (wi, wo))
+            return into(out, self._eval_cos_numpy(wi, wo) if cosine else self._eval_numpy(wi, wo), (wi, wo))
         shape = np.broadcast_shapes(wi.shape, wo.shape)
-        out = kernels.output(out, shape, np.float64, "out", (wi, wo))
-        kernels._launch(k[0], out.size // 3, _rows(np.broadcast_to(wi, shape), 3),
+        out = output(out, shape, np.float64, "out", (wi, wo))
+        kernels.launch(k[0], out.size // 3, _rows(np.broadcast_to(wi, shape), 3),
                         _rows(np.broadcast_to(wo, shape), 3), cosine, out.reshape(-1, 3), *k[2])
         return out
 
@@ -120,18 +121,18 @@ class MeasuredBRDF(BRDF):
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of :meth:`sample`: ``cos theta_i / pi`` (0 if ``wo`` is below the horizon)."""
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
-        return _into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
+        return into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
 
     def sample(self, u, wo, out=None):
         """Cosine-weighted light directions: ``(wi, eval_cos / pdf, pdf)``; weight and pdf
         are 0 where ``wo`` or ``wi`` is below the horizon."""
         wo = as_dirs(wo, "wo")
-        u = _uniforms(u)
+        u = uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         k = self._kernel()
         if k is not None:
-            wi, weight, pdf = kernels.sample_outputs(out, shape, np.float64, (u, wo))
-            kernels._launch(k[1], pdf.size, _rows(np.broadcast_to(u, shape + (2,)), 2),
+            wi, weight, pdf = sample_outputs(out, shape, np.float64, (u, wo))
+            kernels.launch(k[1], pdf.size, _rows(np.broadcast_to(u, shape + (2,)), 2),
                             _rows(np.broadcast_to(wo, shape + (3,)), 3), wi.reshape(-1, 3), weight.reshape(-1, 3),
                             pdf.reshape(-1), *k[2])
             return wi, weight, pdf
@@ -141,4 +142,4 @@ class MeasuredBRDF(BRDF):
         ok = pdf > 0
         fc = self.eval_cos(wi, wo)
         weight = np.divide(fc, pdf[..., None], out=np.zeros_like(fc), where=ok[..., None])
-        return _into_sample(out, (wi, weight, pdf), (u, wo))
+        return into_sample(out, (wi, weight, pdf), (u, wo))

@@ -16,68 +16,25 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from . import PluginParameterError
 from . import fresnel as _fresnel
+from .properties import DEFAULT_PLUGIN as PLUGIN
+from .properties import FRESNEL_KEYS as _FRESNEL_KEYS
+from .properties import choice as _choice
+from .properties import correlation as _correlation
+from .properties import finite as _finite
+from .properties import flag as _flag
+from .properties import is_float as _is_float
+from .properties import parameter_error as _error
+from .properties import positive as _positive
+from .properties import texture as _texture
 from .slopes import BECKMANN, GGX, Lobe, ratio
 from .tabulated import luminance
 
 __all__ = ["PLUGIN", "bsdf_class", "GAFS"]
 
-PLUGIN = "mf_microfacet"
 GAFS = ("smith", "vgroove", "normal_map")
-_FRESNEL_KEYS = {"material": "conductor", "eta": "conductor", "k": "conductor",
-                 "int_ior": "dielectric", "ext_ior": "dielectric", "schlick_f0": "schlick"}
 _ALPHA_MIN = 1e-4           # textured alpha is clamped here (as Mitsuba's roughconductor)
 _RHO_MAX = 1.0 - 1e-4       # textured rho is clamped into [-_RHO_MAX, _RHO_MAX]
-
-
-def _error(name: str, message: str, plugin: str = PLUGIN) -> PluginParameterError:
-    return PluginParameterError(f"{plugin}: parameter '{name}' {message}")
-
-
-def _is_float(props, name: str) -> bool:
-    return name in props and props.type(name) in (mi.Properties.Type.Float, mi.Properties.Type.Integer)
-
-
-def _texture(props, name: str, default: float, check=None, unbounded: bool = False, plugin: str = PLUGIN):
-    """``name`` as a texture (a float becomes a uniform one); ``check(value)`` returns an
-    error message for a bad float, or None."""
-    if _is_float(props, name) and check is not None:
-        msg = check(float(props[name]))
-        if msg:
-            raise _error(name, f"{msg}, got {float(props[name])!r}", plugin)
-    if name in props and props.type(name) in (mi.Properties.Type.String, mi.Properties.Type.Bool):
-        raise _error(name, f"must be a float or a texture, got {props.as_string(name)!r}", plugin)
-    if unbounded:
-        return props.get_unbounded_texture(name, default)
-    return props.get_texture(name, default)
-
-
-def _positive(v):
-    return None if (math.isfinite(v) and v > 0) else "must be a finite number > 0"
-
-
-def _finite(v):
-    return None if math.isfinite(v) else "must be finite"
-
-
-def _correlation(v):
-    return None if (math.isfinite(v) and abs(v) < 1) else "must lie in (-1, 1)"
-
-
-def _choice(props, name: str, default: str, choices, plugin: str = PLUGIN) -> str:
-    value = props.get(name, default) if name in props else default
-    if not isinstance(value, str) or value.lower() not in choices:
-        raise _error(name, f"must be one of {', '.join(choices)}, got {value!r}", plugin)
-    return value.lower()
-
-
-def _flag(props, name: str, default: bool, plugin: str = PLUGIN) -> bool:
-    if name not in props:
-        return default
-    if props.type(name) != mi.Properties.Type.Bool:
-        raise _error(name, f"must be true or false, got {props.as_string(name)!r}", plugin)
-    return bool(props[name])
 
 
 def _ior_textures(material: str, plugin: str = PLUGIN):

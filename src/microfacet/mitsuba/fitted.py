@@ -36,6 +36,7 @@ from ..fit import fit_names
 from ..fit import load as load_fit
 from ..io.exr import EXR_MAGIC
 from . import bsdf as _bsdf
+from . import properties
 from .slopes import BECKMANN, GGX, Lobe
 from .tabulated import InterpolatedColor, tabulated_lobe
 
@@ -50,7 +51,7 @@ def fit_path_parameter(props, name: str, plugin: str) -> str:
     """The path of the fit file named by string parameter ``name``, resolved by Mitsuba's file
     resolver; a one-line ``ValueError`` naming the parameter when it is missing."""
     if name not in props or props.type(name) != mi.Properties.Type.String:
-        raise _bsdf._error(name, "is required: the .npz written by `microfacet fit`", plugin)
+        raise properties.parameter_error(name, "is required: the .npz written by `microfacet fit`", plugin)
     return str(mi.file_resolver().resolve(props[name]))
 
 
@@ -63,14 +64,14 @@ def load_fit_parameter(props, name: str, plugin: str):
         with open(path, "rb") as f:
             head = f.read(len(EXR_MAGIC))
     except OSError as e:
-        raise _bsdf._error(name, f"cannot read {path!r} ({e.strerror or e})", plugin) from None
+        raise properties.parameter_error(name, f"cannot read {path!r} ({e.strerror or e})", plugin) from None
     if head == EXR_MAGIC:
-        raise _bsdf._error(name, f"{path!r} is an OpenEXR file (a LEADR pyramid? use mf_leadr), "
+        raise properties.parameter_error(name, f"{path!r} is an OpenEXR file (a LEADR pyramid? use mf_leadr), "
                                  "not a fit .npz of `microfacet fit`", plugin)
     try:
         return load_fit(path)
     except MicrofacetError as e:
-        raise _bsdf._error(name, f"is not usable: {e}", plugin) from None
+        raise properties.parameter_error(name, f"is not usable: {e}", plugin) from None
 
 
 def choose_fit(path: str, use: str, plugin: str = PLUGIN):
@@ -81,17 +82,17 @@ def choose_fit(path: str, use: str, plugin: str = PLUGIN):
     try:
         names, best = fit_names(path)
     except MicrofacetError as e:
-        raise _bsdf._error("filename", f"is not usable: {e}", plugin) from None
+        raise properties.parameter_error("filename", f"is not usable: {e}", plugin) from None
     name = best if use == "best" else use
     if name == "tabulated" or (name in (GGX, BECKMANN) and name not in names):
         return name, None
     if name not in names:
-        raise _bsdf._error("use", f"must name a fit of {path!r}: one of {', '.join(['best', *names])}, "
+        raise properties.parameter_error("use", f"must name a fit of {path!r}: one of {', '.join(['best', *names])}, "
                                   f"got {use!r}", plugin)
     try:
         return name, load_fit(path, model=name)
     except MicrofacetError as e:
-        raise _bsdf._error("use", f"cannot load the fit {name!r}: {e}", plugin) from None
+        raise properties.parameter_error("use", f"cannot load the fit {name!r}: {e}", plugin) from None
 
 
 def _make_class() -> type:
@@ -109,10 +110,10 @@ def _make_class() -> type:
             self.filename = props["filename"]
             use = props.get("use", "best") if "use" in props else "best"
             if not isinstance(use, str):
-                raise _bsdf._error("use", f"must be the name of a fit, got {use!r}", PLUGIN)
+                raise properties.parameter_error("use", f"must be the name of a fit, got {use!r}", PLUGIN)
             self.use, tree = choose_fit(fit_path_parameter(props, "filename", PLUGIN), use)
             self.root = None
-            self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+            self.specular_reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
             if tree is not None:
                 self._init_tree(tree)
                 return

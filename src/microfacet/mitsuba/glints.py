@@ -36,6 +36,7 @@ from ..glints.figures import PIXEL_SIGMA
 from ..glints.microsurface import FWHM_PER_SIGMA
 from ..glints.pbrdf import G2_MODELS
 from . import bsdf as _bsdf
+from . import properties
 from .slopes import BECKMANN, Lobe, ratio
 from .tabulated import Table
 
@@ -52,20 +53,20 @@ def _load(props, name: str):
     """The :class:`~microfacet.glints.Microsurface` of the ``.npz`` named by ``name``, or a
     one-line error naming the parameter and file (an EXR, e.g. a LEADR pyramid, is named)."""
     if name not in props or props.type(name) != mi.Properties.Type.String:
-        raise _bsdf._error(name, "is required: the .npz written by `microfacet glints`", PLUGIN)
+        raise properties.parameter_error(name, "is required: the .npz written by `microfacet glints`", PLUGIN)
     path = str(mi.file_resolver().resolve(props[name]))
     try:
         with open(path, "rb") as f:
             head = f.read(4)
     except OSError as e:
-        raise _bsdf._error(name, f"cannot read {path!r} ({e.strerror or e})", PLUGIN) from None
+        raise properties.parameter_error(name, f"cannot read {path!r} ({e.strerror or e})", PLUGIN) from None
     if head == b"v/1\x01":
-        raise _bsdf._error(name, f"{path!r} is an OpenEXR image (a LEADR pyramid of `microfacet bake`? "
+        raise properties.parameter_error(name, f"{path!r} is an OpenEXR image (a LEADR pyramid of `microfacet bake`? "
                                  "use mf_leadr), not a glint microsurface .npz", PLUGIN)
     try:
         return Microsurface.load(path)
     except MicrofacetError as e:
-        raise _bsdf._error(name, f"is not usable: {e}", PLUGIN) from None
+        raise properties.parameter_error(name, f"is not usable: {e}", PLUGIN) from None
 
 
 class GlintTables:
@@ -153,8 +154,8 @@ def _make_class() -> type:
             mi.BSDF.__init__(self, props)
             ms = _load(props, "filename")
             self.filename = props["filename"]
-            self.exact = _bsdf._flag(props, "exact", True, PLUGIN)
-            self.g2 = _bsdf._choice(props, "g2", "correlated", G2_MODELS, PLUGIN)
+            self.exact = properties.flag(props, "exact", True, PLUGIN)
+            self.g2 = properties.choice(props, "g2", "correlated", G2_MODELS, PLUGIN)
             self.uv_scale = float(props.get("uv_scale", 1.0))
             self.footprint = float(props.get("footprint", 1.0))
             self.max_lobes = int(props.get("max_lobes", 1024))
@@ -162,9 +163,9 @@ def _make_class() -> type:
                                       ("footprint", self.footprint, self.footprint >= 0, ">= 0"),
                                       ("max_lobes", self.max_lobes, self.max_lobes >= 16, ">= 16")):
                 if not (math.isfinite(v) and ok):
-                    raise _bsdf._error(name, f"must be a finite number {what}, got {v!r}", PLUGIN)
+                    raise properties.parameter_error(name, f"must be a finite number {what}, got {v!r}", PLUGIN)
             self.t = GlintTables(ms, mip=not self.exact)
-            self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+            self.specular_reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
             self._init_fresnel(props)
             flags = (mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
                      | mi.BSDFFlags.SpatiallyVarying)

@@ -26,6 +26,7 @@ from ..leadr import downsample_operator, read_pyramid
 from ..leadr.mip import MAX_ANISOTROPY
 from ..leadr.moments import MAX_RHO, MIN_ALPHA
 from . import bsdf as _bsdf
+from . import properties
 from .fitted import load_fit_parameter
 from .slopes import BECKMANN, Lobe
 from .tabulated import InterpolatedColor, Table, index_of
@@ -41,20 +42,20 @@ def _read(props, name: str):
     one-line error naming the parameter and file (a ``.npz``, e.g. a fit or glint file,
     is recognized and named as such)."""
     if name not in props or props.type(name) != mi.Properties.Type.String:
-        raise _bsdf._error(name, "is required: the pyramid EXR written by `microfacet bake`", PLUGIN)
+        raise properties.parameter_error(name, "is required: the pyramid EXR written by `microfacet bake`", PLUGIN)
     path = str(mi.file_resolver().resolve(props[name]))
     try:
         with open(path, "rb") as f:
             head = f.read(4)
     except OSError as e:
-        raise _bsdf._error(name, f"cannot read {path!r} ({e.strerror or e})", PLUGIN) from None
+        raise properties.parameter_error(name, f"cannot read {path!r} ({e.strerror or e})", PLUGIN) from None
     if head == _ZIP_MAGIC:
-        raise _bsdf._error(name, f"{path!r} is a .npz archive (a fit or glint file?), not a LEADR "
+        raise properties.parameter_error(name, f"{path!r} is a .npz archive (a fit or glint file?), not a LEADR "
                                  "pyramid EXR of `microfacet bake`", PLUGIN)
     try:
         return read_pyramid(path)
     except MicrofacetError as e:
-        raise _bsdf._error(name, f"is not usable: {e}", PLUGIN) from None
+        raise properties.parameter_error(name, f"is not usable: {e}", PLUGIN) from None
 
 
 class Pyramid:
@@ -158,22 +159,22 @@ def _make_class() -> type:
             pyramid = _read(props, "filename")
             self.filename = props["filename"]
             if "alpha" in props and "fit" in props:
-                raise _bsdf._error("alpha", "and fit are exclusive: the base is one material", PLUGIN)
+                raise properties.parameter_error("alpha", "and fit are exclusive: the base is one material", PLUGIN)
             self.fresnel_table = None
             if "fit" in props:
                 fit = load_fit_parameter(props, "fit", PLUGIN)
-                if any(k in props for k in _bsdf._FRESNEL_KEYS):
-                    raise _bsdf._error("fit", "brings its own Fresnel table: drop the Fresnel parameters",
+                if any(k in props for k in properties.FRESNEL_KEYS):
+                    raise properties.parameter_error("fit", "brings its own Fresnel table: drop the Fresnel parameters",
                                        PLUGIN)
                 base = fit.to_beckmann()
                 self.fresnel_table = InterpolatedColor(base.fresnel.cos_theta_d, base.fresnel.values)
             else:
                 if "alpha" in props and props.type("alpha") not in (mi.Properties.Type.Float,
                                                                       mi.Properties.Type.Integer):
-                    raise _bsdf._error("alpha", f"must be a number, got {props.as_string('alpha')!r}", PLUGIN)
+                    raise properties.parameter_error("alpha", f"must be a number, got {props.as_string('alpha')!r}", PLUGIN)
                 alpha = float(props.get("alpha", 0.0))
                 if not (math.isfinite(alpha) and alpha >= 0):
-                    raise _bsdf._error("alpha", f"must be a finite number >= 0, got {alpha!r}", PLUGIN)
+                    raise properties.parameter_error("alpha", f"must be a finite number >= 0, got {alpha!r}", PLUGIN)
                 base = alpha if alpha > 0 else None
                 self._init_fresnel(props)
             self.pyramid = Pyramid(downsample_operator(pyramid, base))
@@ -181,14 +182,14 @@ def _make_class() -> type:
             self.footprint = float(props.get("footprint", 0.0))
             for name, v in (("uv_scale", self.uv_scale), ("footprint", self.footprint)):
                 if not (math.isfinite(v) and v >= 0) or (name == "uv_scale" and v == 0):
-                    raise _bsdf._error(name, f"must be a finite number {'>' if name == 'uv_scale' else '>='} 0, "
+                    raise properties.parameter_error(name, f"must be a finite number {'>' if name == 'uv_scale' else '>='} 0, "
                                              f"got {v!r}", PLUGIN)
             self.kind = BECKMANN
             self.gaf = "smith"
-            self.shadowing = _bsdf._flag(props, "shadowing", True, PLUGIN)
+            self.shadowing = properties.flag(props, "shadowing", True, PLUGIN)
             self.separable = False
             self.samples_visible = True
-            self.specular_reflectance = _bsdf._texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+            self.specular_reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
             flags = (mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
                      | mi.BSDFFlags.SpatiallyVarying)
             if hasattr(mi.BSDFFlags, "NeedsDifferentials"):      # Mitsuba 0.6; 3.x has no such flag

@@ -157,7 +157,7 @@ class Lobe:
         if self.kind == BECKMANN:
             x = beckmann_visible_slope_quantile(u.x, cos_theta)
             y = dr.erfinv(2.0 * dr.clip(u.y, U_MIN, 1.0 - U_MIN) - 1.0)
-            return _slope_normal(x, y)
+            return slope_normal(x, y)
         c = dr.clip(cos_theta, 0.0, 1.0)
         s = dr.safe_sqrt(1.0 - c * c)
         p = mi.warp.square_to_uniform_disk_concentric(u)
@@ -172,7 +172,7 @@ class Lobe:
         ``x~, y~ = erfinv(2u - 1)``; GGX ``tan^2 theta = u1 / (1 - u1)``, ``phi = 2 pi u2``."""
         if self.kind == BECKMANN:
             s = dr.erfinv(2.0 * dr.clip(u, U_MIN, 1.0 - U_MIN) - 1.0)
-            m = _slope_normal(s.x, s.y)
+            m = slope_normal(s.x, s.y)
         else:
             sin_p, cos_p = dr.sincos(2.0 * math.pi * u.y)
             sin_t, cos_t = dr.sqrt(u.x), dr.safe_sqrt(1.0 - u.x)
@@ -180,7 +180,7 @@ class Lobe:
         return self._normal_from_standard(m)
 
 
-def _slope_normal(x, y):
+def slope_normal(x, y):
     """Normal ``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)`` of a slope (Eq. 2.10)."""
     inv = dr.rsqrt(1.0 + x * x + y * y)
     return mi.Vector3f(-x * inv, -y * inv, inv)

@@ -22,8 +22,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..distributions.tabulated import _GL4_T, _GL4_W, _THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
-from .slopes import Lobe, _slope_normal, ratio
+from ..distributions.tabulated import GL4_T, GL4_W, THETA_CAP, HALF_PI, TabulatedAnisotropic, TabulatedIsotropic
+from .slopes import Lobe, slope_normal, ratio
 
 __all__ = ["Table", "SortedSearch", "TabulatedIsotropicLobe", "TabulatedAnisotropicLobe", "tabulated_lobe",
            "InterpolatedColor", "luminance", "NEWTON_STEPS"]
@@ -255,7 +255,7 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
     # ----------------------------------------------------------------- tables
     def _fine(self, xi):
         """Fine-grid coordinate ``s`` of the slope magnitude ``xi = tan(s^2 theta_cap)``."""
-        return dr.sqrt(dr.minimum(dr.atan(xi), _THETA_CAP) / _THETA_CAP)
+        return dr.sqrt(dr.minimum(dr.atan(xi), THETA_CAP) / THETA_CAP)
 
     def _l1(self, xi):
         """``L1(xi)``: cubic Hermite in ``s`` with ``dL1/ds = -L0 dxi/ds`` (the oracle's ``_L1``)."""
@@ -288,7 +288,7 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         u1 = dr.clip(u.x, U_MIN, 1.0 - U_MIN)
         x = self._visible_x(a, u1)
         y = self._conditional_y(dr.abs(x), dr.clip(u.y, 0.0, 1.0))
-        return _slope_normal(x, y)
+        return slope_normal(x, y)
 
     def _visible_x(self, a, u1):
         t, m = self.t, self.t.m
@@ -317,7 +317,7 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
         s_end = dr.select(at_end, s_a, mi.Float(kn) / (m - 1))
         w = dr.select(f0 > f1, ratio(f0 - target, f0 - f1, f0 > f1), 0.5)
         s = s0 + dr.clip(w, 0.0, 1.0) * (s_end - s0)
-        xi = dr.tan(s * s * _THETA_CAP)
+        xi = dr.tan(s * s * THETA_CAP)
         return dr.select(left, -xi, dr.minimum(xi, a))
 
     def _conditional_y(self, xi, u2):
@@ -455,7 +455,7 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
 
         def partial(x):
             out = 0.0
-            for gt, gw in zip(_GL4_T, _GL4_W):
+            for gt, gw in zip(GL4_T, GL4_W):
                 out = out + float(gw) * marginal(ta + (x - ta) * float(gt))
             return (x - ta) * out
 

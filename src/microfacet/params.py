@@ -1,0 +1,115 @@
+"""Frozen parameter records of the compiled Smith microfacet kernels.
+
+A :class:`~microfacet.brdf.MicrofacetBRDF` with a Smith GAF, a scalar Beckmann or GGX
+distribution and a Fresnel term the kernels know is described, for the compiled backend,
+by one :class:`SmithParams` record, built once (:func:`smith_params`, from
+``MicrofacetBRDF.params``) and passed whole: into the Numba kernels of
+:mod:`microfacet._numba_kernels` as a named tuple (Numba types it as a tuple and reads its
+fields as ``p.ax``, ``p.fresnel.fp``; no copy, no loose arguments), as pbrt-v4's
+``TrowbridgeReitzDistribution`` and ``ConductorBxDF`` carry theirs. The record holds:
+
+* ``kind``: :data:`BECKMANN` or :data:`GGX` (it selects the compiled kernel, in which the
+  kind is a compile-time constant);
+* ``ax``, ``ay``, ``rho``, ``xn``, ``yn``: roughness, correlation and mean slope
+  (Dupuy 2015, Eq. 3.2-3.4) as scalars of the BRDF's arithmetic type;
+* ``shadowing``: whether ``G`` has the shadowing term ``Lambda(i)`` (Eq. 2.13);
+* ``fresnel``: a :class:`FresnelParams` record, made by the Fresnel term itself
+  (:meth:`microfacet.fresnel.Fresnel.kernel_params`).
+
+A new model parameter is a new field here and its use in each backend's formula; a new
+Fresnel term a new kind code here, its :meth:`~microfacet.fresnel.Fresnel.kernel_params`
+and its formula in ``_numba_kernels._fresnel_block``.
+
+Example::
+
+    >>> import microfacet as mf
+    >>> p = mf.MicrofacetBRDF(mf.GGX(alpha=0.3)).params
+    >>> (p.kind == GGX, float(p.ax), p.shadowing, p.fresnel.kind == IDEAL)
+    (True, 0.3, True, True)
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from . import distributions
+
+__all__ = ["BECKMANN", "GGX", "IDEAL", "SCHLICK", "DIELECTRIC", "CONDUCTOR", "TABULATED",
+           "FresnelParams", "SmithParams", "smith_params", "fresnel_params", "read_only"]
+
+#: Distribution kinds of :class:`SmithParams` (the kernels are compiled per kind).
+BECKMANN, GGX = 0, 1
+#: Fresnel kinds of :class:`FresnelParams` (``_numba_kernels._fresnel_block`` branches on them).
+IDEAL, SCHLICK, DIELECTRIC, CONDUCTOR, TABULATED = range(5)
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a``: the kernels read their array parameters as read-only arrays,
+    whether the caller's are writeable or not (one compiled version instead of two: Numba
+    compiles per read-only flag)."""
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+class FresnelParams(NamedTuple):
+    """The Fresnel term of :class:`SmithParams`: ``kind`` (:data:`IDEAL` ... :data:`TABULATED`),
+    ``fp`` ``(2, 3)`` of the kernels' arithmetic type (row 0: Schlick's ``f0`` or ``eta``, row 1:
+    a conductor's ``k``), ``tx`` ``(m,)`` and ``tv`` ``(m, 3)`` float64: a tabulated term's
+    ``cos theta_d`` grid and values (zeros for the analytic terms). Arrays read-only."""
+
+    kind: int
+    fp: np.ndarray
+    tx: np.ndarray
+    tv: np.ndarray
+
+    @classmethod
+    def analytic(cls, kind: int, dtype, row0=0.0, row1=0.0) -> "FresnelParams":
+        """The record of an analytic term (no table): ``fp = [row0, row1]`` as ``dtype``."""
+        fp = np.zeros((2, 3), dtype)
+        fp[0], fp[1] = row0, row1
+        return cls(kind, read_only(fp), _NO_TABLE[0], _NO_TABLE[1])
+
+
+#: The table of analytic terms (unused by their formulas; a fixed type for Numba).
+_NO_TABLE = (read_only(np.zeros(2)), read_only(np.zeros((2, 3))))
+
+
+class SmithParams(NamedTuple):
+    """Parameters of a Smith microfacet BRDF for the compiled kernels (module docstring)."""
+
+    kind: int
+    ax: float
+    ay: float
+    rho: float
+    xn: float
+    yn: float
+    shadowing: bool
+    fresnel: FresnelParams
+
+
+def fresnel_params(fresnel, dtype=np.float64) -> FresnelParams | None:
+    """``fresnel.kernel_params(dtype)`` (:meth:`microfacet.fresnel.Fresnel.kernel_params`), or
+    ``None`` for ``None``: the ideal term (``F = 1``)."""
+    if fresnel is None:
+        return FresnelParams.analytic(IDEAL, dtype)
+    return fresnel.kernel_params(dtype)
+
+
+def smith_params(distribution, fresnel=None, shadowing: bool = True, dtype=np.float64) -> SmithParams | None:
+    """The :class:`SmithParams` of a Smith BRDF with ``distribution``, ``fresnel`` (``None``:
+    ideal) and ``shadowing``, its scalars as ``dtype``; ``None`` where the kernels do not cover
+    it: a distribution other than a :class:`~microfacet.distributions.Beckmann` or
+    :class:`~microfacet.distributions.GGX` with scalar parameters (subclasses included: they
+    may change the formulas), or a Fresnel term without a record."""
+    d, t = distribution, type(distribution)
+    if t not in (distributions.Beckmann, distributions.GGX) \
+            or any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
+        return None
+    f = fresnel_params(fresnel, dtype)
+    if f is None:
+        return None
+    F = np.dtype(dtype).type
+    return SmithParams(GGX if t is distributions.GGX else BECKMANN, F(d.alpha_x), F(d.alpha_y), F(d.rho),
+                       F(d.xn), F(d.yn), bool(shadowing), f)
