@@ -37,8 +37,6 @@ PACKAGE = "microfacet"
 #: Files owned by the project lead (issue 27): their private imports are listed here until
 #: the lead replaces them with public names; this allow-list is meant to be emptied.
 LEAD_OWNED = frozenset({
-    "microfacet.fit.perceptual", "microfacet.fit.outputs", "microfacet.fit.fitted",
-    "microfacet.fit.spec", "microfacet.fit.analytic",
 })
 
 

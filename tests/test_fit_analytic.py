@@ -460,7 +460,7 @@ def test_energy_constrained_solves_stop_at_their_optimum(monkeypatch):
         assert np.all(extract._albedo_rows_of(albedo[0], diffuse) @ x <= albedo[1][:, c] * (1.0 + 1e-9))
         return x
     monkeypatch.setattr(extract, "box_qp", counted_box_qp)
-    monkeypatch.setattr(analytic, "_energy_constrained", checked_solve)
+    monkeypatch.setattr(analytic, "energy_constrained", checked_solve)
     fit_analytic(truth, "ggx", diffuse=True, start=lobe(truth), **FAST)
     assert calls["solves"] > 10
     assert calls["box_qp"] / calls["solves"] < 15

@@ -51,10 +51,11 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import fresnel as _fresnel
-from ..brdf import BRDF, Lambertian, MicrofacetBRDF, _into, _into_sample
+from ..brdf import BRDF, Lambertian, MicrofacetBRDF
+from ..protocol import into, into_sample
 from ..distributions import GGX, Beckmann
 from ..geometry import dot, half_vector
-from .extract import _distribution_key, _energy_constrained, _kept, albedo_rows, box_qp, golden_section
+from .extract import albedo_rows, box_qp, distribution_key, energy_constrained, golden_section, kept
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, compared_pairs, measured_mask,
                        measurement_directions, uniform_directions)
 
@@ -120,15 +121,15 @@ class SumBRDF(BRDF):
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
         """``sum_j f_j cos theta_i``."""
-        return _into(out, sum(b.eval_cos(wi, wo) for b in self.brdfs), (wi, wo))
+        return into(out, sum(b.eval_cos(wi, wo) for b in self.brdfs), (wi, wo))
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
         """``sum_j f_j``."""
-        return _into(out, sum(b.eval(wi, wo) for b in self.brdfs), (wi, wo))
+        return into(out, sum(b.eval(wi, wo) for b in self.brdfs), (wi, wo))
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Mixture density ``sum_j w_j pdf_j``."""
-        return _into(out, sum(w * b.pdf(wi, wo) for w, b in zip(self.weights, self.brdfs, strict=True) if w > 0),
+        return into(out, sum(w * b.pdf(wi, wo) for w, b in zip(self.weights, self.brdfs, strict=True) if w > 0),
                      (wi, wo))
 
     def sample(self, u, wo, out=None):
@@ -154,7 +155,7 @@ class SumBRDF(BRDF):
         fc = self.eval_cos(wi, wo)
         ok = (pdf > 0) & np.all(np.isfinite(fc), axis=-1)
         weight = np.where(ok[..., None], fc / np.where(ok, pdf, 1.0)[..., None], 0.0)
-        return _into_sample(out, (wi, weight, np.where(ok, pdf, 0.0)), (u, wo))
+        return into_sample(out, (wi, weight, np.where(ok, pdf, 0.0)), (u, wo))
 
 
 # ------------------------------------------------------------------ least squares
@@ -340,7 +341,7 @@ class _Problem:
                              _spread(d.pairs.sum(sp[:, None] * d.w_hat_ref).reshape(n, 2, 3)).T,
                              _spread(d.albedo_nodes.sum(sa[:, None] * d.w_albedo_hat)).reshape(-1, n),
                              _spread(d.pairs.sum((sp * d.lambert[:d.m])[:, None] * d.w_hat)) if self.diffuse else None)
-        return _kept(self._lobes, _distribution_key(distribution), make)
+        return kept(self._lobes, distribution_key(distribution), make)
 
     def quadratic(self, q):
         """``H (3, X, X)``, ``g (3, X)``, ``k (3,)`` with ``E_c(x) = x^T H_c x - 2 g_c^T x + k_c``,
@@ -429,7 +430,7 @@ class _Problem:
     def _quadratic_kept(self, q):
         """:meth:`quadratic`, kept per ``q`` (:func:`.extract._kept`; a :meth:`lower_bound` is
         followed by the :meth:`solve` of the same ``q``)."""
-        return _kept(self._quadratics, np.asarray(q, dtype=np.float64).tobytes(), lambda: self.quadratic(q))
+        return kept(self._quadratics, np.asarray(q, dtype=np.float64).tobytes(), lambda: self.quadratic(q))
 
     def lower_bound(self, q) -> float:
         """A lower bound of :meth:`error` (linear Fresnel models): ``E(q)`` with the
@@ -457,7 +458,7 @@ class _Problem:
 
         def lobe(distribution):
             ideal = MicrofacetBRDF(distribution, gaf=self.gaf, shadowing=self.shadowing)
-            return _kept(self._lobe_rows, _distribution_key(distribution),
+            return kept(self._lobe_rows, distribution_key(distribution),
                          lambda: albedo_rows(None, ideal, n, views, ENERGY_SAMPLES)[0][:, n - 1::-1])
         cols = [lobe(self.distribution(q))]
         if self.coat:
@@ -514,7 +515,7 @@ class _Problem:
         if rows is not None and self._may_gain(Q @ y + x0):
             r = rows() @ Q
             limit = 1.0 - ENERGY_MARGIN - rows() @ x0
-            y = _energy_constrained(Hy, gy, y, (lo, hi), (r, np.repeat(limit[:, None], 3, 1)), c, True)
+            y = energy_constrained(Hy, gy, y, (lo, hi), (r, np.repeat(limit[:, None], 3, 1)), c, True)
         return y
 
     def _may_gain(self, x) -> bool:
@@ -561,7 +562,7 @@ class _Problem:
                 Hee = Hc[n:, n:]
                 ge = g[c][n:] - Hc[n:, :n] @ x[:n]
                 limit = 1.0 - ENERGY_MARGIN - rows()[:, :n] @ x[:n]
-                p[2:] = _energy_constrained(Hee, ge, p[2:], (lo[2:], hi[2:]),
+                p[2:] = energy_constrained(Hee, ge, p[2:], (lo[2:], hi[2:]),
                                             (rows()[:, n:], np.repeat(limit[:, None], 3, 1)), c, True)
                 x[n:] = p[2:]
             total += float(x @ Hc @ x - 2.0 * g[c] @ x + k[c])

@@ -10,10 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import fresnel as _fresnel
-from ..brdf import GAFS, Lambertian, MicrofacetBRDF, _into, _into_sample
+from ..brdf import GAFS, Lambertian, MicrofacetBRDF
 from ..distributions import GGX, Beckmann
 from ..distributions.tabulated import THETA_REFINE, TabulatedAnisotropic, TabulatedIsotropic, refine_radial, theta_grid
 from ..errors import MicrofacetError
+from ..protocol import into, into_sample
 from ..io.atomic import write_bytes
 from ..io.npz import load_npz
 from . import extract
@@ -82,13 +83,13 @@ class FittedBRDF(MicrofacetBRDF):
         """``f_r cos theta_i``: the microfacet lobe (Listing 2.2) plus ``k_d cos theta_i / pi``."""
         if not self.has_diffuse:
             return super().eval_cos(wi, wo, out)
-        return _into(out, super().eval_cos(wi, wo) + self.base.eval_cos(wi, wo), (wi, wo))
+        return into(out, super().eval_cos(wi, wo) + self.base.eval_cos(wi, wo), (wi, wo))
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
         """``f_r = F D G / (4 cos theta_i cos theta_o) + k_d / pi`` (Eq. 2.1, 1.9)."""
         if not self.has_diffuse:
             return super().eval(wi, wo, out)
-        return _into(out, super().eval(wi, wo) + self.base.eval(wi, wo), (wi, wo))
+        return into(out, super().eval(wi, wo) + self.base.eval(wi, wo), (wi, wo))
 
     def _lobe_probability(self) -> float:
         """Probability of sampling the microfacet lobe: its albedo estimate
@@ -102,7 +103,7 @@ class FittedBRDF(MicrofacetBRDF):
         if not self.has_diffuse:
             return super().pdf(wi, wo, out)
         p = self._lobe_probability()
-        return _into(out, p * super().pdf(wi, wo) + (1.0 - p) * self.base.pdf(wi, wo), (wi, wo))
+        return into(out, p * super().pdf(wi, wo) + (1.0 - p) * self.base.pdf(wi, wo), (wi, wo))
 
     def sample(self, u, wo, out=None):
         """Sample the lobe (:meth:`MicrofacetBRDF.sample`) or the base (cosine warp),
@@ -124,7 +125,7 @@ class FittedBRDF(MicrofacetBRDF):
         fc = self.eval_cos(wi, wo_b)
         ok = pdf > 0
         weight = np.where(ok[..., None], fc / np.where(ok, pdf, 1.0)[..., None], 0.0)
-        return _into_sample(out, (wi, weight, np.where(ok, pdf, 0.0)), (u, wo))
+        return into_sample(out, (wi, weight, np.where(ok, pdf, 0.0)), (u, wo))
 
     # ------------------------------------------------------------ backscattering
     def backscatter(self, k) -> np.ndarray:
@@ -156,7 +157,7 @@ class FittedBRDF(MicrofacetBRDF):
         the distribution and roughness they were computed for (the moment conversions and
         the least-squares fits started from them ask ~4 times)."""
         d = self.distribution
-        key = extract._distribution_key(d)
+        key = extract.distribution_key(d)
         kept = getattr(self, "_kept_moments", None)
         if kept is None or kept[0] is not d or kept[1] != key:
             self._kept_moments = kept = (d, key, self._slope_moments())
@@ -540,7 +541,7 @@ def load(path: str | os.PathLike, model: str | None = None):
     path = Path(path)
     data = load_npz(path, "a microfacet fit file")
     if "format" not in data and "magic" in data:
-        from ..glints.microsurface import _MAGIC as GLINTS_MAGIC
+        from ..glints.microsurface import MAGIC as GLINTS_MAGIC
         if str(data["magic"]) == GLINTS_MAGIC:
             raise MicrofacetError(f"{path}: a glint microsurface written by 'microfacet glints' "
                                   "(read it with microfacet.glints.Microsurface.load), not a microfacet fit file "
