@@ -7,34 +7,127 @@ sheared projected-area normalization, Eq. 3.3) and the sampling of
 :meth:`microfacet.MicrofacetBRDF.sample` (visible normals for Smith, Eq. 2.23; slopes of
 ``P`` otherwise). Mitsuba's ``si.wi`` is the library's view direction ``o`` and the
 ``wo`` argument its light direction ``i``; ``eval`` returns ``f_r cos theta_i``.
+
+The plugin's parameters are read once into records (:class:`LobeModel`, :class:`Roughness`,
+:class:`FresnelParams`, together :class:`MicrofacetParams`); each step of the math is a
+module-level function of those records (:func:`geometric_attenuation`,
+:func:`normal_density`, :func:`fresnel_term`, ...). :class:`MicrofacetLobe` is the shading
+code shared with ``mf_fitted``, ``mf_leadr`` and the fits' BRDF trees, which supply their
+own lobe and Fresnel term; :class:`MicrofacetBSDF` is the plugin (a plain class made a
+``mi.BSDF`` per variant by :func:`.registry.variant_class`).
 """
 from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
 
-from . import fresnel as _fresnel
+from . import fresnel as fresnel_formulas
+from . import properties
 from .properties import DEFAULT_PLUGIN as PLUGIN
-from .properties import FRESNEL_KEYS as _FRESNEL_KEYS
-from .properties import choice as _choice
-from .properties import correlation as _correlation
-from .properties import finite as _finite
-from .properties import flag as _flag
-from .properties import is_float as _is_float
-from .properties import parameter_error as _error
-from .properties import positive as _positive
-from .properties import texture as _texture
+from .registry import variant_class
 from .slopes import BECKMANN, GGX, Lobe, ratio
 from .tabulated import luminance
 
-__all__ = ["PLUGIN", "bsdf_class", "GAFS"]
+__all__ = ["PLUGIN", "bsdf_class", "GAFS", "MicrofacetBSDF", "MicrofacetLobe", "LobeModel", "Roughness",
+           "FresnelParams", "MicrofacetParams", "read_model", "read_roughness", "read_fresnel",
+           "read_microfacet_params", "roughness_lobe", "fresnel_term", "geometric_attenuation",
+           "normal_density", "reflecting", "half_vector", "lobe_value", "lobe_pdf", "sample_normal",
+           "sample_weight", "glossy_sample", "glossy_flags"]
 
 GAFS = ("smith", "vgroove", "normal_map")
 _ALPHA_MIN = 1e-4           # textured alpha is clamped here (as Mitsuba's roughconductor)
 _RHO_MAX = 1.0 - 1e-4       # textured rho is clamped into [-_RHO_MAX, _RHO_MAX]
+#: Default of ``int_ior`` / ``ext_ior`` (Mitsuba's ``bk7`` and ``air``).
+_INT_IOR, _EXT_IOR = 1.5046, 1.000277
+
+
+# ------------------------------------------------------------------ records
+@dataclass(frozen=True)
+class LobeModel:
+    """What a microfacet lobe computes, fixed at load: the slope distribution ``kind``
+    (``beckmann``, ``ggx``, ``tabulated``), the GAF (Table 2.IV: ``smith``, ``vgroove``,
+    ``normal_map``), shadowing (``False``: masking only), ``separable`` Smith ``G1 G1``, and
+    whether sampling draws visible normals (Eq. 2.23) or slopes of ``P``."""
+    kind: str = BECKMANN
+    gaf: str = "smith"
+    shadowing: bool = True
+    separable: bool = False
+    samples_visible: bool = True
+
+
+@dataclass(frozen=True)
+class Roughness:
+    """The lobe's textures: ``alpha_u``, ``alpha_v`` (one texture when ``isotropic``), the
+    slope correlation ``rho`` and the mean slope ``(mean_slope_u, mean_slope_v)`` (Eq. 3.4)."""
+    alpha_u: object
+    alpha_v: object
+    rho: object
+    mean_slope_u: object
+    mean_slope_v: object
+    isotropic: bool
+
+
+@dataclass(frozen=True)
+class FresnelParams:
+    """``F(o.h)`` (Table 2.I) times ``specular_reflectance``: ``kind`` ``none`` (F = 1),
+    ``conductor`` (textures ``eta``, ``k``), ``dielectric`` (``eta``: a ``Float``
+    ``int_ior / ext_ior``), ``schlick`` (texture ``f0``) or ``table`` (``table``: an
+    :class:`~.tabulated.InterpolatedColor` of ``cos theta_d``, a fit's)."""
+    kind: str
+    specular_reflectance: object
+    eta: object = None
+    k: object = None
+    f0: object = None
+    table: object = None
+
+
+@dataclass(frozen=True)
+class MicrofacetParams:
+    """All parameters of ``mf_microfacet`` (:func:`read_microfacet_params`)."""
+    model: LobeModel
+    roughness: Roughness
+    fresnel: FresnelParams
+    anisotropic: bool
+
+
+# ------------------------------------------------------------------ reading parameters
+def read_model(props, plugin: str = PLUGIN) -> LobeModel:
+    """``distribution``, ``gaf``, ``shadowing`` and ``separable`` of ``props``."""
+    kind = properties.choice(props, "distribution", BECKMANN, (BECKMANN, GGX), plugin)
+    gaf = properties.choice(props, "gaf", "smith", GAFS, plugin)
+    separable = properties.flag(props, "separable", False, plugin)
+    if separable and gaf != "smith":
+        raise properties.parameter_error("separable", f"applies to gaf=smith only, got gaf={gaf!r}", plugin)
+    return LobeModel(kind, gaf, properties.flag(props, "shadowing", True, plugin), separable, gaf == "smith")
+
+
+def read_roughness(props, model: LobeModel, plugin: str = PLUGIN) -> Roughness:
+    """``alpha`` or ``alpha_u``/``alpha_v``, ``rho``, ``mean_slope_u``/``mean_slope_v``,
+    checked (V-grooves need a zero mean slope)."""
+    error = properties.parameter_error
+    if "alpha" in props and ("alpha_u" in props or "alpha_v" in props):
+        raise error("alpha", "and alpha_u/alpha_v are exclusive: give one or the other", plugin)
+    if ("alpha_u" in props) != ("alpha_v" in props):
+        raise error("alpha_v" if "alpha_u" in props else "alpha_u",
+                    "is missing: give both alpha_u and alpha_v (or alpha)", plugin)
+    isotropic = "alpha_u" not in props
+    if isotropic:
+        alpha_u = alpha_v = properties.texture(props, "alpha", 0.1, properties.positive, plugin=plugin)
+    else:
+        alpha_u = properties.texture(props, "alpha_u", 0.1, properties.positive, plugin=plugin)
+        alpha_v = properties.texture(props, "alpha_v", 0.1, properties.positive, plugin=plugin)
+    rho = properties.texture(props, "rho", 0.0, properties.correlation, unbounded=True, plugin=plugin)
+    xn, yn = (properties.texture(props, n, 0.0, properties.finite, unbounded=True, plugin=plugin)
+              for n in ("mean_slope_u", "mean_slope_v"))
+    if model.gaf == "vgroove" and any(n in props and not (properties.is_float(props, n) and props[n] == 0)
+                                      for n in ("mean_slope_u", "mean_slope_v")):
+        raise error("gaf", "vgroove needs a zero mean slope (V-grooves stand on the macro normal); "
+                    "use gaf=smith with mean_slope_u/mean_slope_v", plugin)
+    return Roughness(alpha_u, alpha_v, rho, xn, yn, isotropic)
 
 
 def _ior_textures(material: str, plugin: str = PLUGIN):
@@ -42,22 +135,182 @@ def _ior_textures(material: str, plugin: str = PLUGIN):
     (``data/ior/<material>.{eta,k}.spd``), converted as its ``roughconductor`` does."""
     paths = {part: str(mi.file_resolver().resolve(f"data/ior/{material}.{part}.spd")) for part in ("eta", "k")}
     if not all(os.path.isfile(p) for p in paths.values()):
-        raise _error("material", f"is not a conductor in Mitsuba's IOR database "
-                                 f"(no data/ior/{material}.eta.spd), got {material!r}", plugin)
-    textures = []
-    for part in ("eta", "k"):
-        wavelengths, values = mi.spectrum_from_file(paths[part])
-        if mi.is_spectral:
-            textures.append(mi.load_dict({"type": "irregular",
-                                          "wavelengths": ", ".join(map(str, wavelengths)),
-                                          "values": ", ".join(map(str, values))}))
+        raise properties.parameter_error("material", f"is not a conductor in Mitsuba's IOR database "
+                                                     f"(no data/ior/{material}.eta.spd), got {material!r}", plugin)
+    return tuple(_spectrum_texture(*mi.spectrum_from_file(paths[part])) for part in ("eta", "k"))
+
+
+def _spectrum_texture(wavelengths, values):
+    """The texture of a sampled spectrum in the current variant (irregular spectrum,
+    luminance or unbounded sRGB colour)."""
+    if mi.is_spectral:
+        return mi.load_dict({"type": "irregular", "wavelengths": ", ".join(map(str, wavelengths)),
+                             "values": ", ".join(map(str, values))})
+    rgb = mi.spectrum_list_to_srgb(wavelengths, values, False, False)
+    if mi.is_monochromatic:
+        return mi.load_dict({"type": "uniform", "value": luminance(rgb)})
+    return mi.load_dict({"type": "srgb", "color": rgb, "unbounded": True})
+
+
+def _fresnel_kind(props, plugin: str) -> tuple[str, list[str]]:
+    """The Fresnel term the parameters of :data:`~.properties.FRESNEL_KEYS` name (``none``
+    without one) and those parameters, checking that they do not conflict."""
+    names = sorted(n for n in props.keys() if n in properties.FRESNEL_KEYS)
+    if "material" in names and props.get("material") == "none":
+        names.remove("material")                  # Mitsuba's "none": F = 1
+    if "material" in names and {"eta", "k"} & set(names):
+        raise properties.parameter_error("material", "and eta/k are exclusive: give one or the other", plugin)
+    kinds = {properties.FRESNEL_KEYS[n] for n in names}
+    if len(kinds) > 1:
+        raise properties.parameter_error(names[0], f"conflicts with {', '.join(names[1:])}: give one Fresnel "
+                                         "(material or eta/k, int_ior/ext_ior, schlick_f0) or none", plugin)
+    return (kinds.pop() if kinds else "none"), names
+
+
+def _dielectric_eta(props, plugin: str):
+    """``int_ior / ext_ior`` (numbers or Mitsuba's names) as a ``Float``."""
+    int_ior = mi.lookup_ior(props, "int_ior", _INT_IOR)
+    ext_ior = mi.lookup_ior(props, "ext_ior", _EXT_IOR)
+    for name, v in (("int_ior", int_ior), ("ext_ior", ext_ior)):
+        if not (math.isfinite(v) and v > 0):
+            raise properties.parameter_error(name, f"must be a finite number > 0, got {v!r}", plugin)
+    return mi.Float(int_ior / ext_ior)
+
+
+def read_fresnel(props, plugin: str = PLUGIN) -> FresnelParams:
+    """The Fresnel parameters of Table 2.I (``material``, ``eta``/``k``, ``int_ior``/
+    ``ext_ior``, ``schlick_f0``, or none) and ``specular_reflectance``."""
+    reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=plugin)
+    kind, names = _fresnel_kind(props, plugin)
+    if kind == "conductor":
+        if "material" in names:
+            eta, k = _ior_textures(props.get("material"), plugin)
         else:
-            rgb = mi.spectrum_list_to_srgb(wavelengths, values, False, False)
-            if mi.is_monochromatic:
-                textures.append(mi.load_dict({"type": "uniform", "value": luminance(rgb)}))
-            else:
-                textures.append(mi.load_dict({"type": "srgb", "color": rgb, "unbounded": True}))
-    return tuple(textures)
+            eta = properties.texture(props, "eta", 0.0, properties.finite, unbounded=True, plugin=plugin)
+            k = properties.texture(props, "k", 1.0, properties.finite, unbounded=True, plugin=plugin)
+        return FresnelParams(kind, reflectance, eta=eta, k=k)
+    if kind == "dielectric":
+        return FresnelParams(kind, reflectance, eta=_dielectric_eta(props, plugin))
+    if kind == "schlick":
+        f0 = properties.texture(props, "schlick_f0", 0.04, lambda v: None if 0 <= v <= 1 else "must lie in [0, 1]",
+                                plugin=plugin)
+        return FresnelParams(kind, reflectance, f0=f0)
+    return FresnelParams(kind, reflectance)
+
+
+def read_microfacet_params(props, plugin: str = PLUGIN) -> MicrofacetParams:
+    """All parameters of ``mf_microfacet`` (class docstring of :class:`MicrofacetBSDF`)."""
+    model = read_model(props, plugin)
+    roughness = read_roughness(props, model, plugin)
+    anisotropic = not roughness.isotropic or any(n in props for n in ("rho", "mean_slope_u", "mean_slope_v"))
+    return MicrofacetParams(model, roughness, read_fresnel(props, plugin), anisotropic)
+
+
+# ------------------------------------------------------------------ terms
+def roughness_lobe(kind: str, roughness: Roughness, si, active) -> Lobe:
+    """The :class:`~.slopes.Lobe` of the textures at ``si`` (alpha clamped to >= 1e-4, rho
+    into +-0.9999, as Mitsuba's ``roughconductor`` clamps textured roughness)."""
+    r = roughness
+    ax = dr.maximum(r.alpha_u.eval_1(si, active), _ALPHA_MIN)
+    ay = ax if r.isotropic else dr.maximum(r.alpha_v.eval_1(si, active), _ALPHA_MIN)
+    rho = dr.clip(r.rho.eval_1(si, active), -_RHO_MAX, _RHO_MAX)
+    return Lobe(kind, ax, ay, rho, r.mean_slope_u.eval_1(si, active), r.mean_slope_v.eval_1(si, active))
+
+
+def fresnel_term(fresnel: FresnelParams, si, oh, active):
+    """``F(o.h)`` (Table 2.I; a fit's table, Eq. 4.11) times ``specular_reflectance``."""
+    r = fresnel.specular_reflectance.eval(si, active)
+    if fresnel.kind == "conductor":
+        return r * fresnel_formulas.conductor(oh, fresnel.eta.eval(si, active), fresnel.k.eval(si, active))
+    if fresnel.kind == "dielectric":
+        return r * fresnel_formulas.dielectric(oh, fresnel.eta)
+    if fresnel.kind == "schlick":
+        return r * fresnel_formulas.schlick(oh, fresnel.f0.eval(si, active))
+    if fresnel.kind == "table":
+        return r * fresnel.table(dr.clip(oh, 0.0, 1.0), si.wavelengths)
+    return r
+
+
+def _smith_attenuation(model: LobeModel, lobe, light, view, ok):
+    """Smith ``(z_o / c_o) / (1 + Lambda_i + Lambda_o)`` (Eq. 3.3), or separable
+    ``G1(i) G1(o)``; ``(G, ok)``."""
+    if model.separable:
+        return lobe.g1(view) * (lobe.g1(light) if model.shadowing else 1.0), ok
+    lam_o, co = lobe.lambda_c(view)
+    ok &= co > 0
+    lam_i = lobe.lambda_c(light)[0] if model.shadowing else 0.0
+    return ratio(view.z, co * (1.0 + lam_i + lam_o), ok), ok
+
+
+def _facet_attenuation(model: LobeModel, light, view, h, oh, ok):
+    """V-groove ``min(1, 2 z_i z_h / ih, 2 z_o z_h / oh)`` or normal map ``z_o z_h / oh``."""
+    go = ratio(view.z * h.z, oh, ok)
+    if model.gaf != "vgroove":
+        return go
+    go = 2.0 * go
+    gi = ratio(2.0 * light.z * h.z, oh, ok)
+    return dr.minimum(1.0, dr.minimum(go, gi) if model.shadowing else go)
+
+
+def geometric_attenuation(model: LobeModel, lobe, light, view, h, oh):
+    """``G(i, o)`` of :meth:`microfacet.MicrofacetBRDF.gaf` at ``i.h = o.h`` (Table 2.IV);
+    without shadowing only the ``o`` factors remain; 0 below the horizons."""
+    ok = (light.z > 0) & (view.z > 0) & (oh > 0) & (h.z > 0)
+    if model.gaf == "smith":
+        g, ok = _smith_attenuation(model, lobe, light, view, ok)
+    else:
+        g = _facet_attenuation(model, light, view, h, oh, ok)
+    return dr.select(ok, g, 0.0)
+
+
+def normal_density(model: LobeModel, lobe, h, view):
+    """Density of sampled normals: ``D_o(h)`` (Smith, Eq. 2.17) or ``D(h) z_h``."""
+    if model.samples_visible:
+        return lobe.vndf(h, view)
+    return lobe.ndf(h) * h.z
+
+
+def reflecting(ctx, si, active):
+    """``active`` where the view is above the surface and glossy reflection is asked."""
+    active = active & (si.wi.z > 0)
+    if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
+        active = active & False
+    return active
+
+
+def half_vector(ctx, si, light, active):
+    """``(h, o.h, active)`` of ``light`` and the view, active where both are above the
+    surface and ``o.h > 0``."""
+    active = reflecting(ctx, si, active & (light.z > 0))
+    h = dr.normalize(light + si.wi)
+    oh = dr.dot(si.wi, h)
+    return h, oh, active & (oh > 0)
+
+
+def lobe_value(model: LobeModel, lobe, light, view, h, oh, active):
+    """``(D G / (4 z_o), ok)`` (Listing 2.2 without Fresnel), ``ok`` where ``G > 0``."""
+    g = geometric_attenuation(model, lobe, light, view, h, oh)
+    return ratio(lobe.ndf(h) * g, 4.0 * view.z, active), active & (g > 0)
+
+
+def lobe_pdf(model: LobeModel, lobe, view, h, oh, active):
+    """Solid-angle density of the reflected direction: normal density over ``4 o.h``."""
+    return ratio(normal_density(model, lobe, h, view), 4.0 * oh, active)
+
+
+def sample_normal(model: LobeModel, lobe, sample2, view):
+    """A normal of the visible normals (Smith, Eq. 2.23) or of the slopes of ``P``."""
+    return lobe.sample_visible(sample2, view) if model.samples_visible else lobe.sample_p22(sample2)
+
+
+def sample_weight(model: LobeModel, lobe, light, view, h, oh, active):
+    """``eval / pdf`` without Fresnel: ``G / G1(o)`` (visible normals, Eq. 2.23), else
+    ``G o.h / (z_o z_h)``."""
+    g = geometric_attenuation(model, lobe, light, view, h, oh)
+    if model.samples_visible:
+        g1_o = lobe.g1(view)
+        return ratio(g, g1_o, g1_o > 0)
+    return ratio(g * oh, view.z * h.z, active & (h.z > 0))
 
 
 def glossy_sample(wo, pdf, active):
@@ -72,231 +325,150 @@ def glossy_sample(wo, pdf, active):
     return bs
 
 
-def per_variant(make):
-    """``bsdf_class()``: the plugin class ``make()`` builds for the current Mitsuba variant
-    (``mi.BSDF`` differs per variant, so each class is built once per variant); ``make``
-    raises ``RuntimeError`` for a variant it does not support."""
-    classes: dict[str, type] = {}
-
-    def bsdf_class() -> type:
-        variant = mi.variant()
-        if variant not in classes:
-            classes[variant] = make()
-        return classes[variant]
-    return bsdf_class
-
-
-def _make_class() -> type:
-    if mi.is_polarized:
-        raise RuntimeError(f"polarized variants are not supported ({mi.variant()})")
-
-    class MicrofacetBSDF(mi.BSDF):
-        """Mitsuba BSDF of :class:`microfacet.MicrofacetBRDF` (see the module docstring)."""
-
-        PLUGIN_NAME = PLUGIN
-
-        def __init__(self, props):
-            mi.BSDF.__init__(self, props)
-            self.kind = _choice(props, "distribution", BECKMANN, (BECKMANN, GGX))
-            self.gaf = _choice(props, "gaf", "smith", GAFS)
-            self.shadowing = _flag(props, "shadowing", True)
-            self.separable = _flag(props, "separable", False)
-            if self.separable and self.gaf != "smith":
-                raise _error("separable", f"applies to gaf=smith only, got gaf={self.gaf!r}")
-            if "alpha" in props and ("alpha_u" in props or "alpha_v" in props):
-                raise _error("alpha", "and alpha_u/alpha_v are exclusive: give one or the other")
-            if ("alpha_u" in props) != ("alpha_v" in props):
-                raise _error("alpha_v" if "alpha_u" in props else "alpha_u",
-                             "is missing: give both alpha_u and alpha_v (or alpha)")
-            if "alpha_u" in props:
-                self.alpha_u = _texture(props, "alpha_u", 0.1, _positive)
-                self.alpha_v = _texture(props, "alpha_v", 0.1, _positive)
-            else:
-                self.alpha_u = self.alpha_v = _texture(props, "alpha", 0.1, _positive)
-            self.isotropic = "alpha_u" not in props
-            self.rho = _texture(props, "rho", 0.0, _correlation, unbounded=True)
-            self.xn = _texture(props, "mean_slope_u", 0.0, _finite, unbounded=True)
-            self.yn = _texture(props, "mean_slope_v", 0.0, _finite, unbounded=True)
-            if self.gaf == "vgroove" and any(n in props and not (_is_float(props, n) and props[n] == 0)
-                                             for n in ("mean_slope_u", "mean_slope_v")):
-                raise _error("gaf", "vgroove needs a zero mean slope (V-grooves stand on the macro normal); "
-                             "use gaf=smith with mean_slope_u/mean_slope_v")
-            self.specular_reflectance = _texture(props, "specular_reflectance", 1.0)
-            self.samples_visible = self.gaf == "smith"
-            self._init_fresnel(props)
-            anisotropic = not self.isotropic or any(n in props for n in ("rho", "mean_slope_u", "mean_slope_v"))
-            flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-            if anisotropic:
-                flags = flags | mi.BSDFFlags.Anisotropic
-            self.m_components = [flags]
-            self.m_flags = flags
-
-        def _init_fresnel(self, props):
-            """Fresnel parameters of Table 2.I (``material``, ``eta``/``k``, ``int_ior``/
-            ``ext_ior``, ``schlick_f0``, or none)."""
-            plugin = self.PLUGIN_NAME
-            names = sorted(n for n in props.keys() if n in _FRESNEL_KEYS)
-            if "material" in names and props.get("material") == "none":
-                names.remove("material")                  # Mitsuba's "none": F = 1
-            if "material" in names and {"eta", "k"} & set(names):
-                raise _error("material", "and eta/k are exclusive: give one or the other", plugin)
-            kinds = {_FRESNEL_KEYS[n] for n in names}
-            if len(kinds) > 1:
-                raise _error(names[0], f"conflicts with {', '.join(names[1:])}: give one Fresnel "
-                                       "(material or eta/k, int_ior/ext_ior, schlick_f0) or none", plugin)
-            self.fresnel = kinds.pop() if kinds else "none"
-            if self.fresnel == "conductor":
-                if "material" in names:
-                    self.eta, self.k = _ior_textures(props.get("material"), plugin)
-                else:
-                    self.eta = _texture(props, "eta", 0.0, _finite, unbounded=True, plugin=plugin)
-                    self.k = _texture(props, "k", 1.0, _finite, unbounded=True, plugin=plugin)
-            elif self.fresnel == "dielectric":
-                int_ior = mi.lookup_ior(props, "int_ior", 1.5046)
-                ext_ior = mi.lookup_ior(props, "ext_ior", 1.000277)
-                for name, v in (("int_ior", int_ior), ("ext_ior", ext_ior)):
-                    if not (math.isfinite(v) and v > 0):
-                        raise _error(name, f"must be a finite number > 0, got {v!r}", plugin)
-                self.eta_real = mi.Float(int_ior / ext_ior)
-            elif self.fresnel == "schlick":
-                self.f0 = _texture(props, "schlick_f0", 0.04,
-                                   lambda v: None if 0 <= v <= 1 else "must lie in [0, 1]", plugin=plugin)
-
-        # ------------------------------------------------------------- terms
-        def _lobe(self, si, active):
-            ax = dr.maximum(self.alpha_u.eval_1(si, active), _ALPHA_MIN)
-            ay = ax if self.isotropic else dr.maximum(self.alpha_v.eval_1(si, active), _ALPHA_MIN)
-            rho = dr.clip(self.rho.eval_1(si, active), -_RHO_MAX, _RHO_MAX)
-            return Lobe(self.kind, ax, ay, rho, self.xn.eval_1(si, active), self.yn.eval_1(si, active))
-
-        def _fresnel(self, si, oh, active):
-            """``F(o.h)`` times ``specular_reflectance`` (Table 2.I)."""
-            r = self.specular_reflectance.eval(si, active)
-            if self.fresnel == "conductor":
-                return r * _fresnel.conductor(oh, self.eta.eval(si, active), self.k.eval(si, active))
-            if self.fresnel == "dielectric":
-                return r * _fresnel.dielectric(oh, self.eta_real)
-            if self.fresnel == "schlick":
-                return r * _fresnel.schlick(oh, self.f0.eval(si, active))
-            return r
-
-        def _gaf(self, lobe, wi, wo, h, oh):
-            """``G(i, o)`` of :meth:`microfacet.MicrofacetBRDF.gaf` at ``i.h = o.h`` (Table 2.IV):
-            Smith ``(z_o / c_o) / (1 + Lambda_i + Lambda_o)`` (Eq. 3.3), or separable
-            ``G1(i) G1(o)``; V-groove ``min(1, 2 z_i z_h / ih, 2 z_o z_h / oh)``; normal map
-            ``z_o z_h / oh``; without shadowing only the ``o`` factors remain."""
-            ok = (wi.z > 0) & (wo.z > 0) & (oh > 0) & (h.z > 0)
-            if self.gaf == "smith":
-                if self.separable:
-                    g = lobe.g1(wo) * (lobe.g1(wi) if self.shadowing else 1.0)
-                else:
-                    lam_o, co = lobe.lambda_c(wo)
-                    ok &= co > 0
-                    lam_i = lobe.lambda_c(wi)[0] if self.shadowing else 0.0
-                    g = ratio(wo.z, co * (1.0 + lam_i + lam_o), ok)
-            else:
-                go = ratio(wo.z * h.z, oh, ok)
-                if self.gaf == "vgroove":
-                    go = 2.0 * go
-                    gi = ratio(2.0 * wi.z * h.z, oh, ok)
-                    g = dr.minimum(1.0, dr.minimum(go, gi) if self.shadowing else go)
-                else:
-                    g = go
-            return dr.select(ok, g, 0.0)
-
-        def _normal_pdf(self, lobe, h, wo):
-            """Density of sampled normals: ``D_o(h)`` (Smith, Eq. 2.17) or ``D(h) z_h``."""
-            if self.samples_visible:
-                return lobe.vndf(h, wo)
-            return lobe.ndf(h) * h.z
-
-        def _reflecting(self, ctx, si, active):
-            """``active`` where the view is above the surface and glossy reflection is asked."""
-            active = active & (si.wi.z > 0)
-            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
-                active = active & False
-            return active
-
-        def _half(self, ctx, si, light, active):
-            """``(h, o.h, active)`` of ``light`` and the view, active where both are above the
-            surface and ``o.h > 0``."""
-            active = self._reflecting(ctx, si, active & (light.z > 0))
-            h = dr.normalize(light + si.wi)
-            oh = dr.dot(si.wi, h)
-            return h, oh, active & (oh > 0)
-
-        def _eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
-            view = si.wi
-            h, oh, active = self._half(ctx, si, light, active)
-            lobe = self._lobe(si, active)
-            value = pdf = None
-            if want_value:
-                g = self._gaf(lobe, light, view, h, oh)
-                s = ratio(lobe.ndf(h) * g, 4.0 * view.z, active)
-                value = dr.select(active & (g > 0), self._fresnel(si, oh, active) * s, 0.0)
-            if want_pdf:
-                pdf = ratio(self._normal_pdf(lobe, h, view), 4.0 * oh, active)
-            return value, pdf
-
-        # ------------------------------------------------------ Mitsuba API
-        def eval(self, ctx, si, wo, active=True):
-            """``f_r cos theta_i = F D G / (4 z_o)`` (Listing 2.2); ``wo`` is the light."""
-            return self._eval_pdf(ctx, si, wo, active, want_pdf=False)[0]
-
-        def pdf(self, ctx, si, wo, active=True):
-            """Solid-angle density of :meth:`sample`: normal density over ``4 o.h``."""
-            return self._eval_pdf(ctx, si, wo, active, want_value=False)[1]
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            return self._eval_pdf(ctx, si, wo, active)
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            """Reflect the view about a sampled normal (Sec. 2.2, 3.2); the Smith weight is
-            ``F G / G1(o)`` (Eq. 2.23), the others' ``F G o.h / (z_o z_h)``."""
-            view = si.wi
-            active = self._reflecting(ctx, si, active)
-            lobe = self._lobe(si, active)
-            h = lobe.sample_visible(sample2, view) if self.samples_visible else lobe.sample_p22(sample2)
-            oh = dr.dot(view, h)
-            light = 2.0 * oh * h - view
-            active &= (light.z > 0) & (oh > 0)
-            g = self._gaf(lobe, light, view, h, oh)
-            pdf = ratio(self._normal_pdf(lobe, h, view), 4.0 * oh, active)
-            if self.samples_visible:
-                g1_o = lobe.g1(view)
-                weight = ratio(g, g1_o, g1_o > 0)
-            else:
-                weight = ratio(g * oh, view.z * h.z, active & (h.z > 0))
-            active &= pdf > 0
-            bs = glossy_sample(light, pdf, active)
-            return bs, dr.select(active, self._fresnel(si, oh, active) * weight, 0.0)
-
-        def traverse(self, callback):
-            lobe = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous
-            if self.isotropic:
-                callback.put("alpha", self.alpha_u, lobe)
-            else:
-                callback.put("alpha_u", self.alpha_u, lobe)
-                callback.put("alpha_v", self.alpha_v, lobe)
-            callback.put("rho", self.rho, lobe)
-            callback.put("mean_slope_u", self.xn, lobe)
-            callback.put("mean_slope_v", self.yn, lobe)
-            callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
-            if self.fresnel == "conductor":
-                callback.put("eta", self.eta, mi.ParamFlags.Differentiable)
-                callback.put("k", self.k, mi.ParamFlags.Differentiable)
-            elif self.fresnel == "schlick":
-                callback.put("schlick_f0", self.f0, mi.ParamFlags.Differentiable)
-
-        def parameters_changed(self, keys):
-            pass
-
-        def to_string(self):
-            return (f"MicrofacetBSDF[{PLUGIN}, distribution={self.kind}, gaf={self.gaf}, "
-                    f"shadowing={self.shadowing}, separable={self.separable}, fresnel={self.fresnel}]")
-
-    MicrofacetBSDF.__name__ = MicrofacetBSDF.__qualname__ = "MicrofacetBSDF"
-    return MicrofacetBSDF
+def glossy_flags(anisotropic: bool, spatially_varying: bool = False):
+    """``GlossyReflection | FrontSide`` (``| Anisotropic``; ``| SpatiallyVarying`` and
+    ``NeedsDifferentials`` where Mitsuba has it, for the footprint plugins)."""
+    flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+    if anisotropic:
+        flags = flags | mi.BSDFFlags.Anisotropic
+    if spatially_varying:
+        flags = flags | mi.BSDFFlags.SpatiallyVarying
+        if hasattr(mi.BSDFFlags, "NeedsDifferentials"):      # Mitsuba 0.6; 3.x has no such flag
+            flags = flags | mi.BSDFFlags.NeedsDifferentials
+    return flags
 
 
-bsdf_class = per_variant(_make_class)
+# ------------------------------------------------------------------ the shared lobe
+class MicrofacetLobe:
+    """``f_r cos theta_i = F D G / (4 z_o)`` and its sampler (Listing 2.2, Sec. 2.2, 3.2) for a
+    plugin that supplies ``self.model`` (a :class:`LobeModel`), :meth:`lobe` (the slope
+    distribution at ``si``) and :meth:`fresnel` (``F(o.h)`` at ``si``)."""
+
+    model: LobeModel
+
+    def lobe(self, si, active):
+        raise NotImplementedError
+
+    def fresnel(self, si, oh, active):
+        raise NotImplementedError
+
+    def lobe_eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
+        """``(f_r cos theta_i, pdf)`` toward ``light`` (either ``None`` when not wanted)."""
+        view = si.wi
+        h, oh, active = half_vector(ctx, si, light, active)
+        lobe = self.lobe(si, active)
+        value = pdf = None
+        if want_value:
+            s, ok = lobe_value(self.model, lobe, light, view, h, oh, active)
+            value = dr.select(ok, self.fresnel(si, oh, active) * s, 0.0)
+        if want_pdf:
+            pdf = lobe_pdf(self.model, lobe, view, h, oh, active)
+        return value, pdf
+
+    def lobe_sample(self, ctx, si, sample2, active):
+        """``(BSDFSample3f, weight)``: the view reflected about a sampled normal (Sec. 2.2,
+        3.2); weight ``F`` times :func:`sample_weight`."""
+        view = si.wi
+        active = reflecting(ctx, si, active)
+        lobe = self.lobe(si, active)
+        h = sample_normal(self.model, lobe, sample2, view)
+        oh = dr.dot(view, h)
+        light = 2.0 * oh * h - view
+        active &= (light.z > 0) & (oh > 0)
+        weight = sample_weight(self.model, lobe, light, view, h, oh, active)
+        pdf = lobe_pdf(self.model, lobe, view, h, oh, active)
+        active &= pdf > 0
+        return glossy_sample(light, pdf, active), dr.select(active, self.fresnel(si, oh, active) * weight, 0.0)
+
+
+# ------------------------------------------------------------------ the plugin
+class MicrofacetBSDF(MicrofacetLobe):
+    """Mitsuba BSDF of :class:`microfacet.MicrofacetBRDF` (module docstring). Parameters
+    marked texture may be textures; without a Fresnel parameter F = 1. ``mi.traverse``
+    exposes ``alpha`` (or ``alpha_u``, ``alpha_v``), ``rho``, ``mean_slope_u``,
+    ``mean_slope_v``, ``specular_reflectance`` and the Fresnel textures.
+
+    | name | type | default | meaning |
+    |---|---|---|---|
+    | `distribution` | string | `beckmann` | standard slope distribution: `beckmann` or `ggx` |
+    | `alpha` | float or texture | 0.1 | isotropic roughness (> 0; textured values clamped to >= 1e-4) |
+    | `alpha_u` | float or texture | 0.1 | roughness along u, with `alpha_v` (instead of `alpha`) |
+    | `alpha_v` | float or texture | 0.1 | roughness along v, with `alpha_u` |
+    | `rho` | float or texture | 0 | slope correlation in (-1, 1) (textured values clamped to +-0.9999) |
+    | `mean_slope_u` | float or texture | 0 | mean slope along u of the sheared (noncentral) lobe |
+    | `mean_slope_v` | float or texture | 0 | mean slope along v |
+    | `gaf` | string | `smith` | `smith` (height-correlated, sheared normalization), `vgroove` or `normal_map` |
+    | `shadowing` | boolean | `true` | `false`: masking only |
+    | `separable` | boolean | `false` | `true`: Smith `G1(i) G1(o)` as `roughconductor` (gaf=smith only) |
+    | `material` | string | `none` | conductor of Mitsuba's IOR database (`Au`, `Cu`, ...); `none`: F = 1 |
+    | `eta` | float or texture | 0 | real part of a conductor's index (with `k`) |
+    | `k` | float or texture | 1 | imaginary part of a conductor's index (with `eta`) |
+    | `int_ior` | float or string | 1.5046 | interior index of a dielectric Fresnel term (or a name, e.g. `bk7`) |
+    | `ext_ior` | float or string | 1.000277 | exterior index of a dielectric Fresnel term (or a name, e.g. `air`) |
+    | `schlick_f0` | float or texture | 0.04 | reflectance at normal incidence of Schlick's approximation |
+    | `specular_reflectance` | float or texture | 1 | factor on the whole BRDF |
+    """
+
+    PLUGIN_NAME = PLUGIN
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        self.params = read_microfacet_params(props, PLUGIN)
+        self.model = self.params.model
+        flags = glossy_flags(self.params.anisotropic)
+        self.m_components = [flags]
+        self.m_flags = flags
+
+    def lobe(self, si, active):
+        return roughness_lobe(self.model.kind, self.params.roughness, si, active)
+
+    def fresnel(self, si, oh, active):
+        return fresnel_term(self.params.fresnel, si, oh, active)
+
+    # ------------------------------------------------------ Mitsuba API
+    def eval(self, ctx, si, wo, active=True):
+        """``f_r cos theta_i = F D G / (4 z_o)`` (Listing 2.2); ``wo`` is the light."""
+        return self.lobe_eval_pdf(ctx, si, wo, active, want_pdf=False)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        """Solid-angle density of :meth:`sample`: normal density over ``4 o.h``."""
+        return self.lobe_eval_pdf(ctx, si, wo, active, want_value=False)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.lobe_eval_pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        """Reflect the view about a sampled normal (Sec. 2.2, 3.2); the Smith weight is
+        ``F G / G1(o)`` (Eq. 2.23), the others' ``F G o.h / (z_o z_h)``."""
+        return self.lobe_sample(ctx, si, sample2, active)
+
+    def traverse(self, callback):
+        r, f = self.params.roughness, self.params.fresnel
+        lobe = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous
+        if r.isotropic:
+            callback.put("alpha", r.alpha_u, lobe)
+        else:
+            callback.put("alpha_u", r.alpha_u, lobe)
+            callback.put("alpha_v", r.alpha_v, lobe)
+        callback.put("rho", r.rho, lobe)
+        callback.put("mean_slope_u", r.mean_slope_u, lobe)
+        callback.put("mean_slope_v", r.mean_slope_v, lobe)
+        callback.put("specular_reflectance", f.specular_reflectance, mi.ParamFlags.Differentiable)
+        if f.kind == "conductor":
+            callback.put("eta", f.eta, mi.ParamFlags.Differentiable)
+            callback.put("k", f.k, mi.ParamFlags.Differentiable)
+        elif f.kind == "schlick":
+            callback.put("schlick_f0", f.f0, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        pass
+
+    def to_string(self):
+        m = self.model
+        return (f"MicrofacetBSDF[{PLUGIN}, distribution={m.kind}, gaf={m.gaf}, shadowing={m.shadowing}, "
+                f"separable={m.separable}, fresnel={self.params.fresnel.kind}]")
+
+
+def bsdf_class() -> type:
+    """The ``mf_microfacet`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    return variant_class(MicrofacetBSDF)

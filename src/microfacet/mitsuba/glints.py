@@ -25,6 +25,7 @@ footprint (documented limit; the library has none).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -35,12 +36,15 @@ from ..glints import Microsurface
 from ..glints.figures import PIXEL_SIGMA
 from ..glints.microsurface import FWHM_PER_SIGMA
 from ..glints.pbrdf import G2_MODELS
-from . import bsdf as _bsdf
 from . import properties
+from .bsdf import FresnelParams, fresnel_term, glossy_flags, glossy_sample, half_vector, read_fresnel, reflecting
+from .registry import variant_class
 from .slopes import BECKMANN, Lobe, ratio
 from .tabulated import Table
 
-__all__ = ["PLUGIN", "bsdf_class", "GlintTables"]
+__all__ = ["PLUGIN", "bsdf_class", "GlintTables", "GlintsBSDF", "GlintParams", "read_glint_params",
+           "footprint_covariance", "footprint_sums", "merged_lobe", "merged_area", "g2_over_ao", "glint_eval_pdf",
+           "pick_lobe", "lobe_of"]
 
 PLUGIN = "mf_glints"
 _ZIP_MAGIC = b"PK\x03\x04"
@@ -141,174 +145,240 @@ def _lobe_areas(k, mx, my, sxx, syy, sxy):
     return dr.maximum(c, 0.0), _area(c, x * x * sxx + 2.0 * x * y * sxy + y * y * syy)
 
 
-def _make_class() -> type:
-    Base = _bsdf.bsdf_class()
-    F64 = mi.Float64
-
-    class GlintsBSDF(Base):
-        """Mitsuba BSDF of :class:`microfacet.glints.PatchBRDF` (see the module docstring)."""
-
-        PLUGIN_NAME = PLUGIN
-
-        def __init__(self, props):
-            mi.BSDF.__init__(self, props)
-            ms = _load(props, "filename")
-            self.filename = props["filename"]
-            self.exact = properties.flag(props, "exact", True, PLUGIN)
-            self.g2 = properties.choice(props, "g2", "correlated", G2_MODELS, PLUGIN)
-            self.uv_scale = float(props.get("uv_scale", 1.0))
-            self.footprint = float(props.get("footprint", 1.0))
-            self.max_lobes = int(props.get("max_lobes", 1024))
-            for name, v, ok, what in (("uv_scale", self.uv_scale, self.uv_scale > 0, "> 0"),
-                                      ("footprint", self.footprint, self.footprint >= 0, ">= 0"),
-                                      ("max_lobes", self.max_lobes, self.max_lobes >= 16, ">= 16")):
-                if not (math.isfinite(v) and ok):
-                    raise properties.parameter_error(name, f"must be a finite number {what}, got {v!r}", PLUGIN)
-            self.t = GlintTables(ms, mip=not self.exact)
-            self.specular_reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
-            self._init_fresnel(props)
-            flags = (mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
-                     | mi.BSDFFlags.SpatiallyVarying)
-            if hasattr(mi.BSDFFlags, "NeedsDifferentials"):
-                flags = flags | mi.BSDFFlags.NeedsDifferentials
-            self.m_components = [flags]
-            self.m_flags = flags
-
-        # ------------------------------------------------------------ footprint
-        def footprint_cov(self, si):
-            """Centre (wrapped into the unit square) and covariance ``(uu, vv, uv)`` of the
-            footprint (module docstring), shrunk to fit ``max_lobes`` (double precision)."""
-            t = self.t
-            a, b = si.duv_dx * self.uv_scale, si.duv_dy * self.uv_scale
-            has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
-            ax, ay = F64(dr.select(has, a.x, self.footprint / t.width)), F64(dr.select(has, a.y, 0.0))
-            bx, by = F64(dr.select(has, b.x, 0.0)), F64(dr.select(has, b.y, self.footprint / t.height))
-            s2 = PIXEL_SIGMA * PIXEL_SIGMA
-            suu, svv, suv = s2 * (ax * ax + bx * bx), s2 * (ay * ay + by * by), s2 * (ax * ay + bx * by)
-            # per axis at most L = floor(sqrt(max_lobes)) seeds: sd_total <= (L - 1) / (2 cutoff n)
-            side = float(math.floor(math.sqrt(self.max_lobes)) - 1) / (2.0 * t.cutoff)
-            scale = 1.0
-            for s, n in ((suu, t.nx), (svv, t.ny)):
-                cap = (side / n) ** 2 - (1.0 / n / _FWHM) ** 2
-                scale = dr.minimum(scale, dr.select(s > cap, cap / dr.maximum(s, 1e-300), 1.0))
-            u, v = F64(si.uv.x) * self.uv_scale, F64(si.uv.y) * self.uv_scale
-            return u - dr.floor(u), v - dr.floor(v), (suu * scale, svv * scale, suv * scale)
-
-        def _sums(self, si, h, wi, wo):
-            """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the footprint (Eq. 9, 13-17),
-            as ``_footprint_sums``; with ``exact=false`` ``A_P`` from the merged lobe."""
-            t = self.t
-            cu, cv, cov = self.footprint_cov(si)
-            hz = F64(h.z)
-            xh, yh = -F64(h.x) / hz, -F64(h.y) / hz
-            ki = (F64(wi.x), F64(wi.y), F64(wi.z))
-            ko = (F64(wo.x), F64(wo.y), F64(wo.z))
-
-            def body(index, w, s):
-                mx, my, sxx, syy, sxy = (t.central[5 * index + c] for c in range(5))
-                det = sxx * syy - sxy * sxy
-                gx, gy = xh - mx, yh - my
-                q = (syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy) / det
-                d = dr.exp(-0.5 * q) / (2.0 * math.pi * dr.sqrt(det))
-                ai, vi = _lobe_areas(ki, mx, my, sxx, syy, sxy)
-                ao, vo = _lobe_areas(ko, mx, my, sxx, syy, sxy)
-                return [acc + w * x for acc, x in zip(s, (1.0, d, ai, vi, ao, vo))]
-
-            zero = 0.0 * cu
-            ws, d, ai, vi, ao, vo = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero] * 6, body)
-            ok = ws > 0
-            d, ai, vi, ao, vo = (ratio(x, ws, ok) for x in (d, ai, vi, ao, vo))
-            if not self.exact:
-                m = self._merged(cu, cv, cov)
-                ai, vi = self._merged_area(vi, m, ki)
-                ao, vo = self._merged_area(vo, m, ko)
-            return d / (hz * hz * hz * hz), ai, vi, ao, vo      # D_P(h) = P_P(h~) / z_h^4 (Eq. 9)
-
-        def _merged(self, cu, cv, cov):
-            """Raw moments of the footprint's merged lobe (Sec. 4.2.2: ``W``-weighted average
-            over the MIP level of :meth:`LobeMixture.mip_level`)."""
-            t = self.t
-            suu, svv, suv = cov
-            half = 0.5 * (suu + svv)
-            sd = dr.sqrt(half + dr.sqrt(dr.maximum(0.25 * (suu - svv) ** 2 + suv * suv, 0.0)))
-            spacing = 1.0 / max(t.nx, t.ny)
-            lev = dr.select(sd > spacing, dr.floor(dr.log2(dr.maximum(sd, 1e-300) / spacing)), 0.0)
-            lev = dr.clip(lev, 0.0, float(t.levels - 1))
-            nx, ny, off = t.mip_nx[lev], t.mip_ny[lev], t.mip_offset[lev]
-
-            def body(index, w, s):
-                base = 5.0 * (off + index)
-                return [s[0] + w] + [acc + w * t.mip[base + c] for c, acc in enumerate(s[1:])]
-
-            zero = 0.0 * cu
-            s = _walk(cu, cv, cov, nx, ny, t.cutoff, [zero] * 6, body)
-            return [ratio(x, s[0], s[0] > 0) for x in s[1:]]
-
-        @staticmethod
-        def _merged_area(v, m, k):
-            """``(A_P, V_P)`` with ``A_P = V_P c_m+ / V_m`` (:func:`..glints.pbrdf._merged_area`)."""
-            e1, e2, e3, e4, e5 = m
-            c, vm = _lobe_areas(k, e1, e2, e3 - e1 * e1, e4 - e2 * e2, e5 - e1 * e2)
-            return dr.select((vm > 0) & (c > 0), v * ratio(c, vm, vm > 0), 0.0), v
-
-        def _g2_over_ao(self, ai, vi, ao, vo):
-            """``G2 / A_P(o)`` (:func:`microfacet.glints.pbrdf._g2_over_ao`)."""
-            den = vo * vi if self.g2 == "separable" else vo * ai + ao * (vi - ai)
-            return dr.select((den > 0) & (ai > 0), ratio(ai, den, den > 0), 0.0)
-
-        # ------------------------------------------------------------ Mitsuba API
-        def _eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
-            view = si.wi
-            h, oh, active = self._half(ctx, si, light, active)
-            active &= h.z > 0
-            d, ai, vi, ao, vo = self._sums(si, h, light, view)
-            value = pdf = None
-            if want_value:
-                s = mi.Float(d * self._g2_over_ao(ai, vi, ao, vo) * 0.25)
-                value = dr.select(active, self._fresnel(si, oh, active) * s, 0.0)
-            if want_pdf:
-                pdf = dr.select(active, mi.Float(d * F64(h.z) / (4.0 * F64(oh))), 0.0)
-            return value, pdf
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            """Lobe ``i`` with probability ``W_i / sum W`` (``sample1``), a normal of its slope
-            density (``sample2``), the view reflected about it (Sec. 5); weight ``eval / pdf``."""
-            t = self.t
-            view = si.wi
-            active = self._reflecting(ctx, si, active)
-            cu, cv, cov = self.footprint_cov(si)
-            zero = 0.0 * cu
-            ws = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero], lambda i, w, s: [s[0] + w])[0]
-            target = F64(sample1) * ws
-
-            def pick(index, w, s):
-                acc, chosen, last = s
-                take = (acc <= target) & (acc + w > target)
-                return [acc + w, dr.select(take, index, chosen), index]
-
-            _, chosen, last = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero, zero - 1.0, zero], pick)
-            chosen = dr.select(chosen < 0, last, chosen)    # sample1 * ws rounded up to ws
-            mx, my, sxx, syy, sxy = (t.central[5 * chosen + c] for c in range(5))
-            ax, ay = dr.sqrt(2.0 * sxx), dr.sqrt(2.0 * syy)
-            lobe = Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, 2.0 * sxy / (ax * ay), mx, my)))
-            h = lobe.sample_p22(sample2)
-            oh = dr.dot(view, h)
-            light = 2.0 * oh * h - view
-            value, pdf = self._eval_pdf(ctx, si, light, active & (light.z > 0))
-            active &= (pdf > 0) & (light.z > 0)
-            bs = _bsdf.glossy_sample(light, pdf, active)
-            return bs, dr.select(active, value / dr.select(active, pdf, 1.0), 0.0)
-
-        def traverse(self, callback):
-            callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
-
-        def to_string(self):
-            return (f"GlintsBSDF[{PLUGIN}, filename={self.filename!r}, lobes={self.t.nx}x{self.t.ny}, "
-                    f"exact={self.exact}, g2={self.g2}, uv_scale={self.uv_scale}, "
-                    f"footprint={self.footprint}, max_lobes={self.max_lobes}]")
-
-    GlintsBSDF.__name__ = GlintsBSDF.__qualname__ = "GlintsBSDF"
-    return GlintsBSDF
+@dataclass(frozen=True)
+class GlintParams:
+    """All parameters of ``mf_glints`` (:func:`read_glint_params`): the microsurface's
+    :class:`GlintTables`, the area model (``exact``), the ``g2`` model, the map's repetition
+    ``uv_scale``, the fallback ``footprint`` (texels), the ``max_lobes`` bound and the
+    Fresnel term (:func:`.bsdf.read_fresnel`)."""
+    filename: str
+    tables: GlintTables
+    exact: bool
+    g2: str
+    uv_scale: float
+    footprint: float
+    max_lobes: int
+    fresnel: FresnelParams
 
 
-bsdf_class = _bsdf.per_variant(_make_class)
+def read_glint_params(props) -> GlintParams:
+    """All parameters of ``mf_glints`` (class docstring of :class:`GlintsBSDF`), checked."""
+    ms = _load(props, "filename")
+    exact = properties.flag(props, "exact", True, PLUGIN)
+    g2 = properties.choice(props, "g2", "correlated", G2_MODELS, PLUGIN)
+    uv_scale = float(props.get("uv_scale", 1.0))
+    footprint = float(props.get("footprint", 1.0))
+    max_lobes = int(props.get("max_lobes", 1024))
+    for name, v, ok, what in (("uv_scale", uv_scale, uv_scale > 0, "> 0"),
+                              ("footprint", footprint, footprint >= 0, ">= 0"),
+                              ("max_lobes", max_lobes, max_lobes >= 16, ">= 16")):
+        if not (math.isfinite(v) and ok):
+            raise properties.parameter_error(name, f"must be a finite number {what}, got {v!r}", PLUGIN)
+    return GlintParams(props["filename"], GlintTables(ms, mip=not exact), exact, g2, uv_scale, footprint,
+                       max_lobes, read_fresnel(props, PLUGIN))
+
+
+def _footprint_scale(params: GlintParams, suu, svv):
+    """The factor on the footprint covariance that keeps at most ``L = floor(sqrt(max_lobes))``
+    seeds per axis in its window: ``sd_total <= (L - 1) / (2 cutoff n)``."""
+    t = params.tables
+    side = float(math.floor(math.sqrt(params.max_lobes)) - 1) / (2.0 * t.cutoff)
+    scale = 1.0
+    for s, n in ((suu, t.nx), (svv, t.ny)):
+        cap = (side / n) ** 2 - (1.0 / n / _FWHM) ** 2
+        scale = dr.minimum(scale, dr.select(s > cap, cap / dr.maximum(s, 1e-300), 1.0))
+    return scale
+
+
+def footprint_covariance(params: GlintParams, si):
+    """Centre (wrapped into the unit square) and covariance ``(uu, vv, uv)`` of the
+    footprint (module docstring), shrunk to fit ``max_lobes`` (double precision)."""
+    F64, t = mi.Float64, params.tables
+    a, b = si.duv_dx * params.uv_scale, si.duv_dy * params.uv_scale
+    has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
+    ax, ay = F64(dr.select(has, a.x, params.footprint / t.width)), F64(dr.select(has, a.y, 0.0))
+    bx, by = F64(dr.select(has, b.x, 0.0)), F64(dr.select(has, b.y, params.footprint / t.height))
+    s2 = PIXEL_SIGMA * PIXEL_SIGMA
+    suu, svv, suv = s2 * (ax * ax + bx * bx), s2 * (ay * ay + by * by), s2 * (ax * ay + bx * by)
+    scale = _footprint_scale(params, suu, svv)
+    u, v = F64(si.uv.x) * params.uv_scale, F64(si.uv.y) * params.uv_scale
+    return u - dr.floor(u), v - dr.floor(v), (suu * scale, svv * scale, suv * scale)
+
+
+def _lobe_terms(tables: GlintTables, index, xh, yh, ki, ko):
+    """``(P_i(h~), A_i(i), V_i(i), A_i(o), V_i(o))`` of lobe ``index``: its Gaussian slope
+    density at ``h~ = (xh, yh)`` and its areas toward both directions (Eq. 9, 13, 17)."""
+    mx, my, sxx, syy, sxy = (tables.central[5 * index + c] for c in range(5))
+    det = sxx * syy - sxy * sxy
+    gx, gy = xh - mx, yh - my
+    q = (syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy) / det
+    d = dr.exp(-0.5 * q) / (2.0 * math.pi * dr.sqrt(det))
+    ai, vi = _lobe_areas(ki, mx, my, sxx, syy, sxy)
+    ao, vo = _lobe_areas(ko, mx, my, sxx, syy, sxy)
+    return d, ai, vi, ao, vo
+
+
+def _f64(k):
+    return mi.Float64(k.x), mi.Float64(k.y), mi.Float64(k.z)
+
+
+def footprint_sums(params: GlintParams, si, h, light, view):
+    """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the footprint (Eq. 9, 13-17),
+    as ``_footprint_sums``; with ``exact=false`` ``A_P`` from the merged lobe."""
+    t = params.tables
+    cu, cv, cov = footprint_covariance(params, si)
+    hz = mi.Float64(h.z)
+    xh, yh = -mi.Float64(h.x) / hz, -mi.Float64(h.y) / hz
+    ki, ko = _f64(light), _f64(view)
+
+    def body(index, w, s):
+        terms = _lobe_terms(t, index, xh, yh, ki, ko)
+        return [acc + w * x for acc, x in zip(s, (1.0, *terms))]
+
+    ws, d, ai, vi, ao, vo = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [0.0 * cu] * 6, body)
+    d, ai, vi, ao, vo = (ratio(x, ws, ws > 0) for x in (d, ai, vi, ao, vo))
+    if not params.exact:
+        m = merged_lobe(t, cu, cv, cov)
+        ai, vi = merged_area(vi, m, ki)
+        ao, vo = merged_area(vo, m, ko)
+    return d / (hz * hz * hz * hz), ai, vi, ao, vo      # D_P(h) = P_P(h~) / z_h^4 (Eq. 9)
+
+
+def merged_lobe(tables: GlintTables, cu, cv, cov):
+    """Raw moments of the footprint's merged lobe (Sec. 4.2.2: ``W``-weighted average
+    over the MIP level of :meth:`LobeMixture.mip_level`)."""
+    t = tables
+    suu, svv, suv = cov
+    half = 0.5 * (suu + svv)
+    sd = dr.sqrt(half + dr.sqrt(dr.maximum(0.25 * (suu - svv) ** 2 + suv * suv, 0.0)))
+    spacing = 1.0 / max(t.nx, t.ny)
+    lev = dr.select(sd > spacing, dr.floor(dr.log2(dr.maximum(sd, 1e-300) / spacing)), 0.0)
+    lev = dr.clip(lev, 0.0, float(t.levels - 1))
+    nx, ny, off = t.mip_nx[lev], t.mip_ny[lev], t.mip_offset[lev]
+
+    def body(index, w, s):
+        base = 5.0 * (off + index)
+        return [s[0] + w] + [acc + w * t.mip[base + c] for c, acc in enumerate(s[1:])]
+
+    s = _walk(cu, cv, cov, nx, ny, t.cutoff, [0.0 * cu] * 6, body)
+    return [ratio(x, s[0], s[0] > 0) for x in s[1:]]
+
+
+def merged_area(v, m, k):
+    """``(A_P, V_P)`` with ``A_P = V_P c_m+ / V_m`` (:func:`..glints.pbrdf._merged_area`)."""
+    e1, e2, e3, e4, e5 = m
+    c, vm = _lobe_areas(k, e1, e2, e3 - e1 * e1, e4 - e2 * e2, e5 - e1 * e2)
+    return dr.select((vm > 0) & (c > 0), v * ratio(c, vm, vm > 0), 0.0), v
+
+
+def g2_over_ao(g2: str, ai, vi, ao, vo):
+    """``G2 / A_P(o)`` (:func:`microfacet.glints.pbrdf._g2_over_ao`)."""
+    den = vo * vi if g2 == "separable" else vo * ai + ao * (vi - ai)
+    return dr.select((den > 0) & (ai > 0), ratio(ai, den, den > 0), 0.0)
+
+
+def glint_eval_pdf(params: GlintParams, ctx, si, light, active, want_value=True, want_pdf=True):
+    """``(F D_P G2 / (4 A_P(o)), D_P z_h / (4 o.h))`` toward ``light`` (either ``None`` when
+    not wanted; :meth:`PatchBRDF.eval_cos`)."""
+    h, oh, active = half_vector(ctx, si, light, active)
+    active &= h.z > 0
+    d, ai, vi, ao, vo = footprint_sums(params, si, h, light, si.wi)
+    value = pdf = None
+    if want_value:
+        s = mi.Float(d * g2_over_ao(params.g2, ai, vi, ao, vo) * 0.25)
+        value = dr.select(active, fresnel_term(params.fresnel, si, oh, active) * s, 0.0)
+    if want_pdf:
+        pdf = dr.select(active, mi.Float(d * mi.Float64(h.z) / (4.0 * mi.Float64(oh))), 0.0)
+    return value, pdf
+
+
+def pick_lobe(tables: GlintTables, cu, cv, cov, sample1):
+    """The index of the lobe ``i`` of the footprint's window with ``sum_{j<i} W_j <= sample1
+    sum W < sum_{j<=i} W_j`` (two walks: the total, then the pick)."""
+    t, zero = tables, 0.0 * cu
+    ws = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero], lambda i, w, s: [s[0] + w])[0]
+    target = mi.Float64(sample1) * ws
+
+    def pick(index, w, s):
+        acc, chosen, last = s
+        take = (acc <= target) & (acc + w > target)
+        return [acc + w, dr.select(take, index, chosen), index]
+
+    _, chosen, last = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero, zero - 1.0, zero], pick)
+    return dr.select(chosen < 0, last, chosen)    # sample1 * ws rounded up to ws
+
+
+def lobe_of(tables: GlintTables, index) -> Lobe:
+    """Lobe ``index`` as a Beckmann :class:`~.slopes.Lobe` (``alpha = sqrt(2 sigma^2)``)."""
+    mx, my, sxx, syy, sxy = (tables.central[5 * index + c] for c in range(5))
+    ax, ay = dr.sqrt(2.0 * sxx), dr.sqrt(2.0 * syy)
+    return Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, 2.0 * sxy / (ax * ay), mx, my)))
+
+
+class GlintsBSDF:
+    """Mitsuba BSDF of :class:`microfacet.glints.PatchBRDF` (module docstring): the P-BRDF
+    of the footprint at each shading point. ``mi.traverse`` exposes ``specular_reflectance``.
+
+    | name | type | default | meaning |
+    |---|---|---|---|
+    | `filename` | string | required | the `.npz` of `microfacet glints` |
+    | `exact` | boolean | `true` | exact patch areas `A_P` (Eq. 17); `false`: the merged lobe of the MIP level matching the footprint (Sec. 4.2.2) |
+    | `g2` | string | `correlated` | `correlated` or `separable`, as `PatchBRDF` |
+    | `footprint` | float | 1 | pixel width in texels of the normal map without ray differentials (>= 0) |
+    | `uv_scale` | float | 1 | the map repeats `uv_scale` times over the uv square (> 0) |
+    | `max_lobes` | integer | 1024 | bound on the lobes gathered per shading point (>= 16; larger footprints are shrunk) |
+    | `material` | string | `none` | Fresnel of a conductor of Mitsuba's IOR database, as `mf_microfacet` |
+    | `eta` | float or texture | 0 | conductor Fresnel (with `k`), as `mf_microfacet` |
+    | `k` | float or texture | 1 | conductor Fresnel (with `eta`), as `mf_microfacet` |
+    | `int_ior` | float or string | 1.5046 | dielectric Fresnel, as `mf_microfacet` |
+    | `ext_ior` | float or string | 1.000277 | dielectric Fresnel, as `mf_microfacet` |
+    | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
+    | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+    """
+
+    PLUGIN_NAME = PLUGIN
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        self.params = read_glint_params(props)
+        flags = glossy_flags(anisotropic=True, spatially_varying=True)
+        self.m_components = [flags]
+        self.m_flags = flags
+
+    def eval(self, ctx, si, wo, active=True):
+        return glint_eval_pdf(self.params, ctx, si, wo, active, want_pdf=False)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return glint_eval_pdf(self.params, ctx, si, wo, active, want_value=False)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return glint_eval_pdf(self.params, ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        """Lobe ``i`` with probability ``W_i / sum W`` (``sample1``), a normal of its slope
+        density (``sample2``), the view reflected about it (Sec. 5); weight ``eval / pdf``."""
+        view = si.wi
+        active = reflecting(ctx, si, active)
+        cu, cv, cov = footprint_covariance(self.params, si)
+        h = lobe_of(self.params.tables, pick_lobe(self.params.tables, cu, cv, cov, sample1)).sample_p22(sample2)
+        light = 2.0 * dr.dot(view, h) * h - view
+        value, pdf = glint_eval_pdf(self.params, ctx, si, light, active & (light.z > 0))
+        active &= (pdf > 0) & (light.z > 0)
+        return glossy_sample(light, pdf, active), dr.select(active, value / dr.select(active, pdf, 1.0), 0.0)
+
+    def traverse(self, callback):
+        callback.put("specular_reflectance", self.params.fresnel.specular_reflectance, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        pass
+
+    def to_string(self):
+        p = self.params
+        return (f"GlintsBSDF[{PLUGIN}, filename={p.filename!r}, lobes={p.tables.nx}x{p.tables.ny}, "
+                f"exact={p.exact}, g2={p.g2}, uv_scale={p.uv_scale}, "
+                f"footprint={p.footprint}, max_lobes={p.max_lobes}]")
+
+
+def bsdf_class() -> type:
+    """The ``mf_glints`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    return variant_class(GlintsBSDF)

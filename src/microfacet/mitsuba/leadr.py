@@ -16,6 +16,7 @@ Slopes are taken along the shading frame's ``s`` (``dp/du``) and ``t`` axes.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -25,13 +26,15 @@ from ..errors import MicrofacetError
 from ..leadr import downsample_operator, read_pyramid
 from ..leadr.mip import MAX_ANISOTROPY
 from ..leadr.moments import MAX_RHO, MIN_ALPHA
-from . import bsdf as _bsdf
 from . import properties
+from .bsdf import FresnelParams, LobeModel, MicrofacetBSDF, fresnel_term, glossy_flags, read_fresnel
 from .fitted import load_fit_parameter
+from .registry import variant_class
 from .slopes import BECKMANN, Lobe
 from .tabulated import InterpolatedColor, Table, index_of
 
-__all__ = ["PLUGIN", "bsdf_class", "Pyramid"]
+__all__ = ["PLUGIN", "bsdf_class", "Pyramid", "LeadrBSDF", "LeadrParams", "read_leadr_params", "footprint_axes",
+           "filtered_moments", "lobe_from_moments"]
 
 PLUGIN = "mf_leadr"
 _ZIP_MAGIC = b"PK\x03\x04"
@@ -146,90 +149,123 @@ def lobe_from_moments(e):
     return Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, rho, e1, e2)))
 
 
-def _make_class() -> type:
-    Base = _bsdf.bsdf_class()
-
-    class LeadrBSDF(Base):
-        """Mitsuba BSDF of a LEADR-filtered displaced surface (see the module docstring)."""
-
-        PLUGIN_NAME = PLUGIN
-
-        def __init__(self, props):
-            mi.BSDF.__init__(self, props)
-            pyramid = _read(props, "filename")
-            self.filename = props["filename"]
-            if "alpha" in props and "fit" in props:
-                raise properties.parameter_error("alpha", "and fit are exclusive: the base is one material", PLUGIN)
-            self.fresnel_table = None
-            if "fit" in props:
-                fit = load_fit_parameter(props, "fit", PLUGIN)
-                if any(k in props for k in properties.FRESNEL_KEYS):
-                    raise properties.parameter_error("fit", "brings its own Fresnel table: drop the Fresnel parameters",
-                                       PLUGIN)
-                base = fit.to_beckmann()
-                self.fresnel_table = InterpolatedColor(base.fresnel.cos_theta_d, base.fresnel.values)
-            else:
-                if "alpha" in props and props.type("alpha") not in (mi.Properties.Type.Float,
-                                                                      mi.Properties.Type.Integer):
-                    raise properties.parameter_error("alpha", f"must be a number, got {props.as_string('alpha')!r}", PLUGIN)
-                alpha = float(props.get("alpha", 0.0))
-                if not (math.isfinite(alpha) and alpha >= 0):
-                    raise properties.parameter_error("alpha", f"must be a finite number >= 0, got {alpha!r}", PLUGIN)
-                base = alpha if alpha > 0 else None
-                self._init_fresnel(props)
-            self.pyramid = Pyramid(downsample_operator(pyramid, base))
-            self.uv_scale = float(props.get("uv_scale", 1.0))
-            self.footprint = float(props.get("footprint", 0.0))
-            for name, v in (("uv_scale", self.uv_scale), ("footprint", self.footprint)):
-                if not (math.isfinite(v) and v >= 0) or (name == "uv_scale" and v == 0):
-                    raise properties.parameter_error(name, f"must be a finite number {'>' if name == 'uv_scale' else '>='} 0, "
-                                             f"got {v!r}", PLUGIN)
-            self.kind = BECKMANN
-            self.gaf = "smith"
-            self.shadowing = properties.flag(props, "shadowing", True, PLUGIN)
-            self.separable = False
-            self.samples_visible = True
-            self.specular_reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
-            flags = (mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
-                     | mi.BSDFFlags.SpatiallyVarying)
-            if hasattr(mi.BSDFFlags, "NeedsDifferentials"):      # Mitsuba 0.6; 3.x has no such flag
-                flags = flags | mi.BSDFFlags.NeedsDifferentials
-            self.m_components = [flags]
-            self.m_flags = flags
-
-        def footprint_axes(self, si):
-            """``(a, b)``: ``uv_scale`` times the ray differentials ``duv_dx``, ``duv_dy``
-            where they are set, else ``footprint`` along u and v (uv units of the map)."""
-            a, b = si.duv_dx * self.uv_scale, si.duv_dy * self.uv_scale
-            has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
-            f = self.footprint
-            a = dr.select(has, a, mi.Vector2f(f, 0.0))
-            b = dr.select(has, b, mi.Vector2f(0.0, f))
-            return a, b
-
-        def moments(self, si):
-            """Filtered moments ``[E1..E5]`` at ``si`` (:meth:`Pyramid.lookup`)."""
-            a, b = self.footprint_axes(si)
-            return self.pyramid.lookup(si.uv * self.uv_scale, a, b)
-
-        def _lobe(self, si, active):
-            return lobe_from_moments(self.moments(si))
-
-        def _fresnel(self, si, oh, active):
-            if self.fresnel_table is None:
-                return Base._fresnel(self, si, oh, active)
-            return self.specular_reflectance.eval(si, active) * self.fresnel_table(dr.clip(oh, 0.0, 1.0),
-                                                                                   si.wavelengths)
-
-        def traverse(self, callback):
-            callback.put("specular_reflectance", self.specular_reflectance, mi.ParamFlags.Differentiable)
-
-        def to_string(self):
-            return (f"LeadrBSDF[{PLUGIN}, filename={self.filename!r}, levels={self.pyramid.levels}, "
-                    f"uv_scale={self.uv_scale}, footprint={self.footprint}, shadowing={self.shadowing}]")
-
-    LeadrBSDF.__name__ = LeadrBSDF.__qualname__ = "LeadrBSDF"
-    return LeadrBSDF
+@dataclass(frozen=True)
+class LeadrParams:
+    """All parameters of ``mf_leadr`` (:func:`read_leadr_params`): the pyramid merged with
+    the base lobe, the Fresnel term (the base fit's table, or :func:`.bsdf.read_fresnel`'s),
+    the map's repetition ``uv_scale`` and the fallback ``footprint`` width (uv units)."""
+    filename: str
+    pyramid: Pyramid
+    model: LobeModel
+    fresnel: FresnelParams
+    uv_scale: float
+    footprint: float
 
 
-bsdf_class = _bsdf.per_variant(_make_class)
+def _read_base(props):
+    """``(base, fresnel)``: the base lobe merged into the pyramid (an alpha, a Beckmann fit
+    of the ``fit`` file, or ``None`` for a mirror) and its Fresnel term."""
+    error = properties.parameter_error
+    if "alpha" in props and "fit" in props:
+        raise error("alpha", "and fit are exclusive: the base is one material", PLUGIN)
+    if "fit" in props:
+        fit = load_fit_parameter(props, "fit", PLUGIN)
+        if any(k in props for k in properties.FRESNEL_KEYS):
+            raise error("fit", "brings its own Fresnel table: drop the Fresnel parameters", PLUGIN)
+        base = fit.to_beckmann()
+        table = InterpolatedColor(base.fresnel.cos_theta_d, base.fresnel.values)
+        reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=PLUGIN)
+        return base, FresnelParams("table", reflectance, table=table)
+    if "alpha" in props and not properties.is_float(props, "alpha"):
+        raise error("alpha", f"must be a number, got {props.as_string('alpha')!r}", PLUGIN)
+    alpha = float(props.get("alpha", 0.0))
+    if not (math.isfinite(alpha) and alpha >= 0):
+        raise error("alpha", f"must be a finite number >= 0, got {alpha!r}", PLUGIN)
+    return (alpha if alpha > 0 else None), read_fresnel(props, PLUGIN)
+
+
+def _read_scale(props, name: str, default: float, zero_ok: bool) -> float:
+    """A finite number ``> 0`` (``>= 0`` where ``zero_ok``) of ``props``."""
+    v = float(props.get(name, default))
+    if not (math.isfinite(v) and (v > 0 or (zero_ok and v == 0))):
+        raise properties.parameter_error(name, f"must be a finite number {'>=' if zero_ok else '>'} 0, got {v!r}",
+                                         PLUGIN)
+    return v
+
+
+def read_leadr_params(props) -> LeadrParams:
+    """All parameters of ``mf_leadr`` (class docstring of :class:`LeadrBSDF`), checked."""
+    pyramid = _read(props, "filename")
+    base, fresnel = _read_base(props)
+    pyramid = Pyramid(downsample_operator(pyramid, base))
+    uv_scale = _read_scale(props, "uv_scale", 1.0, zero_ok=False)
+    footprint = _read_scale(props, "footprint", 0.0, zero_ok=True)
+    model = LobeModel(BECKMANN, "smith", properties.flag(props, "shadowing", True, PLUGIN), False, True)
+    return LeadrParams(props["filename"], pyramid, model, fresnel, uv_scale, footprint)
+
+
+def footprint_axes(params: LeadrParams, si):
+    """``(a, b)``: ``uv_scale`` times the ray differentials ``duv_dx``, ``duv_dy`` where they
+    are set, else ``footprint`` along u and v (uv units of the map)."""
+    a, b = si.duv_dx * params.uv_scale, si.duv_dy * params.uv_scale
+    has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
+    f = params.footprint
+    return dr.select(has, a, mi.Vector2f(f, 0.0)), dr.select(has, b, mi.Vector2f(0.0, f))
+
+
+def filtered_moments(params: LeadrParams, si):
+    """Filtered moments ``[E1..E5]`` at ``si`` (:meth:`Pyramid.lookup` over :func:`footprint_axes`)."""
+    a, b = footprint_axes(params, si)
+    return params.pyramid.lookup(si.uv * params.uv_scale, a, b)
+
+
+class LeadrBSDF(MicrofacetBSDF):
+    """Mitsuba BSDF of a LEADR-filtered displaced surface (module docstring): the Beckmann
+    lobe of the filtered moments at each shading point, shaded as ``mf_microfacet``'s
+    Smith path. ``mi.traverse`` exposes ``specular_reflectance``.
+
+    | name | type | default | meaning |
+    |---|---|---|---|
+    | `filename` | string | required | the pyramid EXR of `microfacet bake` |
+    | `alpha` | float | 0 | base Beckmann roughness merged into every level (0: a mirror base, clamped to 1e-3) |
+    | `fit` | string | none | instead of `alpha`: a fit `.npz`, merged by its Beckmann moments, whose Fresnel table is used |
+    | `uv_scale` | float | 1 | the map repeats `uv_scale` times over the uv square (> 0) |
+    | `footprint` | float | 0 | footprint width in uv units of the map without ray differentials (0: bilinear finest level) |
+    | `shadowing` | boolean | `true` | `false`: masking only |
+    | `material` | string | `none` | Fresnel of a conductor of Mitsuba's IOR database, as `mf_microfacet` |
+    | `eta` | float or texture | 0 | conductor Fresnel (with `k`), as `mf_microfacet` |
+    | `k` | float or texture | 1 | conductor Fresnel (with `eta`), as `mf_microfacet` |
+    | `int_ior` | float or string | 1.5046 | dielectric Fresnel, as `mf_microfacet` |
+    | `ext_ior` | float or string | 1.000277 | dielectric Fresnel, as `mf_microfacet` |
+    | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
+    | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+    """
+
+    PLUGIN_NAME = PLUGIN
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        self.params = read_leadr_params(props)
+        self.model = self.params.model
+        flags = glossy_flags(anisotropic=True, spatially_varying=True)
+        self.m_components = [flags]
+        self.m_flags = flags
+
+    def lobe(self, si, active):
+        return lobe_from_moments(filtered_moments(self.params, si))
+
+    def fresnel(self, si, oh, active):
+        return fresnel_term(self.params.fresnel, si, oh, active)
+
+    def traverse(self, callback):
+        callback.put("specular_reflectance", self.params.fresnel.specular_reflectance, mi.ParamFlags.Differentiable)
+
+    def to_string(self):
+        p = self.params
+        return (f"LeadrBSDF[{PLUGIN}, filename={p.filename!r}, levels={p.pyramid.levels}, "
+                f"uv_scale={p.uv_scale}, footprint={p.footprint}, shadowing={p.model.shadowing}]")
+
+
+def bsdf_class() -> type:
+    """The ``mf_leadr`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    return variant_class(LeadrBSDF)

@@ -38,12 +38,13 @@ from .. import fresnel as _fr
 from ..brdf import Lambertian, MicrofacetBRDF
 from ..diffuse import TransmittedLambertian
 from ..distributions import GGX as _GGX, Beckmann as _Beckmann
-from . import bsdf as _bsdf
 from . import fresnel as _fresnel
+from .bsdf import LobeModel, MicrofacetLobe, glossy_sample
+from .registry import variant_class
 from .slopes import BECKMANN, GGX, Lobe, ratio
 from .tabulated import InterpolatedColor, Table
 
-__all__ = ["mitsuba_bsdf_of", "component_of", "fresnel_term", "bsdf_class", "SUPPORTED"]
+__all__ = ["mitsuba_bsdf_of", "component_of", "fresnel_term", "bsdf_class", "SUPPORTED", "TreeBSDF", "TreeLobe"]
 
 #: The BRDF classes a tree may be built of (their names).
 SUPPORTED = ("MicrofacetBRDF", "Lambertian", "TransmittedLambertian", "SumBRDF", "LayeredBRDF")
@@ -219,48 +220,35 @@ class _Layered:
         return dr.select(coat, lc, lb), dr.select(coat, okc, okb)
 
 
-def _make_lobe_class() -> type:
-    Base = _bsdf.bsdf_class()
+class TreeLobe(MicrofacetLobe):
+    """A :class:`microfacet.MicrofacetBRDF` of a tree: ``mf_microfacet``'s lobe code
+    (:class:`.bsdf.MicrofacetLobe`; a plain object, since a second ``mi.BSDF`` instance inside
+    a BSDF breaks Mitsuba's rendering) with constant parameters and the tree's Fresnel term
+    (:func:`fresnel_term`)."""
 
-    class TreeLobe:
-        """A :class:`microfacet.MicrofacetBRDF` of a tree: ``mf_microfacet``'s lobe code (its
-        methods, borrowed: a plain object, since a second ``mi.BSDF`` instance inside a BSDF
-        breaks Mitsuba's rendering) with constant parameters and the tree's Fresnel term
-        (:func:`fresnel_term`)."""
+    diffuse = False
 
-        diffuse = False
-        _gaf, _normal_pdf, _reflecting = Base._gaf, Base._normal_pdf, Base._reflecting
-        _half, _eval_pdf, _sample = Base._half, Base._eval_pdf, Base.sample
+    def __init__(self, brdf: MicrofacetBRDF):
+        d = brdf.distribution
+        if type(d) not in (_GGX, _Beckmann):
+            raise ValueError(f"a tree's MicrofacetBRDF must be GGX or Beckmann, got {type(d).__name__}")
+        kind = GGX if type(d) is _GGX else BECKMANN
+        self.model = LobeModel(kind, brdf.gaf_model, brdf.shadowing, False, brdf.gaf_model == "smith")
+        self.params = [float(v) for v in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)]
+        self.fresnel_of = fresnel_term(brdf.fresnel)
 
-        def __init__(self, brdf: MicrofacetBRDF):
-            d = brdf.distribution
-            if type(d) not in (_GGX, _Beckmann):
-                raise ValueError(f"a tree's MicrofacetBRDF must be GGX or Beckmann, got {type(d).__name__}")
-            self.kind = GGX if type(d) is _GGX else BECKMANN
-            self.gaf = brdf.gaf_model
-            self.shadowing = brdf.shadowing
-            self.separable = False
-            self.samples_visible = self.gaf == "smith"
-            self.params = [float(v) for v in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)]
-            self.fresnel_of = fresnel_term(brdf.fresnel)
+    def lobe(self, si, active):
+        return Lobe(self.model.kind, *(mi.Float(v) for v in self.params))
 
-        def _lobe(self, si, active):
-            return Lobe(self.kind, *(mi.Float(v) for v in self.params))
+    def fresnel(self, si, oh, active):
+        return self.fresnel_of(si, oh, active)
 
-        def _fresnel(self, si, oh, active):
-            return self.fresnel_of(si, oh, active)
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        bs, _ = self.lobe_sample(ctx, si, sample2, active)
+        return bs.wo, active & (bs.pdf > 0)
 
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            bs, _ = self._sample(ctx, si, sample1, sample2, active)
-            return bs.wo, active & (bs.pdf > 0)
-
-        def eval_pdf(self, ctx, si, light, active=True):
-            return self._eval_pdf(ctx, si, light, active)
-
-    return TreeLobe
-
-
-_lobe_class = _bsdf.per_variant(_make_lobe_class)
+    def eval_pdf(self, ctx, si, light, active=True):
+        return self.lobe_eval_pdf(ctx, si, light, active)
 
 
 def component_of(brdf):
@@ -275,7 +263,7 @@ def component_of(brdf):
         raise ValueError("no Mitsuba BSDF for a FittedBRDF (the tabulated fit) in a BRDF tree: render it with "
                          "mf_fitted use=tabulated")
     if isinstance(brdf, MicrofacetBRDF):
-        return _lobe_class()(brdf)
+        return TreeLobe(brdf)
     if isinstance(brdf, TransmittedLambertian):
         return _TransmittedLambertian(brdf)
     if isinstance(brdf, Lambertian):
@@ -289,68 +277,63 @@ def component_of(brdf):
 
 
 # ------------------------------------------------------------------ the BSDF
-def _make_class() -> type:
-    if mi.is_polarized:
-        raise RuntimeError(f"polarized variants are not supported ({mi.variant()})")
+class TreeBSDF:
+    """Mitsuba BSDF of a library BRDF tree (module docstring); built by :func:`mitsuba_bsdf_of`."""
 
-    class TreeBSDF(mi.BSDF):
-        """Mitsuba BSDF of a library BRDF tree (module docstring); built by :func:`mitsuba_bsdf_of`."""
+    def __init__(self, props, brdf=None):
+        mi.BSDF.__init__(self, props)
+        self.set_tree(brdf)
 
-        def __init__(self, props, brdf=None):
-            mi.BSDF.__init__(self, props)
-            self.set_tree(brdf)
+    def set_tree(self, brdf):
+        self.brdf = brdf
+        self.root = None if brdf is None else component_of(brdf)
+        flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+        if self.root is not None and self.root.diffuse:
+            flags = flags | mi.BSDFFlags.DiffuseReflection
+        self.m_components = [flags]
+        self.m_flags = flags
 
-        def set_tree(self, brdf):
-            self.brdf = brdf
-            self.root = None if brdf is None else component_of(brdf)
-            flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-            if self.root is not None and self.root.diffuse:
-                flags = flags | mi.BSDFFlags.DiffuseReflection
-            self.m_components = [flags]
-            self.m_flags = flags
+    def _active(self, ctx, si, active):
+        active = active & (si.wi.z > 0)
+        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection) and \
+                not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            active = active & False
+        return active
 
-        def _active(self, ctx, si, active):
-            active = active & (si.wi.z > 0)
-            if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection) and \
-                    not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-                active = active & False
-            return active
+    def eval_pdf(self, ctx, si, wo, active=True):
+        """``(f cos theta_i, pdf)`` of the tree; ``wo`` is the light."""
+        active = self._active(ctx, si, active) & (wo.z > 0)
+        value, pdf = self.root.eval_pdf(ctx, si, wo, active)
+        return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
-        def eval_pdf(self, ctx, si, wo, active=True):
-            """``(f cos theta_i, pdf)`` of the tree; ``wo`` is the light."""
-            active = self._active(ctx, si, active) & (wo.z > 0)
-            value, pdf = self.root.eval_pdf(ctx, si, wo, active)
-            return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+    def eval(self, ctx, si, wo, active=True):
+        return self.eval_pdf(ctx, si, wo, active)[0]
 
-        def eval(self, ctx, si, wo, active=True):
-            return self.eval_pdf(ctx, si, wo, active)[0]
+    def pdf(self, ctx, si, wo, active=True):
+        return self.eval_pdf(ctx, si, wo, active)[1]
 
-        def pdf(self, ctx, si, wo, active=True):
-            return self.eval_pdf(ctx, si, wo, active)[1]
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        """A direction from the tree's mixture sampler; weight ``eval / pdf`` of the tree."""
+        active = self._active(ctx, si, active)
+        light, ok = self.root.sample(ctx, si, sample1, sample2, active)
+        value, pdf = self.eval_pdf(ctx, si, light, active & ok)
+        ok = active & ok & (pdf > 0) & (light.z > 0)
+        bs = glossy_sample(light, pdf, ok)
+        return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
 
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            """A direction from the tree's mixture sampler; weight ``eval / pdf`` of the tree."""
-            active = self._active(ctx, si, active)
-            light, ok = self.root.sample(ctx, si, sample1, sample2, active)
-            value, pdf = self.eval_pdf(ctx, si, light, active & ok)
-            ok = active & ok & (pdf > 0) & (light.z > 0)
-            bs = _bsdf.glossy_sample(light, pdf, ok)
-            return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+    def traverse(self, callback):
+        pass
 
-        def traverse(self, callback):
-            pass
+    def parameters_changed(self, keys):
+        pass
 
-        def parameters_changed(self, keys):
-            pass
-
-        def to_string(self):
-            return f"TreeBSDF[{self.brdf!r}]"
-
-    TreeBSDF.__name__ = TreeBSDF.__qualname__ = "TreeBSDF"
-    return TreeBSDF
+    def to_string(self):
+        return f"TreeBSDF[{self.brdf!r}]"
 
 
-bsdf_class = _bsdf.per_variant(_make_class)
+def bsdf_class() -> type:
+    """The tree BSDF class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    return variant_class(TreeBSDF)
 
 
 def mitsuba_bsdf_of(brdf):
