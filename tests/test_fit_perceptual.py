@@ -221,3 +221,13 @@ def test_a_failed_moment_conversion_leaves_the_other_fits(tmp_path, monkeypatch)
     assert "not finite" in summary["moments_failed"]["beckmann"]
     assert "beckmann_moments" not in summary["fits"] and "ggx_moments" in summary["fits"]
     assert mf.fit.fit_names(tmp_path / "f.npz")[1] == summary["best"]
+
+
+def test_best_fit_leaves_out_colour_casts():
+    from microfacet.fit.outputs import CHROMA_LIMIT, best_fit
+    cast = {"image": 0.05, "log": 0.01, "chromaticity": 2 * CHROMA_LIMIT}
+    clean = {"image": 0.08, "log": 0.01, "chromaticity": CHROMA_LIMIT / 2}
+    assert best_fit({"cast": cast, "clean": clean}) == "clean"
+    # every fit with a cast: the least image x log error
+    assert best_fit({"cast": cast, "worse": {**cast, "image": 0.09}}) == "cast"
+    assert best_fit({"a": clean, "b": {**clean, "log": 0.005}}) == "b"

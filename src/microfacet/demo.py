@@ -191,16 +191,16 @@ def fit_sizes(size: int) -> tuple[int, int]:
 def shown_fits(summary: dict) -> list[tuple[str, str]]:
     """``(label, fit name)`` of the fits the demo shows from a ``microfacet fit`` summary:
     the best and the tabulated fit, or, where the tabulated fit is the best, the best
-    analytic fit (of least :func:`microfacet.fit.outputs.best_score` among those with a model)."""
-    from .fit.outputs import best_score
+    analytic fit (:func:`microfacet.fit.outputs.best_fit` of those with a model)."""
+    from .fit.outputs import best_fit
     fits, best = summary["fits"], summary["best"]
     out = [(f"best: {best}", best)]
     if best != "tabulated":
         out.append(("tabulated fit", "tabulated"))
     else:
-        analytic = {k: best_score(v["metrics"]) for k, v in fits.items() if k != "tabulated" and v["model"] is not None}
+        analytic = {k: v["metrics"] for k, v in fits.items() if k != "tabulated" and v["model"] is not None}
         if analytic:
-            name = min(analytic, key=analytic.get)
+            name = best_fit(analytic)
             out.append((f"best analytic: {name}", name))
     return out
 

@@ -56,7 +56,7 @@ IMAGE_SIZE = 32
 
 
 def _fit_file_models(path: Path) -> tuple[dict, dict, str]:
-    """``({name: BRDF} of the analytic fits, {name: image error} from OUT.json or {}, best)``."""
+    """``({name: BRDF} of the analytic fits, {name: metrics} from OUT.json or {}, best)``."""
     from ..fit import fit_names, load
     names, best = fit_names(path)
     fits = {n: load(path, model=n) for n in names if n != "tabulated"}
@@ -65,8 +65,8 @@ def _fit_file_models(path: Path) -> tuple[dict, dict, str]:
     if summary.is_file():
         try:
             data = json.loads(summary.read_text())
-            errors = {n: float(v["metrics"]["image"]) for n, v in data.get("fits", {}).items()
-                      if isinstance(v, dict) and "image" in v.get("metrics", {})}
+            errors = {n: dict(v["metrics"]) for n, v in data.get("fits", {}).items()
+                      if isinstance(v, dict) and {"image", "log"} <= set(v.get("metrics", {}))}
         except (ValueError, KeyError, TypeError, AttributeError):
             errors = {}
     return fits, errors, best
@@ -75,11 +75,13 @@ def _fit_file_models(path: Path) -> tuple[dict, dict, str]:
 def choose_model(path, model: str = "best") -> tuple[str, object, dict]:
     """``(name, brdf, image errors)`` of the fit to export from the fit file ``path``: ``model``
     by name, or for ``"best"`` the file's best fit, and when that is the tabulated fit the
-    analytic fit of least image error (from ``OUT.json`` beside it, else measured here
-    against the tabulated fit). ``image errors``: ``{name: error}`` of the analytic fits."""
+    analytic fit that :func:`microfacet.fit.outputs.best_fit` chooses (metrics from
+    ``OUT.json`` beside it, else measured here against the tabulated fit). ``image
+    errors``: ``{name: error}`` of the analytic fits."""
     from ..fit import load
     path = Path(path)
-    fits, errors, best = _fit_file_models(path)
+    fits, metrics, best = _fit_file_models(path)
+    errors = {n: float(m["image"]) for n, m in metrics.items()}
     if not fits:
         raise MicrofacetError(f"{path}: the fit file holds no analytic fit to export (only the tabulated one)")
     if model not in ("best",):
@@ -91,10 +93,14 @@ def choose_model(path, model: str = "best") -> tuple[str, object, dict]:
         return model, fits[model], errors
     if best in fits:
         return best, fits[best], errors
-    if not all(n in errors for n in fits):
-        from ..metrics import ImageError
-        errors = ImageError(load(path), size=IMAGE_SIZE)(fits)
-    name = min(fits, key=lambda n: errors[n])
+    if not all(n in metrics for n in fits):
+        from ..metrics import ImageError, LogError
+        reference = load(path)
+        image, log = ImageError(reference, size=IMAGE_SIZE), LogError(reference)
+        metrics = {n: {**image.details(b), "log": log(b)} for n, b in fits.items()}
+        errors = {n: float(m["image"]) for n, m in metrics.items()}
+    from ..fit.outputs import best_fit
+    name = best_fit({n: metrics[n] for n in fits})
     return name, fits[name], errors
 
 

@@ -50,10 +50,13 @@ def fit_spec(path: str, model: str = "best") -> tuple:
         summary = os.path.splitext(path)[0] + ".json"
         try:
             with open(summary) as f:
-                errors = {n: float(v["metrics"]["image"]) for n, v in json.load(f).get("fits", {}).items()
-                          if n in fits and "image" in v.get("metrics", {})}
-            if errors:
-                best = min(errors, key=errors.get)
+                metrics = {n: v["metrics"] for n, v in json.load(f).get("fits", {}).items()
+                           if n in fits and {"image", "log"} <= set(v.get("metrics", {}))}
+            # microfacet.fit.outputs.best_fit's rule (this add-on runs without microfacet):
+            # of the fits without a colour cast, the least image error x log error
+            clean = {n: m for n, m in metrics.items() if float(m.get("chromaticity", 1.0)) <= 0.02} or metrics
+            if clean:
+                best = min(clean, key=lambda n: float(clean[n]["image"]) * float(clean[n]["log"]))
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass
     return best, fits[best]

@@ -356,8 +356,7 @@ def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) ->
     """``({name: {"model": spec, "metrics": {...}}}, best)`` for every fit of ``named``
     (the tabulated fit's model is ``"tabulated"``): the legacy metrics ``legacy = (grid,
     uniform, albedo)`` where computed, the log and image errors, chromaticity difference
-    and largest albedo; the best is the fit of least :func:`best_score`."""
-    from .perceptual import select
+    and largest albedo; the best is :func:`best_fit`'s."""
     from .spec import to_spec
     log_error, image_error = judges
     grid, uniform, albedo = legacy
@@ -369,8 +368,28 @@ def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) ->
                    "uniform": uniform.get(name), "albedo_ratio": np.asarray(albedo[name]).round(4).tolist(),
                    "albedo_ratio_worst": round(_worst(albedo[name]), 4), "max_albedo": round(_energy(b), 4)}
         out[name] = {"model": "tabulated" if name == "tabulated" else _spec_or_none(to_spec, b), "metrics": metrics}
-    best = select({k: best_score(v["metrics"]) for k, v in out.items()})
-    return out, best
+    return out, best_fit({k: v["metrics"] for k, v in out.items()})
+
+
+#: Largest chromaticity difference (CIE 1931 xy of the rendered spheres' mean colour) of a
+#: fit without a colour cast.
+CHROMA_LIMIT = 0.02
+
+
+def best_fit(metrics: dict) -> str:
+    """The best of fits ``{name: metrics}`` (each with ``"image"``, ``"log"`` and
+    ``"chromaticity"``): of the fits without a colour cast (chromaticity difference at most
+    :data:`CHROMA_LIMIT`), the one of least :func:`best_score`; the least score of all when
+    every fit has a cast. A cast is a visible failure that neither error weighs much: an
+    iridescent gem's sphere can score best with a hue the data does not have.
+
+    >>> best_fit({"a": {"image": 0.1, "log": 0.01, "chromaticity": 0.05},
+    ...           "b": {"image": 0.2, "log": 0.01, "chromaticity": 0.01}})
+    'b'
+    """
+    from .perceptual import select
+    clean = {k: m for k, m in metrics.items() if float(m.get("chromaticity", np.inf)) <= CHROMA_LIMIT}
+    return select({k: best_score(m) for k, m in (clean or metrics).items()})
 
 
 def best_score(metrics: dict) -> float:
