@@ -263,6 +263,22 @@ def test_no_private_imports_across_modules():
         f"  {m}:{line} uses {t}.{n}" for m, line, t, n in bad)
 
 
+#: The longest a function of :data:`FUNCTION_LENGTH_PACKAGES` may be, in lines (a screen).
+MAX_FUNCTION_LINES = 80
+#: Subpackages held to :data:`MAX_FUNCTION_LINES` (issue 27).
+FUNCTION_LENGTH_PACKAGES = ("microfacet.mitsuba",)
+
+
+def test_function_length():
+    """Every function (methods and nested functions included) of the Mitsuba plugins fits
+    on a screen: at most ``MAX_FUNCTION_LINES`` lines from ``def`` to its last line."""
+    long = [(q, where, n) for q, where, n, _ in functions(min_lines=MAX_FUNCTION_LINES + 1)
+            if q.startswith(tuple(p + "." for p in FUNCTION_LENGTH_PACKAGES))]
+    assert any(q.startswith("microfacet.mitsuba.bsdf.") for q, _, _, _ in functions(min_lines=1))
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines:\n" + "\n".join(
+        f"  {n:4d} lines  {q}  ({where})" for q, where, n in sorted(long, key=lambda f: -f[2]))
+
+
 def report() -> str:
     lines = []
     mod = cycles(import_graph(module_level=True))

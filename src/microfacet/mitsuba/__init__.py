@@ -20,14 +20,18 @@ A bad parameter or file raises :class:`PluginParameterError` in the plugin. Mits
 location, the Python traceback (nanobind formats it into the message) and, last, our
 line; :func:`load_dict` and :func:`load_file` are the same loaders that raise our one
 line instead, with Mitsuba's location appended.
+
+Each plugin class documents its parameters in one table of its docstring;
+:func:`plugin_reference` returns them all as Markdown (:mod:`microfacet.mitsuba.reference`).
 """
 from __future__ import annotations
 
 import re
 
 from ..errors import MicrofacetError
+from .reference import plugin_reference
 
-__all__ = ["register", "load_dict", "load_file", "PLUGINS", "PluginParameterError"]
+__all__ = ["register", "load_dict", "load_file", "PLUGINS", "PluginParameterError", "plugin_reference"]
 
 PLUGINS = ("mf_microfacet", "mf_fitted", "mf_leadr", "mf_glints")
 

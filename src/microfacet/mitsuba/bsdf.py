@@ -383,8 +383,11 @@ class MicrofacetLobe:
 
 # ------------------------------------------------------------------ the plugin
 class MicrofacetBSDF(MicrofacetLobe):
-    """Mitsuba BSDF of :class:`microfacet.MicrofacetBRDF` (module docstring). Parameters
-    marked texture may be textures; without a Fresnel parameter F = 1. ``mi.traverse``
+    """The noncentral microfacet BRDF of :class:`microfacet.MicrofacetBRDF`:
+    ``f_r cos theta_i = F(o.h) D(h) G(i, o) / (4 z_o)`` with a Beckmann or GGX slope
+    distribution under the slope map of Eq. 3.4 (anisotropic, correlated, sheared), the
+    library's GAF and its sampler (visible normals for Smith). Parameters of type texture
+    may be textures; without a Fresnel parameter F = 1. ``mi.traverse``
     exposes ``alpha`` (or ``alpha_u``, ``alpha_v``), ``rho``, ``mean_slope_u``,
     ``mean_slope_v``, ``specular_reflectance`` and the Fresnel textures.
 

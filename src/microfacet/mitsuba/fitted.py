@@ -222,9 +222,10 @@ def _mixture_sample(bs, lobe: FitLobe, eval_pdf, si, sample1, sample2, active):
 
 
 class FittedBSDF(MicrofacetBSDF):
-    """Mitsuba BSDF of a fit of :mod:`microfacet.fit` (module docstring): an analytic fit
-    through its BRDF tree, the tabulated fit or a conversion through the shared lobe code
-    (plus the fit's Lambertian base). ``mi.traverse`` exposes ``specular_reflectance``.
+    """A fit of ``microfacet fit`` (its ``.npz``): an analytic fit through its BRDF tree
+    (``eval`` and ``pdf`` equal the library's), the tabulated fit with its tables, Fresnel
+    table, sampling and Lambertian base, or the ``ggx`` / ``beckmann`` moment conversions of
+    files that keep no such fit. ``mi.traverse`` exposes ``specular_reflectance``.
 
     | name | type | default | meaning |
     |---|---|---|---|

@@ -316,8 +316,10 @@ def lobe_of(tables: GlintTables, index) -> Lobe:
 
 
 class GlintsBSDF:
-    """Mitsuba BSDF of :class:`microfacet.glints.PatchBRDF` (module docstring): the P-BRDF
-    of the footprint at each shading point. ``mi.traverse`` exposes ``specular_reflectance``.
+    """The patch BRDF (:class:`microfacet.glints.PatchBRDF`) of a glint microsurface of
+    ``microfacet glints``: per shading point the lobes of the footprint (a Gaussian pixel
+    filter from the ray differentials, else ``footprint`` texels), summed in double
+    precision; a footprint whose window would exceed ``max_lobes`` lobes is shrunk. ``mi.traverse`` exposes ``specular_reflectance``.
 
     | name | type | default | meaning |
     |---|---|---|---|

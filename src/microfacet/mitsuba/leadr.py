@@ -220,9 +220,10 @@ def filtered_moments(params: LeadrParams, si):
 
 
 class LeadrBSDF(MicrofacetBSDF):
-    """Mitsuba BSDF of a LEADR-filtered displaced surface (module docstring): the Beckmann
-    lobe of the filtered moments at each shading point, shaded as ``mf_microfacet``'s
-    Smith path. ``mi.traverse`` exposes ``specular_reflectance``.
+    """A LEADR moment pyramid of ``microfacet bake`` over a base material: per shading point
+    the pyramid's moments merged with the base lobe, filtered over the footprint (ray
+    differentials, else ``footprint``; trilinear, anisotropic probes, wrapping) and
+    converted to a Beckmann lobe, shaded as ``mf_microfacet``'s Smith path. ``mi.traverse`` exposes ``specular_reflectance``.
 
     | name | type | default | meaning |
     |---|---|---|---|
