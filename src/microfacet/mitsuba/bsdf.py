@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -35,7 +36,7 @@ from .tabulated import luminance
 __all__ = ["PLUGIN", "bsdf_class", "GAFS", "MicrofacetBSDF", "MicrofacetLobe", "LobeModel", "Roughness",
            "FresnelParams", "MicrofacetParams", "read_model", "read_roughness", "read_fresnel",
            "read_microfacet_params", "roughness_lobe", "fresnel_term", "geometric_attenuation",
-           "normal_density", "reflecting", "half_vector", "lobe_value", "lobe_pdf", "sample_normal",
+           "normal_density", "reflecting", "half_vector", "mirror", "Reflection", "lobe_value", "lobe_pdf", "sample_normal",
            "sample_weight", "glossy_sample", "glossy_flags"]
 
 GAFS = ("smith", "vgroove", "normal_map")
@@ -83,6 +84,17 @@ class FresnelParams:
     k: object = None
     f0: object = None
     table: object = None
+
+
+class Reflection(NamedTuple):
+    """The directions of one reflection (Dr.Jit arrays per lane): ``light`` (the library's
+    ``i``), ``view`` (``o``, Mitsuba's ``si.wi``), the half vector ``h``, ``oh = o.h`` and
+    the lanes where it is ``active``."""
+    light: object
+    view: object
+    h: object
+    oh: object
+    active: object
 
 
 @dataclass(frozen=True)
@@ -231,9 +243,10 @@ def fresnel_term(fresnel: FresnelParams, si, oh, active):
     return r
 
 
-def _smith_attenuation(model: LobeModel, lobe, light, view, ok):
+def _smith_attenuation(model: LobeModel, lobe, r: Reflection, ok):
     """Smith ``(z_o / c_o) / (1 + Lambda_i + Lambda_o)`` (Eq. 3.3), or separable
     ``G1(i) G1(o)``; ``(G, ok)``."""
+    light, view = r.light, r.view
     if model.separable:
         return lobe.g1(view) * (lobe.g1(light) if model.shadowing else 1.0), ok
     lam_o, co = lobe.lambda_c(view)
@@ -242,24 +255,24 @@ def _smith_attenuation(model: LobeModel, lobe, light, view, ok):
     return ratio(view.z, co * (1.0 + lam_i + lam_o), ok), ok
 
 
-def _facet_attenuation(model: LobeModel, light, view, h, oh, ok):
+def _facet_attenuation(model: LobeModel, r: Reflection, ok):
     """V-groove ``min(1, 2 z_i z_h / ih, 2 z_o z_h / oh)`` or normal map ``z_o z_h / oh``."""
-    go = ratio(view.z * h.z, oh, ok)
+    go = ratio(r.view.z * r.h.z, r.oh, ok)
     if model.gaf != "vgroove":
         return go
     go = 2.0 * go
-    gi = ratio(2.0 * light.z * h.z, oh, ok)
+    gi = ratio(2.0 * r.light.z * r.h.z, r.oh, ok)
     return dr.minimum(1.0, dr.minimum(go, gi) if model.shadowing else go)
 
 
-def geometric_attenuation(model: LobeModel, lobe, light, view, h, oh):
+def geometric_attenuation(model: LobeModel, lobe, r: Reflection):
     """``G(i, o)`` of :meth:`microfacet.MicrofacetBRDF.gaf` at ``i.h = o.h`` (Table 2.IV);
     without shadowing only the ``o`` factors remain; 0 below the horizons."""
-    ok = (light.z > 0) & (view.z > 0) & (oh > 0) & (h.z > 0)
+    ok = (r.light.z > 0) & (r.view.z > 0) & (r.oh > 0) & (r.h.z > 0)
     if model.gaf == "smith":
-        g, ok = _smith_attenuation(model, lobe, light, view, ok)
+        g, ok = _smith_attenuation(model, lobe, r, ok)
     else:
-        g = _facet_attenuation(model, light, view, h, oh, ok)
+        g = _facet_attenuation(model, r, ok)
     return dr.select(ok, g, 0.0)
 
 
@@ -278,24 +291,32 @@ def reflecting(ctx, si, active):
     return active
 
 
-def half_vector(ctx, si, light, active):
-    """``(h, o.h, active)`` of ``light`` and the view, active where both are above the
-    surface and ``o.h > 0``."""
+def half_vector(ctx, si, light, active) -> Reflection:
+    """The :class:`Reflection` of ``light`` and the view, active where both are above the
+    surface, ``o.h > 0`` and glossy reflection is asked."""
     active = reflecting(ctx, si, active & (light.z > 0))
     h = dr.normalize(light + si.wi)
     oh = dr.dot(si.wi, h)
-    return h, oh, active & (oh > 0)
+    return Reflection(light, si.wi, h, oh, active & (oh > 0))
 
 
-def lobe_value(model: LobeModel, lobe, light, view, h, oh, active):
+def mirror(view, h, active) -> Reflection:
+    """The :class:`Reflection` of ``view`` about the normal ``h`` (``i = 2 (o.h) h - o``),
+    active where ``active``, the light is above the surface and ``o.h > 0``."""
+    oh = dr.dot(view, h)
+    light = 2.0 * oh * h - view
+    return Reflection(light, view, h, oh, active & (light.z > 0) & (oh > 0))
+
+
+def lobe_value(model: LobeModel, lobe, r: Reflection):
     """``(D G / (4 z_o), ok)`` (Listing 2.2 without Fresnel), ``ok`` where ``G > 0``."""
-    g = geometric_attenuation(model, lobe, light, view, h, oh)
-    return ratio(lobe.ndf(h) * g, 4.0 * view.z, active), active & (g > 0)
+    g = geometric_attenuation(model, lobe, r)
+    return ratio(lobe.ndf(r.h) * g, 4.0 * r.view.z, r.active), r.active & (g > 0)
 
 
-def lobe_pdf(model: LobeModel, lobe, view, h, oh, active):
+def lobe_pdf(model: LobeModel, lobe, r: Reflection):
     """Solid-angle density of the reflected direction: normal density over ``4 o.h``."""
-    return ratio(normal_density(model, lobe, h, view), 4.0 * oh, active)
+    return ratio(normal_density(model, lobe, r.h, r.view), 4.0 * r.oh, r.active)
 
 
 def sample_normal(model: LobeModel, lobe, sample2, view):
@@ -303,14 +324,14 @@ def sample_normal(model: LobeModel, lobe, sample2, view):
     return lobe.sample_visible(sample2, view) if model.samples_visible else lobe.sample_p22(sample2)
 
 
-def sample_weight(model: LobeModel, lobe, light, view, h, oh, active):
+def sample_weight(model: LobeModel, lobe, r: Reflection):
     """``eval / pdf`` without Fresnel: ``G / G1(o)`` (visible normals, Eq. 2.23), else
     ``G o.h / (z_o z_h)``."""
-    g = geometric_attenuation(model, lobe, light, view, h, oh)
+    g = geometric_attenuation(model, lobe, r)
     if model.samples_visible:
-        g1_o = lobe.g1(view)
+        g1_o = lobe.g1(r.view)
         return ratio(g, g1_o, g1_o > 0)
-    return ratio(g * oh, view.z * h.z, active & (h.z > 0))
+    return ratio(g * r.oh, r.view.z * r.h.z, r.active & (r.h.z > 0))
 
 
 def glossy_sample(wo, pdf, active):
@@ -354,31 +375,26 @@ class MicrofacetLobe:
 
     def lobe_eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
         """``(f_r cos theta_i, pdf)`` toward ``light`` (either ``None`` when not wanted)."""
-        view = si.wi
-        h, oh, active = half_vector(ctx, si, light, active)
-        lobe = self.lobe(si, active)
+        r = half_vector(ctx, si, light, active)
+        lobe = self.lobe(si, r.active)
         value = pdf = None
         if want_value:
-            s, ok = lobe_value(self.model, lobe, light, view, h, oh, active)
-            value = dr.select(ok, self.fresnel(si, oh, active) * s, 0.0)
+            s, ok = lobe_value(self.model, lobe, r)
+            value = dr.select(ok, self.fresnel(si, r.oh, r.active) * s, 0.0)
         if want_pdf:
-            pdf = lobe_pdf(self.model, lobe, view, h, oh, active)
+            pdf = lobe_pdf(self.model, lobe, r)
         return value, pdf
 
     def lobe_sample(self, ctx, si, sample2, active):
         """``(BSDFSample3f, weight)``: the view reflected about a sampled normal (Sec. 2.2,
         3.2); weight ``F`` times :func:`sample_weight`."""
-        view = si.wi
         active = reflecting(ctx, si, active)
         lobe = self.lobe(si, active)
-        h = sample_normal(self.model, lobe, sample2, view)
-        oh = dr.dot(view, h)
-        light = 2.0 * oh * h - view
-        active &= (light.z > 0) & (oh > 0)
-        weight = sample_weight(self.model, lobe, light, view, h, oh, active)
-        pdf = lobe_pdf(self.model, lobe, view, h, oh, active)
-        active &= pdf > 0
-        return glossy_sample(light, pdf, active), dr.select(active, self.fresnel(si, oh, active) * weight, 0.0)
+        r = mirror(si.wi, sample_normal(self.model, lobe, sample2, si.wi), active)
+        weight = sample_weight(self.model, lobe, r)
+        pdf = lobe_pdf(self.model, lobe, r)
+        ok = r.active & (pdf > 0)
+        return glossy_sample(r.light, pdf, ok), dr.select(ok, self.fresnel(si, r.oh, ok) * weight, 0.0)
 
 
 # ------------------------------------------------------------------ the plugin

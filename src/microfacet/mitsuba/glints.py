@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -43,7 +44,7 @@ from .slopes import BECKMANN, Lobe, ratio
 from .tabulated import Table
 
 __all__ = ["PLUGIN", "bsdf_class", "GlintTables", "GlintsBSDF", "GlintParams", "read_glint_params",
-           "footprint_covariance", "footprint_sums", "merged_lobe", "merged_area", "g2_over_ao", "glint_eval_pdf",
+           "footprint_covariance", "Footprint", "SeedGrid", "footprint_sums", "merged_lobe", "merged_area", "g2_over_ao", "glint_eval_pdf",
            "pick_lobe", "lobe_of"]
 
 PLUGIN = "mf_glints"
@@ -82,6 +83,7 @@ class GlintTables:
         self.ny, self.nx = ms.grid
         self.height, self.width = ms.resolution
         self.cutoff = float(ms.cutoff)
+        self.grid = SeedGrid(self.nx, self.ny, self.cutoff)
         E = np.asarray(ms.lobe_moments, np.float64)
         mx, my = E[:, 0], E[:, 1]
         central = np.stack([mx, my, E[:, 2] - mx * mx, E[:, 3] - my * my, E[:, 4] - mx * my], -1)
@@ -96,10 +98,28 @@ class GlintTables:
             self.mip_offset = Table(offsets, "float64")
 
 
-def _window(cu, cv, sxx, syy, sxy, nx, ny, cutoff):
+class Footprint(NamedTuple):
+    """A pixel footprint in uv (double precision per lane): centre ``(cu, cv)`` wrapped
+    into the unit square and covariance ``(uu, vv, uv)``."""
+    cu: object
+    cv: object
+    cov: tuple
+
+
+class SeedGrid(NamedTuple):
+    """The ``nx x ny`` lobe seeds of a level (per lane where a MIP level is chosen per
+    lane) and the window ``cutoff`` in standard deviations."""
+    nx: object
+    ny: object
+    cutoff: float
+
+
+def _window(fp: Footprint, grid: SeedGrid):
     """Seed window (first index and count per axis) and inverse covariance ``(iuu, ivv,
-    iuv)`` of the footprint plus the kernel of ``nx x ny`` seeds (the window and weights of
+    iuv)`` of the footprint plus the kernel of the seeds (the window and weights of
     :func:`microfacet.glints.pbrdf.footprint_lobes`)."""
+    cu, cv, (sxx, syy, sxy) = fp
+    nx, ny, cutoff = grid
     kx, ky = (1.0 / nx / _FWHM) ** 2, (1.0 / ny / _FWHM) ** 2
     sxx, syy = sxx + kx, syy + ky
     det = sxx * syy - sxy * sxy
@@ -110,10 +130,12 @@ def _window(cu, cv, sxx, syy, sxy, nx, ny, cutoff):
     return x0, y0, cx, cy, syy / det, sxx / det, -sxy / det
 
 
-def _walk(cu, cv, cov, nx, ny, cutoff, state, body):
+def _walk(fp: Footprint, grid: SeedGrid, state, body):
     """``state = body(index, W, state)`` over the window's seeds (row-major, index wrapped
     into ``nx x ny``; ``W = exp(-q / 2)`` unnormalized), one ``dr.while_loop``."""
-    x0, y0, cx, cy, iuu, ivv, iuv = _window(cu, cv, *cov, nx, ny, cutoff)
+    cu, cv, _ = fp
+    nx, ny, _ = grid
+    x0, y0, cx, cy, iuu, ivv, iuv = _window(fp, grid)
     n = cx * cy
 
     def step(j, s):
@@ -191,8 +213,7 @@ def _footprint_scale(params: GlintParams, suu, svv):
 
 
 def footprint_covariance(params: GlintParams, si):
-    """Centre (wrapped into the unit square) and covariance ``(uu, vv, uv)`` of the
-    footprint (module docstring), shrunk to fit ``max_lobes`` (double precision)."""
+    """The :class:`Footprint` at ``si`` (module docstring), shrunk to fit ``max_lobes``."""
     F64, t = mi.Float64, params.tables
     a, b = si.duv_dx * params.uv_scale, si.duv_dy * params.uv_scale
     has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
@@ -202,7 +223,7 @@ def footprint_covariance(params: GlintParams, si):
     suu, svv, suv = s2 * (ax * ax + bx * bx), s2 * (ay * ay + by * by), s2 * (ax * ay + bx * by)
     scale = _footprint_scale(params, suu, svv)
     u, v = F64(si.uv.x) * params.uv_scale, F64(si.uv.y) * params.uv_scale
-    return u - dr.floor(u), v - dr.floor(v), (suu * scale, svv * scale, suv * scale)
+    return Footprint(u - dr.floor(u), v - dr.floor(v), (suu * scale, svv * scale, suv * scale))
 
 
 def _lobe_terms(tables: GlintTables, index, xh, yh, ki, ko):
@@ -226,7 +247,7 @@ def footprint_sums(params: GlintParams, si, h, light, view):
     """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the footprint (Eq. 9, 13-17),
     as ``_footprint_sums``; with ``exact=false`` ``A_P`` from the merged lobe."""
     t = params.tables
-    cu, cv, cov = footprint_covariance(params, si)
+    fp = footprint_covariance(params, si)
     hz = mi.Float64(h.z)
     xh, yh = -mi.Float64(h.x) / hz, -mi.Float64(h.y) / hz
     ki, ko = _f64(light), _f64(view)
@@ -235,20 +256,20 @@ def footprint_sums(params: GlintParams, si, h, light, view):
         terms = _lobe_terms(t, index, xh, yh, ki, ko)
         return [acc + w * x for acc, x in zip(s, (1.0, *terms))]
 
-    ws, d, ai, vi, ao, vo = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [0.0 * cu] * 6, body)
+    ws, d, ai, vi, ao, vo = _walk(fp, t.grid, [0.0 * fp.cu] * 6, body)
     d, ai, vi, ao, vo = (ratio(x, ws, ws > 0) for x in (d, ai, vi, ao, vo))
     if not params.exact:
-        m = merged_lobe(t, cu, cv, cov)
+        m = merged_lobe(t, fp)
         ai, vi = merged_area(vi, m, ki)
         ao, vo = merged_area(vo, m, ko)
     return d / (hz * hz * hz * hz), ai, vi, ao, vo      # D_P(h) = P_P(h~) / z_h^4 (Eq. 9)
 
 
-def merged_lobe(tables: GlintTables, cu, cv, cov):
+def merged_lobe(tables: GlintTables, fp: Footprint):
     """Raw moments of the footprint's merged lobe (Sec. 4.2.2: ``W``-weighted average
     over the MIP level of :meth:`LobeMixture.mip_level`)."""
     t = tables
-    suu, svv, suv = cov
+    suu, svv, suv = fp.cov
     half = 0.5 * (suu + svv)
     sd = dr.sqrt(half + dr.sqrt(dr.maximum(0.25 * (suu - svv) ** 2 + suv * suv, 0.0)))
     spacing = 1.0 / max(t.nx, t.ny)
@@ -260,7 +281,7 @@ def merged_lobe(tables: GlintTables, cu, cv, cov):
         base = 5.0 * (off + index)
         return [s[0] + w] + [acc + w * t.mip[base + c] for c, acc in enumerate(s[1:])]
 
-    s = _walk(cu, cv, cov, nx, ny, t.cutoff, [0.0 * cu] * 6, body)
+    s = _walk(fp, SeedGrid(nx, ny, t.cutoff), [0.0 * fp.cu] * 6, body)
     return [ratio(x, s[0], s[0] > 0) for x in s[1:]]
 
 
@@ -280,8 +301,8 @@ def g2_over_ao(g2: str, ai, vi, ao, vo):
 def glint_eval_pdf(params: GlintParams, ctx, si, light, active, want_value=True, want_pdf=True):
     """``(F D_P G2 / (4 A_P(o)), D_P z_h / (4 o.h))`` toward ``light`` (either ``None`` when
     not wanted; :meth:`PatchBRDF.eval_cos`)."""
-    h, oh, active = half_vector(ctx, si, light, active)
-    active &= h.z > 0
+    r = half_vector(ctx, si, light, active)
+    h, oh, active = r.h, r.oh, r.active & (r.h.z > 0)
     d, ai, vi, ao, vo = footprint_sums(params, si, h, light, si.wi)
     value = pdf = None
     if want_value:
@@ -292,11 +313,11 @@ def glint_eval_pdf(params: GlintParams, ctx, si, light, active, want_value=True,
     return value, pdf
 
 
-def pick_lobe(tables: GlintTables, cu, cv, cov, sample1):
+def pick_lobe(tables: GlintTables, fp: Footprint, sample1):
     """The index of the lobe ``i`` of the footprint's window with ``sum_{j<i} W_j <= sample1
     sum W < sum_{j<=i} W_j`` (two walks: the total, then the pick)."""
-    t, zero = tables, 0.0 * cu
-    ws = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero], lambda i, w, s: [s[0] + w])[0]
+    grid, zero = tables.grid, 0.0 * fp.cu
+    ws = _walk(fp, grid, [zero], lambda i, w, s: [s[0] + w])[0]
     target = mi.Float64(sample1) * ws
 
     def pick(index, w, s):
@@ -304,7 +325,7 @@ def pick_lobe(tables: GlintTables, cu, cv, cov, sample1):
         take = (acc <= target) & (acc + w > target)
         return [acc + w, dr.select(take, index, chosen), index]
 
-    _, chosen, last = _walk(cu, cv, cov, t.nx, t.ny, t.cutoff, [zero, zero - 1.0, zero], pick)
+    _, chosen, last = _walk(fp, grid, [zero, zero - 1.0, zero], pick)
     return dr.select(chosen < 0, last, chosen)    # sample1 * ws rounded up to ws
 
 
@@ -361,8 +382,8 @@ class GlintsBSDF:
         density (``sample2``), the view reflected about it (Sec. 5); weight ``eval / pdf``."""
         view = si.wi
         active = reflecting(ctx, si, active)
-        cu, cv, cov = footprint_covariance(self.params, si)
-        h = lobe_of(self.params.tables, pick_lobe(self.params.tables, cu, cv, cov, sample1)).sample_p22(sample2)
+        fp = footprint_covariance(self.params, si)
+        h = lobe_of(self.params.tables, pick_lobe(self.params.tables, fp, sample1)).sample_p22(sample2)
         light = 2.0 * dr.dot(view, h) * h - view
         value, pdf = glint_eval_pdf(self.params, ctx, si, light, active & (light.z > 0))
         active &= (pdf > 0) & (light.z > 0)
