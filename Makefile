@@ -10,7 +10,7 @@ SCALING ?= 1e4,1e5,1e6,1e7
 PRECOMPILE_DTYPES ?= $(if $(filter true,$(CI)),float64$(comma)float32,float64)
 comma := ,
 
-.PHONY: setup setup-blender setup-npm demo test bench docs clean
+.PHONY: setup setup-blender setup-npm demo test bench docs tutorials clean
 
 $(VENV)/.installed: pyproject.toml
 	@echo "setup: creating $(VENV) and installing microfacet with its test, mitsuba, dask, view, export and docs extras (pip)"
@@ -85,8 +85,13 @@ demo: setup
 test: setup
 	$(PY) -m pytest -q -n auto --maxprocesses 4
 
+# the executed tutorials (examples/NN_*.py, docs/scripts/tutorials.py): each script runs in its own
+# process into build/tutorials/, again only when its text changed (FORCE=1: all of them)
+tutorials: $(VENV)/.installed
+	$(PY) docs/scripts/tutorials.py $(if $(FORCE),--force)
+
 # the docs site (mkdocs.yml: MkDocs + Material + mkdocstrings), warnings as errors, into site/
-docs: $(VENV)/.installed
+docs: tutorials
 	DISABLE_MKDOCS_2_WARNING=true NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
 
 bench: setup

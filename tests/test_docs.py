@@ -3,6 +3,7 @@ commands CI and a newcomer need, the getting-started recipe runs, and the docs s
 with warnings as errors (mkdocs --strict also fails on broken internal links and anchors)."""
 import doctest
 import importlib
+import importlib.util
 import os
 import re
 import subprocess
@@ -93,6 +94,9 @@ def test_docs_build_strictly(tmp_path):
         pytest.skip("mkdocs is not installed (pip install -e '.[docs]')")
     env = dict(os.environ, DISABLE_MKDOCS_2_WARNING="true", NO_MKDOCS_2_WARNING="1")
     site = tmp_path / "site"
+    tut = _tutorials()
+    for script in TUTORIALS:            # as `make tutorials` before the build (cached by script hash)
+        tut.run(script)
     t = time.perf_counter()
     r = subprocess.run([str(mkdocs), "build", "--strict", "--site-dir", str(site)], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=300)
@@ -107,3 +111,69 @@ def test_docs_build_strictly(tmp_path):
     assert 'id="microfacet.brdf.MicrofacetBRDF"' in (site / "api" / "microfacet.html").read_text(encoding="utf-8")
     for md in (ROOT / "experiments" / "results").glob("*.md"):
         assert (site / "results" / md.with_suffix(".html").name).is_file(), md.name
+    for script in TUTORIALS:
+        page = (site / "tutorials" / f"{script.stem}.html").read_text(encoding="utf-8")
+        for name in tut.run(script).images:
+            assert f'src="{script.stem}/{name}"' in page and (site / "tutorials" / script.stem / name).is_file()
+    import microfacet.mitsuba as mfm
+    if hasattr(mfm, "plugin_reference"):   # the parameter tables come from the plugin docstrings
+        plugins = (site / "mitsuba-plugins.html").read_text(encoding="utf-8")
+        assert "plugin_reference()" in plugins
+        for plugin in mfm.PLUGINS:
+            assert f'id="{plugin}"' in plugins, plugin
+
+
+def _tutorials():
+    """docs/scripts/tutorials.py, the executor of the tutorials of examples/."""
+    spec = importlib.util.spec_from_file_location("docs_tutorials", ROOT / "docs" / "scripts" / "tutorials.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(spec.name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+TUTORIALS = sorted((ROOT / "examples").glob("[0-9][0-9]_*.py"))
+
+
+def test_tutorials_are_found():
+    assert len(TUTORIALS) >= 4, [p.name for p in TUTORIALS]
+
+
+@pytest.mark.parametrize("script", TUTORIALS, ids=lambda p: p.stem)
+def test_tutorial_runs_and_writes_its_pictures(script, tmp_path):
+    """Each tutorial runs as the docs run it (its own process, an empty folder, no cache) and
+    writes every picture its code names (the "*.png" literals of the script); its page has
+    the title, the code and those pictures."""
+    if script.stem == "05_mitsuba" and importlib.util.find_spec("mitsuba") is None:
+        pytest.skip("mitsuba is not installed (pip install -e '.[mitsuba]'): 05_mitsuba renders nothing")
+    tut = _tutorials()
+    result = tut.run(script, force=True, folder=tmp_path / script.stem)
+    named = set(re.findall(r"[\"']([\w-]+\.png)[\"']", script.read_text(encoding="utf-8")))
+    assert named, f"{script.name} names no picture"
+    for name in named:
+        path = result.folder / name
+        assert path.is_file() and path.stat().st_size > 1000, f"{script.name} did not write {name}"
+    assert set(result.images) >= named
+    page = tut.page(script, result, "img/")
+    title = tut.split_docstring(script)[0]
+    assert page.startswith(f"# {title}\n") and "```python" in page
+    assert all(f"](img/{name})" in page for name in named)
+
+
+def test_tutorial_cache_reruns_only_a_changed_script(tmp_path):
+    """The executor keeps a script's output until the script's text changes."""
+    tut = _tutorials()
+    script = tmp_path / "00_tiny.py"
+    script.write_text('"""Tiny\n\nWrites one picture."""\nimport microfacet as mf\nimport numpy as np\n'
+                      'mf.io.write_png("tiny.png", np.random.default_rng().random((48, 48, 3)))\n'
+                      'print("done")\n', encoding="utf-8")
+    first = tut.run(script, folder=tmp_path / "out")
+    assert first.images == ("tiny.png",) and first.output.strip() == "done"
+    picture = (tmp_path / "out" / "tiny.png").read_bytes()
+    assert tut.run(script, folder=tmp_path / "out").seconds == round(first.seconds, 2)   # from the stamp
+    assert (tmp_path / "out" / "tiny.png").read_bytes() == picture                       # not rerun
+    script.write_text(script.read_text(encoding="utf-8").replace("done", "again"), encoding="utf-8")
+    assert tut.run(script, folder=tmp_path / "out").output.strip() == "again"
+    script.write_text("import sys\nsys.exit(3)\n", encoding="utf-8")
+    with pytest.raises(RuntimeError, match="exit 3"):
+        tut.run(script, folder=tmp_path / "bad")

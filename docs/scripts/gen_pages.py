@@ -7,12 +7,19 @@
   (``experiments/results/*.md``, ``benchmarks/results/*.md``), included as written, with the
   pictures they link to; ``results/index.md`` lists them with the command that regenerates each.
 * ``changelog.md``: ``CHANGELOG.md``.
+* ``tutorials/*.md``: the executed tutorials of ``examples/`` (``docs/scripts/tutorials.py``:
+  each script run in its own process, cached by script hash), code, output and pictures.
+* ``mitsuba-plugins.md``: the hand-written page with its parameter-reference block replaced by
+  :func:`microfacet.mitsuba.plugin_reference` (the tables of the plugin classes' docstrings)
+  where that function exists.
 """
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import re
+import sys
 from pathlib import Path
 
 import mkdocs_gen_files
@@ -151,9 +158,64 @@ def results_index(listed) -> str:
     return "\n".join(lines) + "\n"
 
 
+# -- tutorials --------------------------------------------------------------------------------
+
+
+def _tutorials_module():
+    spec = importlib.util.spec_from_file_location("docs_tutorials", Path(__file__).with_name("tutorials.py"))
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module          # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def tutorial_pages() -> None:
+    """Run the stale tutorials and write ``tutorials/<stem>.md`` with their pictures."""
+    tut = _tutorials_module()
+    entries = []
+    for script in tut.scripts():
+        result = tut.run(script)
+        with mkdocs_gen_files.open(f"tutorials/{script.stem}.md", "w") as f:
+            f.write(tut.page(script, result, f"{script.stem}/"))
+        for name in result.images:
+            with mkdocs_gen_files.open(f"tutorials/{script.stem}/{name}", "wb") as f:
+                f.write((result.folder / name).read_bytes())
+        title, intro, _ = tut.split_docstring(script)
+        entries.append((f"{script.stem}.md", title, _cell(intro.split(". ")[0].rstrip(".") + ".")))
+    with mkdocs_gen_files.open("tutorials/index.md", "w") as f:
+        f.write(tut.index(entries))
+
+
+# -- Mitsuba plugin reference -----------------------------------------------------------------
+
+PLUGIN_BLOCK = re.compile(r"<!-- plugin-reference:start.*?-->.*?<!-- plugin-reference:end -->", re.S)
+
+
+def mitsuba_plugins_page() -> str | None:
+    """``mitsuba-plugins.md`` with its parameter-reference block made of
+    ``microfacet.mitsuba.plugin_reference()`` (headings one level down), or None where the
+    function does not exist (the hand-written tables stay)."""
+    import microfacet.mitsuba as mfm
+    if not hasattr(mfm, "plugin_reference"):
+        return None
+    text = (ROOT / "docs" / "mitsuba-plugins.md").read_text(encoding="utf-8")
+    if not PLUGIN_BLOCK.search(text):
+        raise ValueError("docs/mitsuba-plugins.md: the plugin-reference markers are missing")
+    generated = re.sub(r"^(#+) ", r"#\1 ", mfm.plugin_reference().strip(), flags=re.M)
+    block = ("Generated from the docstrings of the plugin classes when the docs are built "
+             "(`microfacet.mitsuba.plugin_reference()`, as Mitsuba generates its own plugin "
+             "reference from its sources).\n\n" + generated)
+    return PLUGIN_BLOCK.sub(lambda m: block, text)
+
+
 with mkdocs_gen_files.open("cli-reference.md", "w") as f:
     f.write(cli_reference())
 with mkdocs_gen_files.open("results/index.md", "w") as f:
     f.write(results_index(results_pages()))
 with mkdocs_gen_files.open("changelog.md", "w") as f:
     f.write((ROOT / "CHANGELOG.md").read_text(encoding="utf-8"))
+tutorial_pages()
+_plugins = mitsuba_plugins_page()
+if _plugins is not None:
+    with mkdocs_gen_files.open("mitsuba-plugins.md", "w") as f:
+        f.write(_plugins)
