@@ -45,6 +45,17 @@ class TransmittedLambertian(BRDF):
     eta : float
         Relative index of the surface the light crosses, ``> 1`` (default 1.5: paints,
         plastics).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> body = TransmittedLambertian(reflectance=(0.5, 0.2, 0.1), eta=1.5)
+    >>> wi = wo = np.array([0.0, 0.0, 1.0])
+    >>> (body.eval_cos(wi, wo) * np.pi).round(4)       # R at normal incidence
+    array([0.5, 0.2, 0.1])
+    >>> grazing = np.array([np.sin(1.4), 0.0, np.cos(1.4)])
+    >>> (body.eval_cos(grazing, wo) / np.cos(1.4) * np.pi).round(4)   # darker: the surface reflects more there
+    array([0.315, 0.126, 0.063])
     """
 
     def __init__(self, reflectance=1.0, eta: float = 1.5):

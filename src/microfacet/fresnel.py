@@ -38,7 +38,17 @@ def _cos(cos_theta_d) -> np.ndarray:
 
 
 class Fresnel:
-    """A Fresnel term: ``F(cos theta_d) -> RGB`` (Listing 2.3)."""
+    """A Fresnel term: ``F(cos theta_d) -> RGB`` (Listing 2.3).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.fresnel import Dielectric, Fresnel
+    >>> f = Dielectric(1.5)                     # every Fresnel term maps cos(theta_d) to RGB
+    >>> isinstance(f, Fresnel), f(np.array([1.0, 0.0])).round(4)
+    (True, array([[0.04, 0.04, 0.04],
+           [1.  , 1.  , 1.  ]]))
+    """
 
     def __call__(self, cos_theta_d) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
@@ -56,7 +66,16 @@ class Fresnel:
 
 
 class Ideal(Fresnel):
-    """Ideal mirror microfacets, ``F = 1`` (Eq. 2.3)."""
+    """Ideal mirror microfacets, ``F = 1`` (Eq. 2.3).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> Ideal()(np.array([1.0, 0.5, 0.0]))
+    array([[1., 1., 1.],
+           [1., 1., 1.],
+           [1., 1., 1.]])
+    """
 
     def __call__(self, cos_theta_d) -> np.ndarray:
         return np.ones(np.shape(cos_theta_d) + (3,))
@@ -164,6 +183,17 @@ class F82Tint(Fresnel):
     term through the same ``f0`` errs by up to 0.13 (aluminium; tests). Example::
 
         F82Tint([0.95, 0.64, 0.54], [0.9, 0.8, 0.8])(np.array([1.0, 1 / 7]))
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = F82Tint([0.95, 0.64, 0.54], [0.9, 0.8, 0.8])
+    >>> f(np.array([1.0, 1 / 7])).round(4)     # f0 at normal incidence, tinted near 82 degrees
+    array([[0.95  , 0.64  , 0.54  ],
+           [0.8758, 0.6452, 0.6023]])
+    >>> gold = Conductor.metal("Au")
+    >>> F82Tint.from_conductor(gold.eta, gold.k).f0.round(3)
+    array([0.967, 0.803, 0.324])
     """
 
     def __init__(self, f0=(0.95, 0.64, 0.54), f82=1.0):

@@ -72,6 +72,17 @@ class SlopeDistribution:
     Subclasses provide the standard-form functions ``p22_std``, ``p1_std``,
     ``lambda_std``, ``sample_visible_std``, ``sample_p22_std`` and
     ``second_moment_std``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.distributions import GGX, SlopeDistribution
+    >>> d = GGX(alpha_x=0.3, alpha_y=0.1, rho=0.2, mean_slope=(0.1, 0.0))
+    >>> isinstance(d, SlopeDistribution), d.alpha_x, d.alpha_y, d.rho
+    (True, array(0.3), array(0.1), array(0.2))
+    >>> h = np.array([0.0, 0.0, 1.0])
+    >>> float(d.ndf(h).round(4))                     # D(h) at the macro normal
+    8.6989
     """
 
     def __init__(self, alpha=None, *, alpha_x=None, alpha_y=None, rho=0.0, mean_slope=(0.0, 0.0)):

@@ -13,6 +13,17 @@ class GGX(SlopeDistribution):
     """GGX slopes: ``P_std(x~, y~) = 1 / (pi (1 + x~^2 + y~^2)^2)`` (Table 2.II).
 
     Its first slope moments are finite, its second ones are not.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> d = GGX(alpha=0.2)
+    >>> float(d.ndf(np.array([0.0, 0.0, 1.0])).round(4))   # D(n) = 1 / (pi alpha^2), as Beckmann's
+    7.9577
+    >>> h = np.array([np.sin(0.6), 0.0, np.cos(0.6)])
+    >>> from microfacet.distributions import Beckmann
+    >>> round(float(d.ndf(h) / Beckmann(alpha=0.2).ndf(h)), 1)    # the longer tail, 34 degrees off the normal
+    748.2
     """
 
     second_moment_std = np.inf
