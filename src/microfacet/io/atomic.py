@@ -10,6 +10,12 @@ next writer of the same output recognises as stale (:func:`remove_stale`: its ow
 dead process of this host) and removes, while the temporaries of writers still running,
 e.g. a second command writing the same output, are left alone. :func:`folder_lock` lets
 one batch at a time write into a folder.
+
+Examples
+--------
+>>> from microfacet.io.atomic import TMP_SUFFIX, LOCK_NAME, STAGING_NAME
+>>> TMP_SUFFIX, LOCK_NAME, STAGING_NAME
+('.tmp', '.microfacet.lock', 'microfacet-staging')
 """
 from __future__ import annotations
 
@@ -61,7 +67,16 @@ def _temporary(path: Path) -> Path:
 def check_writable(path: str | os.PathLike) -> None:
     """Raise the ``OSError`` that :func:`atomic_path` would raise for ``path`` (its folder
     missing, read-only, not a folder, ...), by creating and removing a temporary file there:
-    commands check their outputs before their work."""
+    commands check their outputs before their work.
+
+    Examples
+    --------
+    >>> check_writable("out.exr")                        # the current folder is writable: no error
+    >>> check_writable("missing-folder/out.exr")
+    Traceback (most recent call last):
+        ...
+    FileNotFoundError: [Errno 2] cannot write here: No such file or directory: 'missing-folder/out.exr'
+    """
     _temporary(Path(path)).unlink()
 
 
@@ -75,6 +90,14 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     any exception it is removed and the exception propagates, leaving ``path`` as it was
     (an ``OSError`` that named no file or the temporary one, e.g. a full disk, is raised
     again naming ``path``).
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> with atomic_path("table.csv") as tmp:           # write the whole file to tmp ...
+    ...     _ = tmp.write_text("a,b" + chr(10))
+    >>> Path("table.csv").read_text().strip()            # ... then it replaces table.csv at once
+    'a,b'
     """
     path = Path(path)
     tmp = _temporary(path)
@@ -99,7 +122,20 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
 def temporary_owner(tmp: str | os.PathLike, path: str | os.PathLike) -> tuple[int, str] | None | bool:
     """Who wrote the temporary file ``tmp`` of the output ``path``: ``(pid, host)``; ``None``
     for a temporary written before owners were recorded; ``False`` if ``tmp`` is not one of
-    ``path``'s temporaries (e.g. one of ``path.x.exr``'s, whose name starts alike)."""
+    ``path``'s temporaries (e.g. one of ``path.x.exr``'s, whose name starts alike).
+
+    Examples
+    --------
+    >>> import os
+    >>> from pathlib import Path
+    >>> with atomic_path("image.png") as tmp:
+    ...     owner = temporary_owner(tmp, "image.png")
+    ...     _ = tmp.write_bytes(b"x")
+    >>> owner[0] == os.getpid()                           # this process wrote it
+    True
+    >>> temporary_owner("other.png.tmp", "image.png")     # not a temporary of image.png
+    False
+    """
     name, prefix = Path(tmp).name, f".{Path(path).name}."
     if not (name.startswith(prefix) and name.endswith(TMP_SUFFIX)):
         return False
@@ -134,7 +170,12 @@ def remove_stale(path: str | os.PathLike, other_hosts: bool = False) -> list[Pat
     :func:`folder_lock` and reruns a task whose worker died elsewhere). Temporaries of live
     processes (another command writing the same output) are kept. Returns the paths removed.
 
-    >>> remove_stale("out/h.exr")       # after a kill -9 of 'microfacet bake h.png -o out/h.exr'
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> Path("out").mkdir()
+    >>> _ = Path("out/.h.exr.4242@box.x1y2z3w4.tmp").write_bytes(b"")   # left by a killed writer
+    >>> remove_stale("out/h.exr", other_hosts=True)   # a batch rerunning a task of a dead worker
     [PosixPath('out/.h.exr.4242@box.x1y2z3w4.tmp')]
     """
     path = Path(path)
@@ -178,8 +219,15 @@ def staging_folder(folder: str | os.PathLike, last: str = "") -> Iterator[Path]:
     end; when it fails (a full disk, Ctrl-C), remove the staging folder, leaving ``folder``
     as it was. Staging folders of dead processes (a ``kill -9``) are removed first.
 
+    Examples
+    --------
+    >>> import os
+    >>> os.makedirs("report", exist_ok=True)
     >>> with staging_folder("report", last="index.html") as stage:
-    ...     write_text(stage / "index.html", page)
+    ...     _ = write_text(stage / "table.csv", "a,b")
+    ...     _ = write_text(stage / "index.html", "<p>done</p>")
+    >>> sorted(os.listdir("report"))                   # both files, moved in at the end
+    ['index.html', 'table.csv']
     """
     folder = Path(folder)
     remove_stale(folder / STAGING_NAME)
@@ -201,7 +249,18 @@ def staging_folder(folder: str | os.PathLike, last: str = "") -> Iterator[Path]:
 
 
 class FolderBusy(OSError):
-    """Another process holds the folder's :func:`folder_lock` (and ``wait`` was false)."""
+    """Another process holds the folder's :func:`folder_lock` (and ``wait`` was false).
+
+    Examples
+    --------
+    >>> with folder_lock("."):
+    ...     try:
+    ...         with folder_lock(".", wait=False):
+    ...             pass
+    ...     except FolderBusy as e:
+    ...         print("busy")
+    busy
+    """
 
 
 def _lock_holder(fd: int) -> int:
@@ -222,8 +281,15 @@ def folder_lock(folder: str | os.PathLike, wait: bool = True, on_wait=None) -> I
     dies with its process (``kill -9`` included: the file then stays, unlocked). Elsewhere
     than POSIX it is a no-op.
 
-    >>> with folder_lock("out"):
-    ...     ...                             # write into out/
+    Examples
+    --------
+    >>> import os
+    >>> os.makedirs("batch", exist_ok=True)
+    >>> with folder_lock("batch") as lock:
+    ...     lock.name                       # write into batch/ here
+    '.microfacet.lock'
+    >>> os.path.exists("batch/.microfacet.lock")     # removed on release
+    False
     """
     folder = Path(folder)
     try:
@@ -269,12 +335,24 @@ def folder_lock(folder: str | os.PathLike, wait: bool = True, on_wait=None) -> I
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically; return ``path``."""
+    """Write ``data`` to ``path`` atomically; return ``path``.
+
+    Examples
+    --------
+    >>> write_bytes("data.bin", b"MERL").read_bytes()
+    b'MERL'
+    """
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return Path(path)
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` (UTF-8, ``\\n`` line ends) to ``path`` atomically; return ``path``."""
+    """Write ``text`` (UTF-8, ``\\n`` line ends) to ``path`` atomically; return ``path``.
+
+    Examples
+    --------
+    >>> write_text("notes.txt", "hello").read_text()
+    'hello'
+    """
     return write_bytes(path, text.encode("utf-8"))

@@ -2,6 +2,14 @@
 
 Images are ``(H, W)`` or ``(H, W, C)`` arrays, row 0 at the top, with ``C`` = 1 (``Y``),
 3 (``R, G, B``) or 4 (``R, G, B, A``) channels of linear values.
+
+Examples
+--------
+>>> from microfacet.io.exr import COMPRESSIONS, EXR_MAGIC
+>>> sorted(COMPRESSIONS)
+['none', 'piz', 'rle', 'zip', 'zips', 'zstd']
+>>> EXR_MAGIC.hex()
+'762f3101'
 """
 from __future__ import annotations
 
@@ -37,7 +45,17 @@ COMPRESSIONS = {"none": OpenEXR.NO_COMPRESSION, "rle": OpenEXR.RLE_COMPRESSION,
 
 
 def exr_compression(name: str):
-    """The OpenEXR compression constant for a lossless ``name`` in :data:`COMPRESSIONS`."""
+    """The OpenEXR compression constant for a lossless ``name`` in :data:`COMPRESSIONS`.
+
+    Examples
+    --------
+    >>> exr_compression("zip") == COMPRESSIONS["zip"]
+    True
+    >>> exr_compression("lossy")
+    Traceback (most recent call last):
+        ...
+    ValueError: EXR compression must be one of ['none', 'piz', 'rle', 'zip', 'zips', 'zstd'] (lossless), got 'lossy'
+    """
     if name not in COMPRESSIONS:
         raise ValueError(f"EXR compression must be one of {sorted(COMPRESSIONS)} (lossless), got {name!r}")
     return COMPRESSIONS[name]
@@ -53,7 +71,16 @@ def exr_threads():
     """Let OpenEXR (de)compress on every core this process may use (OpenEXR's default, 0,
     works on the calling thread only), restoring its process-global thread count when the
     last concurrent user leaves: a lock and a count of users make overlapping blocks in
-    several threads safe (a save/restore per block would restore too early, or leak)."""
+    several threads safe (a save/restore per block would restore too early, or leak).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> with exr_threads():
+    ...     path = write_exr("big.exr", np.zeros((64, 64, 3)))
+    >>> path.name
+    'big.exr'
+    """
     global _threads_users, _threads_before
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     with _threads_lock:
@@ -79,7 +106,16 @@ def exr_write_errors(path: str | os.PathLike):
     """Within the block, an OpenEXR write's ``RuntimeError`` (``Failed to write pixel data to
     image file "...tmp". No space left on device.``) becomes an ``OSError`` naming ``path``,
     with the system error it reports (``ENOSPC``, ...; else ``EIO`` and OpenEXR's message), so
-    that a command says it in one line: ``out.exr: No space left on device``."""
+    that a command says it in one line: ``out.exr: No space left on device``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> with exr_write_errors("out.exr"):              # as write_exr uses it
+    ...     path = write_exr("out.exr", np.ones((2, 2)))
+    >>> path.name
+    'out.exr'
+    """
     try:
         yield
     except RuntimeError as e:
@@ -138,7 +174,17 @@ def exr_read_errors(path: str | os.PathLike):
     """Within the block (OpenEXR reads of ``path``), OpenEXR's own messages on stdout/stderr are
     captured, not printed, and an exception becomes one :class:`MicrofacetError` naming the file
     and the cause OpenEXR gave (``trunc.exr: unreadable or corrupt EXR ((EXR_ERR_BAD_CHUNK_LEADER)
-    ...)``, not its binding's "file has 0 parts")."""
+    ...)``, not its binding's "file has 0 parts").
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> _ = Path("trunc.exr").write_bytes(EXR_MAGIC + bytes(16))
+    >>> read_exr("trunc.exr")                           # exr_read_errors turns OpenEXR's error into one line
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: trunc.exr: unreadable or corrupt EXR (...)
+    """
     path = Path(path)
     text: list[str] = []
     try:
@@ -188,6 +234,14 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
     allow_nonfinite : bool
         Write NaN/inf samples (and values beyond the float32/half range, which become inf)
         instead of raising ``ValueError``, as :func:`read_exr` reads them only when asked.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> write_exr("ramp.exr", np.linspace(0, 1, 8).reshape(2, 4), compression="piz").name
+    'ramp.exr'
+    >>> read_exr("ramp.exr").shape
+    (2, 4, 1)
     """
     with np.errstate(over="ignore"):                 # overflow to inf: counted below
         a = _as_channels(image).astype(np.float16 if half else np.float32)
@@ -203,7 +257,17 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
 
 
 def check_exr_magic(path: Path, kind: str = "an OpenEXR file") -> None:
-    """Raise :class:`MicrofacetError` "``path``: not ``kind``" unless ``path`` starts with :data:`EXR_MAGIC`."""
+    """Raise :class:`MicrofacetError` "``path``: not ``kind``" unless ``path`` starts with :data:`EXR_MAGIC`.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> _ = Path("not.exr").write_text("text")
+    >>> check_exr_magic(Path("not.exr"))
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: not.exr: not an OpenEXR file (bad magic number 74657874)
+    """
     magic = read_bytes(path, kind, 4)
     if magic != EXR_MAGIC:
         raise MicrofacetError(f"{path}: not {kind} (bad magic number {magic.hex() or 'empty'})")
@@ -223,6 +287,14 @@ def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarr
         memory (the size is read from its header first), has
         neither ``R, G, B`` nor ``Y`` channels, or holds NaN/inf (unless ``allow_nonfinite``).
         The message names the file and the problem.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> image = np.random.default_rng(0).random((4, 6, 3))
+    >>> _ = write_exr("image.exr", image)
+    >>> bool(np.array_equal(read_exr("image.exr"), image.astype(np.float32)))   # float32 storage
+    True
     """
     path = Path(path)
     check_exr_magic(path)

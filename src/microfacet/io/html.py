@@ -27,14 +27,27 @@ code { background: #f3f3f3; padding: 0 0.2em; }
 
 
 def html_figure(src: str, caption: str, alt: str = "", css_class: str = "") -> str:
-    """An ``<figure>`` with one image and its (escaped) caption."""
+    """An ``<figure>`` with one image and its (escaped) caption.
+
+    Examples
+    --------
+    >>> html_figure("a.png", "GGX & Beckmann")
+    '<figure><img src="a.png" alt="GGX &amp; Beckmann"><figcaption>GGX &amp; Beckmann</figcaption></figure>'
+    """
     cls = f' class="{escape(css_class)}"' if css_class else ""
     return (f'<figure><img src="{escape(src)}" alt="{escape(alt or caption)}"{cls}>'
             f"<figcaption>{escape(caption)}</figcaption></figure>")
 
 
 def html_grid(rows: Sequence[tuple[str, Sequence[tuple[str, str]]]]) -> str:
-    """A table of images: each row is ``(row_label, cells)``, each cell ``(src, caption)``."""
+    """A table of images: each row is ``(row_label, cells)``, each cell ``(src, caption)``.
+
+    Examples
+    --------
+    >>> html = html_grid([("GGX", [("ggx_0.png", "alpha 0.1"), ("ggx_1.png", "alpha 0.3")])])
+    >>> html.count("<img"), html.startswith("<table")
+    (2, True)
+    """
     body = "".join(
         f'<tr><th class="row">{escape(label)}</th>'
         + "".join(f'<td><img src="{escape(src)}" alt="{escape(label)}: {escape(cap)}"><br>'
@@ -45,7 +58,14 @@ def html_grid(rows: Sequence[tuple[str, Sequence[tuple[str, str]]]]) -> str:
 
 
 def html_page(title: str, body: str) -> str:
-    """A complete, self-contained HTML5 page (inline CSS, no scripts)."""
+    """A complete, self-contained HTML5 page (inline CSS, no scripts).
+
+    Examples
+    --------
+    >>> page = html_page("Demo", "<p>hello</p>")
+    >>> page.startswith("<!DOCTYPE html>"), "<title>Demo</title>" in page
+    (True, True)
+    """
     return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
             f"<title>{escape(title)}</title>\n<style>{_CSS}</style>\n</head>\n<body>\n"
             f"<h1>{escape(title)}</h1>\n{body}\n</body>\n</html>\n")

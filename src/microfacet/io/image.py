@@ -16,7 +16,19 @@ __all__ = ["read_image"]
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """The samples of a PNG (``uint8``/``uint16`` as stored, :func:`read_png_data`) or an
-    EXR (float64, :func:`read_exr`), chosen by the file's signature, not its name."""
+    EXR (float64, :func:`read_exr`), chosen by the file's signature, not its name.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.io import write_png_data, write_exr
+    >>> _ = write_png_data("map.png", np.full((2, 3, 3), 200, np.uint8))
+    >>> read_image("map.png").dtype, read_image("map.png").shape
+    (dtype('uint8'), (2, 3, 3))
+    >>> _ = write_exr("map.exr", np.zeros((2, 3, 3)))
+    >>> read_image("map.exr").dtype
+    dtype('float64')
+    """
     path = Path(path)
     head = read_bytes(path, "an image", 8)
     if head.startswith(PNG_MAGIC):

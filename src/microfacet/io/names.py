@@ -2,6 +2,12 @@
 
 ``nickel.binary.gz`` -> ``nickel`` (a measured material), ``h.png`` -> ``h`` (a map),
 ``fit.npz`` -> ``fit``. Used by the CLI's output rule, batches and fits alike.
+
+Examples
+--------
+>>> from microfacet.io.names import MEASURED_SUFFIXES, DATA_SUFFIXES
+>>> MEASURED_SUFFIXES[:3], DATA_SUFFIXES
+(('.binary.gz', '.bsdf.gz', '.bin.gz'), ('.png', '.exr', '.npz'))
 """
 from __future__ import annotations
 
@@ -17,7 +23,13 @@ DATA_SUFFIXES = (".png", ".exr", ".npz")
 
 
 def material_name(path: str | os.PathLike) -> str:
-    """File name without its measured-BRDF suffix: ``nickel.binary.gz`` -> ``nickel``."""
+    """File name without its measured-BRDF suffix: ``nickel.binary.gz`` -> ``nickel``.
+
+    Examples
+    --------
+    >>> material_name("data/merl/nickel.binary.gz"), material_name("ibiza.bsdf")
+    ('nickel', 'ibiza')
+    """
     name = Path(path).name
     for suffix in MEASURED_SUFFIXES:
         if name.lower().endswith(suffix) and len(name) > len(suffix):
@@ -26,6 +38,12 @@ def material_name(path: str | os.PathLike) -> str:
 
 
 def input_name(source: str | os.PathLike) -> str:
-    """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``."""
+    """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``.
+
+    Examples
+    --------
+    >>> input_name("nickel.binary.gz"), input_name("maps/height.png"), input_name("fit.npz")
+    ('nickel', 'height', 'fit')
+    """
     name = material_name(source)
     return name.rsplit(".", 1)[0] if Path(name).suffix.lower() in DATA_SUFFIXES else name

@@ -43,6 +43,12 @@ average (mean length ``|v|`` outside ``1 +- 0.1``, stored ``z``; the shipped 8-b
 ``glitterman_scratches.png`` has 1.015, a biased map read as signed about 1.22); most
 texels facing away (more than half with ``n_z <= 0``, or ``x^2 + y^2 > 1`` when ``z`` is
 reconstructed). The last two mean the map looks inconsistent: a wrong ``encoding`` or ``z``.
+
+Examples
+--------
+>>> from microfacet.io.normalmap import ENCODINGS, Z_SOURCES, MAX_THETA_DEG
+>>> ENCODINGS, Z_SOURCES, MAX_THETA_DEG
+(('auto', 'biased', 'signed', 'offset'), ('auto', 'stored', 'reconstruct'), 89.0)
 """
 from __future__ import annotations
 
@@ -82,6 +88,13 @@ class NormalMapReport:
     content; ``repaired`` counts the clamped texels, ``facing_away`` those with ``n_z <= 0``
     (or ``x^2 + y^2 > 1`` with ``z`` reconstructed); ``mean_length`` is the mean length of the
     decoded vectors before renormalization (``None`` when ``z`` is reconstructed).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> _, report = decode_normals(np.full((2, 2, 3), (128, 128, 255), np.uint8), source="flat.png")
+    >>> report.source, report.shape, report.encoding, report.repaired
+    ('flat.png', (2, 2), 'biased', 0)
     """
     source: str
     shape: tuple[int, int]
@@ -205,6 +218,14 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
     repaired, each on its own (module docstring).
     Raises :class:`MicrofacetError` (naming ``source``) for a wrong shape, dtype or
     non-finite samples, ``ValueError`` for an unknown ``encoding`` or ``z``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> texels = np.full((2, 2, 3), (128, 128, 255), np.uint8)     # the flat colour of a biased map
+    >>> normals, report = decode_normals(texels)
+    >>> normals[0, 0].round(3), report.encoding
+    (array([0.004, 0.004, 1.   ]), 'biased')
     """
     where = f"{source}: " if source else ""
     a = np.asarray(image)
@@ -246,7 +267,17 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
 def read_normals(path_or_image, encoding: str = "auto", z: str = "auto", *,
                  warn: bool = True) -> tuple[np.ndarray, NormalMapReport]:
     """Unit normals ``(H, W, 3)`` and report of a normal map file (8/16-bit PNG or EXR, by
-    content) or array: :func:`decode_normals` of its samples."""
+    content) or array: :func:`decode_normals` of its samples.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.io import write_png_data
+    >>> _ = write_png_data("flat.png", np.full((4, 4, 3), (128, 128, 255), np.uint8))
+    >>> normals, report = read_normals("flat.png")
+    >>> normals.shape, report.shape
+    ((4, 4, 3), (4, 4))
+    """
     if isinstance(path_or_image, (str, os.PathLike)):
         return decode_normals(read_image(path_or_image), encoding, z, source=str(path_or_image), warn=warn)
     return decode_normals(path_or_image, encoding, z, warn=warn)
@@ -255,7 +286,15 @@ def read_normals(path_or_image, encoding: str = "auto", z: str = "auto", *,
 def normals_to_slopes(normals) -> np.ndarray:
     """Slopes ``(..., 2)`` ``(-n_x / n_z, -n_y / n_z)`` of upper normals ``(..., 3)`` (thesis
     Eq. 2.9, as :func:`microfacet.geometry.normal_to_slope`, into one array); decoded normals
-    have ``|slope| <= tan 89deg``."""
+    have ``|slope| <= tan 89deg``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> normals_to_slopes(np.array([[0.6, 0.0, 0.8], [0.0, 0.0, 1.0]])).round(3)
+    array([[-0.75, -0.  ],
+           [-0.  , -0.  ]])
+    """
     n = np.asarray(normals, dtype=np.float64)
     slopes = np.divide(n[..., :2], n[..., 2:3])
     return np.negative(slopes, out=slopes)
@@ -264,6 +303,15 @@ def normals_to_slopes(normals) -> np.ndarray:
 def read_slopes(path_or_image, encoding: str = "auto", z: str = "auto", *,
                 warn: bool = True) -> tuple[np.ndarray, NormalMapReport]:
     """Texel slopes ``(H, W, 2)`` float64 and report of a normal map file or array
-    (:func:`read_normals`, :func:`normals_to_slopes`)."""
+    (:func:`read_normals`, :func:`normals_to_slopes`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> n = np.zeros((2, 2, 3)); n[..., 0], n[..., 2] = -0.6, 0.8     # tilted toward -x
+    >>> slopes, report = read_slopes(n, encoding="signed")
+    >>> slopes[0, 0].round(3)
+    array([ 0.75, -0.  ])
+    """
     n, report = read_normals(path_or_image, encoding, z, warn=warn)
     return normals_to_slopes(n), report

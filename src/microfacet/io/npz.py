@@ -1,4 +1,11 @@
-"""Reading ``.npz`` archives written by microfacet, with errors that name the file."""
+"""Reading ``.npz`` archives written by microfacet, with errors that name the file.
+
+Examples
+--------
+>>> from microfacet.io.npz import ZIP_MAGIC
+>>> [m.hex() for m in ZIP_MAGIC]
+['504b0304', '504b0506']
+"""
 from __future__ import annotations
 
 import math
@@ -27,7 +34,19 @@ def load_npz(path: str | os.PathLike, kind: str) -> dict[str, np.ndarray]:
     that is not a readable archive of plain arrays (a missing file, other bytes, a
     truncated or corrupt archive, object arrays) raises :class:`MicrofacetError`
     naming the file and saying that it is not ``kind`` (never NumPy's "pickled data ...
-    allow_pickle" message, which describes how it tried to read it)."""
+    allow_pickle" message, which describes how it tried to read it).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> np.savez("fit.npz", table=np.arange(3.0))
+    >>> load_npz("fit.npz", "a fit file")["table"]
+    array([0., 1., 2.])
+    >>> load_npz("missing.npz", "a fit file")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: missing.npz: no such file
+    """
     path = Path(path)
     head = read_bytes(path, kind, 4)
     if head not in ZIP_MAGIC:

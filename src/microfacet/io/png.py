@@ -10,6 +10,12 @@ everywhere): ``L' = clip(2^exposure L, 0, 1)``, i.e. an exposure in photographic
 followed by a hard clip at display white, then the sRGB transfer function
 (IEC 61966-2-1, ``~ gamma 2.4`` with a linear toe) and rounding to 8 bits. Values above
 white saturate per channel; the EXR keeps the data.
+
+Examples
+--------
+>>> from microfacet.io.png import PNG_MAGIC
+>>> PNG_MAGIC.hex()
+'89504e470d0a1a0a'
 """
 from __future__ import annotations
 
@@ -33,14 +39,28 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 def tonemap(linear, exposure: float = 0.0) -> np.ndarray:
-    """Display-referred linear values ``clip(2^exposure L, 0, 1)``; NaN maps to 0."""
+    """Display-referred linear values ``clip(2^exposure L, 0, 1)``; NaN maps to 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tonemap(np.array([0.25, 1.0, 4.0, np.nan]), exposure=1.0)     # 2^1 L, clipped
+    array([0.5, 1. , 1. , 0. ])
+    """
     scaled = np.asarray(linear, dtype=np.float64) * 2.0 ** float(exposure)
     return np.clip(np.nan_to_num(scaled, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
 
 
 def srgb_encode(v) -> np.ndarray:
     """sRGB OETF (IEC 61966-2-1): ``12.92 v`` for ``v <= 0.0031308``, else
-    ``1.055 v^(1/2.4) - 0.055``; ``v`` in ``[0, 1]``."""
+    ``1.055 v^(1/2.4) - 0.055``; ``v`` in ``[0, 1]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> srgb_encode(np.array([0.0, 0.001, 0.18, 1.0])).round(4)
+    array([0.    , 0.0129, 0.4614, 1.    ])
+    """
     v = np.asarray(v, dtype=np.float64)
     return np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(np.maximum(v, 0.0031308), 1 / 2.4) - 0.055)
 
@@ -49,6 +69,12 @@ def to_srgb8(linear, exposure: float = 0.0) -> np.ndarray:
     """``uint8`` sRGB preview of a linear image: :func:`tonemap`, :func:`srgb_encode`, round.
 
     An alpha channel (4th channel) is kept linear (scaled to 8 bits, not tone mapped).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> to_srgb8(np.array([[0.0, 0.18, 1.0, 2.0]]))
+    array([[  0, 118, 255, 255]], dtype=uint8)
     """
     a = np.asarray(linear, dtype=np.float64)
     if a.ndim == 3 and a.shape[2] == 4:
@@ -60,7 +86,16 @@ def to_srgb8(linear, exposure: float = 0.0) -> np.ndarray:
 
 def write_png(path: str | os.PathLike, linear, exposure: float = 0.0) -> Path:
     """Write an 8-bit sRGB PNG preview of a linear ``(H, W)`` or ``(H, W, 1|3|4)`` image,
-    atomically (see the module docstring for the tone map)."""
+    atomically (see the module docstring for the tone map).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> write_png("gradient.png", np.linspace(0, 1, 64).reshape(8, 8)).name
+    'gradient.png'
+    >>> read_png_data("gradient.png").shape
+    (8, 8)
+    """
     a = np.asarray(linear)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[..., 0]
@@ -74,6 +109,15 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
     ``uint8`` or ``uint16``. Palette images are expanded to RGB(A), 1/2/4-bit gray to 8 bits.
 
     Raises :class:`MicrofacetError` naming the file if it is missing, not a PNG or corrupt.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> _ = write_png_data("height.png", np.arange(12, dtype=np.uint16).reshape(3, 4) * 1000)
+    >>> read_png_data("height.png")
+    array([[    0,  1000,  2000,  3000],
+           [ 4000,  5000,  6000,  7000],
+           [ 8000,  9000, 10000, 11000]], dtype=uint16)
     """
     path = Path(path)
     data = read_bytes(path, "a PNG file")
@@ -96,7 +140,15 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
 
 def write_png_data(path: str | os.PathLike, image) -> Path:
     """Write ``uint8`` or ``uint16`` samples ``(H, W)`` or ``(H, W, 1|2|3|4)`` as a PNG
-    exactly (gray, gray+alpha, RGB, RGBA; no colour management), atomically."""
+    exactly (gray, gray+alpha, RGB, RGBA; no colour management), atomically.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> _ = write_png_data("rgb.png", np.zeros((2, 2, 3), np.uint8))
+    >>> read_png_data("rgb.png").shape, read_png_data("rgb.png").dtype
+    ((2, 2, 3), dtype('uint8'))
+    """
     a = np.asarray(image)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[..., 0]

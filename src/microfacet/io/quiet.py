@@ -79,7 +79,17 @@ class _Records(logging.Handler):
 def log_captured(name: str, into: list):
     """Within the block, the records of logger ``name`` (e.g. ``"imagecodecs"``, which logs
     libpng's warnings) are appended to ``into`` as messages instead of being handled (printed
-    by logging's last-resort handler when the application configured none)."""
+    by logging's last-resort handler when the application configured none).
+
+    Examples
+    --------
+    >>> import logging
+    >>> records = []
+    >>> with log_captured("imagecodecs", records):
+    ...     logging.getLogger("imagecodecs").warning("noisy codec message")
+    >>> records
+    ['noisy codec message']
+    """
     logger = logging.getLogger(name)
     handler, propagate = _Records(into), logger.propagate
     logger.addHandler(handler)

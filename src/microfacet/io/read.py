@@ -1,4 +1,11 @@
-"""Reading input files with errors that name the file and say what is wrong."""
+"""Reading input files with errors that name the file and say what is wrong.
+
+Examples
+--------
+>>> from microfacet.io.read import GZIP_MAGIC, MEASURED_BRDF
+>>> GZIP_MAGIC.hex(), MEASURED_BRDF
+('1f8b', 'a measured BRDF (MERL, RGL .bsdf, UTIA)')
+"""
 from __future__ import annotations
 
 import os
@@ -17,7 +24,19 @@ MEASURED_BRDF = "a measured BRDF (MERL, RGL .bsdf, UTIA)"
 def read_bytes(path: str | os.PathLike, kind: str, size: int | None = None) -> bytes:
     """The first ``size`` bytes of ``path`` (all of it if ``None``); a missing file, a folder
     or an unreadable file raises :class:`MicrofacetError` naming it (``kind``: what was
-    expected, e.g. ``"a PNG file"``)."""
+    expected, e.g. ``"a PNG file"``).
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> _ = Path("data.bin").write_bytes(b"0123456789")
+    >>> read_bytes("data.bin", "a data file", size=4)
+    b'0123'
+    >>> read_bytes("absent.bin", "a data file")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: absent.bin: no such file
+    """
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -33,7 +52,14 @@ def read_bytes(path: str | os.PathLike, kind: str, size: int | None = None) -> b
 def decompressed(data: bytes, path: str | os.PathLike) -> bytes:
     """``data``, decompressed (all members) if it starts with the gzip magic; a corrupt or
     truncated stream raises :class:`MicrofacetError` naming ``path``. NumPy-free, and zlib
-    releases the GIL: a thread can decompress while another imports modules."""
+    releases the GIL: a thread can decompress while another imports modules.
+
+    Examples
+    --------
+    >>> import gzip
+    >>> decompressed(gzip.compress(b"MERL"), "x.binary.gz"), decompressed(b"raw", "x.binary")
+    (b'MERL', b'raw')
+    """
     if data[:2] != GZIP_MAGIC:
         return data
     try:
@@ -52,5 +78,14 @@ def decompressed(data: bytes, path: str | os.PathLike) -> bytes:
 
 def read_decompressed(path: str | os.PathLike, kind: str) -> bytes:
     """:func:`read_bytes` of all of ``path``, :func:`decompressed`: a file's content, gzipped
-    or not. NumPy-free and releasing the GIL, as :func:`decompressed`."""
+    or not. NumPy-free and releasing the GIL, as :func:`decompressed`.
+
+    Examples
+    --------
+    >>> import gzip
+    >>> from pathlib import Path
+    >>> _ = Path("m.binary.gz").write_bytes(gzip.compress(b"payload"))
+    >>> read_decompressed("m.binary.gz", MEASURED_BRDF)
+    b'payload'
+    """
     return decompressed(read_bytes(path, kind), path)
