@@ -17,15 +17,26 @@ from conftest import DATA
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: modules whose docstring examples are run (their other examples are marked +SKIP: they need
-#: optional packages or files)
-DOCTEST_MODULES = (
-    "microfacet.metrics", "microfacet.anchors", "microfacet.io.quiet", "microfacet.render.compare",
-    "microfacet.distributions.base", "microfacet.glints.microsurface", "microfacet.demo",
-    "microfacet.cli.common", "microfacet.batch.workers", "microfacet.fit.fitted",
+#: modules whose public names must each have a runnable example (the docs helper's modules:
+#: every name of their ``__all__`` and of ``microfacet.__all__`` defined in them)
+OWNED_MODULES = (
+    "microfacet.distributions", "microfacet.distributions.base", "microfacet.distributions.beckmann",
+    "microfacet.distributions.ggx", "microfacet.distributions.tabulated", "microfacet.fresnel", "microfacet.metrics",
+    "microfacet.geometry", "microfacet.diffuse", "microfacet.layered", "microfacet.layered.coat",
+    "microfacet.render", "microfacet.render.compare", "microfacet.render.integrate", "microfacet.render.lights",
+    "microfacet.render.lobes", "microfacet.render.sphere", "microfacet.io", "microfacet.io.atomic",
+    "microfacet.io.exr", "microfacet.io.html", "microfacet.io.image", "microfacet.io.names",
+    "microfacet.io.normalmap", "microfacet.io.npz", "microfacet.io.png", "microfacet.io.quiet", "microfacet.io.read",
+    "microfacet.anchors", "microfacet.validation",
+)
+#: modules whose docstring examples are run (examples that need optional packages or files
+#: are marked +SKIP); packages that only re-export names are checked through their modules
+DOCTEST_MODULES = tuple(m for m in OWNED_MODULES if m not in (
+    "microfacet.distributions", "microfacet.render", "microfacet.io")) + (
+    "microfacet.demo", "microfacet.cli.common", "microfacet.batch.workers", "microfacet.fit.fitted",
     "microfacet.export", "microfacet.export.gltf", "microfacet.export.mtlx", "microfacet.export.usd",
-    "microfacet.export.analysis", "microfacet.fresnel", "microfacet.geometry", "microfacet.diffuse",
-    "microfacet.fit.spec", "microfacet.params", "microfacet.protocol",
+    "microfacet.export.analysis", "microfacet.glints.microsurface", "microfacet.fit.spec", "microfacet.params",
+    "microfacet.protocol",
 )
 
 
@@ -41,6 +52,48 @@ def test_docstring_examples_run(name, tmp_path, monkeypatch):
         runner.run(t)
     result = runner.summarize(verbose=False)
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed (output above)"
+
+
+def _example_sources(module) -> str:
+    """The source of every docstring example of ``module`` (functions, classes, methods and
+    the module docstring), one string."""
+    finder = doctest.DocTestFinder(exclude_empty=True)
+    return "\n".join(ex.source for t in finder.find(module, module.__name__) for ex in t.examples)
+
+
+def public_names_without_example(modules, include_top_level: bool = True) -> list[str]:
+    """``module.name`` of each public name (``__all__``) of ``modules`` with no runnable
+    example: a function or class whose own docstring has no ``>>>`` line, or a constant whose
+    name appears in no example of the owned modules. With ``include_top_level``, the names of
+    ``microfacet.__all__`` defined in those modules are checked too (submodules are skipped:
+    their names are checked where they are defined)."""
+    import inspect
+
+    import microfacet
+    mods = [importlib.import_module(m) for m in modules]
+    sources = "\n".join(_example_sources(m) for m in mods)
+    owned = {m.__name__ for m in mods}
+    entries = [(m.__name__, n, getattr(m, n)) for m in mods for n in getattr(m, "__all__", ())]
+    if include_top_level:
+        entries += [("microfacet", n, getattr(microfacet, n)) for n in microfacet.__all__]
+    missing = []
+    for where, name, obj in entries:
+        if inspect.ismodule(obj):
+            continue
+        if inspect.isfunction(obj) or inspect.isclass(obj):
+            if include_top_level and where == "microfacet" and obj.__module__ not in owned:
+                continue
+            if ">>>" not in (obj.__doc__ or ""):
+                missing.append(f"{where}.{name}")
+        elif not re.search(rf"\b{re.escape(name)}\b", sources):
+            missing.append(f"{where}.{name}")
+    return sorted(set(missing))
+
+
+def test_every_public_name_of_the_documented_modules_has_an_example():
+    """Every public name of :data:`OWNED_MODULES` (and of ``microfacet.__all__`` defined there)
+    has an example that runs (the examples run in :func:`test_docstring_examples_run`)."""
+    assert public_names_without_example(OWNED_MODULES) == []
 
 
 def test_readme_is_short_and_names_the_commands():

@@ -34,6 +34,14 @@ Example
 >>> from microfacet.anchors import read_abc
 >>> fits = read_abc("DATA/anchors/abc_low2012_merl.csv")              # doctest: +SKIP
 >>> fits["nickel"].eval_cos(wi, wo)                                   # doctest: +SKIP
+
+Examples
+--------
+>>> from microfacet.anchors import ABC_COLUMNS, SGD_COLUMNS
+>>> ABC_COLUMNS
+('kd_r', 'kd_g', 'kd_b', 'A_r', 'A_g', 'A_b', 'B', 'C', 'ior')
+>>> len(SGD_COLUMNS), SGD_COLUMNS[:3]
+(33, ('rhoD_r', 'rhoD_g', 'rhoD_b'))
 """
 from __future__ import annotations
 
@@ -330,7 +338,17 @@ def read_abc(csv_path) -> dict[str, ABC]:
     """The ABC fits of a table with the columns of :data:`ABC_COLUMNS` (e.g.
     ``../shared/data/anchors/abc_low2012_merl.csv``, Löw et al. 2012 via dj_brdf) as
     ``{material: ABC}``, in file order. ``MicrofacetError`` naming the file if it is
-    unreadable or malformed, ``ValueError`` naming the parameter if a value is invalid."""
+    unreadable or malformed, ``ValueError`` naming the parameter if a value is invalid.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> _ = open("abc.csv", "w").write("material," + ",".join(ABC_COLUMNS) + chr(10)
+    ...                                + "grey,0.1,0.1,0.1,50,50,50,10000,0.8,2.2" + chr(10))
+    >>> fits = read_abc("abc.csv")
+    >>> list(fits), float(fits["grey"].eval(np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0]))[0].round(2))
+    (['grey'], 2.27)
+    """
     out = {}
     for material, r in _read_table(csv_path, ABC_COLUMNS, "ABC").items():
         out[material] = ABC((r["kd_r"], r["kd_g"], r["kd_b"]), (r["A_r"], r["A_g"], r["A_b"]), r["B"], r["C"], r["ior"])
@@ -344,7 +362,15 @@ abc_fits = read_abc
 def read_sgd(csv_path) -> dict[str, SGD]:
     """The SGD fits of a table with the columns of :data:`SGD_COLUMNS` (e.g.
     ``../shared/data/anchors/sgd_bagher2012_merl.csv``, Bagher et al. 2012 via dj_brdf) as
-    ``{material: SGD}``, in file order (errors as :func:`read_abc`)."""
+    ``{material: SGD}``, in file order (errors as :func:`read_abc`).
+
+    Examples
+    --------
+    >>> row = ["0.05"] * 3 + ["0.3"] * 3 + ["0.005"] * 3 + ["0.2"] * 3 + ["1"] * 3 + ["0.5"] * 3 + ["100"] * 3 + ["2"] * 3 + ["1"] * 3 + ["1"] * 3 + ["0.5"] * 3
+    >>> _ = open("sgd.csv", "w").write("material," + ",".join(SGD_COLUMNS) + chr(10) + "shiny," + ",".join(row) + chr(10))
+    >>> list(read_sgd("sgd.csv"))
+    ['shiny']
+    """
     out = {}
     for material, r in _read_table(csv_path, SGD_COLUMNS, "SGD").items():
         params = {f: tuple(r[f"{f}_{c}"] for c in "rgb") for f in _SGD_FIELDS}

@@ -180,9 +180,7 @@ class F82Tint(Fresnel):
     the correction exceeds Schlick's term in mid angles). :meth:`from_conductor` matches a
     conductor at ``c = 1`` and ``c = 1/7``; for the RGB indices of
     :attr:`Conductor.METALS` it then errs by at most 0.035 over all angles, where Schlick's
-    term through the same ``f0`` errs by up to 0.13 (aluminium; tests). Example::
-
-        F82Tint([0.95, 0.64, 0.54], [0.9, 0.8, 0.8])(np.array([1.0, 1 / 7]))
+    term through the same ``f0`` errs by up to 0.13 (aluminium; tests).
 
     Examples
     --------

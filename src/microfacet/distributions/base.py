@@ -9,6 +9,13 @@ Every quantity of the transformed surface (NDF, Smith masking, visible normals a
 their sampling) is the standard one evaluated at transformed arguments (roughness and
 shear invariance, Eq. 2.26, 3.2, 3.3). Parameters may be scalars or arrays that
 broadcast against the leading dimensions of the directions (one surface per texel).
+
+Examples
+--------
+>>> import numpy as np
+>>> from microfacet.distributions.base import MIN_ALPHA
+>>> MIN_ALPHA[np.dtype(np.float64)], MIN_ALPHA[np.dtype(np.float32)]
+(1e-14, 1e-06)
 """
 from __future__ import annotations
 

@@ -18,6 +18,12 @@ reference (black); one legend below the plots names every colour. The grazing re
 ``cos theta < 0.1`` that fit errors exclude (:data:`microfacet.metrics.GRAZING_COS`) is
 shaded grey. The figure is laid out in pixels (column width at least ``size + 40`` px), so
 labels, notes and legends never overlap, whatever the number of BRDFs (3-5 typical).
+
+Examples
+--------
+>>> from microfacet.render.compare import COMPARE_LIGHT, GRAZING_LIGHT
+>>> COMPARE_LIGHT.direction, [round(float(c), 4) for c in GRAZING_LIGHT.direction]
+((-0.5, 0.5, 1.0), [0.9659, 0.0, 0.2588])
 """
 from __future__ import annotations
 
@@ -57,14 +63,30 @@ _TITLE_Y = 1.0
 def backscattering_curve(brdf, phi: float = 0.0, n: int = 200,
                          theta_max: float = np.radians(89.0)) -> tuple[np.ndarray, np.ndarray]:
     """``theta_k`` ``(n,)`` in ``[0, theta_max]`` and the luminance of ``f_r(k, k)`` for
-    ``k`` at azimuth ``phi``."""
+    ``k`` at azimuth ``phi``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> theta, f = backscattering_curve(mf.Lambertian(1.0), n=3)
+    >>> theta.round(3), (f * 3.141592653589793).round(6)             # f(k, k) of a white Lambertian: 1 / pi
+    (array([0.   , 0.777, 1.553]), array([1., 1., 1.]))
+    """
     theta = np.linspace(0.0, theta_max, n)
     k = spherical_to_cartesian(theta, np.full(n, phi))
     return theta, brdf.eval(k, k) @ LUMINANCE
 
 
 def render_sphere(brdf, size: int, light: DirectionalLight = COMPARE_LIGHT) -> np.ndarray:
-    """Linear RGB ``(size, size, 3)`` of ``brdf`` on an orthographic sphere under ``light``."""
+    """Linear RGB ``(size, size, 3)`` of ``brdf`` on an orthographic sphere under ``light``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> image = render_sphere(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), 64)
+    >>> image.shape, float(image[0, 0].max())                       # black outside the sphere
+    ((64, 64, 3), 0.0)
+    """
     sphere = Sphere(size)
     radiance = shade_directional(brdf, sphere.wo, sphere.to_local(light.w), light.rgb)
     return sphere.image(np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0))
@@ -143,7 +165,16 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
                         views_deg: Sequence[float] = (0, 30, 60), planes_deg: Sequence[float] = (0,),
                         size: int = SPHERE_SIZE, dpi: int = 100, notes: Mapping[str, str] | None = None) -> Path:
     """Write the comparison picture of :func:`fit_comparison_png` to ``path``, atomically;
-    return ``path``."""
+    return ``path``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> data = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    >>> save_fit_comparison("comparison.png", {"data": data, "Beckmann": mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3))},
+    ...                     title="GGX vs Beckmann", size=32).name
+    'comparison.png'
+    """
     return write_bytes(path, fit_comparison_png(brdfs, title, views_deg, planes_deg, size, dpi, notes))
 
 

@@ -25,7 +25,17 @@ BATCH_SAMPLES = 1 << 18
 
 def shade_directional(brdf, wo, wi, irradiance) -> np.ndarray:
     """Radiance ``E f_r(wi, wo) cos theta_i`` ``(N, 3)`` reflected toward local ``wo``
-    ``(N, 3)`` from a directional light of local direction ``wi`` ``(N, 3)``."""
+    ``(N, 3)`` from a directional light of local direction ``wi`` ``(N, 3)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import microfacet as mf
+    >>> wo = np.array([[0.0, 0.0, 1.0]])
+    >>> wi = np.array([[0.0, 0.0, 1.0]])
+    >>> (shade_directional(mf.Lambertian(0.5), wo, wi, np.ones(3)) * np.pi).round(6)    # E R cos / pi
+    array([[0.5, 0.5, 0.5]])
+    """
     return np.asarray(irradiance, dtype=np.float64) * brdf.eval_cos(wi, wo)
 
 
@@ -34,7 +44,16 @@ def sobol_02(n: int) -> np.ndarray:
     (value ``* 2^-32``). Dimension 0 is the van der Corput sequence (bit reversal of the
     index), dimension 1 has direction numbers ``v_1 = 1/2``, ``v_j = v_(j-1) xor v_(j-1)/2``
     (Sobol' 1967), in natural order: for ``n = 2^m`` the same point set as
-    ``scipy.stats.qmc.Sobol(2, scramble=False)``, a (0, m, 2)-net."""
+    ``scipy.stats.qmc.Sobol(2, scramble=False)``, a (0, m, 2)-net.
+
+    Examples
+    --------
+    >>> sobol_02(4) / 2.0**32
+    array([[0.  , 0.  ],
+           [0.5 , 0.5 ],
+           [0.25, 0.75],
+           [0.75, 0.25]])
+    """
     k = np.arange(n, dtype=np.uint32)
     out = np.zeros((n, 2), dtype=np.uint32)
     v = np.uint32(1 << 31)
@@ -49,7 +68,15 @@ def sobol_02(n: int) -> np.ndarray:
 def shifted_sobol(rng: np.random.Generator, n: int, spp: int) -> np.ndarray:
     """``(n, spp, 2)`` uniforms in ``[0, 1)``: the first ``spp`` Sobol' points
     (:func:`sobol_02`), XOR-ed with an independent random 32-bit digital shift per pixel
-    and dimension (module docstring)."""
+    and dimension (module docstring).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> u = shifted_sobol(np.random.default_rng(0), 3, 4)
+    >>> u.shape, bool(((u >= 0) & (u < 1)).all())
+    ((3, 4, 2), True)
+    """
     shift = rng.integers(0, 1 << 32, size=(n, 1, 2), dtype=np.uint32)
     return (sobol_02(spp)[None] ^ shift) * 2.0**-32
 
@@ -73,6 +100,17 @@ def shade_environment(brdf, wo, frame, environment, spp: int, rng: np.random.Gen
         two stratify best.
     rng : numpy.random.Generator
         Source of the uniforms; a fixed seed gives a deterministic image.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import microfacet as mf
+    >>> from microfacet.render import Environment, Sphere
+    >>> sphere = Sphere(16)
+    >>> white = Environment(np.ones((8, 16, 3)))                   # a white furnace
+    >>> radiance = shade_environment(mf.Lambertian(0.5), sphere.wo, sphere.frame, white, 16, np.random.default_rng(0))
+    >>> bool(np.allclose(radiance, 0.5))                            # a Lambertian reflects its albedo
+    True
     """
     if int(spp) != spp or spp < 1:
         raise ValueError(f"spp must be a positive integer, got {spp!r}")

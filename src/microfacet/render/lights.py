@@ -25,7 +25,14 @@ __all__ = ["DirectionalLight", "Environment", "procedural_sky", "latlong_directi
 class DirectionalLight:
     """A distant light from world direction ``direction`` (toward the light) delivering
     ``irradiance`` ``E`` (scalar or RGB) on a surface facing it: reflected radiance is
-    ``L_o = E f_r(wi, wo) cos theta_i`` (rendering equation with a Dirac emitter)."""
+    ``L_o = E f_r(wi, wo) cos theta_i`` (rendering equation with a Dirac emitter).
+
+    Examples
+    --------
+    >>> light = DirectionalLight(direction=(0.0, 0.0, 2.0), irradiance=(1.0, 0.5, 0.25))
+    >>> light.w, light.rgb                                  # unit direction, RGB irradiance
+    (array([0., 0., 1.]), array([1.  , 0.5 , 0.25]))
+    """
 
     direction: tuple[float, float, float] = (-0.5, 0.5, 1.0)
     irradiance: float | tuple[float, float, float] = 1.0
@@ -50,7 +57,15 @@ class DirectionalLight:
 
 
 def latlong_directions(height: int, width: int) -> np.ndarray:
-    """World directions ``(height, width, 3)`` of the texel centres of a lat-long map."""
+    """World directions ``(height, width, 3)`` of the texel centres of a lat-long map.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> w = latlong_directions(4, 8)
+    >>> w.shape, bool(np.allclose(np.linalg.norm(w, axis=-1), 1))
+    ((4, 8, 3), True)
+    """
     theta = (np.arange(height) + 0.5) / height * np.pi
     phi = (np.arange(width) + 0.5) / width * 2.0 * np.pi - np.pi
     st = np.sin(theta)[:, None]
@@ -64,6 +79,14 @@ class Environment:
     ----------
     radiance : array_like, (H, W, 3)
         Linear RGB radiance, finite and ``>= 0`` (layout in the module docstring).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sky = Environment(procedural_sky(32, 64))
+    >>> sky.radiance(np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])).round(3)   # zenith (y up) and nadir
+    array([[0.18 , 0.32 , 0.65 ],
+           [0.05 , 0.045, 0.04 ]])
     """
 
     def __init__(self, radiance):
@@ -141,6 +164,12 @@ def procedural_sky(height: int = 64, width: int = 128) -> np.ndarray:
     above-left on the viewer's side and a cool round rim light (radiance 2.5, 15 deg
     radius) low on the right behind the sphere. Contrasts are moderate so that a few tens
     of BRDF samples per pixel give clean images even for rough materials.
+
+    Examples
+    --------
+    >>> sky = procedural_sky(32, 64)
+    >>> sky.shape, bool((sky >= 0).all())
+    ((32, 64, 3), True)
     """
     w = latlong_directions(height, width)
     y = w[..., 1:2]

@@ -3,6 +3,12 @@
 World frame: x to the right of the image, y up, z toward the viewer; the camera looks
 down ``-z``, so the view direction (toward the viewer) is ``+z`` at every pixel. Image
 row 0 is the top (``y = +1``).
+
+Examples
+--------
+>>> from microfacet.render.sphere import VIEW
+>>> VIEW                                  # the orthographic camera looks down -z
+array([0., 0., 1.])
 """
 from __future__ import annotations
 
@@ -24,6 +30,15 @@ def tangent_frame(n: np.ndarray, tangent=(1.0, 0.0, 0.0)) -> tuple[np.ndarray, n
     ``phi = 0`` of :meth:`SlopeDistribution.from_ellipse`) follows the world direction
     ``tangent`` wherever it can. Where ``n`` is parallel to ``tangent`` the projection
     vanishes and the frame falls back to :func:`~microfacet.geometry.orthonormal_basis`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> s, t = tangent_frame(np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]))
+    >>> s.round(6), t.round(6)
+    (array([[1., 0., 0.],
+           [1., 0., 0.]]), array([[ 0.,  1.,  0.],
+           [ 0.,  0., -1.]]))
     """
     n = np.asarray(n, dtype=np.float64)
     a = np.broadcast_to(np.asarray(tangent, dtype=np.float64), n.shape)
@@ -62,6 +77,16 @@ class Sphere:
         World normal and tangents (:func:`tangent_frame`) of each shaded pixel.
     wo : (N, 3) float
         View direction :data:`VIEW` in each local frame ``(s, t, n)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sphere = Sphere(32)
+    >>> sphere.wo.shape == sphere.n.shape, bool(np.allclose(sphere.wo[:, 2], sphere.n[:, 2]))   # wo: the view in each local frame
+    (True, True)
+    >>> image = sphere.image(np.ones((len(sphere.wo), 3)))     # per-pixel values back to a (32, 32, 3) image
+    >>> image.shape, float(image[16, 16, 0]), float(image[0, 0, 0])
+    ((32, 32, 3), 1.0, 0.0)
     """
 
     def __init__(self, size: int, supersample: int = 4, tangent=(1.0, 0.0, 0.0)):
