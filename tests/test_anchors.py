@@ -29,7 +29,8 @@ def _pairs(n, seed=0):
 
 def _abc_scalar(p, i, o, c):
     """dj_brdf's abc::eval, one pair and channel, written out with ``math`` from the
-    README formula (independent of microfacet.anchors)."""
+    formula of the ``microfacet.anchors`` module docstring (docs/api/anchors.md), independent of
+    its code."""
     kd, A, B, C, ior = p
     h = [i[k] + o[k] for k in range(3)]
     n = math.sqrt(sum(x * x for x in h))

@@ -181,7 +181,7 @@ params = st.fixed_dictionaries({
 def _microfacet(p):
     # V-grooves (Table 2.IV) are grooves about the macro normal: with a mean slope their
     # albedo exceeds 1 (up to 1.78 at alpha 0.3, mean slope (0.5, -1), grazing views), a
-    # limitation of the model documented in the README, so they are swept unsheared.
+    # limitation of the model documented in docs/models.md, so they are swept unsheared.
     mean = (0.0, 0.0) if p["gaf"] == "vgroove" else (p["xn"], p["yn"])
     d = DISTS[p["dist"]](alpha_x=10 ** p["log_ax"], alpha_y=10 ** p["log_ay"], rho=p["rho"], mean_slope=mean)
     return mf.MicrofacetBRDF(d, fresnel=mf.fresnel.Schlick(0.9), gaf=p["gaf"], shadowing=p["shadowing"])

@@ -736,7 +736,7 @@ def test_rgl_ndf_is_recovered_from_its_own_masking_model(path):
     file's own D and sigma, ``D(h) / (4 cos theta_i sigma(o))`` (Dupuy & Jakob 2018): the
     masking fit of that model recovers it within 0.01 (relative L2 of D cos theta_h). The
     file's reconstructed BRDF does not (0.30 / 0.19): its rgb factor at retro-reflection
-    is not constant (README)."""
+    is not constant (docs/fitting-methods.md, "RGL files")."""
     from microfacet.geometry import half_vector
     from microfacet.metrics import ndf_error
     m = mf.measured.load(path)
@@ -842,7 +842,8 @@ def test_kept_values_are_those_of_their_key_across_threads():
 
 def test_albedo_weight_defaults_and_validation():
     """A negative weight is refused; the default is ``ALBEDO_WEIGHT`` for isotropic fits and
-    0 for anisotropic ones (README: the term oscillates the anisotropic table)."""
+    0 for anisotropic ones (docs/fitting-methods.md, "Albedo term": the term oscillates the
+    anisotropic table)."""
     brdf = _input(mf.GGX, alpha=0.3)
     with pytest.raises(ValueError, match="albedo_weight"):
         mf.fit.fit(brdf, 16, albedo_weight=-1.0)
@@ -859,7 +860,7 @@ def test_albedo_weight_brings_the_fit_to_the_data_albedo(path):
     """Issue 10's goal for the tabulated fit with a base (``diffuse=True``) at the default
     albedo weight: directional albedo within 10 % of the data's at 0/30/60/75 degrees, RGB
     (``metrics.albedo_ratios``), on every shared material but gold paint, whose data put
-    energy at grazing views where the lobe has little (README: 13 % at 75 degrees, 42 %
+    energy at grazing views where the lobe has little (experiments/results/fit_energy.md: 13 % at 75 degrees, 42 %
     without the albedo term), and violet acrylic, whose fit met 10 % only with a Fresnel
     table flipping between 0 and 0.1 across theta_d (issue 24; with a table of total
     variation <= 2x its range: 16 % at 75 degrees); and everywhere the term brings the

@@ -390,7 +390,7 @@ def test_shared_materials_keep_their_albedo(path):
 @pytest.mark.skipif(not SHARED, reason="../shared/data (or $MICROFACET_DATA) not present")
 @pytest.mark.parametrize("path", [p for p in SHARED if "ibiza" not in p.name], ids=lambda p: p.name.split(".")[0])
 def test_shared_materials_coat_fit_halves_the_baseline_error(path):
-    """Issue 10's grid-error goal (README: met on every shared material but
+    """Issue 10's grid-error goal (experiments/results/fit_measured.md: met on every shared material but
     cc_ibiza_sunset_rgb): the better GGX / Beckmann fit with a coat (7-node table) and a
     base has at most half the grid error of the baseline, the moment GGX of the
     constraint-only tabulated fit with its own Fresnel table, and its albedo within 10 %

@@ -20,7 +20,7 @@ references a fit of this project is compared with.
   theta0)^k)), 0, 1)``.
 
 :func:`read_abc` and :func:`read_sgd` read the parameter tables of ``DATA/anchors`` (the data folder)
-(``abc_low2012_merl.csv``, ``sgd_bagher2012_merl.csv``; columns in that folder's README) into
+(``abc_low2012_merl.csv``, ``sgd_bagher2012_merl.csv``; columns :data:`ABC_COLUMNS`, :data:`SGD_COLUMNS`) into
 ``{material: BRDF}``. Neither model conserves energy by construction (``A`` and ``kap``
 are free scales): their white-furnace albedo is whatever the fit made it.
 
