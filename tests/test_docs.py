@@ -230,3 +230,34 @@ def test_tutorial_cache_reruns_only_a_changed_script(tmp_path):
     script.write_text("import sys\nsys.exit(3)\n", encoding="utf-8")
     with pytest.raises(RuntimeError, match="exit 3"):
         tut.run(script, folder=tmp_path / "bad")
+
+
+#: words before a year that name a venue or an organisation, not an author
+_VENUES = {"EGSR", "JCGT", "Eurographics", "SIGGRAPH", "Foundation", "CGF", "TOG", "GRAPHITE", "Asia", "Issue",
+           "Rendering", "Graphics", "Techniques", "Proc", "Workshop", "Python", "NumPy", "Blender", "OpenEXR"}
+_CITATION = re.compile(r"\b([A-Z][\w'\-]+(?:(?:,|\s+&|\s+and)\s+[A-Z][\w'\-]+)*(?:\s+et\s+al\.)?)[\s,(]+((?:19|20)\d\d)\b")
+
+
+def author_year_citations(text: str) -> set[tuple[str, str]]:
+    """``(first author, year)`` of each "Author Year" / "A & B Year" / "A et al. Year" of ``text``."""
+    found = set()
+    for names, year in _CITATION.findall(text):
+        first = re.split(r"[\s,&]+", names)[0]
+        if first not in _VENUES and not first.isupper() or first in ("CIE",):
+            found.add((first, year))
+    return found
+
+
+def test_author_year_citations_are_in_the_references():
+    """Every "Author Year" cited in the docs pages, the tutorials and the docstrings of the
+    documented modules has an entry "**Author ... Year**" in docs/references.md."""
+    refs = (ROOT / "docs" / "references.md").read_text(encoding="utf-8")
+    entries = set(re.findall(r"^- \*\*([^\s*&,]+)[^*]*?((?:19|20)\d\d)\*\*", refs, re.M))
+    texts = {p.relative_to(ROOT).as_posix(): p.read_text(encoding="utf-8")
+             for p in [*(ROOT / "docs").glob("*.md"), *TUTORIALS] if p.name != "references.md"}
+    for name in OWNED_MODULES:
+        module = importlib.import_module(name)
+        texts[name] = Path(module.__file__).read_text(encoding="utf-8")
+    missing = sorted({f"{a} {y} ({where})" for where, text in texts.items()
+                      for a, y in author_year_citations(text) if (a, y) not in entries})
+    assert not missing, f"cited but not in docs/references.md: {missing}"

@@ -227,8 +227,8 @@ def hd_to_io(h: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Tangents ``(s, t)`` with ``(s, t, n)`` right-handed and orthonormal.
 
-    Branchless construction of Duff et al., "Building an Orthonormal Basis, Revisited"
-    (JCGT 2017), vectorized.
+    Branchless construction of Duff et al. 2017 ("Building an Orthonormal Basis, Revisited",
+    JCGT 6(1)), vectorized.
 
     Examples
     --------
@@ -278,7 +278,7 @@ def to_world(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.n
 
 
 def square_to_concentric_disk(u: np.ndarray) -> np.ndarray:
-    """Shirley-Chiu concentric map of ``[0,1)^2`` onto the unit disk, ``(..., 2)``.
+    """Concentric map of ``[0,1)^2`` onto the unit disk, ``(..., 2)`` (Shirley & Chiu 1997).
 
     Examples
     --------

@@ -68,8 +68,8 @@ class GGX(SlopeDistribution):
         """Standard visible normal for a view at ``theta`` in the xz plane, in closed form.
 
         A uniform point of the unit disk, warped onto the projection of the visible
-        hemisphere of the (unit) ellipsoid, lifted onto it (Heitz, "Sampling the GGX
-        distribution of visible normals", JCGT 2018). This is an exact transform of the
+        hemisphere of the (unit) ellipsoid, lifted onto it (Heitz 2018, "Sampling the GGX
+        distribution of visible normals"). This is an exact transform of the
         visible-slope PDF of Eq. 2.15, equivalent to the quantiles of Table 2.V.
         """
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
