@@ -4,6 +4,7 @@ with warnings as errors (mkdocs --strict also fails on broken internal links and
 import doctest
 import importlib
 import importlib.util
+import inspect
 import os
 import re
 import subprocess
@@ -67,7 +68,6 @@ def public_names_without_example(modules, include_top_level: bool = True) -> lis
     name appears in no example of the owned modules. With ``include_top_level``, the names of
     ``microfacet.__all__`` defined in those modules are checked too (submodules are skipped:
     their names are checked where they are defined)."""
-    import inspect
 
     import microfacet
     mods = [importlib.import_module(m) for m in modules]
@@ -168,6 +168,16 @@ def test_docs_build_strictly(tmp_path):
         page = (site / "tutorials" / f"{script.stem}.html").read_text(encoding="utf-8")
         for name in tut.run(script).images:
             assert f'src="{script.stem}/{name}"' in page and (site / "tutorials" / script.stem / name).is_file()
+    # every public name of the documented modules has an entry of the API reference
+    ids = {i for page in (site / "api").glob("*.html") for i in re.findall(r'id="(microfacet[\w.]*)"', page.read_text(encoding="utf-8"))}
+    unlisted = []
+    for name in OWNED_MODULES:
+        module, top = importlib.import_module(name), ".".join(name.split(".")[:2])
+        for public in module.__all__:
+            if not inspect.ismodule(getattr(module, public)) and not any(
+                    i.startswith(top) and i.rsplit(".", 1)[-1] == public for i in ids):
+                unlisted.append(f"{name}.{public}")
+    assert not unlisted, f"public names without an API reference entry: {unlisted}"
     import microfacet.mitsuba as mfm
     if hasattr(mfm, "plugin_reference"):   # the parameter tables come from the plugin docstrings
         plugins = (site / "mitsuba-plugins.html").read_text(encoding="utf-8")

@@ -199,6 +199,11 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
                    warn: bool = True) -> tuple[np.ndarray, NormalMapReport]:
     """Unit normals ``(H, W, 3)`` float64 of a normal map's samples, and how it was read.
 
+    The inverse of the encoding of Dupuy 2015, Listing 3.6 (``(n + 1) / 2`` per channel) or
+    of a float map of ``n``. Every texel is a unit vector at most 89 degrees from
+    ``(0, 0, 1)`` (so its slope, Eq. 2.9, is finite): non-unit vectors are renormalized and
+    unusable ones repaired, each on its own (module docstring).
+
     Parameters
     ----------
     image : array_like
@@ -212,12 +217,19 @@ def decode_normals(image, encoding: str = "auto", z: str = "auto", *, source: st
     warn : bool
         Emit the report's warnings (:class:`~microfacet.errors.NormalMapWarning`).
 
-    The inverse of the encoding of thesis Listing 3.6 (``(n + 1) / 2`` per channel) or of
-    a float map of ``n``. Every texel is a unit vector at most 89 degrees from ``(0, 0, 1)``
-    (so its slope, Eq. 2.9, is finite): non-unit vectors are renormalized and unusable ones
-    repaired, each on its own (module docstring).
-    Raises :class:`MicrofacetError` (naming ``source``) for a wrong shape, dtype or
-    non-finite samples, ``ValueError`` for an unknown ``encoding`` or ``z``.
+    Returns
+    -------
+    normals : (H, W, 3) float64
+        Unit normals.
+    report : NormalMapReport
+        How the map was read (encoding, z source, texels repaired or facing away).
+
+    Raises
+    ------
+    MicrofacetError
+        Naming ``source``, for a wrong shape, dtype or non-finite samples.
+    ValueError
+        For an unknown ``encoding`` or ``z``.
 
     Examples
     --------
