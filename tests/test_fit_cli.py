@@ -311,14 +311,16 @@ def _waited(fn, *args):
 
 
 def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monkeypatch):
-    """The least-squares fits and metrics run on threads give the same bytes as run one after
-    the other (issue 10: overlapping stages changes no result); only the fit times differ."""
+    """The least-squares fits and metrics run on threads, and the perceptual fits in a forked
+    process, give the same bytes as run one after the other (issue 10: overlapping stages
+    changes no result); only the fit times differ."""
     from microfacet.fit import outputs
     data = mf.measured.load(inputs / "gold-ggx.binary")
     files = {}
     for mode in ("threads", "serial"):
         if mode == "serial":
             monkeypatch.setattr(outputs, "in_background", _waited)
+            monkeypatch.setattr(outputs, "in_process", _waited)
         out = tmp_path / mode / "gold.npz"
         summary = outputs.fit_material(data, out, resolution=16, picture=False)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5

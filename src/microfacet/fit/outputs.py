@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._background import in_background
+from .._background import in_background, in_process
 from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
@@ -227,10 +227,13 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     # of the metrics beside the tabulated fit, then the two least-squares fits beside the
     # moment conversions and the metrics of the tabulated and moment fits; every result as
     # computed serially
+    models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
+    # first, forked before any thread starts; the data's side is evaluated here (the child
+    # runs NumPy only: Numba's GNU OpenMP kernels cannot run in a forked child)
+    from .perceptual import target as perceptual_target
+    perceptual_job = in_process(_perceptual, perceptual_target(brdf), models)
     _import_numba()
     metrics_job = in_background(_metrics, brdf)
-    models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
-    perceptual_job = in_background(_perceptual, brdf, models)
     judges_job = in_background(_judges, brdf)
     t0 = time.perf_counter()
     fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
@@ -247,7 +250,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
     scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
     grid, uniform, albedo, furnace = ({k: v for part in scores for k, v in part[i].items()} for i in range(4))
-    perceptual, t3 = perceptual_job.result()
+    perceptual, t3 = _perceptual_brdfs(*perceptual_job.result())
     p_grid, p_uniform, p_albedo, _ = _scores(metrics, perceptual)
     fits_summary, best = _perceptual_summary(judges_job.result(), {**named, **perceptual}, perceptual,
                                              ({**grid, **p_grid}, {**uniform, **p_uniform}, {**albedo, **p_albedo}))
@@ -334,10 +337,18 @@ LOG_PAIRS = 2**15
 ENERGY_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
 
 
-def _perceptual(brdf, models) -> tuple[dict, float]:
-    """``({name: BRDF}, end time)`` of :func:`microfacet.fit.perceptual.fit_models`."""
-    from .perceptual import fit_models
-    return fit_models(brdf, models), time.perf_counter()
+def _perceptual(t, models) -> tuple[dict, float]:
+    """``({name: (q, y)}, end time)`` of :func:`microfacet.fit.perceptual.fit_parameters` on
+    the target ``t`` (run in a process of its own: many small solves, mostly Python, that
+    threads would serialize)."""
+    from .perceptual import fit_parameters
+    return fit_parameters(None, models, t), time.perf_counter()
+
+
+def _perceptual_brdfs(parameters: dict, end: float) -> tuple[dict, float]:
+    """``({name: BRDF}, end)`` of :func:`_perceptual`'s parameters."""
+    from .perceptual import MODEL_SPECS
+    return {name: MODEL_SPECS[name].brdf(q, y) for name, (q, y) in parameters.items()}, end
 
 
 def _judges(brdf) -> tuple:

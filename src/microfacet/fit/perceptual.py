@@ -60,7 +60,7 @@ from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, measure
                        uniform_directions)
 from .extract import box_qp
 
-__all__ = ["MODELS", "Geometry", "Target", "Model", "target", "fit_model", "fit_models", "select",
+__all__ = ["MODELS", "MODEL_SPECS", "Geometry", "Target", "Model", "target", "fit_model", "fit_parameters", "fit_models", "select",
            "lobe_factor", "PENALTY"]
 
 #: The models of :func:`fit_models`, in the order they are fitted.
@@ -491,8 +491,7 @@ class _Problem:
     def albedo(self, f, mask=None):
         """Albedo ``(views, 3)`` of values ``f`` at the albedo nodes (``mask``: the ratio nodes)."""
         t = self.t
-        w = t.albedo_w if mask is None else t.albedo_w * mask
-        return np.add.reduceat(f[t.n_pairs:] * w[:, None], t.view_starts, axis=0)
+        return self._albedo_sums(f, t.albedo_w if mask is None else t.albedo_w * mask)
 
     def residuals(self, x, jacobian: bool = False):
         """The residuals at ``x = (q, y)``: the weighted log differences (pairs x RGB), the
@@ -509,30 +508,40 @@ class _Problem:
         r = np.concatenate([r_fit.ravel(), r_band.ravel(), r_energy.ravel()])
         if not jacobian:
             return r
-        # d f / d x: exact in y, forward differences in q
-        jf = np.empty(f.shape + (len(x),))
-        jf[..., nq:] = self._linear_jacobian(basis)
+        # d f / d x at the pairs and d albedo / d x: exact in y, forward differences in q
+        ratio_w, all_w = t.albedo_w * t.ratio_mask, t.albedo_w
+        jf = np.empty((n, 3, len(x)))
+        j_ratio = np.empty((len(t.view_starts), 3, len(x)))
+        j_all = np.empty_like(j_ratio)
+        jf[..., nq:] = self._linear_jacobian(basis[:n])
+        j_ratio[..., nq:] = self._linear_jacobian(self._albedo_sums(basis, ratio_w))
+        j_all[..., nq:] = self._linear_jacobian(self._albedo_sums(basis, all_w))
         for k in range(nq):
             h = 1e-5 * max(1.0, abs(q[k]))
             qk = q.copy()
             qk[k] += h
-            jf[..., k] = (self.values(qk, y)[0] - f) / h
+            df = (self.values(qk, y)[0] - f) / h
+            jf[..., k] = df[:n]
+            j_ratio[..., k] = self._albedo_sums(df, ratio_w)
+            j_all[..., k] = self._albedo_sums(df, all_w)
         d = (t.sqrt_w[:, None] * ci * scale * compress_slope(u))[..., None]
-        j_fit = (d * jf[:n]).reshape(-1, len(x))
-        j_band = (band_scale[..., None] * self._albedo_jacobian(jf, t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)])
-        j_energy = energy_active[..., None] * PENALTY * self._albedo_jacobian(jf, None)
+        j_fit = (d * jf).reshape(-1, len(x))
+        j_band = band_scale[..., None] * j_ratio[:len(ALBEDO_VIEWS_DEG)]
+        j_energy = energy_active[..., None] * PENALTY * j_all
         return r, np.concatenate([j_fit, j_band.reshape(-1, len(x)), j_energy.reshape(-1, len(x))])
 
     def _linear_jacobian(self, basis):
-        """``d f / d y`` ``(n, 3, len(y))`` (one matrix product)."""
+        """``d f / d y`` ``(n, 3, len(y))`` of basis values ``(n, K)`` (one matrix product)."""
         mix = self.model.mix
         flat = mix.transpose(1, 0, 2).reshape(mix.shape[1], -1)
         return (np.where(np.isfinite(basis), basis, 0.0) @ flat).reshape(len(basis), 3, mix.shape[2])
 
-    def _albedo_jacobian(self, jf, mask):
+    def _albedo_sums(self, values, w):
+        """Per view, the sums of ``values`` (rows: all pairs then the albedo nodes) at the
+        albedo nodes weighted by ``w``: albedos, or their basis functions' (linear in ``y``)."""
         t = self.t
-        w = t.albedo_w if mask is None else t.albedo_w * mask
-        return np.add.reduceat(jf[t.n_pairs:] * w[:, None, None], t.view_starts, axis=0)
+        return np.add.reduceat(np.where(np.isfinite(values[t.n_pairs:]), values[t.n_pairs:], 0.0) * w[:, None],
+                               t.view_starts, axis=0)
 
     def _energy(self, f):
         """Penalty residuals of the albedo band (:data:`PENALTY` above it, :data:`PENALTY_BELOW`
@@ -556,17 +565,17 @@ class _Problem:
         c, basis = self.model.basis(q, t.geometry)
         basis = np.where(np.isfinite(basis), basis, 0.0)
         c = np.zeros(len(basis)) if c is None else np.where(np.isfinite(c), c, 0.0)
-        a = self._linear_jacobian(basis)
         n = t.n_pairs
+        a = self._linear_jacobian(basis[:n])
         ci = t.geometry.cos_i[:n, None]
         k = t.scale[:, None]
         wt = t.sqrt_w[:, None] * ci * k * compress_slope(t.f_data * ci * k)
-        rows = [(a[:n] * wt[..., None]).reshape(-1, a.shape[-1])]
+        rows = [(a * wt[..., None]).reshape(-1, a.shape[-1])]
         rhs = [((t.f_data - c[:n, None]) * wt).ravel()]
         ad = np.where(self.band_mask, t.albedo_data, 1.0)
         scale = np.where(self.band_mask, PENALTY_BELOW / ad, 0.0)
-        rows.append((self._albedo_jacobian(a, t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)] * scale[..., None])
-                    .reshape(-1, a.shape[-1]))
+        a_albedo = self._linear_jacobian(self._albedo_sums(basis, t.albedo_w * t.ratio_mask))
+        rows.append((a_albedo[:len(ALBEDO_VIEWS_DEG)] * scale[..., None]).reshape(-1, a.shape[-1]))
         c_albedo = self.albedo(np.repeat(c[:, None], 3, axis=1), t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
         rhs.append(((t.albedo_data - c_albedo) * scale).ravel())
         m, b = np.concatenate(rows), np.concatenate(rhs)
@@ -659,24 +668,32 @@ def _project(problem: _Problem, x: np.ndarray) -> np.ndarray:
     return np.concatenate([q, y])
 
 
-def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None) -> dict:
-    """Every model of ``models`` (names of :data:`MODELS`) fitted to ``reference``:
-    ``{name: BRDF}``, each a BRDF of the library (``eval``, ``pdf``, ``sample``). Linear
-    algebra runs on one BLAS thread (the matrices are small; idle BLAS threads spin)."""
+def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = None) -> dict:
+    """Every model of ``models`` (names of :data:`MODELS`) fitted to ``reference`` (or to its
+    :func:`target` ``t``, which then is all that is read): ``{name: (q, y)}``, its nonlinear
+    parameters and reflectances (``MODEL_SPECS[name].brdf(q, y)`` is the BRDF; plain arrays,
+    so that they cross processes). NumPy only once ``t`` is made. Linear algebra runs on one
+    BLAS thread (the matrices are small; idle BLAS threads spin)."""
     from threadpoolctl import threadpool_limits
     unknown = set(models) - set(MODELS)
     if unknown:
         raise ValueError(f"models must be among {MODELS}, got {sorted(unknown)}")
     with threadpool_limits(1):
         t = target(reference) if t is None else t
-        fitted, out = {}, {}
+        fitted = {}
         for name in (m for m in MODELS if m in models):
             model = MODEL_SPECS[name]
             x, _ = fit_model(t, model, fitted)
             nq = len(model.q_bounds[0])
             fitted[name] = (x[:nq], x[nq:])
-            out[name] = model.brdf(*fitted[name])
-    return out
+    return fitted
+
+
+def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None) -> dict:
+    """Every model of ``models`` (names of :data:`MODELS`) fitted to ``reference``:
+    ``{name: BRDF}``, each a BRDF of the library (``eval``, ``pdf``, ``sample``);
+    :func:`fit_parameters` with each model's BRDF built."""
+    return {name: MODEL_SPECS[name].brdf(q, y) for name, (q, y) in fit_parameters(reference, models, t).items()}
 
 
 def select(scores: dict) -> str:
