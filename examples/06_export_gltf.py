@@ -6,7 +6,6 @@ material read back from the file is evaluated as the glTF specification defines 
 (GGX, Schlick's Fresnel term, ``KHR_materials_*`` extensions) and rendered beside the
 fit. The report says what glTF cannot carry and the image error of the export.
 """
-import json
 
 import numpy as np
 
@@ -21,11 +20,15 @@ ggx = mf.fit.fit_analytic(copper, "ggx", diffuse=True)
 
 report = export(ggx, "gltf", "copper.glb")          # writes copper.glb and its report beside it
 print("written:", report["file"])
-print("lost in the export:", report["lost"] or "nothing")
-print("image error of the export:", json.dumps(report["image_error"]["exported_vs_fit"]))
+for loss in report["lost"]:
+    print("lost in the export:", loss)
+print("image error of the glTF material against the fit:",
+      {k: round(v, 4) for k, v in report["image_error"]["exported_vs_fit"].items()})
 
 material = read_material("copper.glb")              # the glTF material as a JSON dict
-print(json.dumps(material["pbrMetallicRoughness"]))
+pbr = material["pbrMetallicRoughness"]
+print("baseColorFactor", np.round(pbr["baseColorFactor"], 4).tolist(), "metallicFactor", pbr.get("metallicFactor"),
+      "roughnessFactor", round(pbr["roughnessFactor"], 4), "extensions", sorted(material.get("extensions", {})))
 as_gltf = gltf_brdf(material)                       # the glTF material as the library evaluates it
 
 sphere = Sphere(160)

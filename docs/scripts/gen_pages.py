@@ -124,7 +124,7 @@ def results_pages() -> list[tuple[str, str]]:
             title, command = RESULTS.get(md.stem, (md.stem.replace("_", " ").capitalize(), ""))
             source = md.relative_to(ROOT).as_posix()
             header = [] if text.lstrip().startswith("# ") else [f"# {title}", ""]
-            note = [f"!!! note \"Generated\"",
+            note = ["!!! note \"Generated\"",
                     f"    This page is `{source}` as the script wrote it"
                     + (f" (`{command}`)." if command else "."), ""]
             body = text.splitlines()
