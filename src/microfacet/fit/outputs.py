@@ -250,10 +250,14 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
     scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
     grid, uniform, albedo, furnace = ({k: v for part in scores for k, v in part[i].items()} for i in range(4))
+    judges = judges_job.result()
+    fits_summary = _fit_summaries(judges, named, (grid, uniform, albedo))     # while the perceptual fits run
+    if picture:
+        from ..render import fit_comparison_png         # imports matplotlib, also while they run
     perceptual, t3 = _perceptual_brdfs(*perceptual_job.result())
     p_grid, p_uniform, p_albedo, _ = _scores(metrics, perceptual)
-    fits_summary, best = _perceptual_summary(judges_job.result(), {**named, **perceptual}, perceptual,
-                                             ({**grid, **p_grid}, {**uniform, **p_uniform}, {**albedo, **p_albedo}))
+    fits_summary.update(_fit_summaries(judges, perceptual, (p_grid, p_uniform, p_albedo)))
+    best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     chosen = moments if method == "moments" else {
         family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}
     fits = {"tabulated": fit, **chosen}
@@ -284,8 +288,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     specs = {k: v["model"] for k, v in fits_summary.items() if k != "tabulated"}
     files = {out_npz: fit.to_bytes(fits=specs, best=best),
              out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
-    if picture:                                     # rendered before any file is written (1.5-3 s)
-        from ..render import fit_comparison_png
+    if picture:                                     # rendered before any file is written
         from .perceptual import select
         every = {**named, **perceptual}
         second = "tabulated" if best != "tabulated" else select(
@@ -363,11 +366,10 @@ def _energy(brdf) -> float:
     return float(np.max(directional_albedo(brdf, ENERGY_VIEWS_DEG)))
 
 
-def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) -> tuple[dict, str]:
-    """``({name: {"model": spec, "metrics": {...}}}, best)`` for every fit of ``named``
-    (the tabulated fit's model is ``"tabulated"``): the legacy metrics ``legacy = (grid,
-    uniform, albedo)`` where computed, the log and image errors, chromaticity difference
-    and largest albedo; the best is :func:`best_fit`'s."""
+def _fit_summaries(judges, named: dict, legacy: tuple) -> dict:
+    """``{name: {"model": spec, "metrics": {...}}}`` for every fit of ``named`` (the tabulated
+    fit's model is ``"tabulated"``): the legacy metrics ``legacy = (grid, uniform, albedo)``
+    where computed, the log and image errors, chromaticity difference and largest albedo."""
     from .spec import to_spec
     log_error, image_error = judges
     grid, uniform, albedo = legacy
@@ -379,7 +381,7 @@ def _perceptual_summary(judges, named: dict, perceptual: dict, legacy: tuple) ->
                    "uniform": uniform.get(name), "albedo_ratio": np.asarray(albedo[name]).round(4).tolist(),
                    "albedo_ratio_worst": round(_worst(albedo[name]), 4), "max_albedo": round(_energy(b), 4)}
         out[name] = {"model": "tabulated" if name == "tabulated" else _spec_or_none(to_spec, b), "metrics": metrics}
-    return out, best_fit({k: v["metrics"] for k, v in out.items()})
+    return out
 
 
 #: Largest chromaticity difference (CIE 1931 xy of the rendered spheres' mean colour) of a
