@@ -91,7 +91,8 @@ class FittedBRDF(MicrofacetBRDF):
             return super().eval(wi, wo, out)
         return into(out, super().eval(wi, wo) + self.base.eval(wi, wo), (wi, wo))
 
-    def _lobe_probability(self) -> float:
+    @property
+    def lobe_probability(self) -> float:
         """Probability of sampling the microfacet lobe: its albedo estimate
         ``luminance(F(1))`` over the sum with ``luminance(k_d)``."""
         a_s = float(extract.luminance(self.fresnel(np.ones(1))[0]))
@@ -102,18 +103,18 @@ class FittedBRDF(MicrofacetBRDF):
         """Density of :meth:`sample`: ``p_s pdf_lobe + (1 - p_s) cos theta_i / pi``."""
         if not self.has_diffuse:
             return super().pdf(wi, wo, out)
-        p = self._lobe_probability()
+        p = self.lobe_probability
         return into(out, p * super().pdf(wi, wo) + (1.0 - p) * self.base.pdf(wi, wo), (wi, wo))
 
     def sample(self, u, wo, out=None):
         """Sample the lobe (:meth:`MicrofacetBRDF.sample`) or the base (cosine warp),
-        chosen by ``u[..., 0]`` against :meth:`_lobe_probability` (rescaled to reuse it);
+        chosen by ``u[..., 0]`` against :attr:`lobe_probability` (rescaled to reuse it);
         returns ``(wi, eval_cos / pdf, pdf)`` of the mixture."""
         if not self.has_diffuse:
             return super().sample(u, wo, out)
         u = np.asarray(u, dtype=np.float64)
         wo = np.asarray(wo, dtype=np.float64)
-        p = self._lobe_probability()
+        p = self.lobe_probability
         lobe = u[..., 0] < p
         u0 = np.where(lobe, u[..., 0] / max(p, 1e-300), (u[..., 0] - p) / max(1.0 - p, 1e-300))
         uu = np.stack([np.clip(u0, 0.0, np.nextafter(1.0, 0.0)), u[..., 1]], axis=-1)

@@ -146,7 +146,7 @@ def _fit_lobe(fit, use: str, reflectance) -> FitLobe:
         make_lobe = tabulated_lobe(dist)
         if fit.has_diffuse:
             diffuse = mi.load_dict({"type": "srgb", "color": [float(v) for v in fit.diffuse], "unbounded": True})
-            p_lobe = float(fit._lobe_probability())
+            p_lobe = float(fit.lobe_probability)
     else:
         converted = fit.to_ggx() if use == GGX else fit.to_beckmann()
         dist, fresnel = converted.distribution, converted.fresnel
