@@ -16,14 +16,12 @@ except ImportError:
     print("mitsuba is not installed (pip install 'microfacet[mitsuba]'): nothing rendered")
     sys.exit(0)
 
-for variant in ("llvm_ad_rgb", "scalar_rgb"):     # llvm needs a system libLLVM >= 16
-    try:
-        mi.set_variant(variant)
-        break
-    except (ImportError, AttributeError, RuntimeError):
-        continue
 import microfacet as mf
 import microfacet.mitsuba as mfm
+from microfacet.mitsuba.demo import choose_variant
+
+mi.set_variant(choose_variant())                  # llvm_ad_rgb where a libLLVM >= 16 runs, else scalar_rgb
+size, spp = (128, 32) if mi.variant().startswith("llvm") else (48, 4)     # scalar: one ray at a time
 
 mfm.register()                                    # mf_microfacet, mf_fitted, mf_leadr, mf_glints
 print("variant:", mi.variant())
@@ -41,10 +39,10 @@ for name, bsdf in bsdfs.items():
         "type": "scene", "integrator": {"type": "path", "max_depth": 3},
         "sensor": {"type": "perspective", "fov": 30,
                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4.2], target=[0, 0, 0], up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": 128, "height": 128}},
+                   "film": {"type": "hdrfilm", "width": size, "height": size}},
         "light": {"type": "envmap", "filename": "sky.exr"},
         "sphere": {"type": "sphere", "bsdf": bsdf}})
-    image = np.asarray(mi.render(scene, spp=32))
+    image = np.asarray(mi.render(scene, spp=spp))
     print(f"{name}: mean radiance {image.mean():.4f}")
     images.append(image)
 mf.io.write_png("mitsuba_spheres.png", np.concatenate(images, axis=1))   # the three, left to right
