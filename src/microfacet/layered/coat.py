@@ -29,7 +29,7 @@ carries most of the variation of ``E_c``), interpolated linearly in ``mu^(1/3)``
 (:func:`lerp`). Accuracy, against the slope-space quadrature of
 :func:`microfacet.validation.albedo` (GGX and Beckmann, ``eta = 1.5``, views 0-89 deg): within
 3e-5 for ``alpha`` 0.005-1 (tests), ~2e-4 at 89.9 deg for ``alpha = 0.003``. Construction
-costs one evaluation of the coat on 48 x 1152 pairs (~10 ms with the compiled kernels).
+costs one evaluation of the coat on 48 x 1152 pairs.
 
 Examples
 --------
