@@ -743,8 +743,8 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
         without attenuating the base).
     coat_fresnel : {"table", "schlick"}
         The coat's Fresnel term, per channel in ``[0, 1]``: a 7-node table as ``fresnel="table"``
-        (the default: on gold-metallic-paint a GGX + coat + base fit has grid error 0.064
-        against 0.203 with Schlick's, README), or Schlick's with free normal and grazing
+        (the default: a coloured base under a coat needs more than Schlick's two values;
+        see the fitting-methods guide), or Schlick's with free normal and grazing
         values ``f0, f90`` (:func:`coat_fresnel`; a dielectric clear coat).
     fresnel : {"table", "schlick", "conductor"}
         Default ``"table"``. Schlick ``F0`` per channel in ``[0, 1]``; a conductor ``eta + i k`` per channel

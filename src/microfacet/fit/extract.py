@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 import threading
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,7 +37,7 @@ from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
            "smith_kernel_anisotropic", "AzimuthalKernel", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
-           "fresnel_samples", "solve_fresnel", "smooth_table_qp", "table_variation", "TV_MAX", "box_qp", "chi2_residual", "albedo_rows", "extract_fresnel",
+           "fresnel_samples", "solve_fresnel", "FresnelSolution", "smooth_table_qp", "table_variation", "TV_MAX", "box_qp", "chi2_residual", "albedo_rows", "extract_fresnel",
            "screen_measured", "MEASURED_MAX"]
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
@@ -348,9 +349,36 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
                 finite=finite, n_d=n_d)
 
 
+class FresnelSolution(NamedTuple):
+    """A solved Fresnel table (:func:`solve_fresnel`): increasing ``cos_theta_d`` of the
+    ``n_d`` nodes, their ``(n_d, 3)`` values ``rgb``, the ``(3,)`` diffuse reflectance
+    ``k_d`` (zeros without a base), and ``misfit``: the model's :func:`chi2_residual` over
+    the usable configurations (a weighting that does not depend on the NDF, so that fits
+    with different NDFs compare), plus, with an albedo weight ``lambda``, the albedo term
+    ``lambda^2 mean_{v, c} (a_fit / a_data - 1)^2`` at the solution."""
+    cos_theta_d: np.ndarray
+    rgb: np.ndarray
+    k_d: np.ndarray
+    misfit: float
+
+
+class _FresnelSystem(NamedTuple):
+    """The normal equations ``h x = b`` (``b`` per channel) of :func:`solve_fresnel` over
+    the usable configurations: their data ``f``, mirror values ``f_id``, weights ``w``, the
+    hat nodes ``k0`` and fractions ``t`` of their ``cos theta_d``."""
+    h: np.ndarray
+    b: np.ndarray
+    f: np.ndarray
+    f_id: np.ndarray
+    w: np.ndarray
+    k0: np.ndarray
+    t: np.ndarray
+    n_d: int
+    diffuse: bool
+
+
 def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float = 1e-6, albedo=None,
-                  kd_max=None, return_residual: bool = False, albedo_weight: float = 0.0,
-                  energy_margin: float = 0.01):
+                  kd_max=None, albedo_weight: float = 0.0, energy_margin: float = 0.01) -> FresnelSolution:
     """Fresnel table ``F(theta_d)`` per RGB channel (Eq. 4.11, Algorithm 2) bounded to
     ``[0, 1]``, and optionally a Lambertian base ``k_d``, by a box-constrained linear
     least-squares solve over the configurations ``samples`` (:func:`fresnel_samples`):
@@ -385,23 +413,40 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     (:func:`_albedo_objective`): the fit's albedo is pulled towards the data's, from below
     as well, while the constraint still bounds it from above.
 
-    Returns ``(cos_theta_d, rgb, k_d)``: increasing ``cos theta_d`` of the ``n_d`` nodes,
-    ``(n_d, 3)`` values and the ``(3,)`` diffuse reflectance (zeros without ``diffuse``),
-    and with ``return_residual`` also the model's misfit :func:`chi2_residual` over the
-    usable configurations (a weighting that does not depend on ``ideal``, so that fits
-    with different NDFs compare), plus, with ``albedo_weight``, the albedo term
-    ``lambda^2 mean_{v, c} (a_fit / a_data - 1)^2`` at the solution.
+    Returns a :class:`FresnelSolution` ``(cos_theta_d, rgb, k_d, misfit)``.
     """
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
     if not (np.isfinite(energy_margin) and energy_margin >= 0):
         raise ValueError(f"energy_margin must be a finite number >= 0, got {energy_margin!r}")
+    system = _fresnel_system(samples, ideal, diffuse)
+    x = np.empty((len(system.h), 3))
+    energy = None if albedo is None else (albedo[0], np.asarray(albedo[1], np.float64) + energy_margin)
+    mu = None
+    for c in (1, 0, 2):                    # green first: its smoothing starts the others' search
+        hi = np.ones(len(x))
+        if diffuse and kd_max is not None:
+            hi[system.n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
+        hc, bc = system.h, system.b[:, c]
+        if albedo is not None and albedo_weight > 0:
+            # the data term divided by the data's energy (a relative misfit), plus the albedo term
+            energy_c = max(float(np.sum(system.w * system.f[:, c] ** 2)), 1e-300)
+            ha, ba = _albedo_objective(albedo, c, diffuse, albedo_weight)
+            hc, bc = hc / energy_c + ha, bc / energy_c + ba
+        x[:, c], mu = smooth_table_qp(hc, bc, (np.zeros(len(x)), hi), system.n_d, smoothing,
+                                      None if energy is None else (energy, c, diffuse), hint=mu)
+    return _fresnel_solution(system, x, albedo, albedo_weight)
+
+
+def _fresnel_system(samples: dict, ideal, diffuse: bool) -> _FresnelSystem:
+    """The normal equations of :func:`solve_fresnel`: weights ``1 / (f_id + k_d0 / pi)``,
+    with ``k_d0`` the data's floor where the mirror lobe is negligible (0 without a base,
+    and configurations with ``f_id = 0`` dropped)."""
     n_d = samples["n_d"]
     f = samples["f"]
     f_id = np.asarray(ideal.eval(samples["wi"], samples["wo"]), dtype=np.float64)[..., 0]
     ok = samples["finite"] & np.isfinite(f_id) & (f_id >= 0)
     if diffuse:
-        # first guess of the base: the data's floor where the mirror lobe is negligible
         low = ok & (f_id <= 1e-3 * np.max(np.where(ok, f_id, 0.0)))
         floor = np.median(luminance(f[low])) if np.any(low) else 0.0
         delta = max(float(floor), 1e-6 * float(np.max(luminance(f[ok])))) if np.any(ok) else 0.0
@@ -413,8 +458,7 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     f, f_id = f[ok], f_id[ok]
     w = 1.0 / (f_id + delta)
     k0, t = _hats(samples["cos_d"][ok], n_d)
-    cols = [k0, k0 + 1]
-    vals = [f_id * (1.0 - t), f_id * t]
+    cols, vals = [k0, k0 + 1], [f_id * (1.0 - t), f_id * t]
     n_var = n_d + (1 if diffuse else 0)
     if diffuse:
         cols.append(np.full(len(f), n_d))
@@ -430,35 +474,23 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     if not np.all(np.isfinite(h)) or not np.all(np.isfinite(b)):
         raise MicrofacetError("fit: the Fresnel system is not finite (the BRDF's values overflow float64 "
                               "products: are they physical?)")
-    lo = np.zeros(n_var)
-    x = np.empty((n_var, 3))
-    energy = None if albedo is None else (albedo[0], np.asarray(albedo[1], np.float64) + energy_margin)
-    mu = None
-    for c in (1, 0, 2):                    # green first: its smoothing starts the others' search
-        hi = np.ones(n_var)
-        if diffuse and kd_max is not None:
-            hi[n_d] = max(min(1.0, float(kd_max[c])), 1e-12)
-        hc, bc = h, b[:, c]
-        if albedo is not None and albedo_weight > 0:
-            # the data term divided by the data's energy (a relative misfit), plus the albedo term
-            energy_c = max(float(np.sum(w * f[:, c] ** 2)), 1e-300)
-            ha, ba = _albedo_objective(albedo, c, diffuse, albedo_weight)
-            hc, bc = hc / energy_c + ha, bc / energy_c + ba
-        x[:, c], mu = smooth_table_qp(hc, bc, (lo, hi), n_d, smoothing,
-                                      None if energy is None else (energy, c, diffuse), hint=mu)
+    return _FresnelSystem(h, b, f, f_id, w, k0, t, n_d, diffuse)
+
+
+def _fresnel_solution(system: _FresnelSystem, x: np.ndarray, albedo, albedo_weight: float) -> FresnelSolution:
+    """The table and base ``x`` (nodes increasing in ``theta_d``, then ``k_d``) as a
+    :class:`FresnelSolution`, with the misfit of the whole model."""
+    n_d, k0, t = system.n_d, system.k0, system.t
     rgb = x[:n_d]
-    kd = x[n_d] if diffuse else np.zeros(3)
-    theta_d = np.linspace(0.0, HALF_PI, n_d)
-    out = np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd
-    if not return_residual:
-        return out
-    model = f_id[:, None] * ((1.0 - t)[:, None] * rgb[k0] + t[:, None] * rgb[k0 + 1]) + kd / np.pi
-    misfit = chi2_residual(model, f)
+    kd = x[n_d] if system.diffuse else np.zeros(3)
+    model = system.f_id[:, None] * ((1.0 - t)[:, None] * rgb[k0] + t[:, None] * rgb[k0 + 1]) + kd / np.pi
+    misfit = chi2_residual(model, system.f)
     if albedo is not None and albedo_weight > 0:
-        a_fit, a_data = _albedo_rows_of(albedo[0], diffuse) @ x, np.asarray(albedo[1], np.float64)
+        a_fit, a_data = _albedo_rows_of(albedo[0], system.diffuse) @ x, np.asarray(albedo[1], np.float64)
         seen = a_data > 0
         misfit += albedo_weight**2 * float(np.mean((a_fit[seen] / a_data[seen] - 1.0) ** 2))
-    return out + (misfit,)
+    theta_d = np.linspace(0.0, HALF_PI, n_d)
+    return FresnelSolution(np.cos(theta_d)[::-1].copy(), rgb[::-1].copy(), kd, float(misfit))
 
 
 #: Largest total variation of a fitted Fresnel table over its range, per channel
@@ -853,7 +885,7 @@ def _cosine_strategy(n_u: int, views, n_d: int):
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
                     diffuse: bool = False, isotropic: bool = False):
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
-    Algorithm 2): ``(cos_theta_d, rgb, k_d)``."""
+    Algorithm 2): a :class:`FresnelSolution`."""
     return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h, isotropic), ideal, diffuse=diffuse)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -201,7 +202,7 @@ class FittedBRDF(MicrofacetBRDF):
         samples = extract.fresnel_samples(reference, n_d, n_phi_h=(8 if self.anisotropic else 1),
                                           isotropic=not self.anisotropic)
         energy = extract.albedo_rows(reference, ideal, n_d, _energy_views(self.anisotropic), n_u=20)
-        cos_d, rgb, _ = extract.solve_fresnel(samples, ideal, albedo=energy, energy_margin=ENERGY_MARGIN)
+        cos_d, rgb, _, _ = extract.solve_fresnel(samples, ideal, albedo=energy, energy_margin=ENERGY_MARGIN)
         return MicrofacetBRDF(distribution, fresnel=_fresnel.Tabulated(cos_d, rgb), gaf=self.gaf_model,
                               shadowing=self.shadowing)
 
@@ -434,8 +435,7 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         Needs ``energy_constraint`` (ignored without it). None (the default):
         :data:`ALBEDO_WEIGHT` for isotropic fits, 0 for anisotropic ones, where the
         term (32 views) drives the table into oscillation on the sampling noise of the
-        albedo rows and misses the data's albedo anyway (README: ibiza's anisotropic
-        fit, grid error 0.19 -> 0.58, worst albedo ratio 0.59 -> 0.78).
+        albedo rows and misses the data's albedo anyway.
     tol, max_iter
         Stopping rule of the power iterations (relative change of the eigenvector).
 
@@ -443,6 +443,26 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     -------
     FittedBRDF
     """
+    n, m, albedo_weight = _checked_options(resolution, resolution_phi, anisotropic, gaf, tol, max_iter,
+                                           diffuse_iterations, albedo_weight)
+    brdf = extract.screen_measured(brdf)         # huge samples: ignored if few, refused if many
+    theta, phi, f_back = _backscattering_table(brdf, n, m if anisotropic else None)
+    problem = _TableProblem(
+        brdf, theta, phi, f_back, gaf, _backscatter_model(backscatter_gaf, shadowing), shadowing, tol, max_iter,
+        extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1), isotropic=not anisotropic),
+        _energy_views(anisotropic) if energy_constraint else None, albedo_weight,
+        _diffuse_bound(brdf) if diffuse else None)
+    dist, f0, its, (cos_d, rgb, kd, _) = (_fit_with_base(problem, diffuse_iterations) if diffuse
+                                          else _solve_table(problem, 0.0))
+    if gaf != "smith":
+        f0 = float(extract.luminance(rgb[-1]))
+    return FittedBRDF(dist, _fresnel.Tabulated(cos_d, rgb), gaf=gaf, shadowing=shadowing, f0=f0,
+                      iterations=its, backscatter_gaf=problem.model, diffuse=kd)
+
+
+def _checked_options(resolution, resolution_phi, anisotropic, gaf, tol, max_iter, diffuse_iterations,
+                     albedo_weight) -> tuple[int, int, float]:
+    """``(N, M, albedo weight)`` of :func:`fit`'s options, or a ``ValueError`` naming the bad one."""
     if gaf not in GAFS:
         raise ValueError(f"gaf must be one of {GAFS}, got {gaf!r}")
     for name, v, low in (("max_iter", max_iter, 1), ("diffuse_iterations", diffuse_iterations, 1),
@@ -455,68 +475,92 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         albedo_weight = 0.0 if anisotropic else ALBEDO_WEIGHT
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
-    model = _backscatter_model(backscatter_gaf, shadowing)
-    brdf = extract.screen_measured(brdf)         # huge samples: ignored if few, refused if many
     n = int(resolution)
     if n < 4:
         raise ValueError(f"resolution must be >= 4, got {resolution!r}")
-    m = n if resolution_phi is None else int(resolution_phi)
-    if anisotropic and m < 4:
-        raise ValueError(f"resolution_phi must be >= 4, got {resolution_phi!r}")
+    return n, n if resolution_phi is None else int(resolution_phi), float(albedo_weight)
+
+
+def _backscattering_table(brdf, n: int, m: int | None) -> tuple:
+    """``(theta, phi, f(o, o))``: the backscattering of ``brdf`` (luminance) at the ``N``
+    nodes of :func:`theta_grid` (the pole excluded), and ``M`` azimuths for an anisotropic
+    fit (``phi`` None for an isotropic one)."""
     theta = theta_grid(n)
-    if anisotropic:
-        phi = np.arange(m) * (2.0 * np.pi / m)
-        f_back = extract.backscattering(brdf, theta[:-1, None], phi[None, :])
-    else:
-        phi = None
-        f_back = extract.backscattering(brdf, theta[:-1])
+    phi = None if m is None else np.arange(m) * (2.0 * np.pi / m)
+    f_back = (extract.backscattering(brdf, theta[:-1]) if phi is None
+              else extract.backscattering(brdf, theta[:-1, None], phi[None, :]))
     if not float(np.max(f_back)) <= 1e100:       # the normal equations square the values
         raise MicrofacetError(f"fit: {brdf!r}: backscattering reaches {float(np.max(f_back)):.3g}, beyond what "
                               "a fit's float64 arithmetic holds (are the values physical?)")
-    samples = extract.fresnel_samples(brdf, n, n_phi_h=(8 if anisotropic else 1), isotropic=not anisotropic)
-    views = _energy_views(anisotropic)
+    return theta, phi, f_back
 
-    def solve(base):
-        """NDF from the backscattering minus ``base / pi`` (luminance), then the Fresnel
-        table (and ``k_d``) against it: ``(dist, f0, its, (cos_d, rgb, k_d, residual))``."""
-        dist, f0, its = _fit_ndf(np.maximum(f_back - base / np.pi, 0.0), theta, phi, gaf, model, tol, max_iter)
-        ideal = MicrofacetBRDF(dist, gaf=gaf, shadowing=shadowing)
-        energy = extract.albedo_rows(brdf, ideal, n, views, n_u=20) if energy_constraint else None
-        return dist, f0, its, extract.solve_fresnel(samples, ideal, diffuse=diffuse, albedo=energy, kd_max=kd_max,
-                                                    return_residual=diffuse, albedo_weight=albedo_weight,
-                                                    energy_margin=ENERGY_MARGIN)
 
-    kd_max = None
-    if diffuse:    # the base may not exceed the backscattering (up to 70 degrees), per channel
-        th = np.linspace(0.0, np.radians(70.0), 29)
-        o = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
-        rgb_back = np.asarray(brdf.eval(o, o), dtype=np.float64)
-        kd_max = np.pi * np.min(np.where(np.isfinite(rgb_back), np.maximum(rgb_back, 0.0), 0.0), axis=0)
-        # the base's luminance minimizes the misfit of the whole model (a bounded 1D search)
-        from scipy.optimize import minimize_scalar
-        top = float(min(extract.luminance(kd_max), np.pi * np.max(f_back)))
-        cache = {}
+def _diffuse_bound(brdf) -> np.ndarray:
+    """Largest Lambertian ``k_d`` (RGB) under the backscattering up to 70 degrees, per channel."""
+    th = np.linspace(0.0, np.radians(70.0), 29)
+    o = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
+    rgb_back = np.asarray(brdf.eval(o, o), dtype=np.float64)
+    return np.pi * np.min(np.where(np.isfinite(rgb_back), np.maximum(rgb_back, 0.0), 0.0), axis=0)
 
-        def misfit(base):
-            if base not in cache:
-                try:
-                    cache[base] = solve(base)
-                except MicrofacetError:          # nothing left for the lobe
-                    return np.inf
-            return cache[base][3][3]
 
-        best = 0.0
-        if top > 0:
-            found = minimize_scalar(misfit, bounds=(0.0, top), method="bounded",
-                                    options=dict(xatol=1e-3 * top, maxiter=max(int(diffuse_iterations), 1))).x
-            best = found if misfit(found) < misfit(0.0) else 0.0
-        dist, f0, its, (cos_d, rgb, kd, _) = cache[best] if best in cache else solve(best)
-    else:
-        dist, f0, its, (cos_d, rgb, kd) = solve(0.0)
-    if gaf != "smith":
-        f0 = float(extract.luminance(rgb[-1]))
-    return FittedBRDF(dist, _fresnel.Tabulated(cos_d, rgb), gaf=gaf, shadowing=shadowing, f0=f0,
-                      iterations=its, backscatter_gaf=model, diffuse=kd)
+@dataclass(frozen=True)
+class _TableProblem:
+    """What one tabulated fit solves, read once: the data, its backscattering ``f_back`` at
+    ``theta`` (x ``phi``), the model (``gaf``, the inverted backscattering ``model``,
+    ``shadowing``), the power iterations' ``tol``/``max_iter``, the Fresnel ``samples``,
+    the energy constraint's ``views`` (None: off), the albedo weight and ``kd_max`` (None:
+    no Lambertian base)."""
+    brdf: object
+    theta: np.ndarray
+    phi: np.ndarray | None
+    f_back: np.ndarray
+    gaf: str
+    model: str
+    shadowing: bool
+    tol: float
+    max_iter: int
+    samples: tuple
+    views: np.ndarray | None
+    albedo_weight: float
+    kd_max: np.ndarray | None
+
+
+def _solve_table(problem: _TableProblem, base: float) -> tuple:
+    """NDF from the backscattering minus ``base / pi`` (luminance), then the Fresnel table
+    (and ``k_d``) against it: ``(dist, f0, its, (cos_d, rgb, k_d, residual))``."""
+    pr = problem
+    dist, f0, its = _fit_ndf(np.maximum(pr.f_back - base / np.pi, 0.0), pr.theta, pr.phi, pr.gaf, pr.model,
+                             pr.tol, pr.max_iter)
+    ideal = MicrofacetBRDF(dist, gaf=pr.gaf, shadowing=pr.shadowing)
+    n = len(pr.theta)
+    energy = None if pr.views is None else extract.albedo_rows(pr.brdf, ideal, n, pr.views, n_u=20)
+    diffuse = pr.kd_max is not None
+    solved = extract.solve_fresnel(pr.samples, ideal, diffuse=diffuse, albedo=energy, kd_max=pr.kd_max,
+                                   albedo_weight=pr.albedo_weight, energy_margin=ENERGY_MARGIN)
+    return dist, f0, its, solved
+
+
+def _fit_with_base(problem: _TableProblem, iterations: int) -> tuple:
+    """:func:`_solve_table` at the base luminance that minimizes the whole model's misfit (a
+    bounded scalar search of at most ``iterations`` steps, kept only if better than no base)."""
+    from scipy.optimize import minimize_scalar
+    top = float(min(extract.luminance(problem.kd_max), np.pi * np.max(problem.f_back)))
+    cache = {}
+
+    def misfit(base):
+        if base not in cache:
+            try:
+                cache[base] = _solve_table(problem, base)
+            except MicrofacetError:          # nothing left for the lobe
+                return np.inf
+        return cache[base][3][3]
+
+    best = 0.0
+    if top > 0:
+        found = minimize_scalar(misfit, bounds=(0.0, top), method="bounded",
+                                options=dict(xatol=1e-3 * top, maxiter=max(int(iterations), 1))).x
+        best = found if misfit(found) < misfit(0.0) else 0.0
+    return cache[best] if best in cache else _solve_table(problem, best)
 
 
 # ------------------------------------------------------------------------- files
