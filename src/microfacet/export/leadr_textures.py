@@ -1,0 +1,415 @@
+"""LEADR pyramids for engines: per-MIP-level normal, roughness and anisotropy textures.
+
+A LEADR pyramid (``microfacet bake``; :mod:`microfacet.leadr`) holds, per texel and MIP
+level, the five slope moments ``E1..E5 = E[x~], E[y~], E[x~^2], E[y~^2], E[x~ y~]`` (Dupuy
+2015, Eqs. 3.5-3.9). Engines take a tangent-space normal map and a roughness (glTF:
+``metallicRoughness`` G channel) with, at most, an anisotropy strength and direction
+(``KHR_materials_anisotropy``). Per level this module writes (:func:`level_parameters`,
+:func:`encode_level`):
+
+* **normal map** from the mean slope ``(x, y) = (E1, E2)``: ``n = (-x, -y, 1) / |.|``,
+  stored ``round(255 (n + 1) / 2)`` (glTF: +X right, +Y up the image, +Z out; the same as
+  :func:`microfacet.leadr.encode_normal_map`);
+* **slope covariance** ``Sx = E3 - E1^2``, ``Sy = E4 - E2^2``, ``C = E5 - E1 E2`` (plus an
+  optional base roughness, added as independent moments, Listing 5.1), turned into the
+  Beckmann ellipse with ``alpha^2 = 2 sigma^2`` (the library's convention,
+  :func:`microfacet.leadr.from_moments`): eigenvalues
+  ``l1,2 = (Sx + Sy)/2 +- sqrt(((Sx - Sy)/2)^2 + C^2)``, ``alpha1,2 = sqrt(2 l1,2)``, the
+  ``alpha1`` axis at ``phi = atan2(2 C, Sx - Sy) / 2`` from the tangent towards the
+  bitangent (:func:`ellipse_of_covariance`; inverse :func:`covariance_of_ellipse`);
+* engines' lobe is GGX: it takes the Beckmann ``alpha`` as is (both have the peak
+  ``D(0) = 1 / (pi alpha1 alpha2)``; GGX's slope variance is infinite, so no moment match
+  exists), then ``KHR_materials_anisotropy`` (``alpha_t = mix(r^2, 1, s^2)``, ``alpha_b = r^2``
+  along the direction): **roughness** ``r = sqrt(alpha2)`` in the G channel of
+  ``metallic_roughness`` (B: metalness 1, scaled by ``metallicFactor``; R: 255), **anisotropy**
+  RGB ``= ((cos phi + 1)/2, (sin phi + 1)/2, s)`` with ``s = sqrt((alpha1 - alpha2) / (1 - alpha2))``
+  (:func:`microfacet.export.gltf.roughness_anisotropy`, vectorised here), ``alpha1`` clipped
+  to 1, ``phi`` in ``(-pi/2, pi/2]`` (``cos phi >= 0``; isotropic texels point along the tangent).
+
+:func:`decode_level` is the inverse (what a conforming engine evaluates at a texel centre).
+:func:`export_leadr` writes the PNG MIP chains (``--to textures``) or a ``.glb`` of a
+textured plane holding level 0 with the chains beside it (``--to gltf``; glTF holds a custom
+MIP chain only as KTX2, ``KHR_texture_basisu``, and no KTX2 writer is installed here), and the
+report of what is not carried (:data:`NOT_CARRIED`) with the 8-bit round trip's error per level.
+
+Example
+-------
+>>> import microfacet as mf
+>>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((64, 64), 0.3, seed=1))
+>>> levels = leadr_textures(pyramid, base_roughness=0.1)
+>>> sorted(levels[0]), levels[0]["normal"].shape
+(['anisotropy', 'metallic_roughness', 'normal'], (64, 64, 3))
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MicrofacetError
+from ..io.png import read_png_data, write_png_data
+
+__all__ = ["ellipse_of_covariance", "covariance_of_ellipse", "gltf_parameters", "level_parameters",
+           "encode_level", "decode_level", "leadr_textures", "naive_textures", "box_downsample",
+           "write_chains", "read_chains", "plane_mesh", "write_plane_glb", "export_leadr", "quantization_error",
+           "TEXTURES", "TARGETS", "NOT_CARRIED"]
+
+#: The three textures of a level, in the order they are written.
+TEXTURES = ("normal", "metallic_roughness", "anisotropy")
+#: ``export_leadr``'s formats.
+TARGETS = ("textures", "gltf")
+#: What engines' textures cannot carry exactly (written into every report).
+NOT_CARRIED = [
+    "Beckmann lobe: engines' lobe is GGX; it takes the Beckmann alpha (same peak D(0) = 1/(pi a1 a2), "
+    "heavier tails; GGX has no finite slope variance, so the moments cannot be matched)",
+    "filtering in the moments: engines interpolate the encoded textures (sqrt(alpha), strength, direction, "
+    "normal) bilinearly within a level and linearly between levels, which is exact only at texel centres "
+    "of each level",
+    "8-bit storage: roughness r = sqrt(alpha2) and strength in steps of 1/255 (per-level error below)",
+    "alpha1 > 1 is clipped to 1 (glTF's alpha_t <= 1)",
+    "the anisotropy direction is an axis (phi and phi + pi are one ellipse) stored as a vector with "
+    "cos(phi) >= 0: filtering between texels whose axes straddle +-90 degrees shortens or turns it",
+    "engines choose the MIP level from their own footprint (isotropic trilinear, or anisotropic filtering "
+    "when enabled), not LEADR's anisotropic footprint lookup",
+    "correlation rho: carried by the direction of the ellipse (the same distribution)",
+]
+#: Smallest alpha written (a single facet has zero variance; as :data:`microfacet.leadr.moments.MIN_ALPHA`).
+MIN_ALPHA = 1e-3
+
+
+def ellipse_of_covariance(vx, vy, cxy):
+    """``(alpha1, alpha2, phi)`` of the slope covariance ``[[vx, cxy], [cxy, vy]]``
+    (Beckmann: ``alpha^2 = 2 sigma^2``, Dupuy 2015 Eq. 3.5-3.9): ``alpha1 >= alpha2`` from the
+    eigenvalues, ``phi = atan2(2 cxy, vx - vy) / 2`` in ``(-pi/2, pi/2]`` the ``alpha1`` axis
+    from the tangent towards the bitangent. Negative eigenvalues (rounding) become 0.
+    Exact to float64 rounding (:func:`covariance_of_ellipse` is the inverse).
+
+    >>> [round(float(v), 6) for v in ellipse_of_covariance(0.02, 0.02, 0.01)]
+    [0.244949, 0.141421, 0.785398]
+    """
+    vx, vy, cxy = (np.asarray(v, dtype=np.float64) for v in (vx, vy, cxy))
+    mean, half = 0.5 * (vx + vy), 0.5 * (vx - vy)
+    r = np.hypot(half, cxy)
+    l1, l2 = np.maximum(mean + r, 0.0), np.maximum(mean - r, 0.0)
+    phi = 0.5 * np.arctan2(2.0 * cxy, vx - vy)
+    phi = np.where(phi <= -0.5 * np.pi, phi + np.pi, phi)
+    return np.sqrt(2.0 * l1), np.sqrt(2.0 * l2), phi
+
+
+def covariance_of_ellipse(alpha1, alpha2, phi):
+    """``(vx, vy, cxy)``: the slope covariance of a Beckmann ellipse (radii ``alpha1,
+    alpha2``, ``alpha1`` axis at ``phi``), ``R diag(a1^2, a2^2) R^T / 2``.
+
+    >>> [round(float(v), 6) for v in covariance_of_ellipse(0.3, 0.1, 0.0)]
+    [0.045, 0.005, 0.0]
+    """
+    a1, a2, phi = (np.asarray(v, dtype=np.float64) for v in (alpha1, alpha2, phi))
+    l1, l2 = 0.5 * a1 * a1, 0.5 * a2 * a2
+    c, s = np.cos(phi), np.sin(phi)
+    return l1 * c * c + l2 * s * s, l1 * s * s + l2 * c * c, (l1 - l2) * c * s
+
+
+def gltf_parameters(alpha1, alpha2):
+    """``(roughness, strength, clipped)`` arrays of KHR_materials_anisotropy for ellipses
+    ``alpha1 >= alpha2``: ``alpha_t = mix(r^2, 1, s^2) = min(alpha1, 1)``, ``alpha_b = r^2 =
+    min(alpha2, 1)``; ``clipped`` marks ``alpha1 > 1`` (the vectorised
+    :func:`microfacet.export.gltf.roughness_anisotropy`)."""
+    a1, a2 = (np.asarray(v, dtype=np.float64) for v in (alpha1, alpha2))
+    clipped = a1 > 1.0
+    a1, a2 = np.minimum(a1, 1.0), np.minimum(a2, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(a2 >= 1.0, 0.0, np.sqrt(np.maximum(a1 - a2, 0.0) / np.maximum(1.0 - a2, 1e-300)))
+    return np.sqrt(a2), np.clip(s, 0.0, 1.0), clipped
+
+
+def level_parameters(E, base_roughness=None) -> dict:
+    """Engine parameters of one pyramid level ``E (H, W, 5)``: ``slopes`` (mean slope
+    ``(E1, E2)``), the covariance ``vx, vy, cxy`` (with ``base_roughness`` added: ``None``,
+    ``alpha``, ``(alpha_x, alpha_y)`` or a Beckmann lobe, :func:`microfacet.leadr.base_moments`),
+    its ellipse ``alpha1, alpha2, phi`` (``alpha`` at least :data:`MIN_ALPHA`) and the glTF
+    ``roughness, strength, clipped`` (module docstring)."""
+    from ..leadr import base_moments, convolve, covariance
+    E = np.asarray(E, dtype=np.float64)
+    if E.ndim != 3 or E.shape[2] != 5 or 0 in E.shape:
+        raise ValueError(f"a pyramid level must be (H, W, 5), got shape {E.shape}")
+    base = base_moments(base_roughness)
+    if base is not None:
+        E = convolve(E, base)
+    vx, vy, cxy = covariance(E)
+    a1, a2, phi = ellipse_of_covariance(vx, vy, cxy)
+    a1, a2 = np.maximum(a1, MIN_ALPHA), np.maximum(a2, MIN_ALPHA)
+    r, s, clipped = gltf_parameters(a1, a2)
+    return {"slopes": E[..., :2], "vx": vx, "vy": vy, "cxy": cxy, "alpha1": a1, "alpha2": a2, "phi": phi,
+            "roughness": r, "strength": s, "clipped": clipped}
+
+
+def _u8(v) -> np.ndarray:
+    return np.rint(np.clip(v, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def encode_level(params: dict) -> dict[str, np.ndarray]:
+    """The three ``(H, W, 3)`` uint8 textures (:data:`TEXTURES`) of :func:`level_parameters`'
+    output (module docstring). Texels whose strength rounds to 0 point along the tangent."""
+    from ..leadr import encode_normal_map
+    r, s, phi = params["roughness"], params["strength"], params["phi"]
+    ones = np.ones_like(r)
+    mr = np.stack([ones, r, ones], axis=-1)
+    s8 = _u8(s)
+    c, sn = np.where(s8 > 0, np.cos(phi), 1.0), np.where(s8 > 0, np.sin(phi), 0.0)
+    aniso = np.stack([_u8(0.5 * c + 0.5), _u8(0.5 * sn + 0.5), s8], axis=-1)
+    return {"normal": encode_normal_map(params["slopes"], np.uint8), "metallic_roughness": _u8(mr),
+            "anisotropy": aniso}
+
+
+def decode_level(images: dict) -> dict:
+    """What a conforming glTF engine reads at the texel centres of :func:`encode_level`'s
+    textures: ``slopes`` of the normal (``-n_xy / n_z``), ``roughness``, ``strength``, ``phi``
+    (of the normalised direction, as three.js), ``alpha_t = mix(r^2, 1, s^2)``, ``alpha_b = r^2``
+    and their covariance ``vx, vy, cxy`` (``alpha^2 = 2 sigma^2``)."""
+    n = images["normal"].astype(np.float64) / 127.5 - 1.0
+    r = images["metallic_roughness"][..., 1].astype(np.float64) / 255.0
+    a = images["anisotropy"].astype(np.float64)
+    d = a[..., :2] / 127.5 - 1.0
+    s = a[..., 2] / 255.0
+    phi = np.arctan2(d[..., 1], d[..., 0])
+    at, ab = r * r + s * s * (1.0 - r * r), r * r
+    vx, vy, cxy = covariance_of_ellipse(at, ab, phi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slopes = -n[..., :2] / np.maximum(n[..., 2:], 1e-6)
+    return {"slopes": slopes, "roughness": r, "strength": s, "phi": phi, "alpha_t": at, "alpha_b": ab,
+            "vx": vx, "vy": vy, "cxy": cxy}
+
+
+def quantization_error(params: dict, images: dict) -> dict:
+    """Error of the 8-bit textures against the exact parameters of one level: ``covariance``
+    (mean and max over texels of ``|S_decoded - S|_F / |S|_F``, clipped texels excluded),
+    ``alpha`` (max ``|alpha - alpha_decoded| / alpha`` over both axes), ``slope`` (max abs of
+    the mean slope's error) and ``clipped`` (fraction of texels with ``alpha1 > 1``)."""
+    d = decode_level(images)
+    keep = ~params["clipped"]
+    a1, a2 = np.minimum(params["alpha1"], 1.0), np.minimum(params["alpha2"], 1.0)
+    vx, vy, cxy = covariance_of_ellipse(a1, a2, params["phi"])
+    norm = np.sqrt(vx**2 + vy**2 + 2 * cxy**2)
+    diff = np.sqrt((d["vx"] - vx) ** 2 + (d["vy"] - vy) ** 2 + 2 * (d["cxy"] - cxy) ** 2)
+    rel = (diff / norm)[keep] if keep.any() else np.zeros(1)
+    ea = np.maximum(np.abs(d["alpha_t"] - a1) / a1, np.abs(d["alpha_b"] - a2) / a2)
+    return {"covariance_mean": float(rel.mean()), "covariance_max": float(rel.max()),
+            "alpha_max": float(ea[keep].max()) if keep.any() else 0.0,
+            "slope_max": float(np.abs(d["slopes"] - params["slopes"]).max()),
+            "clipped": float(params["clipped"].mean())}
+
+
+def _levels_of(source) -> tuple[list[np.ndarray], str]:
+    """``(levels, label)`` of a pyramid file or a list of ``(H, W, 5)`` levels."""
+    from ..leadr import read_pyramid
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        if not path.is_file():
+            raise MicrofacetError(f"{path}: no such pyramid file (a moment pyramid EXR from 'microfacet bake')")
+        return read_pyramid(path), str(path)
+    levels = [np.asarray(level) for level in source]
+    if not levels or any(lv.ndim != 3 or lv.shape[2] != 5 for lv in levels):
+        raise ValueError("pyramid must be a non-empty list of (H, W, 5) moment levels")
+    return levels, "a moment pyramid"
+
+
+def leadr_textures(pyramid, base_roughness=None, with_parameters: bool = False):
+    """Per level (level 0 first) the dict of three uint8 textures (:func:`encode_level`) of a
+    moment pyramid (a list of ``(H, W, 5)`` or a pyramid EXR path); ``base_roughness`` is
+    added to every level (leave it None when the pyramid was baked with ``--roughness``: it
+    holds it already). ``with_parameters``: also return the per-level parameters."""
+    levels, _ = _levels_of(pyramid)
+    params = [level_parameters(E, base_roughness) for E in levels]
+    images = [encode_level(p) for p in params]
+    return (images, params) if with_parameters else images
+
+
+def box_downsample(image: np.ndarray) -> np.ndarray:
+    """The next MIP level of an ``(H, W, C)`` texture by the box filter of
+    :func:`microfacet.leadr.mip_pyramid` (2x2 means for even sizes), in float64."""
+    from ..leadr import mip_pyramid
+    return mip_pyramid(np.asarray(image, dtype=np.float64))[1]
+
+
+def naive_textures(level0: dict) -> list[dict]:
+    """The MIP chain an engine makes from level 0 alone (``generateMipmap``): each texture's
+    encoded values box-filtered level by level (normals averaged, then renormalised when
+    encoded; roughness, strength and direction averaged) and rounded to 8 bits. With a
+    constant base roughness the roughness stays constant: the naive MIPs of Dupuy 2015,
+    Fig. 5.3 (what LEADR is compared against)."""
+    from ..leadr import mip_pyramid
+    chains = {}
+    for name in TEXTURES:
+        levels = mip_pyramid(level0[name].astype(np.float64))
+        if name == "normal":
+            out = []
+            for lv in levels:
+                n = lv / 127.5 - 1.0
+                n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-9)
+                out.append(_u8(0.5 * n + 0.5))
+            chains[name] = out
+        else:
+            chains[name] = [np.rint(lv).astype(np.uint8) for lv in levels]
+    return [{name: chains[name][k] for name in TEXTURES} for k in range(len(chains["normal"]))]
+
+
+def write_chains(levels: list[dict], folder) -> dict[str, list[Path]]:
+    """Write ``folder/<texture>/level_00.png, level_01.png, ...`` (8-bit RGB) for each of
+    :data:`TEXTURES`; returns the paths per texture."""
+    folder = Path(folder)
+    paths = {}
+    for name in TEXTURES:
+        (folder / name).mkdir(parents=True, exist_ok=True)
+        paths[name] = [write_png_data(folder / name / f"level_{k:02d}.png", lv[name]) for k, lv in enumerate(levels)]
+    return paths
+
+
+def read_chains(folder) -> list[dict]:
+    """The levels written by :func:`write_chains` (uint8 arrays)."""
+    folder = Path(folder)
+    files = sorted((folder / "normal").glob("level_*.png"))
+    if not files:
+        raise MicrofacetError(f"{folder}: no normal/level_00.png (a texture folder of 'microfacet export --to textures')")
+    return [{name: read_png_data(folder / name / f.name)[..., :3] for name in TEXTURES} for f in files]
+
+
+def plane_mesh(tiles: float = 1.0):
+    """``(positions, normals, tangents, uvs, indices)`` of the unit square ``[-1/2, 1/2]^2`` in
+    glTF's ground plane (x, z; normal +y), tangent +x (``w = 1``: bitangent ``n x t = -z``), uv
+    ``(x + 1/2, z + 1/2) * tiles`` so that the image's top row (``v = 0``) lies towards ``-z``, the
+    bitangent: the normal map's +Y and the anisotropy's ``phi`` turn from the tangent towards it."""
+    p = np.array([[-0.5, 0, -0.5], [0.5, 0, -0.5], [0.5, 0, 0.5], [-0.5, 0, 0.5]], np.float32)
+    n = np.tile(np.array([[0, 1, 0]], np.float32), (4, 1))
+    t = np.tile(np.array([[1, 0, 0, 1]], np.float32), (4, 1))
+    uv = ((p[:, [0, 2]] + 0.5) * tiles).astype(np.float32)
+    idx = np.array([0, 3, 2, 0, 2, 1], np.uint32)          # counter-clockwise seen from +y
+    return p, n, t, uv, idx
+
+
+def _glb_material(metallic: float, base_color) -> dict:
+    return {"name": "leadr", "pbrMetallicRoughness": {
+        "baseColorFactor": [*map(float, base_color), 1.0], "metallicFactor": float(metallic), "roughnessFactor": 1.0,
+        "metallicRoughnessTexture": {"index": 1}}, "normalTexture": {"index": 0, "scale": 1.0},
+        "extensions": {"KHR_materials_anisotropy": {"anisotropyStrength": 1.0, "anisotropyRotation": 0.0,
+                                                    "anisotropyTexture": {"index": 2}}}}
+
+
+def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.0, base_color=(0.9, 0.9, 0.9)) -> Path:
+    """Write ``path`` (``.glb``): a unit plane (:func:`plane_mesh`) whose material holds the level-0
+    textures of ``level0`` (:data:`TEXTURES`) as embedded PNG images: ``normalTexture``,
+    ``metallicRoughnessTexture`` and ``KHR_materials_anisotropy.anisotropyTexture`` (strength 1,
+    rotation 0), sampler REPEAT with trilinear minification (engines make their own MIPs from
+    level 0: glTF holds a custom chain only as KTX2)."""
+    import imagecodecs
+    import pygltflib as g
+    path = Path(path)
+    gl = g.GLTF2(asset=g.Asset(version="2.0", generator="microfacet.export.leadr_textures"),
+                 extensionsUsed=["KHR_materials_anisotropy"])
+    blob = b""
+    arrays = [(a, ct, kind, tgt) for a, (ct, kind, tgt) in zip(plane_mesh(tiles), [
+        (g.FLOAT, "VEC3", g.ARRAY_BUFFER), (g.FLOAT, "VEC3", g.ARRAY_BUFFER), (g.FLOAT, "VEC4", g.ARRAY_BUFFER),
+        (g.FLOAT, "VEC2", g.ARRAY_BUFFER), (g.UNSIGNED_INT, "SCALAR", g.ELEMENT_ARRAY_BUFFER)])]
+    for k, (arr, ctype, kind, target) in enumerate(arrays):
+        data = arr.tobytes()
+        gl.bufferViews.append(g.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data), target=target))
+        acc = g.Accessor(bufferView=k, componentType=ctype, count=len(arr) if arr.ndim > 1 else arr.size, type=kind)
+        if k == 0:
+            acc.min, acc.max = arr.min(axis=0).tolist(), arr.max(axis=0).tolist()
+        gl.accessors.append(acc)
+        blob += data + b"\0" * (-len(data) % 4)
+    for name in TEXTURES:
+        data = imagecodecs.png_encode(np.ascontiguousarray(level0[name]), level=6)
+        gl.bufferViews.append(g.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
+        gl.images.append(g.Image(bufferView=len(gl.bufferViews) - 1, mimeType="image/png", name=name))
+        blob += data + b"\0" * (-len(data) % 4)
+    gl.samplers = [g.Sampler(magFilter=9729, minFilter=9987, wrapS=10497, wrapT=10497)]
+    gl.textures = [g.Texture(sampler=0, source=k) for k in range(len(TEXTURES))]
+    mat = _glb_material(metallic, base_color)
+    gl.materials = [g.Material(name=mat["name"], pbrMetallicRoughness=g.PbrMetallicRoughness(**mat["pbrMetallicRoughness"]),
+                               normalTexture=g.NormalMaterialTexture(**mat["normalTexture"]),
+                               extensions=mat["extensions"])]
+    gl.buffers = [g.Buffer(byteLength=len(blob))]
+    gl.meshes = [g.Mesh(name="plane", primitives=[g.Primitive(
+        attributes=g.Attributes(POSITION=0, NORMAL=1, TANGENT=2, TEXCOORD_0=3), indices=4, material=0)])]
+    gl.nodes = [g.Node(mesh=0, name="plane")]
+    gl.scenes = [g.Scene(nodes=[0])]
+    gl.scene = 0
+    gl.set_binary_blob(blob)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    gl.save_binary(str(path))
+    return path
+
+
+def _ktx2_note() -> str:
+    return ("glTF holds a custom MIP chain only in KTX2 images (KHR_texture_basisu); no KTX2 writer is installed, "
+            "so the .glb holds level 0 (engines build their own naive MIPs from it) and the LEADR chains are PNG "
+            "files beside it, to upload as the textures' mipmaps (three.js: texture.mipmaps, generateMipmaps false)")
+
+
+def _markdown(report: dict) -> str:
+    lines = [f"# LEADR export of {report['source']} to {report['format']}", "", f"Files: `{report['file']}`"
+             + (f" and the MIP chains in `{report['chains']}`" if report.get("chains") != report["file"] else ""), "",
+             f"Base roughness added: {report['base_roughness']}. Levels: {len(report['levels'])}.", "",
+             "## 8-bit round trip per level (decoded as a glTF engine reads texel centres)", "",
+             "| level | size | covariance rel. error mean | max | alpha rel. error max | mean-slope error max "
+             "| alpha1 > 1 (clipped) | mean alpha1 | mean alpha2 |", "|---|---|---|---|---|---|---|---|---|"]
+    for k, lv in enumerate(report["levels"]):
+        q = lv["quantization"]
+        lines.append(f"| {k} | {lv['size'][1]}x{lv['size'][0]} | {q['covariance_mean']:.4f} | {q['covariance_max']:.4f} "
+                     f"| {q['alpha_max']:.4f} | {q['slope_max']:.4f} | {q['clipped']:.2%} | {lv['alpha1_mean']:.4f} "
+                     f"| {lv['alpha2_mean']:.4f} |")
+    lines += ["", "## Not carried", ""] + [f"- {x}" for x in report["lost"]]
+    return "\n".join(lines) + "\n"
+
+
+def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, metallic: float = 1.0,
+                 base_color=(0.9, 0.9, 0.9)) -> dict:
+    """Export a LEADR moment pyramid (a pyramid EXR of ``microfacet bake`` or a list of
+    ``(H, W, 5)`` levels) for engines (module docstring) and return the report.
+
+    ``to="textures"``: the folder ``out`` with ``normal/``, ``metallic_roughness/``,
+    ``anisotropy/`` each holding ``level_00.png ...`` (8-bit RGB, one file per MIP level).
+    ``to="gltf"``: ``out`` (``.glb`` added if missing), a textured unit plane (:func:`write_plane_glb`,
+    uv ``tiles`` times the map, ``metallic``, ``base_color``) holding level 0, and the chains in
+    ``out.mips/``. Either writes the report ``<out>.export.json`` / ``.export.md``: what is not
+    carried and, per level, the error of the 8-bit textures decoded as an engine reads them
+    (:func:`quantization_error`).
+
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((32, 32), 0.3, seed=0), roughness=0.05)
+    >>> report = export_leadr(pyramid, "textures", "leadr_maps")         # doctest: +SKIP
+    """
+    if to not in TARGETS:
+        raise ValueError(f"to must be one of {', '.join(TARGETS)} for a LEADR pyramid, got {to!r}")
+    for name, v in (("tiles", tiles), ("metallic", metallic)):
+        if not (np.isfinite(v) and v > 0 if name == "tiles" else np.isfinite(v) and 0 <= v <= 1):
+            raise ValueError(f"{name} must be {'> 0' if name == 'tiles' else 'in [0, 1]'}, got {v!r}")
+    levels, label = _levels_of(source)
+    images, params = leadr_textures(levels, base_roughness, with_parameters=True)
+    out = Path(out)
+    if to == "gltf":
+        if out.suffix.lower() != ".glb":
+            out = out.with_name(out.name + ".glb")
+        chains = out.with_name(out.stem + ".mips")
+        write_plane_glb(images[0], out, tiles=tiles, metallic=metallic, base_color=base_color)
+        lost = NOT_CARRIED + [_ktx2_note()]
+    else:
+        if out.exists() and not out.is_dir():
+            raise MicrofacetError(f"{out}: exists and is not a folder (--to textures writes a folder)")
+        chains = out
+        lost = list(NOT_CARRIED)
+    write_chains(images, chains)
+    summary = [{"size": list(p["alpha1"].shape), "quantization": quantization_error(p, im),
+                "alpha1_mean": float(p["alpha1"].mean()), "alpha2_mean": float(p["alpha2"].mean()),
+                "strength_mean": float(p["strength"].mean())} for p, im in zip(params, images)]
+    report = {"format": to, "file": str(out), "chains": str(chains), "source": label, "lost": lost,
+              "base_roughness": None if base_roughness is None else str(base_roughness), "levels": summary,
+              "convention": "alpha^2 = 2 sigma^2 (Beckmann); GGX alpha = Beckmann alpha; r = sqrt(alpha2), "
+                            "s = sqrt((alpha1 - alpha2)/(1 - alpha2)), direction (cos phi, sin phi)",
+              "textures": {name: f"{name}/level_NN.png" for name in TEXTURES}}
+    stem = str(out).rstrip("/\\")
+    Path(stem + ".export.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
+    Path(stem + ".export.md").write_text(_markdown(report))
+    return report
