@@ -46,6 +46,7 @@ both refined together.
 from __future__ import annotations
 
 import weakref
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -784,28 +785,56 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     data = _data(brdf, int(n), int(n_uniform), tuple(int(v) for v in albedo_grid))
     options = dict(gaf=gaf, shadowing=shadowing, mean_slope=mean_slope, albedo_weight=albedo_weight,
                    coat_fresnel=coat_fresnel)
-    # stage 1: isotropic roughness by scan + Brent, with a linear Fresnel (Schlick for a conductor)
-    linear = "schlick" if fresnel == "conductor" else fresnel
-    iso = _Problem(data, model, bool(diffuse), False, linear, **options)
-    la = np.log(ALPHA_BOUNDS)
-    q = np.array([_minimize_log_alpha(iso, [np.log(np.clip(np.sqrt(ax * ay), *ALPHA_BOUNDS))] + list(np.log(_SCAN)),
-                                      *la)])
-    # stage 2: anisotropy from there (the start's aspect and rho if it has them)
+    shape = _Shape(data, model, bool(diffuse), bool(anisotropic), bool(coat), options)
+    linear = "schlick" if fresnel == "conductor" else fresnel   # stages 1-3: a Fresnel linear in its values
+    q, problem = _isotropic_roughness(shape, linear, np.sqrt(ax * ay))
     if anisotropic:
-        aniso = _Problem(data, model, bool(diffuse), True, linear, **options)
-        q0 = [q[0], q[0], 0.0]
-        if ax != ay:
-            ratio = 0.5 * np.log(ay / ax)
-            q0 = [q[0] - ratio, q[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
-        q = _minimize(aniso, q0, max_nfev)
-    # stage 3: the coat, from a scan of its roughness at that shape, then refined with it
+        q, problem = _anisotropy(shape, linear, q, (ax, ay, rho), max_nfev)
     if coat:
-        problem = _Problem(data, model, bool(diffuse), bool(anisotropic), linear, coat=True, **options)
-        q = _coat_search(problem, [np.append(q, lc) for lc in np.log(_SCAN)], max_nfev)
-        if not anisotropic and linear == coat_fresnel and q[0] < q[1]:
-            q = q[::-1].copy()       # interchangeable lobes (mirror minima): the coat is the sharper
-    # stage 4: a conductor, refined from that shape
-    if fresnel == "conductor":
-        problem = _Problem(data, model, bool(diffuse), bool(anisotropic), "conductor", coat=coat, **options)
-        return problem.brdf(_minimize(problem, q, max_nfev))
-    return (problem if coat else aniso if anisotropic else iso).brdf(q)
+        q, problem = _coat_roughness(shape, linear, q, max_nfev)
+    if fresnel == "conductor":                                  # stage 4: refined from that shape
+        problem = _Problem(data, model, shape.diffuse, shape.anisotropic, "conductor", coat=coat, **options)
+        q = _minimize(problem, q, max_nfev)
+    return problem.brdf(q)
+
+
+@dataclass(frozen=True)
+class _Shape:
+    """What every stage of :func:`fit_analytic` fits: the data's side, the model family,
+    whether it has a base, anisotropy and a coat, and the options of its problems."""
+    data: object
+    model: str
+    diffuse: bool
+    anisotropic: bool
+    coat: bool
+    options: dict
+
+
+def _isotropic_roughness(shape: _Shape, linear: str, alpha0: float) -> tuple:
+    """Stage 1: ``(q, problem)``, the isotropic log roughness by a scan and Brent's method."""
+    problem = _Problem(shape.data, shape.model, shape.diffuse, False, linear, **shape.options)
+    la = np.log(ALPHA_BOUNDS)
+    starts = [np.log(np.clip(alpha0, *ALPHA_BOUNDS))] + list(np.log(_SCAN))
+    return np.array([_minimize_log_alpha(problem, starts, *la)]), problem
+
+
+def _anisotropy(shape: _Shape, linear: str, q, start: tuple, max_nfev: int) -> tuple:
+    """Stage 2: ``(q, problem)``, log roughnesses and ``rho`` from the isotropic one (with the
+    ``start``'s aspect and ``rho`` if it has them)."""
+    ax, ay, rho = start
+    problem = _Problem(shape.data, shape.model, shape.diffuse, True, linear, **shape.options)
+    q0 = [q[0], q[0], 0.0]
+    if ax != ay:
+        ratio = 0.5 * np.log(ay / ax)
+        q0 = [q[0] - ratio, q[0] + ratio, float(np.clip(rho, -0.9, 0.9))]
+    return _minimize(problem, q0, max_nfev), problem
+
+
+def _coat_roughness(shape: _Shape, linear: str, q, max_nfev: int) -> tuple:
+    """Stage 3: ``(q, problem)`` with the coat's log roughness, from a scan at the lobe's
+    shape, then refined with it; of the two interchangeable lobes the coat is the sharper."""
+    problem = _Problem(shape.data, shape.model, shape.diffuse, shape.anisotropic, linear, coat=True, **shape.options)
+    q = _coat_search(problem, [np.append(q, lc) for lc in np.log(_SCAN)], max_nfev)
+    if not shape.anisotropic and linear == shape.options["coat_fresnel"] and q[0] < q[1]:
+        q = q[::-1].copy()       # mirror minima
+    return q, problem
