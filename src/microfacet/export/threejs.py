@@ -153,7 +153,11 @@ class _Quiet(http.server.SimpleHTTPRequestHandler):
 class ThreeRenderer:
     """Renders ``.glb`` files with three.js in headless Chromium (module docstring); a context
     manager holding one server (127.0.0.1) and one browser page. ``exact_schlick=False`` keeps
-    three.js's approximate Schlick term. ``revision``: three.js's."""
+    three.js's approximate Schlick term. ``revision``: three.js's. Subclasses serve another page
+    through ``HTML`` (it must set ``window.pageReady``) and add files to the served folder ``root``."""
+
+    #: The page served as ``index.html``.
+    HTML = PAGE
 
     def __init__(self, timeout_ms: int = 60000, exact_schlick: bool = True):
         self.timeout_ms = timeout_ms
@@ -167,7 +171,7 @@ class ThreeRenderer:
         self._dir = tempfile.TemporaryDirectory()
         root = Path(self._dir.name)
         (root / "node_modules").symlink_to(mods, target_is_directory=True)
-        (root / "index.html").write_text(PAGE)
+        (root / "index.html").write_text(self.HTML)
         handler = functools.partial(_Quiet, directory=str(root))
         self._server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
         threading.Thread(target=self._server.serve_forever, daemon=True).start()
@@ -183,6 +187,11 @@ class ThreeRenderer:
             self.__exit__(None, None, None)
             raise
         return self
+
+    @property
+    def root(self) -> Path:
+        """The folder served at :attr:`url` (while the renderer is entered)."""
+        return Path(self._dir.name)
 
     def _load(self, exact_schlick: bool) -> None:
         self.page.goto(self.url + "index.html" + ("" if exact_schlick else "?schlick=stock"))
