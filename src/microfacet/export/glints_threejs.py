@@ -129,13 +129,12 @@ void main() {
 """
 
 
-def fragment_shader(max_window: int = MAX_WINDOW) -> str:
+def fragment_shader() -> str:
     """Fragment shader of the material (three.js ``ShaderMaterial``, GLSL 3, ``lights: true``):
     three.js's ``common`` and ``lights_pars_begin`` chunks, the library's ``glints.glsl`` (its
-    ``#version`` line removed: three.js writes its own) and a ``main`` summing the point lights."""
-    if int(max_window) != max_window or max_window < 1:
-        raise ValueError(f"max_window must be a positive integer, got {max_window!r}")
-    lib = source("glints", "es300", {"MF_GLINT_MAX_WINDOW": int(max_window)}).split("\n", 1)[1]
+    ``#version`` line removed: three.js writes its own) and a ``main`` summing the point lights.
+    ``MF_GLINT_MAX_WINDOW`` comes from the material's ``defines`` (``maxWindow``)."""
+    lib = source("glints", "es300").split("\n", 1)[1]
     return "#include <common>\n#include <lights_pars_begin>\n" + lib + _MAIN
 
 
@@ -173,7 +172,8 @@ export async function loadGlintLobes(THREE, jsonUrl) {
 // options: f0 (Schlick F0, [r, g, b], default 1 = ideal mirror facets), uvScale ([su, sv]),
 // pixelSigma (pixel filter deviation in pixels, default 0.5), cutoff (default the file's),
 // exact (default true: Eq. 10-17; false: the merged-lobe approximation of Sec. 4.2.2),
-// separable (default false: height-correlated G2).
+// separable (default false: height-correlated G2), maxWindow (lobes per axis summed at one
+// level, default %(max_window)d; wider footprints use coarser lobe levels).
 export function createGlintMaterial(THREE, lobes, options = {}) {
   const uniforms = THREE.UniformsUtils.merge([THREE.UniformsLib.lights]);
   const f0 = options.f0 ?? [1, 1, 1];
@@ -186,18 +186,22 @@ export function createGlintMaterial(THREE, lobes, options = {}) {
     mfUvScale: { value: new THREE.Vector2(uv[0], uv[1]) },
     mfExact: { value: options.exact ?? true }, mfSeparable: { value: options.separable ?? false },
   });
+  const maxWindow = options.maxWindow ?? %(max_window)d;
+  if (!(Number.isInteger(maxWindow) && maxWindow >= 1)) throw new Error(`maxWindow must be an integer >= 1`);
   return new THREE.ShaderMaterial({ glslVersion: THREE.GLSL3, uniforms, lights: true,
+                                    defines: { MF_GLINT_MAX_WINDOW: maxWindow },
                                     vertexShader: VERTEX_SHADER, fragmentShader: FRAGMENT_SHADER });
 }
 """
 
 
-def material_module(max_window: int = MAX_WINDOW) -> str:
+def material_module() -> str:
     """The ES module ``glints-material.js``: ``VERTEX_SHADER``, ``FRAGMENT_SHADER``,
     ``loadGlintLobes(THREE, jsonUrl)`` (the textures of :func:`write_lobes`) and
-    ``createGlintMaterial(THREE, lobes, options)`` (a ``THREE.ShaderMaterial``)."""
-    return _MODULE % {"vertex": json.dumps(vertex_shader()), "fragment": json.dumps(fragment_shader(max_window)),
-                      "format": LOBES_FORMAT}
+    ``createGlintMaterial(THREE, lobes, options)`` (a ``THREE.ShaderMaterial``; options in the
+    module's comment, among them ``maxWindow``, default :data:`MAX_WINDOW`)."""
+    return _MODULE % {"vertex": json.dumps(vertex_shader()), "fragment": json.dumps(fragment_shader()),
+                      "format": LOBES_FORMAT, "max_window": MAX_WINDOW}
 
 
 def write_lobes(ms, folder, name: str = "lobes") -> Path:
@@ -293,6 +297,12 @@ renderer.setAnimationLoop(() => {            // the light circles: the glints mo
 """
 
 
+def _max_window(n) -> int:
+    if isinstance(n, bool) or int(n) != n or n < 1:
+        raise ValueError(f"max_window must be a positive integer, got {n!r}")
+    return int(n)
+
+
 def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, light=(0.0, 0.35, 0.9),
                           intensity: float = 1.0, three_url: str = "https://unpkg.com/three@0.187.0/build/three.module.js",
                           max_window: int = MAX_WINDOW) -> Path:
@@ -305,14 +315,16 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
     >>> export_glints_threejs(mf.glints.Microsurface.load("scratches.npz"), "web")  # doctest: +SKIP
     """
     from ..glints.figures import PlaneScene
+    max_window = _max_window(max_window)
     scene = PlaneScene(width=int(width), view_deg=float(view_deg), light=tuple(map(float, light)),
                        intensity=float(intensity))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "glints-material.js").write_text(material_module(max_window))
+    (out / "glints-material.js").write_text(material_module())
     write_lobes(ms, out)
     params = {"lobes": "./lobes.json", "width": scene.width, "height": scene.height, "viewDeg": scene.view_deg,
-              "light": list(scene.light), "intensity": scene.intensity}
+              "light": list(scene.light), "intensity": scene.intensity,
+              "options": {"maxWindow": max_window}}
     (out / "index.html").write_text(_DEMO_PAGE % {"three": three_url, "scene": _SCENE_JS,
                                                   "params": json.dumps(params)})
     return out
@@ -330,24 +342,24 @@ class GlintsRenderer(ThreeRenderer):
 
     HTML = _TEST_PAGE
 
-    def __init__(self, timeout_ms: int = 60000, max_window: int = MAX_WINDOW):
+    def __init__(self, timeout_ms: int = 60000):
         super().__init__(timeout_ms)
-        self.max_window = int(max_window)
         self._count = 0
 
     def render_scene(self, ms, scene, *, f0=None, exact: bool = True, g2: str = "correlated",
-                     pixel_sigma: float | None = None) -> np.ndarray:
+                     pixel_sigma: float | None = None, max_window: int = MAX_WINDOW) -> np.ndarray:
         """``(scene.height, scene.width, 3)`` linear radiance (row 0 the far edge, as
         :func:`~microfacet.glints.figures.render_pbrdf`): ``I / r^2 F eval_cos`` per pixel.
         ``f0``: Schlick F0 (None: ideal mirror facets, the library's default); ``exact``, ``g2``
         as :class:`~microfacet.glints.PatchBRDF`; ``pixel_sigma`` default
-        :data:`~microfacet.glints.figures.PIXEL_SIGMA`."""
+        :data:`~microfacet.glints.figures.PIXEL_SIGMA`; ``max_window``: lobes per axis summed at
+        one level (wider footprints: coarser lobe levels)."""
         from ..glints.figures import PIXEL_SIGMA
         if g2 not in ("correlated", "separable"):
             raise ValueError(f"g2 must be 'correlated' or 'separable', got {g2!r}")
         root = self.root
         if not (root / "glints-material.js").exists():
-            (root / "glints-material.js").write_text(material_module(self.max_window))
+            (root / "glints-material.js").write_text(material_module())
         self._count += 1
         lobes = write_lobes(ms, root, f"lobes{self._count}")
         f0 = [1.0, 1.0, 1.0] if f0 is None else list(np.broadcast_to(np.asarray(f0, float), (3,)))
@@ -355,7 +367,8 @@ class GlintsRenderer(ThreeRenderer):
              "viewDeg": float(scene.view_deg), "light": [float(v) for v in scene.light],
              "intensity": float(scene.intensity),
              "options": {"f0": f0, "exact": bool(exact), "separable": g2 == "separable",
-                         "pixelSigma": float(PIXEL_SIGMA if pixel_sigma is None else pixel_sigma)}}
+                         "pixelSigma": float(PIXEL_SIGMA if pixel_sigma is None else pixel_sigma),
+                         "maxWindow": _max_window(max_window)}}
         out = self.page.evaluate("(p) => window.renderGlints(p)", p)
         self.revision = out["revision"]
         w, h = p["width"], p["height"]

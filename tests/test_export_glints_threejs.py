@@ -1,0 +1,123 @@
+"""The glint P-BRDF as a three.js material (microfacet.export.glints_threejs, glsl/glints.glsl),
+rendered in the system Chromium against the library's own glint render
+(microfacet.glints.figures.render_pbrdf) of the same plane, light and pixel footprints.
+
+Tolerance: relL1 < 1e-4 where the lobe windows fit (the shader sums the library's lobes with the
+library's weights, in float32: the error is float32 rounding, ~2e-6 measured; no texture filtering
+is involved, the lobes are read with texelFetch), and the glint pattern itself: the pixel
+correlation with the library's image exceeds 0.999, while the same image shifted by a few pixels
+correlates far less (so the check sees the pattern, not only the mean). Skips with one line where
+Chromium, playwright or three.js are absent; fails under CI=true."""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from microfacet import fresnel as fr
+
+CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+F0 = [0.95, 0.64, 0.54]
+
+
+def _skip_or_fail(reason):
+    if CI:
+        pytest.fail(f"{reason} [CI=true: make setup installs three.js (setup-npm), playwright and chromium]")
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def ms():
+    from microfacet.glints import Microsurface
+    from microfacet.glints.figures import scratched_normal_map
+    return Microsurface.from_normal_map(scratched_normal_map(128, scratches=40, seed=1))
+
+
+@pytest.fixture(scope="module")
+def three():
+    from microfacet.export.threejs import chromium, npm_modules
+    if npm_modules(required=False) is None:
+        _skip_or_fail("three.js absent: make setup-npm")
+    try:
+        import playwright  # noqa: F401
+    except ImportError:
+        _skip_or_fail("playwright is not installed (pip install playwright)")
+    if chromium(required=False) is None:
+        _skip_or_fail("no system Chromium (apt-get install chromium)")
+    from microfacet.export.glints_threejs import GlintsRenderer
+    with GlintsRenderer() as r:
+        yield r
+
+
+def _rel_l1(img, ref) -> float:
+    return float(np.abs(img - ref).sum() / np.abs(ref).sum())
+
+
+def _corr(a, b) -> float:
+    return float(np.corrcoef(np.ravel(a), np.ravel(b))[0, 1])
+
+
+#: name: (PlaneScene arguments, exact, g2, Schlick F0 or None)
+CASES = {
+    "exact_correlated_mirror": (dict(width=64, view_deg=50.0, light=(0.0, 0.35, 0.9)), True, "correlated", None),
+    "approx_separable_schlick": (dict(width=64, view_deg=35.0, light=(0.3, 0.5, 0.8)), False, "separable", F0),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_threejs_glints_match_the_library(name, ms, three):
+    from microfacet.glints.figures import PlaneScene, render_pbrdf
+    args, exact, g2, f0 = CASES[name]
+    scene = PlaneScene(**args)
+    ref = render_pbrdf(ms, scene, exact=exact, g2=g2, fresnel=None if f0 is None else fr.Schlick(f0))
+    img = three.render_scene(ms, scene, f0=f0, exact=exact, g2=g2)
+    assert not three.errors, three.errors
+    assert img.shape == ref.shape == (scene.height, scene.width, 3)
+    # a glinty image: a few bright pixels far above the mean
+    assert ref[..., 0].max() > 20 * ref[..., 0].mean()
+    e, c = _rel_l1(img, ref), _corr(img, ref)
+    print(f"{name}: three.js r{three.revision} vs library relL1 {e:.2e}, correlation {c:.6f}")
+    assert e < 1e-4, e
+    assert c > 0.999, c
+    assert _corr(img, np.roll(ref, 3, axis=1)) < 0.9          # the pattern, not only the mean
+
+
+def test_large_footprints_use_coarser_lobe_levels(ms, three):
+    """Footprints wider than the window (max_window 8 lobes here) are summed over the first MIP
+    level of the lobes where they fit: the prefiltered image keeps the mean and most of the
+    pattern, not the exact glints (module notes)."""
+    from microfacet.glints.figures import PlaneScene, render_pbrdf
+    scene = PlaneScene(width=32, view_deg=50.0, light=(0.0, 0.35, 0.9))
+    ref = render_pbrdf(ms, scene)
+    exact = three.render_scene(ms, scene)
+    assert _rel_l1(exact, ref) < 1e-4
+    img = three.render_scene(ms, scene, max_window=8)
+    print(f"fallback: mean ratio {img.mean() / ref.mean():.4f}, relL1 {_rel_l1(img, ref):.3f}, "
+          f"correlation {_corr(img, ref):.4f}")
+    assert _rel_l1(img, ref) > 1e-2                          # another level was used
+    assert abs(img.mean() / ref.mean() - 1) < 0.05
+    assert _corr(img, ref) > 0.95
+
+
+def test_lobe_textures_and_export(ms, tmp_path):
+    from microfacet.export.glints_threejs import (LOBES_FORMAT, export_glints_threejs, fragment_shader,
+                                                 lobe_textures, material_module)
+    levels = lobe_textures(ms)
+    assert [a.shape[:2] for a, _ in levels] == [m.shape[:2] for m in ms.mip] and levels[-1][0].shape == (1, 1, 4)
+    a, b = levels[0]
+    E = ms.lobe_moments.reshape(a.shape[0], a.shape[1], 5)
+    np.testing.assert_allclose(a[..., 2], E[..., 2] - E[..., 0] ** 2, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(b[..., 0], E[..., 4] - E[..., 0] * E[..., 1], rtol=1e-5, atol=1e-10)
+    assert a.dtype == b.dtype == np.float32
+    out = export_glints_threejs(ms, tmp_path / "web", width=32)
+    meta = json.loads((out / "lobes.json").read_text())
+    assert meta["format"] == LOBES_FORMAT and meta["levels"][0] == [128, 128]
+    assert (out / "lobes.bin").stat().st_size == sum(a.nbytes + b.nbytes for a, b in levels)
+    js = (out / "glints-material.js").read_text()
+    assert "export function createGlintMaterial" in js and "mf_glint_eval_cos" in js
+    assert "#version" not in fragment_shader() and "#ifndef MF_GLINT_MAX_WINDOW" in fragment_shader()
+    assert "maxWindow ?? 48" in material_module()
+    with pytest.raises(ValueError, match="max_window"):
+        export_glints_threejs(ms, tmp_path / "bad", max_window=0)
