@@ -107,6 +107,7 @@ RESULTS = {
     "fit_moments": ("Moment conversions and their Fresnel tables", "python experiments/fit_moments.py --data DATA"),
     "leadr_validation": ("LEADR validation", "python experiments/leadr_validation.py"),
     "glints_pndf_validation": ("Glints P-NDF validation", "python experiments/glints_pndf_validation.py"),
+    "glints_threejs": ("Glints in three.js", "python experiments/glints_threejs.py"),
     "sheared_chi2": ("Sheared lobes at grazing views: chi-square", "python experiments/sheared_chi2.py"),
     "glsl_gpu": ("GLSL shaders on an NVIDIA GPU", "python experiments/glsl_gpu.py"),
     "cold_start": ("Cold start", "python benchmarks/bench_cold_start.py"),
