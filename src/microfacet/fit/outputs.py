@@ -31,6 +31,7 @@ import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -223,23 +224,68 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     if out_npz.is_dir():
         raise MicrofacetError(f"{out_npz}: is a folder")
     out_npz.parent.mkdir(parents=True, exist_ok=True)     # before the work, not after
-    # independent work on threads (NumPy releases the GIL in its array loops): the data's side
-    # of the metrics beside the tabulated fit, then the two least-squares fits beside the
-    # moment conversions and the metrics of the tabulated and moment fits; every result as
-    # computed serially
-    models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
+    settings = {"resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf, "diffuse": diffuse,
+                "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
+                "tabulated_diffuse": bool(tabulated_diffuse)}
     # first, forked before any thread starts; the data's side is evaluated here (the child
     # runs NumPy only: Numba's GNU OpenMP kernels cannot run in a forked child)
     from .perceptual import target as perceptual_target
+    models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_job = in_process(_perceptual, perceptual_target(brdf), models)
+    legacy = _legacy_fits(brdf, method, settings)
+    fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3])   # while the perceptual fits run
+    if picture:
+        from ..render import fit_comparison_png         # imports matplotlib, also while they run
+    perceptual, t3 = _perceptual_brdfs(*perceptual_job.result())
+    fits_summary.update(_fit_summaries(legacy.judges, perceptual, _scores(legacy.metrics, perceptual)[:3]))
+    best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
+    summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
+               "seconds_perceptual": round(t3 - legacy.times[1], 4)}
+    if legacy.moments_failed:
+        summary["moments_failed"] = legacy.moments_failed
+    specs = {k: v["model"] for k, v in fits_summary.items() if k != "tabulated"}
+    files = {out_npz: legacy.fit.to_bytes(fits=specs, best=best),
+             out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
+    if picture:                                     # rendered before any file is written
+        shown, notes = _shown_fits({**legacy.named, **perceptual}, fits_summary, best)
+        files[out_npz.with_suffix(".png")] = fit_comparison_png(
+            {"data": brdf, **shown}, title=title or material_name(out_npz),
+            planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
+    _write_all(files)
+    return summary
+
+
+class _Legacy(NamedTuple):
+    """The tabulated fit, its moment conversions and the least-squares fits (``named``, by
+    name), the data's side of the metrics and of the judges, the fits' ``scores`` (grid,
+    uniform, albedo, furnace) and the times ``(t0, t1, t2)``: start, tabulated fit done,
+    least-squares fits done."""
+    fit: object
+    moments: dict
+    moments_failed: dict
+    least: dict
+    named: dict
+    metrics: tuple
+    judges: tuple
+    scores: tuple
+    times: tuple
+
+
+def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
+    """The tabulated fit and the fits made from it, with their metrics. Independent work on
+    threads (NumPy releases the GIL in its array loops): the data's side of the metrics
+    beside the tabulated fit, then the two least-squares fits beside the moment conversions
+    and the metrics of the tabulated and moment fits; every result as computed serially."""
     _import_numba()
     metrics_job = in_background(_metrics, brdf)
     judges_job = in_background(_judges, brdf)
     t0 = time.perf_counter()
-    fit = _run_fit(brdf, resolution, anisotropic, gaf, tabulated_diffuse, albedo_weight)
+    fit = _run_fit(brdf, settings["resolution"], settings["anisotropic"], settings["gaf"],
+                   settings["tabulated_diffuse"], settings["albedo_weight"])
     t1 = time.perf_counter()
-    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, anisotropic, diffuse, fresnel, albedo_weight,
-                                coat) for model in (("ggx", "beckmann") if method == "least_squares" else ())]
+    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, settings["anisotropic"], settings["diffuse"],
+                                settings["fresnel_model"], settings["albedo_weight"], settings["coat"])
+                  for model in (("ggx", "beckmann") if method == "least_squares" else ())]
     moments, moments_failed = _moment_fits(fit, brdf, required=method == "moments")
     first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
     metrics = metrics_job.result()
@@ -249,27 +295,28 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     least = {name: b for name, b, _ in least}
     named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
     scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
-    grid, uniform, albedo, furnace = ({k: v for part in scores for k, v in part[i].items()} for i in range(4))
-    judges = judges_job.result()
-    fits_summary = _fit_summaries(judges, named, (grid, uniform, albedo))     # while the perceptual fits run
-    if picture:
-        from ..render import fit_comparison_png         # imports matplotlib, also while they run
-    perceptual, t3 = _perceptual_brdfs(*perceptual_job.result())
-    p_grid, p_uniform, p_albedo, _ = _scores(metrics, perceptual)
-    fits_summary.update(_fit_summaries(judges, perceptual, (p_grid, p_uniform, p_albedo)))
-    best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
-    chosen = moments if method == "moments" else {
+    scores = tuple({k: v for part in scores for k, v in part[i].items()} for i in range(4))
+    return _Legacy(fit, moments, moments_failed, least, named, metrics, judges_job.result(), scores, (t0, t1, t2))
+
+
+def _legacy_json(legacy: _Legacy, method: str) -> dict:
+    """The summary's entries of the tabulated, moment and least-squares fits: the headline
+    ``"ggx"``/``"beckmann"`` fits of ``method``, every fit's parameters, errors and times."""
+    grid, uniform, albedo, furnace = legacy.scores
+    least, named = legacy.least, legacy.named
+    chosen = legacy.moments if method == "moments" else {
         family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}
-    fits = {"tabulated": fit, **chosen}
+    fits = {"tabulated": legacy.fit, **chosen}
     names = {"tabulated": "tabulated", **{k: _key(named, b) for k, b in chosen.items()}}
     errors = {k: grid[names[k]] for k in fits}
     errors.update({k: grid[k] for k in named})
-    summary = {
+    t0, t1, t2 = legacy.times
+    return {
         **{k: analytic_json(b) for k, b in chosen.items()},
         "method": method, "selected": {k: names[k] for k in chosen},
-        "moments": {k: analytic_json(b) for k, b in moments.items()},
+        "moments": {k: analytic_json(b) for k, b in legacy.moments.items()},
         "least_squares": {k: analytic_json(b) for k, b in least.items()},
-        "fresnel": fresnel_json(_fit_fresnel(fit)),
+        "fresnel": fresnel_json(_fit_fresnel(legacy.fit)),
         "seconds": round(t1 - t0, 4), "seconds_least_squares": round(t2 - t1, 4),
         "errors": {**errors, "n_pairs": grid["n_pairs"], "metric": describe_fit_error(),
                    "uniform": {**{k: uniform[names[k]] for k in fits}, **{k: uniform[k] for k in named},
@@ -278,29 +325,17 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
                                     **{k: v.round(4).tolist() for k, v in albedo.items()},
                                     "views_deg": list(ALBEDO_VIEWS_DEG), "metric": describe_albedo()},
                    "white_furnace": {k: round(furnace[k], 4) for k in named}},
-        "resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf,
-        "diffuse": diffuse, "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
-        "tabulated_diffuse": bool(tabulated_diffuse),
-        "best": best, "fits": fits_summary, "seconds_perceptual": round(t3 - t1, 4),
     }
-    if moments_failed:
-        summary["moments_failed"] = moments_failed
-    specs = {k: v["model"] for k, v in fits_summary.items() if k != "tabulated"}
-    files = {out_npz: fit.to_bytes(fits=specs, best=best),
-             out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
-    if picture:                                     # rendered before any file is written
-        from .perceptual import select
-        every = {**named, **perceptual}
-        second = "tabulated" if best != "tabulated" else select(
-            {k: best_score(v["metrics"]) for k, v in fits_summary.items() if k != "tabulated"})
-        labels = {best: f"best: {best}", second: "tabulated fit" if second == "tabulated" else f"best analytic: {second}"}
-        shown = {labels[k]: every[k] for k in (best, second)}
-        notes = {labels[k]: _fit_note(fits_summary[k]["metrics"]) for k in (best, second)}
-        files[out_npz.with_suffix(".png")] = fit_comparison_png(
-            {"data": brdf, **shown}, title=title or material_name(out_npz),
-            planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
-    _write_all(files)
-    return summary
+
+
+def _shown_fits(every: dict, fits_summary: dict, best: str) -> tuple[dict, dict]:
+    """``({label: BRDF}, {label: note})`` of the picture: the best fit and the tabulated fit,
+    or, where the tabulated fit is the best, the best analytic fit (:func:`best_fit`)."""
+    second = "tabulated" if best != "tabulated" else best_fit(
+        {k: v["metrics"] for k, v in fits_summary.items() if k != "tabulated"})
+    labels = {best: f"best: {best}", second: "tabulated fit" if second == "tabulated" else f"best analytic: {second}"}
+    return ({labels[k]: every[k] for k in (best, second)},
+            {labels[k]: _fit_note(fits_summary[k]["metrics"]) for k in (best, second)})
 
 
 def _moment_fits(fit, brdf, required: bool) -> tuple[dict, dict]:
