@@ -474,8 +474,9 @@ def format_fits_table(summary: dict) -> str:
                      f"{m['max_albedo']:.3f}"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
-    return "\n".join(lines) + ("\n* best: least image error x log error (images: spheres under 3 lights and an environment, "
-                                f"{IMAGE_SIZE} px); log: cosine-weighted log error; albedo: worst ratio fit/data\n")
+    return "\n".join(lines) + ("\n* best: least image error x log error of the fits without a colour cast (images: spheres "
+                                f"under 3 lights and an environment, {IMAGE_SIZE} px); log: cosine-weighted log error; "
+                                "albedo: worst ratio fit/data\n")
 
 
 def _key(named: dict, brdf) -> str:
