@@ -46,6 +46,8 @@ __all__ = ["lobe_textures", "vertex_shader", "fragment_shader", "material_module
 
 #: Most lobes per axis summed at one level (``MF_GLINT_MAX_WINDOW``).
 MAX_WINDOW = 48
+#: three.js of the demo page's import map (the revision the tests render with).
+THREE_URL = "https://unpkg.com/three@0.187.0/build/three.module.js"
 #: Tag of ``lobes.json``.
 LOBES_FORMAT = "microfacet.glints.threejs/1"
 
@@ -215,7 +217,8 @@ def write_lobes(ms, folder, name: str = "lobes") -> Path:
         for a, b in levels:
             f.write(a.astype("<f4").tobytes())
             f.write(b.astype("<f4").tobytes())
-    meta = {"format": LOBES_FORMAT, "data": f"{name}.bin", "levels": [[int(a.shape[1]), int(a.shape[0])] for a, _ in levels],
+    meta = {"format": LOBES_FORMAT, "data": f"{name}.bin",
+            "levels": [[int(a.shape[1]), int(a.shape[0])] for a, _ in levels],
             "cutoff": float(ms.cutoff), "h": float(ms.h), "sigma_eps": float(ms.sigma_eps),
             "map": [int(v) for v in ms.resolution]}
     path = folder / f"{name}.json"
@@ -242,7 +245,8 @@ async function renderGlints(THREE, renderer, M, p) {
   camera.position.set(0, -5 * Math.cos(e), 5 * se);
   camera.lookAt(0, 0, 0);
   renderer.setSize(p.width, p.height);
-  return { scene, camera, dispose: () => { material.dispose(); plane.geometry.dispose(); lobes.a.dispose(); lobes.b.dispose(); } };
+  const dispose = () => { material.dispose(); plane.geometry.dispose(); lobes.a.dispose(); lobes.b.dispose(); };
+  return { scene, camera, dispose };
 }
 """
 
@@ -304,7 +308,7 @@ def _max_window(n) -> int:
 
 
 def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, light=(0.0, 0.35, 0.9),
-                          intensity: float = 1.0, three_url: str = "https://unpkg.com/three@0.187.0/build/three.module.js",
+                          intensity: float = 1.0, three_url: str = THREE_URL,
                           max_window: int = MAX_WINDOW) -> Path:
     """Write the folder ``out``: ``glints-material.js`` (:func:`material_module`),
     ``lobes.json``/``lobes.bin`` (:func:`write_lobes`) and ``index.html``, a page that renders the
