@@ -105,7 +105,7 @@ def main() -> None:
 
     def level_zero():                             # channels-first, as bake stores it
         out = np.empty((5, n, n), np.float32)
-        _height_moments(height, 0.5 * n, 0.5 * n, True, base, out)
+        _height_moments(0, n, height, (0.5 * n, 0.5 * n, True), base, out)
         return out.transpose(1, 2, 0)
     res["level0"] = time_it(level_zero, args.repeats)
     level0 = level_zero()

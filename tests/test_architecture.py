@@ -305,3 +305,90 @@ def report() -> str:
 
 if __name__ == "__main__":
     print(report())
+
+
+# -- parameters ------------------------------------------------------------------------------
+
+#: The most parameters a function of ``src/microfacet`` takes (issue 27: records, not loose
+#: argument lists; the compiled kernels take ~6, e.g. ``kernel(start, stop, p, wi, wo, out)``).
+MAX_PARAMETERS = 8
+#: Mitsuba fixes the signatures of these plugin methods (``mi.BSDF``'s interface), not we.
+MITSUBA_FIXED = frozenset({"__init__", "sample", "eval", "pdf", "eval_pdf", "eval_pdf_sample",
+                           "eval_attribute", "eval_attribute_1", "eval_attribute_3", "traverse",
+                           "parameters_changed", "to_string", "eval_diffuse_reflectance"})
+#: Functions allowed more than :data:`MAX_PARAMETERS` parameters, each with its reason. None is a
+#: compiled kernel: they are public entry points whose options every caller passes by keyword,
+#: in files of other owners (issue 27), which may make them keyword-only (``*``) and drop them here.
+MANY_PARAMETERS_ALLOWED = {
+    "microfacet.anchors.SGD.__init__": "public constructor of the SGD anchor: its published fit's "
+                                       "parameters, by keyword (anchors.py)",
+    "microfacet.batch.runner.run": "the batch command's entry point: one parameter per CLI option",
+    "microfacet.batch.tasks.bake_file": "a batch task: one parameter per `microfacet bake` option",
+    "microfacet.batch.tasks.fit_file": "a batch task: one parameter per `microfacet fit` option",
+    "microfacet.demo.run_demo": "the demo's entry point: one parameter per `microfacet demo` option",
+    "microfacet.demo._render_demo": "the demo's render step, called once by run_demo with its options",
+    "microfacet.fit.analytic._Problem.__init__": "the fit's problem set-up, built once per fit from "
+                                                 "fit_analytic's options (fit/, the lead's files)",
+    "microfacet.fit.outputs.fit_material": "a fit of one corpus material: one parameter per "
+                                           "experiment option (fit/, the lead's files)",
+}
+
+
+def parameter_count(args: ast.arguments, method: bool) -> int:
+    """Parameters a caller may have to pass: positional ones (``self``/``cls`` of a method not
+    counted), ``*args``, ``**kwargs`` and keyword-only ones without a default. Keyword-only
+    parameters with a default are named options (NumPy's style: ``f(x, *, out=None)``), never
+    passed positionally, and are not counted; Numba kernels have none."""
+    n = len(args.posonlyargs) + len(args.args) + (args.vararg is not None) + (args.kwarg is not None) \
+        + sum(d is None for d in args.kw_defaults)
+    first = (args.posonlyargs + args.args)[:1]
+    return n - (method and bool(first) and first[0].arg in ("self", "cls"))
+
+
+def many_parameters(limit: int = MAX_PARAMETERS) -> list[tuple[str, str, int]]:
+    """``(qualified name, file:line, parameters)`` of the functions of ``src/microfacet`` (nested
+    ones and methods included) with more than ``limit`` parameters (:func:`parameter_count`),
+    but the Mitsuba plugin methods of :data:`MITSUBA_FIXED`."""
+    out = []
+    for module, path in module_files().items():
+        tree = ast.parse(path.read_text(), str(path))
+        stack: list[tuple[ast.AST, str, bool]] = [(tree, module, False)]
+        while stack:
+            node, prefix, in_class = stack.pop()
+            for child in ast.iter_child_nodes(node):
+                if isinstance(child, ast.ClassDef):
+                    stack.append((child, f"{prefix}.{child.name}", True))
+                elif isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    qual = f"{prefix}.{child.name}"
+                    n = parameter_count(child.args, in_class)
+                    fixed = in_class and module.startswith("microfacet.mitsuba.") and child.name in MITSUBA_FIXED
+                    if n > limit and not fixed:
+                        out.append((qual, f"{path.relative_to(SRC.parent)}:{child.lineno}", n))
+                    stack.append((child, qual, False))
+                else:
+                    stack.append((child, prefix, in_class))
+    return sorted(out)
+
+
+def test_parameter_count_of_a_planted_function():
+    """The count: positional parameters, ``*args``, ``**kwargs`` and keyword-only ones without a
+    default; not ``self``, not keyword-only options with a default."""
+    f = ast.parse("def f(self, a, b=1, *c, d, e=2, **g): pass").body[0]
+    assert parameter_count(f.args, method=True) == 5 and parameter_count(f.args, method=False) == 6
+    kernel = ast.parse("def loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y): pass").body[0]
+    assert parameter_count(kernel.args, method=False) == 10 > MAX_PARAMETERS
+
+
+def test_kernel_arguments():
+    """No function of ``src/microfacet`` takes more than :data:`MAX_PARAMETERS` parameters (the
+    compiled kernels take records: :class:`microfacet.params.SmithParams`,
+    :class:`microfacet.glints.pbrdf.LobeGrid`, :class:`microfacet.measured.rgl.RGLTables` ...), but
+    the Mitsuba plugin methods whose signatures Mitsuba fixes and the justified exceptions of
+    :data:`MANY_PARAMETERS_ALLOWED` (which must still exist and still need it: the list only shrinks)."""
+    found = many_parameters()
+    bad = [(q, where, n) for q, where, n in found if q not in MANY_PARAMETERS_ALLOWED]
+    assert not bad, f"functions with more than {MAX_PARAMETERS} parameters (pass a record):\n" + "\n".join(
+        f"  {n:3d} params  {q}  ({where})" for q, where, n in sorted(bad, key=lambda f: -f[2]))
+    stale = sorted(set(MANY_PARAMETERS_ALLOWED) - {q for q, _, _ in found})
+    assert not stale, "MANY_PARAMETERS_ALLOWED lists functions that no longer need it: " + ", ".join(stale)
+    assert all(MANY_PARAMETERS_ALLOWED.values())

@@ -410,8 +410,7 @@ def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
     ``exp(-prune^2 / 2) / (2 pi sigma_eps^2 z_h^4)`` per pixel (the areas are unchanged),
     on a near-mirror map where most blocks are pruned; at 3 deviations the bound is
     loose enough to be seen, and the pruned image stays within it."""
-    from microfacet.glints.microsurface import BLOCK, FWHM_PER_SIGMA
-    from microfacet.glints.pbrdf import PRUNE_SIGMA, _footprint_sums, _g2_over_ao
+    from microfacet.glints.pbrdf import PRUNE_SIGMA, Footprints, LobeGrid, _footprint_sums, _g2_over_ao
     if _footprint_sums is None:
         pytest.skip("compiled kernels disabled")
     eps = 0.01
@@ -424,13 +423,10 @@ def test_pruned_image_within_the_stated_bound_of_the_unpruned_one():
     ref = eval_cos_footprints(ms, uv, cov, wi, scene.wo, backend="numpy")[:, 0]
     np.testing.assert_allclose(full, ref, rtol=1e-11, atol=1e-14 * ref.max())
     # G2 / (4 A_P(o)) per pixel (the factor of D_P in eval_cos), from the kernel's areas
-    ny, nx = ms.grid
-    ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.column_stack([uv, np.broadcast_to([cov[0, 0], cov[1, 1], cov[0, 1]], (len(uv), 3))])
     wo = np.broadcast_to(scene.wo, wi.shape)
-    E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64).reshape(-1)      # flat (5 N,)
-    _, ai, vi, ao, vo = _footprint_sums(E, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1],
-                                        ms.cutoff, np.inf, fp, h, wi, np.ascontiguousarray(wo), np.zeros(0)).T
+    _, ai, vi, ao, vo = _footprint_sums(LobeGrid.of(ms), Footprints(fp, h, wi, np.ascontiguousarray(wo),
+                                                                     np.zeros(0), np.inf)).T
     factor = _g2_over_ao("correlated", ai, vi, ao, vo) / 4.0
     for k in (PRUNE_SIGMA, 3.0):
         got = eval_cos_footprints(ms, uv, cov, wi, scene.wo, prune=k)[:, 0]

@@ -502,22 +502,28 @@ def _fresnel_block(F, f, c_row, s_row, out, o, m):
 
 
 @_inline
-def _projected_block(F, kind, p, shadowing, divide_cos_i, wi, oi, wo, oo, m, rows, measure, top_i, top_o, dst, od,
-                     oh_row=True, smith=True):
+def _projected_block(kind, p, mode, block, rows, tops):
     """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
-    of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`)
+    of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`;
+    ``block = (wi, oi, wo, oo, m, dst, od)``), the distribution ``kind``, in the arithmetic type of
+    ``rows`` (:func:`_float_type`), with the flags ``mode = (shadowing, divide_cos_i, measure, oh_row,
+    smith)`` (constants at each call but ``divide_cos_i``, and ``shadowing`` and ``smith`` of eval)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
     0 where invalid (see ``_projected_numpy``), for the record ``p`` (:class:`microfacet.params.SmithParams`;
     ``shadowing`` apart: the pdf takes ``False`` whatever ``p.shadowing``). Uses the six scratch ``rows`` (1-D arrays of ``F``,
     made once per kernel call: an array view made per block costs two atomic reference counts).
-    Returns ``(top_i, top_o)`` updated, if ``measure``, with the unit-length deviations of ``wi`` and
+    Returns ``tops = (top_i, top_o)`` updated, if ``measure``, with the unit-length deviations of ``wi`` and
     ``wo``: the largest :func:`_bits_of` of their :func:`_deviation_at`, taken in this loop in lanes of
     ``F``'s width (rows and a pass over them, as the sample kernel's, took Beckmann eval 8-10 %
     longer; int64 lanes in the float32 loop, 13-30 %). Without ``oh_row`` (the pdf), ``h = wi + wo`` is
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
+    F = _float_type(rows[0])
+    shadowing, divide_cos_i, measure, oh_row, smith = mode
+    wi, oi, wo, oo, m, dst, od = block
+    top_i, top_o = tops
     s1 = math.sqrt(F(1.0) - p.rho * p.rho)
     oh_r, a_r, w_r, e_r, f_r, co_r = rows
     oi, oo, od = max(oi, 0), max(oo, 0), max(od, 0)  # (see _flat_rows)
@@ -874,10 +880,10 @@ def _visible_view(cos_theta):
 
 
 @_jit_contract
-def _beckmann_visible_block(u, ou, cos_row, mx, my, mz, gx, gy, ok_x, ok_y, m):
-    """``(mx[k], my[k], mz[k])``: the standard Beckmann visible normal for a view at ``theta`` in the
+def _beckmann_visible_block(u, ou, cos_row, normal, scratch, m):
+    """``normal = (mx, my, mz)``, rows: the standard Beckmann visible normal for a view at ``theta`` in the
     xz plane (``Beckmann.sample_visible_std``: ``x~ = Q2(u[ou + 2 k])``, ``y~ = erfinv(2 u[ou + 2 k + 1] -
-    1)``, ``cos theta = cos_row[k]``) for ``k < m``, in float64 (scratch rows ``gx`` ... ``ok_y``). The
+    1)``, ``cos theta = cos_row[k]``) for ``k < m``, in float64 (``scratch = (gx, gy, ok_x, ok_y)``, rows). The
     guesses :func:`_visible_slope_guess` and :func:`_erfinv_guess` in a loop of their own (it
     vectorizes since their ``log`` is :func:`_log_pos`, not the library's: the block 24 -> 20 ns
     per view in cache, Beckmann sample 50 -> 34 ms per 10^6 on one core); then, in loops that vectorize (:func:`_exp_neg`, :func:`_erfc_near`
@@ -889,6 +895,8 @@ def _beckmann_visible_block(u, ou, cos_row, mx, my, mz, gx, gy, ok_x, ok_y, m):
     per view), and one of :func:`_erfinv`'s, with their stopping tests after the last. The lanes
     that fail them, lie in the upper tail (``u >= _UPPER``, solved on the complementary CDF) or
     beyond :data:`_TAIL` are solved again by those scalar functions."""
+    mx, my, mz = normal
+    gx, gy, ok_x, ok_y = scratch
     uz = ok_x                                        # u z until the flags of x~ replace it
     ou = max(ou, 0)                                  # (see _flat_rows)
     for k in range(m):                               # guesses
@@ -1128,20 +1136,21 @@ def projected_kernel(kind, dtype=np.float64):
     key = ("projected", kind, np.dtype(dtype).name)
 
     @_loops(key)
-    def loops(start, stop, p, wi, wo, divide_cos_i, oh_out, s_out, scratch):
+    def loops(start, stop, p, wi, wo, divide_cos_i, out, scratch):
+        oh_out, s_out = out
         rows, si, so, wi_f, wo_f = scratch
         oh_r = rows[0]
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            _projected_block(F, kind, p, p.shadowing, divide_cos_i, bi, oi, bo, oo, m, rows, False,
-                             _no_bits(F), _no_bits(F), s_out, j0)
+            _projected_block(kind, p, (p.shadowing, divide_cos_i, False, True, True), (bi, oi, bo, oo, m, s_out, j0),
+                             rows, (_no_bits(F), _no_bits(F)))
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
 
     @_jit
     def kernel(start, stop, p, wi, wo, divide_cos_i, out):
-        _call_loops(key, start, stop, p, wi, wo, divide_cos_i, out[0], out[1], _scratch(F, wi, wo))
+        _call_loops(key, start, stop, p, wi, wo, divide_cos_i, out, _scratch(F, wi, wo))
     return kernel
 
 
@@ -1161,8 +1170,8 @@ def pdf_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            top_i, top_o = _projected_block(F, kind, p, False, False, bi, oi, bo, oo, m, rows, True,
-                                            top_i, top_o, out, j0, False)
+            top_i, top_o = _projected_block(kind, p, (False, False, True, False, True), (bi, oi, bo, oo, m, out, j0),
+                                            rows, (top_i, top_o))
         return top_i, top_o
 
     @_jit
@@ -1191,8 +1200,8 @@ def eval_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            top_i, top_o = _projected_block(F, kind, p, p.shadowing, divide_cos_i, bi, oi, bo, oo, m, rows, True,
-                                            top_i, top_o, rows[1], 0, True, not (fused and later))
+            top_i, top_o = _projected_block(kind, p, (p.shadowing, divide_cos_i, True, True, not (fused and later)),
+                                            (bi, oi, bo, oo, m, rows[1], 0), rows, (top_i, top_o))
             if fused and later:
                 _beckmann_eval_block(f, rows, out, 3 * j0, m)
             else:
@@ -1251,7 +1260,7 @@ def sample_kernel(kind, dtype=np.float64):
                 for k in range(m):
                     dev_o[k] = _deviation_at(F, wo_b, oo + 3 * k)
                     r0[k], r1[k], r2[k], r6[k], r8[k] = _view_angles(F, kind, p, s1, wo_b, oo + 3 * k)
-                _beckmann_visible_block(u_b, ou, r0, r3, r4, r5, gx, gy, ok_x, ok_y, m)
+                _beckmann_visible_block(u_b, ou, r0, (r3, r4, r5), (gx, gy, ok_x, ok_y), m)
             top_o = _max_bits(bits_o, m, top_o)
             for k in range(m):
                 jo, ji = oo + 3 * k, 3 * (jp + k)

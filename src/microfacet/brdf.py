@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import backend
 from . import fresnel as _fresnel
 from . import kernels
 from . import protocol
@@ -44,6 +45,12 @@ def uniforms(u) -> np.ndarray:
     """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]``, checked as :meth:`BRDF.sample` does
     (:func:`microfacet.protocol.uniforms`)."""
     return protocol.uniforms(u)
+
+
+def _reference(**arrays):
+    """The compiled path's stand-in where :func:`microfacet.backend.smith` chose the NumPy reference:
+    no result, so that :func:`_fused` checks the inputs itself."""
+    return None
 
 
 def _fused(kernel, float32: bool, **inputs):
@@ -285,7 +292,7 @@ class MicrofacetBRDF(BRDF):
 
     def _projected_unit(self, wi, wo, divide_cos_i: bool = False):
         """:meth:`_projected` of directions already checked (:func:`microfacet.protocol.directions`)."""
-        if self.gaf_model == "smith":
+        if self.gaf_model == "smith" and backend.choose() == backend.NUMBA:
             fast = kernels.smith_projected(self.distribution, self.shadowing, wi, wo, divide_cos_i, background=True)
             if fast is not None:
                 return fast
@@ -308,11 +315,11 @@ class MicrofacetBRDF(BRDF):
         compiles in the background, :meth:`_projected_numpy`: see :mod:`microfacet.kernels`)."""
         def compiled(wi, wo):
             return kernels.smith_eval(self, wi, wo, divide_cos_i, self.dtype, self._out(out, wi, wo, (3,)), True)
-        d, fast = _fused(compiled, self.dtype == np.float32, wi=wi, wo=wo)
+        d, fast = _fused(compiled if backend.smith(self) else _reference, self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
         wi, wo = d["wi"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False)
-        projected = self._projected_numpy if kernels.covers(self) else self._projected_unit
+        projected = self._projected_numpy if backend.smith(self) else self._projected_unit
         oh, s = projected(wi, wo, divide_cos_i)
         return into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
 
@@ -331,7 +338,7 @@ class MicrofacetBRDF(BRDF):
         pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
         def compiled(wi, wo):
             return kernels.smith_pdf(self, wi, wo, self.dtype, self._out(out, wi, wo, ()), True)
-        d, fast = _fused(compiled, self.dtype == np.float32, wi=wi, wo=wo)
+        d, fast = _fused(compiled if backend.smith(self) else _reference, self.dtype == np.float32, wi=wi, wo=wo)
         if fast is not None:
             return fast
         return into(out, self._pdf_numpy(d["wi"].astype(np.float64, copy=False),
@@ -365,7 +372,7 @@ class MicrofacetBRDF(BRDF):
         :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
         def compiled(wo, u):
             return kernels.smith_sample(self, u, wo, self.dtype, self._out(out, u, wo, None), True)
-        d, fast = _fused(compiled, self.dtype == np.float32, wo=wo, u=u)
+        d, fast = _fused(compiled if backend.smith(self) else _reference, self.dtype == np.float32, wo=wo, u=u)
         if fast is not None:
             return fast
         result = self._sample_numpy(d["u"].astype(np.float64, copy=False), d["wo"].astype(np.float64, copy=False))

@@ -49,7 +49,7 @@ import numpy as np
 from . import _background, _buffers, params
 
 __all__ = ["AVAILABLE", "BACKGROUND_MAX", "COMPILE", "Compiled", "compiled", "covers", "launch", "launch_ranges", "ready", "release_outputs",
-           "smith_projected", "smith_eval", "smith_pdf", "smith_sample", "unit_deviation"]
+           "smith_projected", "smith_eval", "smith_pdf", "smith_sample", "unit_deviation", "precompile_calls"]
 
 #: Give the memory that the cache of freed output arrays holds back to the system; returns its bytes
 #: (see :mod:`microfacet._buffers`: outputs of 1 MiB and more, ``MICROFACET_OUTPUT_CACHE_MB``).
@@ -494,6 +494,30 @@ def unit_deviation(w: np.ndarray, background: bool = True) -> float:
     rows = params.read_only(w.reshape(-1, 3))
     k = _kernel(("_unit_deviation",), (rows,), len(rows), background)
     return reference(w) if k is None else float(k(rows))
+
+
+def precompile_calls(calls, progress=None) -> int:
+    """Runs ``calls`` (``[(name, call)]``, each a small instance of a code path) one after the
+    other in this process with every kernel compiled before it runs (:data:`COMPILE` ``"wait"``
+    meanwhile), so that Numba compiles them into its on-disk cache or loads them from it; one
+    process at a time (:func:`_compile`). ``progress(name, seconds)`` is called after each. Returns
+    how many ran; 0 without Numba. The loop of every precompile entry point
+    (:mod:`microfacet.precompile`, :mod:`microfacet.kernels_extra`). Example:
+    ``precompile_calls([("unit deviation", lambda: unit_deviation(np.eye(3), False))])`` is 1."""
+    import time
+    global COMPILE
+    if not AVAILABLE:
+        return 0
+    saved, COMPILE = COMPILE, "wait"
+    try:
+        for name, call in calls:
+            t = time.perf_counter()
+            call()
+            if progress is not None:
+                progress(name, time.perf_counter() - t)
+    finally:
+        COMPILE = saved
+    return len(calls)
 
 
 if __name__ == "__main__":                      # python -m microfacet.kernels --precompile (make setup)

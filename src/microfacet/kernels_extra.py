@@ -9,7 +9,7 @@ P-BRDF footprint loops, naive renderer). These compile at their first use (Numba
 Each group runs a small instance of the code path that uses it (the demo's LEADR and glints
 sections on tiny maps, eval and sample of synthetic MERL, UTIA and RGL data), so the kernels are
 compiled for exactly the argument types that the library passes them (those do not depend on the
-sizes). Usage::
+sizes). Usage (the command line of :func:`microfacet.precompile.main`, restricted to these groups)::
 
     python -m microfacet.kernels_extra --precompile [--groups measured,leadr,glints] [-q]
 
@@ -18,14 +18,13 @@ Example: ``microfacet.kernels_extra.precompile(("leadr",))`` returns 1 (one grou
 from __future__ import annotations
 
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 from . import kernels
 
-__all__ = ["GROUPS", "group_calls", "precompile", "main"]
+__all__ = ["GROUPS", "group_calls", "precompile"]
 
 #: The groups of kernels that :func:`precompile` compiles, in order (the slowest last).
 GROUPS = ("measured", "leadr", "glints")
@@ -127,54 +126,15 @@ def group_calls(groups=GROUPS) -> list:
 
 def precompile(groups=GROUPS, progress=None) -> int:
     """Compiles the kernels of ``groups`` (:data:`GROUPS`) into Numba's on-disk cache, or loads
-    those already there, one group after the other in this process (compiling the same function
-    in two processes at once can corrupt Numba's cache index: ``microfacet.kernels``), with every
-    kernel compiled before it runs (``microfacet.kernels.COMPILE`` ``"wait"`` meanwhile).
-    ``progress(group, seconds)`` is called after each. Returns how many groups ran; 0 without
-    Numba (or with ``MICROFACET_NUMBA=0``)."""
-    calls = group_calls(groups)
-    if not kernels.AVAILABLE:
-        return 0
-    saved, kernels.COMPILE = kernels.COMPILE, "wait"
-    try:
-        for name, call in calls:
-            t = time.perf_counter()
-            call()
-            if progress is not None:
-                progress(name, time.perf_counter() - t)
-    finally:
-        kernels.COMPILE = saved
-    return len(calls)
+    those already there, one group after the other in this process
+    (:func:`microfacet.kernels.precompile_calls`: compiling the same function in two processes at
+    once can corrupt Numba's cache index). ``progress(group, seconds)`` is called after each.
+    Returns how many groups ran; 0 without Numba (or with ``MICROFACET_NUMBA=0``). The command
+    line is :func:`microfacet.precompile.main`'s."""
+    return kernels.precompile_calls(group_calls(groups), progress)
 
 
-def main(argv=None) -> int:
-    """``python -m microfacet.kernels_extra --precompile [--groups LIST] [-q]``: :func:`precompile`."""
-    import argparse
-    p = argparse.ArgumentParser(prog="python -m microfacet.kernels_extra",
-                                description="Compile the measured-BRDF, LEADR and glints kernels into Numba's "
-                                            "on-disk cache ahead of time (or check that they load from it).")
-    p.add_argument("--precompile", action="store_true", required=True, help="compile the kernels now")
-    p.add_argument("--groups", default=",".join(GROUPS), metavar="LIST",
-                   help=f"comma-separated groups among {','.join(GROUPS)} (default: all)")
-    p.add_argument("-q", "--quiet", action="store_true", help="print only the total")
-    args = p.parse_args(argv)
-    groups = [g.strip() for g in args.groups.split(",") if g.strip()]
-    try:
-        group_calls(groups)
-    except ValueError as e:
-        p.error(f"--groups: {e}")
-    if not groups:
-        p.error(f"--groups must list some of {', '.join(GROUPS)}, got {args.groups!r}")
-    if not kernels.AVAILABLE:
-        print("microfacet.kernels_extra: Numba is not installed (or MICROFACET_NUMBA=0): nothing to compile")
-        return 0
-    start = time.perf_counter()
-    n = precompile(groups, None if args.quiet else lambda name, t: print(f"  {t:6.2f} s  {name}", flush=True))
-    print(f"microfacet.kernels_extra: {n} kernel groups ({', '.join(groups)}) compiled or loaded from Numba's "
-          f"cache in {time.perf_counter() - start:.1f} s")
-    return 0
-
-
-if __name__ == "__main__":                       # run as microfacet.kernels_extra, not as a second copy
-    from microfacet.kernels_extra import main as _main
-    raise SystemExit(_main())
+if __name__ == "__main__":    # python -m microfacet.kernels_extra --precompile: the one entry point, these groups
+    from microfacet.kernels_extra import GROUPS as _GROUPS
+    from microfacet.precompile import main
+    raise SystemExit(main(prog="python -m microfacet.kernels_extra", groups=_GROUPS))

@@ -1,7 +1,9 @@
-"""Ahead-of-time compilation of the Smith kernels: ``python -m microfacet.kernels --precompile``
-(run by ``make setup``; the same as ``python -m microfacet.precompile --precompile``) compiles the kernels that
-the library's BRDFs use into Numba's on-disk cache, or loads those already there
-(``docs/performance.md``). Here, not in :mod:`microfacet.kernels`, since it builds BRDFs
+"""Ahead-of-time compilation of the Numba kernels, one entry point (:func:`main`):
+``python -m microfacet.kernels --precompile`` (run by ``make setup``; the same as ``python -m
+microfacet.precompile --precompile``) compiles the kernels that the library's BRDFs use into
+Numba's on-disk cache, or loads those already there (``docs/performance.md``); ``--groups
+brdf,measured,leadr,glints`` adds those of :mod:`microfacet.kernels_extra`, whose own ``python -m
+microfacet.kernels_extra --precompile`` is this command line for its groups. Here, not in :mod:`microfacet.kernels`, since it builds BRDFs
 (:mod:`microfacet.brdf`, :mod:`microfacet.fresnel`), which import the kernels' module.
 
 Example: ``microfacet.precompile.precompile(dtypes=("float64",))``.
@@ -13,16 +15,19 @@ import functools
 import numpy as np
 
 from . import fresnel as fr
-from . import kernels
+from . import kernels, kernels_extra
 from .brdf import MicrofacetBRDF
 from .distributions import GGX, Beckmann
 
-__all__ = ["PRECOMPILE_DTYPES", "PRECOMPILE_DEFAULT", "precompile", "main"]
+__all__ = ["PRECOMPILE_DTYPES", "PRECOMPILE_DEFAULT", "GROUPS", "precompile", "main"]
 
 #: The arithmetic types :func:`precompile` can compile for (``MicrofacetBRDF(dtype=...)``), and
 #: those it compiles by default (float32 BRDFs are opt-in: ``--dtypes float64,float32``).
 PRECOMPILE_DTYPES = ("float64", "float32")
 PRECOMPILE_DEFAULT = ("float64",)
+#: The groups of kernels the command line compiles: the BRDF kernels (this module) and those of
+#: :data:`microfacet.kernels_extra.GROUPS` (measured-BRDF readers, LEADR, glints).
+GROUPS = ("brdf",) + kernels_extra.GROUPS
 
 
 def _precompile_calls(dtype):
@@ -61,49 +66,59 @@ def _precompile_calls(dtype):
 def precompile(dtypes=PRECOMPILE_DEFAULT, progress=None) -> int:
     """Compiles the kernels that the library's BRDFs use (:func:`_precompile_calls`) into Numba's
     on-disk cache, or loads those already there, so that later processes load them in milliseconds
-    instead of compiling them at first use (5-20 s each). One kernel at a time, in this process:
-    Numba's cache is not safe for processes that compile versions of one function at once
-    (:func:`_compile`). ``progress(name, seconds)`` is called after each. Returns how many kernels
-    were compiled or loaded; 0 without Numba. Run by ``make setup`` as ``python -m microfacet.kernels
-    --precompile`` (``docs/performance.md``).
+    instead of compiling them at first use (5-20 s each), one kernel at a time in this process
+    (:func:`microfacet.kernels.precompile_calls`). ``progress(name, seconds)`` is called after each.
+    Returns how many kernels were compiled or loaded; 0 without Numba. Run by ``make setup`` as
+    ``python -m microfacet.kernels --precompile`` (``docs/performance.md``).
 
     Example: ``microfacet.precompile.precompile(dtypes=("float64",))``."""
-    import time
-    if not kernels.AVAILABLE:
-        return 0
-    calls = [c for dtype in dtypes for c in _precompile_calls(dtype)]
-    for name, call in calls:
-        t = time.perf_counter()
-        call()
-        if progress is not None:
-            progress(name, time.perf_counter() - t)
-    return len(calls)
+    return kernels.precompile_calls([c for dtype in dtypes for c in _precompile_calls(dtype)], progress)
 
 
-def main(argv=None) -> int:
-    """``python -m microfacet.kernels --precompile [--dtypes float64,float32] [-q]``: :func:`precompile`,
-    printing each kernel's time."""
+def _calls(groups, dtypes) -> list:
+    """``[(name, call)]`` of :data:`GROUPS` ``groups``: the BRDF kernels of ``dtypes`` for ``"brdf"``,
+    :func:`microfacet.kernels_extra.group_calls` for the others."""
+    calls = [c for dtype in dtypes for c in _precompile_calls(dtype)] if "brdf" in groups else []
+    return calls + kernels_extra.group_calls([g for g in groups if g != "brdf"])
+
+
+def main(argv=None, prog: str = "python -m microfacet.kernels", groups=("brdf",)) -> int:
+    """The one precompile command line: ``python -m microfacet.kernels --precompile [--dtypes
+    float64,float32] [--groups LIST] [-q]`` (default group ``brdf``) and ``python -m
+    microfacet.kernels_extra --precompile [--groups LIST] [-q]`` (``prog``; ``groups``: the groups it
+    accepts, all of them by default): compiles the kernels of the groups (:data:`GROUPS`) in this
+    process, printing each one's time (:func:`microfacet.kernels.precompile_calls`)."""
     import argparse
     import time
-    p = argparse.ArgumentParser(prog="python -m microfacet.kernels",
-                                description="Compile the microfacet BRDF kernels into Numba's on-disk cache ahead of "
-                                            "time (or check that they load from it).")
+    allowed = tuple(groups) if prog.endswith("kernels_extra") else GROUPS
+    default = tuple(groups)
+    p = argparse.ArgumentParser(prog=prog, description="Compile microfacet's Numba kernels into Numba's on-disk "
+                                                       "cache ahead of time (or check that they load from it).")
     p.add_argument("--precompile", action="store_true", required=True, help="compile the kernels now")
     p.add_argument("--dtypes", default=",".join(PRECOMPILE_DEFAULT), metavar="LIST",
-                   help=f"comma-separated arithmetic types among {','.join(PRECOMPILE_DTYPES)} "
+                   help=f"arithmetic types of the brdf group, among {','.join(PRECOMPILE_DTYPES)} "
                         f"(default {','.join(PRECOMPILE_DEFAULT)})")
+    p.add_argument("--groups", default=",".join(default), metavar="LIST",
+                   help=f"comma-separated groups among {','.join(allowed)} (default: {','.join(default)})")
     p.add_argument("-q", "--quiet", action="store_true", help="print only the total")
     args = p.parse_args(argv)
     dtypes = [d.strip() for d in args.dtypes.split(",") if d.strip()]
-    bad = [d for d in dtypes if d not in PRECOMPILE_DTYPES]
-    if bad or not dtypes:
+    if not dtypes or any(d not in PRECOMPILE_DTYPES for d in dtypes):
         p.error(f"--dtypes must list some of {', '.join(PRECOMPILE_DTYPES)}, got {args.dtypes!r}")
+    chosen = [g.strip() for g in args.groups.split(",") if g.strip()]
+    bad = [g for g in chosen if g not in allowed]
+    if bad:
+        p.error(f"--groups: groups must be among {', '.join(allowed)}, got {', '.join(bad)}")
+    if not chosen:
+        p.error(f"--groups must list some of {', '.join(allowed)}, got {args.groups!r}")
+    name = prog.split()[-1]
     if not kernels.AVAILABLE:
-        print("microfacet.kernels: Numba is not installed (or MICROFACET_NUMBA=0): nothing to compile")
+        print(f"{name}: Numba is not installed (or MICROFACET_NUMBA=0): nothing to compile")
         return 0
     start = time.perf_counter()
-    n = precompile(dtypes, None if args.quiet else lambda name, t: print(f"  {t:6.2f} s  {name}", flush=True))
-    print(f"microfacet.kernels: {n} kernels compiled or loaded from Numba's cache in "
+    n = kernels.precompile_calls(_calls(chosen, dtypes),
+                                 None if args.quiet else lambda what, t: print(f"  {t:6.2f} s  {what}", flush=True))
+    print(f"{name}: {n} kernels ({', '.join(chosen)}) compiled or loaded from Numba's cache in "
           f"{time.perf_counter() - start:.1f} s")
     return 0
 

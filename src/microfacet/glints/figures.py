@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import backend as backend_
 from ..brdf import MicrofacetBRDF
 from ..distributions import Beckmann
 from ..geometry import dot, half_vector
@@ -183,10 +184,7 @@ def render_naive(ms, scene: PlaneScene, spp: int, seed: int = 0, fresnel=None,
     :func:`_naive_sums`, the same positions and formulas; tested against the reference)
     or ``"auto"`` (numba when available). The Fresnel term depends on the pixel's half
     vector only (one light direction per pixel) and is applied per pixel."""
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
-    if backend == "numba" and _naive_sums is None:
-        raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
+    compiled = backend_.choose(backend, _naive_sums is not None) == backend_.NUMBA
     if int(spp) != spp or spp < 1:
         raise ValueError(f"spp must be a positive integer, got {spp!r}")
     spp = int(spp)
@@ -196,7 +194,7 @@ def render_naive(ms, scene: PlaneScene, spp: int, seed: int = 0, fresnel=None,
     alpha = np.sqrt(2.0) * ms.sigma_eps
     wo = scene.wo
     P = uv.shape[0]
-    if backend != "numpy" and _naive_sums is not None:
+    if compiled:
         s = _naive_sums(np.ascontiguousarray(ms.slopes), uv, L, wi, wo, alpha, spp, _seed_key(seed))
         F = MicrofacetBRDF(Beckmann(alpha=alpha), fresnel=fresnel).fresnel
         acc = F(dot(wo, half_vector(wi, wo))) * s[:, None]

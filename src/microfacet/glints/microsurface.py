@@ -462,9 +462,16 @@ def _flatten(levels):
 
 
 @numba.njit(parallel=True, cache=True)
-def _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, params, W, x0, x1, y0, y1, out):  # pragma: no cover
+def _traverse_sum(queries, tree, lobes, window, out):  # pragma: no cover
     """Compiled depth-first version of :func:`_traverse` that also sums ``W D_i``
-    (slope-space P22) into ``out`` per query."""
+    (slope-space P22) into ``out`` per query: ``queries = (x~, y~)`` the query slopes, ``tree``
+    the flat box pyramid of :func:`_flatten` ``(lo, hi, offs, nxs, nys)``, ``lobes = (params, W)``
+    the lobes' P22 parameters (``(n, 6)``, :func:`_p22`) and the footprint weights ``W`` of the
+    seed window ``window = (x0, x1, y0, y1)`` (inclusive)."""
+    xq, yq = queries
+    lo, hi, offs, nxs, nys = tree
+    params, W = lobes
+    x0, x1, y0, y1 = window
     top = offs.size - 1
     span = max(x1 - x0, y1 - y0) + 1
     start = 0
@@ -887,10 +894,8 @@ class LobeMixture:
                 sl = slice(s, s + chunk)
                 out[sl] = _p22(params[None], xq[sl, None], yq[sl, None]) @ W
         elif method == "hierarchy":
-            lo, hi, offs, nxs, nys = self._flat
-            for ((x0, x1, y0, y1), _), W in zip(blocks, Ws):
-                _traverse_sum(xq, yq, lo, hi, offs, nxs, nys, self._flat_params,
-                              np.ascontiguousarray(W), x0, x1, y0, y1, out)
+            for (window, _), W in zip(blocks, Ws):
+                _traverse_sum((xq, yq), self._flat, (self._flat_params, np.ascontiguousarray(W)), tuple(window), out)
         else:
             for ((x0, x1, y0, y1), _), W in zip(blocks, Ws):
                 q, iy, ix = _traverse(self._boxes, (x0, x1, y0, y1), xq, yq)

@@ -58,10 +58,12 @@ reflected about it. The pdf is ``D_P(h) z_h / (4 o.h)``.
 from __future__ import annotations
 
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from scipy.special import erfc
 
+from .. import backend as _backend
 from .. import fresnel as _fresnel
 from ..brdf import BRDF
 from ..protocol import directions, into, into_sample, uniforms
@@ -70,7 +72,7 @@ from ..geometry import dot, half_vector, reflect
 from .microsurface import BLOCK, FWHM_PER_SIGMA, LobeMixture
 
 __all__ = ["Microsurface", "PatchBRDF", "lobe_projected_area", "merge_moments", "footprint_lobes",
-           "eval_cos_footprints", "G2_MODELS"]
+           "eval_cos_footprints", "G2_MODELS", "Window", "LobeGrid", "Footprints"]
 
 G2_MODELS = ("correlated", "separable")
 
@@ -213,11 +215,7 @@ class PatchBRDF(BRDF):
     def _setup(self, moments, weights, fresnel, exact, g2, merged, backend) -> None:
         if g2 not in G2_MODELS:
             raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
-        if backend not in ("auto", "numpy", "numba"):
-            raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
-        if backend == "numba" and _lobe_sums is None:
-            raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
-        self._compiled = backend != "numpy" and _lobe_sums is not None
+        self._compiled = _backend.choose(backend, _lobe_sums is not None) == _backend.NUMBA
         m = _moments(moments)
         w = np.asarray(weights, dtype=np.float64).reshape(-1)
         if w.shape != (m.shape[0],) or np.any(~np.isfinite(w)) or np.any(w < 0):
@@ -271,7 +269,7 @@ class PatchBRDF(BRDF):
             return np.zeros(h.shape[:-1])
         if self._compiled:         # the compiled sums (their area columns unused)
             flat = np.ascontiguousarray(h.reshape(-1, 3))
-            return _lobe_sums(self.moments.reshape(-1), self.weights, flat, flat, flat)[:, 0].reshape(h.shape[:-1])
+            return _lobe_sums((self.moments.reshape(-1), self.weights), (flat, flat, flat))[:, 0].reshape(h.shape[:-1])
         return self._lobe_sum(self.lobes.ndf, h)[0]
 
     def areas(self, k) -> tuple[np.ndarray, np.ndarray]:
@@ -286,7 +284,7 @@ class PatchBRDF(BRDF):
 
         if self._compiled:         # the compiled sums (toward k; their P-NDF column unused)
             flat = np.ascontiguousarray(k.reshape(-1, 3))
-            sums = _lobe_sums(self.moments.reshape(-1), self.weights, flat, flat, flat)
+            sums = _lobe_sums((self.moments.reshape(-1), self.weights), (flat, flat, flat))
             a, v = sums[:, 1].reshape(k.shape[:-1]), sums[:, 2].reshape(k.shape[:-1])
         else:
             def fn(kk):
@@ -319,7 +317,7 @@ class PatchBRDF(BRDF):
         flat = [np.ascontiguousarray(np.broadcast_to(d, shape).reshape(-1, 3)) for d in (h, wi, wo)]
         for f in flat:      # read-only, copied or not: one compiled version of the loop, not one per flag
             f.flags.writeable = False
-        out = [v.reshape(shape[:-1]) for v in _lobe_sums(self.moments.reshape(-1), self.weights, *flat).T]
+        out = [v.reshape(shape[:-1]) for v in _lobe_sums((self.moments.reshape(-1), self.weights), tuple(flat)).T]
         if not self.exact:
             out[1:3] = _merged_area(out[2], self.merged, wi)
             out[3:5] = _merged_area(out[4], self.merged, wo)
@@ -465,7 +463,7 @@ def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
     return idx, W
 
 
-def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | None = None,
+def eval_cos_footprints(ms, centers, covs, wi, wo, *, fresnel: _fresnel.Fresnel | None = None,
                         exact: bool = True, g2: str = "correlated", block: int = 4096,
                         backend: str = "auto", prune: float = PRUNE_SIGMA) -> np.ndarray:
     """``eval_cos`` of the P-BRDF of footprint ``p`` at ``(wi[p], wo[p])`` for many
@@ -489,12 +487,8 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
         raise ValueError(f"prune must be > 0 (standard deviations), got {prune!r}")
     if g2 not in G2_MODELS:
         raise ValueError(f"g2 must be one of {G2_MODELS}, got {g2!r}")
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f"backend must be 'auto', 'numpy' or 'numba', got {backend!r}")
-    if backend == "numba" and _footprint_sums is None:
-        raise ValueError("backend 'numba' is not available (numba missing or MICROFACET_NUMBA=0)")
-    if backend != "numpy" and _footprint_sums is not None:
-        return _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, float(prune))
+    if _backend.choose(backend, _footprint_sums is not None) == _backend.NUMBA:
+        return _eval_cos_footprints_numba(ms, (centers, covs, wi, wo), fresnel, exact, g2, float(prune))
     fresnel = _fresnel.Ideal() if fresnel is None else fresnel
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
@@ -525,6 +519,62 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, fresnel: _fresnel.Fresnel | N
 
 
 # ------------------------------------------------------------- compiled footprint kernel
+class Window(NamedTuple):
+    """How a footprint selects and weights the lobes of a grid of ``nx`` x ``ny`` lobes
+    (:func:`footprint_lobes`): the reconstruction kernel's variances ``ks2x``, ``ks2y``
+    (added to the footprint's covariance; ``(1 / n / FWHM_PER_SIGMA)^2`` per axis) and the
+    window's half-width ``cutoff`` in standard deviations. Built once per grid
+    (:meth:`of`) and passed whole to the compiled footprint kernels.
+
+    Example: ``Window.of((64, 64), 3.0).nx`` is 64."""
+
+    nx: int
+    ny: int
+    ks2x: float
+    ks2y: float
+    cutoff: float
+
+    @classmethod
+    def of(cls, grid_shape, cutoff) -> "Window":
+        """The window of a lobe grid of shape ``(ny, nx)`` and ``cutoff`` deviations."""
+        ny, nx = (int(n) for n in grid_shape[:2])
+        ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
+        return cls(nx, ny, float(ks2[0]), float(ks2[1]), float(cutoff))
+
+
+class LobeGrid(NamedTuple):
+    """A microsurface's lobes as the compiled image kernel reads them: ``E`` the flat raw
+    moments ``(ny * nx * 5,)`` (Eq. 5), ``bounds`` the per-block bounds ``(nby, nbx, 7)`` of
+    ``B x B`` blocks (:meth:`~microfacet.glints.microsurface.LobeMixture._block_bounds`, the
+    pruning grid) and the footprint :class:`Window` of the grid."""
+
+    E: np.ndarray
+    bounds: np.ndarray
+    B: int
+    window: Window
+
+    @classmethod
+    def of(cls, ms) -> "LobeGrid":
+        """The record of a :class:`Microsurface` ``ms`` (level 0, its cutoff)."""
+        return cls(np.ascontiguousarray(ms.lobe_moments, dtype=np.float64).reshape(-1), ms._block_bounds, BLOCK,
+                   Window.of(ms.grid, ms.cutoff))
+
+
+class Footprints(NamedTuple):
+    """The queries of the compiled image kernel: per footprint ``p``, ``fp[p] = (u, v, cuu, cvv,
+    cuv)`` (centre and covariance), the half vector ``h[p]`` and the directions ``wi[p]``,
+    ``wo[p]`` (C-contiguous float64 rows); ``exo`` the lobes' tabulated area excess toward a
+    shared ``wo`` (:func:`_area_excess`) or empty, ``prune`` the pruning width in standard
+    deviations (:func:`eval_cos_footprints`)."""
+
+    fp: np.ndarray
+    h: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    exo: np.ndarray
+    prune: float
+
+
 from .. import kernels as _kernels  # noqa: E402
 
 if _kernels.AVAILABLE:
@@ -606,17 +656,6 @@ if _kernels.AVAILABLE:
         """Whether :func:`_area` is ``(c, c)``: ``c >= _AREA_T sigma``."""
         return (c > 0.0) & (c * c >= _AREA_T2 * var)
 
-    @_inline
-    def _lobe_terms(E, k, xh, yh, qmax, ix, iy, iz, ox, oy, oz):  # pragma: no cover - compiled
-        """``(P_i(h~), A_i(i), V_i(i), c(o), var(o))`` of lobe ``k`` of the flat raw moments
-        ``E``: the terms of Eq. 9, 13 and 17 (``P_i`` cut at ``qmax``, :func:`_p22`) but
-        toward ``o``, whose area the caller takes (:func:`_add_run`)."""
-        mx, my, sxx, syy, sxy = _lobe(E, k)
-        ci, vari = _toward(ix, iy, iz, mx, my, sxx, syy, sxy)
-        co, varo = _toward(ox, oy, oz, mx, my, sxx, syy, sxy)
-        ai, vi = _area(ci, vari)
-        return _p22(xh, yh, mx, my, sxx, syy, sxy, qmax), ai, vi, co, varo
-
     @_kernel
     def _area_excess_range(start, stop, E, k, out):  # pragma: no cover - compiled
         """``out[n] = V_n(k) - A_n(k) = E[s+] - c+ >= 0`` (:func:`_area`) of lobes
@@ -647,10 +686,11 @@ if _kernels.AVAILABLE:
         return hz, 0.0, 0.0, 0.0
 
     @numba.njit(cache=True, nogil=True)
-    def _window(f, nx, ny, ks2x, ks2y, cutoff):  # pragma: no cover - compiled
+    def _window(f, win):  # pragma: no cover - compiled
         """Centre, covariance (footprint + kernel), its determinant and the inclusive seed
         index window ``x0..x1, y0..y1`` of footprint row ``f = (u, v, cuu, cvv, cuv)``
-        (the window of :func:`footprint_lobes`)."""
+        (the window of :func:`footprint_lobes`; ``win`` the grid's :class:`Window`)."""
+        nx, ny, ks2x, ks2y, cutoff = win
         cu, cv = f[0], f[1]
         sxx, syy, sxy = f[2] + ks2x, f[3] + ks2y, f[4]
         rx, ry = cutoff * math.sqrt(sxx), cutoff * math.sqrt(syy)
@@ -659,12 +699,12 @@ if _kernels.AVAILABLE:
         return cu, cv, sxx, syy, sxy, sxx * syy - sxy * sxy, x0, x1, y0, y1
 
     @numba.njit(cache=True, nogil=True)
-    def _widest(start, stop, fp, nx, ny, ks2x, ks2y, cutoff):  # pragma: no cover - compiled
+    def _widest(start, stop, fp, win):  # pragma: no cover - compiled
         """``(L, K)``: the most columns and the most lobes (at least 1) of the windows of the
         footprints ``start:stop`` of ``fp`` (:func:`_window`), which size the range kernels' scratch."""
         L, K = 1, 1
         for p in range(start, stop):
-            x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)[6:10]
+            x0, x1, y0, y1 = _window(fp[p], win)[6:10]
             L, K = max(L, x1 - x0 + 1), max(K, (x1 - x0 + 1) * (y1 - y0 + 1))
         return L, K
 
@@ -696,11 +736,13 @@ if _kernels.AVAILABLE:
         return min(e, s + min(blk * B + B, n) - 1 - w), w, blk
 
     @_inline
-    def _add_run(E, k0, j0, n, wr, acc, xh, yh, qmax, ix, iy, iz, ox, oy, oz, tab, exo, curved, m):  # pragma: no cover
+    def _add_run(lobes, run, cols, q, tab, curved, m):  # pragma: no cover - compiled
         """Adds ``w (1, P_i, A_i(i), V_i(i), A_i(o), V_i(o))`` (Eq. 9, 13, 17: the slope density
         :func:`_p22` and the projected areas :func:`_area`) of the ``n`` consecutive lobes ``k0 ..``
-        (weights ``wr[j0 ..]``) to the columns ``j0 ..`` of ``acc`` (``6 j + term``: one array, so
-        that LLVM sees the stores apart and vectorizes the loop). The view direction's areas from
+        (``run = (k0, j0, n)``; ``lobes = (E, exo)``: the flat raw moments and the tabulated area
+        excess) with weights ``wr[j0 ..]`` to the columns ``j0 ..`` of ``acc`` (``cols = (wr, acc)``;
+        ``6 j + term``: one array, so that LLVM sees the stores apart and vectorizes the loop), at the
+        query ``q = (x~h, y~h, qmax, i, o)`` (:func:`_query`). The view direction's areas from
         the lobes' tabulated ``V_i(o) - A_i(o)`` (``exo``, :func:`_area_excess`) where ``tab``, else
         :func:`_area`; ``tab`` is a constant at each call (:func:`_footprint_range`), so that the
         choice leaves the loop.
@@ -712,6 +754,10 @@ if _kernels.AVAILABLE:
         :func:`_area` only for those (9.4 % of the window lobes in the glint benchmark's scenes), in a
         loop long enough to vectorize (per run, its few lobes took the scalar remainder). One core,
         the benchmark's 16-texel image: 13.8 -> 13.0 ms."""
+        E, exo = lobes
+        k0, j0, n = run
+        wr, acc = cols
+        xh, yh, qmax, ix, iy, iz, ox, oy, oz = q
         # views from the run's start, indexed from 0: LLVM vectorizes the loop (not with
         # the indices k0 + j: unknown sign, wraparound)
         Er, wrr, accr, exr = E[5 * k0:5 * (k0 + n)], wr[j0:j0 + n], acc[6 * j0:6 * (j0 + n)], exo[k0:k0 + n]
@@ -758,8 +804,11 @@ if _kernels.AVAILABLE:
         return total
 
     @_inline
-    def _add_linear(E, k0, j0, n, wr, acc, ix, iy, iz, ox, oy, oz):  # pragma: no cover - compiled
+    def _add_linear(E, run, cols, q):  # pragma: no cover - compiled
         """:func:`_add_run` for the lobes of a pruned block: ``w (1, 0, c(i), c(i), c(o), c(o))``."""
+        k0, j0, n = run
+        wr, acc = cols
+        ix, iy, iz, ox, oy, oz = q[3:9]
         Er, wrr, accr = E[5 * k0:5 * (k0 + n)], wr[j0:j0 + n], acc[6 * j0:6 * (j0 + n)]
         for j in range(n):
             w = wrr[j]
@@ -777,10 +826,13 @@ if _kernels.AVAILABLE:
                 acc[4:6 * L:6].sum(), acc[5:6 * L:6].sum())
 
     @_inline
-    def _column_weights(ex, L, x0, nx, cu, sxx, syy, sxy, det):  # pragma: no cover - compiled
+    def _column_weights(ex, wnd, nx):  # pragma: no cover - compiled
         """The footprint weights ``exp(-q / 2)`` (:func:`footprint_lobes`) of a window's columns:
-        ``ex[jx] = exp(ax du^2)`` for its ``L`` columns from ``x0``; returns ``(ax, ay, axy)`` of
+        ``ex[jx] = exp(ax du^2)`` for the ``L`` columns from ``x0`` of the window ``wnd``
+        (:func:`_window`, of a grid ``nx`` lobes wide); returns ``(ax, ay, axy)`` of
         ``-q / 2 = ax du^2 + ay dv^2 + axy du dv`` (covariance ``sxx, syy, sxy``, determinant ``det``)."""
+        cu, _, sxx, syy, sxy, det, x0, x1 = wnd[:8]
+        L = x1 - x0 + 1
         ax, ay, axy = -0.5 * syy / det, -0.5 * sxx / det, sxy / det
         for jx in range(L):
             du = (x0 + jx + 0.5) / nx - cu
@@ -788,10 +840,13 @@ if _kernels.AVAILABLE:
         return ax, ay, axy
 
     @_inline
-    def _row_weights(wr, ex, L, x0, nx, cu, ax, ay, axy, dv):  # pragma: no cover - compiled
-        """``wr[:L]``: the footprint weights of the window row at ``dv`` (:func:`_column_weights`):
-        ``ex[jx] exp(ay dv^2)`` when uncorrelated (one exp per column and per row instead of one per
-        lobe), else ``exp(-q / 2)`` in one exp (the factors may over/underflow for thin footprints)."""
+    def _row_weights(wr, ex, wnd, nx, quad, dv):  # pragma: no cover - compiled
+        """``wr[:L]``: the footprint weights of the row at ``dv`` of the window ``wnd`` (``quad = (ax, ay,
+        axy)`` and ``ex`` from :func:`_column_weights`): ``ex[jx] exp(ay dv^2)`` when uncorrelated (one exp
+        per column and per row instead of one per lobe), else ``exp(-q / 2)`` in one exp (the factors may
+        over/underflow for thin footprints)."""
+        ax, ay, axy = quad
+        cu, x0, L = wnd[0], wnd[6], wnd[7] - wnd[6] + 1
         cross = axy * dv
         if cross == 0.0:
             ey = math.exp(ay * dv * dv)
@@ -802,17 +857,55 @@ if _kernels.AVAILABLE:
                 du = (x0 + jx + 0.5) / nx - cu
                 wr[jx] = math.exp(ax * du * du + ay * dv * dv + cross * du)
 
+    @_inline
+    def _query(h, wi, wo, qmax):  # pragma: no cover - compiled
+        """``(z_h, 1 / z_h^4, q)`` of a footprint's half vector ``h`` and directions ``wi``, ``wo``:
+        the query ``q = (x~h, y~h, qmax, ix, iy, iz, ox, oy, oz)`` of :func:`_add_run` (``qmax`` 0
+        below the horizon: no density there; :func:`_half_slope`)."""
+        hz, xh, yh, inv4 = _half_slope(h)
+        return hz, inv4, (xh, yh, qmax if hz > 0.0 else 0.0, wi[0], wi[1], wi[2], wo[0], wo[1], wo[2])
+
+    @_inline
+    def _block_runs(grid, wnd, ys, q, hp, runs):  # pragma: no cover - compiled
+        """The runs of blocks of the block row of seed row ``ys`` (``B``-blocks of ``grid``, a
+        :class:`LobeGrid`) across the window ``wnd`` (:func:`_window`) for the query ``q``
+        (:func:`_query`; ``hp = (z_h, prune)``): consecutive blocks of the same
+        kind (pruned or not, :func:`_block_dark`, :func:`_block_linear`) that are consecutive in memory,
+        into ``runs = (r0, r1, rw, rfull)`` (first and last unwrapped column, first wrapped column,
+        kind). Returns ``(ye, wys, n_runs)``: the block row's last seed row, its wrapped first one and
+        how many runs it has."""
+        r0, r1, rw, rfull = runs
+        nx, ny = grid.window.nx, grid.window.ny
+        x0, x1, y1 = wnd[6], wnd[7], wnd[9]
+        xh, yh = q[0], q[1]
+        hz, prune = hp
+        ye, wys, by = _segment(ys, y1, ny, grid.B)
+        n_runs = 0
+        xs = x0
+        while xs <= x1:
+            xe, wxs, bx = _segment(xs, x1, nx, grid.B)
+            b = grid.bounds[by, bx]
+            full = not (_block_dark(b, hz, xh, yh, prune) and _block_linear(b, q[3], q[4], q[5])
+                        and _block_linear(b, q[6], q[7], q[8]))
+            if n_runs > 0 and rfull[n_runs - 1] == full and wxs == rw[n_runs - 1] + xs - r0[n_runs - 1]:
+                r1[n_runs - 1] = xe
+            else:
+                r0[n_runs], r1[n_runs], rw[n_runs], rfull[n_runs] = xs, xe, wxs, full
+                n_runs += 1
+            xs = xe + 1
+        return ye, wys, n_runs
+
     @_loops
-    def _footprint_loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
-                         exo, ex, wr, acc, r0, r1, rw, rfull, curved):  # pragma: no cover - compiled
+    def _footprint_loops(start, stop, out, grid, query, scratch):  # pragma: no cover - compiled
         """Per footprint ``p`` of ``start:stop``, into ``out[p]``: ``(D_P(h), A_P(i), V_P(i),
         A_P(o), V_P(o))`` of the lobes of :func:`footprint_lobes` (same window, same
-        weights), looping over the window instead of padding it; ``E`` the flat raw lobe
-        moments ``(ny * nx * 5,)`` (each lobe's Gaussian is set up from them where it is
-        used: no per-lobe table).
+        weights), looping over the window instead of padding it; ``grid`` the
+        :class:`LobeGrid` (``E`` the flat raw lobe moments ``(ny * nx * 5,)``: each lobe's Gaussian
+        is set up from them where it is used, no per-lobe table), ``query`` the
+        :class:`Footprints`, ``scratch = (ex, wr, acc, runs, curved)`` (:func:`_footprint_range`).
 
-        Pruning by ``B x B`` blocks of lobes (``bounds``, :func:`_block_dark`,
-        :func:`_block_linear`): a block whose slope box (``prune`` deviations) misses the
+        Pruning by ``B x B`` blocks of lobes (``bounds``, :func:`_block_runs`): a block whose slope
+        box (``prune`` deviations) misses the
         half vector's slope and whose lobes all have projected areas ``(c, c)`` toward
         ``i`` and ``o`` adds only its weights and ``W c`` (Eq. 13, 17); its slope
         densities, each below ``exp(-prune^2 / 2) / (2 pi sigma_eps^2)``, are dropped, and
@@ -834,51 +927,40 @@ if _kernels.AVAILABLE:
         the lobe's slope density is cut where its exponent is below ``-700``
         (``_Q_MAX``), and the projected areas are ``c`` where ``c / sigma >= 8``
         (``_AREA_T``)."""
-        qmax = min(prune * prune, _Q_MAX)
-        tab = exo.size > 0
+        E, win = grid.E, grid.window
+        nx, ny = win.nx, win.ny
+        ex, wr, acc, runs, curved = scratch
+        r0, r1, rw, rfull = runs
+        lobes, cols = (E, query.exo), (wr, acc)
+        qmax = min(query.prune * query.prune, _Q_MAX)
+        tab = query.exo.size > 0
         for p in range(start, stop):
-            cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
+            wnd = _window(query.fp[p], win)
+            cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = wnd
             if x1 < x0 or y1 < y0:
                 continue
             L = x1 - x0 + 1
-            ax, ay, axy = _column_weights(ex, L, x0, nx, cu, sxx, syy, sxy, det)
-            hz, xh, yh, inv4 = _half_slope(h[p])
-            qp = qmax if hz > 0.0 else 0.0              # no density below the horizon
-            ix_, iy_, iz_, ox_, oy_, oz_ = wi[p, 0], wi[p, 1], wi[p, 2], wo[p, 0], wo[p, 1], wo[p, 2]
+            quad = _column_weights(ex, wnd, nx)
+            hz, inv4, q = _query(query.h[p], query.wi[p], query.wo[p], qmax)
             acc[:6 * L] = 0.0
             m, excess = 0, 0.0                       # the gathered lobes of _add_run, their sum
             ys = y0
             while ys <= y1:
-                ye, wys, by = _segment(ys, y1, ny, B)
                 # runs of blocks along this block row: same kind, consecutive in memory
-                n_runs = 0
-                xs = x0
-                while xs <= x1:
-                    xe, wxs, bx = _segment(xs, x1, nx, B)
-                    b = bounds[by, bx]
-                    full = not (_block_dark(b, hz, xh, yh, prune) and _block_linear(b, ix_, iy_, iz_)
-                                and _block_linear(b, ox_, oy_, oz_))
-                    if n_runs > 0 and rfull[n_runs - 1] == full and wxs == rw[n_runs - 1] + xs - r0[n_runs - 1]:
-                        r1[n_runs - 1] = xe
-                    else:
-                        r0[n_runs], r1[n_runs], rw[n_runs], rfull[n_runs] = xs, xe, wxs, full
-                        n_runs += 1
-                    xs = xe + 1
+                ye, wys, n_runs = _block_runs(grid, wnd, ys, q, (hz, query.prune), runs)
                 for iy in range(ys, ye + 1):
-                    _row_weights(wr, ex, L, x0, nx, cu, ax, ay, axy, (iy + 0.5) / ny - cv)
+                    _row_weights(wr, ex, wnd, nx, quad, (iy + 0.5) / ny - cv)
                     row = (wys + iy - ys) * nx
                     for r in range(n_runs):
-                        k0, j0, n = row + rw[r], r0[r] - x0, r1[r] - r0[r] + 1
+                        run = (row + rw[r], r0[r] - x0, r1[r] - r0[r] + 1)
                         if rfull[r] and tab:        # constant tab: a loop without the choice
-                            if m + n > curved[0].size:      # full: sum what it holds
+                            if m + run[2] > curved[0].size:      # full: sum what it holds
                                 excess, m = excess + _excess_sum(curved, m), 0
-                            m = _add_run(E, k0, j0, n, wr, acc, xh, yh, qp, ix_, iy_, iz_, ox_, oy_, oz_, True, exo,
-                                         curved, m)
+                            m = _add_run(lobes, run, cols, q, True, curved, m)
                         elif rfull[r]:
-                            _add_run(E, k0, j0, n, wr, acc, xh, yh, qp, ix_, iy_, iz_, ox_, oy_, oz_, False, exo,
-                                     curved, 0)
+                            _add_run(lobes, run, cols, q, False, curved, 0)
                         else:
-                            _add_linear(E, k0, j0, n, wr, acc, ix_, iy_, iz_, ox_, oy_, oz_)
+                            _add_linear(E, run, cols, q)
                 ys = ye + 1
             wsum, s0, s1, s2, s3, s4 = _column_sums(acc, L)
             s2 += excess + _excess_sum(curved, m)
@@ -891,67 +973,71 @@ if _kernels.AVAILABLE:
     _GATHER = 1 << 16
 
     @_kernel
-    def _footprint_range(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo,
-                         exo):  # pragma: no cover - compiled
-        """:func:`_footprint_loops` over the footprints ``start:stop``, with scratch for the widest
-        of their windows (``L`` lobes: ``6 L`` accumulators, ``L // B + 2`` runs per block row) and
-        :func:`_add_run`'s ``curved`` where ``exo`` is tabulated: room for the largest window's lobes,
-        at most :data:`_GATHER` but at least a row's (the loops sum the list when it is full)."""
-        L, K = _widest(start, stop, fp, nx, ny, ks2x, ks2y, cutoff)
-        nr = L // B + 2
-        K = max(L, min(K, _GATHER)) if exo.size > 0 else 0     # (only with the tabulated view)
-        _footprint_loops(start, stop, out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo,
-                         np.empty(L), np.empty(L), np.empty(6 * L), np.empty(nr, np.int64), np.empty(nr, np.int64),
-                         np.empty(nr, np.int64), np.empty(nr, np.bool_),
-                         (np.empty(K), np.empty(K), np.empty(K), np.empty(L)))
+    def _footprint_range(start, stop, out, grid, query):  # pragma: no cover - compiled
+        """:func:`_footprint_loops` over the footprints ``start:stop`` of ``query`` (:class:`Footprints`)
+        on ``grid`` (:class:`LobeGrid`), with scratch for the widest of their windows (``L`` lobes:
+        ``6 L`` accumulators, ``L // B + 2`` runs per block row) and :func:`_add_run`'s ``curved`` where
+        ``exo`` is tabulated: room for the largest window's lobes, at most :data:`_GATHER` but at least a
+        row's (the loops sum the list when it is full)."""
+        L, K = _widest(start, stop, query.fp, grid.window)
+        nr = L // grid.B + 2
+        K = max(L, min(K, _GATHER)) if query.exo.size > 0 else 0     # (only with the tabulated view)
+        runs = (np.empty(nr, np.int64), np.empty(nr, np.int64), np.empty(nr, np.int64), np.empty(nr, np.bool_))
+        _footprint_loops(start, stop, out, grid, query,
+                         (np.empty(L), np.empty(L), np.empty(6 * L), runs,
+                          (np.empty(K), np.empty(K), np.empty(K), np.empty(L))))
 
-    def _footprint_sums(E, bounds, B, nx, ny, ks2x, ks2y, cutoff, prune, fp, h, wi, wo, exo):
-        """``(P, 5)`` sums of :func:`_footprint_range` over all footprints, as tasks on the
-        kernels' thread pool (:func:`microfacet.kernels.launch_ranges`: a thread takes the
-        next task when done, so that footprints of different cost balance)."""
-        out = np.zeros((fp.shape[0], 5))
-        _kernels.launch_ranges(_footprint_range, fp.shape[0], out, E, bounds, B, nx, ny, ks2x, ks2y, cutoff,
-                                prune, fp, h, wi, wo, exo, cost=_task_cost(fp, ks2x, ks2y, nx, ny, cutoff))
+    def _footprint_sums(grid, query):
+        """``(P, 5)`` sums of :func:`_footprint_range` over all footprints of ``query``
+        (:class:`Footprints`) on ``grid`` (:class:`LobeGrid`), as tasks on the kernels' thread pool
+        (:func:`microfacet.kernels.launch_ranges`: a thread takes the next task when done, so that
+        footprints of different cost balance)."""
+        out = np.zeros((query.fp.shape[0], 5))
+        _kernels.launch_ranges(_footprint_range, query.fp.shape[0], out, grid, query,
+                                cost=_task_cost(query.fp, grid.window))
         return out
 
     @_kernel
-    def _lobe_range(start, stop, out, E, W, h, wi, wo):  # pragma: no cover - compiled
+    def _lobe_range(start, stop, out, lobes, query):  # pragma: no cover - compiled
         """Per query ``q`` of ``start:stop``, into ``out[q]``: ``(D_P(h), A_P(i), V_P(i),
-        A_P(o), V_P(o))`` of explicit lobes (flat raw moments ``E (5 N,)``, weights ``W``
-        summing to 1): the sums of :meth:`PatchBRDF.pndf` and :meth:`PatchBRDF.areas`
-        (Eq. 9, 13, 17) in one pass, the lobes as one run of :func:`_add_run`."""
+        A_P(o), V_P(o))`` of explicit lobes ``lobes = (E, W)`` (flat raw moments ``E (5 N,)``,
+        weights ``W`` summing to 1) at ``query = (h, wi, wo)``: the sums of :meth:`PatchBRDF.pndf`
+        and :meth:`PatchBRDF.areas` (Eq. 9, 13, 17) in one pass, the lobes as one run of :func:`_add_run`."""
+        E, W = lobes
+        h, wi, wo = query
         acc, none = np.empty(6 * W.size), np.empty(0)
         for q in range(start, stop):
-            hz, xh, yh, inv4 = _half_slope(h[q])
+            hz, inv4, qq = _query(h[q], wi[q], wo[q], _Q_MAX)
             acc[:] = 0.0
-            _add_run(E, 0, 0, W.size, W, acc, xh, yh, _Q_MAX if hz > 0.0 else 0.0, wi[q, 0], wi[q, 1], wi[q, 2],
-                     wo[q, 0], wo[q, 1], wo[q, 2], False, none, (none, none, none, none), 0)
+            _add_run((E, none), (0, 0, W.size), (W, acc), qq, False, (none, none, none, none), 0)
             _, d, ai, vi, ao, vo = _column_sums(acc, W.size)
             out[q, 0], out[q, 1], out[q, 2], out[q, 3], out[q, 4] = d * inv4, ai, vi, ao, vo
 
-    def _lobe_sums(E, W, h, wi, wo):
-        """``(Q, 5)`` sums of :func:`_lobe_range` over all queries, as tasks on the kernels'
-        thread pool (:func:`microfacet.kernels.launch_ranges`)."""
-        out = np.zeros((h.shape[0], 5))
-        _kernels.launch_ranges(_lobe_range, h.shape[0], out, E, W, h, wi, wo, cost=W.size)
+    def _lobe_sums(lobes, query):
+        """``(Q, 5)`` sums of :func:`_lobe_range` over all queries ``query = (h, wi, wo)`` of the lobes
+        ``lobes = (E, W)``, as tasks on the kernels' thread pool (:func:`microfacet.kernels.launch_ranges`)."""
+        out = np.zeros((query[0].shape[0], 5))
+        _kernels.launch_ranges(_lobe_range, out.shape[0], out, lobes, query, cost=lobes[1].size)
         return out
 
     @_kernel
-    def _merge_range(start, stop, out, grid, nx, ny, ks2x, ks2y, cutoff, fp):  # pragma: no cover - compiled
+    def _merge_range(start, stop, out, grid, win, fp):  # pragma: no cover - compiled
         """Per footprint ``p`` of ``start:stop``, into ``out[p]``: the ``W``-weighted average of the flat
-        moments ``grid`` ``(ny * nx * 5,)`` over its window (the weights of :func:`footprint_lobes`:
-        :func:`_column_weights`, :func:`_row_weights`, as in :func:`_footprint_loops`)."""
-        L = _widest(start, stop, fp, nx, ny, ks2x, ks2y, cutoff)[0]
+        moments ``grid`` ``(ny * nx * 5,)`` over its window (``win``, a :class:`Window`; the weights of
+        :func:`footprint_lobes`: :func:`_column_weights`, :func:`_row_weights`, as in :func:`_footprint_loops`)."""
+        nx, ny = win.nx, win.ny
+        L = _widest(start, stop, fp, win)[0]
         ex, wr, xw = np.empty(L), np.empty(L), np.empty(L, np.int64)
         for p in range(start, stop):
-            cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = _window(fp[p], nx, ny, ks2x, ks2y, cutoff)
+            wnd = _window(fp[p], win)
+            cu, cv, sxx, syy, sxy, det, x0, x1, y0, y1 = wnd
             n = x1 - x0 + 1
-            ax, ay, axy = _column_weights(ex, n, x0, nx, cu, sxx, syy, sxy, det)
+            quad = _column_weights(ex, wnd, nx)
             for jx in range(n):
                 xw[jx] = 5 * ((x0 + jx) % nx)
             wsum, m0, m1, m2, m3, m4 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
             for iy in range(y0, y1 + 1):
-                _row_weights(wr, ex, n, x0, nx, cu, ax, ay, axy, (iy + 0.5) / ny - cv)
+                _row_weights(wr, ex, wnd, nx, quad, (iy + 0.5) / ny - cv)
                 row = 5 * nx * (iy % ny)
                 for jx in range(n):
                     w = wr[jx]
@@ -963,26 +1049,28 @@ if _kernels.AVAILABLE:
                 out[p, 0], out[p, 1], out[p, 2] = m0 / wsum, m1 / wsum, m2 / wsum
                 out[p, 3], out[p, 4] = m3 / wsum, m4 / wsum
 
-    def _footprint_merge(grid, nx, ny, ks2x, ks2y, cutoff, fp):
-        """``(P, 5)`` averages of :func:`_merge_range` over all footprints ``fp``, as tasks on the kernels'
-        thread pool (:func:`microfacet.kernels.launch_ranges`)."""
+    def _footprint_merge(grid, win, fp):
+        """``(P, 5)`` averages of :func:`_merge_range` over all footprints ``fp`` of the moments ``grid``
+        ``(ny * nx, 5)`` (``win``, its :class:`Window`), as tasks on the kernels' thread pool
+        (:func:`microfacet.kernels.launch_ranges`)."""
         out = np.zeros((fp.shape[0], 5))
-        _kernels.launch_ranges(_merge_range, fp.shape[0], out, grid.reshape(-1), nx, ny, ks2x, ks2y, cutoff, fp,
-                                cost=_task_cost(fp, ks2x, ks2y, nx, ny, cutoff))
+        _kernels.launch_ranges(_merge_range, fp.shape[0], out, grid.reshape(-1), win, fp,
+                                cost=_task_cost(fp, win))
         return out
 else:  # pragma: no cover - without numba
     _footprint_sums = _footprint_merge = _lobe_sums = _area_excess = None
 
 
-def _window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) -> float:
-    """About how many (footprint, lobe) pairs the windows of footprints ``fp`` hold."""
-    return float(np.sum((2 * cutoff * np.sqrt(fp[:, 2] + ks2x) * nx + 1) * (2 * cutoff * np.sqrt(fp[:, 3] + ks2y) * ny + 1)))
+def _window_pairs(fp, win) -> float:
+    """About how many (footprint, lobe) pairs the windows of footprints ``fp`` hold (:class:`Window` ``win``)."""
+    return float(np.sum((2 * win.cutoff * np.sqrt(fp[:, 2] + win.ks2x) * win.nx + 1)
+                        * (2 * win.cutoff * np.sqrt(fp[:, 3] + win.ks2y) * win.ny + 1)))
 
 
-def _task_cost(fp, ks2x, ks2y, nx, ny, cutoff) -> int:
+def _task_cost(fp, win) -> int:
     """Lobes per footprint of ``fp``'s windows (:func:`_window_pairs`), the ``cost`` of a footprint
     for :func:`microfacet.kernels.launch_ranges`."""
-    return int(_window_pairs(fp, ks2x, ks2y, nx, ny, cutoff) / max(fp.shape[0], 1)) + 1
+    return int(_window_pairs(fp, win) / max(fp.shape[0], 1)) + 1
 
 
 def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
@@ -999,12 +1087,10 @@ def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
         sel = np.flatnonzero(levels == lev)
         grid = ms.mip[lev]
         if fast and _footprint_merge is not None:
-            ny, nx = grid.shape[:2]
-            ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
             fp = np.ascontiguousarray(np.stack([c[sel, 0], c[sel, 1], cov[sel, 0, 0], cov[sel, 1, 1],
                                                 cov[sel, 0, 1]], -1))
-            merged[sel] = _footprint_merge(np.ascontiguousarray(grid.reshape(-1, 5)), nx, ny, ks2[0], ks2[1],
-                                           float(ms.cutoff), fp)
+            merged[sel] = _footprint_merge(np.ascontiguousarray(grid.reshape(-1, 5)),
+                                           Window.of(grid.shape, ms.cutoff), fp)
             continue
         for s in range(0, sel.size, 4096):
             part = sel[s:s + 4096]
@@ -1013,7 +1099,10 @@ def _merged_footprints(ms, c, cov, fast: bool = False) -> np.ndarray:
     return merged
 
 
-def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, prune) -> np.ndarray:
+def _eval_cos_footprints_numba(ms, pixels, fresnel, exact, g2, prune) -> np.ndarray:
+    """:func:`eval_cos_footprints` by the compiled image kernel (:func:`_footprint_sums`), ``pixels =
+    (centers, covs, wi, wo)``."""
+    centers, covs, wi, wo = pixels
     fresnel = _fresnel.Ideal() if fresnel is None else fresnel
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
     P = c.shape[0]
@@ -1021,19 +1110,16 @@ def _eval_cos_footprints_numba(ms, centers, covs, wi, wo, fresnel, exact, g2, pr
     wi = np.ascontiguousarray(np.broadcast_to(directions(wi, "wi"), (P, 3)))
     wo1 = directions(wo, "wo")
     wo = np.ascontiguousarray(np.broadcast_to(wo1, (P, 3)))
-    ny, nx = ms.grid
-    ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
     fp = np.ascontiguousarray(np.stack([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 1, 1], cov[:, 0, 1]], -1))
     h = half_vector(wi, wo)
     oh, ih = dot(wo, h), dot(wi, h)
     ok = _local_ok(wi, wo, h, oh, ih)
-    E = np.ascontiguousarray(ms.lobe_moments, dtype=np.float64).reshape(-1)       # flat (5 N,)
+    grid = LobeGrid.of(ms)
     # one view direction for all pixels: tabulate the lobes' area excess toward it once,
     # when the image visits more (pixel, lobe) pairs than there are lobes
-    pairs = _window_pairs(fp, ks2[0], ks2[1], nx, ny, ms.cutoff)
-    exo = _area_excess(E, wo1) if wo1.ndim == 1 and pairs > 2 * ms.n_lobes else np.zeros(0)
-    D, ai, vi, ao, vo = _footprint_sums(E, ms._block_bounds, BLOCK, nx, ny, ks2[0], ks2[1], float(ms.cutoff),
-                                        prune, fp, np.ascontiguousarray(h), wi, wo, exo).T
+    pairs = _window_pairs(fp, grid.window)
+    exo = _area_excess(grid.E, wo1) if wo1.ndim == 1 and pairs > 2 * ms.n_lobes else np.zeros(0)
+    D, ai, vi, ao, vo = _footprint_sums(grid, Footprints(fp, np.ascontiguousarray(h), wi, wo, exo, prune)).T
     if not exact:
         merged = _merged_footprints(ms, c, cov, fast=True)
         ai, vi = _merged_area(vi, merged, wi)

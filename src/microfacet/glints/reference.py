@@ -52,7 +52,7 @@ def _bin_masses(ms, edges_x, edges_y, center, cov, sub: int, **kwargs) -> np.nda
     return m.reshape(bx, sub, by, sub).sum(axis=(1, 3))
 
 
-def compare_histogram(ms, center, cov, bins: int = 24, n: int = 1_000_000, sub: int = 4,
+def compare_histogram(ms, center, cov, *, bins: int = 24, n: int = 1_000_000, sub: int = 4,
                       seed: int = 0, method: str = "sample", rough: bool = True, **kwargs) -> dict:
     """Binned comparison of ``ms``'s P-NDF with the footprint histogram of the interpolated
     map. ``method``: ``"sample"`` bins ``n`` samples of the lobe mixture

@@ -143,10 +143,14 @@ def _neighbours(i, n, wrap):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always")
-def _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e):  # pragma: no cover - compiled
+def _texel_moments(rows, cols, scale, b, e):  # pragma: no cover - compiled
     """Moments ``e[c][i]`` (the slopes' E1..E5 convolved with the base moments ``b``,
     Listing 5.1) of the central-difference slopes ``x~ = sx_scale (row[ir] - row[il])``,
-    ``y~ = sy_scale (up[i] - down[i])``, computed in float64."""
+    ``y~ = sy_scale (up[i] - down[i])``, computed in float64 (``rows = (row, up, down)``,
+    ``cols = (il, i, ir)``, ``scale = (sx_scale, sy_scale)``)."""
+    row, up, down = rows
+    il, i, ir = cols
+    sx_scale, sy_scale = scale
     x = sx_scale * (np.float64(row[ir]) - np.float64(row[il]))
     y = sy_scale * (np.float64(up[i]) - np.float64(down[i]))
     e[0][i] = x + b[0]
@@ -161,22 +165,26 @@ _EXPONENT32 = np.uint32(0x7F800000)
 
 
 @numba.njit(cache=True, nogil=True)
-def _height_moments(start, stop, xi, sx_scale, sy_scale, wrap, base, out):  # pragma: no cover - compiled
-    """Level-0 moments of rows ``start:stop`` into the planar float32 ``out (5, H, W)``, row by
-    row through 1-D row views: the two border texels, then the inner ones (no index select:
-    that loop vectorizes). Returns how many stored moments are not finite (overflow of float32)."""
+def _height_moments(start, stop, xi, diff, base, out):  # pragma: no cover - compiled
+    """Level-0 moments of rows ``start:stop`` of the heights ``xi`` into the planar float32
+    ``out (5, H, W)``, row by row through 1-D row views: the two border texels, then the inner
+    ones (no index select: that loop vectorizes); ``diff = (sx_scale, sy_scale, wrap)``: the
+    central differences' scales and border, ``base`` the base moments. Returns how many stored
+    moments are not finite (overflow of float32)."""
+    sx_scale, sy_scale, wrap = diff
+    scale = (sx_scale, sy_scale)
     h, w = xi.shape
     b = (base[0], base[1], base[2], base[3], base[4])
     bad = 0
     for j in range(start, stop):
         jt, jb = _neighbours(j, h, wrap)
-        row, up, down = xi[j], xi[jt], xi[jb]
+        rows = (xi[j], xi[jt], xi[jb])
         e = (out[0, j], out[1, j], out[2, j], out[3, j], out[4, j])
         for i in (0, w - 1):
             il, ir = _neighbours(i, w, wrap)
-            _texel_moments(row, up, down, il, i, ir, sx_scale, sy_scale, b, e)
+            _texel_moments(rows, (il, i, ir), scale, b, e)
         for i in range(1, w - 1):
-            _texel_moments(row, up, down, i - 1, i, i + 1, sx_scale, sy_scale, b, e)
+            _texel_moments(rows, (i - 1, i, i + 1), scale, b, e)
         for c in range(5):                           # inf and NaN: exponent bits all ones
             bits = e[c].view(np.uint32)
             for i in range(w):
@@ -215,8 +223,8 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
         raise ValueError(f"out must be the float32 levels of a {h} x {w} map's pyramid")
     planar = np.empty((5, h, w), dtype=np.float32) if out is None else np.moveaxis(out[0], -1, 0)
     with np.errstate(over="ignore", invalid="ignore"):
-        bad = launch_ranges(_height_moments, h, np.ascontiguousarray(xi), 0.5 * w * float(scale),
-                             0.5 * h * float(scale), border == "wrap", base, planar, cost=w)
+        bad = launch_ranges(_height_moments, h, np.ascontiguousarray(xi),
+                             (0.5 * w * float(scale), 0.5 * h * float(scale), border == "wrap"), base, planar, cost=w)
     if sum(bad):
         raise ValueError(OVERFLOW)
     return mip_pyramid(planar.transpose(1, 2, 0), out)

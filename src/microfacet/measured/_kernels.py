@@ -18,8 +18,10 @@ Arrays are read through flat 1-D views of the block (``w[3 k + c]``): loops that
 coordinate passes call no libm function (:func:`_atan2`, a Cephes polynomial within 2 ulp
 of libm, stands for ``atan2`` and ``asin``), so LLVM vectorizes them (AVX2 / AVX-512).
 
-Loop signatures: ``eval_*(wi, wo, cosine, out, *tables)`` writes ``f_r cos theta_i`` if
-``cosine`` else ``f_r``; ``sample_*(u, wo, wi, weight, pdf, *tables)``; directions
+Loop signatures: ``eval_*(wi, wo, cosine, out, tables)`` writes ``f_r cos theta_i`` if
+``cosine`` else ``f_r``; ``sample_*(u, wo, wi, weight, pdf, tables)``, ``tables`` the reader's
+record, passed whole (:class:`microfacet.measured.rgl.RGLTables`; ``(kind, table)`` for MERL
+and UTIA); directions
 ``(N, 3)``, uniforms ``(N, 2)``, RGB ``(N, 3)``, all float64 C-contiguous (read through
 their flat views).
 """
@@ -166,12 +168,17 @@ def _cell(u, n):
 
 
 @_inline
-def _param_corners(p0, tp, q0, tq, n_theta, one_phi, s, w, o):
-    """Slices ``s[o:o + 4]`` and weights ``w[o:o + 4]`` of the parameter corners of
-    ``Marginal2D._slices`` from the nodes and weights ``(p0, tp)``, ``(q0, tq)`` of
-    ``phi_v``, ``theta_v`` (:func:`_node`); the corners of nonzero weight first: 4, or 2
-    for a file with one ``phi_i`` node (skipping the zero terms of the reference's sum is
-    exact)."""
+def _param_corners(phi, theta, nodes, corners, o):
+    """Slices ``s[o:o + 4]`` and weights ``w[o:o + 4]`` (``corners = (s, w)``) of the parameter
+    corners of ``Marginal2D._slices`` from the nodes and weights ``phi = (p0, tp)``, ``theta =
+    (q0, tq)`` of ``phi_v``, ``theta_v`` (:func:`_node`), ``nodes = (n_theta, one_phi)``: the
+    number of theta nodes and whether the file has one ``phi_i`` node; the corners of nonzero
+    weight first: 4, or 2 for one ``phi_i`` node (skipping the zero terms of the reference's
+    sum is exact)."""
+    s, w = corners
+    p0, tp = phi
+    q0, tq = theta
+    n_theta, one_phi = nodes
     if one_phi:
         s[o], s[o + 1], s[o + 2], s[o + 3] = q0, q0 + 1, q0, q0 + 1
         w[o], w[o + 1], w[o + 2], w[o + 3] = 1.0 - tq, tq, 0.0, 0.0
@@ -183,12 +190,16 @@ def _param_corners(p0, tp, q0, tq, n_theta, one_phi, s, w, o):
 
 
 @_inline
-def _invert(vc, rows, marg, normalized, s, w, o, nc, x, y):
+def _invert(t, corners, sel, x, y):
     """``Marginal2D.invert`` (u1, u2) at ``(x, y)``: the conditional and marginal CDFs of
-    the bilinear patch. ``vc[s, j, i] = (value, conditional CDF)``, ``rows[s, j]`` the row
-    integrals (the CDF's last column), ``marg[s, j]`` the marginal CDF; each lookup is the
-    blend over the parameter corners ``s[o:o + nc], w[o:o + nc]`` (``Marginal2D._lookup``),
-    summed in the same order."""
+    the bilinear patch, of the tables ``t`` (:class:`~microfacet.measured.rgl.RGLTables`):
+    ``vc[s, j, i] = (value, conditional CDF)``, ``rows[s, j]`` the row integrals (the CDF's
+    last column), ``marg[s, j]`` the marginal CDF; each lookup is the blend over the parameter
+    corners ``s[o:o + nc], w[o:o + nc]`` (``corners = (s, w)``, ``sel = (o, nc)``;
+    ``Marginal2D._lookup``), summed in the same order."""
+    vc, rows, marg = t.vc, t.rows, t.marg
+    s, w = corners
+    o, nc = sel
     H, W = vc.shape[1], vc.shape[2]
     i, fx = _cell(x, W)
     j, fy = _cell(y, H)
@@ -209,13 +220,17 @@ def _invert(vc, rows, marg, normalized, s, w, o, nc, x, y):
     u1 = fx * _lerp(c0, c1, 0.5 * fx) / (W - 1)
     u1 = (u1 + _lerp(q0, q1, fy)) / _lerp(r0, r1, fy)
     u2 = fy * _lerp(r0, r1, 0.5 * fy) / (H - 1) + m
-    return u1, (u2 if normalized else u2 / m_end)
+    return u1, (u2 if t.normalized else u2 / m_end)
 
 
 @_inline
-def _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, ch):
+def _rgb_channel(rgb, corners, sel, cell, ch):
     """Channel ``ch`` of ``Marginal2D.eval`` of the RGB table ``rgb[s, j, i, channel]``
-    in cell ``(j, i)`` at local coordinates ``(fx, fy)``."""
+    in cell ``cell = (j, i, fx, fy)`` (local coordinates ``fx``, ``fy``), blended over the
+    parameter corners ``corners``, ``sel`` (:func:`_invert`)."""
+    s, w = corners
+    o, nc = sel
+    j, i, fx, fy = cell
     v00 = v01 = v10 = v11 = 0.0
     for c in range(o, o + nc):
         sc, wc = s[c], w[c]
@@ -227,12 +242,13 @@ def _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, ch):
 
 
 @_inline
-def _rgb_eval(rgb, s, w, o, nc, x, y):
-    """``Marginal2D.eval`` of the RGB table at ``(x, y)``."""
+def _rgb_eval(rgb, corners, sel, x, y):
+    """``Marginal2D.eval`` of the RGB table at ``(x, y)`` (corners as :func:`_invert`)."""
     i, fx = _cell(x, rgb.shape[2])
     j, fy = _cell(y, rgb.shape[1])
-    return (_rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, 0), _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, 1),
-            _rgb_channel(rgb, s, w, o, nc, j, i, fx, fy, 2))
+    cell = (j, i, fx, fy)
+    return (_rgb_channel(rgb, corners, sel, cell, 0), _rgb_channel(rgb, corners, sel, cell, 1),
+            _rgb_channel(rgb, corners, sel, cell, 2))
 
 
 @_inline
@@ -265,13 +281,13 @@ def _rgl_coordinates(ix, iy, iz, ox, oy, oz, isotropic, reduction):
 
 
 @_jit
-def _rgl_block(wi, wo, out, phi_nodes, theta_nodes, vc, rows, marg, normalized, rgb, ndf, sigma,
-               isotropic, reduction, jacobian, clip_negative):
+def _rgl_block(wi, wo, out, t):
     """``RGLBRDF.eval_cos`` (Dupuy & Jakob 2018: ``rgb(s) D(u_m) / (4 sigma(u_v))`` at the
     VNDF-warped half vector ``s``) of the flat pairs ``wi``, ``wo`` (one block) into the
-    flat ``out``, in passes over the block through 1-D scratch rows: coordinates and
+    flat ``out``, for the tables ``t`` (:class:`~microfacet.measured.rgl.RGLTables`), in passes over the block through 1-D scratch rows: coordinates and
     parameter nodes (vectorized), parameter corners, VNDF inversion, RGB lookup (so that
     the table lookups of different pairs overlap); 0 below either horizon."""
+    phi_nodes, theta_nodes, isotropic, reduction = t.phi_nodes, t.theta_nodes, t.isotropic, t.reduction
     n = len(out) // 3
     scratch = np.empty((8, n))
     um_x, um_y, theta_v, phi_v, t_theta, t_phi, s1, s2 = (scratch[0], scratch[1], scratch[2], scratch[3],
@@ -286,35 +302,37 @@ def _rgl_block(wi, wo, out, phi_nodes, theta_nodes, vc, rows, marg, normalized, 
     for k in range(n):
         nodes[n + k], t_phi[k] = _node(phi_nodes, phi_v[k])
     one_phi, n_theta = len(phi_nodes) == 1, len(theta_nodes)
+    corners = (cs, cw)
     for k in range(n):
-        _param_corners(nodes[n + k], t_phi[k], nodes[k], t_theta[k], n_theta, one_phi, cs, cw, 4 * k)
+        _param_corners((nodes[n + k], t_phi[k]), (nodes[k], t_theta[k]), (n_theta, one_phi), corners, 4 * k)
     nc = 2 if one_phi else 4
     for k in range(n):
-        s1[k], s2[k] = _invert(vc, rows, marg, normalized, cs, cw, 4 * k, nc, um_x[k], um_y[k])
+        s1[k], s2[k] = _invert(t, corners, (4 * k, nc), um_x[k], um_y[k])
     for k in range(n):
         j = 3 * k
         if not (wi[j + 2] > 0.0 and wo[j + 2] > 0.0):
             out[j] = out[j + 1] = out[j + 2] = 0.0
             continue
-        r, g, b = _rgb_eval(rgb, cs, cw, 4 * k, nc, s1[k], s2[k])
-        if clip_negative:
+        r, g, b = _rgb_eval(t.rgb, corners, (4 * k, nc), s1[k], s2[k])
+        if t.clip_negative:
             r, g, b = max(r, 0.0), max(g, 0.0), max(b, 0.0)
-        if jacobian:
-            scale = _bilinear(ndf, um_x[k], um_y[k]) / (4.0 * _bilinear(sigma, _theta2u(theta_v[k]),
-                                                                         _phi2u(phi_v[k])))
+        if t.jacobian:
+            scale = _bilinear(t.ndf, um_x[k], um_y[k]) / (4.0 * _bilinear(t.sigma, _theta2u(theta_v[k]),
+                                                                           _phi2u(phi_v[k])))
             r, g, b = r * scale, g * scale, b * scale
         out[j], out[j + 1], out[j + 2] = r, g, b
 
 
 @_pjit
-def eval_rgl(wi, wo, cosine, out, *tables):
-    """``f_r cos theta_i`` (or ``f_r``) of an RGL BRDF for each pair."""
+def eval_rgl(wi, wo, cosine, out, tables):
+    """``f_r cos theta_i`` (or ``f_r``) of an RGL BRDF (``tables``: its
+    :class:`~microfacet.measured.rgl.RGLTables`) for each pair."""
     n = len(out)
     wi, wo, out = wi.reshape(-1), wo.reshape(-1), out.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):
         k0, k1 = block * BLOCK, min(block * BLOCK + BLOCK, n)
         a, o = wi[3 * k0:3 * k1], out[3 * k0:3 * k1]
-        _rgl_block(a, wo[3 * k0:3 * k1], o, *tables)
+        _rgl_block(a, wo[3 * k0:3 * k1], o, tables)
         if not cosine:
             for j in range(len(o)):
                 z = a[j - j % 3 + 2]
@@ -322,7 +340,7 @@ def eval_rgl(wi, wo, cosine, out, *tables):
 
 
 @_pjit
-def sample_rgl(u, wo, wi, weight, pdf, *tables):
+def sample_rgl(u, wo, wi, weight, pdf, tables):
     """Cosine-weighted ``wi``, ``weight = eval_cos / pdf`` and ``pdf`` (``MeasuredBRDF.sample``)."""
     n = len(wo)
     u, wo, wi, weight = u.reshape(-1), wo.reshape(-1), wi.reshape(-1), weight.reshape(-1)
@@ -330,7 +348,7 @@ def sample_rgl(u, wo, wi, weight, pdf, *tables):
         k0, k1 = block * BLOCK, min(block * BLOCK + BLOCK, n)
         a, b, f, p = wi[3 * k0:3 * k1], wo[3 * k0:3 * k1], weight[3 * k0:3 * k1], pdf[k0:k1]
         _warp_block(u[2 * k0:2 * k1], b, a, p)
-        _rgl_block(a, b, f, *tables)
+        _rgl_block(a, b, f, tables)
         _divide_by_pdf(f, p)
 
 
@@ -474,8 +492,9 @@ def _table_block(kind, table, wi, wo, cosine, out):
 
 
 @_pjit
-def eval_table(wi, wo, cosine, out, kind, table):
-    """``f_r`` (or ``f_r cos theta_i``) of a MERL or UTIA BRDF (``kind``) for each pair."""
+def eval_table(wi, wo, cosine, out, tables):
+    """``f_r`` (or ``f_r cos theta_i``) of a MERL or UTIA BRDF (``tables = (kind, table)``) for each pair."""
+    kind, table = tables
     n = len(out)
     wi, wo, out = wi.reshape(-1), wo.reshape(-1), out.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):
@@ -484,8 +503,10 @@ def eval_table(wi, wo, cosine, out, kind, table):
 
 
 @_pjit
-def sample_table(u, wo, wi, weight, pdf, kind, table):
-    """Cosine-weighted ``wi``, ``weight = f_r cos theta_i / pdf`` and ``pdf``."""
+def sample_table(u, wo, wi, weight, pdf, tables):
+    """Cosine-weighted ``wi``, ``weight = f_r cos theta_i / pdf`` and ``pdf`` of a MERL or UTIA BRDF
+    (``tables = (kind, table)``)."""
+    kind, table = tables
     n = len(wo)
     u, wo, wi, weight = u.reshape(-1), wo.reshape(-1), wi.reshape(-1), weight.reshape(-1)
     for block in numba.prange((n + BLOCK - 1) // BLOCK):

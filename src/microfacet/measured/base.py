@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import kernels
+from .. import backend, kernels
 from ..brdf import BRDF
 from ..protocol import directions as as_dirs   # the one direction check of every BRDF
 from ..protocol import into, into_sample, output, sample_outputs, uniforms
@@ -30,8 +30,9 @@ __all__ = ["MeasuredBRDF", "file_error", "check_finite", "as_dirs", "compiled_ke
 def compiled_kernels():
     """The module of compiled loops (:mod:`._kernels`, imports Numba on first use), or
     ``None`` without Numba, with ``MICROFACET_NUMBA=0`` or while
-    ``microfacet.kernels.AVAILABLE`` is False: then every reader runs its NumPy reference."""
-    if not kernels.AVAILABLE:
+    ``microfacet.kernels.AVAILABLE`` is False (:func:`microfacet.backend.choose`): then every reader
+    runs its NumPy reference."""
+    if backend.choose() != backend.NUMBA:
         return None
     from . import _kernels
     return _kernels
@@ -85,7 +86,8 @@ class MeasuredBRDF(BRDF):
         return f"{type(self).__name__}({os.fspath(self.path)!r})"
 
     def _kernel(self):
-        """``(eval loop, sample loop, tables)`` of the compiled path, or ``None``: then
+        """``(eval loop, sample loop, tables)`` of the compiled path (``tables``: the reader's record,
+        passed whole to the loops), or ``None``: then
         :meth:`eval`, :meth:`eval_cos` and :meth:`sample` run the NumPy reference."""
         return None
 
@@ -107,7 +109,7 @@ class MeasuredBRDF(BRDF):
         shape = np.broadcast_shapes(wi.shape, wo.shape)
         out = output(out, shape, np.float64, "out", (wi, wo))
         kernels.launch(k[0], out.size // 3, _rows(np.broadcast_to(wi, shape), 3),
-                        _rows(np.broadcast_to(wo, shape), 3), cosine, out.reshape(-1, 3), *k[2])
+                        _rows(np.broadcast_to(wo, shape), 3), cosine, out.reshape(-1, 3), k[2])
         return out
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
@@ -134,7 +136,7 @@ class MeasuredBRDF(BRDF):
             wi, weight, pdf = sample_outputs(out, shape, np.float64, (u, wo))
             kernels.launch(k[1], pdf.size, _rows(np.broadcast_to(u, shape + (2,)), 2),
                             _rows(np.broadcast_to(wo, shape + (3,)), 3), wi.reshape(-1, 3), weight.reshape(-1, 3),
-                            pdf.reshape(-1), *k[2])
+                            pdf.reshape(-1), k[2])
             return wi, weight, pdf
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
         wo = np.broadcast_to(wo, shape + (3,))

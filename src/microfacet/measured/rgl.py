@@ -26,6 +26,7 @@ plugin (``eval``) and rgl-epfl/brdf-loader (``powitacq_rgb``), with their conven
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,7 +34,31 @@ from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_er
 from .marginal2d import Marginal2D
 from .tensor_file import read_tensor_file
 
-__all__ = ["RGLBRDF", "read_rgl"]
+__all__ = ["RGLBRDF", "RGLTables", "read_rgl"]
+
+
+class RGLTables(NamedTuple):
+    """The tables and flags of an :class:`RGLBRDF` as its compiled loops read them
+    (:mod:`microfacet.measured._kernels`, passed whole): the parameter nodes ``phi_nodes``,
+    ``theta_nodes`` of the view, the VNDF's ``vc`` ``(value, conditional CDF)`` pairs, row
+    integrals ``rows`` and marginal CDF ``marg`` (``normalized``: whether it sums to 1), the
+    ``rgb`` table, the NDF ``ndf`` and projected area ``sigma`` tables (Dupuy & Jakob 2018), and
+    the flags ``isotropic``, ``reduction`` (the file's azimuthal symmetry), ``jacobian`` and
+    ``clip_negative`` of :class:`RGLBRDF`. Example: ``brdf._kernel()[2].isotropic``."""
+
+    phi_nodes: np.ndarray
+    theta_nodes: np.ndarray
+    vc: np.ndarray
+    rows: np.ndarray
+    marg: np.ndarray
+    normalized: bool
+    rgb: np.ndarray
+    ndf: np.ndarray
+    sigma: np.ndarray
+    isotropic: bool
+    reduction: int
+    jacobian: bool
+    clip_negative: bool
 
 FLOAT_FIELDS = ("theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "rgb")
 
@@ -163,8 +188,8 @@ class RGLBRDF(MeasuredBRDF):
         k = compiled_kernels()
         if k is None:
             return None
-        return k.eval_rgl, k.sample_rgl, self._tables + (self.isotropic, self.reduction, self.jacobian,
-                                                         self.clip_negative)
+        return k.eval_rgl, k.sample_rgl, RGLTables(*self._tables, self.isotropic, self.reduction, self.jacobian,
+                                                   self.clip_negative)
 
     def _eval_cos_numpy(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (Mitsuba's ``eval`` with
