@@ -20,8 +20,12 @@ def add(sub) -> None:
                     "and OUT.export.md, what the format "
                     "could not carry and the image error of the exported material (read back from OUT) against "
                     "the library's fit and the tabulated fit, measured now. Formulas: docs/export.md.")
-    p.add_argument("fit", metavar="FIT.npz", help="fit file written by 'microfacet fit'")
-    p.add_argument("--to", required=True, choices=sorted(FORMAT_SUFFIX), help="output format")
+    p.add_argument("fit", metavar="FIT.npz|PYRAMID.exr",
+                   help="fit file written by 'microfacet fit', or a LEADR pyramid of 'microfacet bake' (--to "
+                        "textures|gltf: normal, roughness and anisotropy textures per MIP level, docs/export.md)")
+    p.add_argument("--to", required=True, choices=sorted([*FORMAT_SUFFIX, "textures"]), help="output format")
+    p.add_argument("--base-roughness", type=float, default=None, metavar="ALPHA",
+                   help="PYRAMID.exr only: Beckmann roughness added to every level (leave out when baked with it)")
     p.add_argument("--model", default="best", metavar="NAME",
                    help="fit of the file to export: best (default) or a name (microfacet.fit.fit_names)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
@@ -30,7 +34,12 @@ def add(sub) -> None:
 
 
 def run(args) -> int:
-    from ..export import export
+    from ..export import export, is_pyramid
+    if is_pyramid(args.fit) or args.to == "textures":
+        from ..export.leadr_textures import run_cli
+        return run_cli(args)
+    if args.base_roughness is not None:
+        raise ValueError("--base-roughness applies to a LEADR pyramid (PYRAMID.exr), not to a fit file")
     suffix = FORMAT_SUFFIX[args.to]
     out = output_path(args.output, suffix, source=args.fit)
     report = export(args.fit, args.to, out, model=args.model)

@@ -41,12 +41,13 @@ from .blender import (BlenderBRDF, blender_brdf, blender_material, blender_pytho
                       write_blend)
 from .consumers import consumer_renders, consumer_section
 from .mtlx import mtlx_document, openpbr_brdf, openpbr_inputs, pbrlib_brdf
+from .leadr_textures import export_leadr, leadr_textures
 
 __all__ = ["export", "choose_model", "FORMATS", "SUFFIXES", "Analysis", "Lobe", "analyse", "schlick_of",
            "GltfBRDF", "alphas_of", "gltf_brdf", "gltf_material", "read_material", "roughness_anisotropy",
            "write_glb", "mtlx_document", "openpbr_brdf", "openpbr_inputs", "pbrlib_brdf", "BlenderBRDF", "blender_brdf",
            "blender_material", "blender_python", "render_cycles", "write_addon", "write_blend", "consumer_renders",
-           "consumer_section"]
+           "consumer_section", "export_leadr", "leadr_textures", "is_pyramid"]
 
 #: Formats of :func:`export` and the suffix of each one's file.
 SUFFIXES = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda", "blender": ".blend"}
@@ -162,6 +163,13 @@ def _markdown(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def is_pyramid(source) -> bool:
+    """Whether ``source`` is a LEADR moment pyramid: a path ending in ``.exr`` or a list of levels."""
+    if isinstance(source, (str, os.PathLike)):
+        return Path(source).suffix.lower() == ".exr"
+    return isinstance(source, (list, tuple))
+
+
 def export(source, to: str, out, model: str = "best", compare_models: bool = True, **options) -> dict:
     """Export ``source`` (a fit file path or an analytic BRDF tree) to format ``to``
     (:data:`FORMATS`) at ``out`` (its suffix added if missing), write the report beside it
@@ -171,8 +179,16 @@ def export(source, to: str, out, model: str = "best", compare_models: bool = Tru
     ``mesh`` (glTF: False for the material only), ``mtlx_file`` (USD: the ``.mtlx`` to note);
     ``name`` is also the Blender material's name.
     ``compare_models``: for a fit file, also export every other analytic fit in memory and
-    measure it against the tabulated fit (``other_models``)."""
+    measure it against the tabulated fit (``other_models``).
+    A LEADR pyramid (a ``.exr`` path or a list of moment levels) exports ``to="textures"`` or
+    ``"gltf"`` through :func:`~microfacet.export.leadr_textures.export_leadr` (``options``:
+    ``base_roughness``, ``tiles``, ``metallic``, ``base_color``), which returns its own report."""
     from ..metrics import ImageError
+    if is_pyramid(source) or to == "textures":      # LEADR pyramids: textures per MIP level (leadr_textures)
+        if not is_pyramid(source):
+            raise ValueError(f"--to textures exports a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
+                             f"got {source if isinstance(source, (str, os.PathLike)) else type(source).__name__}")
+        return export_leadr(source, to, out, **options)
     if to not in _WRITERS:
         raise ValueError(f"to must be one of {', '.join(FORMATS)}, got {to!r}")
     if to == "blender":                             # one line saying what to do, before any work

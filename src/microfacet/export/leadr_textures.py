@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +55,7 @@ from ..io.png import read_png_data, write_png_data
 __all__ = ["ellipse_of_covariance", "covariance_of_ellipse", "gltf_parameters", "level_parameters",
            "encode_level", "decode_level", "leadr_textures", "naive_textures", "box_downsample",
            "write_chains", "read_chains", "plane_mesh", "write_plane_glb", "export_leadr", "quantization_error",
-           "TEXTURES", "TARGETS", "NOT_CARRIED"]
+           "run_cli", "TEXTURES", "TARGETS", "NOT_CARRIED"]
 
 #: The three textures of a level, in the order they are written.
 TEXTURES = ("normal", "metallic_roughness", "anisotropy")
@@ -413,3 +414,31 @@ def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, 
     Path(stem + ".export.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
     Path(stem + ".export.md").write_text(_markdown(report))
     return report
+
+
+def run_cli(args) -> int:
+    """``microfacet export PYRAMID.exr --to textures|gltf -o OUT [--base-roughness A]`` (called by
+    :mod:`microfacet.cli.export` for a pyramid or ``--to textures``): one line per error."""
+    from ..cli.common import check_output_name, output_path
+    source = Path(args.fit)
+    if source.suffix.lower() != ".exr":
+        raise MicrofacetError(f"{source}: --to textures takes a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
+                              "not a fit file")
+    if args.to not in TARGETS:
+        raise MicrofacetError(f"{source}: a LEADR pyramid exports --to textures or --to gltf, not --to {args.to}")
+    if getattr(args, "model", "best") != "best":
+        raise MicrofacetError("--model applies to fit files, not to a LEADR pyramid")
+    base = getattr(args, "base_roughness", None)
+    if base is not None and not (np.isfinite(base) and base >= 0):
+        raise ValueError(f"--base-roughness must be a finite alpha >= 0, got {base}")
+    if not source.is_file():
+        raise MicrofacetError(f"{source}: no such file")
+    out = output_path(args.output, ".glb", source=source) if args.to == "gltf" else Path(check_output_name(args.output))
+    report = export_leadr(source, args.to, out, base_roughness=base)
+    q = [lv["quantization"]["covariance_max"] for lv in report["levels"]]
+    print(f"{report['file']}: {len(report['levels'])} MIP levels as {args.to}"
+          + (f" (chains in {report['chains']})" if args.to == "gltf" else "")
+          + f"; 8-bit covariance error max {max(q):.4f}; report {report['file'].rstrip('/')}.export.md")
+    for line in report["lost"]:
+        print(f"  not carried: {line}", file=sys.stderr)
+    return 0
