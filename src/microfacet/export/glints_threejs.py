@@ -71,7 +71,7 @@ def lobe_textures(ms) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def vertex_shader() -> str:
-    """Vertex shader of the material (three.js ``ShaderMaterial``, GLSL 3): ``uv * mfUvScale``,
+    """Vertex shader of the material (three.js ``ShaderMaterial``): ``uv * mfUvScale``,
     the view-space position and the object axes in view space."""
     return """uniform vec2 mfUvScale;
 out vec2 vMfUv;
@@ -103,7 +103,6 @@ in vec3 vMfViewPos;
 in vec3 vMfT;
 in vec3 vMfB;
 in vec3 vMfN;
-out vec4 mfFragColor;
 void main() {
     vec3 T = normalize(vMfT), B = normalize(vMfB), N = normalize(vMfN);
     vec3 v = isOrthographic ? vec3(0.0, 0.0, 1.0) : normalize(-vMfViewPos);
@@ -126,15 +125,19 @@ void main() {
         color += pl.color * getDistanceAttenuation(d, pl.distance, pl.decay) * F * f;
     }
 #endif
-    mfFragColor = vec4(color, 1.0);
+    gl_FragColor = vec4(color, 1.0);
+#include <tonemapping_fragment>
+#include <colorspace_fragment>
 }
 """
 
 
 def fragment_shader() -> str:
-    """Fragment shader of the material (three.js ``ShaderMaterial``, GLSL 3, ``lights: true``):
-    three.js's ``common`` and ``lights_pars_begin`` chunks, the library's ``glints.glsl`` (its
-    ``#version`` line removed: three.js writes its own) and a ``main`` summing the point lights.
+    """Fragment shader of the material (three.js ``ShaderMaterial``, ``lights: true``; three.js
+    compiles it as GLSL ES 3.00): three.js's ``common`` and ``lights_pars_begin`` chunks, the
+    library's ``glints.glsl`` (its ``#version`` line removed: three.js writes its own) and a
+    ``main`` summing the point lights, then three.js's tone mapping and output colour space
+    (neither applies to a float render target: linear radiance).
     ``MF_GLINT_MAX_WINDOW`` comes from the material's ``defines`` (``maxWindow``)."""
     lib = source("glints", "es300").split("\n", 1)[1]
     return "#include <common>\n#include <lights_pars_begin>\n" + lib + _MAIN
@@ -190,7 +193,7 @@ export function createGlintMaterial(THREE, lobes, options = {}) {
   });
   const maxWindow = options.maxWindow ?? %(max_window)d;
   if (!(Number.isInteger(maxWindow) && maxWindow >= 1)) throw new Error(`maxWindow must be an integer >= 1`);
-  return new THREE.ShaderMaterial({ glslVersion: THREE.GLSL3, uniforms, lights: true,
+  return new THREE.ShaderMaterial({ uniforms, lights: true,
                                     defines: { MF_GLINT_MAX_WINDOW: maxWindow },
                                     vertexShader: VERTEX_SHADER, fragmentShader: FRAGMENT_SHADER });
 }
