@@ -59,7 +59,8 @@ class PlaneView:
     holding ``tiles`` repeats of the map along each axis, a perspective camera (vertical ``fov``
     degrees) at ``eye`` looking at ``target``, a directional light of irradiance 1 from
     ``light``, the textures' ``anisotropy`` (three.js ``texture.anisotropy``: 1 is trilinear), an
-    image of ``width x height`` pixels; ``extra``: material overrides (``{"normalScale": k}``).
+    image of ``width x height`` pixels; ``extra``: material overrides (``{"normalScale": k,
+    "anisotropy": 0}``: the latter turns KHR_materials_anisotropy off, three.js's isotropic lobe).
     The default looks down 15 degrees at the point 15 units away, the horizon in view."""
     extent: tuple = (40.0, 40.0)
     tiles: float = 80.0
@@ -128,6 +129,7 @@ window.renderPlane = async (url, maps, mips, o) => {
     }
   }
   if (o.extra.normalScale !== undefined) m.normalScale.set(o.extra.normalScale, o.extra.normalScale);
+  if (o.extra.anisotropy !== undefined) m.anisotropy = o.extra.anisotropy;
   m.needsUpdate = true;
   const scene = new THREE.Scene();
   scene.add(gltf.scene);
