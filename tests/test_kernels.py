@@ -225,7 +225,7 @@ def test_beckmann_visible_block_matches_numpy():
         out, bk, xy = np.empty((3, k.BLOCK)), np.empty((4, k.BLOCK)), np.empty((2, c.size))
         for j0 in range(0, c.size, k.BLOCK):
             m = min(k.BLOCK, c.size - j0)
-            k._beckmann_visible_block(u, 2 * j0, c[j0:j0 + m], out[0], out[1], out[2], bk[0], bk[1], bk[2], bk[3], m)
+            k._beckmann_visible_block(u, 2 * j0, c[j0:j0 + m], (out[0], out[1], out[2]), (bk[0], bk[1], bk[2], bk[3]), m)
             xy[0, j0:j0 + m], xy[1, j0:j0 + m] = -out[0, :m] / out[2, :m], -out[1, :m] / out[2, :m]
         return xy
 

@@ -629,9 +629,11 @@ if _kernels.AVAILABLE:
         return cp, (c if linear else (area if sg > 0.0 else cp))
 
     @_inline
-    def _p22(xh, yh, mx, my, sxx, syy, sxy, qmax):  # pragma: no cover - compiled
-        """Gaussian slope density ``P_i`` (Eq. 4) of one lobe at slope ``(xh, yh)``; 0 where
-        the Mahalanobis distance^2 ``q`` is at least ``qmax`` (or ``det <= 0``)."""
+    def _p22(xh, yh, lobe, qmax):  # pragma: no cover - compiled
+        """Gaussian slope density ``P_i`` (Eq. 4) of one lobe (``lobe = (mx, my, sxx, syy, sxy)``,
+        :func:`_lobe`) at slope ``(xh, yh)``; 0 where the Mahalanobis distance^2 ``q`` is at least
+        ``qmax`` (or ``det <= 0``)."""
+        mx, my, sxx, syy, sxy = lobe
         det = sxx * syy - sxy * sxy
         gx, gy = xh - mx, yh - my
         qdet = syy * gx * gx + sxx * gy * gy - 2.0 * sxy * gx * gy      # q det
@@ -647,8 +649,10 @@ if _kernels.AVAILABLE:
         return mx, my, E[5 * k + 2] - mx * mx, E[5 * k + 3] - my * my, E[5 * k + 4] - mx * my
 
     @_inline
-    def _toward(kx, ky, kz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
-        """``(c, var)`` of ``s = z - x x~ - y y~`` toward ``k`` (:func:`_area`)."""
+    def _toward(kx, ky, kz, lobe):  # pragma: no cover - compiled
+        """``(c, var)`` of ``s = z - x x~ - y y~`` toward ``k`` (:func:`_area`) for the lobe
+        ``lobe = (mx, my, sxx, syy, sxy)`` (:func:`_lobe`)."""
+        mx, my, sxx, syy, sxy = lobe
         return kz - kx * mx - ky * my, kx * kx * sxx + 2.0 * kx * ky * sxy + ky * ky * syy
 
     @_inline
@@ -663,8 +667,7 @@ if _kernels.AVAILABLE:
         kx, ky, kz = k[0], k[1], k[2]
         Er, outr = E[5 * start:5 * stop], out[start:stop]         # indexed from 0: vectorizes
         for n in range(stop - start):
-            mx, my, sxx, syy, sxy = _lobe(Er, n)
-            c, var = _toward(kx, ky, kz, mx, my, sxx, syy, sxy)
+            c, var = _toward(kx, ky, kz, _lobe(Er, n))
             a, v = _area(c, var)
             outr[n] = v - a
 
@@ -764,9 +767,9 @@ if _kernels.AVAILABLE:
         cc, vv, ww, row = curved
         fr = row[0:n]
         for j in range(n):
-            mx, my, sxx, syy, sxy = _lobe(Er, j)
-            ci, vari = _toward(ix, iy, iz, mx, my, sxx, syy, sxy)
-            co, varo = _toward(ox, oy, oz, mx, my, sxx, syy, sxy)
+            lobe = _lobe(Er, j)
+            ci, vari = _toward(ix, iy, iz, lobe)
+            co, varo = _toward(ox, oy, oz, lobe)
             if tab:         # the tabulated V_i(o) - A_i(o) (_area_excess); V_i(i) = c, see above
                 ai, vi = max(ci, 0.0), ci
                 ao = max(co, 0.0)
@@ -777,7 +780,7 @@ if _kernels.AVAILABLE:
                 ao, vo = _area(co, varo)
             w = wrr[j]
             accr[6 * j] += w
-            accr[6 * j + 1] += w * _p22(xh, yh, mx, my, sxx, syy, sxy, qmax)
+            accr[6 * j + 1] += w * _p22(xh, yh, lobe, qmax)
             accr[6 * j + 2] += w * ai
             accr[6 * j + 3] += w * vi
             accr[6 * j + 4] += w * ao
@@ -786,7 +789,7 @@ if _kernels.AVAILABLE:
             m = max(m, 0)                            # (known >= 0: no wraparound of the indices)
             for j in range(n):                       # branch-free gathering
                 var = fr[j]
-                cc[m] = _toward(ix, iy, iz, Er[5 * j], Er[5 * j + 1], 0.0, 0.0, 0.0)[0]
+                cc[m] = _toward(ix, iy, iz, (Er[5 * j], Er[5 * j + 1], 0.0, 0.0, 0.0))[0]
                 vv[m], ww[m] = var, wrr[j]
                 m += 1 if var >= 0.0 else 0
         return m

@@ -261,10 +261,13 @@ def _bilinear(table, x, y):
 
 
 @_inline
-def _rgl_coordinates(ix, iy, iz, ox, oy, oz, isotropic, reduction):
-    """``(u_m, theta_v, phi_v)`` of ``RGLBRDF._eval_cos_numpy``: the directions mirrored
-    into the stored azimuths (``RGLBRDF._mirror``), the unit coordinates ``u_m`` of the
-    half vector (relative to ``phi_v`` if isotropic) and the view's angles."""
+def _rgl_coordinates(wi, wo, j, t):
+    """``(u_m, theta_v, phi_v)`` of ``RGLBRDF._eval_cos_numpy`` for the pair at element ``j`` of the
+    flat ``wi``, ``wo``: the directions mirrored into the stored azimuths (``RGLBRDF._mirror``,
+    ``t.reduction``), the unit coordinates ``u_m`` of the half vector (relative to ``phi_v`` if
+    ``t.isotropic``) and the view's angles (``t``: :class:`~microfacet.measured.rgl.RGLTables`)."""
+    ix, iy, iz, ox, oy, oz = wi[j], wi[j + 1], wi[j + 2], wo[j], wo[j + 1], wo[j + 2]
+    isotropic, reduction = t.isotropic, t.reduction
     if reduction >= 2:
         sy = oy
         sx = ox if reduction == 4 else sy
@@ -287,7 +290,7 @@ def _rgl_block(wi, wo, out, t):
     flat ``out``, for the tables ``t`` (:class:`~microfacet.measured.rgl.RGLTables`), in passes over the block through 1-D scratch rows: coordinates and
     parameter nodes (vectorized), parameter corners, VNDF inversion, RGB lookup (so that
     the table lookups of different pairs overlap); 0 below either horizon."""
-    phi_nodes, theta_nodes, isotropic, reduction = t.phi_nodes, t.theta_nodes, t.isotropic, t.reduction
+    phi_nodes, theta_nodes = t.phi_nodes, t.theta_nodes
     n = len(out) // 3
     scratch = np.empty((8, n))
     um_x, um_y, theta_v, phi_v, t_theta, t_phi, s1, s2 = (scratch[0], scratch[1], scratch[2], scratch[3],
@@ -295,8 +298,7 @@ def _rgl_block(wi, wo, out, t):
     nodes, cs, cw = np.empty(2 * n, np.int64), np.empty(4 * n, np.int64), np.empty(4 * n)
     for k in range(n):
         j = 3 * k
-        um_x[k], um_y[k], theta_v[k], phi_v[k] = _rgl_coordinates(wi[j], wi[j + 1], wi[j + 2], wo[j], wo[j + 1],
-                                                                  wo[j + 2], isotropic, reduction)
+        um_x[k], um_y[k], theta_v[k], phi_v[k] = _rgl_coordinates(wi, wo, j, t)
     for k in range(n):
         nodes[k], t_theta[k] = _node(theta_nodes, theta_v[k])
     for k in range(n):
