@@ -678,7 +678,7 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
     unknown = set(models) - set(MODELS)
     if unknown:
         raise ValueError(f"models must be among {MODELS}, got {sorted(unknown)}")
-    with threadpool_limits(1):
+    with threadpool_limits(1, user_api="blas"):     # BLAS only: OpenMP is not to be touched in a forked child
         t = target(reference) if t is None else t
         fitted = {}
         for name in (m for m in MODELS if m in models):
