@@ -47,7 +47,15 @@ IDEAL, SCHLICK, DIELECTRIC, CONDUCTOR, TABULATED = range(5)
 def read_only(a: np.ndarray) -> np.ndarray:
     """A read-only view of ``a``: the kernels read their array parameters as read-only arrays,
     whether the caller's are writeable or not (one compiled version instead of two: Numba
-    compiles per read-only flag)."""
+    compiles per read-only flag).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> v = read_only(np.zeros(3))
+    >>> v.flags.writeable
+    False
+    """
     v = a.view()
     v.flags.writeable = False
     return v
@@ -57,7 +65,16 @@ class FresnelParams(NamedTuple):
     """The Fresnel term of :class:`SmithParams`: ``kind`` (:data:`IDEAL` ... :data:`TABULATED`),
     ``fp`` ``(2, 3)`` of the kernels' arithmetic type (row 0: Schlick's ``f0`` or ``eta``, row 1:
     a conductor's ``k``), ``tx`` ``(m,)`` and ``tv`` ``(m, 3)`` float64: a tabulated term's
-    ``cos theta_d`` grid and values (zeros for the analytic terms). Arrays read-only."""
+    ``cos theta_d`` grid and values (zeros for the analytic terms). Arrays read-only.
+
+    Examples
+    --------
+    >>> f = FresnelParams.analytic(SCHLICK, "float64", row0=0.04)
+    >>> f.kind == SCHLICK, f.fp[0].tolist(), f.tx.shape
+    (True, [0.04, 0.04, 0.04], (2,))
+    >>> (IDEAL, SCHLICK, DIELECTRIC, CONDUCTOR, TABULATED)     # the kind codes
+    (0, 1, 2, 3, 4)
+    """
 
     kind: int
     fp: np.ndarray
@@ -77,7 +94,15 @@ _NO_TABLE = (read_only(np.zeros(2)), read_only(np.zeros((2, 3))))
 
 
 class SmithParams(NamedTuple):
-    """Parameters of a Smith microfacet BRDF for the compiled kernels (module docstring)."""
+    """Parameters of a Smith microfacet BRDF for the compiled kernels (module docstring).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> p = smith_params(mf.Beckmann(alpha_x=0.2, alpha_y=0.4))
+    >>> p.kind == BECKMANN, float(p.ax), float(p.ay), float(p.rho)
+    (True, 0.2, 0.4, 0.0)
+    """
 
     kind: int
     ax: float
@@ -91,7 +116,19 @@ class SmithParams(NamedTuple):
 
 def fresnel_params(fresnel, dtype=np.float64) -> FresnelParams | None:
     """``fresnel.kernel_params(dtype)`` (:meth:`microfacet.fresnel.Fresnel.kernel_params`), or
-    ``None`` for ``None``: the ideal term (``F = 1``)."""
+    ``None`` for ``None``: the ideal term (``F = 1``).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> fresnel_params(None).kind == IDEAL
+    True
+    >>> f = fresnel_params(mf.fresnel.Conductor(eta=0.2, k=3.0))
+    >>> f.kind == CONDUCTOR, f.fp[:, 0].tolist()
+    (True, [0.2, 3.0])
+    >>> fresnel_params(mf.fresnel.Dielectric(eta=1.5)).kind == DIELECTRIC
+    True
+    """
     if fresnel is None:
         return FresnelParams.analytic(IDEAL, dtype)
     return fresnel.kernel_params(dtype)
@@ -102,7 +139,16 @@ def smith_params(distribution, fresnel=None, shadowing: bool = True, dtype=np.fl
     ideal) and ``shadowing``, its scalars as ``dtype``; ``None`` where the kernels do not cover
     it: a distribution other than a :class:`~microfacet.distributions.Beckmann` or
     :class:`~microfacet.distributions.GGX` with scalar parameters (subclasses included: they
-    may change the formulas), or a Fresnel term without a record."""
+    may change the formulas), or a Fresnel term without a record.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> smith_params(mf.GGX(alpha=0.3)).kind == GGX
+    True
+    >>> smith_params(mf.GGX(alpha=np.array([0.1, 0.3]))) is None     # per-direction alpha: no kernel
+    True
+    """
     d, t = distribution, type(distribution)
     if t not in (distributions.Beckmann, distributions.GGX) \
             or any(np.ndim(p) for p in (d.alpha_x, d.alpha_y, d.rho, d.xn, d.yn)):
