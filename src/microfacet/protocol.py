@@ -50,7 +50,17 @@ UNIT_TOLERANCE = 1e-5
 def as_directions(w, name: str, float32: bool = False) -> np.ndarray:
     """``w`` as float64 directions ``(..., 3)`` (float32 arrays stay float32 if ``float32``, for
     the compiled kernels, which read either); ``ValueError`` naming ``name`` if the last axis is not 3.
-    Not checked for unit length: :func:`check_unit`."""
+    Not checked for unit length: :func:`check_unit`.
+
+    Examples
+    --------
+    >>> as_directions([0.0, 0.0, 2.0], "wo")          # not normalized, not checked for length
+    array([0., 0., 2.])
+    >>> as_directions([0.0, 1.0], "wo")
+    Traceback (most recent call last):
+        ...
+    ValueError: wo must have a last axis of size 3, got shape (2,)
+    """
     w = np.asarray(w)
     if not (float32 and w.dtype == np.float32):
         w = w.astype(np.float64, copy=False)
@@ -63,7 +73,17 @@ def check_unit(w, name: str, deviation=None) -> None:
     """``ValueError`` naming ``name`` if a vector of ``w`` is not unit length within
     :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included). ``deviation``: the largest
     ``| |w|^2 - 1 |`` (or an upper bound of it) if a kernel measured it while reading ``w``, else,
-    and where that fails, one compiled pass (:func:`microfacet.kernels.unit_deviation`)."""
+    and where that fails, one compiled pass (:func:`microfacet.kernels.unit_deviation`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> check_unit(np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]]), "wi")      # passes: returns None
+    >>> check_unit(np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.9]]), "wi")
+    Traceback (most recent call last):
+        ...
+    ValueError: wi must be unit vectors (| |w|^2 - 1 | <= 1e-05; normalize them first), got [0.6, 0.0, 0.9] of length 1.08166538 at index (1,)
+    """
     if deviation is None or not deviation <= UNIT_TOLERANCE:
         deviation = kernels.unit_deviation(w)
     if not deviation <= UNIT_TOLERANCE:
@@ -77,7 +97,17 @@ def check_unit(w, name: str, deviation=None) -> None:
 
 def directions(w, name: str, float32: bool = False) -> np.ndarray:
     """``w`` as unit directions ``(..., 3)``, the convention of every BRDF method:
-    :func:`as_directions` and :func:`check_unit`."""
+    :func:`as_directions` and :func:`check_unit`.
+
+    Examples
+    --------
+    >>> directions([[0.6, 0.0, 0.8]], "wi")
+    array([[0.6, 0. , 0.8]])
+    >>> directions([0.0, 0.0, 0.0], "wo")
+    Traceback (most recent call last):
+        ...
+    ValueError: wo must be unit vectors (| |w|^2 - 1 | <= 1e-05; normalize them first), got [0.0, 0.0, 0.0] of length 0
+    """
     w = as_directions(w, name, float32)
     check_unit(w, name)
     return w
@@ -85,7 +115,16 @@ def directions(w, name: str, float32: bool = False) -> np.ndarray:
 
 def as_uniforms(u, float32: bool = False) -> np.ndarray:
     """``u`` as float64 uniforms ``(..., 2)`` (float32 arrays stay float32 if ``float32``);
-    ``ValueError`` if the last axis is not 2. Not checked for range: :func:`check_uniforms`."""
+    ``ValueError`` if the last axis is not 2. Not checked for range: :func:`check_uniforms`.
+
+    Examples
+    --------
+    >>> as_uniforms([0.5, 1.5])                  # not checked for range: check_uniforms
+    array([0.5, 1.5])
+    >>> import numpy as np
+    >>> as_uniforms(np.zeros(2, np.float32), float32=True).dtype
+    dtype('float32')
+    """
     u = np.asarray(u)
     if not (float32 and u.dtype == np.float32):
         u = u.astype(np.float64, copy=False)
@@ -96,7 +135,17 @@ def as_uniforms(u, float32: bool = False) -> np.ndarray:
 
 def check_uniforms(u, name: str = "u", outside=None) -> None:
     """``ValueError`` if a value of ``u`` lies outside ``[0, 1]`` (NaN too). ``outside``: nonzero
-    if a kernel found one while reading ``u``, else two NumPy passes."""
+    if a kernel found one while reading ``u``, else two NumPy passes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> check_uniforms(np.array([0.0, 1.0]))        # passes: returns None
+    >>> check_uniforms(np.array([0.5, np.nan]))
+    Traceback (most recent call last):
+        ...
+    ValueError: u must lie in [0, 1] (uniform random numbers), got nan (1 value(s) outside)
+    """
     if outside is None:
         outside = u.size and not (np.min(u) >= 0.0 and np.max(u) <= 1.0)
     if outside:
@@ -106,7 +155,17 @@ def check_uniforms(u, name: str = "u", outside=None) -> None:
 
 
 def uniforms(u, float32: bool = False) -> np.ndarray:
-    """``u`` as uniforms ``(..., 2)`` in ``[0, 1]``: :func:`as_uniforms` and :func:`check_uniforms`."""
+    """``u`` as uniforms ``(..., 2)`` in ``[0, 1]``: :func:`as_uniforms` and :func:`check_uniforms`.
+
+    Examples
+    --------
+    >>> uniforms([[0.1, 0.9]])
+    array([[0.1, 0.9]])
+    >>> uniforms([0.1, 0.2, 0.3])
+    Traceback (most recent call last):
+        ...
+    ValueError: u must have a last axis of size 2, got shape (3,)
+    """
     u = as_uniforms(u, float32)
     check_uniforms(u)
     return u
@@ -114,7 +173,18 @@ def uniforms(u, float32: bool = False) -> np.ndarray:
 
 def pair_shape(a, b) -> tuple:
     """The batch shape of two inputs ``(..., k)`` (their leading axes broadcast); ``ValueError``
-    if they do not broadcast."""
+    if they do not broadcast.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pair_shape(np.zeros((4, 1, 3)), np.zeros((5, 3)))
+    (4, 5)
+    >>> pair_shape(np.zeros((4, 3)), np.zeros((5, 3)))
+    Traceback (most recent call last):
+        ...
+    ValueError: shape mismatch: ...Mismatch is between arg 0 with shape (4,) and arg 1 with shape (5,).
+    """
     return a.shape[:-1] if a.shape[:-1] == b.shape[:-1] else np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
 
 
@@ -123,7 +193,21 @@ def output(out, shape, dtype, name="out", inputs=()):
     array if it is ``None``: ``ValueError`` naming ``name`` unless it is a writeable
     C-contiguous ndarray of ``shape`` and ``dtype`` that shares no memory with ``inputs``. New
     arrays come from the cache of freed outputs (:mod:`microfacet._buffers`,
-    :func:`microfacet.kernels.release_outputs`)."""
+    :func:`microfacet.kernels.release_outputs`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> output(None, (2, 3), np.float64).shape           # a new array
+    (2, 3)
+    >>> out = np.empty((2, 3))
+    >>> output(out, (2, 3), np.float64) is out
+    True
+    >>> output(np.empty((2, 3), np.float32), (2, 3), np.float64)
+    Traceback (most recent call last):
+        ...
+    ValueError: out must be a writeable C-contiguous float64 array of shape (2, 3), got float32 array of shape (2, 3)
+    """
     if out is None:
         return _buffers.empty(shape, dtype)
     if not (isinstance(out, np.ndarray) and out.shape == shape and out.dtype == dtype
@@ -138,7 +222,18 @@ def output(out, shape, dtype, name="out", inputs=()):
 
 def sample_outputs(out, shape, dtype, inputs=()):
     """``(wi, weight, pdf)`` of a sample of ``shape``: ``out``'s three arrays (:func:`output`,
-    named ``out[0]`` ... ``out[2]``, distinct), or new ones if it is ``None``."""
+    named ``out[0]`` ... ``out[2]``, distinct), or new ones if it is ``None``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> [a.shape for a in sample_outputs(None, (4,), np.float64)]
+    [(4, 3), (4, 3), (4,)]
+    >>> sample_outputs(np.empty((4, 3)), (4,), np.float64)
+    Traceback (most recent call last):
+        ...
+    ValueError: out must be a tuple of three arrays (wi, weight, pdf), got ndarray
+    """
     if out is None:
         out = (None,) * 3
     elif not (isinstance(out, tuple) and len(out) == 3):
@@ -151,7 +246,17 @@ def sample_outputs(out, shape, dtype, inputs=()):
 
 
 def into(out, result: np.ndarray, inputs) -> np.ndarray:
-    """``result``, or ``out`` with ``result`` copied in (checked by :func:`output`)."""
+    """``result``, or ``out`` with ``result`` copied in (checked by :func:`output`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> into(None, np.ones(2), ())
+    array([1., 1.])
+    >>> out = np.zeros(2)
+    >>> into(out, np.ones(2), ()) is out, out
+    (True, array([1., 1.]))
+    """
     if out is None:
         return result
     np.copyto(output(out, result.shape, result.dtype, "out", tuple(inputs)), result)
@@ -160,7 +265,18 @@ def into(out, result: np.ndarray, inputs) -> np.ndarray:
 
 def into_sample(out, result, inputs):
     """``(wi, weight, pdf)`` ``result``, or ``out``'s three arrays with it copied in
-    (checked by :func:`sample_outputs`)."""
+    (checked by :func:`sample_outputs`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> result = (np.zeros((1, 3)), np.ones((1, 3)), np.ones(1))
+    >>> into_sample(None, result, ()) is result
+    True
+    >>> out = (np.empty((1, 3)), np.empty((1, 3)), np.empty(1))
+    >>> into_sample(out, result, ())[2]
+    array([1.])
+    """
     if out is None:
         return result
     out = sample_outputs(out, result[2].shape, result[2].dtype, tuple(inputs))
