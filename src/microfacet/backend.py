@@ -41,7 +41,14 @@ BACKENDS = (AUTO, NUMPY, NUMBA)
 
 def available() -> bool:
     """Whether the compiled backend may run now: :data:`microfacet.kernels.AVAILABLE` (Numba
-    installed and ``MICROFACET_NUMBA`` not ``0``; a process may set it to False)."""
+    installed and ``MICROFACET_NUMBA`` not ``0``; a process may set it to False).
+
+    Examples
+    --------
+    >>> from microfacet import kernels
+    >>> available() == kernels.AVAILABLE          # True where Numba is installed
+    True
+    """
     return kernels.AVAILABLE
 
 
@@ -49,7 +56,21 @@ def choose(requested: str = AUTO, compiled: bool = True, name: str = "backend") 
     """The backend that runs for a request ``requested`` (:data:`BACKENDS`): :data:`NUMBA` for
     ``"auto"`` or ``"numba"`` when :func:`available` and the caller has ``compiled`` code for the
     case, else :data:`NUMPY`. ``ValueError`` naming ``name`` for an unknown request, or for
-    ``"numba"`` where it cannot run. Example: ``choose()`` is ``"numba"`` with Numba installed."""
+    ``"numba"`` where it cannot run. Example: ``choose()`` is ``"numba"`` with Numba installed.
+
+    Examples
+    --------
+    >>> choose("numpy"), NUMPY
+    ('numpy', 'numpy')
+    >>> choose("auto") == (NUMBA if available() else NUMPY)
+    True
+    >>> choose("auto", compiled=False)            # the caller has no compiled code for the case
+    'numpy'
+    >>> choose("gpu", name="glints backend")
+    Traceback (most recent call last):
+        ...
+    ValueError: glints backend must be 'auto', 'numpy' or 'numba', got 'gpu'
+    """
     if requested not in BACKENDS:
         raise ValueError(f"{name} must be 'auto', 'numpy' or 'numba', got {requested!r}")
     runs = bool(compiled) and available()
@@ -62,5 +83,14 @@ def smith(brdf) -> bool:
     """Whether the compiled Smith kernels (:func:`microfacet.kernels.smith_eval`, ``smith_pdf``,
     ``smith_sample``) run for the :class:`~microfacet.MicrofacetBRDF` ``brdf``: the compiled
     backend is chosen (:func:`choose`) and the BRDF has a kernel record (``brdf.params``: Smith
-    GAF, scalar Beckmann or GGX, a Fresnel term with a record). Example: ``smith(mf.MicrofacetBRDF(mf.GGX(0.3)))``."""
+    GAF, scalar Beckmann or GGX, a Fresnel term with a record). Example: ``smith(mf.MicrofacetBRDF(mf.GGX(0.3)))``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> smith(mf.MicrofacetBRDF(mf.GGX(alpha=0.3))) == available()
+    True
+    >>> smith(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), gaf="vgroove"))     # no kernel for V-grooves
+    False
+    """
     return choose(AUTO, getattr(brdf, "params", None) is not None) == NUMBA

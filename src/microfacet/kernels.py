@@ -33,6 +33,11 @@ compiles and one made after. ``wait`` compiles the kernel at the first call, bef
 it, as the public functions of this module (``smith_eval`` ...) always do. :func:`precompile`
 (``python -m microfacet.kernels --precompile``, run by ``make setup``) fills Numba's cache
 ahead of time; see ``docs/performance.md``.
+
+Examples
+--------
+>>> AVAILABLE in (True, False), COMPILE in ("background", "wait"), BACKGROUND_MAX
+(True, True, 1048576)
 """
 from __future__ import annotations
 
@@ -92,6 +97,15 @@ class Compiled:
 
         f = Compiled(lambda c, eta, k: ...)      # kernels.compiled(...)
         f(np.linspace(0, 1, 5), 1.5, 2.0)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> def hypot3(x):
+    ...     return np.sqrt(np.sum(x * x, axis=-1))
+    >>> f = Compiled(hypot3)
+    >>> f.py_func is hypot3, f.__name__                # compiles at its first call, not here
+    (True, 'hypot3')
     """
 
     def __init__(self, function):
@@ -114,7 +128,15 @@ def compiled(function):
     """:class:`Compiled` ``function`` (``numba.njit(cache=True)`` on demand, the NumPy function
     as its fallback while it compiles), or ``None`` without Numba. Callers build it on first
     use and keep it (a dispatcher loads from Numba's cache in milliseconds, a ``numba.vectorize``
-    ufunc takes ~0.5 s to build)."""
+    ufunc takes ~0.5 s to build).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = compiled(np.hypot)
+    >>> f is None if not AVAILABLE else isinstance(f, Compiled)
+    True
+    """
     if not AVAILABLE:
         return None
     return Compiled(function)
@@ -273,7 +295,13 @@ def _kernel(maker, args, n: int, background: bool):
 def ready(wait: float | None = 0.0) -> bool:
     """Whether no kernel is queued or compiling on the background thread (``COMPILE ==
     "background"``), after waiting up to ``wait`` seconds for it (``None``: until it is done).
-    Example: ``mf.kernels.ready(wait=None)`` before timing a loop."""
+    Example: ``mf.kernels.ready(wait=None)`` before timing a loop.
+
+    Examples
+    --------
+    >>> ready(wait=None)             # nothing queued on the background thread any more
+    True
+    """
     import time
     end = None if wait is None else time.monotonic() + wait
     while _QUEUED:
@@ -299,7 +327,18 @@ def threads() -> int:
 
 def launch(kernel, n: int, *args) -> None:
     """``kernel(*args)`` of a Numba ``parallel=True`` (``prange``) kernel over ``n`` elements,
-    on one thread below :data:`PARALLEL_MIN` (for kernels that are not range kernels)."""
+    on one thread below :data:`PARALLEL_MIN` (for kernels that are not range kernels).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = np.zeros(3)
+    >>> def fill(out, value):          # a Numba prange kernel in the library; any callable here
+    ...     out[:] = value
+    >>> launch(fill, 3, out, 2.0)      # below PARALLEL_MIN: one thread
+    >>> out
+    array([2., 2., 2.])
+    """
     if n >= PARALLEL_MIN:
         kernel(*args)
         return
@@ -329,7 +368,13 @@ def launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     per thread, which the calling thread and :func:`threads` ``- 1`` pool threads take in turn
     until none is left (the kernels release the GIL): the caller starts at once, without
     waiting for a pool thread to wake (~0.1 ms), and a thread slowed by the machine's load
-    takes fewer. Returns the tasks' return values."""
+    takes fewer. Returns the tasks' return values.
+
+    Examples
+    --------
+    >>> launch_ranges(lambda start, stop, scale: (stop - start) * scale, 10, 2)   # small: one task
+    [20]
+    """
     t = threads()
     tasks = min(4 * t, n * cost // TASK_MIN, n)
     if t < 2 or n * cost < PARALLEL_MIN:
@@ -392,7 +437,16 @@ def _record(brdf, dtype=None):
 def covers(brdf) -> bool:
     """Whether the fused kernels (:func:`smith_eval`; :func:`smith_pdf` and :func:`smith_sample` for
     visible-normal sampling) cover ``brdf``: Numba available, a Smith GAF, a scalar Beckmann or GGX
-    and a :mod:`microfacet.fresnel` term they know. Imports neither Numba nor the kernels."""
+    and a :mod:`microfacet.fresnel` term they know. Imports neither Numba nor the kernels.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> covers(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.2))) == AVAILABLE
+    True
+    >>> covers(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.2), gaf="vgroove"))
+    False
+    """
     return _record(brdf) is not None
 
 
@@ -410,7 +464,16 @@ def _output_like(dtype, ndim: int):
 def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool, background: bool = False):
     """``(o.h, D G / (4 z_o) [/ z_i])`` by the compiled kernel, or ``None`` when it does
     not apply (no Numba, array parameters, another distribution) or, with ``background``,
-    while it compiles (:func:`_kernel`; the caller runs the NumPy reference)."""
+    while it compiles (:func:`_kernel`; the caller runs the NumPy reference).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> n = np.array([[0.0, 0.0, 1.0]])
+    >>> r = smith_projected(mf.GGX(alpha=0.3), True, n, n, True)    # precompiled by make setup
+    >>> r is None or (r[0].round(4).tolist(), r[1].round(4).tolist())   # o.h, D G / (4 z_o z_i)
+    ([1.0], [0.8842])
+    """
     p = params.smith_params(distribution, None, shadowing) if AVAILABLE else None
     if p is None:
         return None
@@ -430,7 +493,20 @@ def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None, bac
     ``dtype`` (into ``out`` if given, an array checked by :func:`microfacet.protocol.output`), and the unit-length deviations of ``wi``
     and ``wo`` measured in that pass (:func:`_checks`; ``f`` is meaningless if they fail), or
     ``None`` when the kernel does not apply (no Numba, array parameters, another distribution,
-    GAF or Fresnel class) or, with ``background``, while it compiles (:func:`_kernel`)."""
+    GAF or Fresnel class) or, with ``background``, while it compiles (:func:`_kernel`).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    >>> wi = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+    >>> f, checks = smith_eval(brdf, wi, wi[::-1].copy(), True)     # precompiled by make setup
+    >>> f.round(4), checks
+    (array([[0.2699, 0.2699, 0.2699],
+           [0.2699, 0.2699, 0.2699]]), {'wi': 0.0, 'wo': 0.0})
+    >>> np.allclose(f, brdf.eval(wi, wi[::-1]))
+    True
+    """
     p = _record(brdf, dtype)
     if p is None:
         return None
@@ -448,7 +524,17 @@ def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None, background: bool = False
     """``(pdf, checks)``: the visible-normal sampling density ``D(h) / (4 A(o))`` (Eq. 2.17) of
     a Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``), and
     the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply
-    (or, with ``background``, while it compiles)."""
+    (or, with ``background``, while it compiles).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    >>> n = np.array([[0.0, 0.0, 1.0]])
+    >>> pdf, checks = smith_pdf(brdf, n, n)      # precompiled by make setup
+    >>> pdf.round(4), np.allclose(pdf, brdf.pdf(n, n))
+    (array([0.8842]), True)
+    """
     p = _record(brdf, dtype)
     if p is None:
         return None
@@ -467,7 +553,16 @@ def smith_sample(brdf, u, wo, dtype=np.float64, out=None, background: bool = Fal
     Smith ``brdf`` by one compiled pass, computed and written as ``dtype`` (into ``out``'s
     arrays, checked by :func:`microfacet.protocol.sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
     ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply (or,
-    with ``background``, while it compiles)."""
+    with ``background``, while it compiles).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    >>> (wi, weight, pdf), checks = smith_sample(brdf, np.array([[0.5, 0.5]]), np.array([[0.0, 0.0, 1.0]]))
+    >>> wi.round(4), weight.round(4), pdf.round(4), checks
+    (array([[0., 0., 1.]]), array([[1., 1., 1.]]), array([0.8842]), {'u': 0, 'wo': 0.0})
+    """
     p = _record(brdf, dtype)
     if p is None:
         return None
@@ -487,7 +582,18 @@ def unit_deviation(w: np.ndarray, background: bool = True) -> float:
     """:func:`microfacet.geometry.unit_deviation` (``max | |w|^2 - 1 |``, ``inf`` on NaN/inf)
     in one compiled pass over a C-contiguous float64 or float32 ``w (..., 3)``; the NumPy reference
     for other arrays, without Numba or, with ``background`` (the default: this is the BRDFs' input
-    check), while the pass compiles (:func:`_kernel`). Example: ``unit_deviation(np.array([[0, 0, 1.0]]))`` is 0."""
+    check), while the pass compiles (:func:`_kernel`). Example: ``unit_deviation(np.array([[0, 0, 1.0]]))`` is 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> unit_deviation(np.array([[0.0, 0.0, 1.0]]))
+    0.0
+    >>> round(unit_deviation(np.array([[0.0, 0.0, 1.1]])), 4)
+    0.21
+    >>> unit_deviation(np.array([[0.0, 0.0, np.nan]]))
+    inf
+    """
     from .geometry import unit_deviation as reference
     if not AVAILABLE or w.dtype not in (np.float64, np.float32) or not w.flags.c_contiguous or w.size == 0:
         return reference(w)
@@ -503,7 +609,14 @@ def precompile_calls(calls, progress=None) -> int:
     process at a time (:func:`_compile`). ``progress(name, seconds)`` is called after each. Returns
     how many ran; 0 without Numba. The loop of every precompile entry point
     (:mod:`microfacet.precompile`, :mod:`microfacet.kernels_extra`). Example:
-    ``precompile_calls([("unit deviation", lambda: unit_deviation(np.eye(3), False))])`` is 1."""
+    ``precompile_calls([("unit deviation", lambda: unit_deviation(np.eye(3), False))])`` is 1.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> precompile_calls([("unit deviation", lambda: unit_deviation(np.eye(3), False))]) == int(AVAILABLE)
+    True
+    """
     import time
     global COMPILE
     if not AVAILABLE:

@@ -117,7 +117,19 @@ _CALLS = {"measured": _measured, "leadr": _leadr, "glints": _glints}
 
 
 def group_calls(groups=GROUPS) -> list:
-    """``[(group, call)]`` of :func:`precompile`; ``ValueError`` for an unknown group."""
+    """``[(group, call)]`` of :func:`precompile`; ``ValueError`` for an unknown group.
+
+    Examples
+    --------
+    >>> GROUPS
+    ('measured', 'leadr', 'glints')
+    >>> [group for group, call in group_calls(("measured", "leadr"))]
+    ['measured', 'leadr']
+    >>> group_calls(["brdf"])
+    Traceback (most recent call last):
+        ...
+    ValueError: groups must be among measured, leadr, glints, got brdf
+    """
     bad = [g for g in groups if g not in _CALLS]
     if bad:
         raise ValueError(f"groups must be among {', '.join(GROUPS)}, got {', '.join(map(str, bad))}")
@@ -130,7 +142,14 @@ def precompile(groups=GROUPS, progress=None) -> int:
     (:func:`microfacet.kernels.precompile_calls`: compiling the same function in two processes at
     once can corrupt Numba's cache index). ``progress(group, seconds)`` is called after each.
     Returns how many groups ran; 0 without Numba (or with ``MICROFACET_NUMBA=0``). The command
-    line is :func:`microfacet.precompile.main`'s."""
+    line is :func:`microfacet.precompile.main`'s.
+
+    Examples
+    --------
+    >>> precompile(groups=())       # no group: nothing to compile
+    0
+    >>> precompile(groups=("measured",))   # compiles for minutes when cold  # doctest: +SKIP
+    """
     return kernels.precompile_calls(group_calls(groups), progress)
 
 

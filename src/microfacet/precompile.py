@@ -7,6 +7,11 @@ microfacet.kernels_extra --precompile`` is this command line for its groups. Her
 (:mod:`microfacet.brdf`, :mod:`microfacet.fresnel`), which import the kernels' module.
 
 Example: ``microfacet.precompile.precompile(dtypes=("float64",))``.
+
+Examples
+--------
+>>> PRECOMPILE_DTYPES, PRECOMPILE_DEFAULT, GROUPS
+(('float64', 'float32'), ('float64',), ('brdf', 'measured', 'leadr', 'glints'))
 """
 from __future__ import annotations
 
@@ -71,7 +76,14 @@ def precompile(dtypes=PRECOMPILE_DEFAULT, progress=None) -> int:
     Returns how many kernels were compiled or loaded; 0 without Numba. Run by ``make setup`` as
     ``python -m microfacet.kernels --precompile`` (``docs/performance.md``).
 
-    Example: ``microfacet.precompile.precompile(dtypes=("float64",))``."""
+    Example: ``microfacet.precompile.precompile(dtypes=("float64",))``.
+
+    Examples
+    --------
+    >>> precompile(dtypes=())        # no arithmetic type: nothing to compile
+    0
+    >>> precompile(dtypes=("float64",))   # compiles for minutes when cold  # doctest: +SKIP
+    """
     return kernels.precompile_calls([c for dtype in dtypes for c in _precompile_calls(dtype)], progress)
 
 
@@ -87,7 +99,12 @@ def main(argv=None, prog: str = "python -m microfacet.kernels", groups=("brdf",)
     float64,float32] [--groups LIST] [-q]`` (default group ``brdf``) and ``python -m
     microfacet.kernels_extra --precompile [--groups LIST] [-q]`` (``prog``; ``groups``: the groups it
     accepts, all of them by default): compiles the kernels of the groups (:data:`GROUPS`) in this
-    process, printing each one's time (:func:`microfacet.kernels.precompile_calls`)."""
+    process, printing each one's time (:func:`microfacet.kernels.precompile_calls`).
+
+    Examples
+    --------
+    >>> main(["--precompile", "--groups", "brdf,measured", "--quiet"])  # compiles for minutes  # doctest: +SKIP
+    """
     import argparse
     import time
     allowed = tuple(groups) if prog.endswith("kernels_extra") else GROUPS
