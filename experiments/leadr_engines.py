@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 import microfacet as mf
-from microfacet.export.leadr_textures import encode_level, leadr_textures, level_parameters, naive_textures, write_plane_glb
+from microfacet.export.leadr_textures import (encode_level, leadr_textures, level_parameters, naive_textures,
+                                             write_plane_glb)
 from microfacet.export.leadr_threejs import PlaneRenderer, PlaneView, relative_l1
 from microfacet.io.png import write_png
 

@@ -4,6 +4,7 @@ one-line errors, and three.js: a plane receding to the horizon where the LEADR M
 supersampled reference than naive MIPs."""
 from __future__ import annotations
 
+import concurrent.futures
 import importlib
 import os
 
@@ -109,7 +110,8 @@ def test_pyramid_textures_follow_the_moments(pyramid):
     with_base = lt.level_parameters(pyramid[-1], base_roughness=0.2)
     assert np.allclose(with_base["vx"], vx + 0.02, atol=1e-7)    # alpha^2 / 2 added
     naive = lt.naive_textures(levels[0])
-    assert len(naive) == 7 and np.all(naive[-1]["metallic_roughness"][..., 1] == levels[0]["metallic_roughness"][0, 0, 1])
+    base_r = levels[0]["metallic_roughness"][0, 0, 1]
+    assert len(naive) == 7 and np.all(naive[-1]["metallic_roughness"][..., 1] == base_r)
 
 
 def test_export_writes_chains_glb_and_report(pyramid, tmp_path):
@@ -184,3 +186,23 @@ def test_threejs_plane_leadr_mips_beat_naive_mips(pyramid, plane_renderer, tmp_p
     glb_own = plane_renderer.render(res["glb"], view, None, mips=False, supersample=2)
     uploaded = plane_renderer.render(res["glb"], view, lt.leadr_textures(pyramid), mips=False, supersample=2)
     assert relative_l1(glb_own, uploaded) < 1e-6
+
+
+def test_threejs_anisotropy_frame_patch(pyramid, plane_renderer, tmp_path):
+    """With the patched frame, an anisotropy map of strength 0 renders as three.js's isotropic lobe;
+    stock three.js (geometric tangent frame) does not: its normal map barely moves the lobe."""
+    from microfacet.export.leadr_threejs import PlaneRenderer, PlaneView, relative_l1
+    levels = lt.leadr_textures(pyramid)
+    glb = lt.write_plane_glb(levels[0], tmp_path / "p.glb", tiles=80)
+    on, off = PlaneView(width=64, height=48), PlaneView(width=64, height=48, extra={"anisotropy": 0})
+    patched = relative_l1(plane_renderer.render(glb, on, levels, mips=False, supersample=2),
+                          plane_renderer.render(glb, off, levels, mips=False, supersample=2))
+
+    def stock_error():                       # one sync Playwright per thread: the stock page in its own
+        with PlaneRenderer(mapped_frame=False) as stock:
+            return relative_l1(stock.render(glb, on, levels, mips=False, supersample=2),
+                               stock.render(glb, off, levels, mips=False, supersample=2))
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        unpatched = pool.submit(stock_error).result()
+    print(f"extension on vs off: patched {patched:.2e}, stock three.js {unpatched:.3f}")
+    assert patched < 1e-3 and unpatched > 0.1

@@ -272,7 +272,8 @@ def read_chains(folder) -> list[dict]:
     folder = Path(folder)
     files = sorted((folder / "normal").glob("level_*.png"))
     if not files:
-        raise MicrofacetError(f"{folder}: no normal/level_00.png (a texture folder of 'microfacet export --to textures')")
+        raise MicrofacetError(f"{folder}: no normal/level_00.png "
+                              "(a texture folder of 'microfacet export --to textures')")
     return [{name: read_png_data(folder / name / f.name)[..., :3] for name in TEXTURES} for f in files]
 
 
@@ -328,7 +329,8 @@ def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.
     gl.samplers = [g.Sampler(magFilter=9729, minFilter=9987, wrapS=10497, wrapT=10497)]
     gl.textures = [g.Texture(sampler=0, source=k) for k in range(len(TEXTURES))]
     mat = _glb_material(metallic, base_color)
-    gl.materials = [g.Material(name=mat["name"], pbrMetallicRoughness=g.PbrMetallicRoughness(**mat["pbrMetallicRoughness"]),
+    pbr = g.PbrMetallicRoughness(**mat["pbrMetallicRoughness"])
+    gl.materials = [g.Material(name=mat["name"], pbrMetallicRoughness=pbr,
                                normalTexture=g.NormalMaterialTexture(**mat["normalTexture"]),
                                extensions=mat["extensions"])]
     gl.buffers = [g.Buffer(byteLength=len(blob))]
@@ -358,7 +360,8 @@ def _markdown(report: dict) -> str:
              "| alpha1 > 1 (clipped) | mean alpha1 | mean alpha2 |", "|---|---|---|---|---|---|---|---|---|"]
     for k, lv in enumerate(report["levels"]):
         q = lv["quantization"]
-        lines.append(f"| {k} | {lv['size'][1]}x{lv['size'][0]} | {q['covariance_mean']:.4f} | {q['covariance_max']:.4f} "
+        lines.append(f"| {k} | {lv['size'][1]}x{lv['size'][0]} | {q['covariance_mean']:.4f} "
+                     f"| {q['covariance_max']:.4f} "
                      f"| {q['alpha_max']:.4f} | {q['slope_max']:.4f} | {q['clipped']:.2%} | {lv['alpha1_mean']:.4f} "
                      f"| {lv['alpha2_mean']:.4f} |")
     lines += ["", "## Not carried", ""] + [f"- {x}" for x in report["lost"]]
