@@ -28,7 +28,14 @@ __all__ = ["load", "load_bytes", "detect", "MeasuredBRDF", "MERLBRDF", "RGLBRDF"
 
 
 def detect(data: bytes) -> str:
-    """Format of uncompressed file bytes: ``"rgl"``, ``"merl"``, ``"utia"`` or ``""``."""
+    """Format of uncompressed file bytes: ``"rgl"``, ``"merl"``, ``"utia"`` or ``""``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> detect(write_tensor_file({})), detect(np.array([90, 90, 180], "<i4").tobytes()), detect(b"abc")
+    ('rgl', 'merl', '')
+    """
     if is_tensor_file(data):
         return "rgl"
     if is_merl(data):
@@ -54,12 +61,34 @@ def load(path: str | os.PathLike) -> MeasuredBRDF:
     ------
     MicrofacetError
         Unreadable or unknown file, bad header or size, truncated data, NaN/inf values.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.kernels_extra import synthetic_rgl
+    >>> with open("synthetic.bsdf", "wb") as f:      # a small RGL file made here
+    ...     _ = f.write(write_tensor_file(synthetic_rgl(np.random.default_rng(0))))
+    >>> brdf = load("synthetic.bsdf")
+    >>> brdf, brdf.format, brdf.description
+    (RGLBRDF('synthetic.bsdf'), 'rgl', 'synthetic material')
+    >>> brdf.eval(np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])).round(3)
+    array([0.718, 0.845, 0.802])
+    >>> load("merl/chrome.binary")   # needs a MERL file  # doctest: +SKIP
+    MERLBRDF('merl/chrome.binary')
     """
     return load_bytes(read_decompressed(path, MEASURED_BRDF), path)
 
 
 def load_bytes(data: bytes, path: str | os.PathLike) -> MeasuredBRDF:
-    """:func:`load` of the file's uncompressed bytes ``data`` (``path`` names it in errors)."""
+    """:func:`load` of the file's uncompressed bytes ``data`` (``path`` names it in errors).
+
+    Examples
+    --------
+    >>> load_bytes(b"not a BRDF", "x.bin")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: x.bin: unknown measured-BRDF format (10 bytes; expected a MERL .binary(.gz) with header (90, 90, 180), an RGL tensor_file .bsdf, or a 1990656-byte UTIA .bin)
+    """
     kind = detect(data)
     if kind == "rgl":
         return RGLBRDF(read_rgl(data, path), path)

@@ -31,7 +31,14 @@ def compiled_kernels():
     """The module of compiled loops (:mod:`._kernels`, imports Numba on first use), or
     ``None`` without Numba, with ``MICROFACET_NUMBA=0`` or while
     ``microfacet.kernels.AVAILABLE`` is False (:func:`microfacet.backend.choose`): then every reader
-    runs its NumPy reference."""
+    runs its NumPy reference.
+
+    Examples
+    --------
+    >>> from microfacet import backend
+    >>> (compiled_kernels() is None) == (backend.choose() == backend.NUMPY)
+    True
+    """
     if backend.choose() != backend.NUMBA:
         return None
     from . import _kernels
@@ -51,12 +58,28 @@ def _rows(a, k: int) -> np.ndarray:
 
 
 def file_error(path, what: str) -> MicrofacetError:
-    """A :class:`MicrofacetError` naming the file and what is wrong with it."""
+    """A :class:`MicrofacetError` naming the file and what is wrong with it.
+
+    Examples
+    --------
+    >>> file_error("data/gold.binary", "truncated")
+    MicrofacetError('data/gold.binary: truncated')
+    """
     return MicrofacetError(f"{os.fspath(path)}: {what}")
 
 
 def check_finite(path, values: np.ndarray, what: str) -> None:
-    """Raise if ``values`` hold NaN or infinity, counting them in the message."""
+    """Raise if ``values`` hold NaN or infinity, counting them in the message.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> check_finite("a.bin", np.ones(3), "values")           # passes: returns None
+    >>> check_finite("a.bin", np.array([1.0, np.nan, np.inf]), "values")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: a.bin: values holds 2 NaN or infinite value(s)
+    """
     bad = ~np.isfinite(values)
     if bad.any():
         raise file_error(path, f"{what} holds {int(bad.sum())} NaN or infinite value(s)")
@@ -75,6 +98,20 @@ class MeasuredBRDF(BRDF):
         The file the data were read from.
     format : str
         ``"merl"``, ``"rgl"`` or ``"utia"``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.measured import UTIABRDF
+    >>> brdf = UTIABRDF(np.full((6, 48, 6, 48, 3), 0.2))      # a constant table
+    >>> isinstance(brdf, MeasuredBRDF), brdf.format
+    (True, 'utia')
+    >>> wo = np.array([0.0, 0.6, 0.8])
+    >>> brdf.eval(np.array([0.6, 0.0, 0.8]), wo)
+    array([0.2, 0.2, 0.2])
+    >>> wi, weight, pdf = brdf.sample(np.array([0.5, 0.5]), wo)     # cosine-hemisphere sampling
+    >>> round(float(pdf), 4) == round(float(wi[2] / np.pi), 4)
+    True
     """
 
     format = ""

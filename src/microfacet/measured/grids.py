@@ -9,6 +9,14 @@ as compile-time constants: here, so that neither imports the other.
   ``phi = 0, 7.5, ..., 352.5`` degrees (:data:`UTIA_PHI_STEP`).
 
 Example: ``MERL_SHAPE[0] * MERL_SHAPE[1] * MERL_SHAPE[2]`` is 1,458,000 samples per channel.
+
+Examples
+--------
+>>> import math
+>>> MERL_SHAPE, math.prod(MERL_SHAPE)
+((90, 90, 180), 1458000)
+>>> UTIA_SHAPE, round(math.degrees(UTIA_THETA_STEP), 9), round(math.degrees(UTIA_PHI_STEP), 9)
+((3, 6, 48, 6, 48), 15.0, 7.5)
 """
 from __future__ import annotations
 

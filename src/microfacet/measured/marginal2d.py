@@ -32,6 +32,15 @@ class Marginal2D:
         Scale each slice to integrate to 1 over ``[0, 1]^2`` (so ``eval`` is a density).
     invertible : bool
         Build the conditional and marginal CDFs needed by :meth:`invert` (scalar tables).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> table = Marginal2D(np.array([[1.0, 1.0], [3.0, 3.0]]), normalize=True, invertible=True)
+    >>> table.eval(np.array([0.0, 0.5, 1.0]), np.array([0.5, 0.5, 0.5]))     # a density on [0, 1]^2
+    array([1., 1., 1.])
+    >>> table.invert(np.array([0.5]), np.array([0.5]))     # the warped point and its density
+    (array([0.5]), array([0.375]), array([1.]))
     """
 
     def __init__(self, data, param_values=(), normalize: bool = False, invertible: bool = False):

@@ -21,6 +21,11 @@ measured corners are renormalized; where all 8 corners are unmeasured the BRDF i
 ``valid`` is the per-sample mask. Samples where both directions graze the horizon are
 noisy in real MERL data (and unreliable in the neural-fit files of ``../shared/data``);
 the reader returns them as stored: weighting or clipping them is the fitter's choice.
+
+Examples
+--------
+>>> SHAPE, SCALE * 1500
+((90, 90, 180), array([1.  , 1.15, 1.66]))
 """
 from __future__ import annotations
 
@@ -45,7 +50,15 @@ N_BYTES = len(HEADER) + 3 * N_SAMPLES * 8             # 34,992,012
 def is_merl(data: bytes) -> bool:
     """Whether ``data`` (uncompressed) look like a MERL file: the header ``(90, 90, 180)``,
     or any 3 positive int32 bin counts that match the file size (then :func:`read_merl`
-    reports the unsupported resolution)."""
+    reports the unsupported resolution).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> header = np.array(SHAPE, "<i4").tobytes()
+    >>> is_merl(header + bytes(3 * 90 * 90 * 180 * 8)), is_merl(header)
+    (True, True)
+    """
     if data[:12] == HEADER:
         return True
     dims = np.frombuffer(data[:12], dtype="<i4") if len(data) >= 12 else np.zeros(0)
@@ -56,6 +69,14 @@ def read_merl(data: bytes, path) -> tuple[np.ndarray, np.ndarray]:
     """Physical RGB values ``(90, 90, 180, 3)`` and the measured mask ``(90, 90, 180)``.
 
     ``data`` are the uncompressed file bytes; ``path`` only names the file in errors.
+
+    Examples
+    --------
+    >>> import gzip
+    >>> data = gzip.open("merl/chrome.binary.gz").read()   # needs a MERL file  # doctest: +SKIP
+    >>> values, valid = read_merl(data, "chrome.binary")   # doctest: +SKIP
+    >>> values.shape, valid.shape                          # doctest: +SKIP
+    ((90, 90, 180, 3), (90, 90, 180))
     """
     if len(data) < 12:
         raise file_error(path, f"not a MERL .binary file: {len(data)} bytes, too short for its header")
@@ -144,6 +165,13 @@ class MERLBRDF(MeasuredBRDF):
         True where all three channels were measured (raw value >= 0).
     theta_h, theta_d, phi_d : ndarray
         Sample positions (radians) of the three axes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> brdf = MERLBRDF(np.full(SHAPE + (3,), 0.1), np.ones(SHAPE, bool))  # 35 MB table, ~1 s  # doctest: +SKIP
+    >>> brdf.eval(np.array([0.6, 0.0, 0.8]), np.array([0.0, 0.6, 0.8]))                  # doctest: +SKIP
+    array([0.1, 0.1, 0.1])
     """
 
     format = "merl"

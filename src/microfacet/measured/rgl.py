@@ -44,7 +44,17 @@ class RGLTables(NamedTuple):
     integrals ``rows`` and marginal CDF ``marg`` (``normalized``: whether it sums to 1), the
     ``rgb`` table, the NDF ``ndf`` and projected area ``sigma`` tables (Dupuy & Jakob 2018), and
     the flags ``isotropic``, ``reduction`` (the file's azimuthal symmetry), ``jacobian`` and
-    ``clip_negative`` of :class:`RGLBRDF`. Example: ``brdf._kernel()[2].isotropic``."""
+    ``clip_negative`` of :class:`RGLBRDF`. Example: ``brdf._kernel()[2].isotropic``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.kernels_extra import synthetic_rgl
+    >>> brdf = RGLBRDF(synthetic_rgl(np.random.default_rng(0)))
+    >>> k = brdf._kernel()          # None without Numba (the NumPy reference runs)
+    >>> k is None or (isinstance(k[2], RGLTables) and k[2].isotropic)
+    True
+    """
 
     phi_nodes: np.ndarray
     theta_nodes: np.ndarray
@@ -92,7 +102,22 @@ def _require(path, f: dict, name: str, dtype: str, ndim: int) -> np.ndarray:
 
 def read_rgl(data: bytes, path) -> dict[str, np.ndarray]:
     """The fields of an RGL ``_rgb`` ``.bsdf`` file, checked as Mitsuba 3 does
-    (dtypes, ranks, consistent ``phi_i`` / ``theta_i`` / table shapes) plus finiteness."""
+    (dtypes, ranks, consistent ``phi_i`` / ``theta_i`` / table shapes) plus finiteness.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.kernels_extra import synthetic_rgl
+    >>> from microfacet.measured import write_tensor_file
+    >>> fields = read_rgl(write_tensor_file(synthetic_rgl(np.random.default_rng(0))), "synthetic.bsdf")
+    >>> fields["rgb"].shape, fields["theta_i"].dtype
+    ((1, 4, 3, 8, 8), dtype('float32'))
+    >>> del fields["ndf"]
+    >>> read_rgl(write_tensor_file(fields), "bad.bsdf")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: bad.bsdf: RGL .bsdf file lacks the field 'ndf'
+    """
     f = read_tensor_file(data, path)
     for name, dtype, ndim in (("description", "u1", 1), ("jacobian", "u1", 1),
                               ("theta_i", "<f4", 1), ("phi_i", "<f4", 1), ("ndf", "<f4", 2),
@@ -132,6 +157,17 @@ class RGLBRDF(MeasuredBRDF):
     isotropic : bool
     clip_negative : bool
         Clip negative (out-of-gamut) RGB values to 0 (default False: as Mitsuba 3).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.kernels_extra import synthetic_rgl
+    >>> brdf = RGLBRDF(synthetic_rgl(np.random.default_rng(0)), "synthetic.bsdf")
+    >>> brdf.isotropic, brdf.description
+    (True, 'synthetic material')
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> brdf.eval(n, n).round(3), round(float(brdf.ndf(n)), 3)
+    (array([0.718, 0.845, 0.802]), 3.0)
     """
 
     format = "rgl"

@@ -5,6 +5,12 @@ count, then per field: u16 name length, name (UTF-8), u16 ndim, u8 dtype
 (``Struct::Type``: 1 u8, 2 i8, 3 u16, 4 i16, 5 u32, 6 i32, 7 u64, 8 i64, 9 f16,
 10 f32, 11 f64), u64 absolute data offset, ndim x u64 shape; each field's data are
 stored row-major at its offset.
+
+Examples
+--------
+>>> MAGIC[:11], len(MAGIC), DTYPES[10]
+(b'tensor_file', 12, '<f4')
+
 """
 from __future__ import annotations
 
@@ -25,7 +31,13 @@ _CODES = {np.dtype(v).str: k for k, v in DTYPES.items()}
 
 
 def is_tensor_file(data: bytes) -> bool:
-    """Whether ``data`` start with the ``tensor_file`` magic."""
+    """Whether ``data`` start with the ``tensor_file`` magic.
+
+    Examples
+    --------
+    >>> is_tensor_file(write_tensor_file({})), is_tensor_file(b"GIF89a")
+    (True, False)
+    """
     return data[:12] == MAGIC
 
 
@@ -34,6 +46,17 @@ def read_tensor_file(data: bytes, path) -> dict[str, np.ndarray]:
 
     Raises ``MicrofacetError`` (naming ``path``) on a bad magic, version, dtype, a
     truncated header or a field whose data run past the end of the file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> data = write_tensor_file({"theta_i": np.array([0.0, 0.5], np.float32)})
+    >>> read_tensor_file(data, "t.bsdf")
+    {'theta_i': array([0. , 0.5], dtype=float32)}
+    >>> read_tensor_file(data[:30], "t.bsdf")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: t.bsdf: tensor_file header truncated or corrupt (...)
     """
     if not is_tensor_file(data):
         raise file_error(path, "not a tensor_file (bad magic)")
@@ -75,7 +98,16 @@ def _field_header(data: bytes, pos: int):
 
 def write_tensor_file(fields: dict[str, np.ndarray]) -> bytes:
     """The bytes of a tensor file holding ``fields`` (8-byte aligned data); for tests and
-    tools that write RGL-style files."""
+    tools that write RGL-style files.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> data = write_tensor_file({"jacobian": np.array([1], np.uint8), "ndf": np.ones((2, 2), np.float32)})
+    >>> len(data), data[:11]
+    (104, b'tensor_file')
+
+    """
     arrays = {k: np.ascontiguousarray(v) for k, v in fields.items()}
     header = bytearray(MAGIC + bytes(VERSION) + struct.pack("<I", len(arrays)))
     size = len(header) + sum(2 + len(k.encode()) + 11 + 8 * a.ndim for k, a in arrays.items())

@@ -9,6 +9,11 @@ Evaluation is quadrilinear in ``(theta_i, phi_i, theta_v, phi_v)``, periodic in 
 azimuths; **elevations beyond 75 degrees are clamped to the 75 degree samples** (the data
 stop there, extrapolation would be guesswork), so grazing directions get the 75 degree
 values.
+
+Examples
+--------
+>>> SHAPE, N_BYTES
+((3, 6, 48, 6, 48), 1990656)
 """
 from __future__ import annotations
 
@@ -27,18 +32,44 @@ PHI_STEP = np.float64(UTIA_PHI_STEP)
 
 
 def is_utia(data: bytes) -> bool:
-    """UTIA files have no header: recognised by their exact size."""
+    """UTIA files have no header: recognised by their exact size.
+
+    Examples
+    --------
+    >>> is_utia(bytes(N_BYTES)), is_utia(bytes(100))
+    (True, False)
+    """
     return len(data) == N_BYTES
 
 
 def srgb_decode(c: np.ndarray) -> np.ndarray:
     """Inverse sRGB transfer (IEC 61966-2-1): ``c / 12.92`` up to 0.04045, else
-    ``((c + 0.055) / 1.055)^2.4``."""
+    ``((c + 0.055) / 1.055)^2.4``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> srgb_decode(np.array([0.0, 0.04, 0.5, 1.0])).round(4)
+    array([0.    , 0.0031, 0.214 , 1.    ])
+    """
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 def read_utia(data: bytes, path) -> np.ndarray:
-    """Physical RGB values, channels last: ``(6, 48, 6, 48, 3)``."""
+    """Physical RGB values, channels last: ``(6, 48, 6, 48, 3)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> raw = np.full(SHAPE, 70.0)                # raw values are sRGB-encoded, x 140
+    >>> values = read_utia(raw.astype("<f8").tobytes(), "flat.bin")
+    >>> values.shape, round(float(values[0, 0, 0, 0, 0]), 4)
+    ((6, 48, 6, 48, 3), 21.4041)
+    >>> read_utia(bytes(16), "short.bin")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: short.bin: UTIA .bin file has 16 bytes, expected 1990656 (float64 (3, 6, 48, 6, 48))
+    """
     if len(data) != N_BYTES:
         raise file_error(path, f"UTIA .bin file has {len(data)} bytes, expected {N_BYTES} "
                                f"(float64 {SHAPE})")
@@ -71,6 +102,16 @@ class UTIABRDF(MeasuredBRDF):
     ----------
     values : ndarray, (6, 48, 6, 48, 3)
         Physical RGB values ``[theta_i, phi_i, theta_v, phi_v, channel]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> values = np.full((6, 48, 6, 48, 3), 0.2)
+    >>> values[..., 0] = 0.4
+    >>> brdf = UTIABRDF(values, "synthetic.bin")
+    >>> brdf.eval(np.array([[0.6, 0.0, 0.8], [0.0, 0.0, -1.0]]), np.array([0.0, 0.0, 1.0]))
+    array([[0.4, 0.2, 0.2],
+           [0. , 0. , 0. ]])
     """
 
     format = "utia"
