@@ -30,7 +30,15 @@ def base_lobe(base) -> np.ndarray:
     ``alpha``, ``(alpha_x, alpha_y)``, a :class:`~microfacet.Beckmann`, a BRDF whose
     ``distribution`` is Beckmann, any object with ``to_beckmann()`` (a fit of
     :mod:`microfacet.fit`, converted by equal second slope moments, App. C), or the
-    moments ``(5,)`` themselves."""
+    moments ``(5,)`` themselves.
+
+    Examples
+    --------
+    >>> base_lobe(None)
+    array([0., 0., 0., 0., 0.])
+    >>> base_lobe(0.2)
+    array([0.  , 0.  , 0.02, 0.02, 0.  ])
+    """
     if base is not None and hasattr(base, "to_beckmann"):
         base = base.to_beckmann()
     if isinstance(base, (np.ndarray, list, tuple)) and np.shape(base) == (5,):
@@ -44,7 +52,16 @@ def downsample_operator(pyramid, base) -> list[np.ndarray]:
     material (:func:`base_lobe`) by moment addition (Ch. 5, Listing 5.1). The result's
     levels are the displaced surface's Beckmann BRDFs at each resolution (same dtype as
     the input levels). Merging is affine in the moments, so it commutes with the MIP
-    averaging: ``downsample_operator(bake(h), b) == bake(h, roughness=b)`` up to rounding."""
+    averaging: ``downsample_operator(bake(h), b) == bake(h, roughness=b)`` up to rounding.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> merged = downsample_operator(pyramid, 0.2)
+    >>> len(merged), round(float(merged[0][0, 0, 2] - pyramid[0][0, 0, 2]), 4)     # + 0.2^2 / 2
+    (5, 0.02)
+    """
     b = base_lobe(base)
     return [convolve(level, b).astype(np.asarray(level).dtype) for level in pyramid]
 
@@ -52,7 +69,15 @@ def downsample_operator(pyramid, base) -> list[np.ndarray]:
 def box_average(values, factor: int, weights=None) -> np.ndarray:
     """Average of ``values (H, W, ...)`` over ``factor x factor`` blocks, optionally
     weighted by ``weights (H, W)`` (e.g. projected areas); ``H`` and ``W`` must be
-    multiples of ``factor``."""
+    multiples of ``factor``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> box_average(np.arange(16.0).reshape(4, 4), 2)
+    array([[ 2.5,  4.5],
+           [10.5, 12.5]])
+    """
     v = np.asarray(values, dtype=np.float64)
     f = int(factor)
     h, w = v.shape[:2]
@@ -71,7 +96,16 @@ def naive_slopes(level0, factor: int) -> np.ndarray:
     """Slopes ``(H / f, W / f, 2)`` of naive MIP mapping of a normal map: the unit normals
     of the texels' mean slopes (``level0[..., :2]``) averaged over ``f x f`` blocks and
     renormalized (the "naive MIP mapping" of Fig. 5.3, which loses the roughness that
-    the normals' spread should become)."""
+    the normals' spread should become).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import slopes_to_moments
+    >>> level0 = slopes_to_moments(np.array([[[1.0, 0.0], [-1.0, 0.0]], [[1.0, 0.0], [-1.0, 0.0]]]))
+    >>> naive_slopes(level0, 2)          # the averaged normal is flat: a mirror
+    array([[[-0., -0.]]])
+    """
     E = np.asarray(level0, dtype=np.float64)
     n = np.stack([-E[..., 0], -E[..., 1], np.ones(E.shape[:2])], axis=-1)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
@@ -82,7 +116,17 @@ def naive_slopes(level0, factor: int) -> np.ndarray:
 def naive_pyramid(level0, base=None, levels: int | None = None) -> list[np.ndarray]:
     """Moment pyramid ``(H_k, W_k, 5)`` of naive MIP mapping: each level a single facet
     of the averaged normal (:func:`naive_slopes`, factor ``2^k``) with the ``base`` lobe
-    only. Stops at the first level whose size is not a whole number of blocks."""
+    only. Stops at the first level whose size is not a whole number of blocks.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> naive = naive_pyramid(pyramid[0], base=0.2)
+    >>> top = naive[-1][0, 0]
+    >>> round(float(top[2] - top[0] ** 2), 4)      # only the base lobe's variance is left: 0.2^2 / 2
+    0.02
+    """
     E = np.asarray(level0, dtype=np.float64)
     h, w = E.shape[:2]
     b = base_lobe(base)
@@ -106,6 +150,18 @@ class FilteredSurface:
     fresnel : Fresnel, optional
         Fresnel term of the BRDFs :meth:`brdf` returns (a fit's ``to_beckmann().fresnel``
         when ``base`` is a fit and ``fresnel`` is not given).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> surface = FilteredSurface(bake(gaussian_heightfield((16, 16), 0.3, seed=0)), base=0.1)
+    >>> surface.moments(np.array([0.5, 0.5]), footprint=1.0).round(4)       # the whole map
+    array([ 0.    ,  0.    ,  0.1186,  0.0699, -0.0005])
+    >>> brdf = surface.brdf(np.array([0.5, 0.5]), footprint=1.0)
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> brdf.eval(n, n).round(3)
+    array([0.437, 0.437, 0.437])
     """
 
     def __init__(self, pyramid, base=None, fresnel=None):

@@ -19,6 +19,11 @@ Shading accounts for masking, not self-shadowing (the supplemental's choice when
 of the displacement are not rendered): point light by the analytic formula (Sec. 3.3),
 environment by the 5 x 5 filtered sample grid (Sec. 3.5). Errors are relative RMS over
 the image against the reference of the same resolution.
+
+Examples
+--------
+>>> METHODS
+('reference', 'naive', 'leadr')
 """
 from __future__ import annotations
 
@@ -46,7 +51,16 @@ PATCH_FRAME = (np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, -1.0]), np.array([
 @dataclass(frozen=True)
 class PatchScene:
     """Camera and lights of the patch ``[0, 1]^2 x {0}`` (local frame, z up; texture
-    ``u`` along x, ``v`` down the rows, so ``y = 1 - v``)."""
+    ``u`` along x, ``v`` down the rows, so ``y = 1 - v``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> scene = PatchScene()
+    >>> wi, wo, irradiance = scene.directions(np.array([[0.5, 0.5]]))
+    >>> wi.round(3), wo.round(3)
+    (array([[ 0.   , -0.774,  0.633]]), array([[-0.041,  0.664,  0.747]]))
+    """
 
     camera: tuple[float, float, float] = (0.5, -0.6, 0.9)
     light: tuple[float, float, float] = (0.45, 1.3, 0.9)
@@ -72,7 +86,13 @@ class PatchScene:
 def default_heightfield(size: int = 256, seed: int = 3) -> np.ndarray:
     """A tileable displacement: smooth bumps (correlation 48 texels, ``alpha = 0.25``) plus
     fine anisotropic, correlated grooves (correlation 3 texels, ``alpha = (0.45, 0.15)``,
-    ``rho = 0.5``), Gaussian random fields (:func:`microfacet.leadr.gaussian_heightfield`)."""
+    ``rho = 0.5``), Gaussian random fields (:func:`microfacet.leadr.gaussian_heightfield`).
+
+    Examples
+    --------
+    >>> default_heightfield(size=16).shape
+    (16, 16)
+    """
     from .heightfield import gaussian_heightfield
     coarse = gaussian_heightfield((size, size), 0.25, correlation=48.0, seed=seed)
     fine = gaussian_heightfield((size, size), 0.45, 0.15, 0.5, correlation=3.0, seed=seed + 1)
@@ -97,7 +117,17 @@ def render_level(method: str, level: int, pyramid0, naive, leadr, scene: PatchSc
                  kind: str = "point", env=None) -> np.ndarray:
     """Image ``(n_k, n_k, 3)`` of the patch at MIP ``level`` by ``method`` (module
     docstring). ``pyramid0`` is the merged level 0, ``naive`` and ``leadr`` the naive and
-    merged pyramids; ``kind`` is ``"point"`` or ``"env"``."""
+    merged pyramids; ``kind`` is ``"point"`` or ``"env"``.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, naive_pyramid, downsample_operator
+    >>> height = default_heightfield(size=16)
+    >>> leadr = downsample_operator(bake(height), 0.1)
+    >>> naive = naive_pyramid(leadr[0], base=0.1)
+    >>> render_level("leadr", 2, leadr[0], naive, leadr, PatchScene()).shape      # 16 / 2^2 pixels
+    (4, 4, 3)
+    """
     if method == "reference":
         E0 = np.asarray(pyramid0, dtype=np.float64)
         uv = _pixel_uv(E0.shape[0])
@@ -109,7 +139,14 @@ def render_level(method: str, level: int, pyramid0, naive, leadr, scene: PatchSc
 
 
 def relative_rms(image, reference) -> float:
-    """``sqrt(mean((I - R)^2) / mean(R^2))`` over all pixels and channels."""
+    """``sqrt(mean((I - R)^2) / mean(R^2))`` over all pixels and channels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> round(relative_rms(np.full((2, 2, 3), 1.1), np.ones((2, 2, 3))), 6)
+    0.1
+    """
     a, b = np.asarray(image, dtype=np.float64), np.asarray(reference, dtype=np.float64)
     return float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b * b)))
 
@@ -119,7 +156,16 @@ def compare_levels(height, base=0.1, scale: float = 1.0, levels=(1, 2, 3, 4, 5),
     """Render every method at every level; returns ``{(kind, level): {method: image}}``
     and ``{(kind, level): {method: relative RMS error}}`` (naive and LEADR against the
     reference). ``height`` is a square power-of-two height map, ``base`` the base
-    material (:func:`~microfacet.leadr.downsample.base_lobe`)."""
+    material (:func:`~microfacet.leadr.downsample.base_lobe`).
+
+    Examples
+    --------
+    >>> images, errors = compare_levels(default_heightfield(size=16), levels=(2,), kinds=("point",))
+    >>> sorted(images[("point", 2)]), images[("point", 2)]["leadr"].shape
+    (['leadr', 'naive', 'reference'], (4, 4, 3))
+    >>> errors[("point", 2)]["leadr"] < errors[("point", 2)]["naive"]
+    True
+    """
     from .maps import bake
     scene = PatchScene() if scene is None else scene
     b = base_lobe(base)
@@ -156,7 +202,12 @@ def leadr_section(out, size: int = 256, levels=(1, 2, 3, 4, 5), base=0.1, seed: 
     every image shown upscaled to ``display`` pixels, nearest neighbour) and return the
     HTML section. ``size`` is the side of the height map (a power of two), ``levels``
     the MIP levels shown, ``base`` the base material (``alpha``, a Beckmann lobe, a
-    BRDF or a fit: :func:`~microfacet.leadr.downsample.base_lobe`)."""
+    BRDF or a fit: :func:`~microfacet.leadr.downsample.base_lobe`).
+
+    Examples
+    --------
+    >>> html = leadr_section("out", size=16, levels=(1, 2), display=32)   # EXR and PNG files, ~2 s  # doctest: +SKIP
+    """
     from ..io import html_grid, write_exr, write_png
     out = Path(out)
     folder = out / "leadr"

@@ -8,6 +8,11 @@ shares level 0's display window (OpenEXR requires it); the data window of part `
 its own ``W_k x H_k``. :func:`pyramid_file` lays out the uncompressed file, byte for byte as
 OpenEXR writes it, in memory mapped onto the file, for :func:`microfacet.leadr.bake` to
 fill (OpenExr file layout, "Multi-Part Files" and "Scan Lines").
+
+Examples
+--------
+>>> CHANNELS
+('E1', 'E2', 'E3', 'E4', 'E5')
 """
 from __future__ import annotations
 
@@ -45,7 +50,17 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none",
     :func:`microfacet.io.write_exr`; e.g. to test readers). ``compression`` is a lossless
     name of :data:`microfacet.io.exr.COMPRESSIONS`. The default
     ``none`` is chosen because float32 moments barely compress: ``zip`` saves few bytes at
-    several times the write time (``benchmarks/bench_leadr.py``)."""
+    several times the write time (``benchmarks/bench_leadr.py``).
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> write_pyramid("bumps.exr", pyramid).name
+    'bumps.exr'
+    >>> [level.shape for level in read_pyramid("bumps.exr")]
+    [(16, 16, 5), (8, 8, 5), (4, 4, 5), (2, 2, 5), (1, 1, 5)]
+    """
     compression_type = exr_compression(compression)
     levels = [np.asarray(level) for level in pyramid]
     if not levels:
@@ -106,7 +121,16 @@ def pyramid_file(path: str | os.PathLike, height: int, width: int) -> Iterator[l
     the file replaces ``path`` atomically (flushed to disk); on an exception nothing is left.
     A bake filling it touches each byte once, where an array then written to a file takes
     its memory twice (the array's pages and the file's), which costs most of a large bake.
-    Do not write into the levels after the block: they remain mapped onto the file."""
+    Do not write into the levels after the block: they remain mapped onto the file.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> height = gaussian_heightfield((16, 16), 0.3, seed=0)
+    >>> with pyramid_file("bumps.exr", 16, 16) as levels:     # baked straight into the file's storage
+    ...     _ = bake(height, out=levels)
+    >>> [level.shape for level in read_pyramid("bumps.exr")]
+    """
     sizes = mip_sizes(height, width)
     multi = len(sizes) > 1                   # a 1 x 1 map has one level: a single-part file
     prefix = 3 if multi else 2               # chunk: [part,] y, size (int32), then E1..E5 of line y
@@ -145,6 +169,15 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     Raises :class:`MicrofacetError` naming the file when it is not an EXR, is corrupt, or
     its parts are not ``mip0, mip1, ...`` with channels ``E1..E5``, the MIP sizes of
     level 0 and finite values.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> back = read_pyramid(write_pyramid("bumps.exr", pyramid))
+    >>> all(np.array_equal(a, b) for a, b in zip(pyramid, back)), back[0].dtype
+    (True, dtype('float32'))
     """
     path = Path(path)
     check_exr_magic(path, _PYRAMID)
@@ -186,7 +219,17 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
     or EXR (``Y``, or the mean of ``R, G, B``) image. Colour PNGs use the mean of R, G, B
     (equal in a gray image); alpha is ignored. A colour map that decodes as a normal map
     (:func:`_looks_like_normal_map`) is read as heights all the same, with a
-    :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless)."""
+    :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.io import write_png_data
+    >>> _ = write_png_data("height.png", (np.arange(16)[None, :] * 4096).astype(np.uint16).repeat(4, 0))
+    >>> h = load_height_map("height.png")
+    >>> h.shape, round(float(h.max()), 4)
+    ((4, 16), 0.9375)
+    """
     levels, top = height_levels(read_image(Path(path)), path)
     return np.divide(levels, top, dtype=np.float64)
 
@@ -219,7 +262,17 @@ def height_levels(a: np.ndarray, path: str | os.PathLike) -> tuple[np.ndarray, f
 def load_normal_map(path: str | os.PathLike) -> np.ndarray:
     """A normal map as stored: ``(H, W, 2|3|4)`` ``uint8``/``uint16`` from a PNG, float64
     from an EXR; decode with :func:`microfacet.leadr.decode_normal_map` (or read and decode
-    in one step with :func:`microfacet.io.normalmap.read_normals`)."""
+    in one step with :func:`microfacet.io.normalmap.read_normals`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import encode_normal_map
+    >>> _ = write_normal_map("normals.png", encode_normal_map(np.zeros((16, 16, 2))))
+    >>> nmap = load_normal_map("normals.png")
+    >>> nmap.shape, nmap.dtype, nmap[0, 0]
+    ((16, 16, 3), dtype('uint8'), array([128, 128, 255], dtype=uint8))
+    """
     path = Path(path)
     a = read_image(path)
     if a.ndim != 3 or a.shape[2] not in (2, 3, 4):
@@ -230,7 +283,15 @@ def load_normal_map(path: str | os.PathLike) -> np.ndarray:
 def write_normal_map(path: str | os.PathLike, nmap) -> Path:
     """Write a normal map from :func:`microfacet.leadr.encode_normal_map`, atomically: a
     ``uint8``/``uint16`` one as an exact 8/16-bit RGB PNG, a float one as a float32 RGB
-    EXR (normal components, not offset)."""
+    EXR (normal components, not offset).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import encode_normal_map
+    >>> write_normal_map("normals.png", encode_normal_map(np.zeros((16, 16, 2)))).name
+    'normals.png'
+    """
     a = np.asarray(nmap)
     if a.ndim != 3 or a.shape[2] != 3:
         raise ValueError(f"a normal map must be (H, W, 3), got shape {a.shape}")

@@ -32,7 +32,14 @@ def slope_spectrum(shape, alpha_x, alpha_y, rho=0.0, correlation: float = 8.0, i
     """Height power spectrum ``S (H, W)`` (per FFT coefficient, variance of ``xi_hat / sqrt(HW)``)
     whose central-difference slopes have covariance exactly ``alpha^2 / 2`` (Beckmann),
     and the per-frequency slope contributions ``(dx, dy)`` (used to compute estimator
-    variances). ``correlation`` is the correlation length in texels."""
+    variances). ``correlation`` is the correlation length in texels.
+
+    Examples
+    --------
+    >>> S, dx, dy = slope_spectrum((16, 16), 0.3, 0.3)
+    >>> S.shape, float(S[0, 0])          # no energy in the mean height
+    ((16, 16), 0.0)
+    """
     h, w = shape
     target = 0.5 * np.array([[alpha_x**2, rho * alpha_x * alpha_y], [rho * alpha_x * alpha_y, alpha_y**2]])
     kx, ky, dx, dy = _operators(shape)
@@ -62,6 +69,15 @@ def gaussian_heightfield(shape, alpha_x: float, alpha_y: float | None = None, rh
 
     ``correlation`` (texels) sets the spectrum's width: larger is smoother but gives
     fewer independent slope samples (more statistical error in the map's moments).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import height_to_slopes
+    >>> h = gaussian_heightfield((64, 64), 0.3, seed=0)
+    >>> s = height_to_slopes(h)
+    >>> h.shape, round(float(np.sqrt(2 * s[..., 0].var())), 2)    # alpha_x of the slopes
+    ((64, 64), 0.33)
     """
     alpha_y = alpha_x if alpha_y is None else alpha_y
     h, w = int(shape[0]), int(shape[1])

@@ -27,7 +27,13 @@ MAX_ANISOTROPY = 16
 
 
 def mip_sizes(height: int, width: int) -> list[tuple[int, int]]:
-    """``[(H_0, W_0), (H_1, W_1), ...]`` down to ``(1, 1)``: ``n_{k+1} = max(1, n_k // 2)``."""
+    """``[(H_0, W_0), (H_1, W_1), ...]`` down to ``(1, 1)``: ``n_{k+1} = max(1, n_k // 2)``.
+
+    Examples
+    --------
+    >>> mip_sizes(16, 4)
+    [(16, 4), (8, 2), (4, 1), (2, 1), (1, 1)]
+    """
     sizes = [(int(height), int(width))]
     while sizes[-1] != (1, 1):
         h, w = sizes[-1]
@@ -43,6 +49,13 @@ def downsample_weights(n_in: int, n_out: int) -> tuple[np.ndarray, np.ndarray]:
     texel ``[i, i + 1)`` with ``[o r, (o + 1) r)``, ``r = n_in / n_out``, divided by ``r``
     (so each row sums to 1 and each input texel's weights sum to ``1 / r``). Computed in
     exact integer arithmetic (units of ``1 / n_out`` input texels).
+
+    Examples
+    --------
+    >>> downsample_weights(4, 2)
+    (array([[0, 1, 2],
+           [2, 3, 3]]), array([[0.5, 0.5, 0. ],
+           [0.5, 0.5, 0. ]]))
     """
     if n_out < 1 or n_in < n_out:
         raise ValueError(f"cannot downsample {n_in} texels to {n_out}")
@@ -135,7 +148,15 @@ def mip_pyramid(moments, out: list[np.ndarray] | None = None) -> list[np.ndarray
     input itself if it is a channels-first view, see :func:`downsample`, whose layout the
     levels keep). The dtype (float32 or float64) is kept; sums are accumulated in float64.
     With ``out`` (levels of the pyramid's sizes, e.g. :func:`microfacet.leadr.pyramid_file`'s,
-    ``out[0]`` holding the moments) the levels above 0 are written into it, and it is returned."""
+    ``out[0]`` holding the moments) the levels above 0 are written into it, and it is returned.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> levels = mip_pyramid(np.arange(16.0).reshape(4, 4, 1))
+    >>> [level.shape for level in levels], float(levels[-1][0, 0, 0])     # the mean at the top
+    ([(4, 4, 1), (2, 2, 1), (1, 1, 1)], 7.5)
+    """
     if out is not None:
         for k in range(1, len(out)):
             downsample(out[k - 1], out[k].shape[:2], out=out[k])
@@ -236,6 +257,18 @@ def lookup(pyramid, uv, footprint=0.0, *, wrap: bool = True,
     the major axis, each a trilinear lookup at ``lod = log2(major / N)`` (so a probe's
     texel is about the size of the footprint's minor axis), and the probes are averaged.
     Moments are linear, so every blend and average is a valid LEAN filter.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> lookup(pyramid, np.array([0.5, 0.5]), footprint=1.0).round(4)     # the whole map: the top level
+    array([ 0.    ,  0.    ,  0.1136,  0.0649, -0.0005])
+    >>> np.allclose(lookup(pyramid, np.array([0.5, 0.5]), 1.0), pyramid[-1][0, 0], atol=1e-6)
+    True
+    >>> MAX_ANISOTROPY
+    16
     """
     uv = np.asarray(uv, dtype=np.float64)
     if uv.shape[-1:] != (2,):

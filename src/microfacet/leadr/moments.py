@@ -7,6 +7,11 @@ they average linearly (MIP maps, Eq. 3.10-3.14), add under convolution of indepe
 lobes (Listing 5.1) and transform exactly under linear maps of the slopes (height
 scaling and the uv Jacobian, Sec. 3.4). Beckmann convention: the slope standard
 deviation per axis is ``alpha / sqrt(2)``, so ``E3 = alpha_x^2 / 2 + x~n^2``.
+
+Examples
+--------
+>>> MIN_ALPHA, MAX_RHO
+(0.001, 0.99)
 """
 from __future__ import annotations
 
@@ -37,6 +42,11 @@ def to_moments(alpha_x, alpha_y, rho=0.0, mean_slope=(0.0, 0.0)) -> np.ndarray:
     ``E1 = x~n``, ``E2 = y~n``, ``E3 = alpha_x^2/2 + x~n^2``, ``E4 = alpha_y^2/2 + y~n^2``,
     ``E5 = rho alpha_x alpha_y / 2 + x~n y~n``. Parameters broadcast; ``mean_slope`` has
     a last axis of size 2. ``alpha = 0`` (a single facet) is allowed here.
+
+    Examples
+    --------
+    >>> to_moments(0.2, 0.4, rho=0.5, mean_slope=(0.1, 0.0)).round(4)   # E1, E2, E3, E4, E5
+    array([0.1 , 0.  , 0.03, 0.08, 0.02])
     """
     ax, ay, rho = (np.asarray(v, dtype=np.float64) for v in (alpha_x, alpha_y, rho))
     ms = np.asarray(mean_slope, dtype=np.float64)
@@ -53,7 +63,13 @@ def to_moments(alpha_x, alpha_y, rho=0.0, mean_slope=(0.0, 0.0)) -> np.ndarray:
 
 
 def covariance(E) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Central second moments ``(Var[x~], Var[y~], Cov[x~, y~])`` of moments ``E``."""
+    """Central second moments ``(Var[x~], Var[y~], Cov[x~, y~])`` of moments ``E``.
+
+    Examples
+    --------
+    >>> [round(float(v), 6) for v in covariance(to_moments(0.2, 0.4, rho=0.5))]   # alpha^2 / 2 ...
+    [0.02, 0.08, 0.02]
+    """
     E = _moments(E)
     e1, e2 = E[..., 0], E[..., 1]
     return E[..., 2] - e1 * e1, E[..., 3] - e2 * e2, E[..., 4] - e1 * e2
@@ -67,6 +83,12 @@ def from_moments(E, min_alpha: float = MIN_ALPHA, max_rho: float = MAX_RHO) -> B
     texels are clamped as in Listing 3.5: variances below ``min_alpha^2 / 2`` (a single
     facet, or negative by rounding) are raised to it, and ``|rho| <= max_rho``.
     Non-finite moments raise ``ValueError``.
+
+    Examples
+    --------
+    >>> d = from_moments(to_moments(0.2, 0.4, rho=0.5))
+    >>> round(float(d.alpha_x), 6), round(float(d.alpha_y), 6), round(float(d.rho), 6)
+    (0.2, 0.4, 0.5)
     """
     E = _moments(E)
     if not np.all(np.isfinite(E)):
@@ -85,6 +107,12 @@ def convolve(Ea, Eb) -> np.ndarray:
 
     ``E1 = Ea1 + Eb1``, ``E3 = Ea3 + Eb3 + 2 Ea1 Eb1``,
     ``E5 = Ea5 + Eb5 + Ea1 Eb2 + Ea2 Eb1``: means and covariances add.
+
+    Examples
+    --------
+    >>> E = convolve(to_moments(0.3, 0.3), to_moments(0.4, 0.4))
+    >>> round(float(from_moments(E).alpha_x), 6)          # variances add: sqrt(0.3^2 + 0.4^2)
+    0.5
     """
     Ea, Eb = np.broadcast_arrays(_moments(Ea), _moments(Eb))
     a1, a2, b1, b2 = Ea[..., 0], Ea[..., 1], Eb[..., 0], Eb[..., 1]
@@ -95,7 +123,13 @@ def convolve(Ea, Eb) -> np.ndarray:
 
 def scale_height(E, beta) -> np.ndarray:
     """Moments of the surface whose heights are scaled by ``beta`` (Sec. 3.4): ``E1, E2``
-    scale by ``beta`` and ``E3, E4, E5`` by ``beta^2``."""
+    scale by ``beta`` and ``E3, E4, E5`` by ``beta^2``.
+
+    Examples
+    --------
+    >>> round(float(from_moments(scale_height(to_moments(0.2, 0.2), 2.0)).alpha_x), 6)   # slopes x 2
+    0.4
+    """
     E = _moments(E)
     beta = np.asarray(beta, dtype=np.float64)[..., None]
     return E * np.concatenate(np.broadcast_arrays(beta, beta, beta**2, beta**2, beta**2), axis=-1)
@@ -110,6 +144,14 @@ def transform(E, jacobian) -> np.ndarray:
     ``(d xi/dx, d xi/dy) = J (d xi/du, d xi/dv)``; ``E1 = du/dx E1' + dv/dx E2'``,
     ``E3 = (du/dx)^2 E3' + (dv/dx)^2 E4' + 2 du/dx dv/dx E5'``,
     ``E5 = du/dx du/dy E3' + dv/dx dv/dy E4' + (du/dx dv/dy + dv/dx du/dy) E5'``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> E = transform(to_moments(0.2, 0.2), np.diag([2.0, 1.0]))     # uv stretched along x
+    >>> d = from_moments(E)
+    >>> round(float(d.alpha_x), 6), round(float(d.alpha_y), 6)
+    (0.4, 0.2)
     """
     E = _moments(E)
     J = np.asarray(jacobian, dtype=np.float64)
@@ -132,6 +174,11 @@ def clean_moments(E, mode: str = "lean") -> np.ndarray:
 
     Unlike the five LEAN moments, ``mode="max"`` texels are not linear in the slopes:
     filter the ``"lean"`` form and convert after filtering.
+
+    Examples
+    --------
+    >>> clean_moments(to_moments(0.2, 0.4)).round(4)        # E1, E2, E3 + E4
+    array([0. , 0. , 0.1])
     """
     E = _moments(E)
     e1, e2 = E[..., 0], E[..., 1]
@@ -148,7 +195,13 @@ def clean_moments(E, mode: str = "lean") -> np.ndarray:
 
 def clean_to_moments(C) -> np.ndarray:
     """Isotropic LEAN moments ``(..., 5)`` of CLEAN texels ``(E1, E2, E3 + E4)``:
-    ``alpha^2 = third - E1^2 - E2^2`` (Eq. 3.18), ``rho = 0``."""
+    ``alpha^2 = third - E1^2 - E2^2`` (Eq. 3.18), ``rho = 0``.
+
+    Examples
+    --------
+    >>> clean_to_moments(clean_moments(to_moments(0.2, 0.4))).round(4)     # isotropic: (E3 + E4) / 2 each
+    array([0.  , 0.  , 0.05, 0.05, 0.  ])
+    """
     C = np.asarray(C, dtype=np.float64)
     if C.shape[-1:] != (3,):
         raise ValueError(f"CLEAN texels must have a last axis of size 3, got shape {C.shape}")

@@ -24,7 +24,16 @@ WO = np.array([-np.sin(_THETA), 0.0, np.cos(_THETA)])
 def shade_level(level, min_alpha: float = 0.02) -> np.ndarray:
     """Linear RGB radiance ``(H, W, 3)`` of each texel of a moment map under unit
     irradiance (``f_r cos theta_i``, module docstring). ``min_alpha`` floors the
-    roughness so that single-facet texels stay visible rather than sub-pixel spikes."""
+    roughness so that single-facet texels stay visible rather than sub-pixel spikes.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> image = shade_level(pyramid[1])
+    >>> image.shape, bool((image >= 0).all())
+    ((8, 8, 3), True)
+    """
     E = np.asarray(level, dtype=np.float64)
     brdf = MicrofacetBRDF(from_moments(E, min_alpha=min_alpha), fresnel=Schlick(0.04))
     return brdf.eval_cos(WI, WO)
@@ -39,7 +48,15 @@ def _enlarge(img: np.ndarray, shape) -> np.ndarray:
 def preview_image(pyramid, max_side: int = 256, count: int = 5, gap: int = 4) -> np.ndarray:
     """Linear RGB preview ``(H, W, 3)``: ``count`` consecutive levels starting at the first
     whose larger side is at most ``max_side``, normalised so that the brightest 0.5 % of
-    the coarsest shown level is at display white."""
+    the coarsest shown level is at display white.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import bake, gaussian_heightfield
+    >>> pyramid = bake(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> preview_image(pyramid, max_side=16, count=3).shape
+    (16, 56, 3)
+    """
     first = next(k for k, lv in enumerate(pyramid) if max(lv.shape[:2]) <= max_side)
     levels = list(range(first, min(first + count, len(pyramid))))
     shape = pyramid[first].shape[:2]

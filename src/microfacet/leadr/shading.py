@@ -22,6 +22,11 @@ Beckmann surface of roughness ``alpha`` has ``var = alpha^2 / 2``.
 The grid algorithms account for masking only (no self-shadowing of the displacement):
 by Eq. 10 of the supplemental the masking ``1 / (1 + Lambda_o)`` and the inverse
 projected area are replaced by the grid's own normalization ``1 / S``.
+
+Examples
+--------
+>>> GRID_SPACING, ARTIFICIAL_WEIGHT, ARTIFICIAL_EPSILON, MIN_VARIANCE
+(0.9, 1e-05, 1.01, 5e-11)
 """
 from __future__ import annotations
 
@@ -54,7 +59,14 @@ _SQRT_PI = np.sqrt(np.pi)
 def slope_statistics(moments) -> tuple[np.ndarray, ...]:
     """``(x0, y0, var_x, var_y, c_xy)`` of moments ``(..., 5)`` (Sec. 3.1), with the
     variances clamped to :data:`MIN_VARIANCE` and the correlation to ``[-0.99, 0.99]``
-    (the clamping of Listing 3.5)."""
+    (the clamping of Listing 3.5).
+
+    Examples
+    --------
+    >>> from microfacet.leadr import to_moments
+    >>> [round(float(v), 4) for v in slope_statistics(to_moments(0.2, 0.4, rho=0.5, mean_slope=(0.1, 0.0)))]
+    [0.1, 0.0, 0.02, 0.08, 0.02]
+    """
     e = np.asarray(moments, dtype=np.float64)
     if e.shape[-1:] != (5,):
         raise ValueError(f"moments must have a last axis of size 5, got shape {e.shape}")
@@ -67,14 +79,30 @@ def slope_statistics(moments) -> tuple[np.ndarray, ...]:
 
 
 def mesonormal(moments) -> np.ndarray:
-    """Mesonormal ``w_n- = (-E[x~], -E[y~], 1) / |.|`` of the pixel (Eq. 5)."""
+    """Mesonormal ``w_n- = (-E[x~], -E[y~], 1) / |.|`` of the pixel (Eq. 5).
+
+    Examples
+    --------
+    >>> from microfacet.leadr import to_moments
+    >>> mesonormal(to_moments(0.3, 0.3, mean_slope=(0.75, 0.0))).round(4)
+    array([-0.6, -0. ,  0.8])
+    """
     e = np.asarray(moments, dtype=np.float64)
     return normalize(np.stack([-e[..., 0], -e[..., 1], np.ones_like(e[..., 0])], axis=-1))
 
 
 def ndf(moments, h) -> np.ndarray:
     """Beckmann NDF ``D(h) = P22(h~) / z_h^4`` of the Gaussian slope PDF ``P22`` of the
-    moments (Eq. 2 and Sec. 3.1); 0 for ``z_h <= 0``."""
+    moments (Eq. 2 and Sec. 3.1); 0 for ``z_h <= 0``.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> from microfacet.leadr import to_moments
+    >>> h = np.array([0.6, 0.0, 0.8])
+    >>> round(float(ndf(to_moments(0.3, 0.3), h)), 4), round(float(mf.Beckmann(alpha=0.3).ndf(h)), 4)
+    (0.0167, 0.0167)
+    """
     x0, y0, vx, vy, cxy = slope_statistics(moments)
     h = np.asarray(h, dtype=np.float64)
     z = h[..., 2]
@@ -96,6 +124,13 @@ def lambda_(moments, k) -> np.ndarray:
     is used (the supplemental uses Walter's rational approximation of it). Evaluated as
     ``nu = (z - x x0 - y y0) / sqrt(2 (x^2 var_x + y^2 var_y + 2 x y c_xy))``, finite at
     normal incidence (``Lambda = 0``); ``inf`` where ``nu <= 0`` (``k`` below the mesosurface).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import to_moments
+    >>> round(float(lambda_(to_moments(0.3, 0.3), np.array([0.98, 0.0, 0.198997]))), 4)   # 78.5 degrees
+    0.0944
     """
     x0, y0, vx, vy, cxy = slope_statistics(moments)
     k = np.asarray(k, dtype=np.float64)
@@ -112,7 +147,15 @@ def lambda_(moments, k) -> np.ndarray:
 def projected_area(moments, k) -> np.ndarray:
     """Projected area toward ``k`` of the microsurface of ``moments`` per unit macro area,
     ``A(k) = int <k, n>+ D(n) dn = c_k (1 + Lambda(k))`` with ``c_k = (-x0, -y0, 1) . k``
-    the mesonormal's (supplemental Eq. 4, 9); 0 where ``c_k <= 0``."""
+    the mesonormal's (supplemental Eq. 4, 9); 0 where ``c_k <= 0``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import to_moments
+    >>> round(float(projected_area(to_moments(0.3, 0.3), np.array([0.0, 0.0, 1.0]))), 6)   # cos theta = 1
+    1.0
+    """
     e = np.asarray(moments, dtype=np.float64)
     k = np.asarray(k, dtype=np.float64)
     c = k[..., 2] - k[..., 0] * e[..., 0] - k[..., 1] * e[..., 1]
@@ -133,6 +176,17 @@ def point_light(moments, wi, wo, irradiance=1.0, fresnel=None, shadowing: bool =
     Sec. 1.5: use it when shadows of the displacement are not rendered at close range).
     This equals ``MicrofacetBRDF(Beckmann.from_moments(*E), fresnel).eval_cos(wi, wo) * E``.
     0 where either direction is below the macro horizon, ``o.h <= 0`` or ``c_o <= 0``.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> from microfacet.leadr import to_moments
+    >>> E = to_moments(0.3, 0.3)
+    >>> wi, wo = np.array([0.6, 0.0, 0.8]), np.array([-0.6, 0.0, 0.8])
+    >>> point_light(E, wi, wo).round(4)
+    array([1.1052, 1.1052, 1.1052])
+    >>> mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3)).eval_cos(wi, wo).round(4)      # the same
+    array([1.1052, 1.1052, 1.1052])
     """
     wi, wo = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
     e = np.asarray(moments, dtype=np.float64)
@@ -157,6 +211,12 @@ def sample_grid(n: int = 5, spacing: float | None = None) -> tuple[np.ndarray, n
     empirical best for ``n = 5``: ``p = (-1.8, -0.9, 0, 0.9, 1.8)``,
     ``w = (0.0725, 0.2443, 0.3663, 0.2443, 0.0725)``); from ``n = 8`` on the grid spans
     ``[-3, 3]`` ("it is not necessary to place samples beyond"), spacing ``6 / (n - 1)``.
+
+    Examples
+    --------
+    >>> p, w = sample_grid(5)
+    >>> p.round(2), w.round(4)
+    (array([-1.8, -0.9,  0. ,  0.9,  1.8]), array([0.0725, 0.2443, 0.3663, 0.2443, 0.0725]))
     """
     if int(n) != n or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
@@ -173,7 +233,13 @@ def sample_grid(n: int = 5, spacing: float | None = None) -> tuple[np.ndarray, n
 
 
 def grid_spacing(n: int) -> float:
-    """Spacing of :func:`sample_grid` for ``n`` samples per axis."""
+    """Spacing of :func:`sample_grid` for ``n`` samples per axis.
+
+    Examples
+    --------
+    >>> grid_spacing(5), grid_spacing(13)
+    (0.9, 0.5)
+    """
     p, _ = sample_grid(n)
     return float(p[1] - p[0]) if n > 1 else 0.0
 
@@ -182,7 +248,15 @@ def grid_slopes(moments, n: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray
     """Slopes ``(x~, y~)`` and weights ``W = w_j w_k`` of the ``n x n`` grid, each
     ``(..., n * n)`` (Algorithm 1): ``x~ = x0 + p_j sigma_x``,
     ``y~ = y0 + (r p_j + sqrt(1 - r^2) p_k) sigma_y`` with ``r = c_xy / (sigma_x sigma_y)``,
-    i.e. the grid of the standard normal mapped by the Cholesky factor of the covariance."""
+    i.e. the grid of the standard normal mapped by the Cholesky factor of the covariance.
+
+    Examples
+    --------
+    >>> from microfacet.leadr import to_moments
+    >>> x, y, W = grid_slopes(to_moments(0.2, 0.2), n=3)
+    >>> x.shape, round(float(W.sum()), 6)
+    ((9,), 1.0)
+    """
     x0, y0, vx, vy, cxy = slope_statistics(moments)
     p, w = sample_grid(n)
     pj, pk = np.repeat(p, len(p)), np.tile(p, len(p))
@@ -199,7 +273,13 @@ _LOD_BIAS = ((5, 0.5), (32, -0.5), (128, -1.48))
 
 def lod_bias(n: int) -> float:
     """Constant of the LOD rule for an ``n x n`` grid: 0.5 for ``n <= 5``, -0.5 for 32,
-    -1.48 (unbiased) from 128 on (Sec. 3.5), linear in ``log2 n`` in between."""
+    -1.48 (unbiased) from 128 on (Sec. 3.5), linear in ``log2 n`` in between.
+
+    Examples
+    --------
+    >>> lod_bias(5), lod_bias(32)
+    (0.5, -0.5)
+    """
     ln = np.log2([m for m, _ in _LOD_BIAS])
     return float(np.interp(np.log2(max(n, 1)), ln, [b for _, b in _LOD_BIAS]))
 
@@ -216,6 +296,15 @@ def artificial_micronormal(moments, wo, epsilon: float = ARTIFICIAL_EPSILON) -> 
     (``w_n-.o < 0``, a silhouette of a low-tessellated mesh) it is visible
     (``w~.o = -(eps - 1) w_n-.o |.|^-1 > 0``); elsewhere it is back-facing and contributes
     nothing. Used with weight :data:`ARTIFICIAL_WEIGHT` in the grid sums.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import to_moments
+    >>> E = to_moments(0.1, 0.1, mean_slope=(-3.0, 0.0))          # mesonormal tilted toward +x
+    >>> wo = np.array([-0.8, 0.0, 0.6])                            # seen from the other side
+    >>> bool(mesonormal(E) @ wo < 0), bool(artificial_micronormal(E, wo) @ wo > 0)
+    (True, True)
     """
     m = mesonormal(moments)
     wo = np.asarray(wo, dtype=np.float64)
@@ -249,6 +338,15 @@ class MipEnvironment(Environment):
     angles, so a constant map stays constant and every level keeps the map's integral
     ``sum L dOmega``; the pyramid stops at the first odd dimension. Lookups are
     trilinear: bilinear in each level (wrapping in ``phi``), linear between levels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> env = MipEnvironment(np.full((16, 32, 3), 0.5))         # a constant 16 x 32 lat-long map
+    >>> [level.map.shape[:2] for level in env.levels], env.texture_size
+    ([(16, 32), (8, 16), (4, 8), (2, 4), (1, 2)], 8.0)
+    >>> env.radiance_lod(np.array([0.0, 0.0, 1.0]), 2.5)          # constant at every level
+    array([0.5, 0.5, 0.5])
     """
 
     def __init__(self, radiance):
@@ -322,6 +420,14 @@ def env_specular(moments, wo, env: MipEnvironment, frame=None, n: int = 5, fresn
     fallback : bool
         Append the artificial micronormal (Sec. 3.7), so the result is defined even when
         every grid normal faces away from ``o``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import to_moments
+    >>> env = MipEnvironment(np.full((16, 32, 3), 0.5))
+    >>> env_specular(to_moments(0.3, 0.3), np.array([0.0, 0.6, 0.8]), env).round(4)   # ideal Fresnel: L
+    array([0.5, 0.5, 0.5])
     """
     wo = np.asarray(wo, dtype=np.float64)
     normals, w, vn, zn = _grid_normals(moments, wo, n, fallback)
@@ -362,7 +468,15 @@ def sh_basis(w) -> np.ndarray:
     """Real SH ``Y_lm(w)`` ``(..., 9)`` in the order ``L00, L1-1, L10, L11, L2-2, L2-1,
     L20, L21, L22`` (Algorithm 2's constants: ``Y_1 = 0.488603 (y, z, x)``,
     ``Y_2-2,2-1,21 = 1.092548 (xy, yz, xz)``, ``Y_20 = 0.315392 (3z^2 - 1)``,
-    ``Y_22 = 0.546274 (x^2 - y^2)``), in the frame of ``w``."""
+    ``Y_22 = 0.546274 (x^2 - y^2)``), in the frame of ``w``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sh_basis(np.array([0.0, 0.0, 1.0])).round(4)
+    array([0.2821, 0.    , 0.4886, 0.    , 0.    , 0.    , 0.6308, 0.    ,
+           0.    ])
+    """
     w = np.asarray(w, dtype=np.float64)
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
     return np.stack([np.full_like(x, _Y[0]), _Y[1] * y, _Y[1] * z, _Y[1] * x,
@@ -375,7 +489,15 @@ def sh_project(env) -> np.ndarray:
     :class:`~microfacet.render.Environment` or an ``(H, W, 3)`` map), in world
     coordinates: ``int L(w) Y_lm(w) dw`` with ``L`` constant over each texel and ``Y_lm``
     integrated over the texel by a 3 x 3 Gauss-Legendre rule in ``(cos theta, phi)``
-    (exact solid angles; a constant map is projected exactly, smooth ones to ~1e-6)."""
+    (exact solid angles; a constant map is projected exactly, smooth ones to ~1e-6).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sh_project(np.ones((8, 16, 3)))[:, 0].round(4)      # a constant map: L00 = 2 sqrt(pi) only
+    array([ 3.5449, -0.    ,  0.    ,  0.    , -0.    , -0.    , -0.    ,
+           -0.    , -0.    ])
+    """
     m = np.asarray(env.map if isinstance(env, Environment) else env, dtype=np.float64)
     h, wd = m.shape[:2]
     t, g = np.polynomial.legendre.leggauss(3)
@@ -396,7 +518,15 @@ def sh_project(env) -> np.ndarray:
 
 def sh_add_directional(coeffs, direction, radiance) -> np.ndarray:
     """``coeffs`` plus a directional light of world ``direction`` and RGB ``radiance``
-    (Algorithm 2: ``L_lm += Y_lm(w_i) L``); returns a new ``(9, 3)`` array."""
+    (Algorithm 2: ``L_lm += Y_lm(w_i) L``); returns a new ``(9, 3)`` array.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> coeffs = sh_add_directional(np.zeros((9, 3)), np.array([0.0, 0.0, 1.0]), [1.0, 1.0, 1.0])
+    >>> sh_irradiance(coeffs, np.array([0.0, 0.0, 1.0])).round(3)       # 1 up to the SH's ringing
+    array([1.062, 1.062, 1.062])
+    """
     d = normalize(np.asarray(direction, dtype=np.float64))
     rgb = np.broadcast_to(np.asarray(radiance, dtype=np.float64), (3,))
     return np.asarray(coeffs, dtype=np.float64) + sh_basis(d)[:, None] * rgb
@@ -405,7 +535,14 @@ def sh_add_directional(coeffs, direction, radiance) -> np.ndarray:
 def sh_irradiance(coeffs, normals) -> np.ndarray:
     """Irradiance ``E(n) = int L(w) <n, w>+ dw`` ``(..., 3)`` of the 9-coefficient SH
     radiance at world normals ``n`` (Ramamoorthi and Hanrahan 2001, Eq. 13). Exact for
-    radiance of degree <= 2 (constant and linear in particular)."""
+    radiance of degree <= 2 (constant and linear in particular).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sh_irradiance(sh_project(np.ones((8, 16, 3))), np.array([0.0, 0.0, 1.0])).round(4)    # pi
+    array([3.1416, 3.1416, 3.1416])
+    """
     L = np.asarray(coeffs, dtype=np.float64)
     n = np.asarray(normals, dtype=np.float64)
     x, y, z = (n[..., i, None] for i in range(3))
@@ -433,6 +570,14 @@ def diffuse_sh(moments, wo, coeffs, frame=None, albedo=1.0, n: int = 5,
         I = albedo / pi * sum_k W_k (<n_k, o>+ / n_k,z) E(n_k)  /  sum_k W_k <n_k, o>+ / n_k,z.
 
     Masking only. ``frame`` as in :func:`env_specular` (``None``: local = world).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import to_moments
+    >>> coeffs = sh_project(np.ones((8, 16, 3)))                  # uniform white sky and ground
+    >>> diffuse_sh(to_moments(0.3, 0.3), np.array([0.0, 0.6, 0.8]), coeffs, albedo=0.5).round(4)
+    array([0.5, 0.5, 0.5])
     """
     def irradiance(normals):
         if frame is not None:
@@ -445,7 +590,16 @@ def diffuse_sh(moments, wo, coeffs, frame=None, albedo=1.0, n: int = 5,
 def diffuse_directional(moments, wo, wi, irradiance=1.0, albedo=1.0, n: int = 5,
                         fallback: bool = True) -> np.ndarray:
     """Rough diffuse microfacets under one directional light of local direction ``wi``:
-    :func:`diffuse_sh` with ``E(n_k) = E <n_k, i>+`` (end of Sec. 3.6)."""
+    :func:`diffuse_sh` with ``E(n_k) = E <n_k, i>+`` (end of Sec. 3.6).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.leadr import to_moments
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> diffuse_directional(to_moments(1e-3, 1e-3), n, n, albedo=0.5).round(4)     # flat: albedo / pi
+    array([0.1592, 0.1592, 0.1592])
+    """
     wi = np.asarray(wi, dtype=np.float64)
     rgb = np.broadcast_to(np.asarray(irradiance, dtype=np.float64), (3,))
 
