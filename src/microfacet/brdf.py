@@ -284,6 +284,15 @@ class MicrofacetBRDF(BRDF):
             self.__dict__["_params"] = p
             return p
 
+    def __getstate__(self) -> dict:
+        """The attributes without the :attr:`params` record, made again at first use after
+        unpickling: pickle would bring its read-only arrays back writeable, and Numba compiles
+        another version of every kernel for writeable arrays (a process pool's workers would
+        each compile it instead of loading the cached one)."""
+        state = dict(self.__dict__)
+        state.pop("_params", None)
+        return state
+
     def __repr__(self) -> str:
         dtype = "" if self.dtype == np.float64 else f", dtype=numpy.{self.dtype}"
         return (f"MicrofacetBRDF({self.distribution!r}, fresnel={self.fresnel!r}, "

@@ -24,13 +24,15 @@ def _upscale(image, size):
     return np.repeat(np.repeat(image, f, axis=0), f, axis=1)
 
 
-def demo_section(out, size: int = 64, levels=(2, 4), base: float = 0.1, display: int = 128) -> str:
+def demo_section(out, size: int = 64, levels=(2, 4), base: float = 0.1, display: int = 128,
+                 scene_size: tuple[int, int] = (640, 400)) -> str:
     """Render the viewer section under ``out/viewer/`` and return its HTML.
 
     A ``size``² map (``figures.default_heightfield``) is baked and served; for each light
     (point, environment), MIP level and method, the browser's render of the patch
     (``mfViewer.renderPatch``) is saved beside ``figures.render_level``'s NumPy render, with
-    their mean relative difference; then screenshots of the 3D scene per method. Needs
+    their mean relative difference; then screenshots of the 3D scene per method, ``scene_size``
+    (width, height) pixels, each the frame its time per frame was measured on. Needs
     Playwright and a system Chromium (:func:`microfacet.glsl.browser.chromium_path`).
     """
     folder = Path(out) / "viewer"
@@ -41,7 +43,8 @@ def demo_section(out, size: int = 64, levels=(2, 4), base: float = 0.1, display:
     scene = figures.PatchScene()
     env = scene.environment()
     blocks = []
-    with open_viewer(data, 640, 400) as page:
+    width, height = scene_size
+    with open_viewer(data, width, height) as page:
         for light, kind in enumerate(("point", "env")):
             rows = {m: [] for m in _METHODS}
             exposure = None
@@ -65,15 +68,17 @@ def demo_section(out, size: int = 64, levels=(2, 4), base: float = 0.1, display:
         shots = []
         page.evaluate("() => { for (const id of ['bar', 'help']) document.getElementById(id).style.display = 'none'; }")
         for method, m in _METHODS.items():
-            ms = page.evaluate(f"mfViewer.benchmark({{method: {m}, light: 1, supersampling: 4, width: 640, "
-                               "height: 400, frames: 1})")
-            page.evaluate(f"() => {{ Object.assign(mfViewer.state, {{method: {m}, light: 1, supersampling: 4}}); "
-                          "mfViewer.draw(640, 400); }")
+            # the canvas keeps the benchmark's last frame (preserveDrawingBuffer): the screenshot
+            # is that frame, not drawn again (a reference frame takes seconds in SwiftShader)
+            ms = page.evaluate(f"mfViewer.benchmark({{method: {m}, light: 1, supersampling: 4, width: {width}, "
+                               f"height: {height}, frames: 1}})")
+            page.evaluate(f"() => {{ Object.assign(mfViewer.state, {{method: {m}, light: 1, supersampling: 4}}); }}")
             with atomic_path(folder / f"scene_{method}.png") as tmp:
                 page.locator("canvas").screenshot(path=str(tmp), type="png")
             shots.append((f"viewer/scene_{method}.png", f"{_LABELS[method]}, {ms:.0f} ms/frame"))
         errors = list(page.errors)
-    blocks.append("<h3>3D view (plane + sphere), environment light, 4x4 reference</h3>" + html_grid([("microfacet view", shots)]))
+    blocks.append(f"<h3>3D view (plane + sphere), environment light, 4x4 reference, {width}x{height} px</h3>"
+                  + html_grid([("microfacet view", shots)]))
     intro = (f"The WebGL2 viewer ('microfacet view', the package's GLSL ES 3.00 shaders) in headless Chromium "
              f"(SwiftShader), on a {size}x{size} displacement map merged with a Beckmann base (alpha {base:g}, "
              "silver): the patch of the LEADR section rendered per MIP level by naive MIP, LEADR and the "
