@@ -26,7 +26,14 @@ __all__ = ["input_name", "Item", "plan", "up_to_date", "remove_partials"]
 @dataclasses.dataclass(frozen=True)
 class Item:
     """One input file: its path, its path relative to the batch's root (the summary's
-    ``file``) and its main output."""
+    ``file``) and its main output.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> Item(Path("maps/a.png"), "a.png", Path("out/a.exr"))
+    Item(source=PosixPath('maps/a.png'), rel='a.png', out=PosixPath('out/a.exr'), problem='')
+    """
     source: Path
     rel: str
     out: Path
@@ -94,6 +101,21 @@ def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir:
     ``inputs`` is a folder or a list of files (whose root is their common folder). Raises
     :class:`MicrofacetError` when there is no input, an input is missing, or an output
     would overwrite an input.
+
+    Examples
+    --------
+    >>> import os
+    >>> from pathlib import Path
+    >>> from microfacet.batch import get_task
+    >>> os.makedirs("maps/rocks", exist_ok=True)
+    >>> for name in ("a.png", "rocks/b.png", "notes.txt"):
+    ...     _ = Path("maps", name).write_bytes(b"")
+    >>> [(i.rel, i.out.as_posix()) for i in plan(get_task("bake"), "maps", "out", recursive=True)]
+    [('a.png', 'out/a.exr'), ('rocks/b.png', 'out/rocks/b.exr')]
+    >>> plan(get_task("bake"), "no-such-folder", "out")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: no-such-folder: not a folder
     """
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -137,7 +159,18 @@ def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir:
 
 
 def up_to_date(task, item: Item) -> bool:
-    """Whether every output of ``item`` exists and is not older than its input."""
+    """Whether every output of ``item`` exists and is not older than its input.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> from microfacet.batch import get_task
+    >>> _ = Path("a.png").write_bytes(b"")
+    >>> task = get_task("bake")
+    >>> item = plan(task, ["a.png"], "out")[0]
+    >>> up_to_date(task, item)                 # no output yet
+    False
+    """
     try:
         t_in = item.source.stat().st_mtime_ns
         return all(out.stat().st_mtime_ns >= t_in for out in task.outputs(item.out))
@@ -149,6 +182,16 @@ def remove_partials(task, items: Iterable[Item], other_hosts: bool = False) -> i
     """Remove the temporary files (:func:`microfacet.io.atomic.atomic_path`) that a killed
     writer left beside the outputs of ``items`` (:func:`microfacet.io.atomic.remove_stale`:
     those of dead processes; a live writer's are kept; with ``other_hosts``, other machines'
-    too); returns how many."""
+    too); returns how many.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> from microfacet.batch import get_task
+    >>> _ = Path("a.png").write_bytes(b"")
+    >>> task = get_task("bake")
+    >>> remove_partials(task, plan(task, ["a.png"], "out"))     # nothing left by a killed writer
+    0
+    """
     return sum(len(remove_stale(out, other_hosts)) for item in items if not item.problem
                for out in task.outputs(item.out))

@@ -19,7 +19,13 @@ _CLEAR_REFS, _STATUS = "/proc/self/clear_refs", "/proc/self/status"
 
 def reset_peak() -> bool:
     """Reset this process's peak resident set size to its current one; ``False`` where
-    the system cannot (then :func:`peak_bytes` is the lifetime peak)."""
+    the system cannot (then :func:`peak_bytes` is the lifetime peak).
+
+    Examples
+    --------
+    >>> reset_peak() in (True, False)
+    True
+    """
     try:
         with open(_CLEAR_REFS, "w") as f:
             f.write("5")
@@ -30,7 +36,13 @@ def reset_peak() -> bool:
 
 def peak_bytes() -> int:
     """This process's peak resident set size in bytes since :func:`reset_peak` (``VmHWM``),
-    else since it started (``ru_maxrss``: kB on Linux, bytes on macOS)."""
+    else since it started (``ru_maxrss``: kB on Linux, bytes on macOS).
+
+    Examples
+    --------
+    >>> peak_bytes() > 0
+    True
+    """
     try:
         with open(_STATUS) as f:
             for line in f:
@@ -44,7 +56,13 @@ def peak_bytes() -> int:
 
 def available_bytes() -> int:
     """Memory available to new work: ``MemAvailable`` of ``/proc/meminfo``, else the free
-    physical pages (``os.sysconf``)."""
+    physical pages (``os.sysconf``).
+
+    Examples
+    --------
+    >>> available_bytes() > 0
+    True
+    """
     try:
         with open("/proc/meminfo") as f:
             for line in f:
@@ -56,7 +74,13 @@ def available_bytes() -> int:
 
 
 def cpu_count() -> int:
-    """CPUs this process may run on."""
+    """CPUs this process may run on.
+
+    Examples
+    --------
+    >>> cpu_count() >= 1
+    True
+    """
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:
@@ -65,7 +89,18 @@ def cpu_count() -> int:
 
 def default_jobs(peak_estimate: int, n_files: int, available: int | None = None, cpus: int | None = None) -> int:
     """Local worker processes: ``jobs x peak_estimate <= available`` memory, at most the CPU
-    count and the number of files, at least 1."""
+    count and the number of files, at least 1.
+
+    Examples
+    --------
+    >>> GB = 2 ** 30
+    >>> default_jobs(peak_estimate=3 * GB, n_files=100, available=16 * GB, cpus=8)    # memory-bound
+    5
+    >>> default_jobs(peak_estimate=GB // 10, n_files=100, available=16 * GB, cpus=8)  # CPU-bound
+    8
+    >>> default_jobs(peak_estimate=GB, n_files=2, available=16 * GB, cpus=8)          # two files
+    2
+    """
     available = available_bytes() if available is None else available
     cpus = cpu_count() if cpus is None else cpus
     by_memory = available // max(int(peak_estimate), 1)

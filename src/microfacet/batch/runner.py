@@ -18,6 +18,11 @@ same output keeps its own); local worker processes exit when the batch's process
 ``kill -9`` included (:mod:`microfacet.batch.workers`); a Dask scheduler is reached within
 ``connect_timeout`` seconds or the batch stops with one line saying what failed, before
 any file is touched.
+
+Examples
+--------
+>>> SCHEDULER_SCHEMES, CONNECT_TIMEOUT
+(('tcp', 'tls'), 10.0)
 """
 from __future__ import annotations
 
@@ -66,7 +71,20 @@ def execute(task: Task, item: Item, other_hosts: bool = False) -> dict:
     (``ok`` or ``error: reason``), ``seconds`` (wall clock), ``cpu_seconds`` (this
     process's CPU time: all its threads), ``peak_mb``, ``warnings`` (the task's warning
     messages, e.g. repaired normal-map texels, joined by `` / ``) and figures. A failed
-    file leaves none of its outputs."""
+    file leaves none of its outputs.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from pathlib import Path
+    >>> from microfacet.batch import get_task
+    >>> from microfacet.batch.files import plan
+    >>> _ = Path("in.png").write_bytes(b"not a PNG")
+    >>> task = get_task("bake")
+    >>> row = execute(task, plan(task, ["in.png"], "out")[0])
+    >>> row["status"], sorted(row)[:4]
+    ('error: not a PNG or OpenEXR image', ['cpu_seconds', 'peak_mb', 'seconds', 'status'])
+    """
     remove_partials(task, [item], other_hosts)
     item.out.parent.mkdir(parents=True, exist_ok=True)
     memory.reset_peak()
@@ -180,7 +198,13 @@ def connect_scheduler(address: str, timeout: float = CONNECT_TIMEOUT):
     client), an unknown host, a refused connection, no TCP connection, a listener that never
     answers, a client that does not start.
 
-    >>> client = connect_scheduler("tcp://127.0.0.1:8786", timeout=10)
+    Examples
+    --------
+    >>> client = connect_scheduler("tcp://127.0.0.1:8786", timeout=10)  # needs a Dask scheduler  # doctest: +SKIP
+    >>> connect_scheduler("inproc://cluster")
+    Traceback (most recent call last):
+        ...
+    microfacet.errors.MicrofacetError: Dask scheduler inproc://cluster: an inproc:// address works only inside the process that made the cluster; pass its distributed.Client instead, or use tcp://HOST:PORT
     """
     try:
         from distributed import Client
@@ -249,12 +273,28 @@ def _run_dask(task, items, client, report, progress: bool) -> None:
 
 def summary_columns(task: Task) -> tuple[str, ...]:
     """Columns of a batch summary: ``file``, ``status``, ``seconds``, ``cpu_seconds``,
-    ``peak_mb``, the task's figures and ``warnings``."""
+    ``peak_mb``, the task's figures and ``warnings``.
+
+    Examples
+    --------
+    >>> from microfacet.batch import get_task
+    >>> summary_columns(get_task("glints"))
+    ('file', 'status', 'seconds', 'cpu_seconds', 'peak_mb', 'width', 'height', 'lobes', 'levels', 'alpha_median', 'alpha_max', 'warnings')
+    """
     return ("file", "status", "seconds", "cpu_seconds", "peak_mb", *task.columns, "warnings")
 
 
 def format_summary_csv(task: Task, rows: Sequence[dict]) -> str:
-    """The rows as CSV (header :func:`summary_columns`, full precision)."""
+    """The rows as CSV (header :func:`summary_columns`, full precision).
+
+    Examples
+    --------
+    >>> from microfacet.batch import get_task
+    >>> rows = [{"file": "a.png", "status": "ok", "seconds": 0.5, "lobes": 256}]
+    >>> print(format_summary_csv(get_task("glints"), rows))
+    file,status,seconds,cpu_seconds,peak_mb,width,height,lobes,levels,alpha_median,alpha_max,warnings
+    a.png,ok,0.5,,,,,256,,,,
+    """
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=summary_columns(task), lineterminator="\n", extrasaction="ignore")
     w.writeheader()
@@ -267,7 +307,21 @@ def _cell(value) -> str:
 
 
 def format_summary_markdown(task: Task, rows: Sequence[dict]) -> str:
-    """The rows as a Markdown table and a count of each status."""
+    """The rows as a Markdown table and a count of each status.
+
+    Examples
+    --------
+    >>> from microfacet.batch import get_task
+    >>> rows = [{"file": "a.png", "status": "ok", "seconds": 0.5, "lobes": 256},
+    ...         {"file": "b.png", "status": "error: not a PNG", "seconds": 0.1}]
+    >>> print(format_summary_markdown(get_task("glints"), rows))
+    | file | status | seconds | cpu_seconds | peak_mb | width | height | lobes | levels | alpha_median | alpha_max | warnings |
+    |---|---|---|---|---|---|---|---|---|---|---|---|
+    | a.png | ok | 0.5 |  |  |  |  | 256 |  |  |  |  |
+    | b.png | error: not a PNG | 0.1 |  |  |  |  |  |  |  |  |  |
+    <BLANKLINE>
+    1 ok, 1 error of 2 files.
+    """
     columns = summary_columns(task)
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(_cell(r.get(k, "")) for k in columns) + " |" for r in rows]
@@ -338,6 +392,23 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
         nothing is written).
     KeyboardInterrupt
         After writing the summary of what was done.
+
+    Examples
+    --------
+    >>> import os, numpy as np
+    >>> from microfacet.io import write_png_data
+    >>> from microfacet.leadr import gaussian_heightfield
+    >>> os.makedirs("heights", exist_ok=True)
+    >>> for seed in (0, 1):                  # two 16 x 16 height maps
+    ...     h = gaussian_heightfield((16, 16), 0.3, seed=seed)
+    ...     _ = write_png_data(f"heights/h{seed}.png", np.round((h - h.min()) / np.ptp(h) * 65535).astype(np.uint16))
+    >>> rows = run("bake", "heights", "pyramids", jobs=1, progress=False, scale=0.05)
+    >>> [(r["file"], r["status"], r["levels"]) for r in rows]
+    [('h0.png', 'ok', 5), ('h1.png', 'ok', 5)]
+    >>> sorted(os.listdir("pyramids"))
+    ['h0.exr', 'h0.png', 'h1.exr', 'h1.png', 'summary.csv', 'summary.md']
+    >>> [r["status"] for r in run("bake", "heights", "pyramids", jobs=1, progress=False, scale=0.05)]
+    ['skipped', 'skipped']
     """
     task = get_task(task, **options)
     if jobs is not None and scheduler is not None:

@@ -5,6 +5,11 @@ A task reads one input file and writes its outputs (a main output and side outpu
 the same stem), each atomically (:mod:`microfacet.io.atomic`); it returns the figures of
 its summary row. It has no other effect, so it can run in any process or on any machine
 that sees the files, any number of times: the outputs are the same bytes every time.
+
+Examples
+--------
+>>> sorted(TASKS), PLAUSIBLE_ALPHA, SUGGESTED_ALPHA
+(['bake', 'fit', 'glints'], 4.0, 0.2)
 """
 from __future__ import annotations
 
@@ -42,7 +47,15 @@ FIT_PEAK_BYTES = 400e6
 
 def image_pixels(path: str | os.PathLike) -> int:
     """Pixels of a PNG (its IHDR chunk) or EXR (its header), without decoding the image;
-    for another or an unreadable file, its size in bytes (an upper bound for a PNG)."""
+    for another or an unreadable file, its size in bytes (an upper bound for a PNG).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.io import write_png_data
+    >>> image_pixels(write_png_data("tile.png", np.zeros((16, 8), np.uint8)))
+    128
+    """
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -66,6 +79,14 @@ class Task:
     and its side outputs ``out.with_suffix(s)`` for ``s`` in ``suffixes[1:]`` and returns
     the figures named by ``columns``. ``inputs`` are the input suffixes it takes from a
     folder (``()``: every file). ``peak(source)`` estimates its peak memory in bytes.
+
+    Examples
+    --------
+    >>> task = get_task("bake", scale=0.02)
+    >>> task.name, task.suffixes, task.inputs, task.options
+    ('bake', ('.exr', '.png'), ('.png', '.exr'), (('scale', 0.02),))
+    >>> task.with_options(roughness=0.1).options
+    (('roughness', 0.1), ('scale', 0.02))
     """
     name: str
     function: Callable[..., dict]
@@ -119,8 +140,13 @@ def slope_scale_warning(source, top, scale: float, base=None) -> str | None:
     the scale that makes it :data:`SUGGESTED_ALPHA` (slopes scale linearly with ``scale``),
     to one significant digit.
 
-    >>> slope_scale_warning("h.exr", top_moments, 1.0)
-    'h.exr: at --scale 1 the heights' slopes have roughness alpha 96.75 (...); --scale 0.002 gives alpha ~0.2'
+    Examples
+    --------
+    >>> from microfacet.leadr import to_moments
+    >>> slope_scale_warning("h.exr", to_moments(26.4, 2.1), 1.0)
+    "h.exr: at --scale 1 the heights' slopes have roughness alpha 26.4 (above 4: facets steeper than 70 degrees, a black preview; are the heights in another unit than the map's width?); --scale 0.008 gives alpha ~0.2"
+    >>> slope_scale_warning("h.exr", to_moments(0.3, 0.2), 1.0) is None
+    True
     """
     from ..leadr import base_moments
     E = np.asarray(top, dtype=np.float64).reshape(5)
@@ -143,7 +169,20 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     """``microfacet bake``: a height (or normal) map's LEAN/LEADR moment pyramid
     (E1..E5, thesis Eq. 3.5-3.9, merged with a base roughness by Listing 5.1) as
     ``out`` (.exr, lossless ``compression``, see ``leadr.write_pyramid``) and its filtered-appearance preview ``out.png``. Returns the size, the
-    number of MIP levels and the top level's Beckmann lobe."""
+    number of MIP levels and the top level's Beckmann lobe.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from pathlib import Path
+    >>> from microfacet.io import write_png_data
+    >>> from microfacet.leadr import gaussian_heightfield
+    >>> h = gaussian_heightfield((16, 16), 0.3, seed=0)          # a 16 x 16 16-bit height map
+    >>> _ = write_png_data("bumps.png", np.round((h - h.min()) / np.ptp(h) * 65535).astype(np.uint16))
+    >>> row = bake_file(Path("bumps.png"), Path("bumps.exr"), scale=0.05)
+    >>> row["width"], row["levels"], round(row["alpha_x"], 3)
+    (16, 5, 0.088)
+    """
     from ..io.image import read_image
     reading = None if normal_map else in_background(read_image, source)   # the decode overlaps the imports
     from .. import leadr
@@ -192,7 +231,19 @@ def glints_file(source: Path, out: Path, spacing: float = 1.0, sigma_eps: float 
                 encoding: str = "auto", z: str = "auto") -> dict:
     """``microfacet glints``: a normal map's Beckmann lobe mixture and hierarchy
     (Chermain et al. 2019, Eq. 3-6, Sec. 4.2.2, 5) as ``out`` (.npz). Returns the lobe
-    count, map size, MIP levels and the lobes' median and largest roughness."""
+    count, map size, MIP levels and the lobes' median and largest roughness.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from pathlib import Path
+    >>> from microfacet.leadr import encode_normal_map, gaussian_heightfield, height_to_slopes, write_normal_map
+    >>> slopes = height_to_slopes(gaussian_heightfield((16, 16), 0.3, seed=0))
+    >>> _ = write_normal_map("normals.png", encode_normal_map(slopes))     # a 16 x 16 normal map
+    >>> row = glints_file(Path("normals.png"), Path("normals.npz"))
+    >>> row["lobes"], row["levels"]
+    (256, 5)
+    """
     from ..glints import Microsurface
     ms = Microsurface.from_normal_map(source, h=spacing, sigma_eps=sigma_eps, encoding=encoding, z=z)
     ms.save(out)
@@ -216,7 +267,15 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     """``microfacet fit``: a measured BRDF's power-iteration fit (thesis Ch. 4) and its
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
-    Returns the summary figures."""
+    Returns the summary figures.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> row = fit_file(Path("gold.binary"), Path("gold.npz"), resolution=32)   # needs a MERL file, ~3 s  # doctest: +SKIP
+    >>> sorted(row)[:3]                                                          # doctest: +SKIP
+    ['albedo_beckmann', 'albedo_ggx', 'albedo_tabulated']
+    """
     reading = in_background(read_decompressed, source, MEASURED_BRDF)   # read + gunzip (GIL released) overlap the imports
     from ..fit.outputs import fit_material, summary_row
     from ..measured import load_bytes
@@ -251,7 +310,17 @@ TASKS = {
 
 
 def get_task(task: "str | Task", **options) -> Task:
-    """The task named ``task`` (``bake``, ``glints``, ``fit``) or ``task`` itself, with ``options``."""
+    """The task named ``task`` (``bake``, ``glints``, ``fit``) or ``task`` itself, with ``options``.
+
+    Examples
+    --------
+    >>> get_task("glints").columns
+    ('width', 'height', 'lobes', 'levels', 'alpha_median', 'alpha_max')
+    >>> get_task("render")
+    Traceback (most recent call last):
+        ...
+    ValueError: unknown batch task 'render' (known: bake, glints, fit)
+    """
     if isinstance(task, str):
         if task not in TASKS:
             raise ValueError(f"unknown batch task {task!r} (known: {', '.join(TASKS)})")

@@ -23,7 +23,18 @@ POLL_SECONDS = 0.5
 
 
 def process_ended(pid: int) -> bool:
-    """Whether process ``pid`` has ended (gone, or a zombie not yet reaped)."""
+    """Whether process ``pid`` has ended (gone, or a zombie not yet reaped).
+
+    Examples
+    --------
+    >>> import os, subprocess, sys
+    >>> process_ended(os.getpid())
+    False
+    >>> child = subprocess.Popen([sys.executable, "-c", "pass"])
+    >>> _ = child.wait()
+    >>> process_ended(child.pid)
+    True
+    """
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
