@@ -21,6 +21,11 @@ The NDF is recovered at the nodes of :func:`theta_grid` (and azimuths ``2 pi k /
 The grazing node ``theta = pi/2``, where backscattering is not measurable (an input may
 return garbage there), takes the value of its neighbour (constant extrapolation, which
 keeps the eigenproblem linear and nonnegative).
+
+Examples
+--------
+>>> BACKSCATTER_GAFS, MEASURED_MAX, TV_MAX
+(('masking', 'height_correlated'), 1000000.0, 2.0)
 """
 from __future__ import annotations
 
@@ -47,7 +52,14 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def luminance(rgb) -> np.ndarray:
-    """Rec. 709 luminance of RGB values ``(..., 3)``."""
+    """Rec. 709 luminance of RGB values ``(..., 3)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> luminance(np.array([[1.0, 1.0, 1.0], [1.0, 0.0, 0.0]])).round(4)
+    array([1.    , 0.2126])
+    """
     return np.asarray(rgb, dtype=np.float64) @ LUMINANCE
 
 
@@ -63,7 +75,15 @@ def _directions(theta, phi) -> np.ndarray:
 
 
 def backscattering(brdf, theta, phi=0.0) -> np.ndarray:
-    """Luminance of ``f_r(o, o)`` at ``o = (theta, phi)``, garbage set to 0 (Eq. 4.1)."""
+    """Luminance of ``f_r(o, o)`` at ``o = (theta, phi)``, garbage set to 0 (Eq. 4.1).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> backscattering(brdf, np.radians([0.0, 30.0, 60.0])).round(4)    # f_r(o, o), luminance
+    array([0.0354, 0.0037, 0.0017])
+    """
     o = _directions(theta, phi)
     return _clean(luminance(_clean(brdf.eval(o, o))))
 
@@ -84,7 +104,15 @@ def screen_measured(brdf):
     most :data:`IGNORED_SHARE` of the measured samples; a ``RuntimeWarning`` names the file
     and their count), or a :class:`~microfacet.errors.MicrofacetError` naming the file and
     the count when they are more. Costs one pass over the table (~5 ms) when all is well.
-    Example: ``fit(screen_measured(load(path)))`` (:func:`microfacet.fit.fit` calls it)."""
+    Example: ``fit(screen_measured(load(path)))`` (:func:`microfacet.fit.fit` calls it).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    >>> screen_measured(brdf) is brdf                 # not a MERL table: returned as it is
+    True
+    """
     from ..measured import MERLBRDF
     if not isinstance(brdf, MERLBRDF):
         return brdf
@@ -186,6 +214,17 @@ def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray, model: str = "
     Returns ``(K', None)`` for ``"masking"`` and, for ``"height_correlated"``,
     ``(2 K', (u, v))`` with the rank-one term ``u = 4 f cos^2 theta_o``, ``v = M[z]``
     (the row of ``A`` at the normal): ``F0 D = 2 K' D - u (v . D)`` (module docstring).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> from microfacet.distributions.tabulated import theta_grid
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> theta = theta_grid(16)
+    >>> f_back = backscattering(brdf, theta[:-1])         # the grazing node is not measured
+    >>> k, rank_one = smith_kernel_isotropic(f_back, theta, "height_correlated")
+    >>> k.shape, [a.shape for a in rank_one]
+    ((15, 15), [(15,), (15,)])
     """
     _check_model(model)
     m = projected_area_matrix_isotropic(theta, theta[:-1]).copy()
@@ -211,7 +250,17 @@ class AzimuthalKernel:
     per product instead of ``O(n^2 m^2)`` for the dense ``(n m)^2`` matrix, and exact to
     rounding. ``p`` is over the rows ``i < n - 1`` (row-major, ``(n - 1) m``); the grazing
     row of ``h`` takes the values of its neighbour (folded). ``k @ p`` and ``k.dense()``
-    (the explicit matrix, for tests) are provided."""
+    (the explicit matrix, for tests) are provided.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.distributions.tabulated import theta_grid
+    >>> k = AzimuthalKernel(theta_grid(6), 4, np.ones(5 * 4))
+    >>> p = np.random.default_rng(0).random(5 * 4)
+    >>> bool(np.allclose(k @ p, k.dense() @ p))       # the DFT product equals the dense matrix's
+    True
+    """
 
     dtype = np.float64
 
@@ -240,7 +289,19 @@ def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndar
     rule), the grazing row folded onto its neighbour, as an :class:`AzimuthalKernel`
     (``phi`` must be the uniform ``2 pi k / m``). ``f_back`` is ``(n - 1, m)``.
     Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
-    as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal."""
+    as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> from microfacet.distributions.tabulated import theta_grid
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.4))
+    >>> theta, phi = theta_grid(8), 2 * np.pi * np.arange(8) / 8
+    >>> f_back = backscattering(brdf, theta[:-1, None], phi[None, :])
+    >>> k, _ = smith_kernel_anisotropic(f_back, theta, phi)
+    >>> type(k).__name__, k.dense().shape
+    ('AzimuthalKernel', (56, 56))
+    """
     _check_model(model)
     m = len(phi)
     if not np.allclose(phi, np.arange(m) * (2.0 * np.pi / m), atol=1e-12):
@@ -260,7 +321,16 @@ def rule_area_at_normal(dist, refine: int = 1) -> float:
     (1 for an exact rule): the eigenvalue of the discrete kernel divided by it is ``F0``
     (Eq. 4.9) for the exactly normalized ``D``. ``refine``: a radial table resampled from
     the kernel's nodes (:func:`~microfacet.distributions.tabulated.refine_radial`), whose
-    every ``refine``-th node is one of the kernel's."""
+    every ``refine``-th node is one of the kernel's.
+
+    Examples
+    --------
+    >>> from microfacet.distributions.tabulated import TabulatedIsotropic, theta_grid
+    >>> import numpy as np
+    >>> d = TabulatedIsotropic(np.exp(-np.tan(theta_grid(16)) ** 2 / 0.09) / np.cos(theta_grid(16)) ** 4)
+    >>> round(rule_area_at_normal(d), 3)          # 1 for an exact rule
+    1.043
+    """
     d = dist.ndf_table
     if d.ndim == 1:
         return float(projected_area_matrix_isotropic(dist.theta[::refine], np.zeros(1))[0] @ d[::refine])
@@ -275,7 +345,20 @@ def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, ran
     ``K p - u (v . p)`` (height-correlated backscattering), clamped at 0: it is
     nonnegative on symmetric ``p`` (``A(o) >= cos theta_o A(z)``), so the clamp only
     guards rounding and asymmetric inputs. ``k`` is a matrix or an operator with
-    ``k @ p`` (:class:`AzimuthalKernel`); the iterate is kept in float64."""
+    ``k @ p`` (:class:`AzimuthalKernel`); the iterate is kept in float64.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> from microfacet.distributions.tabulated import theta_grid
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> theta = theta_grid(16)
+    >>> f_back = backscattering(brdf, theta[:-1])         # the grazing node is not measured
+    >>> k, rank_one = smith_kernel_isotropic(f_back, theta, "height_correlated")
+    >>> d, eigenvalue, iterations = power_iteration(k, rank_one=rank_one)
+    >>> d.shape, round(float(eigenvalue), 3)         # F0 = 0.04 up to the rule's normalization
+    ((15,), 0.041)
+    """
     p = np.full(k.shape[0], 1.0 / k.shape[0])
     lam = 0.0
     for it in range(1, max_iter + 1):
@@ -298,7 +381,16 @@ def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, ran
 def ndf_closed_form(f_back: np.ndarray, theta: np.ndarray, gaf: str) -> np.ndarray:
     """``F0 D(h) = 4 f_r(h, h) / G(h, h) cos^2 theta_h`` in closed form: V-groove
     ``4 f max(cos^2, 1/2)`` (Eq. 4.17 divided by ``cos^4``), normal map ``4 f``
-    (Eq. 4.18). ``theta`` broadcasts against ``f_back``."""
+    (Eq. 4.18). ``theta`` broadcasts against ``f_back``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ndf_closed_form(np.array([1.0, 0.5]), np.radians([0.0, 60.0]), "vgroove")
+    array([4., 1.])
+    >>> ndf_closed_form(np.array([1.0, 0.5]), np.radians([0.0, 60.0]), "normal_map")
+    array([4., 2.])
+    """
     if gaf == "vgroove":
         return 4.0 * f_back * np.maximum(np.cos(theta) ** 2, 0.5)
     if gaf == "normal_map":
@@ -331,7 +423,15 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
     (``f(theta_h, theta_d, phi_d) = f(theta_h, theta_d, pi - phi_d)``), so the full
     circle only repeats these configurations.
     Returns ``wi, wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` (nonfinite or
-    negative values set to 0) and ``finite`` ``(K,)`` (configurations to use)."""
+    negative values set to 0) and ``finite`` ``(K,)`` (configurations to use).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> s = fresnel_samples(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), n_d=4, n_h=4, n_phi_d=4)
+    >>> sorted(s), s["wi"].shape
+    (['cos_d', 'f', 'finite', 'n_d', 'wi', 'wo'], (64, 3))
+    """
     step = HALF_PI / (n_d - 1)
     theta_d = np.linspace(0.0, HALF_PI, n_d)
     theta_h = ((np.arange(n_h) + 0.5) / n_h) ** 2 * HALF_PI
@@ -355,7 +455,15 @@ class FresnelSolution(NamedTuple):
     ``k_d`` (zeros without a base), and ``misfit``: the model's :func:`chi2_residual` over
     the usable configurations (a weighting that does not depend on the NDF, so that fits
     with different NDFs compare), plus, with an albedo weight ``lambda``, the albedo term
-    ``lambda^2 mean_{v, c} (a_fit / a_data - 1)^2`` at the solution."""
+    ``lambda^2 mean_{v, c} (a_fit / a_data - 1)^2`` at the solution.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> sol = extract_fresnel(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), n_d=4)
+    >>> isinstance(sol, FresnelSolution), sol.rgb.shape, round(sol.misfit, 6)
+    (True, (4, 3), 0.0)
+    """
     cos_theta_d: np.ndarray
     rgb: np.ndarray
     k_d: np.ndarray
@@ -414,6 +522,17 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     as well, while the constraint still bounds it from above.
 
     Returns a :class:`FresnelSolution` ``(cos_theta_d, rgb, k_d, misfit)``.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> ideal = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))                 # the fitted ideal-mirror BRDF
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> sol = solve_fresnel(fresnel_samples(brdf, n_d=8, n_h=8, n_phi_d=8), ideal)
+    >>> sol.rgb[:, 0].round(3), sol.k_d
+    (array([0.837, 0.306, 0.079, 0.046, 0.04 , 0.04 , 0.04 , 0.04 ]), array([0., 0., 0.]))
+    >>> mf.fresnel.Schlick(0.04)(sol.cos_theta_d)[:, 0].round(3)     # the truth at the nodes
+    array([1.   , 0.313, 0.096, 0.047, 0.04 , 0.04 , 0.04 , 0.04 ])
     """
     if not (np.isfinite(albedo_weight) and albedo_weight >= 0):
         raise ValueError(f"albedo_weight must be a finite number >= 0, got {albedo_weight!r}")
@@ -512,7 +631,13 @@ def table_variation(values) -> np.ndarray:
     """Total variation of a table over its range, per column: ``sum_k |F_{k+1} - F_k| /
     (max F - min F)`` (1 for a monotone table, 1 for a constant one; ``values`` ``(n,)`` or
     ``(n, C)``). Fresnel tables of the fits keep it at most :data:`TV_MAX`. Example:
-    ``table_variation([0, 1, 0, 1]) == 3.0``."""
+    ``table_variation([0, 1, 0, 1]) == 3.0``.
+
+    Examples
+    --------
+    >>> table_variation([0.0, 1.0, 0.0, 1.0]), table_variation([0.1, 0.5, 0.9])
+    (3.0, 1.0)
+    """
     v = np.asarray(values, dtype=np.float64)
     v = v.reshape(len(v), -1)
     tv = np.sum(np.abs(np.diff(v, axis=0)), axis=0)
@@ -539,7 +664,16 @@ def smooth_table_qp(h: np.ndarray, g: np.ndarray, bounds, n_d: int, smoothing: f
     pool-adjacent-violators; Ayer et al. 1955) projection of the smoothest solution,
     nondecreasing or nonincreasing whichever is nearer, scaled down to meet the albedo
     rows: its variation is then its range. ``x[n_d:]`` (a diffuse base) is not penalized.
-    Returns ``(x, mu)`` (``mu`` inf for the monotone projection)."""
+    Returns ``(x, mu)`` (``mu`` inf for the monotone projection).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> h, g = np.eye(4), np.array([0.2, 0.9, 0.1, 0.8])       # an oscillating least-squares table
+    >>> x, mu = smooth_table_qp(h, g, (np.zeros(4), np.ones(4)), n_d=4, tv_max=1.5)
+    >>> x.round(3), float(table_variation(x)) <= 1.5
+    (array([0.336, 0.491, 0.509, 0.664]), True)
+    """
     lo, hi = bounds
     lap = np.diff(np.eye(n_d), 2, axis=0)
     penalty = lap.T @ lap
@@ -640,7 +774,15 @@ def _albedo_objective(albedo, c: int, diffuse: bool, weight: float):
 def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
     """``sum_j sum_c (model_jc - f_jc)^2 / (Y(f_j) + eps) / sum_j Y(f_j)`` (a Pearson
     chi-square, ``Y`` the luminance, ``eps`` 1e-3 of its mean): relative to the data
-    everywhere, lobe and floor alike, whatever the model."""
+    everywhere, lobe and floor alike, whatever the model.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> f = np.array([[1.0, 1.0, 1.0], [0.1, 0.1, 0.1]])
+    >>> chi2_residual(f, f), round(chi2_residual(1.1 * f, f), 6)
+    (0.0, 0.02997)
+    """
     y = luminance(f)
     eps = 1e-3 * max(float(np.mean(y)), 1e-300)
     return float(np.sum(np.sum((model - f) ** 2, axis=-1) / (y + eps)) / max(float(np.sum(y)), 1e-300))
@@ -719,7 +861,14 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     (``|x - P(x - grad)| <= tol |g|``). Exact for the final active set (one Cholesky solve
     per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
     ``g = r^T y``. ``x0``: the start (projected on the box; default the unconstrained
-    minimizer projected), e.g. the solution of a nearby problem, whose active set it guesses."""
+    minimizer projected), e.g. the solution of a nearby problem, whose active set it guesses.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> box_qp(np.eye(2), np.array([2.0, -1.0]), np.zeros(2), np.ones(2))    # clipped to the box
+    array([1., 0.])
+    """
     scale = max(float(np.max(np.abs(g))), 1e-300)
     if not np.isfinite(scale + float(np.sum(h))):
         raise MicrofacetError("fit: a least-squares system is not finite (do the BRDF's values overflow?)")
@@ -819,7 +968,17 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     data are not finite or negative (garbage at grazing angles) are left out of both the
     rows and the data's albedo, so that they compare over the same directions. Returns ``(a,
     a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``; ``brdf=None``: the model's rows alone
-    (``a_data`` None), e.g. to bound a fit's own albedo."""
+    (``a_data`` None), e.g. to bound a fit's own albedo.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> ideal = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> a, a_data = albedo_rows(brdf, ideal, 4, np.array([[0.0, 0.0, 1.0]]), n_u=8)
+    >>> a.shape, a_data.shape
+    ((1, 5), (1, 3))
+    """
     from ..brdf import Lambertian
     from ..geometry import dot
 
@@ -885,7 +1044,16 @@ def _cosine_strategy(n_u: int, views, n_d: int):
 def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: int = 1,
                     diffuse: bool = False, isotropic: bool = False):
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
-    Algorithm 2): a :class:`FresnelSolution`."""
+    Algorithm 2): a :class:`FresnelSolution`.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> sol = extract_fresnel(brdf, mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), n_d=6, n_h=8, n_phi_d=8)
+    >>> sol.cos_theta_d.round(3), sol.rgb[:, 1].round(3)
+    (array([0.   , 0.309, 0.588, 0.809, 0.951, 1.   ]), array([0.721, 0.186, 0.035, 0.042, 0.04 , 0.04 ]))
+    """
     return solve_fresnel(fresnel_samples(brdf, n_d, n_h, n_phi_d, n_phi_h, isotropic), ideal, diffuse=diffuse)
 
 
