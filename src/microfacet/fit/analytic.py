@@ -42,6 +42,13 @@ fit (thesis App. C); a coat's roughness by a scan at that shape, then ``L-BFGS-B
 all from the :data:`COAT_STARTS` best, each on the box-only objective, then the best on
 ``E`` (:func:`_coat_search`); a conductor is fitted at the table fit's shape and
 both refined together.
+
+Examples
+--------
+>>> sorted(MODELS), FRESNELS, ALPHA_BOUNDS
+(['beckmann', 'ggx'], ('conductor', 'schlick', 'table'), (0.001, 2.0))
+>>> TABLE_NODES.round(3), len(FRESNEL_NODES)         # cos theta_d, every 15 and every 1 degree
+(array([0.   , 0.259, 0.5  , 0.707, 0.866, 0.966, 1.   ]), 91)
 """
 from __future__ import annotations
 
@@ -105,6 +112,17 @@ class SumBRDF(BRDF):
     first uniform, rescaled, drives the chosen lobe), so ``pdf = sum_j w_j pdf_j`` and
     the weight is the exact ``eval_cos / pdf`` of the sum (multi-sample MIS, balance
     heuristic). ``weights`` default to equal; they change the variance, never the mean.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.5))
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> brdf.eval(n, n).round(4)           # 0.0354 (the lobe) + 0.5 / pi
+    array([0.1945, 0.1945, 0.1945])
+    >>> wi, weight, pdf = brdf.sample(np.array([0.3, 0.6]), n)
+    >>> bool(np.allclose(weight * pdf, brdf.eval_cos(wi, n)))     # weight = f cos / pdf
+    True
     """
 
     def __init__(self, *brdfs: BRDF, weights=None):
@@ -771,6 +789,14 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     -------
     MicrofacetBRDF, or SumBRDF(MicrofacetBRDF[, coat MicrofacetBRDF][, Lambertian]) with a
     coat or a diffuse base.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> reference = mf.MicrofacetBRDF(mf.Beckmann(alpha=0.25), mf.fresnel.Schlick(0.9))
+    >>> ggx = fit_analytic(reference, "ggx", fresnel="schlick", n=8, n_uniform=512)
+    >>> type(ggx.distribution).__name__, round(float(ggx.distribution.alpha_x), 2)
+    ('GGX', 0.23)
     """
     if model not in MODELS:
         raise ValueError(f"model must be one of {tuple(MODELS)}, got {model!r}")

@@ -23,6 +23,11 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
 materials is a batch (:mod:`microfacet.batch`, task ``fit``): one such triple per
 material and ``summary.csv`` / ``summary.md`` with the figures of :func:`summary_row`.
 Every file is written atomically.
+
+Examples
+--------
+>>> METHODS, DIFFUSE, SUMMARY_COLUMNS[:5]
+(('least_squares', 'moments'), ('auto', 'on', 'off'), ('material', 'file', 'format', 'status', 'seconds'))
 """
 from __future__ import annotations
 
@@ -63,7 +68,14 @@ SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "best", "l
 
 
 def distribution_params(brdf) -> dict[str, float]:
-    """``{"alpha_x", "alpha_y", "rho"}`` of a :class:`microfacet.MicrofacetBRDF`."""
+    """``{"alpha_x", "alpha_y", "rho"}`` of a :class:`microfacet.MicrofacetBRDF`.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> distribution_params(mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.4, rho=0.1)))
+    {'alpha_x': 0.2, 'alpha_y': 0.4, 'rho': 0.1}
+    """
     d = brdf.distribution
     rho = float(d.rho)
     return {"alpha_x": float(d.alpha_x), "alpha_y": float(d.alpha_y),
@@ -71,7 +83,16 @@ def distribution_params(brdf) -> dict[str, float]:
 
 
 def fresnel_json(fresnel) -> dict:
-    """A JSON-able description of a Fresnel term: its type and parameters or samples."""
+    """A JSON-able description of a Fresnel term: its type and parameters or samples.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> fresnel_json(mf.fresnel.Schlick(0.04))
+    {'type': 'schlick', 'f0': [0.04, 0.04, 0.04], 'f90': [1.0, 1.0, 1.0]}
+    >>> fresnel_json(mf.fresnel.Conductor(eta=0.2, k=3.0))
+    {'type': 'conductor', 'eta': [0.2, 0.2, 0.2], 'k': [3.0, 3.0, 3.0]}
+    """
     kind = type(fresnel).__name__.lower()
     if hasattr(fresnel, "cos_theta_d") and hasattr(fresnel, "values"):
         return {"type": kind, "cos_theta_d": np.asarray(fresnel.cos_theta_d, float).round(6).tolist(),
@@ -98,7 +119,15 @@ def _parts(brdf):
 def analytic_json(brdf) -> dict:
     """``{"model", "alpha_x", "alpha_y", "rho", "mean_slope", "gaf", "fresnel", "coat", "diffuse"}``
     of an analytic fit (a MicrofacetBRDF, or a SumBRDF of one, an optional coat lobe and an
-    optional Lambertian base); ``"coat"``: ``{"alpha", "fresnel"}`` or null."""
+    optional Lambertian base); ``"coat"``: ``{"alpha", "fresnel"}`` or null.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> entry = analytic_json(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.2), mf.fresnel.Schlick(0.9)))
+    >>> entry["model"], entry["alpha_x"], entry["gaf"], entry["coat"], entry["diffuse"]
+    ('beckmann', 0.2, 'smith', None, None)
+    """
     lobe, coat, base = _parts(brdf)
     return {"model": type(lobe.distribution).__name__.lower(), **distribution_params(lobe),
             "mean_slope": np.asarray(lobe.distribution.mean_slope, float).tolist(), "gaf": lobe.gaf_model,
@@ -109,7 +138,15 @@ def analytic_json(brdf) -> dict:
 
 
 def analytic_from_json(entry: dict):
-    """The BRDF of an :func:`analytic_json` entry (inverse up to the rounding of tables)."""
+    """The BRDF of an :func:`analytic_json` entry (inverse up to the rounding of tables).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> brdf = analytic_from_json(analytic_json(mf.MicrofacetBRDF(mf.GGX(alpha=0.3))))
+    >>> brdf
+    MicrofacetBRDF(GGX(alpha_x=0.3, alpha_y=0.3, rho=0.0, mean_slope=[0.0, 0.0]), fresnel=Ideal(), gaf='smith', shadowing=True)
+    """
     from .. import fresnel as fr
     from ..brdf import Lambertian, MicrofacetBRDF
     from .analytic import MODELS, SumBRDF
@@ -186,7 +223,14 @@ def _scores(metrics: tuple, named: dict) -> tuple[dict, dict, dict, dict]:
 def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -> float:
     """The objective of :func:`microfacet.fit.fit_analytic` from the metrics:
     ``e_grid^2 + e_uniform^2 + albedo_weight^2 mean((ratio - 1)^2)`` (views x RGB, NaN ratios
-    left out); :func:`fit_material` keeps the least-squares fit of least value."""
+    left out); :func:`fit_material` keeps the least-squares fit of least value.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> round(objective(0.1, 0.2, np.array([[1.1, 1.1, 1.1]]), albedo_weight=1.0), 6)   # 0.01 + 0.04 + 0.01
+    0.06
+    """
     r = np.asarray(albedo_ratio, dtype=np.float64)
     r = r[np.isfinite(r)]
     return grid**2 + uniform**2 + (albedo_weight**2 * float(np.mean((r - 1.0) ** 2)) if len(r) else 0.0)
@@ -213,6 +257,16 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     Returns the JSON summary (module docstring); ``seconds`` holds the time of the tabulated
     fit and of the least-squares fits (wall, until the last ends; not of the errors,
     picture or files).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> reference = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> summary = fit_material(reference, "fits/ggx.npz", resolution=8, picture=False, diffuse="off")  # ~2 s  # doctest: +SKIP
+    >>> sorted(p.name for p in __import__("pathlib").Path("fits").iterdir())      # doctest: +SKIP
+    ['ggx.json', 'ggx.npz']
+    >>> summary["best"], summary["ggx"]["model"], round(summary["ggx"]["alpha_x"], 2)  # doctest: +SKIP
+    ('lobe', 'ggx', 0.3)
     """
     from .analytic import ALBEDO_WEIGHT
     albedo_weight = ALBEDO_WEIGHT if albedo_weight is None else float(albedo_weight)
@@ -503,7 +557,14 @@ def _worst(ratios) -> float:
 
 
 def summary_row(name: str, path, fmt: str, summary: dict | None, status: str = "ok") -> dict:
-    """A row of the folder summary (:data:`SUMMARY_COLUMNS`) from a JSON summary."""
+    """A row of the folder summary (:data:`SUMMARY_COLUMNS`) from a JSON summary.
+
+    Examples
+    --------
+    >>> row = summary_row("gold", "gold.binary", "merl", None, status="error: unreadable")
+    >>> row["material"], row["status"], len(row) == len(SUMMARY_COLUMNS)
+    ('gold', 'error: unreadable', True)
+    """
     row = dict.fromkeys(SUMMARY_COLUMNS, "")
     row.update(material=name, file=Path(path).name, format=fmt, status=status)
     if summary is not None:
@@ -534,7 +595,14 @@ def _cell(value, digits: int = 4) -> str:
 
 
 def format_summary_markdown(rows: Sequence[dict]) -> str:
-    """The rows as a Markdown table, plus notes on the metrics."""
+    """The rows as a Markdown table, plus notes on the metrics.
+
+    Examples
+    --------
+    >>> rows = [summary_row("gold", "gold.binary", "merl", None, status="error: unreadable")]
+    >>> print(format_summary_markdown(rows).splitlines()[0][:60])
+    | material | format | fit s | method | err tab | err GGX | e
+    """
     head = ("material", "format", "fit s", "method", "err tab", "err GGX", "err Beck", "err GGX mom",
             "unif tab", "unif GGX", "unif Beck", "albedo tab", "albedo GGX", "albedo Beck",
             "GGX αx", "GGX αy", "GGX ρ", "GGX kd", "Beck αx", "Beck αy", "Beck ρ", "Beck kd", "status")

@@ -39,7 +39,16 @@ def _list(v) -> list | float:
 
 
 def fresnel_spec(fresnel) -> dict:
-    """The spec of a Fresnel term of :mod:`microfacet.fresnel`."""
+    """The spec of a Fresnel term of :mod:`microfacet.fresnel`.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> fresnel_spec(mf.fresnel.Schlick(0.04))
+    {'type': 'schlick', 'f0': [0.04, 0.04, 0.04], 'f90': [1.0, 1.0, 1.0]}
+    >>> fresnel_spec(mf.fresnel.Dielectric(eta=1.5))
+    {'type': 'dielectric', 'eta': [1.5, 1.5, 1.5]}
+    """
     from .. import fresnel as fr
     if isinstance(fresnel, fr.Schlick):
         return {"type": "schlick", "f0": _list(fresnel.f0), "f90": _list(getattr(fresnel, "f90", 1.0))}
@@ -57,7 +66,15 @@ def fresnel_spec(fresnel) -> dict:
 
 
 def fresnel_from_spec(spec: dict):
-    """The Fresnel term of a :func:`fresnel_spec`."""
+    """The Fresnel term of a :func:`fresnel_spec`.
+
+    Examples
+    --------
+    >>> fresnel_from_spec({"type": "dielectric", "eta": 1.5})
+    Dielectric(eta=[1.5, 1.5, 1.5])
+    >>> fresnel_from_spec({"type": "ideal"})
+    Ideal()
+    """
     from .. import fresnel as fr
     kinds = {"schlick": lambda s: fr.Schlick(s["f0"], s.get("f90", 1.0)),
              "f82tint": lambda s: fr.F82Tint(s["f0"], s["f82"]),
@@ -72,7 +89,17 @@ def fresnel_from_spec(spec: dict):
 
 
 def to_spec(brdf) -> dict:
-    """The spec (module docstring) of an analytic BRDF tree."""
+    """The spec (module docstring) of an analytic BRDF tree.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> to_spec(mf.Lambertian(0.5))
+    {'type': 'lambertian', 'reflectance': [0.5, 0.5, 0.5]}
+    >>> spec = to_spec(mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), mf.Lambertian(0.1)))
+    >>> spec["type"], [part["type"] for part in spec["parts"]]
+    ('sum', ['microfacet', 'lambertian'])
+    """
     from ..brdf import Lambertian, MicrofacetBRDF
     from ..diffuse import TransmittedLambertian
     from ..distributions import GGX, Beckmann
@@ -98,7 +125,17 @@ def to_spec(brdf) -> dict:
 
 
 def from_spec(spec: dict):
-    """The BRDF of a :func:`to_spec` spec; ``ValueError`` naming what is wrong."""
+    """The BRDF of a :func:`to_spec` spec; ``ValueError`` naming what is wrong.
+
+    Examples
+    --------
+    >>> from_spec({"type": "lambertian", "reflectance": [0.5, 0.4, 0.3]})
+    Lambertian(reflectance=[0.5, 0.4, 0.3])
+    >>> from_spec({"type": "phong"})
+    Traceback (most recent call last):
+        ...
+    ValueError: unknown BRDF spec type 'phong' (known: microfacet, lambertian, transmitted_lambertian, sum, layered)
+    """
     from ..brdf import Lambertian, MicrofacetBRDF
     from ..diffuse import TransmittedLambertian
     from ..distributions import GGX, Beckmann
