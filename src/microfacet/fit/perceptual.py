@@ -106,7 +106,15 @@ def compress_slope(u: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Geometry:
-    """Cosines of a set of pairs: ``cos th_i``, ``cos th_o``, ``cos th_h``, ``cos th_d``, each ``(n,)``."""
+    """Cosines of a set of pairs: ``cos th_i``, ``cos th_o``, ``cos th_h``, ``cos th_d``, each ``(n,)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = Geometry(*np.array([[1.0], [1.0], [1.0], [1.0]]))          # one pair at normal incidence
+    >>> g.cos_i, g.cos_h
+    (array([1.]), array([1.]))
+    """
     cos_i: np.ndarray
     cos_o: np.ndarray
     cos_h: np.ndarray
@@ -132,7 +140,18 @@ def lobe_factor(alpha: float, g: Geometry) -> np.ndarray:
     """``D G2 / (4 cos th_i cos th_o)`` of an isotropic GGX lobe (Eq. 2.1 without ``F``;
     Walter et al. 2007's ``D``, the height-correlated Smith ``G2 = 1 / (1 + Lambda_i +
     Lambda_o)``, Heitz 2014 Eq. 99): equal to ``MicrofacetBRDF(GGX(alpha)).eval`` with
-    ``F = 1`` to rounding (tested)."""
+    ``F = 1`` to rounding (tested).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> g = Geometry(*np.array([[0.8], [0.8], [1.0], [0.8]]))      # a mirror pair at 37 degrees
+    >>> lobe_factor(0.3, g).round(4)
+    array([1.3479])
+    >>> wi, wo = np.array([0.6, 0.0, 0.8]), np.array([-0.6, 0.0, 0.8])
+    >>> float(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)).eval(wi, wo)[0].round(4))     # the same
+    1.3479
+    """
     a2 = alpha * alpha
     c2 = g.cos_h * g.cos_h
     d = a2 / (np.pi * (c2 * (a2 - 1.0) + 1.0) ** 2)
@@ -186,7 +205,16 @@ class Model:
     ``basis(q, g) -> (c (n,) grey or None, B (n, K))``: the model's basis functions at the
     pairs ``g``; ``mix (3, K, len(y))``: the reflectance of basis ``k`` in channel ``c`` is
     ``mix[c, k] @ y``; ``brdf(q, y)`` the library BRDF; ``starts(previous)`` the scanned
-    ``q``'s (``previous``: the fitted ``(q, y)`` of earlier models by name)."""
+    ``q``'s (``previous``: the fitted ``(q, y)`` of earlier models by name).
+
+    Examples
+    --------
+    >>> MODELS, PENALTY
+    (('lobe', 'two_lobes', 'mixture', 'dielectric_mixture', 'coat'), 10.0)
+    >>> spec = MODEL_SPECS["lobe"]
+    >>> isinstance(spec, Model), spec.name, spec.mix.shape
+    (True, 'lobe', (3, 3, 7))
+    """
     name: str
     q_bounds: tuple[np.ndarray, np.ndarray]
     mix: np.ndarray
@@ -384,7 +412,15 @@ class Target:
     ``u = f cos th_i`` before compression, ``log_data`` ``compress(scale u_d)``;
     ``albedo_w``/``albedo_view`` the nodes' weights (times ``cos th_i``) and views
     (:data:`ENERGY_VIEWS_DEG`), ``ratio_mask`` the nodes counted in the albedo ratios,
-    ``albedo_data`` the data's albedo at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`."""
+    ``albedo_data`` the data's albedo at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> t = target(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), n=64, grid=4, image_size=0, albedo_grid=(8, 4))
+    >>> isinstance(t, Target), isinstance(t.geometry, Geometry), t.n_pairs
+    (True, True, 81)
+    """
     geometry: Geometry
     n_pairs: int
     sqrt_w: np.ndarray
@@ -433,7 +469,15 @@ def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16, image_size:
       99th-percentile value as the image error's lightness does (Bieron & Peers 2020 fit
       in image space);
 
-    and ``albedo_grid``: the albedo quadrature (half-vector ``theta x phi`` nodes per view)."""
+    and ``albedo_grid``: the albedo quadrature (half-vector ``theta x phi`` nodes per view).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> t = target(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), n=64, grid=4, image_size=0, albedo_grid=(8, 4))
+    >>> t.n_pairs, t.albedo_data.shape
+    (81, (4, 3))
+    """
     wi, wo, w = uniform_directions(n, seed)
     gi, go = measurement_directions(grid)
     ii, io, image = _image_pairs(image_size) if image_size else (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
@@ -631,7 +675,17 @@ def _levenberg_marquardt(problem: _Problem, x0: np.ndarray, max_iter: int = 40, 
 def fit_model(t: Target, model: Model, previous: dict | None = None, refine: int = 2) -> tuple[np.ndarray, float]:
     """``(x, cost)`` of ``model`` fitted to ``t``: every start of ``model.starts(previous)``
     with its linearized ``y`` (:meth:`_Problem.linear_start`), the ``refine`` best by
-    :func:`_levenberg_marquardt`; ``x = (q, y)``."""
+    :func:`_levenberg_marquardt`; ``x = (q, y)``.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> reference = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> t = target(reference, n=256, grid=8, image_size=0, albedo_grid=(16, 8))
+    >>> x, cost = fit_model(t, MODEL_SPECS["lobe"])
+    >>> round(float(np.exp(x[0])), 3), bool(cost < 1e-6)        # alpha = exp(q): the lobe is found
+    (0.3, True)
+    """
     problem = _Problem(model, t)
     scored = []
     for start in model.starts(previous or {}):
@@ -673,7 +727,17 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
     :func:`target` ``t``, which then is all that is read): ``{name: (q, y)}``, its nonlinear
     parameters and reflectances (``MODEL_SPECS[name].brdf(q, y)`` is the BRDF; plain arrays,
     so that they cross processes). NumPy only once ``t`` is made. Linear algebra runs on one
-    BLAS thread (the matrices are small; idle BLAS threads spin)."""
+    BLAS thread (the matrices are small; idle BLAS threads spin).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> reference = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> t = target(reference, n=256, grid=8, image_size=0, albedo_grid=(16, 8))
+    >>> q, y = fit_parameters(reference, models=("lobe",), t=t)["lobe"]
+    >>> np.exp(q).round(3), y[:3].round(3)         # alpha, then the Schlick F0 per channel
+    (array([0.3]), array([0.04, 0.04, 0.04]))
+    """
     from threadpoolctl import threadpool_limits
     unknown = set(models) - set(MODELS)
     if unknown:
@@ -692,13 +756,30 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
 def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None) -> dict:
     """Every model of ``models`` (names of :data:`MODELS`) fitted to ``reference``:
     ``{name: BRDF}``, each a BRDF of the library (``eval``, ``pdf``, ``sample``);
-    :func:`fit_parameters` with each model's BRDF built."""
+    :func:`fit_parameters` with each model's BRDF built.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> reference = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> t = target(reference, n=256, grid=8, image_size=0, albedo_grid=(16, 8))
+    >>> brdf = fit_models(reference, models=("lobe",), t=t)["lobe"]
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> brdf.eval(n, n).round(4), reference.eval(n, n).round(4)
+    (array([0.0354, 0.0354, 0.0354]), array([0.0354, 0.0354, 0.0354]))
+    """
     return {name: MODEL_SPECS[name].brdf(q, y) for name, (q, y) in fit_parameters(reference, models, t).items()}
 
 
 def select(scores: dict) -> str:
     """The name of least score (e.g. :class:`microfacet.metrics.ImageError` values);
-    ties go to the earlier (simpler) model."""
+    ties go to the earlier (simpler) model.
+
+    Examples
+    --------
+    >>> select({"lobe": 0.031, "two_lobes": 0.012, "mixture": 0.012})     # ties: the simpler model
+    'two_lobes'
+    """
     finite = {k: v for k, v in scores.items() if np.isfinite(v)}
     if not finite:
         raise ValueError("no candidate fit has a finite score")
