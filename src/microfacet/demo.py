@@ -363,7 +363,9 @@ class _Deferred:
         self.fn, self.args = fn, args
 
     def result(self):
-        return self.fn(*self.args)
+        if self.args is not None:                  # run once; asked again, the same result
+            self.value, self.args = self.fn(*self.args), None
+        return self.value
 
 
 class _Inline:
@@ -466,11 +468,17 @@ def _optional_section(key: str, title: str, install: str, render, errors) -> str
                 f"<p>Skipped on this machine: {escape(why)} ({escape(install)}).</p></section>")
 
 
+#: Size (px) of the real-time section's 3D shots: three side by side fill the report's
+#: 1200 px column at about this width, so larger frames would only be scaled down (and a
+#: supersampled reference frame costs seconds per 10^5 pixels in Chromium's SwiftShader).
+VIEWER_SCENE_SIZE = (360, 225)
+
+
 def _viewer_section(out) -> str:
     """The real-time section (WebGL2 viewer in headless Chromium)."""
     def render():
         from .glsl import demo_section
-        return demo_section(out)
+        return demo_section(out, scene_size=VIEWER_SCENE_SIZE)
     return _optional_section("viewer", "Real time: GLSL and the WebGL2 viewer",
                              "make setup installs Chromium and Playwright", render, (ImportError, MicrofacetError))
 
@@ -577,11 +585,26 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
              + (GLINTS_STEPS if glints else 0) + (MITSUBA_STEPS if mitsuba else 0))
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
+        # the pool: the panels (short tasks, wanted first), then the fits; meanwhile this
+        # process renders the sections that need no pool result (the viewer's work is mostly
+        # Chromium's), then collects the panels, then the sections that need the fits
         tasks = [[pool.submit(render_panel, p.brdf, f.light, size, env_map, spp, (seed, i, j))
                   for j, p in enumerate(f.panels)] for i, f in enumerate(figures)]
         fit_tasks = [pool.submit(fit_and_picture, ex, work, size) for ex in examples]
         _save(out, "environment", env_map)
         bar.update(1)
+        later = {}                                        # sections rendered now, placed later
+        if viewer:
+            later["viewer"] = _viewer_section(out)
+        if leadr:
+            from .leadr.figures import leadr_section
+            fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
+            later["leadr"] = leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
+                                           progress=bar.update)
+        if glints:
+            from .glints.figures import glints_section
+            small = {} if size >= 64 else {"map_size": 128, "width": 64, "reference_spp": 32, "naive_spp": 4}
+            later["glints"] = glints_section(out, progress=bar.update, **small)
         sections = [_intro_html(size, spp, seed)]
         for fig, fig_tasks in zip(figures, tasks, strict=True):
             (out / fig.key).mkdir(exist_ok=True)
@@ -597,24 +620,17 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
                                     _save(out / fig.key, f"{panel.key}-environment", lit))
                 bar.update(1)
             sections.append(_figure_html(fig, cells, "lobes.png", spp))
+        if mitsuba:                                       # its scenes without fits first, then it waits for them
+            def fitted():
+                return [(ex, task.result()["npz"]) for ex, task in zip(examples, fit_tasks, strict=True)]
+            later["mitsuba"] = _mitsuba_section(out, progress=bar.update, fits=fitted if examples else None)
         if examples:
             sections.append(fit_section(out, size, examples, progress=bar.update, results=fit_tasks, note=note))
-        if leadr:
-            from .leadr.figures import leadr_section
-            fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
-            sections.append(leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
-                                          progress=bar.update))
-        if glints:
-            from .glints.figures import glints_section
-            small = {} if size >= 64 else {"map_size": 128, "width": 64, "reference_spp": 32, "naive_spp": 4}
-            sections.append(glints_section(out, progress=bar.update, **small))
-        if mitsuba:
-            fitted = [(ex, work / f"{ex.key}.npz") for ex in examples]
-            sections.append(_mitsuba_section(out, progress=bar.update, fits=fitted or None))
+        sections += [later[k] for k in ("leadr", "glints", "mitsuba") if k in later]
         if exports and examples:
             sections.append(_exports_section(out, examples[0], work / f"{examples[0].key}.npz"))
         if viewer:
-            sections.append(_viewer_section(out))
+            sections.append(later["viewer"])
     shutil.rmtree(work, ignore_errors=True)
     title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4), LEADR (Fig. 5.3) and glints"
     return write_text(out / "index.html", html_page(title, "\n".join(sections)))

@@ -342,7 +342,9 @@ def demo_section(out, size: int | None = None, spp: int | None = None, reference
     the variant; ``variant``: a Mitsuba RGB variant, default :func:`choose_variant`.
     ``progress(n)`` is called as renders complete. ``fits``: ``[(FitExample, fit file)]``
     of :mod:`microfacet.demo`'s fitting section, whose best fits scene 1 renders (the
-    first :data:`MATERIALS`); default: the demo's materials fitted here
+    first :data:`MATERIALS`), or a function returning them, called after scenes 2 and 3
+    are rendered (the demo's fits are still running then; its wait is not in the section's
+    time); default: the demo's materials fitted here
     (:func:`microfacet.demo.fit_demo_material`). Raises ``ImportError`` without Mitsuba.
     """
     variant = choose_variant() if variant is None else variant
@@ -365,10 +367,14 @@ def demo_section(out, size: int | None = None, spp: int | None = None, reference
     folder = Path(out) / "mitsuba"
     folder.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
-    parts = [_materials(mi, folder, size, spp, tick, fits),
-             _leadr(mi, folder, leadr_width, spp, reference_spp, tick),
-             _glints(mi, folder, size, spp, tick)]
+    leadr = _leadr(mi, folder, leadr_width, spp, reference_spp, tick)
+    glints = _glints(mi, folder, size, spp, tick)
     total = time.perf_counter() - t
+    if callable(fits):
+        fits = fits()
+    t = time.perf_counter()
+    parts = [_materials(mi, folder, size, spp, tick, fits), leadr, glints]
+    total += time.perf_counter() - t
     intro = (f"The plugins of microfacet.mitsuba (import microfacet.mitsuba as mfm; mfm.register()) in "
              f"Mitsuba {mi.__version__}, variant {variant}. Times: wall clock of mi.render (the first "
              f"render of each plugin includes kernel compilation); the whole section took {total:.1f} s.")
