@@ -21,6 +21,8 @@ in the background, a call may still run the NumPy reference (:mod:`microfacet.ke
 
 Example::
 
+    >>> BACKENDS, AUTO
+    (('auto', 'numpy', 'numba'), 'auto')
     >>> choose("numpy")
     'numpy'
     >>> choose("cuda")
