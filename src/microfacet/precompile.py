@@ -135,7 +135,7 @@ def main(argv=None, prog: str = "python -m microfacet.kernels", groups=("brdf",)
     start = time.perf_counter()
     n = kernels.precompile_calls(_calls(chosen, dtypes),
                                  None if args.quiet else lambda what, t: print(f"  {t:6.2f} s  {what}", flush=True))
-    print(f"{name}: {n} kernels ({', '.join(chosen)}) compiled or loaded from Numba's cache in "
+    print(f"{name}: {n} precompile calls ({', '.join(chosen)}): kernels compiled or loaded from Numba's cache in "
           f"{time.perf_counter() - start:.1f} s")
     return 0
 
