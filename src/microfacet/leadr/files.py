@@ -130,6 +130,7 @@ def pyramid_file(path: str | os.PathLike, height: int, width: int) -> Iterator[l
     >>> with pyramid_file("bumps.exr", 16, 16) as levels:     # baked straight into the file's storage
     ...     _ = bake(height, out=levels)
     >>> [level.shape for level in read_pyramid("bumps.exr")]
+    [(16, 16, 5), (8, 8, 5), (4, 4, 5), (2, 2, 5), (1, 1, 5)]
     """
     sizes = mip_sizes(height, width)
     multi = len(sizes) > 1                   # a 1 x 1 map has one level: a single-part file
