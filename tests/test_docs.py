@@ -29,15 +29,27 @@ OWNED_MODULES = (
     "microfacet.io.exr", "microfacet.io.html", "microfacet.io.image", "microfacet.io.names",
     "microfacet.io.normalmap", "microfacet.io.npz", "microfacet.io.png", "microfacet.io.quiet", "microfacet.io.read",
     "microfacet.anchors", "microfacet.validation",
+    # the core, fitting, measured, LEADR and batch modules
+    "microfacet.brdf", "microfacet.params", "microfacet.protocol", "microfacet.backend", "microfacet.kernels",
+    "microfacet.precompile", "microfacet.kernels_extra",
+    "microfacet.fit", "microfacet.fit.fitted", "microfacet.fit.extract", "microfacet.fit.analytic",
+    "microfacet.fit.perceptual", "microfacet.fit.outputs", "microfacet.fit.spec",
+    "microfacet.measured", "microfacet.measured.base", "microfacet.measured.grids", "microfacet.measured.marginal2d",
+    "microfacet.measured.merl", "microfacet.measured.rgl", "microfacet.measured.tensor_file", "microfacet.measured.utia",
+    "microfacet.leadr", "microfacet.leadr.downsample", "microfacet.leadr.figures", "microfacet.leadr.files",
+    "microfacet.leadr.heightfield", "microfacet.leadr.maps", "microfacet.leadr.mip", "microfacet.leadr.moments",
+    "microfacet.leadr.preview", "microfacet.leadr.shading",
+    "microfacet.batch", "microfacet.batch.files", "microfacet.batch.memory", "microfacet.batch.runner",
+    "microfacet.batch.tasks", "microfacet.batch.workers",
 )
 #: modules whose docstring examples are run (examples that need optional packages or files
 #: are marked +SKIP); packages that only re-export names are checked through their modules
 DOCTEST_MODULES = tuple(m for m in OWNED_MODULES if m not in (
-    "microfacet.distributions", "microfacet.render", "microfacet.io")) + (
-    "microfacet.demo", "microfacet.cli.common", "microfacet.batch.workers", "microfacet.fit.fitted",
+    "microfacet.distributions", "microfacet.render", "microfacet.io", "microfacet.fit", "microfacet.leadr",
+    "microfacet.batch")) + (
+    "microfacet.demo", "microfacet.cli.common",
     "microfacet.export", "microfacet.export.gltf", "microfacet.export.mtlx", "microfacet.export.usd",
-    "microfacet.export.analysis", "microfacet.glints.microsurface", "microfacet.fit.spec", "microfacet.params",
-    "microfacet.protocol",
+    "microfacet.export.analysis", "microfacet.glints.microsurface", "microfacet.errors", "microfacet._buffers",
 )
 
 
