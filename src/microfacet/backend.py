@@ -36,7 +36,10 @@ from . import kernels
 
 __all__ = ["AUTO", "NUMPY", "NUMBA", "BACKENDS", "available", "choose", "smith"]
 
-AUTO, NUMPY, NUMBA = "auto", "numpy", "numba"
+#: The backend requests: the choice left to :func:`choose`, the NumPy reference, the compiled kernels.
+AUTO = "auto"
+NUMPY = "numpy"
+NUMBA = "numba"
 #: The accepted ``backend`` arguments.
 BACKENDS = (AUTO, NUMPY, NUMBA)
 

@@ -39,9 +39,14 @@ __all__ = ["BECKMANN", "GGX", "IDEAL", "SCHLICK", "DIELECTRIC", "CONDUCTOR", "TA
            "FresnelParams", "SmithParams", "smith_params", "fresnel_params", "read_only"]
 
 #: Distribution kinds of :class:`SmithParams` (the kernels are compiled per kind).
-BECKMANN, GGX = 0, 1
+BECKMANN = 0
+GGX = 1
 #: Fresnel kinds of :class:`FresnelParams` (``_numba_kernels._fresnel_block`` branches on them).
-IDEAL, SCHLICK, DIELECTRIC, CONDUCTOR, TABULATED = range(5)
+IDEAL = 0
+SCHLICK = 1
+DIELECTRIC = 2
+CONDUCTOR = 3
+TABULATED = 4
 
 
 def read_only(a: np.ndarray) -> np.ndarray:

@@ -17,8 +17,8 @@ and ``FRESNEL`` one of ``{"type": "schlick", "f0", "f90"}``, ``{"type": "f82tint
 "eta"}``, ``{"type": "tabulated", "cos_theta_d", "rgb"}``, ``{"type": "ideal"}``.
 :func:`from_spec` rebuilds the BRDF exactly (float64 values as written).
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> from microfacet.fit.spec import from_spec, to_spec
 >>> b = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fresnel=mf.fresnel.Schlick(0.04))
