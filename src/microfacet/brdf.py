@@ -110,6 +110,10 @@ class BRDF:
     """The BRDF protocol (Listing 1.2). Subclasses implement ``eval_cos``, ``sample``
     and ``pdf``; ``eval`` divides by ``cos theta_i``.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Listing 1.2 (the BRDF protocol).
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf

@@ -495,6 +495,10 @@ def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None, bac
     ``None`` when the kernel does not apply (no Numba, array parameters, another distribution,
     GAF or Fresnel class) or, with ``background``, while it compiles (:func:`_kernel`).
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 2.1.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -526,6 +530,10 @@ def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None, background: bool = False
     the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply
     (or, with ``background``, while it compiles).
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 2.17; Heitz 2018 (visible normals).
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -554,6 +562,10 @@ def smith_sample(brdf, u, wo, dtype=np.float64, out=None, background: bool = Fal
     arrays, checked by :func:`microfacet.protocol.sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
     ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply (or,
     with ``background``, while it compiles).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Sec. 2.2, 3.2, Eq. 2.23.
 
     Examples
     --------

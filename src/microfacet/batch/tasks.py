@@ -140,6 +140,10 @@ def slope_scale_warning(source, top, scale: float, base=None) -> str | None:
     the scale that makes it :data:`SUGGESTED_ALPHA` (slopes scale linearly with ``scale``),
     to one significant digit.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 3.5-3.9.
+
     Examples
     --------
     >>> from microfacet.leadr import to_moments
@@ -170,6 +174,10 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     (E1..E5, thesis Eq. 3.5-3.9, merged with a base roughness by Listing 5.1) as
     ``out`` (.exr, lossless ``compression``, see ``leadr.write_pyramid``) and its filtered-appearance preview ``out.png``. Returns the size, the
     number of MIP levels and the top level's Beckmann lobe.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 3.5-3.9, Listing 5.1; Dupuy et al. 2013.
 
     Examples
     --------
@@ -233,6 +241,10 @@ def glints_file(source: Path, out: Path, spacing: float = 1.0, sigma_eps: float 
     (Chermain et al. 2019, Eq. 3-6, Sec. 4.2.2, 5) as ``out`` (.npz). Returns the lobe
     count, map size, MIP levels and the lobes' median and largest roughness.
 
+    References
+    ----------
+    Chermain et al. 2019, Eq. 3-6, Sec. 4.2.2, 5.
+
     Examples
     --------
     >>> import numpy as np
@@ -268,6 +280,10 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Ch. 4; Dupuy et al. 2015.
 
     Examples
     --------

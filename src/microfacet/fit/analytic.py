@@ -790,6 +790,10 @@ def fit_analytic(brdf, model: str = "ggx", diffuse: bool = False, anisotropic: b
     MicrofacetBRDF, or SumBRDF(MicrofacetBRDF[, coat MicrofacetBRDF][, Lambertian]) with a
     coat or a diffuse base.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 1.9, 2.1, 2.11, Table 2.II, App. C; Walter et al. 2007 (GGX); Beckmann & Spizzichino 1963.
+
     Examples
     --------
     >>> import microfacet as mf

@@ -77,6 +77,10 @@ def _directions(theta, phi) -> np.ndarray:
 def backscattering(brdf, theta, phi=0.0) -> np.ndarray:
     """Luminance of ``f_r(o, o)`` at ``o = (theta, phi)``, garbage set to 0 (Eq. 4.1).
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.1.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -215,6 +219,10 @@ def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray, model: str = "
     ``(2 K', (u, v))`` with the rank-one term ``u = 4 f cos^2 theta_o``, ``v = M[z]``
     (the row of ``A`` at the normal): ``F0 D = 2 K' D - u (v . D)`` (module docstring).
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.4-4.6, 4.12-4.15; Dupuy et al. 2015.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -251,6 +259,10 @@ class AzimuthalKernel:
     rounding. ``p`` is over the rows ``i < n - 1`` (row-major, ``(n - 1) m``); the grazing
     row of ``h`` takes the values of its neighbour (folded). ``k @ p`` and ``k.dense()``
     (the explicit matrix, for tests) are provided.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.8.
 
     Examples
     --------
@@ -291,6 +303,10 @@ def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndar
     Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
     as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.8; Dupuy et al. 2015.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -323,6 +339,10 @@ def rule_area_at_normal(dist, refine: int = 1) -> float:
     the kernel's nodes (:func:`~microfacet.distributions.tabulated.refine_radial`), whose
     every ``refine``-th node is one of the kernel's.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.9.
+
     Examples
     --------
     >>> from microfacet.distributions.tabulated import TabulatedIsotropic, theta_grid
@@ -346,6 +366,10 @@ def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, ran
     nonnegative on symmetric ``p`` (``A(o) >= cos theta_o A(z)``), so the clamp only
     guards rounding and asymmetric inputs. ``k`` is a matrix or an operator with
     ``k @ p`` (:class:`AzimuthalKernel`); the iterate is kept in float64.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.9, Algorithms 1 and 3; Dupuy et al. 2015.
 
     Examples
     --------
@@ -382,6 +406,10 @@ def ndf_closed_form(f_back: np.ndarray, theta: np.ndarray, gaf: str) -> np.ndarr
     """``F0 D(h) = 4 f_r(h, h) / G(h, h) cos^2 theta_h`` in closed form: V-groove
     ``4 f max(cos^2, 1/2)`` (Eq. 4.17 divided by ``cos^4``), normal map ``4 f``
     (Eq. 4.18). ``theta`` broadcasts against ``f_back``.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.16-4.18.
 
     Examples
     --------
@@ -424,6 +452,10 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
     circle only repeats these configurations.
     Returns ``wi, wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` (nonfinite or
     negative values set to 0) and ``finite`` ``(K,)`` (configurations to use).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Algorithm 2.
 
     Examples
     --------
@@ -522,6 +554,10 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     as well, while the constraint still bounds it from above.
 
     Returns a :class:`FresnelSolution` ``(cos_theta_d, rgb, k_d, misfit)``.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.10, 4.11, Algorithm 2; Twomey 1963; Tikhonov & Arsenin 1977 (the smoothness penalty).
 
     Examples
     --------
@@ -776,6 +812,10 @@ def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
     chi-square, ``Y`` the luminance, ``eps`` 1e-3 of its mean): relative to the data
     everywhere, lobe and floor alike, whatever the model.
 
+    References
+    ----------
+    Rec. ITU-R BT.709 (the luminance weights).
+
     Examples
     --------
     >>> import numpy as np
@@ -862,6 +902,10 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
     ``g = r^T y``. ``x0``: the start (projected on the box; default the unconstrained
     minimizer projected), e.g. the solution of a nearby problem, whose active set it guesses.
+
+    References
+    ----------
+    Bertsekas 1982 (projected Newton).
 
     Examples
     --------
@@ -970,6 +1014,10 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``; ``brdf=None``: the model's rows alone
     (``a_data`` None), e.g. to bound a fit's own albedo.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 2.1.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -1045,6 +1093,10 @@ def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_p
                     diffuse: bool = False, isotropic: bool = False):
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
     Algorithm 2): a :class:`FresnelSolution`.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 4.11, Algorithm 2.
 
     Examples
     --------

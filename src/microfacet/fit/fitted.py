@@ -56,6 +56,10 @@ class FittedBRDF(MicrofacetBRDF):
     proportional to their albedo estimates (``luminance(F(1))`` and ``luminance(k_d)``)
     and ``pdf`` is the mixture's, so that ``weight = eval_cos / pdf`` exactly.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Ch. 4, Eq. 2.1, 4.3, 4.9; Dupuy et al. 2015.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -459,6 +463,10 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     Returns
     -------
     FittedBRDF
+
+    References
+    ----------
+    Dupuy 2015, thesis, Ch. 4: Eq. 4.3, 4.9, 4.16-4.18, Algorithms 1-3; Dupuy et al. 2015.
 
     Examples
     --------

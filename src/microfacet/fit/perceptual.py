@@ -142,6 +142,10 @@ def lobe_factor(alpha: float, g: Geometry) -> np.ndarray:
     Lambda_o)``, Heitz 2014 Eq. 99): equal to ``MicrofacetBRDF(GGX(alpha)).eval`` with
     ``F = 1`` to rounding (tested).
 
+    References
+    ----------
+    Walter et al. 2007 (GGX); Heitz 2014, Eq. 99 (height-correlated Smith G2); Dupuy 2015, thesis, Eq. 2.1.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf

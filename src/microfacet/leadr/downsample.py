@@ -32,6 +32,10 @@ def base_lobe(base) -> np.ndarray:
     :mod:`microfacet.fit`, converted by equal second slope moments, App. C), or the
     moments ``(5,)`` themselves.
 
+    References
+    ----------
+    Dupuy 2015, thesis, App. C.
+
     Examples
     --------
     >>> base_lobe(None)
@@ -53,6 +57,10 @@ def downsample_operator(pyramid, base) -> list[np.ndarray]:
     levels are the displaced surface's Beckmann BRDFs at each resolution (same dtype as
     the input levels). Merging is affine in the moments, so it commutes with the MIP
     averaging: ``downsample_operator(bake(h), b) == bake(h, roughness=b)`` up to rounding.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Ch. 5, Listing 5.1; Dupuy et al. 2013.
 
     Examples
     --------
@@ -97,6 +105,10 @@ def naive_slopes(level0, factor: int) -> np.ndarray:
     of the texels' mean slopes (``level0[..., :2]``) averaged over ``f x f`` blocks and
     renormalized (the "naive MIP mapping" of Fig. 5.3, which loses the roughness that
     the normals' spread should become).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Fig. 5.3.
 
     Examples
     --------
@@ -150,6 +162,10 @@ class FilteredSurface:
     fresnel : Fresnel, optional
         Fresnel term of the BRDFs :meth:`brdf` returns (a fit's ``to_beckmann().fresnel``
         when ``base`` is a fit and ``fresnel`` is not given).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Ch. 5, Fig. 5.2; Dupuy et al. 2013.
 
     Examples
     --------

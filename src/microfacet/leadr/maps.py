@@ -58,6 +58,10 @@ def height_to_slopes(height, scale: float = 1.0, border: str = "wrap") -> np.nda
     """Slopes ``(H, W, 2)`` (float64) of a height map ``(H, W)`` in units of the unit uv
     square (module docstring; Sec. 3.4 central differences, Listing 3.6).
 
+    References
+    ----------
+    Dupuy 2015, thesis, Sec. 3.4, Listing 3.6.
+
     Examples
     --------
     >>> import numpy as np
@@ -123,6 +127,10 @@ def decode_normal_map(nmap, encoding: str = "auto", z: str = "auto") -> np.ndarr
     (Listing 3.7), through :func:`microfacet.io.normalmap.read_slopes` (``encoding``, ``z``,
     repairs and warnings as documented there).
 
+    References
+    ----------
+    Dupuy 2015, thesis, Listing 3.7.
+
     Examples
     --------
     >>> import numpy as np
@@ -138,6 +146,10 @@ def slopes_to_moments(slopes, base=None) -> np.ndarray:
     """Level-0 moments ``(H, W, 5)`` (float64) of slope texels (Listing 3.7): each texel is a
     single facet ``(x~, y~, x~^2, y~^2, x~ y~)``, convolved with the base lobe's moments
     ``base (5,)`` when given (Listing 5.1).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Listing 3.7, Listing 5.1.
 
     Examples
     --------
@@ -189,6 +201,10 @@ def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0, *, encoding:
     :func:`decode_normal_map` with ``encoding`` and ``z``) with a base roughness
     (Listing 3.7; ``roughness`` as in :func:`base_moments`). ``scale`` multiplies the
     map's slopes before the base lobe is added (height scaling ``beta``, Sec. 3.4).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Sec. 3.4, Listing 3.7; Olano & Baker 2010.
 
     Examples
     --------
@@ -280,6 +296,10 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
     ``out``: the levels to fill instead (float32 ``(H_k, W_k, 5)`` of the pyramid's sizes, e.g.
     :func:`microfacet.leadr.pyramid_file`'s, whose file they are). Raises ``ValueError`` if a
     moment overflows float32 (too large a ``scale`` or roughness).
+
+    References
+    ----------
+    Dupuy 2015, thesis, Sec. 3.4, Listings 3.6, 5.1; Dupuy et al. 2013; Olano & Baker 2010.
 
     Examples
     --------

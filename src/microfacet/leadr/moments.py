@@ -43,6 +43,10 @@ def to_moments(alpha_x, alpha_y, rho=0.0, mean_slope=(0.0, 0.0)) -> np.ndarray:
     ``E5 = rho alpha_x alpha_y / 2 + x~n y~n``. Parameters broadcast; ``mean_slope`` has
     a last axis of size 2. ``alpha = 0`` (a single facet) is allowed here.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Eq. 3.5-3.9, Listing 3.5.
+
     Examples
     --------
     >>> to_moments(0.2, 0.4, rho=0.5, mean_slope=(0.1, 0.0)).round(4)   # E1, E2, E3, E4, E5
@@ -84,6 +88,10 @@ def from_moments(E, min_alpha: float = MIN_ALPHA, max_rho: float = MAX_RHO) -> B
     facet, or negative by rounding) are raised to it, and ``|rho| <= max_rho``.
     Non-finite moments raise ``ValueError``.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Listing 3.5.
+
     Examples
     --------
     >>> d = from_moments(to_moments(0.2, 0.4, rho=0.5))
@@ -108,6 +116,10 @@ def convolve(Ea, Eb) -> np.ndarray:
     ``E1 = Ea1 + Eb1``, ``E3 = Ea3 + Eb3 + 2 Ea1 Eb1``,
     ``E5 = Ea5 + Eb5 + Ea1 Eb2 + Ea2 Eb1``: means and covariances add.
 
+    References
+    ----------
+    Dupuy 2015, thesis, Listing 5.1.
+
     Examples
     --------
     >>> E = convolve(to_moments(0.3, 0.3), to_moments(0.4, 0.4))
@@ -124,6 +136,10 @@ def convolve(Ea, Eb) -> np.ndarray:
 def scale_height(E, beta) -> np.ndarray:
     """Moments of the surface whose heights are scaled by ``beta`` (Sec. 3.4): ``E1, E2``
     scale by ``beta`` and ``E3, E4, E5`` by ``beta^2``.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Sec. 3.4.
 
     Examples
     --------
@@ -144,6 +160,10 @@ def transform(E, jacobian) -> np.ndarray:
     ``(d xi/dx, d xi/dy) = J (d xi/du, d xi/dv)``; ``E1 = du/dx E1' + dv/dx E2'``,
     ``E3 = (du/dx)^2 E3' + (dv/dx)^2 E4' + 2 du/dx dv/dx E5'``,
     ``E5 = du/dx du/dy E3' + dv/dx dv/dy E4' + (du/dx dv/dy + dv/dx du/dy) E5'``.
+
+    References
+    ----------
+    Dupuy 2015, thesis, Sec. 3.4.
 
     Examples
     --------
@@ -175,6 +195,10 @@ def clean_moments(E, mode: str = "lean") -> np.ndarray:
     Unlike the five LEAN moments, ``mode="max"`` texels are not linear in the slopes:
     filter the ``"lean"`` form and convert after filtering.
 
+    References
+    ----------
+    Baker 2011; Dupuy 2015, thesis, Eq. 3.18.
+
     Examples
     --------
     >>> clean_moments(to_moments(0.2, 0.4)).round(4)        # E1, E2, E3 + E4
@@ -196,6 +220,10 @@ def clean_moments(E, mode: str = "lean") -> np.ndarray:
 def clean_to_moments(C) -> np.ndarray:
     """Isotropic LEAN moments ``(..., 5)`` of CLEAN texels ``(E1, E2, E3 + E4)``:
     ``alpha^2 = third - E1^2 - E2^2`` (Eq. 3.18), ``rho = 0``.
+
+    References
+    ----------
+    Baker 2011; Dupuy 2015, thesis, Eq. 3.18.
 
     Examples
     --------

@@ -61,6 +61,10 @@ def slope_statistics(moments) -> tuple[np.ndarray, ...]:
     variances clamped to :data:`MIN_VARIANCE` and the correlation to ``[-0.99, 0.99]``
     (the clamping of Listing 3.5).
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 3.1; Dupuy 2015, thesis, Listing 3.5 (the clamping).
+
     Examples
     --------
     >>> from microfacet.leadr import to_moments
@@ -81,6 +85,10 @@ def slope_statistics(moments) -> tuple[np.ndarray, ...]:
 def mesonormal(moments) -> np.ndarray:
     """Mesonormal ``w_n- = (-E[x~], -E[y~], 1) / |.|`` of the pixel (Eq. 5).
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Eq. 5.
+
     Examples
     --------
     >>> from microfacet.leadr import to_moments
@@ -94,6 +102,10 @@ def mesonormal(moments) -> np.ndarray:
 def ndf(moments, h) -> np.ndarray:
     """Beckmann NDF ``D(h) = P22(h~) / z_h^4`` of the Gaussian slope PDF ``P22`` of the
     moments (Eq. 2 and Sec. 3.1); 0 for ``z_h <= 0``.
+
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Eq. 2, Sec. 3.1.
 
     Examples
     --------
@@ -125,6 +137,10 @@ def lambda_(moments, k) -> np.ndarray:
     ``nu = (z - x x0 - y y0) / sqrt(2 (x^2 var_x + y^2 var_y + 2 x y c_xy))``, finite at
     normal incidence (``Lambda = 0``); ``inf`` where ``nu <= 0`` (``k`` below the mesosurface).
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 3.2.
+
     Examples
     --------
     >>> import numpy as np
@@ -148,6 +164,10 @@ def projected_area(moments, k) -> np.ndarray:
     """Projected area toward ``k`` of the microsurface of ``moments`` per unit macro area,
     ``A(k) = int <k, n>+ D(n) dn = c_k (1 + Lambda(k))`` with ``c_k = (-x0, -y0, 1) . k``
     the mesonormal's (supplemental Eq. 4, 9); 0 where ``c_k <= 0``.
+
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Eq. 4, 9.
 
     Examples
     --------
@@ -176,6 +196,10 @@ def point_light(moments, wi, wo, irradiance=1.0, fresnel=None, shadowing: bool =
     Sec. 1.5: use it when shadows of the displacement are not rendered at close range).
     This equals ``MicrofacetBRDF(Beckmann.from_moments(*E), fresnel).eval_cos(wi, wo) * E``.
     0 where either direction is below the macro horizon, ``o.h <= 0`` or ``c_o <= 0``.
+
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 1.4, 1.5, 3.2, 3.3, Eq. 4.
 
     Examples
     --------
@@ -211,6 +235,10 @@ def sample_grid(n: int = 5, spacing: float | None = None) -> tuple[np.ndarray, n
     empirical best for ``n = 5``: ``p = (-1.8, -0.9, 0, 0.9, 1.8)``,
     ``w = (0.0725, 0.2443, 0.3663, 0.2443, 0.0725)``); from ``n = 8`` on the grid spans
     ``[-3, 3]`` ("it is not necessary to place samples beyond"), spacing ``6 / (n - 1)``.
+
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 3.4.
 
     Examples
     --------
@@ -250,6 +278,10 @@ def grid_slopes(moments, n: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray
     ``y~ = y0 + (r p_j + sqrt(1 - r^2) p_k) sigma_y`` with ``r = c_xy / (sigma_x sigma_y)``,
     i.e. the grid of the standard normal mapped by the Cholesky factor of the covariance.
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Simplified Algorithm 1.
+
     Examples
     --------
     >>> from microfacet.leadr import to_moments
@@ -275,6 +307,10 @@ def lod_bias(n: int) -> float:
     """Constant of the LOD rule for an ``n x n`` grid: 0.5 for ``n <= 5``, -0.5 for 32,
     -1.48 (unbiased) from 128 on (Sec. 3.5), linear in ``log2 n`` in between.
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 3.5.
+
     Examples
     --------
     >>> lod_bias(5), lod_bias(32)
@@ -296,6 +332,10 @@ def artificial_micronormal(moments, wo, epsilon: float = ARTIFICIAL_EPSILON) -> 
     (``w_n-.o < 0``, a silhouette of a low-tessellated mesh) it is visible
     (``w~.o = -(eps - 1) w_n-.o |.|^-1 > 0``); elsewhere it is back-facing and contributes
     nothing. Used with weight :data:`ARTIFICIAL_WEIGHT` in the grid sums.
+
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 3.7.
 
     Examples
     --------
@@ -421,6 +461,10 @@ def env_specular(moments, wo, env: MipEnvironment, frame=None, n: int = 5, fresn
         Append the artificial micronormal (Sec. 3.7), so the result is defined even when
         every grid normal faces away from ``o``.
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Simplified Algorithm 1, Sec. 3.4-3.5, 3.7.
+
     Examples
     --------
     >>> import numpy as np
@@ -520,6 +564,10 @@ def sh_add_directional(coeffs, direction, radiance) -> np.ndarray:
     """``coeffs`` plus a directional light of world ``direction`` and RGB ``radiance``
     (Algorithm 2: ``L_lm += Y_lm(w_i) L``); returns a new ``(9, 3)`` array.
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Simplified Algorithm 2.
+
     Examples
     --------
     >>> import numpy as np
@@ -536,6 +584,10 @@ def sh_irradiance(coeffs, normals) -> np.ndarray:
     """Irradiance ``E(n) = int L(w) <n, w>+ dw`` ``(..., 3)`` of the 9-coefficient SH
     radiance at world normals ``n`` (Ramamoorthi and Hanrahan 2001, Eq. 13). Exact for
     radiance of degree <= 2 (constant and linear in particular).
+
+    References
+    ----------
+    Ramamoorthi & Hanrahan 2001, Eq. 13.
 
     Examples
     --------
@@ -571,6 +623,10 @@ def diffuse_sh(moments, wo, coeffs, frame=None, albedo=1.0, n: int = 5,
 
     Masking only. ``frame`` as in :func:`env_specular` (``None``: local = world).
 
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Simplified Algorithm 3, Sec. 3.6.
+
     Examples
     --------
     >>> import numpy as np
@@ -591,6 +647,10 @@ def diffuse_directional(moments, wo, wi, irradiance=1.0, albedo=1.0, n: int = 5,
                         fallback: bool = True) -> np.ndarray:
     """Rough diffuse microfacets under one directional light of local direction ``wi``:
     :func:`diffuse_sh` with ``E(n_k) = E <n_k, i>+`` (end of Sec. 3.6).
+
+    References
+    ----------
+    Dupuy et al. 2013, supplemental material, Sec. 3.6.
 
     Examples
     --------
