@@ -52,6 +52,28 @@ def write_pyramid(path: str | os.PathLike, pyramid, compression: str = "none",
     ``none`` is chosen because float32 moments barely compress: ``zip`` saves few bytes at
     several times the write time (``benchmarks/bench_leadr.py``).
 
+    Parameters
+    ----------
+    path : str or PathLike
+        The ``.exr`` file to write.
+    pyramid : list of ndarray
+        Levels ``(H_k, W_k, 5)``, level 0 first (:func:`microfacet.leadr.bake`).
+    compression : str
+        A lossless name of :data:`microfacet.io.exr.COMPRESSIONS`.
+    allow_nonfinite : bool
+        Write NaN, infinite and out-of-range values instead of refusing them.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        Non-finite or out-of-range moments (naming the file and level), a lossy or unknown
+        ``compression``.
+
     Examples
     --------
     >>> from microfacet.leadr import bake, gaussian_heightfield

@@ -70,6 +70,27 @@ def gaussian_heightfield(shape, alpha_x: float, alpha_y: float | None = None, rh
     ``correlation`` (texels) sets the spectrum's width: larger is smoother but gives
     fewer independent slope samples (more statistical error in the map's moments).
 
+    Parameters
+    ----------
+    shape : (int, int)
+        ``(H, W)`` texels.
+    alpha_x, alpha_y : float
+        Beckmann roughness of the slopes along x and y (``alpha_y`` defaults to ``alpha_x``).
+    rho : float
+        Correlation of the slopes, in ``(-1, 1)``.
+    mean_slope : (float, float)
+        Mean slope ``(x~n, y~n)``: a linear ramp added to the field.
+    correlation : float
+        Correlation length in texels.
+    seed : int or numpy.random.Generator, optional
+        Random seed.
+
+    Returns
+    -------
+    ndarray, (H, W) float64
+        Heights whose central-difference slopes (:func:`microfacet.leadr.height_to_slopes`) have
+        the requested statistics, up to the sampling error of a finite map.
+
     Examples
     --------
     >>> import numpy as np

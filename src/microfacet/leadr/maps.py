@@ -202,6 +202,22 @@ def normal_map_to_moments(nmap, roughness=None, scale: float = 1.0, *, encoding:
     (Listing 3.7; ``roughness`` as in :func:`base_moments`). ``scale`` multiplies the
     map's slopes before the base lobe is added (height scaling ``beta``, Sec. 3.4).
 
+    Parameters
+    ----------
+    nmap : ndarray or path
+        A normal map ``(H, W, 2|3|4)`` (``uint8``, ``uint16`` or float) or a PNG/EXR file of one.
+    roughness : None, float, (float, float) or Beckmann, optional
+        The base lobe (:func:`base_moments`).
+    scale : float
+        Factor of the map's slopes (height scaling).
+    encoding, z : str
+        How the map is decoded (:func:`decode_normal_map`).
+
+    Returns
+    -------
+    ndarray, (H, W, 5) float32
+        The level-0 moments ``E1..E5``.
+
     References
     ----------
     Dupuy 2015, thesis, Sec. 3.4, Listing 3.7; Olano & Baker 2010.
@@ -296,6 +312,30 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
     ``out``: the levels to fill instead (float32 ``(H_k, W_k, 5)`` of the pyramid's sizes, e.g.
     :func:`microfacet.leadr.pyramid_file`'s, whose file they are). Raises ``ValueError`` if a
     moment overflows float32 (too large a ``scale`` or roughness).
+
+    Parameters
+    ----------
+    height : ndarray, (H, W)
+        Heights, ``uint8``, ``uint16``, ``uint32``, float32 or float64, in units of the map's width
+        once multiplied by ``scale``.
+    scale : float
+        Height scale: the slopes are those of ``scale * height`` over the unit uv square.
+    roughness : None, float, (float, float) or Beckmann, optional
+        The base material's lobe merged into every texel (:func:`base_moments`).
+    border : {"wrap", "clamp"}
+        Central differences at the map's edges: periodic (a tileable map) or one-sided.
+    out : list of ndarray, optional
+        Float32 levels ``(H_k, W_k, 5)`` of the pyramid's sizes to fill instead of new ones.
+
+    Returns
+    -------
+    list of ndarray
+        The levels ``(H_k, W_k, 5)`` float32, level 0 first, down to ``1 x 1``.
+
+    Raises
+    ------
+    ValueError
+        A moment overflows float32, an unknown ``border``, or ``out`` of the wrong sizes.
 
     References
     ----------

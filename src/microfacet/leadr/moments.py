@@ -43,6 +43,20 @@ def to_moments(alpha_x, alpha_y, rho=0.0, mean_slope=(0.0, 0.0)) -> np.ndarray:
     ``E5 = rho alpha_x alpha_y / 2 + x~n y~n``. Parameters broadcast; ``mean_slope`` has
     a last axis of size 2. ``alpha = 0`` (a single facet) is allowed here.
 
+    Parameters
+    ----------
+    alpha_x, alpha_y : float or ndarray
+        Beckmann roughness along x and y (``alpha = 0``: a single facet).
+    rho : float or ndarray
+        Slope correlation.
+    mean_slope : (float, float) or ndarray (..., 2)
+        Mean slope ``(x~n, y~n)``.
+
+    Returns
+    -------
+    ndarray, (..., 5)
+        The moments ``E1..E5`` (the parameters broadcast).
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 3.5-3.9, Listing 3.5.
@@ -87,6 +101,25 @@ def from_moments(E, min_alpha: float = MIN_ALPHA, max_rho: float = MAX_RHO) -> B
     texels are clamped as in Listing 3.5: variances below ``min_alpha^2 / 2`` (a single
     facet, or negative by rounding) are raised to it, and ``|rho| <= max_rho``.
     Non-finite moments raise ``ValueError``.
+
+    Parameters
+    ----------
+    E : ndarray, (..., 5)
+        Moments ``E1..E5``.
+    min_alpha : float
+        Smallest roughness returned (degenerate texels are raised to it).
+    max_rho : float
+        Largest ``|rho|`` returned.
+
+    Returns
+    -------
+    Beckmann
+        The surface(s), their parameters of shape ``E.shape[:-1]``.
+
+    Raises
+    ------
+    ValueError
+        Non-finite moments, or a last axis other than 5.
 
     References
     ----------
