@@ -175,6 +175,42 @@ def bake_file(source: Path, out: Path, scale: float = 1.0, normal_map: bool = Fa
     ``out`` (.exr, lossless ``compression``, see ``leadr.write_pyramid``) and its filtered-appearance preview ``out.png``. Returns the size, the
     number of MIP levels and the top level's Beckmann lobe.
 
+    Parameters
+    ----------
+    source : pathlib.Path
+        A height map (PNG, 8/16-bit, or EXR), or a normal map with ``normal_map``.
+    out : pathlib.Path
+        The pyramid's ``.exr``; the preview is written as ``out.with_suffix(".png")``.
+    scale : float
+        Height scale (:func:`microfacet.leadr.bake`; integer heights are first divided by their
+        type's largest value); for a normal map, the factor of its slopes.
+    normal_map : bool
+        ``source`` is a tangent-space normal map (decoded with ``encoding`` and ``z``,
+        :func:`microfacet.leadr.decode_normal_map`).
+    border : {"wrap", "clamp"}
+        Central differences at the edges of a height map.
+    roughness : float, optional
+        Base roughness merged into every texel.
+    material : str or PathLike, optional
+        A fit file whose Beckmann conversion is the base lobe instead (``fit.load(...).to_beckmann()``).
+    encoding, z : str
+        Normal-map decoding.
+    compression : str
+        Lossless EXR compression (:func:`microfacet.leadr.write_pyramid`).
+
+    Returns
+    -------
+    dict
+        ``width``, ``height``, ``levels`` and the top level's lobe: ``alpha_x``, ``alpha_y``,
+        ``rho``, ``mean_x``, ``mean_y``.
+
+    Raises
+    ------
+    MicrofacetError
+        An unreadable map, or moments that overflow (naming ``source``); a
+        :class:`~microfacet.errors.HeightMapWarning` for an implausible ``scale``
+        (:func:`slope_scale_warning`).
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 3.5-3.9, Listing 5.1; Dupuy et al. 2013.
@@ -241,6 +277,24 @@ def glints_file(source: Path, out: Path, spacing: float = 1.0, sigma_eps: float 
     (Chermain et al. 2019, Eq. 3-6, Sec. 4.2.2, 5) as ``out`` (.npz). Returns the lobe
     count, map size, MIP levels and the lobes' median and largest roughness.
 
+    Parameters
+    ----------
+    source : pathlib.Path
+        A tangent-space normal map (PNG or EXR).
+    out : pathlib.Path
+        The microsurface's ``.npz``.
+    spacing : float
+        Spacing of the lobes' grid in texels (``h``, :class:`microfacet.glints.Microsurface`).
+    sigma_eps : float
+        Smallest standard deviation of a lobe's slopes (Chermain et al. 2019, Sec. 3.2).
+    encoding, z : str
+        Normal-map decoding (:func:`microfacet.leadr.decode_normal_map`).
+
+    Returns
+    -------
+    dict
+        ``width``, ``height``, ``lobes``, ``levels``, ``alpha_median``, ``alpha_max``.
+
     References
     ----------
     Chermain et al. 2019, Eq. 3-6, Sec. 4.2.2, 5.
@@ -280,6 +334,20 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
     Returns the summary figures.
+
+    Parameters
+    ----------
+    source : pathlib.Path
+        A measured BRDF file (MERL, RGL or UTIA, :func:`microfacet.measured.load`).
+    out : pathlib.Path
+        The fit file (``.npz``); ``.json`` and ``.png`` are written beside it.
+    resolution, anisotropic, gaf, method, diffuse, fresnel, albedo_weight, coat, picture
+        As :func:`microfacet.fit.outputs.fit_material`.
+
+    Returns
+    -------
+    dict
+        The summary figures of the fit (the ``fit`` task's columns).
 
     References
     ----------
