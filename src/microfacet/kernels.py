@@ -495,6 +495,26 @@ def smith_eval(brdf, wi, wo, divide_cos_i: bool, dtype=np.float64, out=None, bac
     ``None`` when the kernel does not apply (no Numba, array parameters, another distribution,
     GAF or Fresnel class) or, with ``background``, while it compiles (:func:`_kernel`).
 
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF
+        A Smith BRDF (:func:`covers`).
+    wi, wo : ndarray, (..., 3)
+        Unit directions (their batch shapes broadcast).
+    divide_cos_i : bool
+        Return ``f`` (True) or ``f cos theta_i`` (False).
+    dtype : numpy.float64 or numpy.float32
+        Arithmetic and output type.
+    out : ndarray, optional
+        The ``(..., 3)`` output to write.
+    background : bool
+        Return ``None`` instead of waiting while the kernel compiles.
+
+    Returns
+    -------
+    (ndarray, dict) or None
+        ``f`` and the input checks ``{"wi": deviation, "wo": deviation}``.
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 2.1.

@@ -367,6 +367,23 @@ def power_iteration(k: np.ndarray, tol: float = 1e-10, max_iter: int = 1000, ran
     guards rounding and asymmetric inputs. ``k`` is a matrix or an operator with
     ``k @ p`` (:class:`AzimuthalKernel`); the iterate is kept in float64.
 
+    Parameters
+    ----------
+    k : ndarray or AzimuthalKernel
+        The kernel (:func:`smith_kernel_isotropic`, :func:`smith_kernel_anisotropic`).
+    tol : float
+        Relative change of the iterate at which the iterations stop.
+    max_iter : int
+        Most iterations.
+    rank_one : (ndarray, ndarray), optional
+        ``(u, v)`` of the height-correlated operator ``K p - u (v . p)``.
+
+    Returns
+    -------
+    (ndarray, float, int)
+        The eigenvector (the NDF at the nodes, unnormalized), the eigenvalue (``F0`` up to the
+        rule's normalization, :func:`rule_area_at_normal`) and the iterations made.
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 4.9, Algorithms 1 and 3; Dupuy et al. 2015.
@@ -1093,6 +1110,23 @@ def extract_fresnel(brdf, ideal, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_p
                     diffuse: bool = False, isotropic: bool = False):
     """:func:`solve_fresnel` on :func:`fresnel_samples` of ``brdf`` (Eq. 4.11,
     Algorithm 2): a :class:`FresnelSolution`.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        The material.
+    ideal : BRDF
+        The fitted microfacet BRDF with an ideal (``F = 1``) Fresnel term.
+    n_d : int
+        Nodes of the Fresnel table, uniform in ``theta_d``.
+    n_h, n_phi_d, n_phi_h, isotropic
+        The configurations (:func:`fresnel_samples`).
+    diffuse : bool
+        Solve a Lambertian base ``k_d`` too.
+
+    Returns
+    -------
+    FresnelSolution
 
     References
     ----------

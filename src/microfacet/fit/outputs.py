@@ -258,6 +258,36 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     fit and of the least-squares fits (wall, until the last ends; not of the errors,
     picture or files).
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The material to fit (a measured BRDF or any object with ``eval``).
+    out_npz : str or PathLike
+        The fit file; ``.json`` and ``.png`` are written beside it.
+    resolution, anisotropic, gaf
+        Of the tabulated fit (:func:`microfacet.fit.fit`).
+    title : str
+        The picture's title (default: the material's name from ``out_npz``).
+    method : {"least_squares", "moments"}
+        How the GGX and Beckmann fits of the JSON and picture are made.
+    diffuse : {"auto", "on", "off"}
+        Lambertian base of the least-squares fits.
+    fresnel : {"conductor", "schlick", "table"}
+        Fresnel model of the least-squares fits.
+    tabulated_diffuse : bool
+        A Lambertian base for the tabulated fit.
+    picture : bool
+        Render and write the ``.png``.
+    albedo_weight : float, optional
+        Weight of the albedo term of the fits.
+    coat : bool
+        Fit each least-squares model with a clear coat lobe too.
+
+    Returns
+    -------
+    dict
+        The JSON summary (module docstring).
+
     Examples
     --------
     >>> import microfacet as mf

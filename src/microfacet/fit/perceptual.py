@@ -475,6 +475,25 @@ def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16, image_size:
 
     and ``albedo_grid``: the albedo quadrature (half-vector ``theta x phi`` nodes per view).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The material.
+    n : int
+        Sobol pairs uniform in solid angle.
+    seed : int
+        Their scramble seed.
+    grid : int
+        Nodes per MERL coordinate of the grid pairs.
+    image_size : int
+        Side of the spheres whose pixels are pairs (0: none).
+    albedo_grid : (int, int)
+        Half-vector ``theta x phi`` nodes of the albedo quadrature, per view.
+
+    Returns
+    -------
+    Target
+
     Examples
     --------
     >>> import microfacet as mf
@@ -732,6 +751,20 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
     parameters and reflectances (``MODEL_SPECS[name].brdf(q, y)`` is the BRDF; plain arrays,
     so that they cross processes). NumPy only once ``t`` is made. Linear algebra runs on one
     BLAS thread (the matrices are small; idle BLAS threads spin).
+
+    Parameters
+    ----------
+    reference : BRDF
+        The material (read only to make ``t`` when it is not given).
+    models : sequence of str
+        Names of :data:`MODELS`, fitted in order (a later model may start from an earlier one).
+    t : Target, optional
+        The data's side of the objective (:func:`target`).
+
+    Returns
+    -------
+    dict
+        ``{name: (q, y)}``: nonlinear parameters and reflectances of each model.
 
     Examples
     --------

@@ -197,6 +197,24 @@ def point_light(moments, wi, wo, irradiance=1.0, fresnel=None, shadowing: bool =
     This equals ``MicrofacetBRDF(Beckmann.from_moments(*E), fresnel).eval_cos(wi, wo) * E``.
     0 where either direction is below the macro horizon, ``o.h <= 0`` or ``c_o <= 0``.
 
+    Parameters
+    ----------
+    moments : ndarray, (..., 5)
+        The pixels' slope moments.
+    wi, wo : ndarray, (..., 3)
+        Light and view directions in the macrosurface's frame.
+    irradiance : float or array-like
+        ``E``, scalar or RGB.
+    fresnel : Fresnel, optional
+        Default: ideal (``F = 1``).
+    shadowing : bool
+        Include ``Lambda(i)``.
+
+    Returns
+    -------
+    ndarray, (..., 3)
+        Radiance.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Sec. 1.4, 1.5, 3.2, 3.3, Eq. 4.
