@@ -91,6 +91,22 @@ def default_jobs(peak_estimate: int, n_files: int, available: int | None = None,
     """Local worker processes: ``jobs x peak_estimate <= available`` memory, at most the CPU
     count and the number of files, at least 1.
 
+    Parameters
+    ----------
+    peak_estimate : int
+        A task's estimated peak memory, bytes.
+    n_files : int
+        Files in the batch.
+    available : int, optional
+        Memory available, bytes (default :func:`available_bytes`).
+    cpus : int, optional
+        CPUs (default :func:`cpu_count`).
+
+    Returns
+    -------
+    int
+        ``max(1, min(cpus, n_files, available // peak_estimate))``.
+
     Examples
     --------
     >>> GB = 2 ** 30

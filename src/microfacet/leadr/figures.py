@@ -158,6 +158,27 @@ def compare_levels(height, base=0.1, scale: float = 1.0, levels=(1, 2, 3, 4, 5),
     reference). ``height`` is a square power-of-two height map, ``base`` the base
     material (:func:`~microfacet.leadr.downsample.base_lobe`).
 
+    Parameters
+    ----------
+    height : ndarray, (N, N)
+        Heights, ``N`` a power of two.
+    base : see :func:`~microfacet.leadr.downsample.base_lobe`
+        The base material's lobe.
+    scale : float
+        Height scale (:func:`microfacet.leadr.bake`).
+    levels : sequence of int
+        MIP levels rendered.
+    scene : PatchScene, optional
+        Camera and lights (default ``PatchScene()``).
+    kinds : sequence of {"point", "env"}
+        Lightings rendered.
+
+    Returns
+    -------
+    (dict, dict)
+        Images ``{(kind, level): {method: (n, n, 3)}}`` and relative RMS errors
+        ``{(kind, level): {"naive": e, "leadr": e}}`` against the reference.
+
     Examples
     --------
     >>> images, errors = compare_levels(default_heightfield(size=16), levels=(2,), kinds=("point",))
@@ -203,6 +224,28 @@ def leadr_section(out, size: int = 256, levels=(1, 2, 3, 4, 5), base=0.1, seed: 
     HTML section. ``size`` is the side of the height map (a power of two), ``levels``
     the MIP levels shown, ``base`` the base material (``alpha``, a Beckmann lobe, a
     BRDF or a fit: :func:`~microfacet.leadr.downsample.base_lobe`).
+
+    Parameters
+    ----------
+    out : str or PathLike
+        Folder; the files go under ``out/leadr/``.
+    size : int
+        Side of the height map (:func:`default_heightfield`), a power of two.
+    levels : sequence of int
+        MIP levels shown.
+    base : see :func:`~microfacet.leadr.downsample.base_lobe`
+        The base material.
+    seed : int
+        Seed of the height map.
+    display : int
+        Side of the shown images, pixels.
+    progress : callable, optional
+        Called as ``progress(1)`` after each image is written (a progress bar's update).
+
+    Returns
+    -------
+    str
+        The HTML section.
 
     Examples
     --------

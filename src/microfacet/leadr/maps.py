@@ -58,6 +58,25 @@ def height_to_slopes(height, scale: float = 1.0, border: str = "wrap") -> np.nda
     """Slopes ``(H, W, 2)`` (float64) of a height map ``(H, W)`` in units of the unit uv
     square (module docstring; Sec. 3.4 central differences, Listing 3.6).
 
+    Parameters
+    ----------
+    height : ndarray, (H, W)
+        Heights in units of the map's width (times ``scale``).
+    scale : float
+        Height scale.
+    border : {"wrap", "clamp"}
+        Central differences across the edges (a tileable map) or one-sided at them.
+
+    Returns
+    -------
+    ndarray, (H, W, 2) float64
+        The slopes ``(x~, y~)``.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``border``.
+
     References
     ----------
     Dupuy 2015, thesis, Sec. 3.4, Listing 3.6.
@@ -126,6 +145,20 @@ def decode_normal_map(nmap, encoding: str = "auto", z: str = "auto") -> np.ndarr
     ``uint16`` or float) or a PNG/EXR file: the inverse of :func:`encode_normal_map`
     (Listing 3.7), through :func:`microfacet.io.normalmap.read_slopes` (``encoding``, ``z``,
     repairs and warnings as documented there).
+
+    Parameters
+    ----------
+    nmap : ndarray or path
+        The normal map, ``(H, W, 2|3|4)``, or a PNG/EXR file.
+    encoding : {"auto", "biased", "signed", "offset"}
+        How the components are stored (:data:`microfacet.io.normalmap.ENCODINGS`).
+    z : {"auto", "stored", "reconstruct"}
+        Use the stored ``n_z`` or rebuild it from ``n_x, n_y``.
+
+    Returns
+    -------
+    ndarray, (H, W, 2) float64
+        The slopes ``(x~, y~) = (-n_x / n_z, -n_y / n_z)``.
 
     References
     ----------
