@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import logging
 import multiprocessing
 import os
 import shutil
 import signal
+import time
 import warnings
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -44,6 +46,9 @@ __all__ = ["Panel", "DemoFigure", "thesis_figures", "render_panel", "run_demo", 
            "corpus_examples", "corpus_file", "corpus_cache", "shared_data", "shown_fits", "fit_sizes",
            "CORPUS_MATERIALS", "ABC_LABEL", "preview_exposure",
            "DEFAULT_SIZE", "DEFAULT_SPP", "DEFAULT_SEED", "LIGHT"]
+
+#: Logger of the demo's section times (INFO; ``microfacet demo --timings`` prints them).
+log = logging.getLogger(__name__)
 
 DEFAULT_SIZE = 128      # sphere image side, pixels
 DEFAULT_SPP = 64        # environment samples per pixel (a power of two stratifies best)
@@ -222,12 +227,14 @@ def fit_and_picture(example: FitExample, work: str | os.PathLike, size: int) -> 
     each one's errors, and the environment images of :func:`microfacet.metrics.render_images`.
 
     Returns ``{"summary", "npz", "shown": [(label, fit name)], "abc": {"image", "log",
-    "chromaticity"} or None, "picture": PNG bytes, "environment": {label: (S, S, 3) image}}``.
+    "chromaticity"} or None, "picture": PNG bytes, "environment": {label: (S, S, 3) image},
+    "seconds": wall time of this work}``.
     """
     from .fit import load
     from .fit.outputs import IMAGE_SIZE, LOG_PAIRS
     from .metrics import ImageError, LogError, render_images
     from .render import fit_comparison_png
+    start = time.perf_counter()
     picture_size, env_size = fit_sizes(size)
     data = example.material()
     summary, npz = fit_demo_material(example, work)
@@ -244,7 +251,7 @@ def fit_and_picture(example: FitExample, work: str | os.PathLike, size: int) -> 
     picture = fit_comparison_png(brdfs, title=f"fit of {example.label}", size=picture_size, notes=notes)
     environment = {label: render_images(b, size=env_size, reference=data)[3] for label, b in brdfs.items()}
     return {"summary": summary, "npz": npz, "shown": shown, "abc": abc, "picture": picture,
-            "environment": environment}
+            "environment": environment, "seconds": time.perf_counter() - start}
 
 
 def _slug(label: str) -> str:
@@ -293,6 +300,8 @@ def fit_section(out: Path, size: int, examples: Sequence[FitExample] | None = No
     done, parts = [], []
     for ex, task in zip(examples, results, strict=True):
         r = task.result() if hasattr(task, "result") else task
+        if "seconds" in r:
+            log.info("demo: fitting %s: %.1f s (in its worker)", ex.key, r["seconds"])
         done.append(r)
         write_bytes(folder / f"{ex.key}.png", r["picture"])
         labels = list(r["environment"])
@@ -574,6 +583,22 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
     return out / "index.html"
 
 
+class _Clock:
+    """Logs (:data:`log`, INFO) the wall time of each step of the demo and when it ended."""
+
+    def __init__(self):
+        self.start = time.perf_counter()
+
+    @contextlib.contextmanager
+    def __call__(self, name: str):
+        t = time.perf_counter()
+        try:
+            yield
+        finally:
+            now = time.perf_counter()
+            log.info("demo: %s: %.1f s (ended at %.1f s)", name, now - t, now - self.start)
+
+
 def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progress: bool, figures, fits,
                  leadr: bool, glints: bool, viewer: bool, mitsuba: bool, exports: bool = False) -> Path:
     """:func:`run_demo`'s files, written into the (staging) folder ``out``."""
@@ -583,6 +608,7 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
     work = out / ".fits"                                   # the fit files: not part of the report
     total = (sum(len(f.panels) + 1 for f in figures) + 1 + len(examples) + (LEADR_STEPS if leadr else 0)
              + (GLINTS_STEPS if glints else 0) + (MITSUBA_STEPS if mitsuba else 0))
+    clock = _Clock()
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
         # the pool: the panels (short tasks, wanted first), then the fits; meanwhile this
@@ -595,42 +621,52 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
         bar.update(1)
         later = {}                                        # sections rendered now, placed later
         if viewer:
-            later["viewer"] = _viewer_section(out)
+            with clock("viewer"):
+                later["viewer"] = _viewer_section(out)
         if leadr:
             from .leadr.figures import leadr_section
             fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
-            later["leadr"] = leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
-                                           progress=bar.update)
+            with clock("LEADR"):
+                later["leadr"] = leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
+                                               progress=bar.update)
         if glints:
             from .glints.figures import glints_section
             small = {} if size >= 64 else {"map_size": 128, "width": 64, "reference_spp": 32, "naive_spp": 4}
-            later["glints"] = glints_section(out, progress=bar.update, **small)
+            with clock("glints"):
+                later["glints"] = glints_section(out, progress=bar.update, **small)
         sections = [_intro_html(size, spp, seed)]
-        for fig, fig_tasks in zip(figures, tasks, strict=True):
-            (out / fig.key).mkdir(exist_ok=True)
-            save_lobe_figure(out / fig.key / "lobes.png", [p.brdf for p in fig.panels],
-                             [f"{name} {p.label}".strip() for name, row in fig.rows for p in row],
-                             fig.lobe_views_deg, fig.lobe_planes_deg,
-                             ncols=max(len(r) for _, r in fig.rows))
-            bar.update(1)
-            cells = {}
-            for panel, task in zip(fig.panels, fig_tasks, strict=True):
-                direct, lit = task.result()
-                cells[panel.key] = (_save(out / fig.key, f"{panel.key}-directional", direct),
-                                    _save(out / fig.key, f"{panel.key}-environment", lit))
+        with clock("figures 2.2-2.6 (lobes; panels from the pool)"):
+            for fig, fig_tasks in zip(figures, tasks, strict=True):
+                (out / fig.key).mkdir(exist_ok=True)
+                save_lobe_figure(out / fig.key / "lobes.png", [p.brdf for p in fig.panels],
+                                 [f"{name} {p.label}".strip() for name, row in fig.rows for p in row],
+                                 fig.lobe_views_deg, fig.lobe_planes_deg,
+                                 ncols=max(len(r) for _, r in fig.rows))
                 bar.update(1)
-            sections.append(_figure_html(fig, cells, "lobes.png", spp))
+                cells = {}
+                for panel, task in zip(fig.panels, fig_tasks, strict=True):
+                    direct, lit = task.result()
+                    cells[panel.key] = (_save(out / fig.key, f"{panel.key}-directional", direct),
+                                        _save(out / fig.key, f"{panel.key}-environment", lit))
+                    bar.update(1)
+                sections.append(_figure_html(fig, cells, "lobes.png", spp))
         if mitsuba:                                       # its scenes without fits first, then it waits for them
             def fitted():
-                return [(ex, task.result()["npz"]) for ex, task in zip(examples, fit_tasks, strict=True)]
-            later["mitsuba"] = _mitsuba_section(out, progress=bar.update, fits=fitted if examples else None)
+                with clock("waiting for the fits (Mitsuba)"):
+                    return [(ex, task.result()["npz"]) for ex, task in zip(examples, fit_tasks, strict=True)]
+            with clock("Mitsuba"):
+                later["mitsuba"] = _mitsuba_section(out, progress=bar.update, fits=fitted if examples else None)
         if examples:
-            sections.append(fit_section(out, size, examples, progress=bar.update, results=fit_tasks, note=note))
+            with clock("fitting section"):
+                sections.append(fit_section(out, size, examples, progress=bar.update, results=fit_tasks, note=note))
         sections += [later[k] for k in ("leadr", "glints", "mitsuba") if k in later]
         if exports and examples:
-            sections.append(_exports_section(out, examples[0], work / f"{examples[0].key}.npz"))
+            with clock("exports"):
+                sections.append(_exports_section(out, examples[0], work / f"{examples[0].key}.npz"))
         if viewer:
             sections.append(later["viewer"])
     shutil.rmtree(work, ignore_errors=True)
     title = "microfacet demo — thesis Figs. 2.2–2.6, fitting (Ch. 4), LEADR (Fig. 5.3) and glints"
-    return write_text(out / "index.html", html_page(title, "\n".join(sections)))
+    index = write_text(out / "index.html", html_page(title, "\n".join(sections)))
+    log.info("demo: all sections: %.1f s", time.perf_counter() - clock.start)
+    return index

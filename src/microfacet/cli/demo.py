@@ -32,16 +32,24 @@ def add(sub) -> None:
     p.add_argument("-j", "--jobs", type=int_at_least(1), default=None, metavar="N",
                    help="worker processes (default: usable CPUs, at most 4); results do not depend on it")
     p.add_argument("--no-viewer", action="store_true",
-                   help="leave out the real-time section (WebGL2 viewer renders in headless Chromium, ~35 s)")
+                   help="leave out the real-time section (WebGL2 viewer renders in headless Chromium)")
     p.add_argument("--no-mitsuba", action="store_true",
                    help="leave out the Mitsuba 3 section (the microfacet.mitsuba plugins in scenes)")
     p.add_argument("--no-exports", action="store_true",
                    help="leave out the exports section (a fit rendered by Blender's Cycles and three.js)")
+    p.add_argument("--timings", action="store_true",
+                   help="print each section's wall time to stderr (the pool's fits with their worker's time)")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    from ..demo import default_workers, run_demo
+    from ..demo import default_workers, log, run_demo
+    if args.timings:
+        import logging
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
     index = run_demo(args.output, size=args.size, spp=args.spp, seed=args.seed,
                      workers=args.jobs or default_workers(), progress=sys.stderr.isatty(), viewer=not args.no_viewer,
                      mitsuba=not args.no_mitsuba, exports=not args.no_exports)

@@ -22,6 +22,7 @@ subprocess: a too-old libLLVM aborts the process), else ``scalar_rgb``.
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 import shutil
@@ -101,14 +102,21 @@ def _metal(name: str) -> dict:
     return {"eta": _rgb(eta), "k": _rgb(k)}
 
 
+@functools.lru_cache(maxsize=1)
+def _sphere(size: int):
+    """:class:`microfacet.render.Sphere` of ``size`` pixels, made once for every library render."""
+    from ..render import Sphere
+    return Sphere(size)
+
+
 def _library_render(brdf, size: int, light) -> np.ndarray:
     """The library's own render of ``brdf``: an orthographic unit sphere under the
     directional ``light`` (:func:`microfacet.render.shade_directional`), shaded at
     :data:`LIBRARY_SUPERSAMPLE`² points per pixel and box-filtered, as Mitsuba's box
     filter integrates each pixel; black background."""
-    from ..render import Sphere, shade_directional
+    from ..render import shade_directional
     k = LIBRARY_SUPERSAMPLE
-    sphere = Sphere(size * k)
+    sphere = _sphere(size * k)
     image = sphere.image(shade_directional(brdf, sphere.wo, sphere.to_local(light.w), light.rgb))
     return image.reshape(size, k, size, k, 3).mean(axis=(1, 3))
 
