@@ -502,12 +502,14 @@ def _fresnel_block(F, f, c_row, s_row, out, o, m):
 
 
 @_inline
-def _projected_block(kind, p, mode, block, rows, tops):
+def _projected_block(kind, p, shadowing, mode, block, rows, tops):
     """``rows[0][k] = o.h`` (if ``oh_row``) and ``dst[od + k] = D G / (4 z_o) [/ z_i]`` of the pairs ``k < m``
     of the flat ``wi``, ``wo`` from their elements ``oi``, ``oo`` (``3 k + axis``: :func:`_flat_rows`;
     ``block = (wi, oi, wo, oo, m, dst, od)``), the distribution ``kind``, in the arithmetic type of
-    ``rows`` (:func:`_float_type`), with the flags ``mode = (shadowing, divide_cos_i, measure, oh_row,
-    smith)`` (constants at each call but ``divide_cos_i``, and ``shadowing`` and ``smith`` of eval)
+    ``rows`` (:func:`_float_type`), with the flags ``shadowing`` and ``mode = (divide_cos_i, measure, oh_row,
+    smith)`` (constants at each call but ``divide_cos_i``, and ``shadowing`` and ``smith`` of eval;
+    ``shadowing`` apart, so that the pdf's literal ``False`` reaches :func:`_smith_block_post`, which Numba
+    then compiles for that constant, as it did before the flags were a tuple)
     (Eq. 2.1 with F = 1: ``D / (4 c_o (1 + Lambda_i + Lambda_o))``, the NDF of Eq. 3.2
     and the height-correlated Smith G with the warped directions of Eq. 3.3; ``Lambda_i = 0``
     without shadowing, which makes it the visible-normal pdf ``D / (4 A(o))`` of Eq. 2.17),
@@ -521,7 +523,7 @@ def _projected_block(kind, p, mode, block, rows, tops):
     not normalized: ``D`` is homogeneous of degree -4 in ``h`` (Eq. 2.11: ``P(x/z, y/z) / z^4``),
     so ``D(h / |h|) = |h|^4 D(h)`` takes a product where ``1 / |h|`` takes a root and a quotient."""
     F = _float_type(rows[0])
-    shadowing, divide_cos_i, measure, oh_row, smith = mode
+    divide_cos_i, measure, oh_row, smith = mode
     wi, oi, wo, oo, m, dst, od = block
     top_i, top_o = tops
     s1 = math.sqrt(F(1.0) - p.rho * p.rho)
@@ -1143,7 +1145,7 @@ def projected_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            _projected_block(kind, p, (p.shadowing, divide_cos_i, False, True, True), (bi, oi, bo, oo, m, s_out, j0),
+            _projected_block(kind, p, p.shadowing, (divide_cos_i, False, True, True), (bi, oi, bo, oo, m, s_out, j0),
                              rows, (_no_bits(F), _no_bits(F)))
             for k in range(m):
                 oh_out[max(j0, 0) + k] = oh_r[k]
@@ -1170,7 +1172,7 @@ def pdf_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            top_i, top_o = _projected_block(kind, p, (False, False, True, False, True), (bi, oi, bo, oo, m, out, j0),
+            top_i, top_o = _projected_block(kind, p, False, (False, True, False, True), (bi, oi, bo, oo, m, out, j0),
                                             rows, (top_i, top_o))
         return top_i, top_o
 
@@ -1200,7 +1202,7 @@ def eval_kernel(kind, dtype=np.float64):
         for j0 in range(start, stop, BLOCK):
             m = min(BLOCK, stop - j0)
             (bi, oi), (bo, oo) = _flat_rows(wi, wi_f, j0, m, si), _flat_rows(wo, wo_f, j0, m, so)
-            top_i, top_o = _projected_block(kind, p, (p.shadowing, divide_cos_i, True, True, not (fused and later)),
+            top_i, top_o = _projected_block(kind, p, p.shadowing, (divide_cos_i, True, True, not (fused and later)),
                                             (bi, oi, bo, oo, m, rows[1], 0), rows, (top_i, top_o))
             if fused and later:
                 _beckmann_eval_block(f, rows, out, 3 * j0, m)
