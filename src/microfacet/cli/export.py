@@ -1,4 +1,6 @@
-"""``microfacet export FIT.npz --to gltf|mtlx|usd|blender -o OUT``: a fit as a glTF, MaterialX, USD or Blender material; ``microfacet export PYRAMID.exr --to textures|gltf -o OUT``: a LEADR pyramid as engine textures."""
+"""``microfacet export FIT.npz --to gltf|mtlx|usd|blender -o OUT``: a fit as a glTF, MaterialX,
+USD or Blender material; ``microfacet export PYRAMID.exr --to textures|gltf -o OUT``: a LEADR
+pyramid as engine textures."""
 from __future__ import annotations
 
 import sys
