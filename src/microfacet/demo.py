@@ -599,6 +599,16 @@ class _Clock:
             log.info("demo: %s: %.1f s (ended at %.1f s)", name, now - t, now - self.start)
 
 
+def _leadr_task(out: Path, size: int) -> tuple[str, float]:
+    """The LEADR section (:func:`microfacet.leadr.figures.leadr_section`) of a demo of
+    ``size``, as a task of the demo's pool: its HTML and its wall time (s)."""
+    from .leadr.figures import leadr_section
+    start = time.perf_counter()
+    fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
+    html = leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size)
+    return html, time.perf_counter() - start
+
+
 def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progress: bool, figures, fits,
                  leadr: bool, glints: bool, viewer: bool, mitsuba: bool, exports: bool = False) -> Path:
     """:func:`run_demo`'s files, written into the (staging) folder ``out``."""
@@ -611,24 +621,19 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
     clock = _Clock()
     with _pool(int(workers)) as pool, \
             tqdm(total=total, disable=not progress, unit="step", desc="microfacet demo", leave=False) as bar:
-        # the pool: the panels (short tasks, wanted first), then the fits; meanwhile this
-        # process renders the sections that need no pool result (the viewer's work is mostly
-        # Chromium's), then collects the panels, then the sections that need the fits
+        # the pool: the panels (short tasks, wanted first), the fits, the LEADR section; meanwhile
+        # this process renders the other sections that need no pool result (the viewer's work
+        # is mostly Chromium's), then collects the panels, then the sections that need the fits
         tasks = [[pool.submit(render_panel, p.brdf, f.light, size, env_map, spp, (seed, i, j))
                   for j, p in enumerate(f.panels)] for i, f in enumerate(figures)]
         fit_tasks = [pool.submit(fit_and_picture, ex, work, size) for ex in examples]
+        leadr_task = pool.submit(_leadr_task, out, size) if leadr else None   # needed last: after the fits
         _save(out, "environment", env_map)
         bar.update(1)
         later = {}                                        # sections rendered now, placed later
         if viewer:
             with clock("viewer"):
                 later["viewer"] = _viewer_section(out)
-        if leadr:
-            from .leadr.figures import leadr_section
-            fine = 256 if size >= 64 else 64          # small demos (tests) get a small map
-            with clock("LEADR"):
-                later["leadr"] = leadr_section(out, size=fine, levels=LEADR_LEVELS, display=2 * size,
-                                               progress=bar.update)
         if glints:
             from .glints.figures import glints_section
             small = {} if size >= 64 else {"map_size": 128, "width": 64, "reference_spp": 32, "naive_spp": 4}
@@ -659,6 +664,11 @@ def _render_demo(out: Path, size: int, spp: int, seed: int, workers: int, progre
         if examples:
             with clock("fitting section"):
                 sections.append(fit_section(out, size, examples, progress=bar.update, results=fit_tasks, note=note))
+        if leadr:
+            with clock("waiting for LEADR"):
+                later["leadr"], seconds = leadr_task.result()
+            log.info("demo: LEADR: %.1f s (in its worker)", seconds)
+            bar.update(LEADR_STEPS)
         sections += [later[k] for k in ("leadr", "glints", "mitsuba") if k in later]
         if exports and examples:
             with clock("exports"):
