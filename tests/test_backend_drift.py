@@ -48,13 +48,15 @@ def reference(brdf, method, *args):
 
 
 @pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed (or MICROFACET_NUMBA=0)")
+@pytest.mark.parametrize("fresnel", ["conductor", "schlick_f90"])
 @pytest.mark.parametrize("case", CASES)
 @pytest.mark.parametrize("dist", DISTRIBUTIONS)
-def test_numba_backend_matches_the_numpy_reference(dist, case):
+def test_numba_backend_matches_the_numpy_reference(dist, case, fresnel):
     rng = np.random.default_rng(7)
     n = 2000
     wi, wo, u = upper(rng, n), upper(rng, n), rng.random((n, 2))
-    b = mf.MicrofacetBRDF(DISTRIBUTIONS[dist](**CASES[case]), fresnel=fr.Conductor.metal("Cu"))
+    term = fr.Conductor.metal("Cu") if fresnel == "conductor" else fr.Schlick((0.9, 0.6, 0.3), f90=(0.5, 0.7, 0.2))
+    b = mf.MicrofacetBRDF(DISTRIBUTIONS[dist](**CASES[case]), fresnel=term)
     assert backend.smith(b)
     f, checks = kernels.smith_eval(b, wi, wo, True)              # the compiled kernels, compiled first
     p, _ = kernels.smith_pdf(b, wi, wo)
@@ -120,8 +122,10 @@ def test_glsl_terms_match_the_numpy_reference(gl, dist, case):
 
 
 @pytest.mark.parametrize("fresnel, kind, a, b", [
-    (fr.Schlick((0.9, 0.6, 0.3)), 1, (0.9, 0.6, 0.3), (0.0,) * 3), (fr.Dielectric(1.5), 2, (1.5,) * 3, (0.0,) * 3),
-    (fr.Conductor.metal("Au"), 3, *fr.Conductor.METALS["Au"])], ids=["schlick", "dielectric", "conductor"])
+    (fr.Schlick((0.9, 0.6, 0.3)), 1, (0.9, 0.6, 0.3), (1.0,) * 3),
+    (fr.Schlick((0.9, 0.6, 0.3), f90=(0.5, 0.7, 0.2)), 1, (0.9, 0.6, 0.3), (0.5, 0.7, 0.2)),
+    (fr.Dielectric(1.5), 2, (1.5,) * 3, (0.0,) * 3),
+    (fr.Conductor.metal("Au"), 3, *fr.Conductor.METALS["Au"])], ids=["schlick", "schlick_f90", "dielectric", "conductor"])
 def test_glsl_fresnel_matches_the_numpy_reference(gl, fresnel, kind, a, b):
     """``mf_fresnel`` against the :mod:`microfacet.fresnel` term at 300 ``cos theta_d`` in ``[0, 1]``."""
     c = np.linspace(0.0, 1.0, 300).astype(np.float32).astype(np.float64)

@@ -58,7 +58,8 @@ SURFACE = """
 uniform int s_dist; uniform vec2 s_alpha; uniform float s_rho; uniform vec2 s_mean;
 uniform int f_kind; uniform vec3 f_a; uniform vec3 f_b; uniform bool shadowing;
 """
-FRESNELS = [(fr.Ideal(), 0, 0, 0), (fr.Schlick((0.9, 0.6, 0.3)), 1, (0.9, 0.6, 0.3), 0),
+FRESNELS = [(fr.Ideal(), 0, 0, 0), (fr.Schlick((0.9, 0.6, 0.3)), 1, (0.9, 0.6, 0.3), 1),
+            (fr.Schlick((0.9, 0.6, 0.3), f90=0.5), 1, (0.9, 0.6, 0.3), 0.5),
             (fr.Dielectric(1.5), 2, (1.5,) * 3, 0), (fr.Conductor.metal("Au"), 3, *fr.Conductor.METALS["Au"])]
 
 

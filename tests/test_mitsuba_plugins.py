@@ -43,6 +43,7 @@ PARAMS = [
     ("ggx-sheared", "ggx", 0.3, 0.3, 0.0, (0.3, -0.2), {}),
     ("beckmann-all", "beckmann", 0.5, 0.25, -0.5, (-0.2, 0.35), {"eta": CU[0], "k": CU[1]}),
     ("ggx-all-rough", "ggx", 0.8, 0.6, 0.4, (0.1, 0.1), {"schlick_f0": 0.04}),
+    ("ggx-schlick-f90", "ggx", 0.2, 0.2, 0.0, (0.0, 0.0), {"schlick_f0": 0.6, "schlick_f90": 0.3}),
 ]
 IDS = [p[0] for p in PARAMS]
 GAF_VARIANTS = [("smith", True, False), ("smith", True, True), ("smith", False, False),
@@ -115,7 +116,7 @@ def oracle(kind, ax, ay, rho, mean, fresnel, gaf="smith", shadowing=True):
     elif "int_ior" in fresnel:
         fr = mf.fresnel.Dielectric(fresnel["int_ior"] / 1.000277)
     elif "schlick_f0" in fresnel:
-        fr = mf.fresnel.Schlick(fresnel["schlick_f0"])
+        fr = mf.fresnel.Schlick(fresnel["schlick_f0"], fresnel.get("schlick_f90", 1.0))
     else:
         fr = mf.fresnel.Ideal()
     return mf.MicrofacetBRDF(dist, fresnel=fr, gaf=gaf, shadowing=shadowing)
@@ -319,7 +320,8 @@ def test_traverse_exposes_and_updates_parameters(variant):
     ({"alpha": 0.1, "alpha_u": 0.2, "alpha_v": 0.2}, "alpha"), ({"distribution": "phong"}, "distribution"),
     ({"gaf": "cook"}, "gaf"), ({"material": "Unobtainium"}, "material"),
     ({"material": "Cu", "int_ior": 1.5}, "int_ior"), ({"eta": 1.0, "material": "Au"}, "material"),
-    ({"schlick_f0": 1.5}, "schlick_f0"), ({"gaf": "vgroove", "separable": True}, "separable"),
+    ({"schlick_f0": 1.5}, "schlick_f0"), ({"schlick_f90": -0.1}, "schlick_f90"),
+    ({"gaf": "vgroove", "separable": True}, "separable"),
     ({"shadowing": "often"}, "shadowing"), ({"mean_slope_u": float("nan")}, "mean_slope_u"),
     ({"gaf": "vgroove", "mean_slope_u": 0.3}, "gaf"),
 ])

@@ -405,11 +405,11 @@ def _guard(F, valid, e, scale, den):
 
 
 @_inline
-def _schlick(F, f0, c):
-    """Schlick's ``F = F0 + (1 - F0)(1 - c)^5`` (Table 2.I; :class:`~microfacet.fresnel.Schlick`)."""
+def _schlick(F, f0, f90, c):
+    """Schlick's ``F = F0 + (F90 - F0)(1 - c)^5`` (Table 2.I for ``F90 = 1``; :class:`~microfacet.fresnel.Schlick`)."""
     m = F(1.0) - min(max(c, F(0.0)), F(1.0))
     m2 = m * m
-    return f0 + (F(1.0) - f0) * (m2 * m2 * m)
+    return f0 + (f90 - f0) * (m2 * m2 * m)
 
 
 @_inline
@@ -480,9 +480,9 @@ def _fresnel_block(F, f, c_row, s_row, out, o, m):
     elif fk == SCHLICK:
         for k in range(m):
             c, s = c_row[k], s_row[k]
-            out[o + 3 * k] = _schlick(F, p0, c) * s
-            out[o + 3 * k + 1] = _schlick(F, p1, c) * s
-            out[o + 3 * k + 2] = _schlick(F, p2, c) * s
+            out[o + 3 * k] = _schlick(F, p0, q0, c) * s
+            out[o + 3 * k + 1] = _schlick(F, p1, q1, c) * s
+            out[o + 3 * k + 2] = _schlick(F, p2, q2, c) * s
     elif fk == DIELECTRIC:
         for k in range(m):
             c, s = c_row[k], s_row[k]

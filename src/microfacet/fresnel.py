@@ -154,10 +154,8 @@ class Schlick(Fresnel):
         return self.f0 + (self.f90 - self.f0) * (m2 * m2 * m)[..., None]
 
     def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
-        """The kernels compute ``f90 = 1`` (Table 2.I); other ``f90`` take the NumPy path."""
-        if type(self) is not Schlick or not np.all(self.f90 == 1.0):
-            return None
-        return FresnelParams.analytic(SCHLICK, dtype, self.f0)
+        """The record: ``f0`` (row 0) and ``f90`` (row 1)."""
+        return FresnelParams.analytic(SCHLICK, dtype, self.f0, self.f90) if type(self) is Schlick else None
 
 
 #: ``mu-bar = 1/7`` of :class:`F82Tint`: the cosine (~81.8 degrees) where ``f82`` tints

@@ -121,7 +121,7 @@ void main() {
         vec3 l = L / d;
         vec3 wi = vec3(dot(T, l), dot(B, l), dot(N, l));
         float f = mf_glint_eval_cos(mfGlintA, mfGlintB, vMfUv, cov, mfCutoff, wi, wo, mfExact, mfSeparable);
-        vec3 F = mf_fresnel_schlick(mfF0, dot(wo, normalize(wi + wo)));
+        vec3 F = mf_fresnel_schlick(mfF0, vec3(1.0), dot(wo, normalize(wi + wo)));
         color += pl.color * getDistanceAttenuation(d, pl.distance, pl.decay) * F * f;
     }
 #endif

@@ -17,7 +17,7 @@ float mf_erfcx(float x) {
 }
 
 // Fresnel term F(cos theta_d) -> RGB. kind: MF_FRESNEL_IDEAL (F = 1, Eq. 2.3),
-// MF_FRESNEL_SCHLICK (a = F0), MF_FRESNEL_DIELECTRIC (a = eta), MF_FRESNEL_CONDUCTOR
+// MF_FRESNEL_SCHLICK (a = F0, b = F90), MF_FRESNEL_DIELECTRIC (a = eta), MF_FRESNEL_CONDUCTOR
 // (a = eta, b = k), MF_FRESNEL_TABLE (the fit's table, tabulated.glsl).
 const int MF_FRESNEL_IDEAL = 0;
 const int MF_FRESNEL_SCHLICK = 1;
@@ -26,11 +26,11 @@ const int MF_FRESNEL_CONDUCTOR = 3;
 const int MF_FRESNEL_TABLE = 4;
 struct MfFresnel { int kind; vec3 a; vec3 b; };
 
-// Schlick: F = F0 + (1 - F0)(1 - c)^5 (Table 2.I).
-vec3 mf_fresnel_schlick(vec3 f0, float c) {
+// Schlick: F = F0 + (F90 - F0)(1 - c)^5 (Table 2.I for F90 = 1).
+vec3 mf_fresnel_schlick(vec3 f0, vec3 f90, float c) {
     float m = 1.0 - clamp(c, 0.0, 1.0);
     float m2 = m * m;
-    return f0 + (1.0 - f0) * (m2 * m2 * m);
+    return f0 + (f90 - f0) * (m2 * m2 * m);
 }
 
 // Dielectric of real index eta: F = 1/2 (g-c)^2/(g+c)^2 [1 + (c(g+c)-1)^2/(c(g-c)+1)^2],
@@ -65,7 +65,7 @@ vec3 mf_fresnel_table(float c);
 #endif
 
 vec3 mf_fresnel(MfFresnel f, float c) {
-    if (f.kind == MF_FRESNEL_SCHLICK) return mf_fresnel_schlick(f.a, c);
+    if (f.kind == MF_FRESNEL_SCHLICK) return mf_fresnel_schlick(f.a, f.b, c);
     if (f.kind == MF_FRESNEL_DIELECTRIC) return mf_fresnel_dielectric(f.a, c);
     if (f.kind == MF_FRESNEL_CONDUCTOR) return mf_fresnel_conductor(f.a, f.b, c);
 #ifdef MF_TABULATED

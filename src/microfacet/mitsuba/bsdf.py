@@ -76,13 +76,14 @@ class Roughness:
 class FresnelParams:
     """``F(o.h)`` (Table 2.I) times ``specular_reflectance``: ``kind`` ``none`` (F = 1),
     ``conductor`` (textures ``eta``, ``k``), ``dielectric`` (``eta``: a ``Float``
-    ``int_ior / ext_ior``), ``schlick`` (texture ``f0``) or ``table`` (``table``: an
+    ``int_ior / ext_ior``), ``schlick`` (textures ``f0``, ``f90``) or ``table`` (``table``: an
     :class:`~.tabulated.InterpolatedColor` of ``cos theta_d``, a fit's)."""
     kind: str
     specular_reflectance: object
     eta: object = None
     k: object = None
     f0: object = None
+    f90: object = None
     table: object = None
 
 
@@ -189,9 +190,13 @@ def _dielectric_eta(props, plugin: str):
     return mi.Float(int_ior / ext_ior)
 
 
+def _unit_interval(v) -> str | None:
+    return None if 0 <= v <= 1 else "must lie in [0, 1]"
+
+
 def read_fresnel(props, plugin: str = PLUGIN) -> FresnelParams:
     """The Fresnel parameters of Table 2.I (``material``, ``eta``/``k``, ``int_ior``/
-    ``ext_ior``, ``schlick_f0``, or none) and ``specular_reflectance``."""
+    ``ext_ior``, ``schlick_f0``/``schlick_f90``, or none) and ``specular_reflectance``."""
     reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=plugin)
     kind, names = _fresnel_kind(props, plugin)
     if kind == "conductor":
@@ -204,9 +209,9 @@ def read_fresnel(props, plugin: str = PLUGIN) -> FresnelParams:
     if kind == "dielectric":
         return FresnelParams(kind, reflectance, eta=_dielectric_eta(props, plugin))
     if kind == "schlick":
-        f0 = properties.texture(props, "schlick_f0", 0.04, lambda v: None if 0 <= v <= 1 else "must lie in [0, 1]",
-                                plugin=plugin)
-        return FresnelParams(kind, reflectance, f0=f0)
+        f0 = properties.texture(props, "schlick_f0", 0.04, _unit_interval, plugin=plugin)
+        f90 = properties.texture(props, "schlick_f90", 1.0, _unit_interval, plugin=plugin)
+        return FresnelParams(kind, reflectance, f0=f0, f90=f90)
     return FresnelParams(kind, reflectance)
 
 
@@ -237,7 +242,7 @@ def fresnel_term(fresnel: FresnelParams, si, oh, active):
     if fresnel.kind == "dielectric":
         return r * fresnel_formulas.dielectric(oh, fresnel.eta)
     if fresnel.kind == "schlick":
-        return r * fresnel_formulas.schlick(oh, fresnel.f0.eval(si, active))
+        return r * fresnel_formulas.schlick(oh, fresnel.f0.eval(si, active), fresnel.f90.eval(si, active))
     if fresnel.kind == "table":
         return r * fresnel.table(dr.clip(oh, 0.0, 1.0), si.wavelengths)
     return r
@@ -425,6 +430,7 @@ class MicrofacetBSDF(MicrofacetLobe):
     | `int_ior` | float or string | 1.5046 | interior index of a dielectric Fresnel term (or a name, e.g. `bk7`) |
     | `ext_ior` | float or string | 1.000277 | exterior index of a dielectric Fresnel term (or a name, e.g. `air`) |
     | `schlick_f0` | float or texture | 0.04 | reflectance at normal incidence of Schlick's approximation |
+    | `schlick_f90` | float or texture | 1 | reflectance at grazing incidence of Schlick's approximation |
     | `specular_reflectance` | float or texture | 1 | factor on the whole BRDF |
     """
 
@@ -478,6 +484,7 @@ class MicrofacetBSDF(MicrofacetLobe):
             callback.put("k", f.k, mi.ParamFlags.Differentiable)
         elif f.kind == "schlick":
             callback.put("schlick_f0", f.f0, mi.ParamFlags.Differentiable)
+            callback.put("schlick_f90", f.f90, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
         pass

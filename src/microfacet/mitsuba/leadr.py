@@ -239,6 +239,7 @@ class LeadrBSDF(MicrofacetBSDF):
     | `int_ior` | float or string | 1.5046 | dielectric Fresnel, as `mf_microfacet` |
     | `ext_ior` | float or string | 1.000277 | dielectric Fresnel, as `mf_microfacet` |
     | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
+    | `schlick_f90` | float or texture | 1 | Schlick Fresnel's grazing value, as `mf_microfacet` |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
     """
 

@@ -27,7 +27,8 @@ __all__ = ["DEFAULT_PLUGIN", "FRESNEL_KEYS", "parameter_error", "is_float", "tex
 DEFAULT_PLUGIN = "mf_microfacet"
 #: Parameters that choose the Fresnel term of ``mf_microfacet``, and the term each implies.
 FRESNEL_KEYS = {"material": "conductor", "eta": "conductor", "k": "conductor",
-                "int_ior": "dielectric", "ext_ior": "dielectric", "schlick_f0": "schlick"}
+                "int_ior": "dielectric", "ext_ior": "dielectric", "schlick_f0": "schlick",
+                "schlick_f90": "schlick"}
 
 
 def parameter_error(name: str, message: str, plugin: str = DEFAULT_PLUGIN) -> PluginParameterError:
