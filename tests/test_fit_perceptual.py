@@ -205,7 +205,8 @@ def test_a_tabulated_gem_passes_the_white_furnace(corpus):
     """An irregular tabulated NDF (a gem of the RGL corpus) sits ~1.5e-3 above 1 on the 128^2
     albedo quadrature and below 1 once converged: the furnace reports the converged value."""
     from microfacet.metrics import white_furnace
-    fit = mf.fit.fit(mf.measured.load(corpus("rgl/cc_blue_agat_rgb")))
+    with pytest.warns(RuntimeWarning, match="ignored as unmeasured"):     # the gem's few huge samples
+        fit = mf.fit.fit(mf.measured.load(corpus("rgl/cc_blue_agat_rgb")))
     assert white_furnace(fit) <= 1.0
 
 
