@@ -6,6 +6,7 @@ import os
 import signal
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 #: The suite tests the compiled kernels where they apply, so a BRDF compiles its kernel at its first
@@ -139,3 +140,27 @@ def corpus_file(name: str) -> Path:
 def corpus():
     """``corpus(name) -> Path``: a corpus material as a MERL-format file (:func:`corpus_file`)."""
     return corpus_file
+
+
+# -- GL (tests/test_glsl.py, tests/test_backend_drift.py) ----------------------------------
+@pytest.fixture(scope="module")
+def gl():
+    """The GLSL harness on a real GL (moderngl, headless EGL); skips with the reason where there
+    is none, fails under ``CI=true``."""
+    try:
+        from microfacet.glsl import harness
+        harness.context()
+    except Exception as e:   # ImportError, moderngl/EGL errors
+        reason = f"no OpenGL 3.3 on EGL ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
+        if os.environ.get("CI", "").lower() in ("true", "1"):
+            pytest.fail(f"{reason} [CI=true: GL tests must run; make setup installs moderngl and Mesa]")
+        pytest.skip(reason)
+    return harness
+
+
+def rel_error(got, ref) -> float:
+    """Largest relative error where ``|ref|`` exceeds 1e-3 of its maximum (at least 100 values)."""
+    got, ref = np.asarray(got, float), np.asarray(ref, float)
+    big = np.abs(ref) > 1e-3 * np.abs(ref).max()
+    assert big.sum() >= 100, "the comparison needs non-negligible values"
+    return float(np.max(np.abs(got[big] - ref[big]) / np.abs(ref[big])))

@@ -14,12 +14,12 @@ the compiled Numba kernels (:mod:`microfacet.kernels`) and the GLSL shaders
   ``mf_eval_cos`` against ``MicrofacetBRDF.eval_cos`` for every Fresnel kind is
   ``tests/test_glsl.py::test_microfacet_brdf`` (not repeated here).
 """
-import os
 
 import numpy as np
 import pytest
 
 import microfacet as mf
+from conftest import rel_error
 from microfacet import backend, kernels
 from microfacet import fresnel as fr
 
@@ -78,25 +78,7 @@ SURFACE = "uniform int s_dist; uniform vec2 s_alpha; uniform float s_rho; unifor
 FRESNEL = "uniform int f_kind; uniform vec3 f_a; uniform vec3 f_b;"
 
 
-@pytest.fixture(scope="module")
-def gl():
-    try:
-        from microfacet.glsl import harness
-        harness.context()
-    except Exception as e:   # ImportError, moderngl/EGL errors
-        reason = f"no OpenGL 3.3 on EGL ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
-        if os.environ.get("CI", "").lower() in ("true", "1"):
-            pytest.fail(f"{reason} [CI=true: GL tests must run; make setup installs moderngl and Mesa]")
-        pytest.skip(reason)
-    return harness
 
-
-def rel_error(got, ref) -> float:
-    """Largest relative error where ``|ref|`` exceeds 1e-3 of its maximum (at least 100 values)."""
-    got, ref = np.asarray(got, float), np.asarray(ref, float)
-    big = np.abs(ref) > 1e-3 * np.abs(ref).max()
-    assert big.sum() >= 100, "the comparison needs non-negligible values"
-    return float(np.max(np.abs(got[big] - ref[big]) / np.abs(ref[big])))
 
 
 @pytest.mark.parametrize("case", CASES)

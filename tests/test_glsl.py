@@ -4,12 +4,12 @@ shaders vs float64 references at the same float32-rounded inputs).
 
 Skips with a one-line reason where moderngl or an EGL driver is missing; fails under CI=true.
 """
-import os
 
 import numpy as np
 import pytest
 
 import microfacet as mf
+from conftest import rel_error
 from microfacet import fresnel as fr
 from microfacet.errors import MicrofacetError
 from microfacet.glsl import SHADERS, export_textures, source
@@ -20,25 +20,7 @@ TOL = 1e-4
 FILTERS = {"hardware": None, "manual": {"MF_MANUAL_BILINEAR": None}}
 
 
-@pytest.fixture(scope="module")
-def gl():
-    try:
-        from microfacet.glsl import harness
-        harness.context()
-    except Exception as e:   # ImportError, moderngl/EGL errors
-        reason = f"no OpenGL 3.3 on EGL ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
-        if os.environ.get("CI", "").lower() in ("true", "1"):
-            pytest.fail(f"{reason} [CI=true: GL tests must run; make setup installs moderngl and Mesa]")
-        pytest.skip(reason)
-    return harness
 
-
-def rel_error(gpu, ref) -> float:
-    """Largest relative error where ``|ref|`` exceeds 1e-3 of its maximum."""
-    gpu, ref = np.asarray(gpu, float), np.asarray(ref, float)
-    big = np.abs(ref) > 1e-3 * np.abs(ref).max()
-    assert big.sum() >= 100, "the comparison needs non-negligible values"
-    return float(np.max(np.abs(gpu[big] - ref[big]) / np.abs(ref[big])))
 
 
 def directions(rng, n, max_theta=np.radians(89.5)):
