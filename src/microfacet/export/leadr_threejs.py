@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 from .leadr_textures import TEXTURES, leadr_textures, naive_textures, write_plane_glb
-from .threejs import chromium, npm_modules
+from .threejs import PAGE_PROLOGUE, chromium, npm_modules
 
 __all__ = ["PlaneView", "PlaneRenderer", "compare_plane", "relative_l1", "PLANE_PAGE"]
 
@@ -74,21 +74,7 @@ class PlaneView:
     extra: dict = field(default_factory=dict)
 
 
-PLANE_PAGE = """<!doctype html><html><head><meta charset="utf-8">
-<script type="importmap">{"imports": {"three": "/node_modules/three/build/three.module.js",
-  "three/addons/": "/node_modules/three/examples/jsm/"}}</script></head><body>
-<script type="module">
-import * as THREE from 'three';
-import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-function patch(chunk, from, to) {
-  const text = THREE.ShaderChunk[chunk];
-  if (!text.includes(from)) throw new Error(`three.js ${THREE.REVISION}: ${chunk} has no '${from}'`);
-  THREE.ShaderChunk[chunk] = text.split(from).join(to);
-}
-patch('lights_physical_pars_fragment', 'irradiance * specularBRDF * material.multiScatteringCompensation',
-      'irradiance * specularBRDF');
-patch('lights_physical_fragment', 'material.roughness += geometryRoughness;', '');
-if (new URLSearchParams(location.search).get('frame') !== 'stock') {
+PLANE_PAGE = PAGE_PROLOGUE + """if (new URLSearchParams(location.search).get('frame') !== 'stock') {
   patch('lights_physical_fragment', 'material.anisotropyB = tbn[ 1 ] * anisotropyV.x - tbn[ 0 ] * anisotropyV.y;',
         'material.anisotropyB = tbn[ 1 ] * anisotropyV.x - tbn[ 0 ] * anisotropyV.y;\\n' +
         'material.anisotropyT = normalize( material.anisotropyT - dot( material.anisotropyT, normal ) * normal );\\n' +

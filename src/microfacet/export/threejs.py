@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import MicrofacetError
 
-__all__ = ["npm_modules", "validate_gltf", "ThreeRenderer", "chromium", "NPM_DIR_ENV", "PAGE"]
+__all__ = ["npm_modules", "validate_gltf", "ThreeRenderer", "chromium", "NPM_DIR_ENV", "PAGE", "PAGE_PROLOGUE"]
 
 #: Environment variable naming the folder whose ``node_modules`` holds three and gltf-validator.
 NPM_DIR_ENV = "MICROFACET_NPM_DIR"
@@ -95,7 +95,9 @@ def validate_gltf(path, timeout: float = 60.0) -> dict:
 
 
 #: The page: three.js with the two patches, and ``window.renderGlb(url, size, light)``.
-PAGE = """<!doctype html><html><head><meta charset="utf-8">
+#: The start of the pages: the import map of the npm three.js, a `patch` of its shader chunks
+#: and the two stock effects off (multiple-scattering compensation, `geometryRoughness`).
+PAGE_PROLOGUE = """<!doctype html><html><head><meta charset="utf-8">
 <script type="importmap">{"imports": {"three": "/node_modules/three/build/three.module.js",
   "three/addons/": "/node_modules/three/examples/jsm/"}}</script></head><body>
 <script type="module">
@@ -109,7 +111,8 @@ function patch(chunk, from, to) {
 patch('lights_physical_pars_fragment', 'irradiance * specularBRDF * material.multiScatteringCompensation',
       'irradiance * specularBRDF');
 patch('lights_physical_fragment', 'material.roughness += geometryRoughness;', '');
-patch('lights_physical_fragment', 'material.clearcoatRoughness += geometryRoughness;', '');
+"""
+PAGE = PAGE_PROLOGUE + """patch('lights_physical_fragment', 'material.clearcoatRoughness += geometryRoughness;', '');
 if (new URLSearchParams(location.search).get('schlick') !== 'stock')
   patch('common', 'float fresnel = exp2( ( - 5.55473 * dotVH - 6.98316 ) * dotVH );',
         'float fresnel = pow( 1.0 - dotVH, 5.0 );');
