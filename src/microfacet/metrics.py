@@ -440,19 +440,23 @@ class AlbedoRatios:
     True
     """
 
-    def __init__(self, reference, views_deg=ALBEDO_VIEWS_DEG):
-        nodes = albedo_directions(views_deg, GRAZING_COS)
+    def __init__(self, reference, views_deg=ALBEDO_VIEWS_DEG, n_theta: int = 128, n_phi: int = 128):
+        nodes = albedo_directions(views_deg, GRAZING_COS, n_theta, n_phi)
         keep = measured_mask(reference, nodes[0], nodes[1])
         self.nodes = tuple(a[keep] for a in nodes)
         self.n_views = len(views_deg)
         self.ref = _albedo_sums(reference, self.nodes, self.n_views)
+
+    def albedo(self, brdf) -> np.ndarray:
+        """Directional albedo of ``brdf`` on the reference's nodes, ``(len(views_deg), 3)``."""
+        return _albedo_sums(brdf, self.nodes, self.n_views)
 
     def __call__(self, fit):
         """Ratios ``(len(views_deg), 3)`` of ``fit``, or a dict of them for a dict of fits."""
         named = fit if isinstance(fit, dict) else {"fit": fit}
         out = {}
         for name, brdf in named.items():
-            fit_albedo = _albedo_sums(brdf, self.nodes, self.n_views)
+            fit_albedo = self.albedo(brdf)
             with np.errstate(divide="ignore", invalid="ignore"):
                 out[name] = np.where(self.ref > 0, fit_albedo / self.ref, np.nan)
         return out if isinstance(fit, dict) else out["fit"]

@@ -45,6 +45,7 @@ from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
                        describe_uniform_error, measurement_directions, uniform_directions, white_furnace)
+from .albedo import albedo_target, match_albedo
 
 __all__ = ["material_name", "fit_material", "distribution_params",
            "fresnel_json", "analytic_json", "analytic_from_json", "summary_row",
@@ -320,7 +321,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3])   # while the perceptual fits run
     if picture:
         from ..render import fit_comparison_png         # imports matplotlib, also while they run
-    perceptual, t3 = _perceptual_brdfs(*perceptual_job.result())
+    ratios = albedo_target(brdf)
+    perceptual, t3 = _perceptual_brdfs(ratios, *perceptual_job.result())
     fits_summary.update(_fit_summaries(legacy.judges, perceptual, _scores(legacy.metrics, perceptual)[:3]))
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
@@ -467,10 +469,13 @@ def _perceptual(t, models) -> tuple[dict, float]:
     return fit_parameters(None, models, t), time.perf_counter()
 
 
-def _perceptual_brdfs(parameters: dict, end: float) -> tuple[dict, float]:
-    """``({name: BRDF}, end)`` of :func:`_perceptual`'s parameters."""
+def _perceptual_brdfs(ratios, parameters: dict, end: float) -> tuple[dict, float]:
+    """``({name: BRDF}, end)`` of :func:`_perceptual`'s parameters, each with its albedo
+    matched to the data's (:func:`microfacet.fit.albedo.match_albedo`; ``ratios``: the data's
+    :func:`~microfacet.fit.albedo.albedo_target`)."""
     from .perceptual import MODEL_SPECS
-    return {name: MODEL_SPECS[name].brdf(q, y) for name, (q, y) in parameters.items()}, end
+    return {name: match_albedo(None, MODEL_SPECS[name].brdf(q, y), ratios)
+            for name, (q, y) in parameters.items()}, end
 
 
 def _judges(brdf) -> tuple:
