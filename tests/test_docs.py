@@ -33,7 +33,7 @@ OWNED_MODULES = (
     "microfacet.brdf", "microfacet.params", "microfacet.protocol", "microfacet.backend", "microfacet.kernels",
     "microfacet.precompile", "microfacet.kernels_extra",
     "microfacet.fit", "microfacet.fit.fitted", "microfacet.fit.extract", "microfacet.fit.analytic",
-    "microfacet.fit.perceptual", "microfacet.fit.outputs", "microfacet.fit.spec",
+    "microfacet.fit.perceptual", "microfacet.fit.outputs", "microfacet.fit.spec", "microfacet.fit.albedo",
     "microfacet.measured", "microfacet.measured.base", "microfacet.measured.grids", "microfacet.measured.marginal2d",
     "microfacet.measured.merl", "microfacet.measured.rgl", "microfacet.measured.tensor_file", "microfacet.measured.utia",
     "microfacet.leadr", "microfacet.leadr.downsample", "microfacet.leadr.figures", "microfacet.leadr.files",

@@ -14,17 +14,24 @@ fit equals the data's at views :data:`VIEWS_DEG`. The albedo is linear in ``s``:
 
     a'(o) = a(o) + sum_k (s_k - 1) int h_k(theta_d) f_spec cos theta_i d i,
 
-so ``s`` is the bounded linear least squares (:func:`~microfacet.fit.extract.box_qp`) of the
-relative albedo residuals, with a second-difference smoothness penalty
+so ``s`` solves a bounded linear least squares (:func:`~microfacet.fit.extract.box_qp`):
+the relative albedo residuals, plus the fit's cosine-weighted log error
+(:class:`~microfacet.metrics.LogError`, Löw et al. 2012) linearized in ``s`` and weighed by
+:data:`LOG_WEIGHT` relative to its value before the match (so that the lobes' energy moves
+where it changes the shape least), a second-difference smoothness penalty
 (:data:`SMOOTHNESS`) and a weak pull toward 1. A specular lobe's energy at view
 ``theta_o`` comes from ``theta_d`` near ``theta_o`` (the mirror configuration), which is
 why a table in ``theta_d`` reaches the albedo at each view without changing the lobes'
 shape. The product ``F s`` becomes each lobe's :class:`~microfacet.fresnel.Tabulated`
 Fresnel term (clipped to ``[0, 1]``): the result is a BRDF of the same tree, which specs,
-fit files, the Mitsuba plugins and the exports read as any other.
+fit files, the Mitsuba plugins and the exports read as any other. No table may ring: where
+a channel's tables would have a total variation above twice their range, ``s`` is solved
+again rising to one peak and falling after it (every peak node tried), and, if that fails
+too, as a constant.
 
-Accuracy: on the fit corpus the albedo is matched to a few percent at 0-75 deg wherever the
-lobes carry enough energy at the view (a lobe-free Lambertian fit is returned unchanged).
+Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes carry
+enough energy at the view; the fit corpus's results page (``experiments/fit_corpus.py``)
+reports it for every material. A fit without microfacet lobes is returned unchanged.
 
 Example
 -------
@@ -38,12 +45,15 @@ True
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-from ..metrics import AlbedoRatios
+from ..metrics import AlbedoRatios, LogError
 from .extract import box_qp
 
-__all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "albedo_target", "albedo_scale", "match_albedo"]
+__all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "LOG_WEIGHT", "AlbedoTarget", "albedo_target", "albedo_scale",
+           "match_albedo", "LOG_PAIRS"]
 
 #: Views (deg) at which the albedo is matched.
 VIEWS_DEG = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0, 65.0, 70.0, 75.0, 80.0)
@@ -51,14 +61,36 @@ VIEWS_DEG = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0, 65.0, 70.0, 75.0, 80
 NODES_DEG = (0.0, 20.0, 35.0, 45.0, 55.0, 62.0, 68.0, 74.0, 80.0, 90.0)
 #: Weight of the second differences of ``s`` (per node) against the relative albedo residuals.
 SMOOTHNESS = 1e-3
+#: Weight of the linearized squared log error over its value before the match: doubling
+#: it costs as much as a 17 % albedo residual at one view.
+LOG_WEIGHT = 0.03
 #: Weight of ``s - 1`` (keeps nodes that no view constrains near 1).
 PULL = 1e-3
 #: Largest factor.
 S_MAX = 20.0
+#: Largest total variation of a table over its range (a larger one rings).
+TV_LIMIT = 2.0
 #: Nodes of the tabulated Fresnel terms, uniform in ``theta_d``.
 TABLE_SIZE = 46
 #: Quadrature of the albedo (half-vector grid per view, :func:`microfacet.metrics.albedo_directions`).
 QUADRATURE = 64
+#: Pairs of the log-error term.
+LOG_PAIRS = 2**15
+
+
+class AlbedoTarget(NamedTuple):
+    """The data's side of :func:`match_albedo`: its albedo at :data:`VIEWS_DEG` and its log
+    error's pairs (made by :func:`albedo_target`).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> t = albedo_target(mf.Lambertian(0.5))
+    >>> isinstance(t, AlbedoTarget), t.ratios.ref.shape == (len(VIEWS_DEG), 3), t.log.n == LOG_PAIRS
+    (True, True, True)
+    """
+    ratios: AlbedoRatios
+    log: LogError
 
 
 def _theta_d(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -79,64 +111,121 @@ def _lobes(brdf) -> list:
     return [b for b in getattr(brdf, "brdfs", [brdf]) if isinstance(b, MicrofacetBRDF)]
 
 
-def albedo_target(reference) -> AlbedoRatios:
+def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
     """The data's side of :func:`match_albedo`: ``reference``'s directional albedo at
     :data:`VIEWS_DEG` on a :data:`QUADRATURE` grid, light directions as the metrics compare
-    them (:class:`~microfacet.metrics.AlbedoRatios`).
+    them (:class:`~microfacet.metrics.AlbedoRatios`), and its log error ``log`` (default
+    :class:`~microfacet.metrics.LogError` on :data:`LOG_PAIRS` pairs).
 
     Examples
     --------
     >>> import microfacet as mf
-    >>> albedo_target(mf.Lambertian(0.5)).ref.shape
+    >>> albedo_target(mf.Lambertian(0.5)).ratios.ref.shape
     (12, 3)
     """
-    return AlbedoRatios(reference, VIEWS_DEG, n_theta=QUADRATURE, n_phi=QUADRATURE)
+    return AlbedoTarget(AlbedoRatios(reference, VIEWS_DEG, n_theta=QUADRATURE, n_phi=QUADRATURE),
+                        LogError(reference, n=LOG_PAIRS) if log is None else log)
 
 
-def albedo_scale(ratios: AlbedoRatios, brdf) -> np.ndarray:
-    """The factor ``s`` of :func:`match_albedo` on :data:`NODES_DEG`, ``(K, 3)``, for the
-    data's albedo ``ratios`` (an :class:`~microfacet.metrics.AlbedoRatios` at
-    :data:`VIEWS_DEG`) and the fit ``brdf``; ones where it has no microfacet lobe.
-
-    Examples
-    --------
-    >>> import microfacet as mf
-    >>> from microfacet.metrics import AlbedoRatios
-    >>> data = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Schlick(0.5))
-    >>> fit = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Schlick(0.25))
-    >>> s = albedo_scale(AlbedoRatios(data, VIEWS_DEG, n_theta=32, n_phi=32), fit)
-    >>> s.shape, bool(s[0, 0] > 1.5)
-    ((10, 3), True)
-    """
-    lobes = _lobes(brdf)
+def _normal_equations(target: AlbedoTarget, brdf, lobes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(H, g)`` per channel of the quadratic ``1/2 s^T H s - g^T s`` that :func:`albedo_scale`
+    minimizes (module docstring)."""
+    ratios, log = target
     k = len(NODES_DEG)
-    if not lobes:
-        return np.ones((k, 3))
     wi, wo, w, view = ratios.nodes
-    n_views = ratios.n_views
     fitted = ratios.albedo(brdf)
     spec = w[:, None] * sum(np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes)
     hats = _hats(_theta_d(wi, wo))
+    f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
+    f_spec = sum(np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes)
+    log_hats = _hats(_theta_d(log.wi, log.wo))
+    d0 = np.log1p(f) - log.ref                                      # log residual before the match
+    pair_w = LOG_WEIGHT * log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
     second = np.diff(np.eye(k), 2, axis=0)
-    s = np.ones((k, 3))
+    regular = SMOOTHNESS * second.T @ second + PULL * np.eye(k)
+    out = []
     for c in range(3):
-        a = np.stack([np.bincount(view, spec[:, c] * hats[:, j], minlength=n_views) for j in range(k)], axis=-1)
-        if not np.any(a > 0):
-            continue
+        a = np.stack([np.bincount(view, spec[:, c] * hats[:, j], minlength=ratios.n_views) for j in range(k)], axis=-1)
         ref = np.maximum(ratios.ref[:, c], 1e-4)
-        rhs = (ref - fitted[:, c] + a.sum(axis=1)) / ref          # a' = fitted + a (s - 1)
-        m = np.vstack([a / ref[:, None], np.sqrt(SMOOTHNESS) * second, np.sqrt(PULL) * np.eye(k)])
-        v = np.concatenate([rhs, np.zeros(len(second)), np.sqrt(PULL) * np.ones(k)])
-        s[:, c] = box_qp(m.T @ m, m.T @ v, np.zeros(k), np.full(k, S_MAX))
+        m = a / ref[:, None]                                        # a' = fitted + a (s - 1)
+        rhs = (ref - fitted[:, c]) / ref + m.sum(axis=1)
+        j = (f_spec[:, c] / (1.0 + f[:, c]))[:, None] * log_hats    # d ln(1 + f') / d s
+        h = m.T @ m + (j.T * pair_w) @ j + regular
+        g = m.T @ rhs + (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL
+        out.append((h, g))
+    return out
+
+
+def _shapes(k: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(T, upper)``: ``s = T z`` over ``0 <= z <= upper``: free (``T = I``), then rising to
+    a peak at node ``p`` and falling after it, for every ``p``."""
+    out = [(np.eye(k), np.full(k, S_MAX))]
+    for p in range(k):
+        t = np.zeros((k, k))
+        for j in range(k):
+            t[j, :min(j, p) + 1] = 1.0
+            t[j, p + 1:j + 1] = -1.0
+        out.append((t, np.full(k, np.inf)))
+    return out
+
+
+def _tables(brdf, s: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The cosines of the tables and each lobe's ``clip(F s, 0, 1)`` for factors ``s`` ``(K, 3)``."""
+    theta = np.linspace(np.pi / 2, 0.0, TABLE_SIZE)
+    cos_d, factor = np.cos(theta), _hats(theta) @ s
+    return cos_d, [np.clip(np.asarray(b.fresnel(cos_d), float) * factor, 0.0, 1.0) for b in _lobes(brdf)]
+
+
+def _rings(values: np.ndarray) -> np.ndarray:
+    """Per channel: whether a table's total variation exceeds :data:`TV_LIMIT` times its range."""
+    tv = np.sum(np.abs(np.diff(values, axis=0)), axis=0)
+    return tv > TV_LIMIT * np.ptp(values, axis=0) + 1e-9
+
+
+def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
+    """The factor ``s`` of :func:`match_albedo` on :data:`NODES_DEG`, ``(K, 3)``, for the
+    data's :func:`albedo_target` and the fit ``brdf``; ones where it has no microfacet lobe.
+    Per channel, the least of the module's quadratic among the shapes whose tables do not
+    ring (free, one peak, constant: module docstring).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> data = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Schlick(0.5))
+    >>> fit = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Schlick(0.25))
+    >>> s = albedo_scale(albedo_target(data), fit)
+    >>> s.shape == (len(NODES_DEG), 3), bool(s[0, 0] > 1.5)      # SMOOTHNESS, LOG_WEIGHT: module docstring
+    (True, True)
+    """
+    lobes = _lobes(brdf)
+    k = len(NODES_DEG)
+    s = np.ones((k, 3))
+    if not lobes:
+        return s
+    systems = _normal_equations(target, brdf, lobes)
+    candidates = []                                  # per shape: (s (K, 3), objective (3,))
+    for t, upper in _shapes(k):
+        z = [box_qp(t.T @ h @ t, t.T @ g, np.zeros(k), upper) for h, g in systems]
+        s_shape = np.stack([t @ zc for zc in z], axis=-1)
+        candidates.append((s_shape, np.array([0.5 * sc @ h @ sc - g @ sc for sc, (h, g) in zip(s_shape.T, systems)])))
+    for c, (h, g) in enumerate(systems):
+        best = np.inf
+        for s_shape, objective in candidates:
+            trial = s.copy()
+            trial[:, c] = s_shape[:, c]
+            if objective[c] < best and not any(_rings(v)[c] for v in _tables(brdf, trial)[1]):
+                s[:, c], best = s_shape[:, c], objective[c]
+        if not np.isfinite(best):                     # a constant factor keeps each table's shape
+            s[:, c] = max(float(np.sum(g)) / max(float(np.sum(h)), 1e-300), 0.0)
     return s
 
 
-def match_albedo(reference, brdf, ratios: AlbedoRatios | None = None):
+def match_albedo(reference, brdf, target: AlbedoTarget | None = None):
     """``brdf`` with each microfacet lobe's Fresnel term ``F`` replaced by the table
     ``clip(F s, 0, 1)`` (:func:`albedo_scale`; module docstring), so that its directional
-    albedo matches ``reference``'s at :data:`VIEWS_DEG`. ``ratios``: the reference's
-    :class:`~microfacet.metrics.AlbedoRatios` at those views, to share among fits.
-    A BRDF without microfacet lobes is returned as is.
+    albedo matches ``reference``'s at :data:`VIEWS_DEG`. ``target``: the reference's
+    :func:`albedo_target`, to share among fits. A BRDF without microfacet lobes is
+    returned as is.
 
     Parameters
     ----------
@@ -144,7 +233,7 @@ def match_albedo(reference, brdf, ratios: AlbedoRatios | None = None):
         The data (measured or any BRDF).
     brdf : MicrofacetBRDF or SumBRDF
         The fit: a lobe, or a sum of lobes and diffuse terms.
-    ratios : AlbedoRatios, optional
+    target : AlbedoTarget, optional
         :func:`albedo_target` of ``reference`` (which is then not read).
 
     Returns
@@ -165,15 +254,14 @@ def match_albedo(reference, brdf, ratios: AlbedoRatios | None = None):
     from .analytic import SumBRDF
     if not _lobes(brdf):
         return brdf
-    s = albedo_scale(albedo_target(reference) if ratios is None else ratios, brdf)
-    theta = np.linspace(np.pi / 2, 0.0, TABLE_SIZE)
-    cos_d, factor = np.cos(theta), _hats(theta) @ s
+    cos_d, tables = _tables(brdf, albedo_scale(albedo_target(reference) if target is None else target, brdf))
+    tables = iter(tables)
 
     def scaled(b):
         if not isinstance(b, MicrofacetBRDF):
             return b
-        table = fr.Tabulated(cos_d, np.clip(np.asarray(b.fresnel(cos_d), float) * factor, 0.0, 1.0))
-        return MicrofacetBRDF(b.distribution, fresnel=table, gaf=b.gaf_model, shadowing=b.shadowing)
+        return MicrofacetBRDF(b.distribution, fresnel=fr.Tabulated(cos_d, next(tables)), gaf=b.gaf_model,
+                              shadowing=b.shadowing)
 
     if isinstance(brdf, SumBRDF):
         return SumBRDF(*map(scaled, brdf.brdfs), weights=brdf.weights)

@@ -321,8 +321,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3])   # while the perceptual fits run
     if picture:
         from ..render import fit_comparison_png         # imports matplotlib, also while they run
-    ratios = albedo_target(brdf)
-    perceptual, t3 = _perceptual_brdfs(ratios, *perceptual_job.result())
+    target = albedo_target(brdf, log=legacy.judges[0])
+    perceptual, t3 = _perceptual_brdfs(target, *perceptual_job.result())
     fits_summary.update(_fit_summaries(legacy.judges, perceptual, _scores(legacy.metrics, perceptual)[:3]))
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
@@ -469,12 +469,12 @@ def _perceptual(t, models) -> tuple[dict, float]:
     return fit_parameters(None, models, t), time.perf_counter()
 
 
-def _perceptual_brdfs(ratios, parameters: dict, end: float) -> tuple[dict, float]:
+def _perceptual_brdfs(target, parameters: dict, end: float) -> tuple[dict, float]:
     """``({name: BRDF}, end)`` of :func:`_perceptual`'s parameters, each with its albedo
-    matched to the data's (:func:`microfacet.fit.albedo.match_albedo`; ``ratios``: the data's
+    matched to the data's (:func:`microfacet.fit.albedo.match_albedo`; ``target``: the data's
     :func:`~microfacet.fit.albedo.albedo_target`)."""
     from .perceptual import MODEL_SPECS
-    return {name: match_albedo(None, MODEL_SPECS[name].brdf(q, y), ratios)
+    return {name: match_albedo(None, MODEL_SPECS[name].brdf(q, y), target)
             for name, (q, y) in parameters.items()}, end
 
 
