@@ -41,7 +41,12 @@ OWNED_MODULES = (
     "microfacet.leadr.preview", "microfacet.leadr.shading",
     "microfacet.batch", "microfacet.batch.files", "microfacet.batch.memory", "microfacet.batch.runner",
     "microfacet.batch.tasks", "microfacet.batch.workers",
+    # the Mitsuba 3 plugins (the modules that import mitsuba are skipped where it is not installed)
+    "microfacet.mitsuba", "microfacet.mitsuba.registry", "microfacet.mitsuba.properties", "microfacet.mitsuba.fresnel",
+    "microfacet.mitsuba.reference", "microfacet.mitsuba.bsdf",
 )
+#: the documented modules of the Mitsuba plugins, checked apart (they need the optional mitsuba package)
+MITSUBA_MODULES = tuple(m for m in OWNED_MODULES if m.startswith("microfacet.mitsuba"))
 #: modules whose docstring examples are run (examples that need optional packages or files
 #: are marked +SKIP); packages that only re-export names are checked through their modules
 DOCTEST_MODULES = tuple(m for m in OWNED_MODULES if m not in (
@@ -53,10 +58,25 @@ DOCTEST_MODULES = tuple(m for m in OWNED_MODULES if m not in (
 )
 
 
+def _import_documented(name: str):
+    """The documented module ``name``; skips the test, with the reason, for a module of
+    microfacet.mitsuba where the optional Mitsuba 3 (mitsuba, drjit) is not installed."""
+    try:
+        return importlib.import_module(name)
+    except ImportError as e:
+        if name in MITSUBA_MODULES and e.name in ("mitsuba", "drjit"):
+            pytest.skip(f"{name} needs Mitsuba 3 (pip install -e '.[mitsuba]'): {e}")
+        raise
+
+
 @pytest.mark.parametrize("name", DOCTEST_MODULES)
-def test_docstring_examples_run(name, tmp_path, monkeypatch):
+def test_docstring_examples_run(name, tmp_path, monkeypatch, request):
     monkeypatch.chdir(tmp_path)  # examples that write files write them here
-    module = importlib.import_module(name)
+    module = _import_documented(name)
+    if name in MITSUBA_MODULES and "mitsuba" in sys.modules:   # examples set scalar_rgb: the variant is global
+        mi = sys.modules["mitsuba"]
+        previous = mi.variant()
+        request.addfinalizer(lambda: previous and mi.variant() != previous and mi.set_variant(previous))
     finder = doctest.DocTestFinder()
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     tests = [t for t in finder.find(module, name) if t.examples]
@@ -105,7 +125,14 @@ def public_names_without_example(modules, include_top_level: bool = True) -> lis
 def test_every_public_name_of_the_documented_modules_has_an_example():
     """Every public name of :data:`OWNED_MODULES` (and of ``microfacet.__all__`` defined there)
     has an example that runs (the examples run in :func:`test_docstring_examples_run`)."""
-    assert public_names_without_example(OWNED_MODULES) == []
+    assert public_names_without_example([m for m in OWNED_MODULES if m not in MITSUBA_MODULES]) == []
+
+
+def test_every_public_name_of_the_mitsuba_modules_has_an_example():
+    """As above, for the modules of the Mitsuba plugins (they need the optional mitsuba package)."""
+    pytest.importorskip("mitsuba", reason="the Mitsuba plugins need the optional mitsuba package "
+                                          "(pip install -e '.[mitsuba]')")
+    assert public_names_without_example(MITSUBA_MODULES, include_top_level=False) == []
 
 
 def test_readme_is_short_and_names_the_commands():
@@ -278,8 +305,7 @@ def test_author_year_citations_are_in_the_references():
     texts = {p.relative_to(ROOT).as_posix(): p.read_text(encoding="utf-8")
              for p in [*(ROOT / "docs").glob("*.md"), *TUTORIALS] if p.name != "references.md"}
     for name in OWNED_MODULES:
-        module = importlib.import_module(name)
-        texts[name] = Path(module.__file__).read_text(encoding="utf-8")
+        texts[name] = Path(importlib.util.find_spec(name).origin).read_text(encoding="utf-8")   # without importing it
     missing = sorted({f"{a} {y} ({where})" for where, text in texts.items()
                       for a, y in author_year_citations(text) if (a, y) not in entries})
     assert not missing, f"cited but not in docs/references.md: {missing}"

@@ -2,8 +2,8 @@
 
 ``f_r cos theta_i = F(o.h) D(h) G(i, o) / (4 z_o)`` (Eq. 2.1, Listing 2.2) with the noncentral
 slope distribution of :mod:`microfacet.mitsuba.slopes`, the geometric attenuation of
-:meth:`microfacet.MicrofacetBRDF.gaf` (Table 2.IV; Smith height-correlated with the
-sheared projected-area normalization, Eq. 3.3) and the sampling of
+:meth:`microfacet.MicrofacetBRDF.gaf` (Table 2.IV, :data:`GAFS`; Smith height-correlated
+with the sheared projected-area normalization, Eq. 3.3) and the sampling of
 :meth:`microfacet.MicrofacetBRDF.sample` (visible normals for Smith, Eq. 2.23; slopes of
 ``P`` otherwise). Mitsuba's ``si.wi`` is the library's view direction ``o`` and the
 ``wo`` argument its light direction ``i``; ``eval`` returns ``f_r cos theta_i``.
@@ -13,8 +13,30 @@ The plugin's parameters are read once into records (:class:`LobeModel`, :class:`
 module-level function of those records (:func:`geometric_attenuation`,
 :func:`normal_density`, :func:`fresnel_term`, ...). :class:`MicrofacetLobe` is the shading
 code shared with ``mf_fitted``, ``mf_leadr`` and the fits' BRDF trees, which supply their
-own lobe and Fresnel term; :class:`MicrofacetBSDF` is the plugin (a plain class made a
-``mi.BSDF`` per variant by :func:`.registry.variant_class`).
+own lobe and Fresnel term; :class:`MicrofacetBSDF` is the plugin :data:`PLUGIN` (a plain
+class made a ``mi.BSDF`` per variant by :func:`.registry.variant_class`).
+
+Examples
+--------
+The plugin's value equals the library's ``f_r`` times ``cos theta_i``:
+
+>>> import numpy as np
+>>> import mitsuba as mi
+>>> mi.set_variant("scalar_rgb")
+>>> import microfacet as mf
+>>> import microfacet.mitsuba as mfm
+>>> from microfacet.mitsuba.bsdf import GAFS, PLUGIN
+>>> _ = mfm.register()
+>>> PLUGIN, GAFS
+('mf_microfacet', ('smith', 'vgroove', 'normal_map'))
+>>> bsdf = mfm.load_dict({"type": PLUGIN, "distribution": "ggx", "alpha": 0.3, "gaf": "vgroove"})
+>>> si = mi.SurfaceInteraction3f()
+>>> si.wi = mi.Vector3f(0, 0.6, 0.8)
+>>> value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(0.48, -0.36, 0.8))
+>>> brdf = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), gaf="vgroove")
+>>> library = brdf.eval(np.array([0.48, -0.36, 0.8]), np.array([0.0, 0.6, 0.8]))[0] * 0.8
+>>> bool(np.isclose(value[0], library, rtol=1e-5))
+True
 """
 from __future__ import annotations
 
@@ -49,10 +71,22 @@ _INT_IOR, _EXT_IOR = 1.5046, 1.000277
 # ------------------------------------------------------------------ records
 @dataclass(frozen=True)
 class LobeModel:
-    """What a microfacet lobe computes, fixed at load: the slope distribution ``kind``
-    (``beckmann``, ``ggx``, ``tabulated``), the GAF (Table 2.IV: ``smith``, ``vgroove``,
-    ``normal_map``), shadowing (``False``: masking only), ``separable`` Smith ``G1 G1``, and
-    whether sampling draws visible normals (Eq. 2.23) or slopes of ``P``."""
+    """What a microfacet lobe computes, fixed at load.
+
+    The slope distribution ``kind`` (``beckmann``, ``ggx``, ``tabulated``), the GAF (Table
+    2.IV: ``smith``, ``vgroove``, ``normal_map``), shadowing (``False``: masking only),
+    ``separable`` Smith ``G1 G1``, and whether sampling draws visible normals (Eq. 2.23) or
+    slopes of ``P``.
+
+    Examples
+    --------
+
+    >>> from microfacet.mitsuba.bsdf import LobeModel
+    >>> LobeModel("ggx")
+    LobeModel(kind='ggx', gaf='smith', shadowing=True, separable=False, samples_visible=True)
+    >>> LobeModel("beckmann", gaf="vgroove", samples_visible=False).gaf
+    'vgroove'
+    """
     kind: str = BECKMANN
     gaf: str = "smith"
     shadowing: bool = True
@@ -62,8 +96,22 @@ class LobeModel:
 
 @dataclass(frozen=True)
 class Roughness:
-    """The lobe's textures: ``alpha_u``, ``alpha_v`` (one texture when ``isotropic``), the
-    slope correlation ``rho`` and the mean slope ``(mean_slope_u, mean_slope_v)`` (Eq. 3.4)."""
+    """The lobe's textures.
+
+    ``alpha_u``, ``alpha_v`` (one texture when ``isotropic``), the slope correlation ``rho``
+    and the mean slope ``(mean_slope_u, mean_slope_v)`` (Eq. 3.4).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, read_roughness
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["alpha_u"], props["alpha_v"], props["rho"] = 0.2, 0.4, 0.5
+    >>> r = read_roughness(props, LobeModel("ggx"))
+    >>> r.isotropic, r.alpha_v.mean(), r.rho.mean(), r.mean_slope_u.mean()
+    (False, 0.4000000059604645, 0.5, 0.0)
+    """
     alpha_u: object
     alpha_v: object
     rho: object
@@ -74,10 +122,23 @@ class Roughness:
 
 @dataclass(frozen=True)
 class FresnelParams:
-    """``F(o.h)`` (Table 2.I) times ``specular_reflectance``: ``kind`` ``none`` (F = 1),
-    ``conductor`` (textures ``eta``, ``k``), ``dielectric`` (``eta``: a ``Float``
-    ``int_ior / ext_ior``), ``schlick`` (textures ``f0``, ``f90``) or ``table`` (``table``: an
-    :class:`~.tabulated.InterpolatedColor` of ``cos theta_d``, a fit's)."""
+    """``F(o.h)`` (Table 2.I) times ``specular_reflectance``.
+
+    ``kind`` ``none`` (F = 1), ``conductor`` (textures ``eta``, ``k``), ``dielectric``
+    (``eta``: a ``Float`` ``int_ior / ext_ior``), ``schlick`` (textures ``f0``, ``f90``) or
+    ``table`` (``table``: an :class:`~.tabulated.InterpolatedColor` of ``cos theta_d``, a
+    fit's).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import FresnelParams, fresnel_term
+    >>> fresnel = FresnelParams("dielectric", mi.load_dict({"type": "uniform", "value": 1.0}), eta=1.5)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> fresnel_term(fresnel, si, 1.0, True)                  # ((1.5 - 1) / (1.5 + 1))^2
+    [0.04, 0.04, 0.04]
+    """
     kind: str
     specular_reflectance: object
     eta: object = None
@@ -88,9 +149,20 @@ class FresnelParams:
 
 
 class Reflection(NamedTuple):
-    """The directions of one reflection (Dr.Jit arrays per lane): ``light`` (the library's
-    ``i``), ``view`` (``o``, Mitsuba's ``si.wi``), the half vector ``h``, ``oh = o.h`` and
-    the lanes where it is ``active``."""
+    """The directions of one reflection (Dr.Jit arrays per lane).
+
+    ``light`` (the library's ``i``), ``view`` (``o``, Mitsuba's ``si.wi``), the half vector
+    ``h``, ``oh = o.h`` and the lanes where it is ``active``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import Reflection, mirror
+    >>> r = mirror(mi.Vector3f(0, 0.6, 0.8), mi.Vector3f(0, 0, 1), True)
+    >>> isinstance(r, Reflection), r.light, r.active
+    (True, [0, -0.6, 0.8], True)
+    """
     light: object
     view: object
     h: object
@@ -100,7 +172,22 @@ class Reflection(NamedTuple):
 
 @dataclass(frozen=True)
 class MicrofacetParams:
-    """All parameters of ``mf_microfacet`` (:func:`read_microfacet_params`)."""
+    """All parameters of ``mf_microfacet`` (:func:`read_microfacet_params`).
+
+    The lobe's :class:`LobeModel`, its :class:`Roughness`, its :class:`FresnelParams` and
+    whether the lobe is ``anisotropic`` (``alpha_u``/``alpha_v``, ``rho`` or a mean slope given).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import read_microfacet_params
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["alpha"], props["mean_slope_u"] = 0.3, 0.1
+    >>> p = read_microfacet_params(props)
+    >>> p.model.kind, p.roughness.isotropic, p.fresnel.kind, p.anisotropic
+    ('beckmann', True, 'none', True)
+    """
     model: LobeModel
     roughness: Roughness
     fresnel: FresnelParams
@@ -109,7 +196,34 @@ class MicrofacetParams:
 
 # ------------------------------------------------------------------ reading parameters
 def read_model(props, plugin: str = PLUGIN) -> LobeModel:
-    """``distribution``, ``gaf``, ``shadowing`` and ``separable`` of ``props``."""
+    """The :class:`LobeModel` of ``distribution``, ``gaf``, ``shadowing`` and ``separable``.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+    plugin : str, optional
+        The plugin named in errors.
+
+    Returns
+    -------
+    LobeModel
+
+    Raises
+    ------
+    PluginParameterError
+        For an unknown name, or ``separable`` with a GAF other than ``smith``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import read_model
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["distribution"], props["gaf"], props["shadowing"] = "ggx", "vgroove", False
+    >>> read_model(props)
+    LobeModel(kind='ggx', gaf='vgroove', shadowing=False, separable=False, samples_visible=False)
+    """
     kind = properties.choice(props, "distribution", BECKMANN, (BECKMANN, GGX), plugin)
     gaf = properties.choice(props, "gaf", "smith", GAFS, plugin)
     separable = properties.flag(props, "separable", False, plugin)
@@ -119,8 +233,44 @@ def read_model(props, plugin: str = PLUGIN) -> LobeModel:
 
 
 def read_roughness(props, model: LobeModel, plugin: str = PLUGIN) -> Roughness:
-    """``alpha`` or ``alpha_u``/``alpha_v``, ``rho``, ``mean_slope_u``/``mean_slope_v``,
-    checked (V-grooves need a zero mean slope)."""
+    """The :class:`Roughness` of ``alpha`` or ``alpha_u``/``alpha_v``, ``rho``,
+    ``mean_slope_u``/``mean_slope_v``, checked.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+    model : LobeModel
+        The lobe's model (V-grooves need a zero mean slope).
+    plugin : str, optional
+        The plugin named in errors.
+
+    Returns
+    -------
+    Roughness
+
+    Raises
+    ------
+    PluginParameterError
+        For ``alpha`` with ``alpha_u``/``alpha_v``, one of ``alpha_u``/``alpha_v`` alone, a
+        bad value, or a mean slope with ``gaf=vgroove``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, read_roughness
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["alpha"], props["mean_slope_v"] = 0.25, -0.5
+    >>> r = read_roughness(props, LobeModel("beckmann"))
+    >>> r.isotropic, r.alpha_u.mean(), r.mean_slope_v.mean()
+    (True, 0.25, -0.5)
+    >>> props["alpha_u"] = 0.1
+    >>> read_roughness(props, LobeModel("beckmann"))
+    Traceback (most recent call last):
+    ...
+    microfacet.mitsuba.PluginParameterError: mf_microfacet: parameter 'alpha' and alpha_u/alpha_v are exclusive: give one or the other
+    """
     error = properties.parameter_error
     if "alpha" in props and ("alpha_u" in props or "alpha_v" in props):
         raise error("alpha", "and alpha_u/alpha_v are exclusive: give one or the other", plugin)
@@ -195,8 +345,43 @@ def _unit_interval(v) -> str | None:
 
 
 def read_fresnel(props, plugin: str = PLUGIN) -> FresnelParams:
-    """The Fresnel parameters of Table 2.I (``material``, ``eta``/``k``, ``int_ior``/
-    ``ext_ior``, ``schlick_f0``/``schlick_f90``, or none) and ``specular_reflectance``."""
+    """The :class:`FresnelParams` of the Fresnel parameters of Table 2.I and ``specular_reflectance``.
+
+    One of ``material`` (a conductor of Mitsuba's IOR database), ``eta``/``k``,
+    ``int_ior``/``ext_ior``, ``schlick_f0``/``schlick_f90``, or none (F = 1).
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+    plugin : str, optional
+        The plugin named in errors.
+
+    Returns
+    -------
+    FresnelParams
+
+    Raises
+    ------
+    PluginParameterError
+        For conflicting Fresnel parameters, an unknown material or a bad value.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import read_fresnel
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["schlick_f0"] = 0.5
+    >>> f = read_fresnel(props)
+    >>> f.kind, f.f0.mean(), f.f90.mean()
+    ('schlick', 0.5, 1.0)
+    >>> props["material"] = "Au"
+    >>> read_fresnel(props)
+    Traceback (most recent call last):
+    ...
+    microfacet.mitsuba.PluginParameterError: mf_microfacet: parameter 'material' conflicts with schlick_f0: give one Fresnel (material or eta/k, int_ior/ext_ior, schlick_f0) or none
+    """
     reflectance = properties.texture(props, "specular_reflectance", 1.0, plugin=plugin)
     kind, names = _fresnel_kind(props, plugin)
     if kind == "conductor":
@@ -216,7 +401,30 @@ def read_fresnel(props, plugin: str = PLUGIN) -> FresnelParams:
 
 
 def read_microfacet_params(props, plugin: str = PLUGIN) -> MicrofacetParams:
-    """All parameters of ``mf_microfacet`` (class docstring of :class:`MicrofacetBSDF`)."""
+    """All parameters of ``mf_microfacet`` (class docstring of :class:`MicrofacetBSDF`).
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+    plugin : str, optional
+        The plugin named in errors.
+
+    Returns
+    -------
+    MicrofacetParams
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import read_microfacet_params
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["distribution"], props["alpha"], props["material"] = "ggx", 0.3, "Au"
+    >>> p = read_microfacet_params(props)
+    >>> p.model.kind, p.fresnel.kind, p.anisotropic
+    ('ggx', 'conductor', False)
+    """
     model = read_model(props, plugin)
     roughness = read_roughness(props, model, plugin)
     anisotropic = not roughness.isotropic or any(n in props for n in ("rho", "mean_slope_u", "mean_slope_v"))
@@ -225,8 +433,37 @@ def read_microfacet_params(props, plugin: str = PLUGIN) -> MicrofacetParams:
 
 # ------------------------------------------------------------------ terms
 def roughness_lobe(kind: str, roughness: Roughness, si, active) -> Lobe:
-    """The :class:`~.slopes.Lobe` of the textures at ``si`` (alpha clamped to >= 1e-4, rho
-    into +-0.9999, as Mitsuba's ``roughconductor`` clamps textured roughness)."""
+    """The :class:`~.slopes.Lobe` of the roughness textures at ``si``.
+
+    Alpha is clamped to ``>= 1e-4`` and rho into ``+-0.9999``, as Mitsuba's
+    ``roughconductor`` clamps textured roughness.
+
+    Parameters
+    ----------
+    kind : str
+        ``"beckmann"`` or ``"ggx"``.
+    roughness : Roughness
+        The textures.
+    si : mi.SurfaceInteraction3f
+        Where they are evaluated.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    Lobe
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, read_roughness, roughness_lobe
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["alpha_u"], props["alpha_v"], props["rho"] = 0.5, 0.25, 0.5
+    >>> lobe = roughness_lobe("ggx", read_roughness(props, LobeModel("ggx")), mi.SurfaceInteraction3f(), True)
+    >>> lobe.kind, lobe.alpha_x, lobe.alpha_y, lobe.rho
+    ('ggx', 0.5, 0.25, 0.5)
+    """
     r = roughness
     ax = dr.maximum(r.alpha_u.eval_1(si, active), _ALPHA_MIN)
     ay = ax if r.isotropic else dr.maximum(r.alpha_v.eval_1(si, active), _ALPHA_MIN)
@@ -235,7 +472,34 @@ def roughness_lobe(kind: str, roughness: Roughness, si, active) -> Lobe:
 
 
 def fresnel_term(fresnel: FresnelParams, si, oh, active):
-    """``F(o.h)`` (Table 2.I; a fit's table, Eq. 4.11) times ``specular_reflectance``."""
+    """``F(o.h)`` (Table 2.I; a fit's table, Eq. 4.11) times ``specular_reflectance``.
+
+    Parameters
+    ----------
+    fresnel : FresnelParams
+        The Fresnel parameters.
+    si : mi.SurfaceInteraction3f
+        Where the textures are evaluated.
+    oh : Float
+        ``o.h``, the cosine of the difference angle.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    Spectrum
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import fresnel_term, read_fresnel
+    >>> props = mi.Properties("mf_microfacet")
+    >>> props["int_ior"], props["ext_ior"], props["specular_reflectance"] = 1.5, 1.0, 0.5
+    >>> f = read_fresnel(props)
+    >>> f.kind, fresnel_term(f, mi.SurfaceInteraction3f(), 1.0, True)   # 0.5 ((1.5 - 1) / (1.5 + 1))^2
+    ('dielectric', [0.02, 0.02, 0.02])
+    """
     r = fresnel.specular_reflectance.eval(si, active)
     if fresnel.kind == "conductor":
         return r * fresnel_formulas.conductor(oh, fresnel.eta.eval(si, active), fresnel.k.eval(si, active))
@@ -271,8 +535,39 @@ def _facet_attenuation(model: LobeModel, r: Reflection, ok):
 
 
 def geometric_attenuation(model: LobeModel, lobe, r: Reflection):
-    """``G(i, o)`` of :meth:`microfacet.MicrofacetBRDF.gaf` at ``i.h = o.h`` (Table 2.IV);
-    without shadowing only the ``o`` factors remain; 0 below the horizons."""
+    """``G(i, o)`` of :meth:`microfacet.MicrofacetBRDF.gaf` at ``i.h = o.h`` (Table 2.IV).
+
+    Without shadowing only the ``o`` factors remain; 0 below the horizons.
+
+    Parameters
+    ----------
+    model : LobeModel
+        The GAF, shadowing and separability.
+    lobe : Lobe
+        The slope distribution (its ``Lambda`` for Smith).
+    r : Reflection
+        The directions (:func:`half_vector` or :func:`mirror`).
+
+    Returns
+    -------
+    Float
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, geometric_attenuation, half_vector
+    >>> ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)                     # the view o
+    >>> r = half_vector(ctx, si, mi.Vector3f(0, -0.6, 0.8), True)   # lit from the mirror direction
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> lobe = Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0)
+    >>> g = geometric_attenuation(LobeModel("ggx"), lobe, r)
+    >>> import numpy as np, microfacet as mf
+    >>> library = mf.MicrofacetBRDF(mf.GGX(alpha=0.3)).gaf(np.array([0, -0.6, 0.8]), np.array([0, 0.6, 0.8]))
+    >>> round(g, 6), round(float(library), 6)
+    (0.97561, 0.97561)
+    """
     ok = (r.light.z > 0) & (r.view.z > 0) & (r.oh > 0) & (r.h.z > 0)
     if model.gaf == "smith":
         g, ok = _smith_attenuation(model, lobe, r, ok)
@@ -282,14 +577,70 @@ def geometric_attenuation(model: LobeModel, lobe, r: Reflection):
 
 
 def normal_density(model: LobeModel, lobe, h, view):
-    """Density of sampled normals: ``D_o(h)`` (Smith, Eq. 2.17) or ``D(h) z_h``."""
+    """Density of the sampled normals: ``D_o(h)`` (Smith, Eq. 2.17) or ``D(h) z_h``.
+
+    Parameters
+    ----------
+    model : LobeModel
+        Whether sampling draws visible normals.
+    lobe : Lobe
+        The slope distribution.
+    h : Vector3f
+        The normal.
+    view : Vector3f
+        The view ``o``.
+
+    Returns
+    -------
+    Float
+        The density of ``h`` over the sphere.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, normal_density
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> lobe = Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0)
+    >>> n = mi.Vector3f(0, 0, 1)
+    >>> p = normal_density(LobeModel("ggx", samples_visible=False), lobe, n, n)
+    >>> round(p, 4), round(1 / (3.14159265 * 0.3**2), 4)            # D(n) z_n = 1 / (pi alpha^2)
+    (3.5368, 3.5368)
+    """
     if model.samples_visible:
         return lobe.vndf(h, view)
     return lobe.ndf(h) * h.z
 
 
 def reflecting(ctx, si, active):
-    """``active`` where the view is above the surface and glossy reflection is asked."""
+    """``active`` where the view is above the surface and glossy reflection is asked.
+
+    Parameters
+    ----------
+    ctx : mi.BSDFContext
+        The context (its enabled components).
+    si : mi.SurfaceInteraction3f
+        The view is ``si.wi``.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    Bool
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import reflecting
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)
+    >>> reflecting(mi.BSDFContext(), si, True)
+    True
+    >>> si.wi = mi.Vector3f(0, 0.6, -0.8)                          # from below
+    >>> reflecting(mi.BSDFContext(), si, True)
+    False
+    """
     active = active & (si.wi.z > 0)
     if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
         active = active & False
@@ -297,8 +648,36 @@ def reflecting(ctx, si, active):
 
 
 def half_vector(ctx, si, light, active) -> Reflection:
-    """The :class:`Reflection` of ``light`` and the view, active where both are above the
-    surface, ``o.h > 0`` and glossy reflection is asked."""
+    """The :class:`Reflection` of ``light`` and the view ``si.wi``.
+
+    Active where both are above the surface, ``o.h > 0`` and glossy reflection is asked.
+
+    Parameters
+    ----------
+    ctx : mi.BSDFContext
+        The context.
+    si : mi.SurfaceInteraction3f
+        The view is ``si.wi``.
+    light : Vector3f
+        The light direction ``i`` (Mitsuba's ``wo``).
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    Reflection
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import half_vector
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)
+    >>> r = half_vector(mi.BSDFContext(), si, mi.Vector3f(0, -0.6, 0.8), True)
+    >>> r.h, round(r.oh, 6), r.active
+    ([0, 0, 1], 0.8, True)
+    """
     active = reflecting(ctx, si, active & (light.z > 0))
     h = dr.normalize(light + si.wi)
     oh = dr.dot(si.wi, h)
@@ -306,32 +685,172 @@ def half_vector(ctx, si, light, active) -> Reflection:
 
 
 def mirror(view, h, active) -> Reflection:
-    """The :class:`Reflection` of ``view`` about the normal ``h`` (``i = 2 (o.h) h - o``),
-    active where ``active``, the light is above the surface and ``o.h > 0``."""
+    """The :class:`Reflection` of ``view`` about the normal ``h``: ``i = 2 (o.h) h - o``.
+
+    Active where ``active``, the light is above the surface and ``o.h > 0``.
+
+    Parameters
+    ----------
+    view : Vector3f
+        The view ``o``.
+    h : Vector3f
+        The (unit) normal.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    Reflection
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import mirror
+    >>> r = mirror(mi.Vector3f(0, 0.6, 0.8), mi.Vector3f(0, 0.6, 0.8), True)   # back to the view
+    >>> r.light, round(r.oh, 6)
+    ([0, 0.6, 0.8], 1.0)
+    """
     oh = dr.dot(view, h)
     light = 2.0 * oh * h - view
     return Reflection(light, view, h, oh, active & (light.z > 0) & (oh > 0))
 
 
 def lobe_value(model: LobeModel, lobe, r: Reflection):
-    """``(D G / (4 z_o), ok)`` (Listing 2.2 without Fresnel), ``ok`` where ``G > 0``."""
+    """``(D G / (4 z_o), ok)``: Listing 2.2 without Fresnel, ``ok`` where ``G > 0``.
+
+    Parameters
+    ----------
+    model : LobeModel
+        The GAF and shadowing.
+    lobe : Lobe
+        The slope distribution.
+    r : Reflection
+        The directions.
+
+    Returns
+    -------
+    value : Float
+        ``f_r cos theta_i`` with ``F = 1``.
+    ok : Bool
+        Where the value is positive.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, half_vector, lobe_value
+    >>> ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)                     # the view o
+    >>> r = half_vector(ctx, si, mi.Vector3f(0, -0.6, 0.8), True)   # lit from the mirror direction
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> value, ok = lobe_value(LobeModel("ggx"), Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0), r)
+    >>> import numpy as np, microfacet as mf
+    >>> f = mf.MicrofacetBRDF(mf.GGX(alpha=0.3)).eval(np.array([0, -0.6, 0.8]), np.array([0, 0.6, 0.8]))
+    >>> round(value, 5), round(float(f[0]) * 0.8, 5), ok                  # the library's f_r cos theta_i
+    (1.07829, 1.07829, True)
+    """
     g = geometric_attenuation(model, lobe, r)
     return ratio(lobe.ndf(r.h) * g, 4.0 * r.view.z, r.active), r.active & (g > 0)
 
 
 def lobe_pdf(model: LobeModel, lobe, r: Reflection):
-    """Solid-angle density of the reflected direction: normal density over ``4 o.h``."""
+    """Solid-angle density of the reflected direction: the normal density over ``4 o.h``.
+
+    Parameters
+    ----------
+    model : LobeModel
+        Whether sampling draws visible normals.
+    lobe : Lobe
+        The slope distribution.
+    r : Reflection
+        The directions.
+
+    Returns
+    -------
+    Float
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, half_vector, lobe_pdf
+    >>> ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)                     # the view o
+    >>> r = half_vector(ctx, si, mi.Vector3f(0, -0.6, 0.8), True)   # lit from the mirror direction
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> pdf = lobe_pdf(LobeModel("ggx"), Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0), r)
+    >>> import numpy as np, microfacet as mf
+    >>> library = mf.MicrofacetBRDF(mf.GGX(alpha=0.3)).pdf(np.array([0, -0.6, 0.8]), np.array([0, 0.6, 0.8]))
+    >>> round(pdf, 5), round(float(library), 5)
+    (1.0916, 1.0916)
+    """
     return ratio(normal_density(model, lobe, r.h, r.view), 4.0 * r.oh, r.active)
 
 
 def sample_normal(model: LobeModel, lobe, sample2, view):
-    """A normal of the visible normals (Smith, Eq. 2.23) or of the slopes of ``P``."""
+    """A normal of the visible normals (Smith, Eq. 2.23) or of the slopes of ``P``.
+
+    Parameters
+    ----------
+    model : LobeModel
+        Whether sampling draws visible normals.
+    lobe : Lobe
+        The slope distribution.
+    sample2 : Point2f
+        Two uniform numbers.
+    view : Vector3f
+        The view ``o``.
+
+    Returns
+    -------
+    Vector3f
+        A unit normal.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, sample_normal
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> lobe = Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0)
+    >>> view = mi.Vector3f(0, 0.6, 0.8)
+    >>> sample_normal(LobeModel("ggx"), lobe, mi.Point2f(0.5, 0.5), view)   # the median: tilted toward o
+    [0, 0.0635378, 0.997979]
+    """
     return lobe.sample_visible(sample2, view) if model.samples_visible else lobe.sample_p22(sample2)
 
 
 def sample_weight(model: LobeModel, lobe, r: Reflection):
-    """``eval / pdf`` without Fresnel: ``G / G1(o)`` (visible normals, Eq. 2.23), else
-    ``G o.h / (z_o z_h)``."""
+    """``eval / pdf`` without Fresnel.
+
+    ``G / G1(o)`` for visible normals (Eq. 2.23), else ``G o.h / (z_o z_h)``.
+
+    Parameters
+    ----------
+    model : LobeModel
+        The GAF and the sampling.
+    lobe : Lobe
+        The slope distribution.
+    r : Reflection
+        The sampled reflection (:func:`mirror`).
+
+    Returns
+    -------
+    Float
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, lobe_pdf, lobe_value, mirror, sample_normal, sample_weight
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> model, lobe, view = LobeModel("ggx"), Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0), mi.Vector3f(0, 0.6, 0.8)
+    >>> r = mirror(view, sample_normal(model, lobe, mi.Point2f(0.3, 0.7), view), True)
+    >>> w = sample_weight(model, lobe, r)
+    >>> bool(abs(w - lobe_value(model, lobe, r)[0] / lobe_pdf(model, lobe, r)) < 1e-5 * w)
+    True
+    """
     g = geometric_attenuation(model, lobe, r)
     if model.samples_visible:
         g1_o = lobe.g1(r.view)
@@ -340,8 +859,31 @@ def sample_weight(model: LobeModel, lobe, r: Reflection):
 
 
 def glossy_sample(wo, pdf, active):
-    """The ``mi.BSDFSample3f`` of a glossy reflection toward ``wo`` with density ``pdf``
-    (0 where not ``active``), component 0."""
+    """The ``mi.BSDFSample3f`` of a glossy reflection toward ``wo`` with density ``pdf``.
+
+    Parameters
+    ----------
+    wo : Vector3f
+        The sampled direction.
+    pdf : Float
+        Its density (0 where not ``active``).
+    active : Bool
+        The lanes with a sample.
+
+    Returns
+    -------
+    mi.BSDFSample3f
+        Component 0, ``GlossyReflection``, ``eta = 1``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import glossy_sample
+    >>> bs = glossy_sample(mi.Vector3f(0, -0.6, 0.8), 1.5, True)
+    >>> bs.pdf, bs.sampled_type == int(mi.BSDFFlags.GlossyReflection), bs.sampled_component
+    (1.5, True, 0)
+    """
     bs = dr.zeros(mi.BSDFSample3f)
     bs.wo = wo
     bs.pdf = dr.select(active, pdf, 0.0)
@@ -352,8 +894,31 @@ def glossy_sample(wo, pdf, active):
 
 
 def glossy_flags(anisotropic: bool, spatially_varying: bool = False):
-    """``GlossyReflection | FrontSide`` (``| Anisotropic``; ``| SpatiallyVarying`` and
-    ``NeedsDifferentials`` where Mitsuba has it, for the footprint plugins)."""
+    """The BSDF flags of a glossy lobe: ``GlossyReflection | FrontSide``.
+
+    Parameters
+    ----------
+    anisotropic : bool
+        Add ``Anisotropic``.
+    spatially_varying : bool, optional
+        Add ``SpatiallyVarying`` (and ``NeedsDifferentials`` where Mitsuba has it), for the
+        footprint plugins.
+
+    Returns
+    -------
+    mi.BSDFFlags
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import glossy_flags
+    >>> F = mi.BSDFFlags
+    >>> glossy_flags(False) == F.GlossyReflection | F.FrontSide
+    True
+    >>> bool(glossy_flags(True) & F.Anisotropic), bool(glossy_flags(True, True) & F.SpatiallyVarying)
+    (True, True)
+    """
     flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
     if anisotropic:
         flags = flags | mi.BSDFFlags.Anisotropic
@@ -366,9 +931,29 @@ def glossy_flags(anisotropic: bool, spatially_varying: bool = False):
 
 # ------------------------------------------------------------------ the shared lobe
 class MicrofacetLobe:
-    """``f_r cos theta_i = F D G / (4 z_o)`` and its sampler (Listing 2.2, Sec. 2.2, 3.2) for a
-    plugin that supplies ``self.model`` (a :class:`LobeModel`), :meth:`lobe` (the slope
-    distribution at ``si``) and :meth:`fresnel` (``F(o.h)`` at ``si``)."""
+    """``f_r cos theta_i = F D G / (4 z_o)`` and its sampler (Listing 2.2, Sec. 2.2, 3.2).
+
+    For a plugin that supplies ``self.model`` (a :class:`LobeModel`), :meth:`lobe` (the slope
+    distribution at ``si``) and :meth:`fresnel` (``F(o.h)`` at ``si``).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import LobeModel, MicrofacetLobe
+    >>> from microfacet.mitsuba.slopes import Lobe
+    >>> class Gold(MicrofacetLobe):                       # a constant GGX lobe, F = 1
+    ...     model = LobeModel("ggx")
+    ...     def lobe(self, si, active):
+    ...         return Lobe("ggx", 0.3, 0.3, 0.0, 0.0, 0.0)
+    ...     def fresnel(self, si, oh, active):
+    ...         return mi.Color3f(1.0)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> value, pdf = Gold().lobe_eval_pdf(mi.BSDFContext(), si, mi.Vector3f(0, 0, 1), True)
+    >>> round(value[0], 4), round(pdf, 4)                  # D(n) / 4 = 1 / (4 pi alpha^2)
+    (0.8842, 0.8842)
+    """
 
     model: LobeModel
 
@@ -379,7 +964,26 @@ class MicrofacetLobe:
         raise NotImplementedError
 
     def lobe_eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
-        """``(f_r cos theta_i, pdf)`` toward ``light`` (either ``None`` when not wanted)."""
+        """``(f_r cos theta_i, pdf)`` toward ``light`` (either ``None`` when not wanted).
+
+        Parameters
+        ----------
+        ctx : mi.BSDFContext
+            The context.
+        si : mi.SurfaceInteraction3f
+            The view is ``si.wi``.
+        light : Vector3f
+            The light ``i``.
+        active : Bool
+            The active lanes.
+        want_value, want_pdf : bool, optional
+            Compute the value, the pdf.
+
+        Returns
+        -------
+        value : Spectrum or None
+        pdf : Float or None
+        """
         r = half_vector(ctx, si, light, active)
         lobe = self.lobe(si, r.active)
         value = pdf = None
@@ -391,8 +995,26 @@ class MicrofacetLobe:
         return value, pdf
 
     def lobe_sample(self, ctx, si, sample2, active):
-        """``(BSDFSample3f, weight)``: the view reflected about a sampled normal (Sec. 2.2,
-        3.2); weight ``F`` times :func:`sample_weight`."""
+        """``(BSDFSample3f, weight)``: the view reflected about a sampled normal (Sec. 2.2, 3.2).
+
+        The weight is ``F`` times :func:`sample_weight`.
+
+        Parameters
+        ----------
+        ctx : mi.BSDFContext
+            The context.
+        si : mi.SurfaceInteraction3f
+            The view is ``si.wi``.
+        sample2 : Point2f
+            Two uniform numbers.
+        active : Bool
+            The active lanes.
+
+        Returns
+        -------
+        bs : mi.BSDFSample3f
+        weight : Spectrum
+        """
         active = reflecting(ctx, si, active)
         lobe = self.lobe(si, active)
         r = mirror(si.wi, sample_normal(self.model, lobe, sample2, si.wi), active)
@@ -432,6 +1054,24 @@ class MicrofacetBSDF(MicrofacetLobe):
     | `schlick_f0` | float or texture | 0.04 | reflectance at normal incidence of Schlick's approximation |
     | `schlick_f90` | float or texture | 1 | reflectance at grazing incidence of Schlick's approximation |
     | `specular_reflectance` | float or texture | 1 | factor on the whole BRDF |
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet.mitsuba as mfm
+    >>> _ = mfm.register()
+    >>> bsdf = mfm.load_dict({"type": "mf_microfacet", "distribution": "ggx", "alpha_u": 0.2,
+    ...                       "alpha_v": 0.4, "rho": 0.3, "mean_slope_u": 0.1, "material": "Cu"})
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)
+    >>> ctx = mi.BSDFContext()
+    >>> bs, weight = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.3, 0.6))
+    >>> value, pdf = bsdf.eval_pdf(ctx, si, bs.wo)
+    >>> bool(abs(pdf - bs.pdf) < 1e-5 * pdf and abs(weight[0] - value[0] / pdf) < 1e-4 * weight[0])
+    True
+    >>> sorted(mi.traverse(bsdf).keys())[:3]
+    ['alpha_u.value', 'alpha_v.value', 'eta.value']
     """
 
     PLUGIN_NAME = PLUGIN
@@ -496,5 +1136,22 @@ class MicrofacetBSDF(MicrofacetLobe):
 
 
 def bsdf_class() -> type:
-    """The ``mf_microfacet`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    """The ``mf_microfacet`` class of the current Mitsuba variant (:func:`.registry.variant_class`).
+
+    Returns
+    -------
+    type
+        A subclass of the variant's ``mi.BSDF``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.bsdf import bsdf_class
+    >>> cls = bsdf_class()
+    >>> issubclass(cls, mi.BSDF), cls.__name__
+    (True, 'MicrofacetBSDF')
+    >>> cls(mi.Properties("mf_microfacet"))           # doctest: +ELLIPSIS
+    MicrofacetBSDF[mf_microfacet, distribution=beckmann, ...]
+    """
     return variant_class(MicrofacetBSDF)

@@ -2,14 +2,20 @@
 docstrings (as Mitsuba generates its own plugin documentation from its sources).
 
 Each plugin class (:data:`PLUGIN_CLASSES`) carries one table in its docstring, a Markdown
-table with the header ``| name | type | default | meaning |``, one row per parameter (the
-name in backquotes; no ``|`` inside a cell). :func:`parameter_table` parses it,
-:func:`plugin_reference` returns the Markdown of all plugins. The docstrings are read from
-the source files with :mod:`ast`: neither Mitsuba nor a variant is needed. Example::
+table with the header :data:`HEADER` (``| name | type | default | meaning |``), one row per
+parameter (the name in backquotes; no ``|`` inside a cell). :func:`parameter_table` parses
+it, :func:`plugin_reference` returns the Markdown of all plugins. The docstrings are read
+from the source files with :mod:`ast`: neither Mitsuba nor a variant is needed.
 
-    from microfacet.mitsuba import plugin_reference
-    print(plugin_reference())          # "## `mf_microfacet`\\n\\n..." for the docs
-    [p.name for p in parameter_table("mf_glints")][:3]   # ['filename', 'exact', 'g2']
+Examples
+--------
+>>> from microfacet.mitsuba.reference import HEADER, PLUGIN_CLASSES, parameter_table
+>>> list(PLUGIN_CLASSES)
+['mf_microfacet', 'mf_fitted', 'mf_leadr', 'mf_glints']
+>>> PLUGIN_CLASSES["mf_leadr"], HEADER
+(('leadr', 'LeadrBSDF'), ('name', 'type', 'default', 'meaning'))
+>>> [p.name for p in parameter_table("mf_glints")][:3]
+['filename', 'exact', 'g2']
 """
 from __future__ import annotations
 
@@ -30,8 +36,19 @@ _ROLE = re.compile(r":\w+:`(~?)([^`]+)`")
 
 
 class Parameter(NamedTuple):
-    """One row of a plugin's parameter table (``default`` as written: ``required``,
-    ``none``, a number or a backquoted word)."""
+    """One row of a plugin's parameter table.
+
+    ``default`` is as written: ``required``, ``none``, a number or a backquoted word.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.reference import Parameter, parameter_table
+    >>> p = parameter_table("mf_fitted")[0]
+    >>> p.name, p.type, p.default
+    ('filename', 'string', 'required')
+    >>> Parameter("alpha", "float", "0.1", "roughness").default
+    '0.1'
+    """
     name: str
     type: str
     default: str
@@ -39,8 +56,33 @@ class Parameter(NamedTuple):
 
 
 def class_docstring(plugin: str) -> str:
-    """The docstring of ``plugin``'s class (:data:`PLUGIN_CLASSES`), read from its source;
-    ``ValueError`` naming an unknown plugin."""
+    """The docstring of a plugin's class (:data:`PLUGIN_CLASSES`), read from its source.
+
+    Parameters
+    ----------
+    plugin : str
+        A plugin name (``"mf_microfacet"``, ...).
+
+    Returns
+    -------
+    str
+        The class docstring (dedented, as :func:`ast.get_docstring`).
+
+    Raises
+    ------
+    ValueError
+        Naming an unknown plugin, or a module without the plugin's class.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.reference import class_docstring
+    >>> class_docstring("mf_leadr").split(":")[0]
+    'A LEADR moment pyramid of ``microfacet bake`` over a base material'
+    >>> class_docstring("roughconductor")
+    Traceback (most recent call last):
+    ...
+    ValueError: plugin must be one of mf_microfacet, mf_fitted, mf_leadr, mf_glints, got 'roughconductor'
+    """
     if plugin not in PLUGIN_CLASSES:
         raise ValueError(f"plugin must be one of {', '.join(PLUGIN_CLASSES)}, got {plugin!r}")
     module, cls = PLUGIN_CLASSES[plugin]
@@ -56,9 +98,38 @@ def _cells(line: str) -> list[str]:
 
 
 def parse_table(doc: str, where: str = "docstring") -> list[Parameter]:
-    """The parameter rows of the table in ``doc`` (module docstring); ``ValueError`` naming
-    ``where`` when the header is missing or a row does not have four cells or a
-    backquoted name."""
+    r"""The parameter rows of the one table of a docstring.
+
+    Parameters
+    ----------
+    doc : str
+        A docstring with one table whose header is :data:`HEADER`.
+    where : str, optional
+        What the docstring is, for errors (e.g. the plugin).
+
+    Returns
+    -------
+    list of Parameter
+        The rows, in order; the table ends at the first line that does not start with ``|``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` when the header is missing or repeated, or a row does not have four
+        cells or a backquoted name.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.reference import parse_table
+    >>> doc = "\n".join(["A plugin.", "", "| name | type | default | meaning |", "|---|---|---|---|",
+    ...                  "| `alpha` | float | 0.1 | roughness |"])
+    >>> parse_table(doc, "mf_example")
+    [Parameter(name='alpha', type='float', default='0.1', meaning='roughness')]
+    >>> parse_table("No table.", "mf_example")
+    Traceback (most recent call last):
+    ...
+    ValueError: mf_example: expected one table with header | name | type | default | meaning |, found 0
+    """
     lines = [ln.strip() for ln in doc.splitlines()]
     header = [i for i, ln in enumerate(lines) if ln.startswith("|") and tuple(_cells(ln)) == HEADER]
     if len(header) != 1:
@@ -75,7 +146,25 @@ def parse_table(doc: str, where: str = "docstring") -> list[Parameter]:
 
 
 def parameter_table(plugin: str) -> list[Parameter]:
-    """The parameters of ``plugin`` (``"mf_microfacet"``, ...) documented in its class docstring."""
+    """The parameters of a plugin, as documented in its class docstring.
+
+    Parameters
+    ----------
+    plugin : str
+        A plugin of :data:`PLUGIN_CLASSES` (``"mf_microfacet"``, ...).
+
+    Returns
+    -------
+    list of Parameter
+        Its rows (:func:`parse_table`).
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.reference import parameter_table
+    >>> rows = {p.name: p for p in parameter_table("mf_microfacet")}
+    >>> rows["distribution"].default, rows["alpha"].type
+    ('`beckmann`', 'float or texture')
+    """
     return parse_table(class_docstring(plugin), plugin)
 
 
@@ -90,8 +179,27 @@ def _prose(doc: str) -> str:
 
 
 def plugin_reference() -> str:
-    """Markdown of every plugin's parameters: per plugin a ``## `name``` section with its
-    class docstring's text and its table (:func:`parameter_table`)."""
+    """Markdown of every plugin's parameters.
+
+    Per plugin of :data:`PLUGIN_CLASSES`, a ``## `name``` section with its class docstring's
+    text (reST roles made Markdown code) and its table (:func:`parameter_table`).
+
+    Returns
+    -------
+    str
+        The Markdown page body.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba import plugin_reference
+    >>> text = plugin_reference()
+    >>> text.splitlines()[0]
+    '## `mf_microfacet`'
+    >>> [line for line in text.splitlines() if line.startswith("## ")][1:]
+    ['## `mf_fitted`', '## `mf_leadr`', '## `mf_glints`']
+    >>> "| `filename` | string | required | the pyramid EXR of `microfacet bake` |" in text
+    True
+    """
     out = []
     for plugin in PLUGIN_CLASSES:
         doc = class_docstring(plugin)

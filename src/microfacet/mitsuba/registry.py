@@ -8,12 +8,6 @@ with the plain class's namespace (its methods and those of its plain bases): the
 Mitsuba instantiates, as its own Python plugins are registered with ``mi.register_bsdf``.
 Plain plugin classes therefore call their bases by name (``MicrofacetBSDF.sample(self,
 ...)``), never ``super()``, and start ``__init__`` with ``mi.BSDF.__init__(self, props)``.
-
-Example::
-
-    mi.set_variant("scalar_rgb")
-    cls = variant_class(MicrofacetBSDF)       # a subclass of mi.BSDF (scalar_rgb)
-    assert variant_class(MicrofacetBSDF) is cls
 """
 from __future__ import annotations
 
@@ -26,8 +20,29 @@ _SKIP = ("__dict__", "__weakref__")
 
 
 def namespace(plugin: type) -> dict:
-    """The attributes of the plain class ``plugin`` and of its plain bases (the nearest one
-    wins, as in Python's method resolution), without ``object``'s."""
+    """The attributes of a plain plugin class and of its plain bases.
+
+    The nearest class wins, as in Python's method resolution; ``object``'s attributes and
+    ``__dict__``/``__weakref__`` are left out.
+
+    Parameters
+    ----------
+    plugin : type
+        A plain plugin class (e.g. :class:`~microfacet.mitsuba.leadr.LeadrBSDF`).
+
+    Returns
+    -------
+    dict
+        Attribute name -> value.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.registry import namespace
+    >>> from microfacet.mitsuba.bsdf import MicrofacetBSDF, MicrofacetLobe
+    >>> ns = namespace(MicrofacetBSDF)
+    >>> ns["lobe_eval_pdf"] is MicrofacetLobe.lobe_eval_pdf, ns["eval"] is MicrofacetBSDF.eval
+    (True, True)
+    """
     out: dict = {}
     for cls in reversed(plugin.__mro__[:-1]):
         out.update({k: v for k, v in vars(cls).items() if k not in _SKIP})
@@ -35,9 +50,36 @@ def namespace(plugin: type) -> dict:
 
 
 def variant_class(plugin: type) -> type:
-    """The subclass of the current variant's ``mi.BSDF`` with the namespace of ``plugin``
-    (:func:`namespace`), built once per variant; ``RuntimeError`` for a polarized variant
-    (the plugins compute unpolarized spectra) or when no variant is set."""
+    """The subclass of the current variant's ``mi.BSDF`` with the namespace of ``plugin``.
+
+    Built once per variant and plugin (:func:`namespace`); Mitsuba instantiates it.
+
+    Parameters
+    ----------
+    plugin : type
+        A plain plugin class.
+
+    Returns
+    -------
+    type
+        A subclass of ``mi.BSDF`` of the current variant.
+
+    Raises
+    ------
+    RuntimeError
+        For a polarized variant (the plugins compute unpolarized spectra) or when no variant
+        is set.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.registry import variant_class
+    >>> from microfacet.mitsuba.bsdf import MicrofacetBSDF
+    >>> cls = variant_class(MicrofacetBSDF)
+    >>> issubclass(cls, mi.BSDF), variant_class(MicrofacetBSDF) is cls
+    (True, True)
+    """
     variant = mi.variant()
     if not variant:
         raise RuntimeError("microfacet.mitsuba: set a Mitsuba variant first (mi.set_variant('llvm_ad_rgb'))")
