@@ -56,17 +56,83 @@ USES = ("best", "tabulated", GGX, BECKMANN)
 
 
 def fit_path_parameter(props, name: str, plugin: str) -> str:
-    """The path of the fit file named by string parameter ``name``, resolved by Mitsuba's file
-    resolver; a one-line ``ValueError`` naming the parameter when it is missing."""
+    """The path of the fit file named by a string parameter, resolved by Mitsuba's file resolver.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+    name : str
+        The parameter (``filename``, or ``mf_leadr``'s ``fit``).
+    plugin : str
+        The plugin named in errors.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    PluginParameterError
+        Naming the parameter when it is missing or not a string.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> props = mi.Properties("mf_fitted")
+    >>> props["filename"] = "fit.npz"
+    >>> from microfacet.mitsuba.fitted import fit_path_parameter
+    >>> fit_path_parameter(props, "filename", "mf_fitted").endswith("fit.npz")
+    True
+    >>> fit_path_parameter(props, "fit", "mf_leadr")
+    Traceback (most recent call last):
+    ...
+    microfacet.mitsuba.PluginParameterError: mf_leadr: parameter 'fit' is required: the .npz written by `microfacet fit`
+    """
     if name not in props or props.type(name) != mi.Properties.Type.String:
         raise properties.parameter_error(name, "is required: the .npz written by `microfacet fit`", plugin)
     return str(mi.file_resolver().resolve(props[name]))
 
 
 def load_fit_parameter(props, name: str, plugin: str):
-    """The :class:`~microfacet.fit.FittedBRDF` of the file named by string parameter ``name``
-    (resolved by Mitsuba's file resolver); a one-line ``ValueError`` naming the parameter
-    and the file when it is missing, not a fit (e.g. a LEADR pyramid EXR) or corrupt."""
+    """The :class:`~microfacet.fit.FittedBRDF` of the file named by a string parameter.
+
+    The path is resolved by Mitsuba's file resolver (:func:`fit_path_parameter`).
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+    name : str
+        The parameter.
+    plugin : str
+        The plugin named in errors.
+
+    Returns
+    -------
+    microfacet.fit.FittedBRDF
+
+    Raises
+    ------
+    PluginParameterError
+        Naming the parameter and the file when it is missing, not a fit (e.g. a LEADR pyramid
+        EXR) or corrupt.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)), 16)
+    >>> path = fit.save("fit.npz")                       # a tabulated fit, as `microfacet fit` writes
+    >>> props = mi.Properties("mf_fitted")
+    >>> props["filename"] = "fit.npz"
+    >>> from microfacet.mitsuba.fitted import load_fit_parameter
+    >>> load_fit_parameter(props, "filename", "mf_fitted")          # doctest: +ELLIPSIS
+    FittedBRDF(TabulatedIsotropic(n=31, ...), gaf='smith', f0=0.5003)
+    """
     path = fit_path_parameter(props, name, plugin)
     try:
         with open(path, "rb") as f:
@@ -83,10 +149,48 @@ def load_fit_parameter(props, name: str, plugin: str):
 
 
 def choose_fit(path: str, use: str, plugin: str = PLUGIN):
-    """``(name, brdf)``: the fit ``use`` of the fit file ``path`` (module docstring): ``brdf`` the
-    analytic BRDF tree of ``microfacet.fit.load(path, model=name)``, or ``None`` for the
-    tabulated fit and the legacy ``ggx``/``beckmann`` conversions (``name`` says which). A
-    one-line ``ValueError`` naming ``use`` and listing the file's fits for an unknown name."""
+    """The fit ``use`` of a fit file (module docstring).
+
+    Parameters
+    ----------
+    path : str
+        The fit file.
+    use : str
+        ``"best"``, ``"tabulated"``, the name of an analytic fit of the file, or
+        ``"ggx"``/``"beckmann"`` (:data:`USES`).
+    plugin : str, optional
+        The plugin named in errors.
+
+    Returns
+    -------
+    name : str
+        The fit chosen (``best`` resolved).
+    brdf : object or None
+        The analytic BRDF tree of ``microfacet.fit.load(path, model=name)``, or ``None`` for
+        the tabulated fit and the legacy ``ggx``/``beckmann`` conversions.
+
+    Raises
+    ------
+    PluginParameterError
+        Naming ``use`` and listing the file's fits for an unknown name.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)), 16)
+    >>> path = fit.save("fit.npz")                       # a tabulated fit, as `microfacet fit` writes
+    >>> from microfacet.mitsuba.fitted import USES, choose_fit
+    >>> USES
+    ('best', 'tabulated', 'ggx', 'beckmann')
+    >>> choose_fit("fit.npz", "best"), choose_fit("fit.npz", "ggx")
+    (('tabulated', None), ('ggx', None))
+    >>> choose_fit("fit.npz", "coat")
+    Traceback (most recent call last):
+    ...
+    microfacet.mitsuba.PluginParameterError: mf_fitted: parameter 'use' must name a fit of 'fit.npz': one of best, tabulated, got 'coat'
+    """
     try:
         names, best = fit_names(path)
     except MicrofacetError as e:
@@ -106,9 +210,26 @@ def choose_fit(path: str, use: str, plugin: str = PLUGIN):
 @dataclass(frozen=True)
 class FitLobe:
     """A fit rendered by the shared lobe code: the tabulated fit or a ``ggx``/``beckmann``
-    conversion (module docstring): its :class:`LobeModel`, Fresnel table, lobe factory
-    (``make_lobe() -> Lobe``), Lambertian base texture (or ``None``) with the probability
-    ``p_lobe`` of sampling the lobe, and whether the lobe is anisotropic."""
+    conversion (module docstring).
+
+    Its :class:`~.bsdf.LobeModel`, Fresnel table, lobe factory (``make_lobe() -> Lobe``),
+    Lambertian base texture (or ``None``) with the probability ``p_lobe`` of sampling the lobe,
+    and whether the lobe is anisotropic.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)), 16)
+    >>> path = fit.save("fit.npz")                       # a tabulated fit, as `microfacet fit` writes
+    >>> props = mi.Properties("mf_fitted")
+    >>> props["filename"] = "fit.npz"
+    >>> from microfacet.mitsuba.fitted import FitLobe, read_fitted_params
+    >>> lobe = read_fitted_params(props).lobe
+    >>> isinstance(lobe, FitLobe), lobe.model.kind, lobe.fresnel.kind, lobe.diffuse, lobe.p_lobe
+    (True, 'tabulated', 'table', None, 1.0)
+    """
     model: LobeModel
     fresnel: FresnelParams
     make_lobe: object
@@ -119,9 +240,26 @@ class FitLobe:
 
 @dataclass(frozen=True)
 class FittedParams:
-    """All parameters of ``mf_fitted`` (:func:`read_fitted_params`): the file, the fit it
-    renders (``use``), ``specular_reflectance`` and either the analytic fit's BRDF ``tree``
-    with its :mod:`.tree` component ``root``, or a :class:`FitLobe`."""
+    """All parameters of ``mf_fitted`` (:func:`read_fitted_params`).
+
+    The file, the fit it renders (``use``), ``specular_reflectance`` and either the analytic
+    fit's BRDF ``tree`` with its :mod:`.tree` component ``root``, or a :class:`FitLobe`.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)), 16)
+    >>> path = fit.save("fit.npz")                       # a tabulated fit, as `microfacet fit` writes
+    >>> props = mi.Properties("mf_fitted")
+    >>> props["filename"] = "fit.npz"
+    >>> from microfacet.mitsuba.fitted import read_fitted_params
+    >>> props["use"] = "beckmann"                  # the moment conversion (App. C)
+    >>> p = read_fitted_params(props)
+    >>> p.use, p.tree, p.lobe.model.kind
+    ('beckmann', None, 'beckmann')
+    """
     filename: str
     use: str
     specular_reflectance: object
@@ -158,7 +296,36 @@ def _fit_lobe(fit, use: str, reflectance) -> FitLobe:
 
 
 def read_fitted_params(props) -> FittedParams:
-    """All parameters of ``mf_fitted`` (class docstring of :class:`FittedBSDF`), checked."""
+    """All parameters of ``mf_fitted`` (class docstring of :class:`FittedBSDF`), checked.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+
+    Returns
+    -------
+    FittedParams
+
+    Raises
+    ------
+    PluginParameterError
+        Naming the parameter (and the file) that is unusable.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)), 16)
+    >>> path = fit.save("fit.npz")                       # a tabulated fit, as `microfacet fit` writes
+    >>> props = mi.Properties("mf_fitted")
+    >>> props["filename"] = "fit.npz"
+    >>> from microfacet.mitsuba.fitted import read_fitted_params
+    >>> p = read_fitted_params(props)
+    >>> p.filename, p.use, p.lobe.model.gaf
+    ('fit.npz', 'tabulated', 'smith')
+    """
     fit = load_fit_parameter(props, "filename", PLUGIN)
     use = props.get("use", "best") if "use" in props else "best"
     if not isinstance(use, str):
@@ -171,8 +338,37 @@ def read_fitted_params(props) -> FittedParams:
 
 
 def fitted_components(params: FittedParams) -> list:
-    """Mitsuba's component flags: one glossy component (``| DiffuseReflection`` for an
-    analytic fit with a diffuse part), plus a diffuse one for a tabulated fit's base."""
+    """Mitsuba's component flags of ``mf_fitted``.
+
+    One glossy component (``| DiffuseReflection`` for an analytic fit with a diffuse part),
+    plus a diffuse one for a tabulated fit's base.
+
+    Parameters
+    ----------
+    params : FittedParams
+        The plugin's parameters.
+
+    Returns
+    -------
+    list of mi.BSDFFlags
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.fit import SumBRDF
+    >>> from microfacet.mitsuba.tree import component_of
+    >>> from microfacet.mitsuba.fitted import FittedParams
+    >>> brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), mf.Lambertian(0.5))
+    >>> one = mi.load_dict({"type": "uniform", "value": 1.0})
+    >>> params = FittedParams("fit.npz", "two_lobes", one, tree=brdf, root=component_of(brdf))
+    >>> ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> from microfacet.mitsuba.fitted import fitted_components
+    >>> [bool(c & mi.BSDFFlags.DiffuseReflection) for c in fitted_components(params)]
+    [True]
+    """
     if params.lobe is None:
         flags = glossy_flags(anisotropic=False)
         return [flags | mi.BSDFFlags.DiffuseReflection if params.root.diffuse else flags]
@@ -183,7 +379,47 @@ def fitted_components(params: FittedParams) -> list:
 
 
 def tree_eval_pdf(params: FittedParams, ctx, si, light, active):
-    """``(f cos theta_i, pdf)`` of the analytic fit, times ``specular_reflectance``."""
+    """``(f cos theta_i, pdf)`` of an analytic fit, times ``specular_reflectance``.
+
+    Parameters
+    ----------
+    params : FittedParams
+        With the fit's ``root`` component.
+    ctx : mi.BSDFContext
+        The context.
+    si : mi.SurfaceInteraction3f
+        The view is ``si.wi``.
+    light : Vector3f
+        The light ``i``.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    value : Spectrum
+    pdf : Float
+
+    Examples
+    --------
+    A GGX lobe plus a Lambertian base (equal sampling weights), seen and lit from the normal:
+    ``1 / (4 pi alpha^2) + 0.5 / pi``.
+
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.fit import SumBRDF
+    >>> from microfacet.mitsuba.tree import component_of
+    >>> from microfacet.mitsuba.fitted import FittedParams
+    >>> brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), mf.Lambertian(0.5))
+    >>> one = mi.load_dict({"type": "uniform", "value": 1.0})
+    >>> params = FittedParams("fit.npz", "two_lobes", one, tree=brdf, root=component_of(brdf))
+    >>> ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> from microfacet.mitsuba.fitted import tree_eval_pdf
+    >>> value, pdf = tree_eval_pdf(params, ctx, si, mi.Vector3f(0, 0, 1), True)
+    >>> round(value[0], 3), round(1 / (4 * 3.14159265 * 0.09) + 0.5 / 3.14159265, 3)
+    (1.043, 1.043)
+    """
     active = active & (si.wi.z > 0) & (light.z > 0)
     value, pdf = params.root.eval_pdf(ctx, si, light, active)
     value = value * params.specular_reflectance.eval(si, active)
@@ -191,7 +427,47 @@ def tree_eval_pdf(params: FittedParams, ctx, si, light, active):
 
 
 def tree_sample(params: FittedParams, ctx, si, sample1, sample2, active):
-    """The analytic fit's mixture sampler; weight ``eval / pdf``."""
+    """The analytic fit's mixture sampler; weight ``eval / pdf``.
+
+    Parameters
+    ----------
+    params : FittedParams
+        With the fit's ``root`` component.
+    ctx : mi.BSDFContext
+        The context.
+    si : mi.SurfaceInteraction3f
+        The view is ``si.wi``.
+    sample1 : Float
+        Chooses the part.
+    sample2 : Point2f
+        Samples the part.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    bs : mi.BSDFSample3f
+    weight : Spectrum
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.fit import SumBRDF
+    >>> from microfacet.mitsuba.tree import component_of
+    >>> from microfacet.mitsuba.fitted import FittedParams
+    >>> brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), mf.Lambertian(0.5))
+    >>> one = mi.load_dict({"type": "uniform", "value": 1.0})
+    >>> params = FittedParams("fit.npz", "two_lobes", one, tree=brdf, root=component_of(brdf))
+    >>> ctx, si = mi.BSDFContext(), mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> from microfacet.mitsuba.fitted import tree_eval_pdf, tree_sample
+    >>> bs, weight = tree_sample(params, ctx, si, 0.7, mi.Point2f(0.2, 0.4), True)
+    >>> value, pdf = tree_eval_pdf(params, ctx, si, bs.wo, True)
+    >>> bool(abs(weight[0] - value[0] / pdf) < 1e-5 * weight[0])
+    True
+    """
     active = active & (si.wi.z > 0)
     light, ok = params.root.sample(ctx, si, sample1, sample2, active)
     value, pdf = tree_eval_pdf(params, ctx, si, light, active & ok)
@@ -200,7 +476,40 @@ def tree_sample(params: FittedParams, ctx, si, sample1, sample2, active):
 
 
 def diffuse_base(diffuse, ctx, si, light, active):
-    """``(k_d z_i / pi, z_i / pi)`` of the Lambertian base (Eq. 1.9), 0 below the horizons."""
+    """``(k_d z_i / pi, z_i / pi)`` of the Lambertian base (Eq. 1.9), 0 below the horizons.
+
+    Parameters
+    ----------
+    diffuse : mi.Texture
+        The base's reflectance ``k_d``.
+    ctx : mi.BSDFContext
+        The context (component 1 must be enabled).
+    si : mi.SurfaceInteraction3f
+        The view is ``si.wi``.
+    light : Vector3f
+        The light ``i``.
+    active : Bool
+        The active lanes.
+
+    Returns
+    -------
+    value : Spectrum
+    pdf : Float
+        The cosine-weighted density.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.fitted import diffuse_base
+    >>> kd = mi.load_dict({"type": "srgb", "color": [0.5, 0.25, 0.125]})
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> value, pdf = diffuse_base(kd, mi.BSDFContext(), si, mi.Vector3f(0.6, 0, 0.8), True)
+    >>> round(pdf, 6), round(0.8 / 3.14159265, 6)
+    (0.254648, 0.254648)
+    """
     ok = active & (si.wi.z > 0) & (light.z > 0) & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
     cos_pdf = dr.select(ok, light.z * (1.0 / dr.pi), 0.0)
     return diffuse.eval(si, ok) * cos_pdf, cos_pdf
@@ -232,6 +541,26 @@ class FittedBSDF(MicrofacetBSDF):
     | `filename` | string | required | the `.npz` of `microfacet fit` (format versions 1 and 2) |
     | `use` | string | `best` | the fit to render: `best` (chosen by image error), `tabulated`, an analytic fit of the file, or the `ggx` / `beckmann` conversions |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+
+    Examples
+    --------
+    The tabulated fit's value equals the library's ``f_r cos theta_i``:
+
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> import microfacet.mitsuba as mfm
+    >>> _ = mfm.register()
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fresnel=mf.fresnel.Schlick(0.5)), 16)
+    >>> path = fit.save("fit.npz")
+    >>> bsdf = mfm.load_dict({"type": "mf_fitted", "filename": "fit.npz", "use": "tabulated"})
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0.6, 0.8)
+    >>> value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(0.48, -0.36, 0.8))
+    >>> library = fit.eval(np.array([0.48, -0.36, 0.8]), np.array([0.0, 0.6, 0.8])) * 0.8
+    >>> bool(np.allclose(np.array(value), library, rtol=1e-4))
+    True
     """
 
     PLUGIN_NAME = PLUGIN
@@ -293,5 +622,19 @@ class FittedBSDF(MicrofacetBSDF):
 
 
 def bsdf_class() -> type:
-    """The ``mf_fitted`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    """The ``mf_fitted`` class of the current Mitsuba variant (:func:`.registry.variant_class`).
+
+    Returns
+    -------
+    type
+        A subclass of the variant's ``mi.BSDF``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.fitted import PLUGIN, bsdf_class
+    >>> PLUGIN, issubclass(bsdf_class(), mi.BSDF)
+    ('mf_fitted', True)
+    """
     return variant_class(FittedBSDF)

@@ -23,8 +23,29 @@ NEWTON_STEPS = 4    # fixed count of the Beckmann visible-slope inversion (see i
 
 
 def ratio(num, den, ok):
-    """``num / den`` where ``ok``, else 0, never dividing by 0 (the scalar variants compute
-    with Python floats, which raise instead of giving inf)."""
+    """``num / den`` where ``ok``, else 0, never dividing by 0.
+
+    The scalar variants compute with Python floats, which raise instead of giving inf.
+
+    Parameters
+    ----------
+    num, den : Float
+        Numerator and denominator.
+    ok : Bool
+        The lanes where ``den`` may be divided by.
+
+    Returns
+    -------
+    Float
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.slopes import ratio
+    >>> ratio(1.0, 4.0, True), ratio(1.0, 0.0, False)
+    (0.25, 0.0)
+    """
     return dr.select(ok, num / dr.select(ok, den, 1.0), 0.0)
 
 
@@ -40,9 +61,32 @@ def beckmann_visible_slope_quantile(u, cos_theta):
     ``b0 = erf(a) - (1 + erf(a)) erf(sqrt(-log u))``; a Newton step of a concave increasing
     function lands at or left of the root and the following ones then increase
     monotonically and quadratically to it, so ``b`` is clamped into ``(-1, erf(a)]`` and
-    ``NEWTON_STEPS`` steps reach float32 precision over ``u`` in ``[1e-6, 1 - 1e-6]`` and all
-    views (measured against the float64 oracle
+    :data:`NEWTON_STEPS` steps reach float32 precision over ``u`` in ``[1e-6, 1 - 1e-6]`` and
+    all views (checked against the float64 oracle
     :func:`microfacet.distributions.beckmann.visible_slope_quantile` in the tests).
+
+    Parameters
+    ----------
+    u : Float
+        A uniform number, clamped into ``[1e-6, 1 - 1e-6]``.
+    cos_theta : Float
+        Cosine of the view's elevation, clamped into ``[1e-6, 1]``.
+
+    Returns
+    -------
+    Float
+        The standard visible x-slope ``x~``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.slopes import NEWTON_STEPS, beckmann_visible_slope_quantile
+    >>> from microfacet.distributions.beckmann import visible_slope_quantile
+    >>> NEWTON_STEPS, round(beckmann_visible_slope_quantile(0.3, 0.5), 6)
+    (4, -0.863384)
+    >>> round(float(visible_slope_quantile(0.3, 0.5)), 6)     # the float64 oracle
+    -0.863384
     """
     c = dr.clip(cos_theta, 1e-6, 1.0)
     t = dr.safe_sqrt(1.0 - c * c) / c
@@ -60,8 +104,43 @@ def beckmann_visible_slope_quantile(u, cos_theta):
 
 
 class Lobe:
-    """Per-lane slope distribution ``P(x~, y~; alpha_x, alpha_y, rho, x~n, y~n)``: a standard
-    ``kind`` distribution (``"beckmann"`` or ``"ggx"``) under the slope map of Eq. 3.4."""
+    """Per-lane slope distribution ``P(x~, y~; alpha_x, alpha_y, rho, x~n, y~n)``.
+
+    A standard ``kind`` distribution (``"beckmann"`` or ``"ggx"``) under the slope map of
+    Eq. 3.4: the Dr.Jit twin of :class:`microfacet.distributions.base.SlopeDistribution`
+    (:meth:`ndf`, :meth:`g1`, :meth:`vndf`, :meth:`sample_visible`, :meth:`sample_p22`, same
+    names and formulas).
+
+    Parameters
+    ----------
+    kind : str
+        ``"beckmann"`` or ``"ggx"``.
+    alpha_x, alpha_y : Float
+        Roughness along x and y.
+    rho : Float
+        Slope correlation in ``(-1, 1)``.
+    xn, yn : Float
+        Mean slope ``(x~n, y~n)``.
+
+    Examples
+    --------
+    The terms equal the NumPy oracle's:
+
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.slopes import BECKMANN, GGX, Lobe
+    >>> BECKMANN, GGX
+    ('beckmann', 'ggx')
+    >>> lobe = Lobe(BECKMANN, 0.2, 0.4, 0.3, 0.1, 0.0)
+    >>> oracle = mf.Beckmann(alpha_x=0.2, alpha_y=0.4, rho=0.3, mean_slope=(0.1, 0.0))
+    >>> h, k = np.array([0.1, 0.2, 0.97]) / 0.99519, np.array([0.3, 0.1, 0.9]) / 0.953939
+    >>> round(lobe.ndf(mi.Vector3f(*h)), 5), round(float(oracle.ndf(h)), 5)
+    (1.5694, 1.5694)
+    >>> round(lobe.g1(mi.Vector3f(*k)), 6), round(float(oracle.g1(k)), 6)
+    (1.034483, 1.034483)
+    """
 
     def __init__(self, kind: str, alpha_x, alpha_y, rho, xn, yn):
         self.kind = kind

@@ -43,9 +43,27 @@ def _steps(width: int) -> int:
 
 
 class Table:
-    """A float32 (or ``dtype="float64"|"uint32"``) table read by indexing: ``dr.gather`` of
-    the variant's ``Float`` / ``Float64`` / ``UInt32``, or NumPy indexing in the scalar variants (whose
-    ``Float`` is a Python float)."""
+    """A table read by indexing, clamped into its range.
+
+    ``dr.gather`` of the variant's ``Float`` / ``Float64`` / ``UInt32``, or NumPy indexing in
+    the scalar variants (whose ``Float`` is a Python float).
+
+    Parameters
+    ----------
+    values : array_like
+        The values (flattened).
+    dtype : str, optional
+        ``"float32"`` (default), ``"float64"`` or ``"uint32"``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.tabulated import Table
+    >>> t = Table([1.0, 2.0, 4.0])
+    >>> t[1], t[7], t[-1]                 # indices are clamped into the table
+    (2.0, 4.0, 1.0)
+    """
 
     def __init__(self, values, dtype: str = "float32"):
         a = np.ascontiguousarray(np.asarray(values).ravel(), dtype=dtype)
@@ -85,17 +103,40 @@ _T_MIN_BITS, _R_MIN_BITS, _HALF_BITS = (int(np.float32(f).view(np.uint32)) for f
 
 
 class SortedSearch:
-    """``k(v)``, the largest ``k`` in ``[0, n - 2]`` with ``x[k] <= v`` (0 if none) for
-    sorted nodes ``x`` and ``v <= v_max``: what ``np.searchsorted(x, v, "right") - 1``
-    clipped into the intervals gives, found by the cutpoint method (Chen and Asau 1974;
-    Devroye 1986, Sec. III.2.4): a guide maps the cell of ``v`` to the first node that
-    can answer, and a bisection with the fixed step count of the widest bracket
-    (:attr:`width` nodes) finishes. The cells are the octaves of ``t`` below 1/2 (down to
-    ``2^-48``) and of ``1 - t`` above (down to ``2^-24``), ``t = (v - x_0) / (x_(n-1) - x_0)``
-    (float32 exponent bits), each split into ``per_octave`` cells (high mantissa bits):
-    fine at both ends, where CDF tables crowd (runs of nodes of tiny mass) and
-    ``cos theta`` tables too. Exact: the nodes' cells are computed with the kernel's
-    float32 operations, and each bracket is widened by one cell on either side."""
+    """``k(v)``, the largest ``k`` in ``[0, n - 2]`` with ``x[k] <= v`` (0 if none), for sorted
+    nodes ``x`` and ``v <= v_max``.
+
+    What ``np.searchsorted(x, v, "right") - 1`` clipped into the intervals gives, found by the
+    cutpoint method (Chen and Asau 1974; Devroye 1986, Sec. III.2.4): a guide maps the cell of
+    ``v`` to the first node that can answer, and a bisection with the fixed step count of the
+    widest bracket (:attr:`width` nodes) finishes. The cells are the octaves of ``t`` below 1/2
+    (down to ``2^-48``) and of ``1 - t`` above (down to ``2^-24``),
+    ``t = (v - x_0) / (x_(n-1) - x_0)`` (float32 exponent bits), each split into
+    ``per_octave`` cells (high mantissa bits): fine at both ends, where CDF tables crowd (runs
+    of nodes of tiny mass) and ``cos theta`` tables too. Exact: the nodes' cells are computed
+    with the kernel's float32 operations, and each bracket is widened by one cell on either
+    side.
+
+    Parameters
+    ----------
+    x : array_like
+        Sorted nodes (float32).
+    v_max : float, optional
+        The largest value searched.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import numpy as np
+    >>> from microfacet.mitsuba.tabulated import SortedSearch
+    >>> x = [0.0, 0.5, 0.75, 1.0]
+    >>> search = SortedSearch(x)
+    >>> [search(v) for v in (-1.0, 0.6, 0.75, 1.0)]
+    [0, 1, 2, 2]
+    >>> [int(k) for k in np.clip(np.searchsorted(x, [-1.0, 0.6, 0.75, 1.0], "right") - 1, 0, 2)]
+    [0, 1, 2, 2]
+    """
 
     def __init__(self, x, v_max: float = math.inf):
         x = np.asarray(x, dtype=np.float32).ravel()
@@ -242,8 +283,28 @@ class _TabulatedLobe(Lobe):
 
 
 class TabulatedIsotropicLobe(_TabulatedLobe):
-    """:class:`~microfacet.distributions.tabulated.TabulatedIsotropic` under the fit's
-    slope map (Eq. 3.4): radial ``P`` (Eq. 4.12), visible-normal sampling (Sec. 4.4)."""
+    """:class:`~microfacet.distributions.tabulated.TabulatedIsotropic` under the fit's slope map
+    (Eq. 3.4): radial ``P`` (Eq. 4.12), visible-normal sampling (Sec. 4.4).
+
+    Made by :func:`tabulated_lobe`; its elevation sampling inverts its tables with
+    :data:`NEWTON_STEPS` safeguarded Newton steps.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import numpy as np
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tabulated import tabulated_lobe
+    >>> from microfacet.mitsuba.tabulated import NEWTON_STEPS
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), 16)
+    >>> lobe = tabulated_lobe(fit.distribution)()
+    >>> type(lobe).__name__, NEWTON_STEPS
+    ('TabulatedIsotropicLobe', 12)
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> bool(np.isclose(lobe.ndf(mi.Vector3f(*n)), fit.distribution.ndf(n), rtol=1e-5))
+    True
+    """
 
     def d_interp(self, theta, x=None, y=None):
         """``D`` interpolated log-linearly in ``theta``."""
@@ -364,10 +425,27 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
 
 
 class TabulatedAnisotropicLobe(_TabulatedLobe):
-    """:class:`~microfacet.distributions.tabulated.TabulatedAnisotropic` under the fit's
-    slope map: ``P`` over ``(theta, phi)`` log-bilinear on the refined grid (the oracle's
-    ``log_ndf``, ``theta_fine`` x ``n_fine``), ``Lambda`` from the projected-area table
-    (node azimuths), slopes of ``P`` sampled exactly from the interpolant (App. A)."""
+    """:class:`~microfacet.distributions.tabulated.TabulatedAnisotropic` under the fit's slope map.
+
+    ``P`` over ``(theta, phi)`` log-bilinear on the refined grid (the oracle's ``log_ndf``,
+    ``theta_fine`` x ``n_fine``), ``Lambda`` from the projected-area table (node azimuths),
+    slopes of ``P`` sampled exactly from the interpolant (App. A). Made by
+    :func:`tabulated_lobe`.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import numpy as np
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tabulated import tabulated_lobe
+    >>> brdf = mf.MicrofacetBRDF(mf.Beckmann(alpha_x=0.2, alpha_y=0.4, rho=0.3))
+    >>> fit = mf.fit.fit(brdf, 12, anisotropic=True)
+    >>> lobe = tabulated_lobe(fit.distribution)()
+    >>> n = np.array([0.0, 0.0, 1.0])
+    >>> type(lobe).__name__, bool(np.isclose(lobe.ndf(mi.Vector3f(*n)), fit.distribution.ndf(n), rtol=1e-5))
+    ('TabulatedAnisotropicLobe', True)
+    """
 
     def _locate(self, theta):
         """Interval and weight of ``theta`` in the refined elevation grid."""
@@ -559,8 +637,40 @@ def next_row_window(cdf: np.ndarray, v_max: float) -> tuple[np.ndarray, int]:
 
 
 def tabulated_lobe(dist):
-    """A factory ``() -> lobe`` for a :class:`TabulatedIsotropic` or
-    :class:`TabulatedAnisotropic` ``dist`` (its tables uploaded once)."""
+    """A factory of the Dr.Jit lobe of a tabulated distribution (its tables uploaded once).
+
+    Parameters
+    ----------
+    dist : TabulatedIsotropic or TabulatedAnisotropic
+        A fit's distribution (:mod:`microfacet.distributions.tabulated`).
+
+    Returns
+    -------
+    callable
+        ``() -> TabulatedIsotropicLobe | TabulatedAnisotropicLobe``.
+
+    Raises
+    ------
+    TypeError
+        For another distribution.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import numpy as np
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tabulated import tabulated_lobe
+    >>> fit = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), 16)
+    >>> make = tabulated_lobe(fit.distribution)
+    >>> k = np.array([0.6, 0.0, 0.8])
+    >>> bool(np.isclose(make().g1(mi.Vector3f(*k)), fit.distribution.g1(k), rtol=1e-4))
+    True
+    >>> tabulated_lobe(mf.GGX(alpha=0.3))
+    Traceback (most recent call last):
+    ...
+    TypeError: not a tabulated distribution: GGX
+    """
     if not isinstance(dist, (TabulatedIsotropic, TabulatedAnisotropic)):
         raise TypeError(f"not a tabulated distribution: {type(dist).__name__}")
     tables = _Tables(dist)
@@ -569,11 +679,29 @@ def tabulated_lobe(dist):
 
 class InterpolatedColor:
     """Piecewise-linear ``x -> colour`` table clamped at its ends, as ``np.interp`` per RGB
-    channel (:class:`microfacet.fresnel.Tabulated`), evaluated as the variant's spectrum:
+    channel (:class:`microfacet.fresnel.Tabulated`), evaluated as the variant's spectrum.
+
     RGB as is; spectral variants interpolate the spectra of the nodes' colours, each
     upsampled by Mitsuba's sRGB model (``srgb_model_fetch`` at load, ``srgb_model_eval`` at
     the wavelengths; colours above 1 scaled as Mitsuba's unbounded ``srgb`` texture does);
-    monochrome variants interpolate the nodes' luminance."""
+    monochrome variants interpolate the nodes' luminance.
+
+    Parameters
+    ----------
+    x : array_like
+        Sorted nodes (e.g. ``cos theta_d``).
+    rgb : array_like
+        ``(len(x), 3)`` colours.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.tabulated import InterpolatedColor
+    >>> table = InterpolatedColor([0.0, 1.0], [[1, 0, 0], [0, 0, 1]])
+    >>> table(0.25), table(2.0)
+    ([0.75, 0, 0.25], [0, 0, 1])
+    """
 
     def __init__(self, x, rgb):
         x = np.asarray(x, dtype=np.float64).ravel()
@@ -590,7 +718,19 @@ class InterpolatedColor:
             self.channels = [Table(rgb[:, c]) for c in range(3)]
 
     def __call__(self, value, wavelengths=None):
-        """The colour at ``value`` (``wavelengths``: the spectral variants' ``si.wavelengths``)."""
+        """The colour at ``value``.
+
+        Parameters
+        ----------
+        value : Float
+            Where the table is read (clamped to its ends).
+        wavelengths : Spectrum, optional
+            The spectral variants' ``si.wavelengths``.
+
+        Returns
+        -------
+        UnpolarizedSpectrum
+        """
         x = self.search.x
         i = self.search(value)
         x0, x1 = x[i], x[i + 1]
@@ -608,5 +748,23 @@ class InterpolatedColor:
 
 
 def luminance(rgb) -> float:
-    """Mitsuba's luminance of a linear sRGB colour, as a Python float in any variant."""
+    """Mitsuba's luminance of a linear sRGB colour, as a Python float in any variant.
+
+    Parameters
+    ----------
+    rgb : sequence of float
+        A linear sRGB colour.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.tabulated import luminance
+    >>> luminance([1, 1, 1]), round(luminance([0, 1, 0]), 4)
+    (1.0, 0.7152)
+    """
     return float(np.asarray(mi.luminance(mi.ScalarColor3f(*(float(c) for c in rgb)))).ravel()[0])

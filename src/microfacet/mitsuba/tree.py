@@ -1,6 +1,7 @@
 """Analytic BRDF trees of the library as Mitsuba 3 BSDFs (Dr.Jit): :func:`mitsuba_bsdf_of`.
 
-A tree is what ``microfacet.fit.load(path, model=...)`` returns for an analytic fit:
+A tree is what ``microfacet.fit.load(path, model=...)`` returns for an analytic fit, made of
+the classes of :data:`SUPPORTED`:
 
 * :class:`microfacet.MicrofacetBRDF` (Beckmann or GGX, any roughness, correlation and mean
   slope; GAF and shadowing as in the library) with a Fresnel term of
@@ -20,13 +21,28 @@ Mitsuba's ``si.wi`` is the library's view ``o``, the ``wo`` argument its light `
 returns ``f cos theta_i``; ``sample`` returns the weight ``eval / pdf`` of the whole tree (the
 balance heuristic over its parts, as the library's ``sample``). Constant RGB parameters are
 ``srgb`` textures (spectral variants upsample them as Mitsuba does); the RGB variants reproduce
-the library's values (``tests/test_mitsuba_fits.py``). Example::
+the library's values (``tests/test_mitsuba_fits.py``).
 
-    mi.set_variant("llvm_ad_rgb")
-    from microfacet.mitsuba.tree import mitsuba_bsdf_of
-    coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.05), fresnel=mf.fresnel.Dielectric(1.5))
-    bsdf = mitsuba_bsdf_of(LayeredBRDF(coat, mf.Lambertian([0.8, 0.3, 0.1])))
-    scene = mi.load_dict({..., "sphere": {"type": "sphere", "bsdf": bsdf}})
+Examples
+--------
+A clear coat over a coloured Lambertian base, used as a shape's ``bsdf`` in ``mi.load_dict``:
+
+>>> import numpy as np
+>>> import mitsuba as mi
+>>> mi.set_variant("scalar_rgb")
+>>> import microfacet as mf
+>>> from microfacet.layered import LayeredBRDF
+>>> from microfacet.mitsuba.tree import SUPPORTED, mitsuba_bsdf_of
+>>> coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.05), fresnel=mf.fresnel.Dielectric(1.5))
+>>> brdf = LayeredBRDF(coat, mf.Lambertian([0.8, 0.3, 0.1]))
+>>> bsdf = mitsuba_bsdf_of(brdf)
+>>> scene = mi.load_dict({"type": "scene", "sphere": {"type": "sphere", "bsdf": bsdf}})
+>>> si = mi.SurfaceInteraction3f()
+>>> si.wi = mi.Vector3f(0, 0.6, 0.8)
+>>> value = bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(0.48, -0.36, 0.8))
+>>> library = brdf.eval(np.array([0.48, -0.36, 0.8]), np.array([0.0, 0.6, 0.8])) * 0.8
+>>> bool(np.allclose(np.array(value), library, rtol=1e-5)), "LayeredBRDF" in SUPPORTED
+(True, True)
 """
 from __future__ import annotations
 
@@ -63,8 +79,35 @@ def _color(values):
 
 
 def fresnel_term(fresnel):
-    """A spectrum-valued :func:`_fresnel_value` (grey terms of float parameters broadcast to the
-    variant's spectrum)."""
+    """A spectrum-valued Dr.Jit twin of a :mod:`microfacet.fresnel` term.
+
+    Table 2.I, Schlick 1994 with ``f90``, F82-tint, conductor, dielectric, table, ideal; grey
+    terms of float parameters are broadcast to the variant's spectrum.
+
+    Parameters
+    ----------
+    fresnel : microfacet.fresnel.Fresnel
+        The library's term.
+
+    Returns
+    -------
+    callable
+        ``F(si, oh, active) -> Spectrum``.
+
+    Raises
+    ------
+    ValueError
+        Naming the class of a term without a twin.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tree import fresnel_term
+    >>> fresnel_term(mf.fresnel.Schlick(0.04))(mi.SurfaceInteraction3f(), 1.0, True)
+    [0.04, 0.04, 0.04]
+    """
     value = _fresnel_value(fresnel)
     return lambda si, oh, active: mi.UnpolarizedSpectrum(value(si, oh, active))
 
@@ -221,10 +264,37 @@ class _Layered:
 
 
 class TreeLobe(MicrofacetLobe):
-    """A :class:`microfacet.MicrofacetBRDF` of a tree: ``mf_microfacet``'s lobe code
-    (:class:`.bsdf.MicrofacetLobe`; a plain object, since a second ``mi.BSDF`` instance inside
-    a BSDF breaks Mitsuba's rendering) with constant parameters and the tree's Fresnel term
-    (:func:`fresnel_term`)."""
+    """A :class:`microfacet.MicrofacetBRDF` of a tree.
+
+    ``mf_microfacet``'s lobe code (:class:`.bsdf.MicrofacetLobe`; a plain object, since a
+    second ``mi.BSDF`` instance inside a BSDF breaks Mitsuba's rendering) with constant
+    parameters and the tree's Fresnel term (:func:`fresnel_term`).
+
+    Parameters
+    ----------
+    brdf : microfacet.MicrofacetBRDF
+        A GGX or Beckmann lobe.
+
+    Raises
+    ------
+    ValueError
+        For another distribution (e.g. a tabulated one).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tree import TreeLobe
+    >>> lobe = TreeLobe(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)))
+    >>> lobe.model.kind, lobe.params
+    ('ggx', [0.3, 0.3, 0.0, 0.0, 0.0])
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> value, pdf = lobe.eval_pdf(mi.BSDFContext(), si, mi.Vector3f(0, 0, 1))
+    >>> round(value[0], 4)                   # D(n) / 4 = 1 / (4 pi alpha^2)
+    0.8842
+    """
 
     diffuse = False
 
@@ -252,10 +322,38 @@ class TreeLobe(MicrofacetLobe):
 
 
 def component_of(brdf):
-    """The Dr.Jit component of one node of a tree (module docstring): an object with
-    ``eval_pdf(ctx, si, light, active) -> (f cos theta_i, pdf)``, ``sample(ctx, si, sample1,
-    sample2, active) -> (light, ok)`` and ``diffuse``; ``ValueError`` naming the class of an
-    unsupported node."""
+    """The Dr.Jit component of one node of a tree (module docstring).
+
+    Parameters
+    ----------
+    brdf : object
+        A node of a class of :data:`SUPPORTED`.
+
+    Returns
+    -------
+    object
+        A component with ``eval_pdf(ctx, si, light, active) -> (f cos theta_i, pdf)``,
+        ``sample(ctx, si, sample1, sample2, active) -> (light, ok)`` and ``diffuse``.
+
+    Raises
+    ------
+    ValueError
+        Naming the class of an unsupported node (e.g. the tabulated
+        :class:`~microfacet.fit.FittedBRDF`).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tree import component_of
+    >>> part = component_of(mf.Lambertian(0.5))
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> value, pdf = part.eval_pdf(mi.BSDFContext(), si, mi.Vector3f(0, 0, 1), True)
+    >>> part.diffuse, round(value[0], 6), round(pdf, 6)          # k_d / pi, 1 / pi
+    (True, 0.159155, 0.31831)
+    """
     from ..fit.analytic import SumBRDF
     from ..fit.fitted import FittedBRDF
     from ..layered import LayeredBRDF
@@ -278,7 +376,25 @@ def component_of(brdf):
 
 # ------------------------------------------------------------------ the BSDF
 class TreeBSDF:
-    """Mitsuba BSDF of a library BRDF tree (module docstring); built by :func:`mitsuba_bsdf_of`."""
+    """Mitsuba BSDF of a library BRDF tree (module docstring); built by :func:`mitsuba_bsdf_of`.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        Mitsuba's properties (none are read).
+    brdf : object, optional
+        The tree (:meth:`set_tree`).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tree import mitsuba_bsdf_of
+    >>> bsdf = mitsuba_bsdf_of(mf.Lambertian(0.5))
+    >>> type(bsdf).__name__, bool(bsdf.flags() & mi.BSDFFlags.DiffuseReflection)
+    ('TreeBSDF', True)
+    """
 
     def __init__(self, props, brdf=None):
         mi.BSDF.__init__(self, props)
@@ -332,13 +448,54 @@ class TreeBSDF:
 
 
 def bsdf_class() -> type:
-    """The tree BSDF class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    """The tree BSDF class of the current Mitsuba variant (:func:`.registry.variant_class`).
+
+    Returns
+    -------
+    type
+        A subclass of the variant's ``mi.BSDF``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.tree import bsdf_class
+    >>> issubclass(bsdf_class(), mi.BSDF)
+    True
+    """
     return variant_class(TreeBSDF)
 
 
 def mitsuba_bsdf_of(brdf):
-    """A Mitsuba BSDF (of the current variant) that renders the library BRDF tree ``brdf``
-    (module docstring): use it as the ``bsdf`` of a shape in ``mi.load_dict``. ``ValueError``
-    naming the node for a BRDF the tree cannot hold (e.g. the tabulated
-    :class:`~microfacet.fit.FittedBRDF`: render it with ``mf_fitted``)."""
+    """A Mitsuba BSDF (of the current variant) that renders a library BRDF tree.
+
+    Parameters
+    ----------
+    brdf : object
+        The tree (module docstring): use the result as the ``bsdf`` of a shape in
+        ``mi.load_dict``.
+
+    Returns
+    -------
+    mi.BSDF
+        A :class:`TreeBSDF`.
+
+    Raises
+    ------
+    ValueError
+        Naming the node for a BRDF the tree cannot hold (e.g. the tabulated
+        :class:`~microfacet.fit.FittedBRDF`: render it with ``mf_fitted``).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.tree import mitsuba_bsdf_of
+    >>> bsdf = mitsuba_bsdf_of(mf.MicrofacetBRDF(mf.Beckmann(alpha=0.2), fresnel=mf.fresnel.Schlick(0.5)))
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.wi = mi.Vector3f(0, 0, 1)
+    >>> round(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(0, 0, 1))[0], 4)   # F(1) / (4 pi alpha^2)
+    0.9947
+    """
     return bsdf_class()(mi.Properties(), brdf)
