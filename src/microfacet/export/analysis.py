@@ -36,7 +36,32 @@ class Lobe:
     """One specular lobe: ``brdf`` (the library's MicrofacetBRDF), the family
     (``"ggx"``/``"beckmann"``), the slope ellipse ``alpha1 >= alpha2`` with ``alpha1``'s axis
     at azimuth ``phi`` (radians, from the tangent towards the bitangent; Eq. 2.29-2.34), the
-    mean slope and the Fresnel term."""
+    mean slope and the Fresnel term.
+
+    Attributes
+    ----------
+    brdf : MicrofacetBRDF
+        The lobe as the library holds it.
+    family : str
+        ``"ggx"`` or ``"beckmann"``.
+    alpha1, alpha2 : float
+        Radii of the slope ellipse, ``alpha1 >= alpha2``.
+    phi : float
+        Azimuth of the ``alpha1`` axis (radians).
+    mean_slope : tuple
+        ``(x~, y~)`` of the lobe's mean normal.
+    fresnel : Fresnel
+        The lobe's Fresnel term.
+    albedo : float
+        Luminance of its directional albedo at normal incidence (:func:`lobe_albedo`).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> lobe = analyse(mf.MicrofacetBRDF(mf.Beckmann(alpha_x=0.1, alpha_y=0.3))).lobes[0]
+    >>> lobe.family, round(lobe.alpha1, 3), round(lobe.alpha2, 3), round(lobe.phi, 4), lobe.isotropic
+    ('beckmann', 0.3, 0.1, 1.5708, False)
+    """
     brdf: object
     family: str
     alpha1: float
@@ -54,7 +79,17 @@ class Lobe:
 @dataclass
 class Analysis:
     """``lobes`` (largest albedo first), ``base`` (Lambertian reflectance RGB or None) and
-    ``coat`` (a :class:`Lobe` with a Dielectric Fresnel, or None) of a BRDF tree."""
+    ``coat`` (a :class:`Lobe` with a Dielectric Fresnel, or None) of a BRDF tree; ``notes``:
+    one line per approximation made (e.g. a TransmittedLambertian read as a Lambertian).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> from microfacet.fit import SumBRDF
+    >>> a = analyse(SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), mf.Lambertian([0.5, 0.2, 0.1])))
+    >>> len(a.lobes), a.base.tolist(), a.coat is None
+    (1, [0.5, 0.2, 0.1], True)
+    """
     lobes: list
     base: np.ndarray | None = None
     coat: Lobe | None = None
@@ -63,7 +98,29 @@ class Analysis:
 
 def lobe_albedo(brdf, n: int = 64) -> float:
     """Luminance of the directional albedo at normal incidence, ``int f cos dwi`` (a
-    midpoint rule in ``(cos theta, phi)``, 64 x 64 nodes: a few 1e-3 for alpha >= 0.02)."""
+    midpoint rule in ``(cos theta, phi)``, 64 x 64 nodes: a few 1e-3 for alpha >= 0.02).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Any library BRDF (its ``eval_cos``).
+    n : int
+        Nodes per axis of the midpoint rule.
+
+    Returns
+    -------
+    float
+        ``int f(wi, n) cos theta_i dwi`` weighted by the Rec. 709 :data:`LUMINANCE`.
+
+    Examples
+    --------
+    A white Lambertian reflects everything; a GGX lobe of ideal mirrors less (single
+    scattering: what its masking-shadowing term blocks is lost):
+
+    >>> import microfacet as mf
+    >>> round(lobe_albedo(mf.Lambertian([1.0, 1.0, 1.0])), 3), round(lobe_albedo(mf.MicrofacetBRDF(mf.GGX(alpha=0.3))), 2)
+    (1.0, 0.88)
+    """
     u = (np.arange(n) + 0.5) / n
     mu, ph = np.meshgrid(u, 2 * np.pi * u, indexing="ij")
     # nodes dense near the mirror direction: cos theta = 1 - (1 - u)^... use u^(1/4) warp
@@ -79,7 +136,30 @@ def lobe_albedo(brdf, n: int = 64) -> float:
 def schlick_of(fresnel, n: int = 64) -> tuple[np.ndarray, np.ndarray]:
     """``(f0, f90)``, RGB: Schlick's ``F = f0 + (f90 - f0)(1 - c)^5`` (Schlick 1994) of least
     squares to ``fresnel`` on ``n`` cosines uniform in ``theta_d``, clipped to ``[0, 1]``;
-    exact for :class:`~microfacet.fresnel.Schlick`."""
+    exact for :class:`~microfacet.fresnel.Schlick`.
+
+    Parameters
+    ----------
+    fresnel : Fresnel
+        Any library Fresnel term (called on cosines).
+    n : int
+        Number of ``theta_d`` samples of the least-squares fit.
+
+    Returns
+    -------
+    f0, f90 : ndarray
+        RGB reflectances at normal and grazing incidence.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> f0, f90 = schlick_of(mf.fresnel.Schlick([0.9, 0.6, 0.5]))      # exact
+    >>> f0.tolist(), f90.tolist()
+    ([0.9, 0.6, 0.5], [1.0, 1.0, 1.0])
+    >>> f0, f90 = schlick_of(mf.fresnel.Dielectric(1.5))               # least squares
+    >>> f0.round(3).tolist(), f90.round(2).tolist()
+    ([0.046, 0.046, 0.046], [0.97, 0.97, 0.97])
+    """
     from .. import fresnel as fr
     if isinstance(fresnel, fr.Schlick):
         return np.array(fresnel.f0, float), np.array(fresnel.f90, float)
@@ -106,7 +186,35 @@ def _lobe(brdf, what: str) -> Lobe:
 
 def analyse(brdf) -> Analysis:
     """The :class:`Analysis` of a BRDF tree (module docstring); :class:`MicrofacetError`
-    naming the part that has no counterpart (a tabulated NDF, a sum holding a coat)."""
+    naming the part that has no counterpart (a tabulated NDF, a sum holding a coat).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        A :class:`~microfacet.MicrofacetBRDF` (GGX or Beckmann, scalar parameters), a
+        :class:`~microfacet.Lambertian` or
+        :class:`~microfacet.diffuse.TransmittedLambertian`, a
+        :class:`~microfacet.fit.SumBRDF` of those, or a
+        :class:`~microfacet.layered.LayeredBRDF` (one coat over such a base).
+
+    Returns
+    -------
+    Analysis
+        Lobes (largest albedo first), base and coat.
+
+    Raises
+    ------
+    MicrofacetError
+        A part no material format holds.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.05), mf.fresnel.Dielectric(1.5))
+    >>> a = analyse(mf.layered.LayeredBRDF(coat, mf.Lambertian([0.8, 0.1, 0.1])))
+    >>> a.coat.family, round(a.coat.alpha1, 3), a.lobes
+    ('ggx', 0.05, [])
+    """
     from ..brdf import Lambertian, MicrofacetBRDF
     from ..diffuse import TransmittedLambertian
     from ..fit.analytic import SumBRDF

@@ -48,7 +48,30 @@ MAX_F0 = 0.999
 
 def roughness_anisotropy(alpha1: float, alpha2: float) -> tuple[float, float, list[str]]:
     """``(roughness, anisotropyStrength, lost)`` with ``alpha_t = mix(r^2, 1, s^2) = alpha1``,
-    ``alpha_b = r^2 = alpha2`` (KHR_materials_anisotropy); ``alpha1 > 1`` is clipped to 1."""
+    ``alpha_b = r^2 = alpha2`` (KHR_materials_anisotropy); ``alpha1 > 1`` is clipped to 1.
+
+    Parameters
+    ----------
+    alpha1, alpha2 : float
+        Radii of the GGX slope ellipse, ``alpha1 >= alpha2``.
+
+    Returns
+    -------
+    roughness : float
+        glTF's ``roughnessFactor``, ``sqrt(alpha2)``.
+    strength : float
+        ``anisotropyStrength`` ``sqrt((alpha1 - alpha2) / (1 - alpha2))`` (0: isotropic).
+    lost : list of str
+        One line when ``alpha1 > 1`` was clipped.
+
+    Examples
+    --------
+    >>> r, s, lost = roughness_anisotropy(0.25, 0.09)
+    >>> round(r, 3), round(s, 3), lost
+    (0.3, 0.419, [])
+    >>> [round(a, 3) for a in alphas_of(r, s)]          # the inverse
+    [0.25, 0.09]
+    """
     lost = []
     a2 = min(alpha2, 1.0)
     a1 = min(alpha1, 1.0)
@@ -59,7 +82,26 @@ def roughness_anisotropy(alpha1: float, alpha2: float) -> tuple[float, float, li
 
 
 def alphas_of(roughness: float, strength: float) -> tuple[float, float]:
-    """``(alpha_t, alpha_b) = (mix(r^2, 1, s^2), r^2)``, the inverse of :func:`roughness_anisotropy`."""
+    """``(alpha_t, alpha_b) = (mix(r^2, 1, s^2), r^2)``, the inverse of :func:`roughness_anisotropy`
+    (KHR_materials_anisotropy, "Implementation").
+
+    Parameters
+    ----------
+    roughness : float
+        glTF's ``roughnessFactor`` ``r``.
+    strength : float
+        ``anisotropyStrength`` ``s`` in ``[0, 1]``.
+
+    Returns
+    -------
+    alpha_t, alpha_b : float
+        GGX alphas along the anisotropy direction and across it.
+
+    Examples
+    --------
+    >>> alphas_of(0.5, 0.0), alphas_of(0.5, 1.0)
+    ((0.25, 0.25), (1.0, 0.25))
+    """
     r2 = roughness * roughness
     return r2 + strength * strength * (1.0 - r2), r2
 
@@ -88,7 +130,37 @@ def _rgb(v) -> list[float]:
 
 def gltf_material(brdf, name: str = "microfacet") -> tuple[dict, list[str]]:
     """``(material, lost)``: the glTF 2.0 material object (JSON dict, with its extensions)
-    of a library BRDF tree (module docstring) and one line for each thing it could not carry."""
+    of a library BRDF tree (module docstring) and one line for each thing it could not carry.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic BRDF tree (:func:`~microfacet.export.analysis.analyse`).
+    name : str
+        The material's ``name``.
+
+    Returns
+    -------
+    material : dict
+        The glTF material object, ``extensions`` holding ``KHR_materials_specular``,
+        ``_ior``, ``_anisotropy`` and ``_clearcoat`` where used.
+    lost : list of str
+        What glTF could not hold (second lobes, F82 tints, coat index, ...).
+
+    Examples
+    --------
+    A dielectric lobe over a red Lambertian base:
+
+    >>> import microfacet as mf
+    >>> from microfacet.fit import SumBRDF
+    >>> brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha_x=0.3, alpha_y=0.1), mf.fresnel.Dielectric(1.5)),
+    ...                mf.Lambertian([0.5, 0.1, 0.1]))
+    >>> mat, lost = gltf_material(brdf, name="red")
+    >>> sorted(mat["extensions"]), round(mat["extensions"]["KHR_materials_ior"]["ior"], 6)
+    (['KHR_materials_anisotropy', 'KHR_materials_ior', 'KHR_materials_specular'], 1.5)
+    >>> round(mat["pbrMetallicRoughness"]["roughnessFactor"], 4), lost
+    (0.3162, [])
+    """
     from .. import fresnel as fr
     a = analyse(brdf)
     lost: list[str] = list(a.notes)
@@ -175,7 +247,24 @@ class GltfBRDF(BRDF):
     ``_clearcoat``) evaluated as the specification defines it: ``f = (1 - c F_cc(n.v))
     [ (1 - m) ((1 - s max F_d(v.h)) baseColor/pi) + spec ] + c f_cc`` with ``spec`` the GGX lobe
     (height-correlated Smith) and Schlick's ``F = mix(s F0c, baseColor, m) + (mix(s, 1, m) -
-    ...)(1 - v.h)^5``. ``eval_cos`` only (for the image error); ``wo`` is the view."""
+    ...)(1 - v.h)^5``. ``eval_cos`` only (for the image error); ``wo`` is the view.
+
+    Parameters
+    ----------
+    material : dict
+        A glTF material object (:func:`gltf_material`, :func:`read_material`).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.09), mf.fresnel.Schlick([0.9, 0.6, 0.5]))
+    >>> g = GltfBRDF(gltf_material(lobe)[0])
+    >>> g.metallic, g.base.tolist()
+    (1.0, [0.9, 0.6, 0.5])
+    >>> wi, wo = np.array([0.6, 0.0, 0.8]), np.array([-0.6, 0.0, 0.8])
+    >>> bool(np.allclose(g.eval_cos(wi, wo), lobe.eval_cos(wi, wo)))
+    True
+    """
 
     def __init__(self, material: dict):
         from .. import fresnel as fr
@@ -227,14 +316,56 @@ class GltfBRDF(BRDF):
 
 
 def gltf_brdf(material: dict) -> GltfBRDF:
-    """The library BRDF of a glTF material (the inverse mapping, :class:`GltfBRDF`)."""
+    """The library BRDF of a glTF material (the inverse mapping, :class:`GltfBRDF`).
+
+    Parameters
+    ----------
+    material : dict
+        A glTF material object.
+
+    Returns
+    -------
+    GltfBRDF
+        The material as a conforming renderer evaluates it.
+
+    Examples
+    --------
+    >>> mat = {"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 1.0,
+    ...                                 "roughnessFactor": 0.5}}
+    >>> b = gltf_brdf(mat)
+    >>> float(b.lobe.distribution.alpha_x)          # GGX alpha = roughness^2
+    0.25
+    """
     return GltfBRDF(material)
 
 
 def sphere_mesh(n_theta: int = 64, n_phi: int = 128):
     """``(positions, normals, tangents, uvs, indices)`` of a unit UV sphere whose poles lie on
     world x, so its tangent (world x projected on the surface, ``w = +1``: bitangent
-    ``n x t``) is smooth on the hemisphere seen from +z."""
+    ``n x t``) is smooth on the hemisphere seen from +z.
+
+    Parameters
+    ----------
+    n_theta, n_phi : int
+        Rings from pole to pole and segments around the x axis.
+
+    Returns
+    -------
+    positions, normals : (V, 3) float32
+        Vertices on the unit sphere (normals equal positions).
+    tangents : (V, 4) float32
+        glTF tangents (``w = 1``).
+    uvs : (V, 2) float32
+        ``(phi / 2 pi, theta / pi)``.
+    indices : (3 T,) uint32
+        Counter-clockwise triangles seen from outside (degenerate ones at the poles dropped).
+
+    Examples
+    --------
+    >>> pos, nrm, tan, uv, idx = sphere_mesh(4, 8)
+    >>> pos.shape, tan.shape, idx.size // 3
+    ((45, 3), (45, 4), 48)
+    """
     th = np.linspace(0.0, np.pi, n_theta + 1)
     ph = np.linspace(0.0, 2 * np.pi, n_phi + 1)
     T, P = np.meshgrid(th, ph, indexing="ij")
@@ -261,7 +392,31 @@ def sphere_mesh(n_theta: int = 64, n_phi: int = 128):
 
 def write_glb(material: dict, path, mesh: bool = True) -> Path:
     """Write ``path`` (``.glb``): one material and, with ``mesh``, a unit sphere node using it
-    (POSITION, NORMAL, TANGENT, TEXCOORD_0); without, the material alone."""
+    (POSITION, NORMAL, TANGENT, TEXCOORD_0); without, the material alone.
+
+    Parameters
+    ----------
+    material : dict
+        A glTF material object (:func:`gltf_material`).
+    path : str or os.PathLike
+        The ``.glb`` to write (its folder is created).
+    mesh : bool
+        Include the sphere (:func:`sphere_mesh`, 64 x 128).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> mat, _ = gltf_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.04)), name="chrome")
+    >>> write_glb(mat, "chrome.glb").name
+    'chrome.glb'
+    >>> read_material("chrome.glb")["name"]
+    'chrome'
+    """
     import pygltflib as g
     path = Path(path)
     used = sorted(material.get("extensions", {}))
@@ -303,7 +458,26 @@ def write_glb(material: dict, path, mesh: bool = True) -> Path:
 
 
 def read_material(path) -> dict:
-    """The first material of a ``.gltf``/``.glb`` file as a JSON dict."""
+    """The first material of a ``.gltf``/``.glb`` file as a JSON dict (pygltflib).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.gltf`` or ``.glb`` file with at least one material.
+
+    Returns
+    -------
+    dict
+        The material object as its JSON holds it.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> mat, _ = gltf_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.16)))
+    >>> path = write_glb(mat, "material.glb", mesh=False)
+    >>> read_material(path)["pbrMetallicRoughness"]["roughnessFactor"]
+    0.4
+    """
     import pygltflib as g
     gl = g.GLTF2().load(str(path))
     return json.loads(gl.to_json())["materials"][0]
