@@ -1,0 +1,89 @@
+"""Exported MaterialX materials rendered by MaterialX's own GlslRenderer (GLX under Xvfb)
+against the library's render of the same BRDF (issue 26): relL1 within 0.5 % isotropic,
+2.5 % anisotropic (MaterialX shadows anisotropic lobes with sqrt(alpha_x alpha_y))."""
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+import microfacet as mf
+from microfacet import fresnel as fr
+from microfacet.fit import SumBRDF
+
+CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+SIZE = 32
+
+GOLD = fr.Conductor([0.18, 0.42, 1.37], [3.42, 2.35, 1.77])
+CASES = {
+    "iso_conductor": (mf.MicrofacetBRDF(mf.GGX(alpha=0.3), GOLD), 0.005),
+    "dielectric_over_lambert": (SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), fr.Dielectric(1.5)),
+                                        mf.Lambertian([0.5, 0.2, 0.1])), 0.005),
+    "iso_schlick": (mf.MicrofacetBRDF(mf.GGX(alpha=0.2), fr.Schlick([0.95, 0.64, 0.54])), 0.005),
+    "aniso_rotated": (mf.MicrofacetBRDF(mf.GGX.from_ellipse(0.35, 0.08, 0.6), fr.Schlick([0.9, 0.8, 0.5])), 0.025),
+}
+
+
+@pytest.fixture(scope="module")
+def mtlx_render():
+    """``render_mtlx`` with an X display: the session's DISPLAY, else a private Xvfb (stopped
+    when the process exits: MaterialX cannot reconnect to another display in one process)."""
+    try:
+        import MaterialX  # noqa: F401
+        import MaterialX.PyMaterialXRenderGlsl  # noqa: F401
+    except ImportError:
+        if CI:
+            pytest.fail("MaterialX is missing under CI (make setup installs the export extra)")
+        pytest.skip("MaterialX absent: pip install 'microfacet[export]'")
+    from microfacet.export import mtlx_render as mr
+    if not os.environ.get("DISPLAY") and shutil.which("Xvfb") is None:
+        if CI:
+            pytest.fail("Xvfb is missing under CI (make setup installs xvfb)")
+        pytest.skip("no DISPLAY and no Xvfb: apt-get install xvfb")
+    return mr
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_mtlx_render_matches_library(mtlx_render, name):
+    brdf, tolerance = CASES[name]
+    r = mtlx_render.compare_mtlx(brdf, size=SIZE)
+    assert r["mtlx"].shape == (SIZE, SIZE, 3) and r["mtlx"].max() > 0.05
+    assert r["relL1"] < tolerance, f"{name}: relL1 {r['relL1']:.4%} >= {tolerance:.1%}"
+
+
+def test_mtlx_render_rotation_sign_and_compensation(mtlx_render):
+    """The exported ellipse turns the library's way (the mirror image is far off), and the
+    patched library matters: with pbrlib's energy compensation kept the error is > 5 %."""
+    from microfacet.export.consumers import library_render, rel_l1
+    from microfacet.export.mtlx import mtlx_document
+    brdf, _ = CASES["aniso_rotated"]
+    mirror = mf.MicrofacetBRDF(mf.GGX.from_ellipse(0.35, 0.08, -0.6), fr.Schlick([0.9, 0.8, 0.5]))
+    doc, _ = mtlx_document(brdf)
+    image = mtlx_render.render_mtlx(doc, SIZE)
+    assert rel_l1(image, library_render(mirror, SIZE)) > 0.5
+    metal, _ = CASES["iso_conductor"]
+    doc, _ = mtlx_document(metal)
+    boosted = mtlx_render.render_mtlx(doc, SIZE, compensation=True)
+    assert rel_l1(boosted, library_render(metal, SIZE)) > 0.05
+
+
+def test_mtlx_render_coat(mtlx_render):
+    """A coat: MaterialX's ``layer`` attenuates the base by the view-side transmission only
+    (the library's LayeredBRDF by both sides'), a 5-7 % difference the graph cannot express;
+    against that one-sided coupling (:func:`mtlx_as_held`) the render agrees within 1 %
+    (the rest: MaterialX's Schlick-fit coat albedo)."""
+    from microfacet.layered import LayeredBRDF
+    brdf = LayeredBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), fr.Dielectric(1.5)), mf.Lambertian([0.5, 0.2, 0.1]))
+    r = mtlx_render.compare_mtlx(brdf, size=SIZE)
+    assert r["relL1_as_held"] < 0.01, f"relL1 against the one-sided layer {r['relL1_as_held']:.4%}"
+    assert r["relL1"] > 2 * r["relL1_as_held"]          # the two-sided coupling is what MaterialX lacks
+
+
+def test_render_mtlx_rejects_bad_input(tmp_path):
+    from microfacet.export.mtlx_render import render_mtlx
+    with pytest.raises(ValueError, match="size"):
+        render_mtlx(tmp_path / "none.mtlx", size=1)
+    with pytest.raises(ValueError, match="no MaterialX file"):
+        pytest.importorskip("MaterialX", reason="MaterialX absent")
+        render_mtlx(tmp_path / "none.mtlx", size=8)
