@@ -50,7 +50,37 @@ DEFAULT_VENV = _HERE.parents[2] / ".venv-blender"
 def blender_material(brdf, name: str = "microfacet") -> tuple[dict, list[str]]:
     """``(description, lost)``: the Blender material of an analytic BRDF tree
     (:func:`~microfacet.export.blender_nodes.closures_of_spec` of its
-    :func:`~microfacet.fit.spec.to_spec`) and one line per thing Blender cannot carry."""
+    :func:`~microfacet.fit.spec.to_spec`) and one line per thing Blender cannot carry.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic BRDF tree (:func:`~microfacet.export.analysis.analyse`).
+    name : str
+        The material's name.
+
+    Returns
+    -------
+    description : dict
+        ``{"format", "version", "name", "closures", "coat"}``, JSON-able (written beside the
+        ``.blend`` as ``OUT.blender.json``).
+    lost : list of str
+        What Cycles' nodes could not hold.
+
+    Raises
+    ------
+    MicrofacetError
+        A part no format holds, or one Blender cannot (a coat with a non-dielectric Fresnel).
+
+    Examples
+    --------
+    A Schlick lobe whose ``f90`` is white is one Metallic BSDF (F82, white Edge Tint):
+
+    >>> import microfacet as mf
+    >>> desc, lost = blender_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.16), mf.fresnel.Schlick([0.9, 0.6, 0.5])))
+    >>> [(c["node"], c["fresnel_type"], c["base_color"]) for c in desc["closures"]], lost
+    ([('metallic', 'F82', [0.9, 0.6, 0.5])], [])
+    """
     from ..fit.spec import to_spec
     from .analysis import analyse
     analyse(brdf)                                   # one clear error for what no format holds
@@ -87,7 +117,22 @@ class BlenderBRDF(BRDF):
     closures (Metallic BSDF: conductor or F82-tint Fresnel; Principled BSDF with a black base:
     the dielectric Fresnel; Glossy BSDF: its colour; Diffuse BSDF roughness 0: Lambert), GGX
     or Beckmann with height-correlated Smith, the ellipse of
-    :func:`~microfacet.export.blender_nodes.node_ellipse`. ``eval_cos`` only (image errors)."""
+    :func:`~microfacet.export.blender_nodes.node_ellipse`. ``eval_cos`` only (image errors).
+
+    Parameters
+    ----------
+    description : dict
+        A material description (:func:`blender_material`).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.16), mf.fresnel.Conductor())
+    >>> b = BlenderBRDF(blender_material(lobe)[0])
+    >>> wi, wo = np.array([0.6, 0.0, 0.8]), np.array([-0.6, 0.0, 0.8])
+    >>> bool(np.allclose(b.eval_cos(wi, wo), lobe.eval_cos(wi, wo)))
+    True
+    """
 
     def __init__(self, description: dict):
         self.parts = [_closure_brdf(c) for c in description["closures"]]
@@ -102,14 +147,54 @@ class BlenderBRDF(BRDF):
 
 
 def blender_brdf(description: dict) -> BlenderBRDF:
-    """The library BRDF of a Blender material description (the inverse mapping)."""
+    """The library BRDF of a Blender material description (the inverse mapping).
+
+    Parameters
+    ----------
+    description : dict
+        A material description (:func:`blender_material`, or ``OUT.blender.json``).
+
+    Returns
+    -------
+    BlenderBRDF
+        The sum of its closures as Cycles evaluates them.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> b = blender_brdf(blender_material(mf.Lambertian([0.5, 0.5, 0.5]))[0])
+    >>> [(type(brdf).__name__, weight) for brdf, weight in b.parts]
+    [('Lambertian', 1.0)]
+    """
     return BlenderBRDF(description)
 
 
 def blender_python(required: bool = True) -> Path | None:
     """The Python interpreter that has ``bpy`` 4.5: ``$MICROFACET_BLENDER_PYTHON``, else
     :data:`DEFAULT_VENV` ``/bin/python``; when neither exists, ``None`` or (``required``) a
-    :class:`MicrofacetError` saying in one line what to do."""
+    :class:`MicrofacetError` saying in one line what to do.
+
+    Parameters
+    ----------
+    required : bool
+        Raise instead of returning None.
+
+    Returns
+    -------
+    Path or None
+        The interpreter.
+
+    Examples
+    --------
+    :data:`BLENDER_PYTHON_ENV` names it first:
+
+    >>> import os, sys
+    >>> from pathlib import Path
+    >>> os.environ[BLENDER_PYTHON_ENV] = sys.executable
+    >>> blender_python() == Path(sys.executable)
+    True
+    >>> del os.environ[BLENDER_PYTHON_ENV]
+    """
     env = os.environ.get(BLENDER_PYTHON_ENV)
     for candidate in ([Path(env)] if env else []) + [DEFAULT_VENV / "bin" / "python", Path.cwd() / ".venv-blender"
                                                      / "bin" / "python"]:
@@ -142,7 +227,34 @@ def _run_bpy(description: dict | None, args: list[str], timeout: float) -> None:
 def write_blend(description: dict, path, timeout: float = 120.0) -> Path:
     """Write ``path`` (``.blend``): the material of ``description`` on a unit sphere (UV
     tangent = world x projected, the library's frame) with the comparison camera and sun of
-    :func:`~microfacet.export.blender_nodes.build_scene`, by the ``bpy`` interpreter."""
+    :func:`~microfacet.export.blender_nodes.build_scene`, by the ``bpy`` interpreter.
+
+    Parameters
+    ----------
+    description : dict
+        A material description (:func:`blender_material`).
+    path : str or os.PathLike
+        The ``.blend`` to write (its folder is created).
+    timeout : float
+        Seconds the ``bpy`` subprocess may take.
+
+    Returns
+    -------
+    Path
+        ``path``, absolute.
+
+    Raises
+    ------
+    MicrofacetError
+        No interpreter with ``bpy`` (:func:`blender_python`), or Blender failed.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> desc, _ = blender_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Conductor()))
+    >>> write_blend(desc, "chrome.blend").name                     # doctest: +SKIP
+    'chrome.blend'
+    """
     path = Path(path).resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     _run_bpy(description, ["--blend", str(path)], timeout)
@@ -154,7 +266,36 @@ def render_cycles(source, size: int = 64, spp: int = 4, light=(-0.5, 0.5, 1.0),
     """``(size, size, 3)`` linear radiance rendered by Cycles on the CPU and read back from
     OpenEXR: ``source`` a ``.blend`` path (its scene as saved, e.g. by :func:`write_blend`) or a
     material description on the comparison sphere (orthographic, sun of irradiance 1 from
-    ``light``, no bounces; the view of :class:`microfacet.render.Sphere`)."""
+    ``light``, no bounces; the view of :class:`microfacet.render.Sphere`).
+
+    Parameters
+    ----------
+    source : str, os.PathLike or dict
+        A ``.blend`` file or a material description (:func:`blender_material`).
+    size : int
+        Image width and height in pixels.
+    spp : int
+        Cycles samples per pixel.
+    light : (3,) sequence
+        Direction toward the sun (a description only).
+    timeout : float
+        Seconds the ``bpy`` subprocess may take.
+
+    Returns
+    -------
+    (size, size, 3) ndarray
+        Linear radiance, row 0 at the top.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> from microfacet.export.consumers import library_render, rel_l1
+    >>> lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Conductor())
+    >>> blend = write_blend(blender_material(lobe)[0], "lobe.blend")         # doctest: +SKIP
+    >>> image = render_cycles(blend, size=32)                                # doctest: +SKIP
+    >>> image.shape, rel_l1(image, library_render(lobe, 32)) < 0.01          # doctest: +SKIP
+    ((32, 32, 3), True)
+    """
     from ..io import read_exr
     with tempfile.TemporaryDirectory() as tmp:
         exr = Path(tmp) / "render.exr"
@@ -169,7 +310,27 @@ def render_cycles(source, size: int = 64, spp: int = 4, light=(-0.5, 0.5, 1.0),
 def write_addon(path) -> Path:
     """Write the installable Blender add-on zip ``path`` (``microfacet_blender/__init__.py`` =
     :mod:`~microfacet.export.blender_addon`, and ``blender_nodes.py``): File > Import >
-    microfacet fit (.npz/.json). Install: Edit > Preferences > Add-ons > Install from Disk."""
+    microfacet fit (.npz/.json). Install: Edit > Preferences > Add-ons > Install from Disk.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The zip to write (its folder is created).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Examples
+    --------
+    >>> import zipfile
+    >>> with zipfile.ZipFile(write_addon("microfacet_blender.zip")) as z:
+    ...     sorted(z.namelist())
+    ['microfacet_blender/__init__.py', 'microfacet_blender/blender_nodes.py']
+    >>> ADDON_MODULE
+    'microfacet_blender'
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:

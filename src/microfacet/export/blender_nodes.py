@@ -68,7 +68,26 @@ TANGENT_NODE = "microfacet tangent"
 def ellipse_of(alpha_x: float, alpha_y: float, rho: float) -> tuple[float, float, float]:
     """``(alpha1, alpha2, phi)``: the radii ``alpha1 >= alpha2`` and azimuth of the slope
     ellipse of ``(alpha_x, alpha_y, rho)`` (thesis Eq. 2.29-2.34: the eigen-decomposition of
-    ``[[ax^2, rho ax ay], [rho ax ay, ay^2]]``)."""
+    ``[[ax^2, rho ax ay], [rho ax ay, ay^2]]``).
+
+    Parameters
+    ----------
+    alpha_x, alpha_y : float
+        Roughness along the tangent and the bitangent.
+    rho : float
+        Slope correlation in ``(-1, 1)``.
+
+    Returns
+    -------
+    alpha1, alpha2, phi : float
+        The radii and the ``alpha1`` axis's azimuth (radians, from the tangent towards the
+        bitangent).
+
+    Examples
+    --------
+    >>> [round(v, 4) for v in ellipse_of(0.1, 0.3, 0.0)]
+    [0.3, 0.1, 1.5708]
+    """
     xx, yy, xy = alpha_x * alpha_x, alpha_y * alpha_y, rho * alpha_x * alpha_y
     mean, half = (xx + yy) / 2.0, math.hypot((xx - yy) / 2.0, xy)
     phi = 0.5 * math.atan2(2.0 * xy, xx - yy) if half > 0 else 0.0
@@ -80,7 +99,33 @@ def roughness_anisotropy(alpha1: float, alpha2: float, node: str = "metallic") -
     ``r = (alpha1 alpha2)^(1/4)`` and, Principled and Metallic BSDF, ``a = (1 - alpha2/alpha1)/0.9``
     (ratio at most :data:`MAX_RATIO`), Glossy BSDF ``a = 1 - sqrt(alpha2/alpha1)`` (``a <= 0.99``);
     beyond, the ratio is clipped keeping ``alpha1 alpha2`` (said in ``lost``), ``alpha`` clipped
-    to ``[1e-4, 1]``."""
+    to ``[1e-4, 1]``.
+
+    Parameters
+    ----------
+    alpha1, alpha2 : float
+        Radii of the slope ellipse, ``alpha1 >= alpha2``.
+    node : str
+        ``"metallic"`` or ``"principled"`` (one mapping) or ``"glossy"``.
+
+    Returns
+    -------
+    roughness, anisotropy : float
+        The node's ``Roughness`` and ``Anisotropy`` inputs.
+    lost : list of str
+        One line per clipping.
+
+    Examples
+    --------
+    >>> r, a, lost = roughness_anisotropy(0.4, 0.1)
+    >>> round(r, 4), round(a, 4), lost
+    (0.4472, 0.8333, [])
+    >>> [round(v, 4) for v in alphas_of(r, a)]                # the inverse
+    [0.4, 0.1]
+    >>> r, a, lost = roughness_anisotropy(1.0, 0.01)          # a ratio beyond MAX_RATIO
+    >>> MAX_RATIO, lost[0]
+    (10.0, "anisotropy alpha1/alpha2 = 100 clipped to 10 (Blender's largest Anisotropy): alpha_x alpha_y kept")
+    """
     lost = []
     a1, a2 = min(max(alpha1, 1e-4), 1.0), min(max(alpha2, 1e-4), 1.0)
     if alpha1 > 1.0:
@@ -102,7 +147,25 @@ def alphas_of(roughness: float, anisotropy: float, node: str = "metallic") -> tu
     ``Roughness`` and ``Anisotropy`` (measured against the library's GGX in Cycles): Principled
     and Metallic BSDF ``aspect = sqrt(1 - 0.9 a)``, ``alpha_x = r^2/aspect``,
     ``alpha_y = r^2 aspect``; Glossy BSDF ``alpha_x = r^2 (1 - a)``, ``alpha_y = r^2/(1 - a)``
-    (its long axis along the bitangent)."""
+    (its long axis along the bitangent).
+
+    Parameters
+    ----------
+    roughness, anisotropy : float
+        The node's ``Roughness`` and ``Anisotropy`` inputs.
+    node : str
+        ``"metallic"``, ``"principled"`` or ``"glossy"``.
+
+    Returns
+    -------
+    alpha_x, alpha_y : float
+        GGX alphas along the node's (rotated) tangent and bitangent.
+
+    Examples
+    --------
+    >>> [round(v, 4) for v in alphas_of(0.5, 1.0)], [round(v, 4) for v in alphas_of(0.5, 0.5, "glossy")]
+    ([0.7906, 0.0791], [0.125, 0.5])
+    """
     r2 = roughness * roughness
     if node == "glossy":
         a = min(max(anisotropy, 0.0), GLOSSY_MAX_ANISOTROPY)
@@ -113,7 +176,27 @@ def alphas_of(roughness: float, anisotropy: float, node: str = "metallic") -> tu
 
 def node_ellipse(closure: dict) -> tuple[float, float, float]:
     """``(alpha1, alpha2, phi)``: the slope ellipse of a closure of :func:`closures_of_spec`
-    (the inverse of the mapping: :func:`alphas_of` turned by ``Rotation``)."""
+    (the inverse of the mapping: :func:`alphas_of` turned by ``Rotation``).
+
+    Parameters
+    ----------
+    closure : dict
+        A closure with ``node``, ``roughness``, ``anisotropy`` and ``rotation``.
+
+    Returns
+    -------
+    alpha1, alpha2, phi : float
+        The slope ellipse (radii ``alpha1 >= alpha2``, azimuth in radians).
+
+    Examples
+    --------
+    >>> spec = {"type": "microfacet", "distribution": {"type": "ggx", "alpha_x": 0.1, "alpha_y": 0.3, "rho": 0.0},
+    ...         "fresnel": {"type": "ideal"}}
+    >>> closure = closures_of_spec(spec)[0]["closures"][0]
+    >>> a1, a2, phi = node_ellipse(closure)
+    >>> closure["node"], round(a1, 4), round(a2, 4), round(phi % math.pi, 4)     # an axis: phi modulo pi
+    ('glossy', 0.3, 0.1, 1.5708)
+    """
     ax, ay = alphas_of(float(closure["roughness"]), float(closure["anisotropy"]), closure["node"])
     phi = 2.0 * math.pi * float(closure["rotation"])
     return (ax, ay, phi) if ax >= ay else (ay, ax, phi + math.pi / 2.0)
@@ -239,7 +322,40 @@ def closures_of_spec(spec: dict, name: str = "microfacet") -> tuple[dict, list]:
     """``(description, lost)``: the Blender material of a BRDF spec (module docstring) as a
     JSON-able dict ``{"format", "name", "closures": [...], "coat"}`` (each closure: ``node``
     ``metallic|principled|glossy|diffuse``, its inputs, ``weight`` a Mix Shader factor) and one
-    line per thing it could not carry."""
+    line per thing it could not carry.
+
+    Parameters
+    ----------
+    spec : dict
+        A BRDF spec (:func:`microfacet.fit.spec.to_spec`): ``microfacet``, ``lambertian``,
+        ``transmitted_lambertian``, ``sum``, or ``layered`` (one dielectric coat).
+    name : str
+        The material's name.
+
+    Returns
+    -------
+    description : dict
+        ``{"format": FORMAT, "version", "name", "closures", "coat"}``.
+    lost : list of str
+        What Cycles' nodes could not hold.
+
+    Raises
+    ------
+    ValueError
+        A spec type, distribution or coat that does not export.
+
+    Examples
+    --------
+    A Schlick lobe whose ``f90`` is not white: a Glossy BSDF plus a Metallic BSDF (module
+    docstring), over a Diffuse BSDF:
+
+    >>> lobe = {"type": "microfacet", "distribution": {"type": "ggx", "alpha_x": 0.2, "alpha_y": 0.2, "rho": 0.0},
+    ...         "fresnel": {"type": "schlick", "f0": [0.2, 0.2, 0.2], "f90": [0.8, 0.8, 0.8]}}
+    >>> spec = {"type": "sum", "parts": [lobe, {"type": "lambertian", "reflectance": [0.5, 0.1, 0.1]}]}
+    >>> desc, lost = closures_of_spec(spec)
+    >>> [c["node"] for c in desc["closures"]], desc["format"], lost
+    (['metallic', 'diffuse'], 'microfacet-blender-material', [])
+    """
     lost: list = []
     closures: list = []
     coat = None
@@ -318,7 +434,37 @@ def build_material(bpy, desc: dict, name: str | None = None, uv_map: str = ""):
     """Create and return a ``bpy.types.Material`` from a :func:`closures_of_spec` description:
     one node per closure, a Mix Shader (``Fac = weight``, other input empty) where the weight
     is not 1, Add Shader nodes summing them, and one Tangent node (UV Map mode, ``uv_map``;
-    the active map when empty) feeding every anisotropic input."""
+    the active map when empty) feeding every anisotropic input.
+
+    Parameters
+    ----------
+    bpy : module
+        Blender's ``bpy`` (Blender 4.5).
+    desc : dict
+        A description (:func:`closures_of_spec`).
+    name : str, optional
+        The material's name (default: the description's).
+    uv_map : str
+        The UV map of the tangent.
+
+    Returns
+    -------
+    bpy.types.Material
+        The material, its description kept as the custom property ``"microfacet"``.
+
+    Raises
+    ------
+    ValueError
+        ``desc`` is not a description.
+
+    Examples
+    --------
+    >>> spec = {"type": "lambertian", "reflectance": [0.8, 0.8, 0.8]}
+    >>> desc, _ = closures_of_spec(spec, name="white")
+    >>> import bpy                                                  # doctest: +SKIP
+    >>> build_material(bpy, desc).name                              # doctest: +SKIP
+    'white'
+    """
     if desc.get("format") != FORMAT:
         raise ValueError(f"not a {FORMAT} description (format {desc.get('format')!r})")
     mat = bpy.data.materials.new(name or desc.get("name", "microfacet"))
@@ -376,7 +522,36 @@ def build_scene(bpy, mat, size: int = 64, spp: int = 4, light=(-0.5, 0.5, 1.0), 
     """Set the current scene to the library's comparison: a unit sphere at the origin with
     ``mat``, an orthographic camera looking down ``-z`` (x right, y up, ``[-1, 1]^2``), a sun
     of irradiance ``irradiance`` from ``light`` (angle 0), no world light, Cycles on the CPU
-    (``spp`` samples, pixel filter 0.01, no bounces), view transform Standard."""
+    (``spp`` samples, pixel filter 0.01, no bounces), view transform Standard.
+
+    Parameters
+    ----------
+    bpy : module
+        Blender's ``bpy``.
+    mat : bpy.types.Material
+        The sphere's material (:func:`build_material`).
+    size : int
+        Image width and height in pixels.
+    spp : int
+        Cycles samples per pixel.
+    light : (3,) sequence
+        Direction toward the sun.
+    irradiance : float
+        The sun's strength.
+
+    Returns
+    -------
+    bpy.types.Scene
+        The current scene, set up.
+
+    Examples
+    --------
+    >>> desc, _ = closures_of_spec({"type": "lambertian", "reflectance": [0.8, 0.8, 0.8]})
+    >>> import bpy                                                                  # doctest: +SKIP
+    >>> scene = build_scene(bpy, build_material(bpy, desc), size=32, spp=4)         # doctest: +SKIP
+    >>> scene.render.engine, scene.render.resolution_x                              # doctest: +SKIP
+    ('CYCLES', 32)
+    """
     from mathutils import Vector
     scene = bpy.context.scene
     for ob in list(scene.objects):
@@ -420,7 +595,23 @@ def build_scene(bpy, mat, size: int = 64, spp: int = 4, light=(-0.5, 0.5, 1.0), 
 
 
 def render(bpy, scene, path: str) -> None:
-    """Render ``scene`` with Cycles into the linear float OpenEXR ``path``."""
+    """Render ``scene`` with Cycles into the linear float OpenEXR ``path``.
+
+    Parameters
+    ----------
+    bpy : module
+        Blender's ``bpy``.
+    scene : bpy.types.Scene
+        The scene (:func:`build_scene`).
+    path : str
+        The EXR to write (32-bit float).
+
+    Examples
+    --------
+    >>> desc, _ = closures_of_spec({"type": "lambertian", "reflectance": [0.8, 0.8, 0.8]})
+    >>> import bpy                                                                  # doctest: +SKIP
+    >>> render(bpy, build_scene(bpy, build_material(bpy, desc), 32), "white.exr")   # doctest: +SKIP
+    """
     scene.render.image_settings.file_format = "OPEN_EXR"
     scene.render.image_settings.color_depth = "32"
     scene.render.filepath = path

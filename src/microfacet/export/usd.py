@@ -32,7 +32,19 @@ MTLX_SHADER_ID = "ND_open_pbr_surface_surfaceshader"
 
 def import_pxr():
     """Import ``pxr`` once no kernel compiles on the background thread: loading pxr's
-    libraries while that thread imports Numba's deadlocks (both inside the dynamic loader)."""
+    libraries while that thread imports Numba's deadlocks (both inside the dynamic loader).
+
+    Returns
+    -------
+    module
+        The ``pxr`` package (usd-core), with ``pxr.Usd`` loaded.
+
+    Examples
+    --------
+    >>> pxr = import_pxr()
+    >>> pxr.__name__, hasattr(pxr, "Usd")
+    ('pxr', True)
+    """
     from .. import kernels
     kernels.ready(wait=None)
     import pxr.Usd  # noqa: F401
@@ -40,7 +52,27 @@ def import_pxr():
 
 
 def preview_inputs(brdf) -> tuple[dict, list[str]]:
-    """``(inputs, lost)``: UsdPreviewSurface inputs of a library BRDF tree (module docstring)."""
+    """``(inputs, lost)``: UsdPreviewSurface inputs of a library BRDF tree (module docstring).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic BRDF tree (:func:`~microfacet.export.analysis.analyse`).
+
+    Returns
+    -------
+    inputs : dict
+        UsdPreviewSurface input name -> float, int or RGB list.
+    lost : list of str
+        What UsdPreviewSurface could not hold (anisotropy, second lobes, coat index, ...).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> p, lost = preview_inputs(mf.MicrofacetBRDF(mf.GGX(alpha_x=0.16, alpha_y=0.04)))
+    >>> round(p["roughness"], 4), p["metallic"], lost
+    (0.2828, 1.0, ['anisotropy dropped: UsdPreviewSurface is isotropic (alpha = sqrt(alpha1 alpha2))'])
+    """
     from .gltf import metal_f0
     a = analyse(brdf)
     lost: list[str] = list(a.notes)
@@ -77,7 +109,28 @@ def preview_brdf(p: dict):
     """The library BRDF of UsdPreviewSurface inputs (the inverse mapping): GGX
     ``alpha = roughness^2`` with Schlick towards 1 (``diffuseColor`` as F0 when metallic,
     ``specularColor`` in the specular workflow, 0.04 otherwise) plus the Lambertian
-    ``diffuseColor`` (non-metals), under a dielectric 1.5 coat when ``clearcoat`` is set."""
+    ``diffuseColor`` (non-metals), under a dielectric 1.5 coat when ``clearcoat`` is set.
+
+    Parameters
+    ----------
+    p : dict
+        UsdPreviewSurface inputs (:func:`preview_inputs`, :func:`read_bound_inputs`);
+        missing ones take the specification's defaults.
+
+    Returns
+    -------
+    BRDF
+        A :class:`~microfacet.MicrofacetBRDF`, a :class:`~microfacet.fit.SumBRDF` with a
+        Lambertian, or a :class:`~microfacet.layered.LayeredBRDF` with a coat.
+
+    Examples
+    --------
+    >>> b = preview_brdf({"roughness": 0.5, "diffuseColor": [0.5, 0.1, 0.1]})     # a non-metal
+    >>> [type(part).__name__ for part in b.brdfs]
+    ['MicrofacetBRDF', 'Lambertian']
+    >>> float(b.brdfs[0].distribution.alpha_x), b.brdfs[0].fresnel.f0.tolist()
+    (0.25, [0.04, 0.04, 0.04])
+    """
     from .. import fresnel as fr
     from ..brdf import Lambertian, MicrofacetBRDF
     from ..distributions import GGX
@@ -108,7 +161,33 @@ def write_usda(brdf, path, mtlx_file: str | None = None, mtlx: bool = True) -> t
     noted in the material's ``customData``); ``mtlx=False``: the preview surface only.
     ``pxr.UsdValidation`` passes the file without errors except, for the OpenPBR shader, a
     ``MissingShaderIdInRegistry`` where USD was built without MaterialX (usd-core).
-    Returns ``(path, lost)``."""
+    Returns ``(path, lost)``.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic BRDF tree.
+    path : str or os.PathLike
+        The ``.usda`` to write (its folder is created).
+    mtlx_file : str, optional
+        The exported ``.mtlx`` to note in the material's ``customData``.
+    mtlx : bool
+        Add the OpenPBR surface under the ``mtlx`` render context.
+
+    Returns
+    -------
+    path : Path
+        ``path``.
+    lost : list of str
+        What the two surfaces could not hold.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> path, lost = write_usda(mf.MicrofacetBRDF(mf.GGX(alpha=0.04)), "chrome.usda")
+    >>> round(read_bound_inputs(path)["roughness"], 4), MTLX_SHADER_ID
+    (0.2, 'ND_open_pbr_surface_surfaceshader')
+    """
     import_pxr()
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade
 
@@ -173,7 +252,28 @@ def write_usda(brdf, path, mtlx_file: str | None = None, mtlx: bool = True) -> t
 
 def validation_errors(path) -> list[tuple[str, str, str]]:
     """``(name, prim path or "", message)`` of each error ``pxr.UsdValidation`` (all its
-    registered validators) reports on the USD file ``path``."""
+    registered validators) reports on the USD file ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A USD file.
+
+    Returns
+    -------
+    list of (str, str, str)
+        The errors (warnings are left out); empty when the file passes.
+
+    Examples
+    --------
+    A preview surface alone passes; the OpenPBR shader's id is known only to a USD built
+    with MaterialX:
+
+    >>> import microfacet as mf
+    >>> path, _ = write_usda(mf.MicrofacetBRDF(mf.GGX(alpha=0.1)), "preview.usda", mtlx=False)
+    >>> validation_errors(path)
+    []
+    """
     import_pxr()
     from pxr import Usd, UsdValidation
     reg = UsdValidation.ValidationRegistry()
@@ -188,7 +288,34 @@ def validation_errors(path) -> list[tuple[str, str, str]]:
 
 def read_bound_inputs(path, prim: str = "/Root/Sphere", context: str = "") -> dict:
     """The inputs (name -> value) of the surface shader bound to ``prim`` in a USD file, for
-    the render ``context`` (``""``: universal, UsdPreviewSurface; ``"mtlx"``: OpenPBR)."""
+    the render ``context`` (``""``: universal, UsdPreviewSurface; ``"mtlx"``: OpenPBR).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A USD file (:func:`write_usda`).
+    prim : str
+        The bound prim's path.
+    context : str
+        The render context of the material's surface output.
+
+    Returns
+    -------
+    dict
+        Input name -> value (vectors and colours as lists).
+
+    Raises
+    ------
+    ValueError
+        USD could not open ``path``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> path, _ = write_usda(mf.MicrofacetBRDF(mf.GGX(alpha=0.25), mf.fresnel.Schlick([0.9, 0.6, 0.5])), "m.usda")
+    >>> read_bound_inputs(path)["metallic"], round(read_bound_inputs(path, context="mtlx")["specular_roughness"], 3)
+    (1.0, 0.5)
+    """
     import_pxr()
     from pxr import Usd, UsdShade
     stage = Usd.Stage.Open(str(path))
