@@ -19,7 +19,9 @@ the relative albedo residuals, plus the fit's cosine-weighted log error
 (:class:`~microfacet.metrics.LogError`, Löw et al. 2012) linearized in ``s`` and weighed by
 :data:`LOG_WEIGHT` relative to its value before the match (so that the lobes' energy moves
 where it changes the shape least), a second-difference smoothness penalty
-(:data:`SMOOTHNESS`) and a weak pull toward 1. A specular lobe's energy at view
+(:data:`SMOOTHNESS`) and a weak pull toward 1; views where the albedo would exceed the
+data's by more than 1 % are weighed up until it does not (energy stays a constraint, as in
+the fits themselves). A specular lobe's energy at view
 ``theta_o`` comes from ``theta_d`` near ``theta_o`` (the mirror configuration), which is
 why a table in ``theta_d`` reaches the albedo at each view without changing the lobes'
 shape. The product ``F s`` becomes each lobe's :class:`~microfacet.fresnel.Tabulated`
@@ -68,6 +70,10 @@ LOG_WEIGHT = 0.03
 PULL = 1e-3
 #: Largest factor.
 S_MAX = 20.0
+#: Relative excess of the albedo over the data's beyond which a view is weighed up, and the
+#: number of rounds of that (the issue's energy constraint: albedo <= data + 1 %).
+ALBEDO_ABOVE = 0.01
+OVERSHOOT_ROUNDS = 4
 #: Largest total variation of a table over its range (a larger one rings).
 TV_LIMIT = 2.0
 #: Nodes of the tabulated Fresnel terms, uniform in ``theta_d``.
@@ -127,9 +133,33 @@ def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
                         LogError(reference, n=LOG_PAIRS) if log is None else log)
 
 
-def _normal_equations(target: AlbedoTarget, brdf, lobes) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``(H, g)`` per channel of the quadratic ``1/2 s^T H s - g^T s`` that :func:`albedo_scale`
-    minimizes (module docstring)."""
+class _System(NamedTuple):
+    """One channel's least squares: relative albedo residuals ``m s - rhs`` (``a'/a_data - 1``
+    per view) and the other terms' quadratic ``1/2 s^T h s - g^T s``."""
+    m: np.ndarray
+    rhs: np.ndarray
+    h: np.ndarray
+    g: np.ndarray
+
+    def solve(self, t: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, float]:
+        """``s = t z`` of least objective over ``0 <= z <= upper``, views whose albedo would
+        exceed the data's by more than ``ALBEDO_ABOVE`` weighed up tenfold until none does
+        (:data:`OVERSHOOT_ROUNDS`); and its objective with unit weights."""
+        w = np.ones(len(self.rhs))
+        for _ in range(OVERSHOOT_ROUNDS):
+            h = self.m.T @ (w[:, None] * self.m) + self.h
+            g = self.m.T @ (w * self.rhs) + self.g
+            s = t @ box_qp(t.T @ h @ t, t.T @ g, np.zeros(len(upper)), upper)
+            over = self.m @ s - self.rhs > ALBEDO_ABOVE
+            if not np.any(over):
+                break
+            w = np.where(over, 10.0 * w, w)
+        h, g = self.m.T @ self.m + self.h, self.m.T @ self.rhs + self.g
+        return s, float(0.5 * s @ h @ s - g @ s)
+
+
+def _systems(target: AlbedoTarget, brdf, lobes) -> list[_System]:
+    """The least squares of :func:`albedo_scale` per channel (module docstring)."""
     ratios, log = target
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
@@ -148,11 +178,9 @@ def _normal_equations(target: AlbedoTarget, brdf, lobes) -> list[tuple[np.ndarra
         a = np.stack([np.bincount(view, spec[:, c] * hats[:, j], minlength=ratios.n_views) for j in range(k)], axis=-1)
         ref = np.maximum(ratios.ref[:, c], 1e-4)
         m = a / ref[:, None]                                        # a' = fitted + a (s - 1)
-        rhs = (ref - fitted[:, c]) / ref + m.sum(axis=1)
         j = (f_spec[:, c] / (1.0 + f[:, c]))[:, None] * log_hats    # d ln(1 + f') / d s
-        h = m.T @ m + (j.T * pair_w) @ j + regular
-        g = m.T @ rhs + (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL
-        out.append((h, g))
+        out.append(_System(m, (ref - fitted[:, c]) / ref + m.sum(axis=1), (j.T * pair_w) @ j + regular,
+                           (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL))
     return out
 
 
@@ -202,21 +230,18 @@ def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
     s = np.ones((k, 3))
     if not lobes:
         return s
-    systems = _normal_equations(target, brdf, lobes)
-    candidates = []                                  # per shape: (s (K, 3), objective (3,))
-    for t, upper in _shapes(k):
-        z = [box_qp(t.T @ h @ t, t.T @ g, np.zeros(k), upper) for h, g in systems]
-        s_shape = np.stack([t @ zc for zc in z], axis=-1)
-        candidates.append((s_shape, np.array([0.5 * sc @ h @ sc - g @ sc for sc, (h, g) in zip(s_shape.T, systems)])))
-    for c, (h, g) in enumerate(systems):
+    systems = _systems(target, brdf, lobes)
+    solved = [[system.solve(t, upper) for system in systems] for t, upper in _shapes(k)]
+    for c, system in enumerate(systems):
         best = np.inf
-        for s_shape, objective in candidates:
+        for shape in solved:
+            s_c, objective = shape[c]
             trial = s.copy()
-            trial[:, c] = s_shape[:, c]
-            if objective[c] < best and not any(_rings(v)[c] for v in _tables(brdf, trial)[1]):
-                s[:, c], best = s_shape[:, c], objective[c]
+            trial[:, c] = s_c
+            if objective < best and not any(_rings(v)[c] for v in _tables(brdf, trial)[1]):
+                s[:, c], best = s_c, objective
         if not np.isfinite(best):                     # a constant factor keeps each table's shape
-            s[:, c] = max(float(np.sum(g)) / max(float(np.sum(h)), 1e-300), 0.0)
+            s[:, c] = system.solve(np.ones((k, 1)), np.full(1, S_MAX))[0]
     return s
 
 

@@ -318,12 +318,13 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_job = in_process(_perceptual, perceptual_target(brdf), models)
     legacy = _legacy_fits(brdf, method, settings)
-    fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3])   # while the perceptual fits run
+    data_albedo = legacy.metrics[2].ref
+    fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3], data_albedo)  # while the perceptual fits run
     if picture:
         from ..render import fit_comparison_png         # imports matplotlib, also while they run
     target = albedo_target(brdf, log=legacy.judges[0])
     perceptual, t3 = _perceptual_brdfs(target, *perceptual_job.result())
-    fits_summary.update(_fit_summaries(legacy.judges, perceptual, _scores(legacy.metrics, perceptual)[:3]))
+    fits_summary.update(_fit_summaries(legacy.judges, perceptual, _scores(legacy.metrics, perceptual)[:3], data_albedo))
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
                "seconds_perceptual": round(t3 - legacy.times[1], 4)}
@@ -490,10 +491,13 @@ def _energy(brdf) -> float:
     return float(np.max(directional_albedo(brdf, ENERGY_VIEWS_DEG)))
 
 
-def _fit_summaries(judges, named: dict, legacy: tuple) -> dict:
+def _fit_summaries(judges, named: dict, legacy: tuple, data_albedo: np.ndarray) -> dict:
     """``{name: {"model": spec, "metrics": {...}}}`` for every fit of ``named`` (the tabulated
     fit's model is ``"tabulated"``): the legacy metrics ``legacy = (grid, uniform, albedo)``
-    where computed, the log and image errors, chromaticity difference and largest albedo."""
+    where computed, the log and image errors, chromaticity difference, largest albedo and
+    ``albedo_error``, the largest ``|ratio - 1|`` over the channels whose ``data_albedo``
+    (views x RGB) exceeds :data:`microfacet.fit.perceptual.ALBEDO_FLOOR`."""
+    from .perceptual import ALBEDO_FLOOR
     from .spec import to_spec
     log_error, image_error = judges
     grid, uniform, albedo = legacy
@@ -503,7 +507,8 @@ def _fit_summaries(judges, named: dict, legacy: tuple) -> dict:
         metrics = {"log": round(log_error(b), 6), "image": round(details["image"], 6),
                    "chromaticity": round(details["chromaticity"], 6), "grid": grid.get(name),
                    "uniform": uniform.get(name), "albedo_ratio": np.asarray(albedo[name]).round(4).tolist(),
-                   "albedo_ratio_worst": round(_worst(albedo[name]), 4), "max_albedo": round(_energy(b), 4)}
+                   "albedo_ratio_worst": round(_worst(albedo[name]), 4), "max_albedo": round(_energy(b), 4),
+                   "albedo_error": round(_albedo_error(albedo[name], data_albedo > ALBEDO_FLOOR), 4)}
         out[name] = {"model": "tabulated" if name == "tabulated" else _spec_or_none(to_spec, b), "metrics": metrics}
     return out
 
@@ -513,20 +518,39 @@ def _fit_summaries(judges, named: dict, legacy: tuple) -> dict:
 CHROMA_LIMIT = 0.02
 
 
+#: Albedo band of a fit that reflects the data's energy: ``albedo_error`` at most this.
+ALBEDO_TOLERANCE = 0.05
+#: A fit within the albedo band is chosen over the best one when its score is at most this
+#: many times the best's.
+ALBEDO_PREFERENCE = 1.5
+
+
 def best_fit(metrics: dict) -> str:
-    """The best of fits ``{name: metrics}`` (each with ``"image"``, ``"log"`` and
-    ``"chromaticity"``): of the fits without a colour cast (chromaticity difference at most
-    :data:`CHROMA_LIMIT`), the one of least :func:`best_score`; the least score of all when
-    every fit has a cast. A cast is a visible failure that neither error weighs much: an
-    iridescent gem's sphere can score best with a hue the data does not have.
+    """The best of fits ``{name: metrics}`` (each with ``"image"``, ``"log"``,
+    ``"chromaticity"`` and, optionally, ``"albedo_error"``): of the fits without a colour cast
+    (chromaticity difference at most :data:`CHROMA_LIMIT`), the one of least
+    :func:`best_score`, unless a fit whose albedo is within the band
+    (``albedo_error <= ALBEDO_TOLERANCE``) scores within :data:`ALBEDO_PREFERENCE` times it:
+    then the least of those. When every fit has a cast, the same among all. A cast is a
+    visible failure that neither error weighs much (an iridescent gem's sphere can score best
+    with a hue the data does not have); a fit that reflects less or more energy than the
+    data at some view is one that the images, lit from a few directions, can miss.
 
     >>> best_fit({"a": {"image": 0.1, "log": 0.01, "chromaticity": 0.05},
     ...           "b": {"image": 0.2, "log": 0.01, "chromaticity": 0.01}})
     'b'
+    >>> best_fit({"a": {"image": 0.1, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.2},
+    ...           "b": {"image": 0.14, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.01}})
+    'b'
     """
     from .perceptual import select
-    clean = {k: m for k, m in metrics.items() if float(m.get("chromaticity", np.inf)) <= CHROMA_LIMIT}
-    return select({k: best_score(m) for k, m in (clean or metrics).items()})
+    clean = {k: m for k, m in metrics.items() if float(m.get("chromaticity", np.inf)) <= CHROMA_LIMIT} or metrics
+    scores = {k: best_score(m) for k, m in clean.items()}
+    best = select(scores)
+    held = {k: v for k, v in scores.items() if float(clean[k].get("albedo_error", np.inf)) <= ALBEDO_TOLERANCE}
+    if held and min(held.values()) <= ALBEDO_PREFERENCE * scores[best]:
+        return select(held)
+    return best
 
 
 def best_score(metrics: dict) -> float:
@@ -582,6 +606,13 @@ def _note(grid: float, uniform: float, albedo: np.ndarray) -> str:
     """Two lines of errors under a sphere of the picture."""
     return (f"grid {grid:.3f} · uniform {uniform:.3f}\n"
             f"albedo ratio {np.nanmin(albedo):.2f}–{np.nanmax(albedo):.2f}")
+
+
+def _albedo_error(ratios, bright) -> float:
+    """The largest ``|ratio - 1|`` over the ``bright`` entries (views x RGB); 0 where none is."""
+    r = np.abs(np.asarray(ratios, dtype=np.float64) - 1.0)
+    r = r[np.asarray(bright, bool) & np.isfinite(r)]
+    return float(np.max(r)) if len(r) else 0.0
 
 
 def _worst(ratios) -> float:
