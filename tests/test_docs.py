@@ -44,7 +44,8 @@ OWNED_MODULES = (
     # the Mitsuba 3 plugins (the modules that import mitsuba are skipped where it is not installed)
     "microfacet.mitsuba", "microfacet.mitsuba.registry", "microfacet.mitsuba.properties", "microfacet.mitsuba.fresnel",
     "microfacet.mitsuba.reference", "microfacet.mitsuba.bsdf", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tree",
-    "microfacet.mitsuba.tabulated", "microfacet.mitsuba.fitted",
+    "microfacet.mitsuba.tabulated", "microfacet.mitsuba.fitted", "microfacet.mitsuba.leadr", "microfacet.mitsuba.glints",
+    "microfacet.mitsuba.demo",
 )
 #: the documented modules of the Mitsuba plugins, checked apart (they need the optional mitsuba package)
 MITSUBA_MODULES = tuple(m for m in OWNED_MODULES if m.startswith("microfacet.mitsuba"))

@@ -47,8 +47,25 @@ LIBRARY_SUPERSAMPLE = 4
 
 
 def choose_variant() -> str:
-    """``"llvm_ad_rgb"`` if it runs here (probed in a subprocess), else ``"scalar_rgb"``;
-    ``ImportError`` without Mitsuba."""
+    """The Mitsuba variant of the demo: ``"llvm_ad_rgb"`` if it runs here, else ``"scalar_rgb"``.
+
+    The LLVM variant is probed in a subprocess (a too-old libLLVM aborts the process).
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ImportError
+        Without Mitsuba.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.demo import choose_variant
+    >>> choose_variant() in ("llvm_ad_rgb", "scalar_rgb")
+    True
+    """
     import mitsuba as mi
     if "llvm_ad_rgb" in mi.variants():
         probe = subprocess.run([sys.executable, "-c", _LLVM_PROBE], capture_output=True, text=True, timeout=120)
@@ -58,14 +75,53 @@ def choose_variant() -> str:
 
 
 def shared_rgl_files() -> list[Path]:
-    """The RGL ``.bsdf`` files of the shared data (``$MICROFACET_DATA``, else
-    ``../shared/data`` beside the repository), sorted; empty where there are none."""
+    """The RGL ``.bsdf`` files of the shared data, sorted; empty where there are none.
+
+    The data folder is ``$MICROFACET_DATA``, else ``../shared/data`` beside the repository.
+
+    Returns
+    -------
+    list of pathlib.Path
+
+    Examples
+    --------
+    >>> import os
+    >>> from microfacet.mitsuba.demo import shared_rgl_files
+    >>> os.makedirs("data/rgl", exist_ok=True)
+    >>> open("data/rgl/gold.bsdf", "wb").close()
+    >>> previous = os.environ.get("MICROFACET_DATA")
+    >>> os.environ["MICROFACET_DATA"] = "data"
+    >>> [p.name for p in shared_rgl_files()]
+    ['gold.bsdf']
+    >>> if previous is None:
+    ...     del os.environ["MICROFACET_DATA"]
+    ... else:
+    ...     os.environ["MICROFACET_DATA"] = previous
+    """
     root = os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[3].parent / "shared" / "data"
     return sorted((Path(root) / "rgl").glob("*.bsdf"))
 
 
 def relative_rms(image, reference) -> float:
-    """``sqrt(sum((I - R)^2) / sum(R^2))`` over pixels and channels (float64)."""
+    """``sqrt(sum((I - R)^2) / sum(R^2))`` over pixels and channels (float64).
+
+    Parameters
+    ----------
+    image, reference : array_like
+        Images of the same shape.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.mitsuba.demo import relative_rms
+    >>> reference = np.ones((4, 4, 3))
+    >>> relative_rms(1.1 * reference, reference), relative_rms(reference, reference)
+    (0.10000000000000009, 0.0)
+    """
     a, b = np.asarray(image, dtype=np.float64), np.asarray(reference, dtype=np.float64)
     return float(np.sqrt(np.sum((a - b) ** 2) / max(np.sum(b * b), 1e-300)))
 
@@ -122,7 +178,31 @@ def _library_render(brdf, size: int, light) -> np.ndarray:
 
 
 def highlight_mask(image, fraction: float = 0.01) -> np.ndarray:
-    """Pixels ``(H, W)`` of ``image`` among its brightest ``fraction`` (luminance) of lit pixels."""
+    """The pixels of ``image`` among its brightest ``fraction`` (luminance) of lit pixels.
+
+    Parameters
+    ----------
+    image : array_like
+        ``(H, W, 3)`` linear RGB.
+    fraction : float, optional
+        The share of the lit pixels kept.
+
+    Returns
+    -------
+    ndarray of bool
+        ``(H, W)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.mitsuba.demo import highlight_mask
+    >>> image = np.zeros((4, 4, 3))
+    >>> image[:2] = 1.0
+    >>> image[0, 0] = 5.0                       # 8 lit pixels, one highlight
+    >>> mask = highlight_mask(image, fraction=0.1)
+    >>> int(mask.sum()), bool(mask[0, 0])
+    (1, True)
+    """
     lum = np.asarray(image, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     lit = lum[lum > 0]
     return lum > np.quantile(lit, 1.0 - fraction) if lit.size else np.zeros(lum.shape, dtype=bool)
@@ -344,16 +424,59 @@ def demo_section(out, size: int | None = None, spp: int | None = None, reference
                  fits=None) -> str:
     """Render the Mitsuba scenes under ``out/mitsuba/`` and return the HTML section.
 
-    ``size``: side in pixels of the sphere and glint images; ``leadr_width``: width of the
-    LEADR plane (``× width/2``; default ``size`` where ``size`` is given); ``spp``: samples
-    per pixel (``reference_spp`` for the references); ``None`` takes :data:`DEFAULTS` of
-    the variant; ``variant``: a Mitsuba RGB variant, default :func:`choose_variant`.
-    ``progress(n)`` is called as renders complete. ``fits``: ``[(FitExample, fit file)]``
-    of :mod:`microfacet.demo`'s fitting section, whose best fits scene 1 renders (the
-    first :data:`MATERIALS`), or a function returning them, called after scenes 2 and 3
-    are rendered (the demo's fits are still running then; its wait is not in the section's
-    time); default: the demo's materials fitted here
-    (:func:`microfacet.demo.fit_demo_material`). Raises ``ImportError`` without Mitsuba.
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The demo's output folder.
+    size : int, optional
+        Side in pixels of the sphere and glint images (>= 8).
+    spp : int, optional
+        Samples per pixel.
+    reference_spp : int, optional
+        Samples per pixel of the references.
+    variant : str, optional
+        A Mitsuba RGB variant, default :func:`choose_variant`.
+    progress : callable, optional
+        ``progress(n)``, called as renders complete.
+    leadr_width : int, optional
+        Width of the LEADR plane (``x width/2``; default ``size`` where ``size`` is given).
+    fits : list or callable, optional
+        ``[(FitExample, fit file)]`` of :mod:`microfacet.demo`'s fitting section, whose best
+        fits scene 1 renders (the first :data:`MATERIALS`, each beside the library's own render
+        supersampled :data:`LIBRARY_SUPERSAMPLE` times per pixel side), or a function
+        returning them, called after scenes 2 and 3 are rendered (the demo's fits are still
+        running then; its wait is not in the section's time); default: the demo's materials
+        fitted here (:func:`microfacet.demo.fit_demo_material`).
+
+    Returns
+    -------
+    str
+        The HTML section.
+
+    Raises
+    ------
+    ImportError
+        Without Mitsuba.
+    ValueError
+        For a size or sample count that is not an integer of the range.
+
+    Notes
+    -----
+    ``None`` takes :data:`DEFAULTS` of the variant.
+
+    Examples
+    --------
+    The LEADR and glint scenes at 8 pixels, one sample per pixel, no fit:
+
+    >>> from microfacet.mitsuba.demo import LIBRARY_SUPERSAMPLE, MATERIALS, demo_section
+    >>> MATERIALS, LIBRARY_SUPERSAMPLE
+    (4, 4)
+    >>> html = demo_section("out", size=8, spp=1, reference_spp=1, variant="scalar_rgb", fits=[])
+    >>> html.startswith('<section id="mitsuba">')
+    True
+    >>> import os
+    >>> "glints.png" in os.listdir("out/mitsuba")
+    True
     """
     variant = choose_variant() if variant is None else variant
     defaults = dict(DEFAULTS["scalar" if variant.startswith("scalar") else "llvm"])

@@ -75,9 +75,31 @@ def _load(props, name: str):
 
 
 class GlintTables:
-    """A microsurface's lobes as Dr.Jit tables: central moments ``(mx, my, sxx, syy, sxy)``
-    of level 0 (float64, from the library's raw moments) and, for ``exact=false``, the raw
-    moments of every MIP level (one flat table with per-level sizes and offsets)."""
+    """A microsurface's lobes as Dr.Jit tables.
+
+    Central moments ``(mx, my, sxx, syy, sxy)`` of level 0 (float64, from the library's raw
+    moments) and, for ``exact=false``, the raw moments of every MIP level (one flat table with
+    per-level sizes and offsets).
+
+    Parameters
+    ----------
+    ms : microfacet.glints.Microsurface
+        The microsurface.
+    mip : bool
+        Upload the MIP levels too.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> from microfacet.mitsuba.glints import GlintTables
+    >>> ms = mf.glints.Microsurface.from_slopes(0.3 * np.random.default_rng(2).normal(size=(8, 8, 2)), sigma_eps=0.1)
+    >>> tables = GlintTables(ms, mip=True)
+    >>> tables.grid, tables.levels > 1
+    (SeedGrid(nx=8, ny=8, cutoff=3.0), True)
+    """
 
     def __init__(self, ms, mip: bool):
         self.ny, self.nx = ms.grid
@@ -99,16 +121,45 @@ class GlintTables:
 
 
 class Footprint(NamedTuple):
-    """A pixel footprint in uv (double precision per lane): centre ``(cu, cv)`` wrapped
-    into the unit square and covariance ``(uu, vv, uv)``."""
+    """A pixel footprint in uv (double precision per lane).
+
+    Centre ``(cu, cv)`` wrapped into the unit square and covariance ``(uu, vv, uv)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.mitsuba.glints import Footprint, footprint_covariance
+    >>> fp = footprint_covariance(params, si)
+    >>> isinstance(fp, Footprint), fp.cu, fp.cov               # PIXEL_SIGMA^2 (2 / 8)^2 on the diagonal
+    (True, 0.5, (0.015625, 0.015625, 0.0))
+    """
     cu: object
     cv: object
     cov: tuple
 
 
 class SeedGrid(NamedTuple):
-    """The ``nx x ny`` lobe seeds of a level (per lane where a MIP level is chosen per
-    lane) and the window ``cutoff`` in standard deviations."""
+    """The ``nx x ny`` lobe seeds of a level and the window ``cutoff`` in standard deviations.
+
+    Per lane where a MIP level is chosen per lane.
+
+    Examples
+    --------
+    >>> from microfacet.mitsuba.glints import SeedGrid
+    >>> SeedGrid(8, 8, 3.0).cutoff
+    3.0
+    """
     nx: object
     ny: object
     cutoff: float
@@ -169,10 +220,30 @@ def _lobe_areas(k, mx, my, sxx, syy, sxy):
 
 @dataclass(frozen=True)
 class GlintParams:
-    """All parameters of ``mf_glints`` (:func:`read_glint_params`): the microsurface's
-    :class:`GlintTables`, the area model (``exact``), the ``g2`` model, the map's repetition
-    ``uv_scale``, the fallback ``footprint`` (texels), the ``max_lobes`` bound and the
-    Fresnel term (:func:`.bsdf.read_fresnel`)."""
+    """All parameters of ``mf_glints`` (:func:`read_glint_params`).
+
+    The microsurface's :class:`GlintTables`, the area model (``exact``), the ``g2`` model, the
+    map's repetition ``uv_scale``, the fallback ``footprint`` (texels), the ``max_lobes``
+    bound and the Fresnel term (:func:`.bsdf.read_fresnel`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.mitsuba.glints import GlintParams
+    >>> isinstance(params, GlintParams), params.exact, params.g2, params.footprint, params.max_lobes
+    (True, True, 'correlated', 2.0, 1024)
+    """
     filename: str
     tables: GlintTables
     exact: bool
@@ -184,7 +255,41 @@ class GlintParams:
 
 
 def read_glint_params(props) -> GlintParams:
-    """All parameters of ``mf_glints`` (class docstring of :class:`GlintsBSDF`), checked."""
+    """All parameters of ``mf_glints`` (class docstring of :class:`GlintsBSDF`), checked.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+
+    Returns
+    -------
+    GlintParams
+
+    Raises
+    ------
+    PluginParameterError
+        Naming the parameter (and the file) that is unusable.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> read_glint_params(props).tables.grid.nx
+    8
+    >>> props["max_lobes"] = 4
+    >>> read_glint_params(props)
+    Traceback (most recent call last):
+    ...
+    microfacet.mitsuba.PluginParameterError: mf_glints: parameter 'max_lobes' must be a finite number >= 16, got 4
+    """
     ms = _load(props, "filename")
     exact = properties.flag(props, "exact", True, PLUGIN)
     g2 = properties.choice(props, "g2", "correlated", G2_MODELS, PLUGIN)
@@ -213,7 +318,42 @@ def _footprint_scale(params: GlintParams, suu, svv):
 
 
 def footprint_covariance(params: GlintParams, si):
-    """The :class:`Footprint` at ``si`` (module docstring), shrunk to fit ``max_lobes``."""
+    """The :class:`Footprint` at ``si`` (module docstring), shrunk to fit ``max_lobes``.
+
+    ``Sigma_P = PIXEL_SIGMA^2 (a a^T + b b^T)`` with ``a, b`` the ray differentials times
+    ``uv_scale``, else ``footprint`` texels along u and v.
+
+    Parameters
+    ----------
+    params : GlintParams
+        The plugin's parameters.
+    si : mi.SurfaceInteraction3f
+        The shading point.
+
+    Returns
+    -------
+    Footprint
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.glints.figures import PIXEL_SIGMA
+    >>> from microfacet.mitsuba.glints import footprint_covariance
+    >>> fp = footprint_covariance(params, si)
+    >>> fp.cov[0] == PIXEL_SIGMA**2 * (2.0 / 8) ** 2
+    True
+    """
     F64, t = mi.Float64, params.tables
     a, b = si.duv_dx * params.uv_scale, si.duv_dy * params.uv_scale
     has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
@@ -244,8 +384,44 @@ def _f64(k):
 
 
 def footprint_sums(params: GlintParams, si, h, light, view):
-    """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the footprint (Eq. 9, 13-17),
-    as ``_footprint_sums``; with ``exact=false`` ``A_P`` from the merged lobe."""
+    """``(D_P(h), A_P(i), V_P(i), A_P(o), V_P(o))`` of the footprint (Eq. 9, 13-17).
+
+    As the library's ``_footprint_sums``; with ``exact=false`` ``A_P`` from the merged lobe.
+
+    Parameters
+    ----------
+    params : GlintParams
+        The plugin's parameters.
+    si : mi.SurfaceInteraction3f
+        The shading point.
+    h : Vector3f
+        The half vector.
+    light, view : Vector3f
+        The directions ``i`` and ``o``.
+
+    Returns
+    -------
+    tuple of Float64
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.mitsuba.glints import footprint_sums
+    >>> d, ai, vi, ao, vo = footprint_sums(params, si, mi.Vector3f(0, 0, 1), mi.Vector3f(0, -0.6, 0.8), si.wi)
+    >>> bool(d > 0 and ai > 0 and ao > 0)
+    True
+    """
     t = params.tables
     fp = footprint_covariance(params, si)
     hz = mi.Float64(h.z)
@@ -266,8 +442,41 @@ def footprint_sums(params: GlintParams, si, h, light, view):
 
 
 def merged_lobe(tables: GlintTables, fp: Footprint):
-    """Raw moments of the footprint's merged lobe (Sec. 4.2.2: ``W``-weighted average
-    over the MIP level of :meth:`LobeMixture.mip_level`)."""
+    """Raw moments of the footprint's merged lobe.
+
+    Sec. 4.2.2: the ``W``-weighted average over the MIP level of :meth:`LobeMixture.mip_level`.
+
+    Parameters
+    ----------
+    tables : GlintTables
+        With the MIP levels (``exact=false``).
+    fp : Footprint
+        The footprint.
+
+    Returns
+    -------
+    list of Float64
+        ``E1..E5``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import footprint_covariance, merged_lobe, read_glint_params
+    >>> props["exact"] = False
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv = mi.Point2f(0.5, 0.5)
+    >>> e1, e2, e3, e4, e5 = merged_lobe(params.tables, footprint_covariance(params, si))
+    >>> bool(e3 >= e1 * e1 and e4 >= e2 * e2)                   # variances >= 0
+    True
+    """
     t = tables
     suu, svv, suv = fp.cov
     half = 0.5 * (suu + svv)
@@ -286,21 +495,111 @@ def merged_lobe(tables: GlintTables, fp: Footprint):
 
 
 def merged_area(v, m, k):
-    """``(A_P, V_P)`` with ``A_P = V_P c_m+ / V_m`` (:func:`..glints.pbrdf._merged_area`)."""
+    """``(A_P, V_P)`` with ``A_P = V_P c_m+ / V_m`` (:func:`..glints.pbrdf._merged_area`).
+
+    Parameters
+    ----------
+    v : Float64
+        ``V_P`` of the footprint.
+    m : sequence of Float64
+        The merged lobe's raw moments (:func:`merged_lobe`).
+    k : tuple of Float64
+        The direction ``(x, y, z)``.
+
+    Returns
+    -------
+    tuple of Float64
+
+    Examples
+    --------
+    A merged lobe without slope variance facing ``k``: ``A_P = V_P``.
+
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.glints import merged_area
+    >>> merged_area(0.8, [0.0, 0.0, 0.0, 0.0, 0.0], (0.0, 0.0, 1.0))
+    (0.8, 0.8)
+    """
     e1, e2, e3, e4, e5 = m
     c, vm = _lobe_areas(k, e1, e2, e3 - e1 * e1, e4 - e2 * e2, e5 - e1 * e2)
     return dr.select((vm > 0) & (c > 0), v * ratio(c, vm, vm > 0), 0.0), v
 
 
 def g2_over_ao(g2: str, ai, vi, ao, vo):
-    """``G2 / A_P(o)`` (:func:`microfacet.glints.pbrdf._g2_over_ao`)."""
+    """``G2 / A_P(o)`` (:func:`microfacet.glints.pbrdf._g2_over_ao`).
+
+    Parameters
+    ----------
+    g2 : str
+        ``"correlated"`` or ``"separable"``.
+    ai, vi, ao, vo : Float64
+        ``A_P`` and ``V_P`` of ``i`` and of ``o``.
+
+    Returns
+    -------
+    Float64
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.glints import g2_over_ao
+    >>> g2_over_ao("separable", 0.5, 0.5, 0.5, 0.5), g2_over_ao("correlated", 0.0, 0.5, 0.5, 0.5)
+    (2.0, 0.0)
+    """
     den = vo * vi if g2 == "separable" else vo * ai + ao * (vi - ai)
     return dr.select((den > 0) & (ai > 0), ratio(ai, den, den > 0), 0.0)
 
 
 def glint_eval_pdf(params: GlintParams, ctx, si, light, active, want_value=True, want_pdf=True):
-    """``(F D_P G2 / (4 A_P(o)), D_P z_h / (4 o.h))`` toward ``light`` (either ``None`` when
-    not wanted; :meth:`PatchBRDF.eval_cos`)."""
+    """``(F D_P G2 / (4 A_P(o)), D_P z_h / (4 o.h))`` toward ``light``.
+
+    Either is ``None`` when not wanted (:meth:`PatchBRDF.eval_cos`).
+
+    Parameters
+    ----------
+    params : GlintParams
+        The plugin's parameters.
+    ctx : mi.BSDFContext
+        The context.
+    si : mi.SurfaceInteraction3f
+        The shading point; the view is ``si.wi``.
+    light : Vector3f
+        The light ``i``.
+    active : Bool
+        The active lanes.
+    want_value, want_pdf : bool, optional
+        Compute the value, the pdf.
+
+    Returns
+    -------
+    value : Spectrum or None
+    pdf : Float or None
+
+    Examples
+    --------
+    The library's patch BRDF of the same footprint gives the same value:
+
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.mitsuba.glints import footprint_covariance, glint_eval_pdf
+    >>> value, pdf = glint_eval_pdf(params, mi.BSDFContext(), si, mi.Vector3f(0, -0.6, 0.8), True)
+    >>> uu, vv, uv = footprint_covariance(params, si).cov
+    >>> patch = mf.glints.PatchBRDF(mf.glints.Microsurface.load(path), (0.5, 0.5), [[uu, uv], [uv, vv]])
+    >>> library = patch.eval_cos(np.array([0, -0.6, 0.8]), np.array([0, 0.6, 0.8]))
+    >>> bool(np.allclose(np.array(value), library, rtol=1e-4))
+    True
+    """
     r = half_vector(ctx, si, light, active)
     h, oh, active = r.h, r.oh, r.active & (r.h.z > 0)
     d, ai, vi, ao, vo = footprint_sums(params, si, h, light, si.wi)
@@ -314,8 +613,43 @@ def glint_eval_pdf(params: GlintParams, ctx, si, light, active, want_value=True,
 
 
 def pick_lobe(tables: GlintTables, fp: Footprint, sample1):
-    """The index of the lobe ``i`` of the footprint's window with ``sum_{j<i} W_j <= sample1
-    sum W < sum_{j<=i} W_j`` (two walks: the total, then the pick)."""
+    """The index of the lobe ``i`` of the footprint's window with
+    ``sum_{j<i} W_j <= sample1 sum W < sum_{j<=i} W_j`` (two walks: the total, then the pick).
+
+    Parameters
+    ----------
+    tables : GlintTables
+        The lobes.
+    fp : Footprint
+        The footprint.
+    sample1 : Float
+        A uniform number.
+
+    Returns
+    -------
+    Float64
+        The lobe's index.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.mitsuba.glints import footprint_covariance, pick_lobe
+    >>> fp = footprint_covariance(params, si)
+    >>> picks = [int(pick_lobe(params.tables, fp, u)) for u in (0.0, 0.5, 0.999)]
+    >>> picks == sorted(picks) and all(0 <= i < 64 for i in picks)
+    True
+    """
     grid, zero = tables.grid, 0.0 * fp.cu
     ws = _walk(fp, grid, [zero], lambda i, w, s: [s[0] + w])[0]
     target = mi.Float64(sample1) * ws
@@ -330,7 +664,38 @@ def pick_lobe(tables: GlintTables, fp: Footprint, sample1):
 
 
 def lobe_of(tables: GlintTables, index) -> Lobe:
-    """Lobe ``index`` as a Beckmann :class:`~.slopes.Lobe` (``alpha = sqrt(2 sigma^2)``)."""
+    """Lobe ``index`` as a Beckmann :class:`~.slopes.Lobe` (``alpha = sqrt(2 sigma^2)``).
+
+    Parameters
+    ----------
+    tables : GlintTables
+        The lobes.
+    index : Float64
+        The lobe's index.
+
+    Returns
+    -------
+    Lobe
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> props = mi.Properties("mf_glints")
+    >>> props["filename"], props["footprint"] = "glints.npz", 2.0       # 2 texels wide
+    >>> from microfacet.mitsuba.glints import read_glint_params
+    >>> params = read_glint_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> from microfacet.mitsuba.glints import lobe_of
+    >>> lobe = lobe_of(params.tables, 0)
+    >>> lobe.kind, bool(lobe.alpha_x > 0)
+    ('beckmann', True)
+    """
     mx, my, sxx, syy, sxy = (tables.central[5 * index + c] for c in range(5))
     ax, ay = dr.sqrt(2.0 * sxx), dr.sqrt(2.0 * syy)
     return Lobe(BECKMANN, *(mi.Float(p) for p in (ax, ay, 2.0 * sxy / (ax * ay), mx, my)))
@@ -358,6 +723,26 @@ class GlintsBSDF:
     | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
     | `schlick_f90` | float or texture | 1 | Schlick Fresnel's grazing value, as `mf_microfacet` |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> import microfacet.mitsuba as mfm
+    >>> _ = mfm.register()
+    >>> slopes = 0.3 * np.random.default_rng(2).normal(size=(8, 8, 2))
+    >>> path = mf.glints.Microsurface.from_slopes(slopes, sigma_eps=0.1).save("glints.npz")
+    >>> bsdf = mfm.load_dict({"type": "mf_glints", "filename": "glints.npz", "material": "Ag"})
+    >>> bsdf                                          # doctest: +ELLIPSIS
+    GlintsBSDF[mf_glints, filename='glints.npz', lobes=8x8, exact=True, g2=correlated, ...]
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> bs, weight = bsdf.sample(mi.BSDFContext(), si, 0.5, mi.Point2f(0.3, 0.6))
+    >>> value, pdf = bsdf.eval_pdf(mi.BSDFContext(), si, bs.wo)
+    >>> bool(abs(weight[0] - value[0] / pdf) < 1e-4 * weight[0])        # weight = eval / pdf
+    True
     """
 
     PLUGIN_NAME = PLUGIN
@@ -404,5 +789,19 @@ class GlintsBSDF:
 
 
 def bsdf_class() -> type:
-    """The ``mf_glints`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    """The ``mf_glints`` class of the current Mitsuba variant (:func:`.registry.variant_class`).
+
+    Returns
+    -------
+    type
+        A subclass of the variant's ``mi.BSDF``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.glints import PLUGIN, bsdf_class
+    >>> PLUGIN, issubclass(bsdf_class(), mi.BSDF)
+    ('mf_glints', True)
+    """
     return variant_class(GlintsBSDF)

@@ -62,12 +62,35 @@ def _read(props, name: str):
 
 
 class Pyramid:
-    """A moment pyramid in one flat table (level after level, row-major texels, 5 moments
-    each; the file's float32 values, widened) with per-level sizes and offsets;
-    :meth:`lookup` is :func:`microfacet.leadr.lookup` (``wrap=True``) in Dr.Jit. Lookups and
-    the moment-to-lobe conversion run in double precision, as the library's: the
-    variances ``E3 - E1^2`` of sharp lobes with large mean slopes cancel digits (float32
-    measured 1e-3 relative errors in the BRDF)."""
+    """A moment pyramid in one flat table, looked up as :func:`microfacet.leadr.lookup`.
+
+    Level after level, row-major texels, 5 moments each (the file's float32 values, widened),
+    with per-level sizes and offsets; :meth:`lookup` is :func:`microfacet.leadr.lookup`
+    (``wrap=True``) in Dr.Jit. Lookups and the moment-to-lobe conversion run in double
+    precision, as the library's: the variances ``E3 - E1^2`` of sharp lobes with large mean
+    slopes cancel digits in float32.
+
+    Parameters
+    ----------
+    levels : list of ndarray
+        The levels ``(H, W, 5)``, finest first (:func:`microfacet.leadr.bake`).
+    max_anisotropy : int, optional
+        The most probes along the footprint's major axis.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, correlation=2.0, seed=1))
+    >>> from microfacet.mitsuba.leadr import Pyramid
+    >>> table = Pyramid(pyramid)
+    >>> e = table.lookup(mi.Point2f(0.5, 0.5), mi.Vector2f(0.25, 0), mi.Vector2f(0, 0.25))
+    >>> library = mf.leadr.lookup(pyramid, np.array([0.5, 0.5]), 0.25)
+    >>> table.levels, bool(np.allclose(e, library, rtol=1e-5, atol=1e-9))
+    (4, True)
+    """
 
     def __init__(self, levels, max_anisotropy: int = MAX_ANISOTROPY):
         self.levels = len(levels)
@@ -110,10 +133,23 @@ class Pyramid:
         return [a * (1.0 - t) + b * t for a, b in zip(s0, s1)]
 
     def lookup(self, uv, a, b):
-        """Filtered moments ``[E1..E5]`` (double precision) at ``uv`` over the footprint axes
-        ``a``, ``b`` (uv units): ``N = min(ceil(major / minor), max_anisotropy)`` trilinear
-        probes (1 when the major axis is below a texel) spread over the major axis at
-        ``lod = log2(max(major / N, 1))``, averaged (:func:`microfacet.leadr.lookup`)."""
+        """Filtered moments ``[E1..E5]`` (double precision) at ``uv`` over the footprint axes.
+
+        ``N = min(ceil(major / minor), max_anisotropy)`` trilinear probes (1 when the major axis is
+        below a texel) spread over the major axis at ``lod = log2(max(major / N, 1))``, averaged
+        (:func:`microfacet.leadr.lookup`).
+
+        Parameters
+        ----------
+        uv : Point2f
+            Where (wrapping).
+        a, b : Vector2f
+            The footprint's axes, in uv units.
+
+        Returns
+        -------
+        list of Float64
+        """
         F = mi.Float64
         u, v = F(uv.x), F(uv.y)
         ax, ay, bx, by = F(a.x) * self.w0, F(a.y) * self.h0, F(b.x) * self.w0, F(b.y) * self.h0
@@ -138,9 +174,30 @@ class Pyramid:
 
 
 def lobe_from_moments(e):
-    """Beckmann lobe of moments ``[E1..E5]`` (Listing 3.5, as
-    :func:`microfacet.leadr.from_moments`): ``alpha^2 = 2 max(Var, MIN_ALPHA^2 / 2)``,
-    ``rho = clip(2 Cov / (alpha_x alpha_y), +-MAX_RHO)``, mean slope ``(E1, E2)``."""
+    """The Beckmann lobe of moments ``[E1..E5]`` (Listing 3.5).
+
+    As :func:`microfacet.leadr.from_moments`: ``alpha^2 = 2 max(Var, MIN_ALPHA^2 / 2)``,
+    ``rho = clip(2 Cov / (alpha_x alpha_y), +-MAX_RHO)``, mean slope ``(E1, E2)``.
+
+    Parameters
+    ----------
+    e : sequence of Float
+        The moments ``E1..E5`` (``E[x~]``, ``E[y~]``, ``E[x~^2]``, ``E[y~^2]``, ``E[x~ y~]``).
+
+    Returns
+    -------
+    Lobe
+        A Beckmann :class:`~.slopes.Lobe`.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.leadr import lobe_from_moments
+    >>> lobe = lobe_from_moments([0.1, 0.0, 0.03, 0.02, 0.0])     # Var x = 0.02, Var y = 0.02
+    >>> round(lobe.alpha_x, 6), round(lobe.alpha_y, 6), lobe.rho, round(lobe.xn, 6)
+    (0.2, 0.2, 0.0, 0.1)
+    """
     e1, e2, e3, e4, e5 = e
     floor = 0.5 * MIN_ALPHA * MIN_ALPHA
     ax = dr.sqrt(2.0 * dr.maximum(e3 - e1 * e1, floor))
@@ -151,9 +208,27 @@ def lobe_from_moments(e):
 
 @dataclass(frozen=True)
 class LeadrParams:
-    """All parameters of ``mf_leadr`` (:func:`read_leadr_params`): the pyramid merged with
-    the base lobe, the Fresnel term (the base fit's table, or :func:`.bsdf.read_fresnel`'s),
-    the map's repetition ``uv_scale`` and the fallback ``footprint`` width (uv units)."""
+    """All parameters of ``mf_leadr`` (:func:`read_leadr_params`).
+
+    The pyramid merged with the base lobe, the Fresnel term (the base fit's table, or
+    :func:`.bsdf.read_fresnel`'s), the map's repetition ``uv_scale`` and the fallback
+    ``footprint`` width (uv units).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, correlation=2.0, seed=1))
+    >>> path = mf.leadr.write_pyramid("pyramid.exr", pyramid)        # as `microfacet bake` writes
+    >>> props = mi.Properties("mf_leadr")
+    >>> props["filename"], props["alpha"], props["footprint"] = "pyramid.exr", 0.1, 0.25
+    >>> from microfacet.mitsuba.leadr import LeadrParams, read_leadr_params
+    >>> p = read_leadr_params(props)
+    >>> isinstance(p, LeadrParams), p.pyramid.levels, p.uv_scale, p.footprint, p.fresnel.kind
+    (True, 4, 1.0, 0.25, 'none')
+    """
     filename: str
     pyramid: Pyramid
     model: LobeModel
@@ -194,7 +269,44 @@ def _read_scale(props, name: str, default: float, zero_ok: bool) -> float:
 
 
 def read_leadr_params(props) -> LeadrParams:
-    """All parameters of ``mf_leadr`` (class docstring of :class:`LeadrBSDF`), checked."""
+    """All parameters of ``mf_leadr`` (class docstring of :class:`LeadrBSDF`), checked.
+
+    The pyramid is merged with the base lobe (``alpha``, or the Beckmann moments of the
+    ``fit`` file) by :func:`microfacet.leadr.downsample_operator`.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters.
+
+    Returns
+    -------
+    LeadrParams
+
+    Raises
+    ------
+    PluginParameterError
+        Naming the parameter (and the file) that is unusable.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, correlation=2.0, seed=1))
+    >>> path = mf.leadr.write_pyramid("pyramid.exr", pyramid)        # as `microfacet bake` writes
+    >>> props = mi.Properties("mf_leadr")
+    >>> props["filename"], props["alpha"], props["footprint"] = "pyramid.exr", 0.1, 0.25
+    >>> from microfacet.mitsuba.leadr import read_leadr_params
+    >>> read_leadr_params(props).model
+    LobeModel(kind='beckmann', gaf='smith', shadowing=True, separable=False, samples_visible=True)
+    >>> props["fit"] = "pyramid.exr"
+    >>> read_leadr_params(props)
+    Traceback (most recent call last):
+    ...
+    microfacet.mitsuba.PluginParameterError: mf_leadr: parameter 'alpha' and fit are exclusive: the base is one material
+    """
     pyramid = _read(props, "filename")
     base, fresnel = _read_base(props)
     pyramid = Pyramid(downsample_operator(pyramid, base))
@@ -205,8 +317,41 @@ def read_leadr_params(props) -> LeadrParams:
 
 
 def footprint_axes(params: LeadrParams, si):
-    """``(a, b)``: ``uv_scale`` times the ray differentials ``duv_dx``, ``duv_dy`` where they
-    are set, else ``footprint`` along u and v (uv units of the map)."""
+    """The footprint's axes ``(a, b)`` at ``si``, in uv units of the map.
+
+    ``uv_scale`` times the ray differentials ``duv_dx``, ``duv_dy`` where they are set, else
+    ``footprint`` along u and v.
+
+    Parameters
+    ----------
+    params : LeadrParams
+        The plugin's parameters.
+    si : mi.SurfaceInteraction3f
+        The shading point.
+
+    Returns
+    -------
+    a, b : Vector2f
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, correlation=2.0, seed=1))
+    >>> path = mf.leadr.write_pyramid("pyramid.exr", pyramid)        # as `microfacet bake` writes
+    >>> props = mi.Properties("mf_leadr")
+    >>> props["filename"], props["alpha"], props["footprint"] = "pyramid.exr", 0.1, 0.25
+    >>> from microfacet.mitsuba.leadr import footprint_axes, read_leadr_params
+    >>> p = read_leadr_params(props)
+    >>> si = mi.SurfaceInteraction3f()
+    >>> footprint_axes(p, si)                          # no ray differentials: `footprint`
+    ([0.25, 0], [0, 0.25])
+    >>> si.duv_dx, si.duv_dy = mi.Vector2f(0.01, 0), mi.Vector2f(0, 0.02)
+    >>> footprint_axes(p, si)
+    ([0.01, 0], [0, 0.02])
+    """
     a, b = si.duv_dx * params.uv_scale, si.duv_dy * params.uv_scale
     has = (dr.squared_norm(a) + dr.squared_norm(b)) > 0
     f = params.footprint
@@ -214,7 +359,39 @@ def footprint_axes(params: LeadrParams, si):
 
 
 def filtered_moments(params: LeadrParams, si):
-    """Filtered moments ``[E1..E5]`` at ``si`` (:meth:`Pyramid.lookup` over :func:`footprint_axes`)."""
+    """Filtered moments ``[E1..E5]`` at ``si`` (:meth:`Pyramid.lookup` over :func:`footprint_axes`).
+
+    Parameters
+    ----------
+    params : LeadrParams
+        The plugin's parameters.
+    si : mi.SurfaceInteraction3f
+        The shading point (``si.uv`` times ``uv_scale``).
+
+    Returns
+    -------
+    list of Float64
+
+    Examples
+    --------
+    The base roughness ``alpha = 0.1`` adds ``alpha^2 / 2`` to the second moments:
+
+    >>> import numpy as np
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, correlation=2.0, seed=1))
+    >>> path = mf.leadr.write_pyramid("pyramid.exr", pyramid)        # as `microfacet bake` writes
+    >>> props = mi.Properties("mf_leadr")
+    >>> props["filename"], props["alpha"], props["footprint"] = "pyramid.exr", 0.1, 0.25
+    >>> from microfacet.mitsuba.leadr import filtered_moments, read_leadr_params
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv = mi.Point2f(0.5, 0.5)
+    >>> e = filtered_moments(read_leadr_params(props), si)
+    >>> library = mf.leadr.lookup(pyramid, np.array([0.5, 0.5]), 0.25)
+    >>> bool(np.allclose(np.array(e) - library, [0, 0, 0.005, 0.005, 0], atol=1e-7))
+    True
+    """
     a, b = footprint_axes(params, si)
     return params.pyramid.lookup(si.uv * params.uv_scale, a, b)
 
@@ -241,6 +418,27 @@ class LeadrBSDF(MicrofacetBSDF):
     | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
     | `schlick_f90` | float or texture | 1 | Schlick Fresnel's grazing value, as `mf_microfacet` |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+
+    Examples
+    --------
+    A Beckmann height field baked to a pyramid, over a gold base of roughness 0.1:
+
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> import microfacet as mf
+    >>> import microfacet.mitsuba as mfm
+    >>> _ = mfm.register()
+    >>> heights = mf.leadr.gaussian_heightfield((8, 8), 0.3, correlation=2.0, seed=1)
+    >>> path = mf.leadr.write_pyramid("pyramid.exr", mf.leadr.bake(heights))
+    >>> bsdf = mfm.load_dict({"type": "mf_leadr", "filename": "pyramid.exr", "alpha": 0.1,
+    ...                       "material": "Au", "footprint": 0.5})
+    >>> bsdf                                     # doctest: +ELLIPSIS
+    LeadrBSDF[mf_leadr, filename='pyramid.exr', levels=4, uv_scale=1.0, footprint=0.5, shadowing=True]
+    >>> si = mi.SurfaceInteraction3f()
+    >>> si.uv, si.wi = mi.Point2f(0.5, 0.5), mi.Vector3f(0, 0.6, 0.8)
+    >>> value, pdf = bsdf.eval_pdf(mi.BSDFContext(), si, mi.Vector3f(0, -0.6, 0.8))
+    >>> bool(value[0] > 0 and pdf > 0)
+    True
     """
 
     PLUGIN_NAME = PLUGIN
@@ -269,5 +467,19 @@ class LeadrBSDF(MicrofacetBSDF):
 
 
 def bsdf_class() -> type:
-    """The ``mf_leadr`` class of the current Mitsuba variant (:func:`.registry.variant_class`)."""
+    """The ``mf_leadr`` class of the current Mitsuba variant (:func:`.registry.variant_class`).
+
+    Returns
+    -------
+    type
+        A subclass of the variant's ``mi.BSDF``.
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> from microfacet.mitsuba.leadr import PLUGIN, bsdf_class
+    >>> PLUGIN, issubclass(bsdf_class(), mi.BSDF)
+    ('mf_leadr', True)
+    """
     return variant_class(LeadrBSDF)
