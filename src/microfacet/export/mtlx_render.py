@@ -36,20 +36,24 @@ sphere), and its ``layer`` attenuates the base by ``1 - E_c(theta_o)`` only (the
 ``E_c`` from its Schlick albedo fit. :func:`compare_mtlx` returns the relL1
 (``sum |a - b| / sum |b|`` over ``r < 0.95``) of the MaterialX render against the library's.
 
-Example
--------
+Measured figures per case are in ``experiments/results/export_mtlx.md``
+(``experiments/export_mtlx.py``).
+
+Examples
+--------
 >>> import microfacet as mf
 >>> int(sphere_mask(4).sum())                    # pixel centres inside the unit disk
 12
->>> err = compare_mtlx(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), size=32)   # doctest: +SKIP
->>> err["relL1"] < 0.005                                                # doctest: +SKIP
+>>> EYE_DISTANCE                                 # the eye of the orthographic view, on +z
+1000000.0
+>>> r = compare_mtlx(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), size=32)     # doctest: +SKIP
+>>> r["relL1"] < 0.005                                                  # doctest: +SKIP
 True
 """
 from __future__ import annotations
 
 import atexit
 import contextlib
-import math
 import os
 import select
 import shutil
@@ -65,7 +69,8 @@ from .consumers import LIGHT, library_render, rel_l1
 __all__ = ["render_mtlx", "compare_mtlx", "xvfb_display", "xvfb_available", "patched_libraries",
            "stop_xvfb", "sphere_obj", "sphere_mask", "MaterialXLayer", "mtlx_as_held", "EYE_DISTANCE"]
 
-#: Distance of the (orthographic) eye: the view direction the shader derives is ``+z`` to ``1/EYE_DISTANCE``.
+#: Distance of the (orthographic) eye: the view direction the shader derives is ``+z`` to
+#: ``1/EYE_DISTANCE`` rad.
 EYE_DISTANCE = 1.0e6
 
 _COMPENSATION = "vec3 mx_ggx_energy_compensation(float NdotV, float alpha, vec3 Fss)\n{"
@@ -80,14 +85,36 @@ def _mx():
 
 
 def sphere_mask(size: int) -> np.ndarray:
-    """``(size, size)`` bool: the pixels whose centre lies inside the unit disk (the pixels
-    :func:`~microfacet.export.consumers.library_render` shades)."""
+    """The pixels of a ``size x size`` comparison image whose centre lies inside the unit disk
+    (the pixels :func:`~microfacet.export.consumers.library_render` shades).
+
+    Parameters
+    ----------
+    size : int
+        Image side in pixels.
+
+    Returns
+    -------
+    (size, size) bool ndarray
+
+    Examples
+    --------
+    >>> sphere_mask(2).all(), int(sphere_mask(64).sum())
+    (np.True_, 3228)
+    """
     k = (np.arange(size) + 0.5) / size * 2.0 - 1.0
     return k[None, :] ** 2 + k[:, None] ** 2 < 1.0
 
 
 def xvfb_available() -> bool:
-    """Whether an X display is set (``DISPLAY``) or ``Xvfb`` is on the ``PATH``."""
+    """Whether :func:`render_mtlx` can have an X display: ``DISPLAY`` is set or ``Xvfb`` is on
+    the ``PATH``.
+
+    Examples
+    --------
+    >>> isinstance(xvfb_available(), bool)
+    True
+    """
     return bool(os.environ.get("DISPLAY")) or shutil.which("Xvfb") is not None
 
 
@@ -126,9 +153,14 @@ def _start_xvfb(timeout: float) -> str:
 
 
 def stop_xvfb() -> None:
-    """Stop the Xvfb that :func:`xvfb_display` started in this process (if any). MaterialX
-    cannot reconnect to another display in the same process: :func:`render_mtlx` raises
-    ``RuntimeError`` afterwards instead of letting Xlib end the process."""
+    """Stop the Xvfb that :func:`xvfb_display` started in this process, if any (also run at
+    exit). MaterialX cannot reconnect to another display in the same process: afterwards
+    :func:`render_mtlx` raises ``RuntimeError`` instead of letting Xlib end the process.
+
+    Examples
+    --------
+    >>> stop_xvfb()          # no-op when this process started none   # doctest: +SKIP
+    """
     proc = _XVFB["proc"]
     if proc is None:
         return
@@ -146,10 +178,25 @@ def xvfb_display(timeout: float = 10.0):
     """Context manager: an X display for MaterialX's GL renderer, yielded as a string.
 
     Uses ``DISPLAY`` when it is set; otherwise starts ``Xvfb`` on a display number of its
-    choosing (``-displayfd``, ``-nolisten tcp``) on first use, sets ``DISPLAY`` while inside, and keeps that Xvfb for
-    the rest of the process (MaterialX connects to the X server once per process; it is
-    stopped at exit or by :func:`stop_xvfb`). ``RuntimeError`` (one line) when Xvfb is
-    absent, does not come up within ``timeout`` s, or was stopped in this process."""
+    choosing (``-displayfd``, ``-nolisten tcp``) on first use, sets ``DISPLAY`` while inside,
+    and keeps that Xvfb for the rest of the process (MaterialX connects to the X server once
+    per process); it is stopped at exit or by :func:`stop_xvfb`.
+
+    Parameters
+    ----------
+    timeout : float
+        Seconds to wait for Xvfb to come up.
+
+    Raises
+    ------
+    RuntimeError
+        Xvfb absent, not up within ``timeout``, or already stopped in this process.
+
+    Examples
+    --------
+    >>> with xvfb_display() as display:                 # doctest: +SKIP
+    ...     image = render_mtlx("sphere.mtlx", size=32)
+    """
     if os.environ.get("DISPLAY") and _XVFB["proc"] is None:
         yield os.environ["DISPLAY"]
         return
@@ -170,10 +217,31 @@ def xvfb_display(timeout: float = 10.0):
 
 def patched_libraries(dest) -> Path:
     """Copy MaterialX's ``libraries`` folder under ``dest`` with pbrlib's GGX energy
-    compensation (``mx_ggx_energy_compensation``, Turquin 2019) returning 1; the root to
-    search (``dest``, which holds ``libraries/``). The installed package is not modified.
+    compensation (``mx_ggx_energy_compensation``: Turquin 2019, Eq. 14 and 16) returning 1,
+    so that every pbrlib GGX lobe is single-scattering as the library's. The installed
+    package is not modified.
 
-    Raises ``RuntimeError`` when the function is not where MaterialX 1.39 has it."""
+    Parameters
+    ----------
+    dest : path-like
+        Folder to write ``libraries/`` into (about 10 MB).
+
+    Returns
+    -------
+    Path
+        ``dest``: the root to search for libraries and GLSL sources.
+
+    Raises
+    ------
+    RuntimeError
+        The function is not where MaterialX 1.39 has it (another MaterialX version).
+
+    Examples
+    --------
+    >>> root = patched_libraries("mx_copy")                             # doctest: +SKIP
+    >>> "return vec3(1.0);" in (root / "libraries/pbrlib/genglsl/lib/mx_microfacet_specular.glsl").read_text()  # doctest: +SKIP
+    True
+    """
     mx = _mx()
     root = Path(mx.getDefaultDataSearchPath().asString().split(os.pathsep)[0])
     dest = Path(dest)
@@ -187,11 +255,31 @@ def patched_libraries(dest) -> Path:
 
 
 def sphere_obj(path, size: int) -> Path:
-    """Write the comparison sphere's visible hemisphere as an OBJ for a ``size x size`` image:
-    one vertex at each pixel centre (and a ring of one pixel beyond the image, so that every
+    """Write the comparison sphere's visible hemisphere as an OBJ for a ``size x size`` image.
+
+    One vertex at each pixel centre (and a ring of one pixel beyond the image, so that every
     pixel centre is inside a triangle), ``z = sqrt(1 - x^2 - y^2)`` and the normal
     ``(x, y, z)`` inside the unit disk, ``z = 0`` and the radial normal outside, texture
-    coordinates ``(x, atan2(y, z))`` (module docstring: MaterialX's tangents follow ``u``)."""
+    coordinates ``(x, atan2(y, z))`` (module docstring: MaterialX's tangents follow ``u``).
+    At the pixel centres the rasterized normal is exact (to float32).
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.obj`` to write.
+    size : int
+        Image side in pixels.
+
+    Returns
+    -------
+    Path
+
+    Examples
+    --------
+    >>> text = sphere_obj("sphere.obj", 4).read_text()
+    >>> text.count("\\nv "), text.count("\\nf ")          # (4 + 2)^2 vertices, 2 (4 + 1)^2 triangles
+    (36, 50)
+    """
     n = int(size)
     k = (np.arange(-1, n + 1) + 0.5) / n * 2.0 - 1.0
     x, y = np.meshgrid(k, -k)                   # row 0 at the top (y = +1), as the library's Sphere
@@ -231,15 +319,46 @@ def _document(mx, path_or_document):
 
 def render_mtlx(path_or_document, size: int = 64, material: str = "M_microfacet_exact", light=LIGHT,
                 compensation: bool = False) -> np.ndarray:
-    """Render ``material`` of a ``.mtlx`` file or MaterialX document with MaterialX's
-    ``GlslRenderer`` on the comparison sphere (module docstring) and return the linear RGB
-    ``(size, size, 3)`` float32 image (row 0 at the top; zero outside the unit disk, as
-    :func:`~microfacet.export.consumers.library_render`).
+    """Render a material of a MaterialX document with MaterialX's ``GlslRenderer`` on the
+    comparison sphere (module docstring): ``E f cos theta_i`` per pixel, ``E = 1``.
 
-    ``light``: the direction toward the directional light (irradiance 1). ``compensation``:
-    keep pbrlib's multiple-scattering energy compensation (default off: the libraries are
-    read from a patched copy, :func:`patched_libraries`). Needs an X display: wrap the call
-    in :func:`xvfb_display` when none is set (done here when ``DISPLAY`` is unset)."""
+    Against :func:`~microfacet.export.consumers.library_render` of the BRDF the graph holds,
+    relL1 ~1e-6 for isotropic lobes (float32); see the module docstring for what differs.
+
+    Parameters
+    ----------
+    path_or_document : path-like or MaterialX.Document
+        A ``.mtlx`` file or a document (:func:`~microfacet.export.mtlx.mtlx_document`).
+    size : int
+        Image side in pixels (>= 2); 32-64 render in about 0.5 s.
+    material : str
+        The material node to render (``"M_microfacet_openpbr"`` for the OpenPBR surface).
+    light : (3,) array_like
+        Direction toward the directional light (normalized here).
+    compensation : bool
+        Keep pbrlib's multiple-scattering energy compensation (default off: the libraries
+        are read from a patched copy, :func:`patched_libraries`).
+
+    Returns
+    -------
+    (size, size, 3) float32 ndarray
+        Linear Rec. 709 RGB, row 0 at the top, zero outside the unit disk.
+
+    Raises
+    ------
+    ValueError
+        Bad ``size``, no such file or no such material.
+    RuntimeError
+        No X display can be had (:func:`xvfb_display`).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> from microfacet.export.mtlx import mtlx_document
+    >>> doc, lost = mtlx_document(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)))   # doctest: +SKIP
+    >>> render_mtlx(doc, size=32).shape                                   # doctest: +SKIP
+    (32, 32, 3)
+    """
     if int(size) != size or size < 2:
         raise ValueError(f"size must be an integer >= 2, got {size!r}")
     size = int(size)
@@ -339,8 +458,8 @@ class MaterialXLayer:
     fit of the Schlick albedo, the rest of the difference). Only ``eval_cos`` and ``eval``:
     a reference for renders, not a sampler.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> import microfacet as mf
     >>> from microfacet.layered import LayeredBRDF
@@ -374,7 +493,25 @@ def mtlx_as_held(brdf):
     write it: :func:`~microfacet.export.mtlx.pbrlib_brdf` (Beckmann as GGX, tables as
     Schlick, mean slopes dropped) with a top-level coat as :class:`MaterialXLayer`. Not
     modelled: MaterialX's isotropic Smith term on anisotropic lobes and its Schlick-fit coat
-    albedo."""
+    albedo.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic tree that :func:`~microfacet.export.mtlx.mtlx_document` exports.
+
+    Returns
+    -------
+    BRDF or MaterialXLayer
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> from microfacet.layered import LayeredBRDF
+    >>> coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Dielectric(1.5))
+    >>> type(mtlx_as_held(LayeredBRDF(coat, mf.Lambertian(0.5)))).__name__
+    'MaterialXLayer'
+    """
     from ..layered import LayeredBRDF
     from .mtlx import pbrlib_brdf
     held = pbrlib_brdf(brdf)
@@ -384,11 +521,35 @@ def mtlx_as_held(brdf):
 def compare_mtlx(brdf, size: int = 64, light=LIGHT, material: str = "M_microfacet_exact") -> dict:
     """Export ``brdf`` (:func:`~microfacet.export.mtlx.mtlx_document`), render it with
     :func:`render_mtlx` and with the library (:func:`~microfacet.export.consumers.library_render`)
-    and return ``{"relL1": ..., "relL1_as_held": ..., "mtlx": image, "library": image,
-    "as_held": image, "lost": [...]}``: relL1 (``sum |a - b| / sum |b|`` over ``r < 0.95``)
-    of the MaterialX render against the library's render of ``brdf``, and against the
-    library's render of :func:`mtlx_as_held` (what the graph can hold: isolates the
-    renderer's own agreement from the export's losses)."""
+    and measure the difference.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic tree (MicrofacetBRDF, SumBRDF with a Lambertian, LayeredBRDF).
+    size : int
+        Image side in pixels.
+    light : (3,) array_like
+        Direction toward the light.
+    material : str
+        The material of the exported document to render.
+
+    Returns
+    -------
+    dict
+        ``relL1``: ``sum |a - b| / sum |b|`` over ``r < 0.95`` of the MaterialX render
+        against the library's render of ``brdf``; ``relL1_as_held``: the same against the
+        library's render of :func:`mtlx_as_held` (what the graph holds: isolates the
+        renderer's agreement from the export's losses); the images ``mtlx``, ``library``,
+        ``as_held``; ``lost``: what the export could not carry.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> r = compare_mtlx(mf.MicrofacetBRDF(mf.GGX.from_ellipse(0.35, 0.08, 0.6)), size=32)  # doctest: +SKIP
+    >>> r["relL1"] < 0.025                                                                   # doctest: +SKIP
+    True
+    """
     from .mtlx import mtlx_document
     doc, lost = mtlx_document(brdf)
     image = render_mtlx(doc, size, material=material, light=light)
