@@ -29,13 +29,14 @@ setup: $(VENV)/.installed
 	  echo "setup: installing the system package libllvm19 with apt-get (as root): Mitsuba's llvm_ad_rgb variant, used by the demo's Mitsuba section and its tests, needs libLLVM >= 16"; \
 	  apt-get update -qq && apt-get install -y -qq libllvm19 >/dev/null; \
 	else echo "setup: no libLLVM >= 16 and no root apt: Mitsuba llvm_ad_rgb tests will skip"; fi
-# GLSL tests (moderngl on EGL: Mesa llvmpipe) and viewer tests (Playwright on the system
-# Chromium; never 'playwright install'): system packages where apt and root are available.
-	@if [ -e /usr/lib/chromium/chromium ] && /sbin/ldconfig -p | grep -q libEGL_mesa; then :; \
+# GLSL tests (moderngl on EGL: Mesa llvmpipe), viewer tests (Playwright on the system
+# Chromium; never 'playwright install') and MaterialX's GlslRenderer (GLX: needs an X server,
+# Xvfb): system packages where apt and root are available.
+	@if [ -e /usr/lib/chromium/chromium ] && /sbin/ldconfig -p | grep -q libEGL_mesa && command -v Xvfb >/dev/null; then :; \
 	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
-	  echo "setup: installing the system packages chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 with apt-get (as root): the demo's real-time section and the viewer tests run the WebGL2 viewer in headless Chromium, the GLSL tests run on Mesa's EGL (llvmpipe)"; \
-	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 >/dev/null; \
-	else echo "setup: no chromium/Mesa EGL and no root apt: GLSL and viewer tests will skip"; fi
+	  echo "setup: installing the system packages chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 xvfb with apt-get (as root): the demo's real-time section and the viewer tests run the WebGL2 viewer in headless Chromium, the GLSL tests run on Mesa's EGL (llvmpipe), the MaterialX render tests run MaterialX's GlslRenderer on a private Xvfb display"; \
+	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 xvfb >/dev/null; \
+	else echo "setup: no chromium/Mesa EGL/Xvfb and no root apt: GLSL, viewer and MaterialX render tests will skip"; fi
 # Numba kernels compiled into Numba's cache now, not at their first use in the demo or the tests
 # (docs/performance.md): the BRDF kernels (python -m microfacet.kernels --help; float32 ones too under
 # CI=true, for the tests) beside the measured-BRDF readers', LEADR and glints kernels
