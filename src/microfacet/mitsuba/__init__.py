@@ -47,6 +47,7 @@ from .reference import plugin_reference
 
 __all__ = ["register", "load_dict", "load_file", "PLUGINS", "PluginParameterError", "plugin_reference"]
 
+#: The plugins :func:`register` registers.
 PLUGINS = ("mf_microfacet", "mf_fitted", "mf_leadr", "mf_glints")
 
 

@@ -16,7 +16,10 @@ import mitsuba as mi
 
 __all__ = ["Lobe", "BECKMANN", "GGX", "beckmann_visible_slope_quantile", "NEWTON_STEPS", "ratio"]
 
-BECKMANN, GGX = "beckmann", "ggx"
+#: Name of the Beckmann slope distribution (Table 2.II).
+BECKMANN = "beckmann"
+#: Name of the GGX (Trowbridge-Reitz) slope distribution (Table 2.II).
+GGX = "ggx"
 INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
 U_MIN = 1e-6        # float32 uniforms are clamped to [U_MIN, 1 - U_MIN] (as Mitsuba's Beckmann)
 NEWTON_STEPS = 4    # fixed count of the Beckmann visible-slope inversion (see its docstring)
