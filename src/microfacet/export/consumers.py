@@ -29,7 +29,29 @@ LIGHT = (-0.5, 0.5, 1.0)
 
 
 def library_render(brdf, size: int, light=LIGHT) -> np.ndarray:
-    """The library's ``(size, size, 3)`` render: ``E f cos`` at each pixel centre, ``E = 1``."""
+    """The library's ``(size, size, 3)`` render: ``E f cos`` at each pixel centre, ``E = 1``.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Any library BRDF.
+    size : int
+        Image width and height in pixels.
+    light : (3,) sequence
+        Direction toward the light (normalised here); default :data:`LIGHT`.
+
+    Returns
+    -------
+    (size, size, 3) ndarray
+        Linear radiance, 0 outside the sphere.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> image = library_render(mf.Lambertian([1.0, 1.0, 1.0]), 16, light=LIGHT)
+    >>> image.shape, round(float(image.max()) * np.pi, 2)          # E cos / pi, largest where n faces the light
+    ((16, 16, 3), 1.0)
+    """
     from ..render import Sphere
     s = Sphere(size, supersample=1)
     w = np.asarray(light, float) / np.linalg.norm(light)
@@ -37,7 +59,26 @@ def library_render(brdf, size: int, light=LIGHT) -> np.ndarray:
 
 
 def rel_l1(image: np.ndarray, reference: np.ndarray) -> float:
-    """``sum |a - b| / sum |b|`` over the pixels at radius ``< 0.95`` of the sphere."""
+    """``sum |a - b| / sum |b|`` over the pixels at radius ``< 0.95`` of the sphere.
+
+    Parameters
+    ----------
+    image, reference : (n, n, 3) ndarray
+        Renders of the comparison sphere.
+
+    Returns
+    -------
+    float
+        The relative L1 difference (the rim, where renderers' pixel footprints differ most,
+        left out).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> reference = library_render(mf.Lambertian([0.5, 0.5, 0.5]), 16)
+    >>> round(rel_l1(1.1 * reference, reference), 6)
+    0.1
+    """
     n = reference.shape[0]
     k = (np.arange(n) + 0.5) / n * 2 - 1
     inside = k[None, :] ** 2 + k[:, None] ** 2 < 0.95 ** 2
@@ -52,7 +93,39 @@ def consumer_renders(brdf, size: int = 64, spp: int = 4, light=LIGHT, three=None
     as exported (one lobe + base: what the format can hold), against which three.js's
     own fidelity is ``errors["three.js vs glTF as held"]``. ``three``: an open
     :class:`~microfacet.export.threejs.ThreeRenderer` to use (Playwright's sync API runs one
-    browser session per thread), else one is opened and closed here."""
+    browser session per thread), else one is opened and closed here.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic BRDF tree.
+    size : int
+        Image width and height in pixels.
+    spp : int
+        Cycles samples per pixel.
+    light : (3,) sequence
+        Direction toward the light.
+    three : ThreeRenderer, optional
+        An open renderer to reuse.
+
+    Returns
+    -------
+    images : dict
+        Name -> ``(size, size, 3)`` linear radiance.
+    errors : dict
+        Name -> relL1 (:func:`rel_l1`) against the library's image.
+    missing : dict
+        Consumer -> why it was not rendered.
+
+    Examples
+    --------
+    Blender and three.js must be installed (``make setup-blender``, ``make setup-npm``):
+
+    >>> import microfacet as mf
+    >>> images, errors, missing = consumer_renders(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), size=32)  # doctest: +SKIP
+    >>> sorted(errors)                                                                            # doctest: +SKIP
+    ['Blender (Cycles)', 'glTF as held', 'three.js', 'three.js vs glTF as held']
+    """
     from .blender import blender_material, blender_python, render_cycles, write_blend
     from .gltf import gltf_brdf, gltf_material, write_glb
     from .threejs import ThreeRenderer, chromium, npm_modules
@@ -86,7 +159,35 @@ def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4, href: 
     """Render :func:`consumer_renders`, write ``consumers_<n>.png`` under ``out`` (one exposure
     for all, :func:`microfacet.io.write_png`) and return an HTML ``<section>`` with the
     pictures (``href``: the prefix of their links, e.g. ``"exports/"`` for a page one folder
-    up) and each consumer's error against the library (``three``: as :func:`consumer_renders`)."""
+    up) and each consumer's error against the library (``three``: as :func:`consumer_renders`).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic BRDF tree.
+    out : str or os.PathLike
+        Folder of the PNGs (created).
+    label : str
+        The material's name in the section's title.
+    size, spp : int
+        As :func:`consumer_renders`.
+    href : str
+        Prefix of the pictures' links.
+    three : ThreeRenderer, optional
+        As :func:`consumer_renders`.
+
+    Returns
+    -------
+    str
+        The HTML ``<section id="consumers">``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> html = consumer_section(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), "exports", "GGX 0.2")   # doctest: +SKIP
+    >>> html.startswith('<section id="consumers">')                                          # doctest: +SKIP
+    True
+    """
     from ..io import write_png
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

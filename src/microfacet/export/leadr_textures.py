@@ -35,10 +35,10 @@ report of what is not carried (:data:`NOT_CARRIED`) with the 8-bit round trip's 
 Example
 -------
 >>> import microfacet as mf
->>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((64, 64), 0.3, seed=1))
+>>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((16, 16), 0.3, seed=1))
 >>> levels = leadr_textures(pyramid, base_roughness=0.1)
 >>> sorted(levels[0]), levels[0]["normal"].shape
-(['anisotropy', 'metallic_roughness', 'normal'], (64, 64, 3))
+(['anisotropy', 'metallic_roughness', 'normal'], (16, 16, 3))
 """
 from __future__ import annotations
 
@@ -116,7 +116,26 @@ def gltf_parameters(alpha1, alpha2):
     """``(roughness, strength, clipped)`` arrays of KHR_materials_anisotropy for ellipses
     ``alpha1 >= alpha2``: ``alpha_t = mix(r^2, 1, s^2) = min(alpha1, 1)``, ``alpha_b = r^2 =
     min(alpha2, 1)``; ``clipped`` marks ``alpha1 > 1`` (the vectorised
-    :func:`microfacet.export.gltf.roughness_anisotropy`)."""
+    :func:`microfacet.export.gltf.roughness_anisotropy`).
+
+    Parameters
+    ----------
+    alpha1, alpha2 : array_like
+        Radii of the ellipses, ``alpha1 >= alpha2``.
+
+    Returns
+    -------
+    roughness, strength : ndarray
+        ``sqrt(alpha2)`` and ``sqrt((alpha1 - alpha2) / (1 - alpha2))`` (alphas clipped to 1).
+    clipped : ndarray of bool
+        Where ``alpha1 > 1``.
+
+    Examples
+    --------
+    >>> r, s, clipped = gltf_parameters([0.5, 2.0], [0.1, 0.1])
+    >>> r.round(4).tolist(), s.round(4).tolist(), clipped.tolist()
+    ([0.3162, 0.3162], [0.6667, 1.0], [False, True])
+    """
     a1, a2 = (np.asarray(v, dtype=np.float64) for v in (alpha1, alpha2))
     clipped = a1 > 1.0
     a1, a2 = np.minimum(a1, 1.0), np.minimum(a2, 1.0)
@@ -130,7 +149,34 @@ def level_parameters(E, base_roughness=None) -> dict:
     ``(E1, E2)``), the covariance ``vx, vy, cxy`` (with ``base_roughness`` added: ``None``,
     ``alpha``, ``(alpha_x, alpha_y)`` or a Beckmann lobe, :func:`microfacet.leadr.base_moments`),
     its ellipse ``alpha1, alpha2, phi`` (``alpha`` at least :data:`MIN_ALPHA`) and the glTF
-    ``roughness, strength, clipped`` (module docstring)."""
+    ``roughness, strength, clipped`` (module docstring).
+
+    Parameters
+    ----------
+    E : (H, W, 5) array_like
+        One level of a moment pyramid (:func:`microfacet.leadr.bake`).
+    base_roughness : None, float, (float, float) or Beckmann
+        A base lobe added to every texel's moments.
+
+    Returns
+    -------
+    dict
+        ``slopes (H, W, 2)`` and ``(H, W)`` arrays ``vx, vy, cxy, alpha1, alpha2, phi,
+        roughness, strength, clipped``.
+
+    Raises
+    ------
+    ValueError
+        ``E`` is not ``(H, W, 5)``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> p = level_parameters(pyramid[0], base_roughness=0.1)
+    >>> p["slopes"].shape, p["alpha1"].shape, bool((p["alpha1"] >= p["alpha2"]).all())
+    ((8, 8, 2), (8, 8), True)
+    """
     from ..leadr import base_moments, convolve, covariance
     E = np.asarray(E, dtype=np.float64)
     if E.ndim != 3 or E.shape[2] != 5 or 0 in E.shape:
@@ -152,7 +198,26 @@ def _u8(v) -> np.ndarray:
 
 def encode_level(params: dict) -> dict[str, np.ndarray]:
     """The three ``(H, W, 3)`` uint8 textures (:data:`TEXTURES`) of :func:`level_parameters`'
-    output (module docstring). Texels whose strength rounds to 0 point along the tangent."""
+    output (module docstring). Texels whose strength rounds to 0 point along the tangent.
+
+    Parameters
+    ----------
+    params : dict
+        :func:`level_parameters` of a level.
+
+    Returns
+    -------
+    dict
+        :data:`TEXTURES` name -> ``(H, W, 3)`` uint8 image.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> images = encode_level(level_parameters(pyramid[0], 0.1))
+    >>> [(name, images[name].shape, images[name].dtype.name) for name in TEXTURES][0]
+    ('normal', (8, 8, 3), 'uint8')
+    """
     from ..leadr import encode_normal_map
     r, s, phi = params["roughness"], params["strength"], params["phi"]
     ones = np.ones_like(r)
@@ -168,7 +233,28 @@ def decode_level(images: dict) -> dict:
     """What a conforming glTF engine reads at the texel centres of :func:`encode_level`'s
     textures: ``slopes`` of the normal (``-n_xy / n_z``), ``roughness``, ``strength``, ``phi``
     (of the normalised direction, as three.js), ``alpha_t = mix(r^2, 1, s^2)``, ``alpha_b = r^2``
-    and their covariance ``vx, vy, cxy`` (``alpha^2 = 2 sigma^2``)."""
+    and their covariance ``vx, vy, cxy`` (``alpha^2 = 2 sigma^2``).
+
+    Parameters
+    ----------
+    images : dict
+        The three textures of a level (:func:`encode_level`, :func:`read_chains`).
+
+    Returns
+    -------
+    dict
+        ``slopes (H, W, 2)`` and ``(H, W)`` arrays ``roughness, strength, phi, alpha_t,
+        alpha_b, vx, vy, cxy``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> p = level_parameters(pyramid[0], 0.1)
+    >>> d = decode_level(encode_level(p))
+    >>> float(np.abs(d["alpha_b"] - p["alpha2"]).max() / p["alpha2"].min()) < 0.02    # 8 bits of sqrt(alpha)
+    True
+    """
     n = images["normal"].astype(np.float64) / 127.5 - 1.0
     r = images["metallic_roughness"][..., 1].astype(np.float64) / 255.0
     a = images["anisotropy"].astype(np.float64)
@@ -187,7 +273,29 @@ def quantization_error(params: dict, images: dict) -> dict:
     """Error of the 8-bit textures against the exact parameters of one level: ``covariance``
     (mean and max over texels of ``|S_decoded - S|_F / |S|_F``, clipped texels excluded),
     ``alpha`` (max ``|alpha - alpha_decoded| / alpha`` over both axes), ``slope`` (max abs of
-    the mean slope's error) and ``clipped`` (fraction of texels with ``alpha1 > 1``)."""
+    the mean slope's error) and ``clipped`` (fraction of texels with ``alpha1 > 1``).
+
+    Parameters
+    ----------
+    params : dict
+        :func:`level_parameters` of a level.
+    images : dict
+        Its textures (:func:`encode_level`).
+
+    Returns
+    -------
+    dict
+        ``covariance_mean``, ``covariance_max``, ``alpha_max``, ``slope_max``, ``clipped``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> p = level_parameters(pyramid[0], 0.1)
+    >>> q = quantization_error(p, encode_level(p))
+    >>> sorted(q), q["covariance_max"] < 0.05, q["clipped"]
+    (['alpha_max', 'clipped', 'covariance_max', 'covariance_mean', 'slope_max'], True, 0.0)
+    """
     d = decode_level(images)
     keep = ~params["clipped"]
     a1, a2 = np.minimum(params["alpha1"], 1.0), np.minimum(params["alpha2"], 1.0)
@@ -220,7 +328,30 @@ def leadr_textures(pyramid, base_roughness=None, with_parameters: bool = False):
     """Per level (level 0 first) the dict of three uint8 textures (:func:`encode_level`) of a
     moment pyramid (a list of ``(H, W, 5)`` or a pyramid EXR path); ``base_roughness`` is
     added to every level (leave it None when the pyramid was baked with ``--roughness``: it
-    holds it already). ``with_parameters``: also return the per-level parameters."""
+    holds it already). ``with_parameters``: also return the per-level parameters.
+
+    Parameters
+    ----------
+    pyramid : list of (H, W, 5) arrays, str or os.PathLike
+        A moment pyramid or its EXR (``microfacet bake``).
+    base_roughness : None, float, (float, float) or Beckmann
+        A base lobe added to every level (:func:`level_parameters`).
+    with_parameters : bool
+        Also return the :func:`level_parameters` of each level.
+
+    Returns
+    -------
+    list of dict, or (list of dict, list of dict)
+        The textures per level (and the parameters).
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> levels = leadr_textures(pyramid, base_roughness=0.1)
+    >>> [level["metallic_roughness"].shape[:2] for level in levels]
+    [(8, 8), (4, 4), (2, 2), (1, 1)]
+    """
     levels, _ = _levels_of(pyramid)
     params = [level_parameters(E, base_roughness) for E in levels]
     images = [encode_level(p) for p in params]
@@ -229,7 +360,23 @@ def leadr_textures(pyramid, base_roughness=None, with_parameters: bool = False):
 
 def box_downsample(image: np.ndarray) -> np.ndarray:
     """The next MIP level of an ``(H, W, C)`` texture by the box filter of
-    :func:`microfacet.leadr.mip_pyramid` (2x2 means for even sizes), in float64."""
+    :func:`microfacet.leadr.mip_pyramid` (2x2 means for even sizes), in float64.
+
+    Parameters
+    ----------
+    image : (H, W, C) ndarray
+        A texture level.
+
+    Returns
+    -------
+    ndarray
+        The next level, float64.
+
+    Examples
+    --------
+    >>> box_downsample(np.arange(16.0).reshape(4, 4, 1))[..., 0].tolist()
+    [[2.5, 4.5], [10.5, 12.5]]
+    """
     from ..leadr import mip_pyramid
     return mip_pyramid(np.asarray(image, dtype=np.float64))[1]
 
@@ -239,7 +386,26 @@ def naive_textures(level0: dict) -> list[dict]:
     encoded values box-filtered level by level (normals averaged, then renormalised when
     encoded; roughness, strength and direction averaged) and rounded to 8 bits. With a
     constant base roughness the roughness stays constant: the naive MIPs of Dupuy 2015,
-    Fig. 5.3 (what LEADR is compared against)."""
+    Fig. 5.3 (what LEADR is compared against).
+
+    Parameters
+    ----------
+    level0 : dict
+        The level-0 textures (:func:`encode_level`).
+
+    Returns
+    -------
+    list of dict
+        The chain, level 0 first, down to 1 x 1.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> naive = naive_textures(leadr_textures(pyramid, base_roughness=0.1)[0])
+    >>> len(naive), naive[-1]["normal"].shape
+    (4, (1, 1, 3))
+    """
     from ..leadr import mip_pyramid
     chains = {}
     for name in TEXTURES:
@@ -258,7 +424,28 @@ def naive_textures(level0: dict) -> list[dict]:
 
 def write_chains(levels: list[dict], folder) -> dict[str, list[Path]]:
     """Write ``folder/<texture>/level_00.png, level_01.png, ...`` (8-bit RGB) for each of
-    :data:`TEXTURES`; returns the paths per texture."""
+    :data:`TEXTURES`; returns the paths per texture.
+
+    Parameters
+    ----------
+    levels : list of dict
+        Textures per level (:func:`leadr_textures`).
+    folder : str or os.PathLike
+        The folder (created).
+
+    Returns
+    -------
+    dict
+        Texture name -> the paths of its levels.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> paths = write_chains(leadr_textures(pyramid, 0.1), "maps")
+    >>> [p.as_posix() for p in paths["anisotropy"][:2]]
+    ['maps/anisotropy/level_00.png', 'maps/anisotropy/level_01.png']
+    """
     folder = Path(folder)
     paths = {}
     for name in TEXTURES:
@@ -268,7 +455,33 @@ def write_chains(levels: list[dict], folder) -> dict[str, list[Path]]:
 
 
 def read_chains(folder) -> list[dict]:
-    """The levels written by :func:`write_chains` (uint8 arrays)."""
+    """The levels written by :func:`write_chains` (uint8 arrays).
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        A folder of :func:`write_chains` (``microfacet export --to textures``).
+
+    Returns
+    -------
+    list of dict
+        Textures per level, level 0 first.
+
+    Raises
+    ------
+    MicrofacetError
+        The folder has no ``normal/level_00.png``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> levels = leadr_textures(pyramid, 0.1)
+    >>> _ = write_chains(levels, "maps")
+    >>> back = read_chains("maps")
+    >>> len(back), all((back[k][t] == levels[k][t]).all() for k in range(4) for t in TEXTURES)
+    (4, True)
+    """
     folder = Path(folder)
     files = sorted((folder / "normal").glob("level_*.png"))
     if not files:
@@ -281,7 +494,27 @@ def plane_mesh(tiles: float = 1.0):
     """``(positions, normals, tangents, uvs, indices)`` of the unit square ``[-1/2, 1/2]^2`` in
     glTF's ground plane (x, z; normal +y), tangent +x (``w = 1``: bitangent ``n x t = -z``), uv
     ``(x + 1/2, z + 1/2) * tiles`` so that the image's top row (``v = 0``) lies towards ``-z``, the
-    bitangent: the normal map's +Y and the anisotropy's ``phi`` turn from the tangent towards it."""
+    bitangent: the normal map's +Y and the anisotropy's ``phi`` turn from the tangent towards it.
+
+    Parameters
+    ----------
+    tiles : float
+        Repeats of the map along each axis.
+
+    Returns
+    -------
+    positions, normals : (4, 3) float32
+    tangents : (4, 4) float32
+    uvs : (4, 2) float32
+    indices : (6,) uint32
+        Two counter-clockwise triangles seen from +y.
+
+    Examples
+    --------
+    >>> p, n, t, uv, idx = plane_mesh(tiles=2.0)
+    >>> uv.tolist(), idx.tolist()
+    ([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]], [0, 3, 2, 0, 2, 1])
+    """
     p = np.array([[-0.5, 0, -0.5], [0.5, 0, -0.5], [0.5, 0, 0.5], [-0.5, 0, 0.5]], np.float32)
     n = np.tile(np.array([[0, 1, 0]], np.float32), (4, 1))
     t = np.tile(np.array([[1, 0, 0, 1]], np.float32), (4, 1))
@@ -303,7 +536,35 @@ def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.
     textures of ``level0`` (:data:`TEXTURES`) as embedded PNG images: ``normalTexture``,
     ``metallicRoughnessTexture`` and ``KHR_materials_anisotropy.anisotropyTexture`` (strength 1,
     rotation 0), sampler REPEAT with trilinear minification (engines make their own MIPs from
-    level 0: glTF holds a custom chain only as KTX2)."""
+    level 0: glTF holds a custom chain only as KTX2).
+
+    Parameters
+    ----------
+    level0 : dict
+        The level-0 textures (:func:`encode_level`).
+    path : str or os.PathLike
+        The ``.glb`` to write.
+    tiles : float
+        Repeats of the map along each axis of the plane.
+    metallic : float
+        ``metallicFactor`` in ``[0, 1]``.
+    base_color : (3,) sequence
+        Linear RGB ``baseColorFactor``.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
+    >>> glb = write_plane_glb(leadr_textures(pyramid, 0.1)[0], "plane.glb", tiles=4)
+    >>> from microfacet.export.gltf import read_material
+    >>> sorted(read_material(glb)["extensions"])
+    ['KHR_materials_anisotropy']
+    """
     import imagecodecs
     import pygltflib as g
     path = Path(path)
@@ -381,9 +642,42 @@ def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, 
     carried and, per level, the error of the 8-bit textures decoded as an engine reads them
     (:func:`quantization_error`).
 
+    Parameters
+    ----------
+    source : list of (H, W, 5) arrays, str or os.PathLike
+        A moment pyramid or its EXR.
+    to : str
+        One of :data:`TARGETS`.
+    out : str or os.PathLike
+        The folder (``"textures"``) or the ``.glb`` (``"gltf"``).
+    base_roughness : None, float, (float, float) or Beckmann
+        A base lobe added to every level.
+    tiles, metallic, base_color
+        The plane's (``"gltf"``; :func:`write_plane_glb`).
+
+    Returns
+    -------
+    dict
+        The report: ``format``, ``file``, ``chains``, ``lost`` (:data:`NOT_CARRIED`, and for
+        glTF the KTX2 note), ``levels`` (per level its size, mean alphas and
+        :func:`quantization_error`), ...
+
+    Raises
+    ------
+    ValueError
+        ``to``, ``tiles`` or ``metallic`` out of range, or levels that are not ``(H, W, 5)``.
+    MicrofacetError
+        No such pyramid file, or ``out`` is a file where a folder is written.
+
+    Examples
+    --------
     >>> import microfacet as mf
-    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((32, 32), 0.3, seed=0), roughness=0.05)
-    >>> report = export_leadr(pyramid, "textures", "leadr_maps")         # doctest: +SKIP
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=0), roughness=0.05)
+    >>> TARGETS
+    ('textures', 'gltf')
+    >>> report = export_leadr(pyramid, "gltf", "bumps")
+    >>> report["file"], report["chains"], len(report["levels"]), report["lost"][:len(NOT_CARRIED)] == NOT_CARRIED
+    ('bumps.glb', 'bumps.mips', 4, True)
     """
     if to not in TARGETS:
         raise ValueError(f"to must be one of {', '.join(TARGETS)} for a LEADR pyramid, got {to!r}")
@@ -421,7 +715,32 @@ def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, 
 
 def run_cli(args) -> int:
     """``microfacet export PYRAMID.exr --to textures|gltf -o OUT [--base-roughness A]`` (called by
-    :mod:`microfacet.cli.export` for a pyramid or ``--to textures``): one line per error."""
+    :mod:`microfacet.cli.export` for a pyramid or ``--to textures``): one line per error.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``fit`` (the pyramid EXR), ``to``, ``output``, ``base_roughness``, ``model``.
+
+    Returns
+    -------
+    int
+        0 (errors raise): prints the summary line, and what is not carried to stderr.
+
+    Raises
+    ------
+    MicrofacetError
+        The source is not a pyramid EXR, or a target or option that does not apply.
+
+    Examples
+    --------
+    >>> import argparse, microfacet as mf
+    >>> _ = mf.leadr.write_pyramid("bumps.exr", mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)))
+    >>> run_cli(argparse.Namespace(fit="bumps.exr", to="textures", output="bumps_maps", base_roughness=0.1,
+    ...                            model="best"))
+    bumps_maps: 4 MIP levels as textures; 8-bit covariance error max ...; report bumps_maps.export.md
+    0
+    """
     from ..cli.common import check_output_name, output_path
     source = Path(args.fit)
     if source.suffix.lower() != ".exr":

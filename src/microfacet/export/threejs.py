@@ -50,7 +50,28 @@ CHROMIUM = ("/usr/lib/chromium/chromium", "/usr/bin/chromium", "/usr/bin/chromiu
 def npm_modules(required: bool = True) -> Path | None:
     """The ``node_modules`` folder with ``three`` and ``gltf-validator``: under
     ``$MICROFACET_NPM_DIR``, else the repository's ``.npm-export``; when absent, ``None`` or
-    (``required``) a :class:`MicrofacetError` saying in one line what to do."""
+    (``required``) a :class:`MicrofacetError` saying in one line what to do.
+
+    Parameters
+    ----------
+    required : bool
+        Raise instead of returning None.
+
+    Returns
+    -------
+    Path or None
+        The ``node_modules`` folder.
+
+    Examples
+    --------
+    :data:`NPM_DIR_ENV` names the folder first; the answer depends on the machine:
+
+    >>> NPM_DIR_ENV
+    'MICROFACET_NPM_DIR'
+    >>> mods = npm_modules(required=False)
+    >>> mods is None or (mods.name == "node_modules" and (mods / "three").is_dir())
+    True
+    """
     env = os.environ.get(NPM_DIR_ENV)
     for base in ([Path(env)] if env else []) + [DEFAULT_NPM_DIR]:
         mods = base / "node_modules"
@@ -63,7 +84,24 @@ def npm_modules(required: bool = True) -> Path | None:
 
 
 def chromium(required: bool = True) -> str | None:
-    """Path of the system Chromium (never a Playwright download), or None / an error."""
+    """Path of the system Chromium (never a Playwright download), or None / an error.
+
+    Parameters
+    ----------
+    required : bool
+        Raise a :class:`MicrofacetError` saying what to install instead of returning None.
+
+    Returns
+    -------
+    str or None
+        The executable.
+
+    Examples
+    --------
+    >>> exe = chromium(required=False)
+    >>> exe is None or Path(exe).exists()
+    True
+    """
     exe = next((c for c in CHROMIUM if Path(c).exists()), shutil.which("chromium"))
     if exe is None and required:
         raise MicrofacetError("no system Chromium: apt-get install chromium")
@@ -82,7 +120,33 @@ v.validateBytes(data, {uri: process.argv[2], maxIssues: 100}).then(r => {
 
 def validate_gltf(path, timeout: float = 60.0) -> dict:
     """The Khronos glTF-Validator report of ``path`` (``.glb``/``.gltf``): a dict whose
-    ``issues`` has ``numErrors``, ``numWarnings``, ``numInfos`` and ``messages``."""
+    ``issues`` has ``numErrors``, ``numWarnings``, ``numInfos`` and ``messages``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to validate.
+    timeout : float
+        Seconds node may take.
+
+    Returns
+    -------
+    dict
+        The validator's JSON report.
+
+    Raises
+    ------
+    MicrofacetError
+        node, the validator (:func:`npm_modules`) or the validation failed.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> from microfacet.export.gltf import gltf_material, write_glb
+    >>> glb = write_glb(gltf_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.1)))[0], "sphere.glb")
+    >>> validate_gltf(glb)["issues"]["numErrors"]                # doctest: +SKIP
+    0
+    """
     mods = npm_modules()
     node = shutil.which("node")
     if node is None:
@@ -157,7 +221,32 @@ class ThreeRenderer:
     """Renders ``.glb`` files with three.js in headless Chromium (module docstring); a context
     manager holding one server (127.0.0.1) and one browser page. ``exact_schlick=False`` keeps
     three.js's approximate Schlick term. ``revision``: three.js's. Subclasses serve another page
-    through ``HTML`` (it must set ``window.pageReady``) and add files to the served folder ``root``."""
+    through ``HTML`` (it must set ``window.pageReady``) and add files to the served folder ``root``.
+
+    Parameters
+    ----------
+    timeout_ms : int
+        Milliseconds the page may take to start and to render.
+    exact_schlick : bool
+        Replace three.js's approximate Schlick term by ``(1 - c)^5``.
+
+    Examples
+    --------
+    The page (:data:`PAGE`) starts from :data:`PAGE_PROLOGUE`, shared by the other pages:
+
+    >>> PAGE.startswith(PAGE_PROLOGUE), "window.pageReady = true" in PAGE
+    (True, True)
+
+    Rendering needs three.js (:func:`npm_modules`) and Chromium (:func:`chromium`):
+
+    >>> import microfacet as mf
+    >>> from microfacet.export.gltf import gltf_material, write_glb
+    >>> glb = write_glb(gltf_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)))[0], "sphere.glb")
+    >>> with ThreeRenderer() as r:                               # doctest: +SKIP
+    ...     image = r.render(glb, size=32)
+    >>> image.shape                                              # doctest: +SKIP
+    (32, 32, 3)
+    """
 
     #: The page served as ``index.html``.
     HTML = PAGE
