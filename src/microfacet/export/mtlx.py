@@ -125,6 +125,8 @@ def _pbrlib(mx, doc, a, lost: list):
         layer.setConnectedNode("top", coat)
         layer.setConnectedNode("base", top)
         top = layer
+        lost.append("coat: MaterialX's layer attenuates the base by the coat's view-side transmission "
+                    "1 - E_c(theta_o) only (the library's LayeredBRDF by both sides')")
     out = graph.addOutput("out", "BSDF")
     out.setConnectedNode(top)
     surf = doc.addNode("surface", "SR_microfacet_exact", "surfaceshader")
