@@ -28,8 +28,10 @@ are summed over the first coarser lobe level where they fit (the lobes' MIP leve
 
 Example
 -------
->>> ms = mf.glints.Microsurface.from_normal_map("scratches.png")      # doctest: +SKIP
->>> export_glints_threejs(ms, "glints_web")                           # doctest: +SKIP
+>>> import numpy as np, microfacet as mf
+>>> ms = mf.glints.Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((4, 4, 2)))
+>>> sorted(p.name for p in export_glints_threejs(ms, "glints_web").iterdir())
+['glints-material.js', 'index.html', 'lobes.bin', 'lobes.json']
 """
 from __future__ import annotations
 
@@ -58,7 +60,23 @@ def lobe_textures(ms) -> list[tuple[np.ndarray, np.ndarray]]:
     ``a (ny_k, nx_k, 4) = (E[x~], E[y~], Var x~, Var y~)`` and ``b (ny_k, nx_k, 1) = Cov(x~, y~)``,
     central moments computed in float64 (float32 raw moments would cancel), row 0 = ``v`` near 0.
 
-    >>> a, b = lobe_textures(ms)[0]                                    # doctest: +SKIP
+    Parameters
+    ----------
+    ms : Microsurface
+        A lobe mixture (:class:`~microfacet.glints.Microsurface`).
+
+    Returns
+    -------
+    list of (ndarray, ndarray)
+        ``(a, b)`` per MIP level, level 0 first.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> slopes = 0.1 * np.random.default_rng(0).standard_normal((4, 4, 2))     # a 4 x 4 normal map's slopes
+    >>> ms = mf.glints.Microsurface.from_slopes(slopes)
+    >>> [(a.shape, b.shape) for a, b in lobe_textures(ms)]
+    [((4, 4, 4), (4, 4, 1)), ((2, 2, 4), (2, 2, 1)), ((1, 1, 4), (1, 1, 1))]
     """
     out = []
     for k in range(len(ms.mip)):
@@ -72,7 +90,18 @@ def lobe_textures(ms) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def vertex_shader() -> str:
     """Vertex shader of the material (three.js ``ShaderMaterial``): ``uv * mfUvScale``,
-    the view-space position and the object axes in view space."""
+    the view-space position and the object axes in view space.
+
+    Returns
+    -------
+    str
+        GLSL ES 3.00 without its ``#version`` line (three.js adds it and its prefix).
+
+    Examples
+    --------
+    >>> "uniform vec2 mfUvScale;" in vertex_shader(), "void main()" in vertex_shader()
+    (True, True)
+    """
     return """uniform vec2 mfUvScale;
 out vec2 vMfUv;
 out vec3 vMfViewPos;
@@ -138,7 +167,19 @@ def fragment_shader() -> str:
     library's ``glints.glsl`` (its ``#version`` line removed: three.js writes its own) and a
     ``main`` summing the point lights, then three.js's tone mapping and output colour space
     (neither applies to a float render target: linear radiance).
-    ``MF_GLINT_MAX_WINDOW`` comes from the material's ``defines`` (``maxWindow``)."""
+    ``MF_GLINT_MAX_WINDOW`` comes from the material's ``defines`` (``maxWindow``).
+
+    Returns
+    -------
+    str
+        The shader's GLSL (three.js's ``#include`` chunks unexpanded).
+
+    Examples
+    --------
+    >>> frag = fragment_shader()
+    >>> frag.startswith("#include <common>"), "#version" in frag, "mf_glint_eval_cos(" in frag
+    (True, False, True)
+    """
     lib = source("glints", "es300").split("\n", 1)[1]
     return "#include <common>\n#include <lights_pars_begin>\n" + lib + _MAIN
 
@@ -204,7 +245,19 @@ def material_module() -> str:
     """The ES module ``glints-material.js``: ``VERTEX_SHADER``, ``FRAGMENT_SHADER``,
     ``loadGlintLobes(THREE, jsonUrl)`` (the textures of :func:`write_lobes`) and
     ``createGlintMaterial(THREE, lobes, options)`` (a ``THREE.ShaderMaterial``; options in the
-    module's comment, among them ``maxWindow``, default :data:`MAX_WINDOW`)."""
+    module's comment, among them ``maxWindow``, default :data:`MAX_WINDOW`).
+
+    Returns
+    -------
+    str
+        The module's JavaScript.
+
+    Examples
+    --------
+    >>> js = material_module()
+    >>> MAX_WINDOW, "export function createGlintMaterial" in js, LOBES_FORMAT in js
+    (48, True, True)
+    """
     return _MODULE % {"vertex": json.dumps(vertex_shader()), "fragment": json.dumps(fragment_shader()),
                       "format": LOBES_FORMAT, "max_window": MAX_WINDOW}
 
@@ -212,7 +265,32 @@ def material_module() -> str:
 def write_lobes(ms, folder, name: str = "lobes") -> Path:
     """Write ``NAME.json`` (levels, cutoff, the microsurface's parameters) and ``NAME.bin``
     (:func:`lobe_textures`, float32 little endian, per level ``a`` then ``b``) into ``folder``;
-    returns the ``.json`` path."""
+    returns the ``.json`` path.
+
+    Parameters
+    ----------
+    ms : Microsurface
+        A lobe mixture.
+    folder : str or os.PathLike
+        The folder (created).
+    name : str
+        The files' stem.
+
+    Returns
+    -------
+    Path
+        ``folder/NAME.json``.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> slopes = 0.1 * np.random.default_rng(0).standard_normal((4, 4, 2))     # a 4 x 4 normal map's slopes
+    >>> ms = mf.glints.Microsurface.from_slopes(slopes)
+    >>> import json
+    >>> meta = json.loads(write_lobes(ms, "web").read_text())
+    >>> meta["format"] == LOBES_FORMAT, meta["levels"], meta["data"]
+    (True, [[4, 4], [2, 2], [1, 1]], 'lobes.bin')
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     levels = lobe_textures(ms)
@@ -319,7 +397,43 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
     ``view_deg``) under a point light at ``light`` circling over it, with three.js from
     ``three_url``. Serve the folder over HTTP (``python -m http.server``); returns ``out``.
 
-    >>> export_glints_threejs(mf.glints.Microsurface.load("scratches.npz"), "web")  # doctest: +SKIP
+    Parameters
+    ----------
+    ms : Microsurface
+        A lobe mixture (e.g. ``Microsurface.load("scratches.npz")``).
+    out : str or os.PathLike
+        The folder (created).
+    width : int
+        The page's image width in pixels.
+    view_deg : float
+        Camera elevation from the plane, degrees.
+    light : (3,) sequence
+        Position of the point light.
+    intensity : float
+        The light's intensity.
+    three_url : str
+        The ``three.module.js`` of the page's import map.
+    max_window : int
+        Lobes per axis summed at one level.
+
+    Returns
+    -------
+    Path
+        ``out``.
+
+    Raises
+    ------
+    ValueError
+        ``max_window`` is not a positive integer.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> slopes = 0.1 * np.random.default_rng(0).standard_normal((4, 4, 2))     # a 4 x 4 normal map's slopes
+    >>> ms = mf.glints.Microsurface.from_slopes(slopes)
+    >>> web = export_glints_threejs(ms, "web", width=64)
+    >>> "renderGlints" in (web / "index.html").read_text()
+    True
     """
     from ..glints.figures import PlaneScene
     max_window = _max_window(max_window)
@@ -343,8 +457,21 @@ class GlintsRenderer(ThreeRenderer):
     Chromium (WebGL2 on SwiftShader), and reads the float image back: the three.js twin of
     :func:`microfacet.glints.figures.render_pbrdf`.
 
+    Parameters
+    ----------
+    timeout_ms : int
+        Milliseconds the page may take to start and to render.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> slopes = 0.1 * np.random.default_rng(0).standard_normal((4, 4, 2))     # a 4 x 4 normal map's slopes
+    >>> ms = mf.glints.Microsurface.from_slopes(slopes)
+    >>> from microfacet.glints.figures import PlaneScene
     >>> with GlintsRenderer() as r:                                    # doctest: +SKIP
-    ...     img = r.render_scene(ms, PlaneScene(width=64))
+    ...     img = r.render_scene(ms, PlaneScene(width=16))
+    >>> img.shape                                                      # doctest: +SKIP
+    (12, 16, 3)
     """
 
     HTML = _TEST_PAGE

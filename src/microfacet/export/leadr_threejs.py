@@ -61,7 +61,14 @@ class PlaneView:
     ``light``, the textures' ``anisotropy`` (three.js ``texture.anisotropy``: 1 is trilinear), an
     image of ``width x height`` pixels; ``extra``: material overrides (``{"normalScale": k,
     "anisotropy": 0}``: the latter turns KHR_materials_anisotropy off, three.js's isotropic lobe).
-    The default looks down 15 degrees at the point 15 units away, the horizon in view."""
+    The default looks down 15 degrees at the point 15 units away, the horizon in view.
+
+    Examples
+    --------
+    >>> view = PlaneView(width=32, height=24, anisotropy=4)
+    >>> view.tiles, view.eye, (view.width, view.height)
+    (80.0, (0.0, 4.0, 20.0), (32, 24))
+    """
     extent: tuple = (40.0, 40.0)
     tiles: float = 80.0
     eye: tuple = (0.0, 4.0, 20.0)
@@ -168,7 +175,36 @@ class PlaneRenderer:
     """Renders the LEADR plane ``.glb`` in three.js in headless Chromium (module docstring): a
     context manager holding one server (127.0.0.1) and one page. ``revision``: three.js's;
     ``max_anisotropy``: the GPU's (SwiftShader's) largest ``texture.anisotropy``; ``mapped_frame``:
-    the anisotropy frame patch (module docstring)."""
+    the anisotropy frame patch (module docstring).
+
+    Parameters
+    ----------
+    timeout_ms : int
+        Milliseconds the page may take to start and to render.
+    mapped_frame : bool
+        Patch three.js's anisotropy frame into the plane of the mapped normal.
+
+    Examples
+    --------
+    Its page (:data:`PLANE_PAGE`) starts from the shared prologue of
+    :mod:`microfacet.export.threejs`:
+
+    >>> from microfacet.export.threejs import PAGE_PROLOGUE
+    >>> PLANE_PAGE.startswith(PAGE_PROLOGUE), "window.pageReady = true" in PLANE_PAGE
+    (True, True)
+
+    Rendering needs three.js and Chromium (:func:`~microfacet.export.threejs.npm_modules`,
+    :func:`~microfacet.export.threejs.chromium`):
+
+    >>> import microfacet as mf
+    >>> from microfacet.export.leadr_textures import leadr_textures, write_plane_glb
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1), roughness=0.05)
+    >>> glb = write_plane_glb(leadr_textures(pyramid)[0], "plane.glb", tiles=80)
+    >>> with PlaneRenderer() as r:                                           # doctest: +SKIP
+    ...     image = r.render(glb, PlaneView(width=32, height=24))
+    >>> image.shape                                                          # doctest: +SKIP
+    (24, 32, 3)
+    """
 
     def __init__(self, timeout_ms: int = 120000, mapped_frame: bool = True):
         self.timeout_ms = timeout_ms
@@ -234,7 +270,23 @@ class PlaneRenderer:
 
 
 def relative_l1(image, reference) -> float:
-    """``sum |image - reference| / sum |reference|`` over all pixels and channels."""
+    """``sum |image - reference| / sum |reference|`` over all pixels and channels.
+
+    Parameters
+    ----------
+    image, reference : array_like
+        Images of the same shape.
+
+    Returns
+    -------
+    float
+        The relative L1 difference.
+
+    Examples
+    --------
+    >>> relative_l1([[1.0, 3.0]], [[2.0, 2.0]])
+    0.5
+    """
     ref = np.asarray(reference, np.float64)
     return float(np.abs(np.asarray(image, np.float64) - ref).sum() / np.abs(ref).sum())
 
@@ -245,7 +297,37 @@ def compare_plane(pyramid, renderer: PlaneRenderer, folder, view: PlaneView | No
     three ways and return ``{"errors": {"naive": e_a, "leadr": e_b}, "images": {"naive",
     "leadr", "reference"}, "glb", "revision"}``; ``e`` is :func:`relative_l1` against the
     reference (level 0 without MIPs at ``supersample`` x the resolution, box-downsampled).
-    ``folder`` receives the plane ``.glb``."""
+    ``folder`` receives the plane ``.glb``.
+
+    Parameters
+    ----------
+    pyramid : list of (H, W, 5) arrays, str or os.PathLike
+        A moment pyramid or its EXR.
+    renderer : PlaneRenderer
+        An open renderer.
+    folder : str or os.PathLike
+        Where the plane ``.glb`` is written.
+    view : PlaneView, optional
+        The scene (default ``PlaneView()``).
+    base_roughness : None, float, (float, float) or Beckmann
+        A base lobe added to every level.
+    supersample : int
+        The reference's supersampling per axis.
+
+    Returns
+    -------
+    dict
+        ``errors``, ``images``, ``glb``, ``revision``, ``max_anisotropy``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1), roughness=0.05)
+    >>> with PlaneRenderer() as r:                                                         # doctest: +SKIP
+    ...     result = compare_plane(pyramid, r, ".", PlaneView(width=32, height=24), supersample=2)
+    >>> sorted(result["errors"]), result["images"]["leadr"].shape                          # doctest: +SKIP
+    (['leadr', 'naive'], (24, 32, 3))
+    """
     view = view or PlaneView()
     levels = leadr_textures(pyramid, base_roughness)
     naive = naive_textures(levels[0])
