@@ -9,6 +9,19 @@ BRDF (Eq. 7) with exact or approximate (MIP, Sec. 4.2.2) patch masking.
 Modules: ``microsurface`` (:class:`LobeMixture`: lobes, P-NDF, files) <- ``pbrdf``
 (:class:`PatchBRDF` and the public :class:`Microsurface`, a ``LobeMixture`` with
 ``.pbrdf``) <- ``figures``; ``reference`` needs only ``microsurface``.
+
+Examples
+--------
+>>> import numpy as np
+>>> ms = Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((8, 8, 2)))
+>>> center, cov = [0.5, 0.5], np.eye(2) * 1e-3            # a Gaussian footprint in uv
+>>> bool(ms.pndf(np.array([0.0, 0.0, 1.0]), center, cov) > 0)
+True
+>>> f = ms.pbrdf(center, cov)                               # the patch BRDF, a library BRDF
+>>> f.eval_cos(np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])).shape
+(3,)
+>>> Microsurface.load(ms.save("scratches.npz")).grid, FORMAT_VERSION
+((8, 8), 2)
 """
 from .microsurface import FORMAT_VERSION, LobeMixture, interpolate_slopes, load_slopes
 from .pbrdf import Microsurface, PatchBRDF, eval_cos_footprints, lobe_projected_area

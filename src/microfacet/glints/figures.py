@@ -46,6 +46,30 @@ def scratched_normal_map(size: int = 512, scratches: int = 160, depth: float = 1
     ``width`` texels, depth up to ``depth`` texels, random orientation, position and length)
     over a smooth low-amplitude bump field of slope deviation ``roughness``; normals from
     the periodic central-difference gradient. Deterministic for a ``seed``; wraps.
+
+    Parameters
+    ----------
+    size : int
+        Width and height in texels (at least 8).
+    scratches : int
+        Number of grooves.
+    depth, width : float
+        Largest groove depth and the grooves' Gaussian width, in texels.
+    roughness : float
+        Slope deviation of the bump field.
+    seed : int
+        Random seed.
+
+    Returns
+    -------
+    (size, size, 3) ndarray
+        Unit normals (z up), signed.
+
+    Examples
+    --------
+    >>> n = scratched_normal_map(16, scratches=4, seed=1)
+    >>> n.shape, bool(np.allclose(np.linalg.norm(n, axis=-1), 1.0)), bool((n[..., 2] > 0).all())
+    ((16, 16, 3), True, True)
     """
     if int(size) != size or size < 8:
         raise ValueError(f"size must be an integer >= 8, got {size!r}")
@@ -82,7 +106,28 @@ def scratched_normal_map(size: int = 512, scratches: int = 160, depth: float = 1
 # ------------------------------------------------------------------------------ scene
 @dataclass
 class PlaneScene:
-    """A normal-mapped plane, an orthographic camera and a point light (module notes)."""
+    """A normal-mapped plane, an orthographic camera and a point light (module notes).
+
+    Parameters
+    ----------
+    width : int
+        Image width in pixels; the height is ``round(width sin(view_deg))``.
+    view_deg : float
+        Camera elevation from the plane, degrees, in ``(0, 90]``.
+    light : (3,) tuple
+        Position of the point light (``z > 0``).
+    intensity : float
+        The light's intensity ``I`` (radiance ``I / r^2`` times ``eval_cos``).
+
+    Examples
+    --------
+    Each pixel's footprint is a Gaussian of :data:`PIXEL_SIGMA` pixels, mapped to uv:
+
+    >>> scene = PlaneScene(width=8)
+    >>> uv, cov, points = scene.pixels()
+    >>> scene.height, uv.shape, bool(np.isclose(cov[0, 0], (PIXEL_SIGMA / 8) ** 2))
+    (6, (48, 2), True)
+    """
 
     width: int = 64
     view_deg: float = 50.0
@@ -133,7 +178,34 @@ class PlaneScene:
 
 
 def render_pbrdf(ms, scene: PlaneScene, exact: bool = True, fresnel=None, g2: str = "correlated") -> np.ndarray:
-    """Image ``(height, width, 3)`` of ``scene`` with the P-BRDF of each pixel's footprint."""
+    """Image ``(height, width, 3)`` of ``scene`` with the P-BRDF of each pixel's footprint
+    (:func:`~microfacet.glints.pbrdf.eval_cos_footprints`, Chermain et al. 2019, Eq. 7).
+
+    Parameters
+    ----------
+    ms : Microsurface
+        The normal map's lobe mixture.
+    scene : PlaneScene
+        Camera, plane and light.
+    exact : bool
+        Exact patch masking or the MIP approximation.
+    fresnel : Fresnel, optional
+        Microfacet Fresnel term (default ideal mirrors).
+    g2 : str
+        Masking-shadowing form (:data:`~microfacet.glints.pbrdf.G2_MODELS`).
+
+    Returns
+    -------
+    (height, width, 3) ndarray
+        Linear radiance, row 0 the far edge.
+
+    Examples
+    --------
+    >>> ms = Microsurface.from_normal_map(scratched_normal_map(16, scratches=4, seed=1))
+    >>> image = render_pbrdf(ms, PlaneScene(width=8))
+    >>> image.shape, bool(image.max() > 0)
+    ((6, 8, 3), True)
+    """
     uv, cov, p = scene.pixels()
     wi, e = scene.lighting(p)
     f = eval_cos_footprints(ms, uv, cov, wi, scene.wo, fresnel=fresnel, exact=exact, g2=g2)
@@ -183,7 +255,40 @@ def render_naive(ms, scene: PlaneScene, spp: int, seed: int = 0, fresnel=None,
     array mean slopes, ``batch`` samples at a time), ``"numba"`` (one compiled pass,
     :func:`_naive_sums`, the same positions and formulas; tested against the reference)
     or ``"auto"`` (numba when available). The Fresnel term depends on the pixel's half
-    vector only (one light direction per pixel) and is applied per pixel."""
+    vector only (one light direction per pixel) and is applied per pixel.
+
+    Parameters
+    ----------
+    ms : Microsurface
+        The normal map (its ``slopes`` and ``sigma_eps``).
+    scene : PlaneScene
+        Camera, plane and light.
+    spp : int
+        Samples per pixel.
+    seed : int
+        Seed of the counter-based samples.
+    fresnel : Fresnel, optional
+        Microfacet Fresnel term (default ideal mirrors).
+    batch : int
+        Samples per NumPy batch.
+    backend : str
+        ``"auto"``, ``"numpy"`` or ``"numba"``.
+
+    Returns
+    -------
+    (height, width, 3) ndarray
+        Linear radiance, an unbiased estimate of the image :func:`render_pbrdf` approximates.
+
+    Examples
+    --------
+    The backends draw the same samples:
+
+    >>> ms = Microsurface.from_normal_map(scratched_normal_map(16, scratches=4, seed=1))
+    >>> a = render_naive(ms, PlaneScene(width=8), spp=4, backend="numpy")
+    >>> b = render_naive(ms, PlaneScene(width=8), spp=4, backend="auto")
+    >>> a.shape, bool(np.allclose(a, b))
+    ((6, 8, 3), True)
+    """
     compiled = backend_.choose(backend, _naive_sums is not None) == backend_.NUMBA
     if int(spp) != spp or spp < 1:
         raise ValueError(f"spp must be a positive integer, got {spp!r}")
@@ -293,7 +398,23 @@ else:  # pragma: no cover - without numba
 
 
 def relative_error(image, reference) -> float:
-    """Relative L2 error ``||image - ref|| / ||ref||`` over pixels (first channel)."""
+    """Relative L2 error ``||image - ref|| / ||ref||`` over pixels (first channel).
+
+    Parameters
+    ----------
+    image, reference : (H, W, C) array_like
+        Images of the same shape.
+
+    Returns
+    -------
+    float
+        The relative error.
+
+    Examples
+    --------
+    >>> relative_error(np.full((2, 2, 3), 1.1), np.ones((2, 2, 3)))
+    0.10000000000000009
+    """
     a, b = np.asarray(image)[..., 0], np.asarray(reference)[..., 0]
     return float(np.linalg.norm(a - b) / max(np.linalg.norm(b), 1e-300))
 
@@ -341,6 +462,34 @@ def glints_section(out, progress=None, map_size: int = 512, width: int = 256,
     left to ``benchmarks/bench_glints_render.py``. A white-furnace table shows that both
     P-BRDFs conserve energy and that the approximation darkens. ``progress(n)`` is
     called as steps complete.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The demo's folder (``out/glints/`` is written).
+    progress : callable, optional
+        Called with the number of steps done.
+    map_size : int
+        The scratched map's size in texels.
+    width : int
+        The images' width in pixels.
+    reference_spp, naive_spp : int
+        Samples per pixel of the naive reference and of the naive image.
+    seed : int
+        Seed of the map and of the samples.
+
+    Returns
+    -------
+    str
+        The HTML ``<section id="glints">``.
+
+    Examples
+    --------
+    It takes seconds even for tiny images (the white-furnace integrals):
+
+    >>> html = glints_section("demo", map_size=8, width=4, reference_spp=2, naive_spp=1)   # doctest: +SKIP
+    >>> html.startswith('<section id="glints">')                                          # doctest: +SKIP
+    True
     """
     from html import escape
 
@@ -421,7 +570,47 @@ def render_cli(npz, out_png, light=(0.0, 0.35, 0.9), distance: float = 1.2, widt
     """``microfacet glints render``: a plane with the microsurface ``npz`` under a point
     light at ``distance`` from the plane's centre in direction ``light``; writes the PNG
     (exposure: the 99.5th percentile maps to 1 unless given). Returns
-    ``(png_path, linear image, seconds)``."""
+    ``(png_path, linear image, seconds)``.
+
+    Parameters
+    ----------
+    npz : str or os.PathLike
+        A microsurface file (``microfacet glints build``, :meth:`Microsurface.save`).
+    out_png : str or os.PathLike
+        The picture to write (its folder is created).
+    light : (3,) sequence
+        Direction of the light from the plane's centre (``z > 0``).
+    distance : float
+        The light's distance from the plane's centre.
+    width : int
+        Image width in pixels.
+    view_deg : float
+        Camera elevation, degrees.
+    exact : bool
+        Exact patch masking or the MIP approximation.
+    exposure : float, optional
+        Exposure (stops) of the PNG.
+
+    Returns
+    -------
+    png_path : Path
+    image : (height, width, 3) ndarray
+        Linear radiance.
+    seconds : float
+        The render's wall time.
+
+    Raises
+    ------
+    ValueError
+        ``light`` or ``distance`` out of range.
+
+    Examples
+    --------
+    >>> ms = Microsurface.from_normal_map(scratched_normal_map(16, scratches=4, seed=1))
+    >>> png, image, seconds = render_cli(ms.save("scratches.npz"), "glints.png", width=8)
+    >>> png.name, image.shape
+    ('glints.png', (6, 8, 3))
+    """
     from ..io import write_png
     lt = np.asarray(light, dtype=np.float64)
     if lt.shape != (3,) or not np.all(np.isfinite(lt)) or lt[2] <= 0:

@@ -106,12 +106,56 @@ def load_slopes(path_or_array, encoding: str = "auto", z: str = "auto") -> np.nd
     ``(H, W, 2|3|4)``), decoded by the library's one normal-map decoder
     (:func:`microfacet.io.normalmap.read_slopes`: ``encoding`` ``"auto"``, ``"biased"``
     (alias ``"offset"``) or ``"signed"``; ``z`` ``"auto"``, ``"stored"`` or ``"reconstruct"``;
-    per-texel repair with a warning)."""
+    per-texel repair with a warning).
+
+    Parameters
+    ----------
+    path_or_array : str, os.PathLike or (H, W, C) array
+        The normal map.
+    encoding : str
+        ``"auto"``, ``"biased"``/``"offset"`` (``(n + 1) / 2``) or ``"signed"``.
+    z : str
+        ``"auto"``, ``"stored"`` or ``"reconstruct"`` (from x and y).
+
+    Returns
+    -------
+    (H, W, 2) ndarray
+        Slopes ``(x~, y~) = (-n_x / n_z, -n_y / n_z)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> n = np.broadcast_to([-0.48, 0.36, 0.8], (2, 2, 3))      # signed unit normals
+    >>> load_slopes(n, encoding="signed")[0, 0].round(6).tolist()
+    [0.6, -0.45]
+    """
     return read_slopes(path_or_array, encoding, z)[0]
 
 
 def interpolate_slopes(slopes, uv) -> np.ndarray:
-    """Slopes ``(..., 2)`` of the bilinearly interpolated (wrapped) map at ``uv (..., 2)``."""
+    """Slopes ``(..., 2)`` of the bilinearly interpolated (wrapped) map at ``uv (..., 2)``
+    (texel centres at ``(i + 1/2) / W``; module conventions).
+
+    Parameters
+    ----------
+    slopes : (H, W, 2) array_like
+        Texel slopes (:func:`load_slopes`).
+    uv : (..., 2) array_like
+        Texture coordinates (wrapped).
+
+    Returns
+    -------
+    (..., 2) ndarray
+        The interpolated slopes.
+
+    Examples
+    --------
+    Halfway between the centres of texels 0 and 1 of a row, and across the wrap:
+
+    >>> s = np.zeros((1, 4, 2)); s[0, :, 0] = [0.0, 1.0, 2.0, 3.0]
+    >>> interpolate_slopes(s, [[0.25, 0.5], [0.0, 0.5]])[:, 0].tolist()
+    [0.5, 1.5]
+    """
     s = np.asarray(slopes, dtype=np.float64)
     uv = np.asarray(uv, dtype=np.float64)
     hgt, wid = s.shape[:2]
@@ -137,7 +181,30 @@ def _quadrature(sigma: float, samples: int) -> tuple[np.ndarray, np.ndarray]:
 def lobe_moments_reference(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
     """Raw moments ``(ny, nx, 5)`` of the interpolated map under each seed's normalized
     kernel (Eq. 3-6) by tensor quadrature, vectorized over seeds (NumPy reference of the
-    compiled :func:`_lobe_moments`)."""
+    compiled :func:`_lobe_moments`).
+
+    Parameters
+    ----------
+    slopes : (H, W, 2) array_like
+        Texel slopes.
+    nx, ny : int
+        Seeds per axis.
+    samples : int
+        Quadrature points per texel and axis.
+
+    Returns
+    -------
+    (ny, nx, 5) ndarray
+        ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~ y~]`` per seed (unfloored).
+
+    Examples
+    --------
+    A constant map: every lobe's mean is the slope, its variance 0:
+
+    >>> s = np.broadcast_to([0.2, -0.1], (4, 4, 2))
+    >>> lobe_moments_reference(s, 2, 2)[0, 0].round(6).tolist()
+    [0.2, -0.1, 0.04, 0.01, -0.02]
+    """
     s = np.asarray(slopes, dtype=np.float64)
     hgt, wid = s.shape[:2]
     hx, hy = wid / nx, hgt / ny
@@ -264,7 +331,28 @@ def lobe_moments(slopes, nx: int, ny: int, samples: int = 4) -> np.ndarray:
     kernel (Eq. 3-6), compiled: :func:`_lobe_moments_shared` when ``h * samples`` is an
     integer along both axes, else the direct sum :func:`_lobe_moments`. Both equal
     :func:`lobe_moments_reference` to rounding. Float32 slopes are read as they are (the
-    arithmetic is float64), others as float64."""
+    arithmetic is float64), others as float64.
+
+    Parameters
+    ----------
+    slopes : (H, W, 2) array_like
+        Texel slopes.
+    nx, ny : int
+        Seeds per axis.
+    samples : int
+        Quadrature points per texel and axis.
+
+    Returns
+    -------
+    (ny, nx, 5) ndarray
+        Raw moments per seed (unfloored).
+
+    Examples
+    --------
+    >>> s = 0.1 * np.random.default_rng(0).standard_normal((8, 8, 2))
+    >>> bool(np.allclose(lobe_moments(s, 4, 4), lobe_moments_reference(s, 4, 4)))
+    True
+    """
     s = np.asarray(slopes)
     s = np.ascontiguousarray(s, dtype=np.float32 if s.dtype == np.float32 else np.float64)
     hgt, wid = s.shape[:2]
@@ -645,6 +733,36 @@ class LobeMixture:
 
     ``moments`` ``(ny, nx, 5)`` raw moments are floored (:func:`_floor_moments`) in a
     copy, or in place with ``copy=False`` (the builders and :meth:`load` own theirs).
+
+    Parameters
+    ----------
+    moments : (ny, nx, 5) array_like
+        Raw lobe moments (:func:`lobe_moments`).
+    slopes : (H, W, 2) array_like
+        The texel slopes they came from.
+    h : float
+        Seed spacing in texels (:data:`SPACING_RANGE`).
+    sigma_eps : float
+        Floor of the lobes' principal slope deviations.
+    cutoff, slope_cutoff : float
+        Truncations of the footprint weights and of the hierarchy's slope boxes (Sec. 5).
+    copy : bool
+        Floor a copy of ``moments`` (False: in place).
+
+    Examples
+    --------
+    The kernels' FWHM is one seed spacing (:data:`FWHM_PER_SIGMA`); files are written in
+    format :data:`FORMAT_VERSION`:
+
+    >>> slopes = 0.1 * np.random.default_rng(0).standard_normal((4, 4, 2))
+    >>> ms = LobeMixture.from_slopes(slopes)
+    >>> ms.grid, ms.n_lobes, bool(np.allclose(ms.kernel_sigma * FWHM_PER_SIGMA, 1 / 4))
+    ((4, 4), 16, True)
+    >>> h = np.array([0.0, 0.0, 1.0])
+    >>> ms.pndf(h, center=[0.5, 0.5], cov=np.eye(2) * 1e-3).shape
+    ()
+    >>> LobeMixture.load(ms.save("lobes.npz")).grid, FORMAT_VERSION, SPACING_RANGE
+    ((4, 4), 2, (0.0625, 10000.0))
     """
 
     def __init__(self, moments, slopes, h: float = 1.0, sigma_eps: float = 0.01,

@@ -108,6 +108,30 @@ def lobe_projected_area(moments, k) -> tuple[np.ndarray, np.ndarray]:
     ``A = c Phi(c/sigma) + sigma phi(c/sigma)`` (``= c_k (1 + Lambda(k))`` of Eq. 3.3
     where ``c_k > 0``, Chermain et al. Eq. 13). ``moments`` ``(..., 5)`` broadcast against
     ``k`` ``(..., 3)``; ``c_k = <n_mean, k> / n_mean.z`` is returned unclamped.
+
+    Parameters
+    ----------
+    moments : (..., 5) array_like
+        Raw slope moments ``E1..E5`` of Beckmann lobes.
+    k : (..., 3) array_like
+        Unit directions.
+
+    Returns
+    -------
+    c : ndarray
+        ``<n_mean, k> / n_mean.z``.
+    area : ndarray
+        The projected area ``int <k, h>+ D(h) dw_h``.
+
+    Examples
+    --------
+    A centred lobe seen from the normal projects to 1; from 74 degrees, to ``cos theta (1 +
+    Lambda)``, a little more than ``cos theta``:
+
+    >>> E = np.array([0.0, 0.0, 0.02, 0.02, 0.0])             # Beckmann alpha = 0.2
+    >>> c, area = lobe_projected_area(E, [[0.0, 0.0, 1.0], [0.96, 0.0, 0.28]])
+    >>> c.tolist(), area.round(4).tolist()
+    ([1.0, 0.28], [1.0, 0.281])
     """
     m = np.asarray(moments, dtype=np.float64)
     k = np.asarray(k, dtype=np.float64)
@@ -125,7 +149,27 @@ def lobe_projected_area(moments, k) -> tuple[np.ndarray, np.ndarray]:
 
 def merge_moments(moments, weights) -> np.ndarray:
     """``W``-weighted average of linear slope moments (LEADR): the single Beckmann lobe
-    with the mixture's mean and covariance (Sec. 4.2.2, what MIP levels store)."""
+    with the mixture's mean and covariance (Sec. 4.2.2, what MIP levels store).
+
+    Parameters
+    ----------
+    moments : (N, 5) array_like
+        Raw moments of the lobes.
+    weights : (N,) array_like
+        Their weights ``W_i`` (any positive scale).
+
+    Returns
+    -------
+    (5,) ndarray
+        The merged raw moments.
+
+    Examples
+    --------
+    Two narrow lobes of mean slopes +-0.1 merge into one centred lobe of variance 0.01 more:
+
+    >>> merge_moments([[0.1, 0.0, 0.02, 0.01, 0.0], [-0.1, 0.0, 0.02, 0.01, 0.0]], [1.0, 1.0]).round(6).tolist()
+    [0.0, 0.0, 0.02, 0.01, 0.0]
+    """
     m = _moments(moments)
     w = np.asarray(weights, dtype=np.float64)
     return (w[:, None] * m).sum(0) / w.sum()
@@ -188,6 +232,17 @@ class PatchBRDF(BRDF):
         it (Eq. 7 is homogeneous of degree 0 in ``W``).
     moments : (N, 5)
         Their slope moments; ``merged`` ``(5,)`` the approximation's single lobe.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> ms = mf.glints.Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((4, 4, 2)))
+    >>> f = PatchBRDF(ms, center=[0.5, 0.5], cov=np.eye(2) * 1e-3, backend="numpy")
+    >>> len(f.indices), round(float(f.weights.sum()), 6)
+    (4, 1.0)
+    >>> wi, wo = np.array([0.3, 0.0, 0.954]), np.array([-0.3, 0.0, 0.954])
+    >>> f.eval_cos(wi / np.linalg.norm(wi), wo / np.linalg.norm(wo)).shape
+    (3,)
     """
 
     def __init__(self, ms, center, cov, fresnel: _fresnel.Fresnel | None = None,
@@ -420,7 +475,21 @@ class PatchBRDF(BRDF):
 class Microsurface(LobeMixture):
     """A normal map's lobe mixture (:class:`~microfacet.glints.microsurface.LobeMixture`:
     Sec. 3-5, P-NDF, files) with its patch BRDF (Eq. 7): the public class. It lives here
-    so that imports flow one way (``microsurface`` <- ``pbrdf`` <- ``figures``)."""
+    so that imports flow one way (``microsurface`` <- ``pbrdf`` <- ``figures``).
+
+    Build it with :meth:`from_normal_map` or :meth:`from_slopes` (parameters of
+    :class:`~microfacet.glints.microsurface.LobeMixture`).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> ms = mf.glints.Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((4, 4, 2)))
+    >>> ms
+    Microsurface(4 x 4 lobes from a 4 x 4 map, h=1, sigma_eps=0.01)
+    >>> wi = wo = np.array([0.0, 0.0, 1.0])
+    >>> float(ms.pbrdf([0.5, 0.5], np.eye(2) * 1e-3, backend="numpy").eval_cos(wi, wo)[0]) > 0
+    True
+    """
 
     def pbrdf(self, center, cov, fresnel=None, exact: bool = True, **kwargs) -> PatchBRDF:
         """The patch BRDF (Eq. 7) of a footprint; see :class:`PatchBRDF`."""
@@ -437,6 +506,32 @@ def footprint_lobes(grid_shape, centers, covs, cutoff: float = 3.0):
     ``Sigma_P + sigma_k^2 I`` per axis. ``centers`` ``(P, 2)``, ``covs`` ``(P, 2, 2)`` or
     ``(2, 2)``. Returns flat lobe indices ``(P, K)`` and weights ``(P, K)`` (0 outside each
     footprint's rectangle; ``K`` the largest rectangle of the batch).
+
+    Parameters
+    ----------
+    grid_shape : (int, int)
+        ``(ny, nx)`` of the lobe grid (``ms.grid``).
+    centers : (P, 2) array_like
+        Footprint centres in uv.
+    covs : (P, 2, 2) or (2, 2) array_like
+        Footprint covariances in uv^2.
+    cutoff : float
+        Half-width of the window, in standard deviations.
+
+    Returns
+    -------
+    indices : (P, K) int ndarray
+        Flat lobe indices (``iy * nx + ix``, wrapped).
+    weights : (P, K) ndarray
+        ``W_i``, summing to 1 per footprint.
+
+    Examples
+    --------
+    >>> idx, W = footprint_lobes((4, 4), [[0.5, 0.5], [0.0, 0.0]], np.eye(2) * 1e-3)
+    >>> idx.shape, W.sum(-1).round(6).tolist()
+    ((2, 4), [1.0, 1.0])
+    >>> idx[0].tolist()                       # the 2 x 2 lobes around the centre
+    [5, 6, 9, 10]
     """
     ny, nx = grid_shape
     c = np.asarray(centers, dtype=np.float64).reshape(-1, 2)
@@ -482,7 +577,50 @@ def eval_cos_footprints(ms, centers, covs, wi, wo, *, fresnel: _fresnel.Fresnel 
     are linear in their mean slopes (:func:`_footprint_sums`): each pixel's ``D_P`` then
     drops at most ``exp(-prune^2 / 2) / (2 pi sigma_eps^2 z_h^4)`` (``1.3e-14`` of the
     largest lobe density at the default 8) and the areas are unchanged; ``np.inf``
-    visits every lobe. The NumPy backend sums every lobe."""
+    visits every lobe. The NumPy backend sums every lobe.
+
+    Parameters
+    ----------
+    ms : Microsurface
+        The lobe mixture.
+    centers, covs : array_like
+        Footprints (``(P, 2)``; ``(P, 2, 2)`` or ``(2, 2)``).
+    wi, wo : array_like
+        Light and view directions, ``(P, 3)`` or ``(3,)``.
+    fresnel : Fresnel, optional
+        Microfacet Fresnel term (default ideal mirrors).
+    exact : bool
+        Exact patch masking or the MIP approximation (Sec. 4.2.2).
+    g2 : str
+        One of :data:`G2_MODELS`.
+    block : int
+        Footprints per NumPy batch.
+    backend : str
+        ``"auto"``, ``"numpy"`` or ``"numba"``.
+    prune : float
+        The compiled backend's pruning width (standard deviations).
+
+    Returns
+    -------
+    (P, 3) ndarray
+        ``eval_cos`` per footprint.
+
+    Raises
+    ------
+    ValueError
+        ``prune <= 0`` or ``g2`` not in :data:`G2_MODELS`.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> ms = mf.glints.Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((4, 4, 2)))
+    >>> wi, wo = np.array([0.3, 0.0, 0.954]), np.array([-0.3, 0.0, 0.954])
+    >>> wi, wo = wi / np.linalg.norm(wi), wo / np.linalg.norm(wo)
+    >>> cov = np.eye(2) * 1e-3
+    >>> batch = eval_cos_footprints(ms, [[0.5, 0.5]], cov, wi, wo, backend="numpy")
+    >>> G2_MODELS, bool(np.allclose(batch[0], ms.pbrdf([0.5, 0.5], cov, backend="numpy").eval_cos(wi, wo)))
+    (('correlated', 'separable'), True)
+    """
     if not prune > 0:
         raise ValueError(f"prune must be > 0 (standard deviations), got {prune!r}")
     if g2 not in G2_MODELS:
@@ -526,7 +664,12 @@ class Window(NamedTuple):
     window's half-width ``cutoff`` in standard deviations. Built once per grid
     (:meth:`of`) and passed whole to the compiled footprint kernels.
 
-    Example: ``Window.of((64, 64), 3.0).nx`` is 64."""
+    Examples
+    --------
+    >>> w = Window.of((64, 32), 3.0)
+    >>> w.nx, w.ny, w.cutoff, bool(np.isclose(w.ks2x, (1 / 32 / FWHM_PER_SIGMA) ** 2))
+    (32, 64, 3.0, True)
+    """
 
     nx: int
     ny: int
@@ -546,7 +689,16 @@ class LobeGrid(NamedTuple):
     """A microsurface's lobes as the compiled image kernel reads them: ``E`` the flat raw
     moments ``(ny * nx * 5,)`` (Eq. 5), ``bounds`` the per-block bounds ``(nby, nbx, 7)`` of
     ``B x B`` blocks (:meth:`~microfacet.glints.microsurface.LobeMixture._block_bounds`, the
-    pruning grid) and the footprint :class:`Window` of the grid."""
+    pruning grid) and the footprint :class:`Window` of the grid.
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> ms = mf.glints.Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((4, 4, 2)))
+    >>> g = LobeGrid.of(ms)
+    >>> g.E.shape, g.window.nx
+    ((80,), 4)
+    """
 
     E: np.ndarray
     bounds: np.ndarray
@@ -565,7 +717,13 @@ class Footprints(NamedTuple):
     cuv)`` (centre and covariance), the half vector ``h[p]`` and the directions ``wi[p]``,
     ``wo[p]`` (C-contiguous float64 rows); ``exo`` the lobes' tabulated area excess toward a
     shared ``wo`` (:func:`_area_excess`) or empty, ``prune`` the pruning width in standard
-    deviations (:func:`eval_cos_footprints`)."""
+    deviations (:func:`eval_cos_footprints`).
+
+    Examples
+    --------
+    >>> Footprints._fields
+    ('fp', 'h', 'wi', 'wo', 'exo', 'prune')
+    """
 
     fp: np.ndarray
     h: np.ndarray
