@@ -34,6 +34,36 @@ def demo_section(out, size: int = 64, levels=(2, 4), base: float = 0.1, display:
     their mean relative difference; then screenshots of the 3D scene per method, ``scene_size``
     (width, height) pixels, each the frame its time per frame was measured on. Needs
     Playwright and a system Chromium (:func:`microfacet.glsl.browser.chromium_path`).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The demo's folder (``out/viewer/`` is written).
+    size : int
+        The baked map's size in texels.
+    levels : tuple of int
+        The MIP levels compared.
+    base : float
+        The base material's Beckmann alpha.
+    display : int
+        Size in pixels of the pictures on the page.
+    scene_size : (int, int)
+        Width and height of the 3D scene's screenshots.
+
+    Returns
+    -------
+    str
+        The HTML section.
+
+    Examples
+    --------
+    The map it bakes, then the section (Chromium renders it):
+
+    >>> figures.default_heightfield(16, 3).shape
+    (16, 16)
+    >>> html = demo_section("demo", size=16, levels=(2,), display=64, scene_size=(160, 100))   # doctest: +SKIP
+    >>> (Path("demo") / "viewer" / "map.exr").is_file()                                        # doctest: +SKIP
+    True
     """
     folder = Path(out) / "viewer"
     folder.mkdir(parents=True, exist_ok=True)

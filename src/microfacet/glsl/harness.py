@@ -22,7 +22,18 @@ void main() { gl_Position = vec4(in_pos, 0.0, 1.0); }
 
 
 def context():
-    """A shared standalone OpenGL >= 3.3 context on EGL (raises if none can be made)."""
+    """A shared standalone OpenGL >= 3.3 context on EGL (raises if none can be made).
+
+    Returns
+    -------
+    moderngl.Context
+        The context, made on first use.
+
+    Examples
+    --------
+    >>> context().version_code >= 330
+    True
+    """
     global _CTX
     if _CTX is None:
         import moderngl
@@ -32,7 +43,31 @@ def context():
 
 def upload_levels(ctx, levels, wrap=(True, True), nearest: bool = False):
     """A float32 texture whose MIP level ``k`` is ``levels[k]`` (``(H_k, W_k, C)``, C <= 4;
-    row 0 is texture coordinate ``t = 0``)."""
+    row 0 is texture coordinate ``t = 0``).
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+        The context (:func:`context`).
+    levels : list of (H_k, W_k, C) array_like
+        The MIP levels, level 0 first.
+    wrap : (bool, bool)
+        Repeat along s and t (else clamp).
+    nearest : bool
+        Nearest filtering (else linear, ``LINEAR_MIPMAP_NEAREST`` with levels).
+
+    Returns
+    -------
+    moderngl.Texture
+        The texture (release it when done).
+
+    Examples
+    --------
+    >>> tex = upload_levels(context(), [np.ones((4, 4, 4)), np.ones((2, 2, 4))])
+    >>> tex.size, tex.components, tex.dtype
+    ((4, 4), 4, 'f4')
+    >>> tex.release()
+    """
     import moderngl
     levels = [np.ascontiguousarray(level, dtype=np.float32) for level in levels]
     h, w, c = levels[0].shape
@@ -67,6 +102,32 @@ def evaluate(library: str, body: str, inputs: dict, *, uniforms: dict | None = N
         Uniforms declared in ``declarations`` (or the library), set with moderngl.
     textures : dict of name -> (levels, wrap) or (levels, wrap, nearest)
         Samplers (``uniform highp sampler2D name;`` in ``declarations`` or the library).
+    version : str
+        GLSL version (:data:`microfacet.glsl.VERSIONS`).
+    defines : dict, optional
+        Macros (:func:`microfacet.glsl.source`).
+    declarations : str
+        GLSL placed after the library (uniforms, helper functions).
+
+    Returns
+    -------
+    (N, 4) float32 ndarray
+        ``result`` per element.
+
+    Raises
+    ------
+    ValueError
+        Inputs of different lengths or more than 4 components.
+
+    Examples
+    --------
+    The shader's Schlick term against the library's:
+
+    >>> import numpy as np, microfacet as mf
+    >>> c = np.array([[1.0], [0.5], [0.1]])                                  # cos theta_d
+    >>> gl = evaluate("common", "result = vec4(mf_fresnel_schlick(vec3(0.04), vec3(1.0), x.x), 1.0);", {"x": c})
+    >>> bool(np.allclose(gl[:, :3], mf.fresnel.Schlick(0.04)(c[:, 0]), atol=1e-6))
+    True
     """
     import moderngl
     ctx = context()

@@ -24,6 +24,7 @@ from .sources import SHADERS, source
 
 __all__ = ["ViewerData", "load_viewer_data", "make_server", "HOST"]
 
+#: The only address the server binds.
 HOST = "127.0.0.1"
 _STATIC = {"/": ("index.html", "text/html; charset=utf-8"),
            "/index.html": ("index.html", "text/html; charset=utf-8"),
@@ -37,7 +38,32 @@ def _pack(levels) -> tuple[bytes, list]:
 
 @dataclass
 class ViewerData:
-    """What the page renders: merged LEADR and naive pyramids, environment, lights."""
+    """What the page renders: merged LEADR and naive pyramids, environment, lights.
+
+    Attributes
+    ----------
+    leadr, naive : list of (H_k, W_k, 5) arrays
+        The moment pyramids with the base merged in (LEADR: per level; naive: level 0's
+        slopes box-filtered).
+    env_levels : list of (H, W, 3) arrays
+        The environment's MIP levels.
+    sh : ndarray
+        Its spherical-harmonics coefficients.
+    fresnel : dict
+        The Fresnel term as the page reads it.
+    meta : dict
+        Names, the base's moments, the camera, the light.
+
+    Examples
+    --------
+    ``blobs()`` is what the server sends:
+
+    >>> import microfacet as mf
+    >>> _ = mf.leadr.write_pyramid("bumps.exr", mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)))
+    >>> data = load_viewer_data("bumps.exr")
+    >>> sorted(data.blobs())
+    ['/env.bin', '/leadr.bin', '/meta.json', '/naive.bin']
+    """
 
     leadr: list
     naive: list
@@ -64,6 +90,29 @@ def load_viewer_data(pyramid_path, material=None, roughness=None, env_path=None)
     merged into every level (:func:`microfacet.leadr.downsample_operator`); the Fresnel
     term is the fit's table or silver (``PatchScene``'s). ``env_path`` is a lat-long EXR
     (default: :func:`microfacet.render.lights.procedural_sky` at ``PatchScene.env_size``).
+
+    Parameters
+    ----------
+    pyramid_path : str or os.PathLike
+        A pyramid EXR (``microfacet bake``).
+    material : str or os.PathLike, optional
+        A fit ``.npz``: the base material and its Fresnel table.
+    roughness : float, optional
+        The base's Beckmann alpha when no ``material`` is given.
+    env_path : str or os.PathLike, optional
+        A lat-long environment EXR.
+
+    Returns
+    -------
+    ViewerData
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> _ = mf.leadr.write_pyramid("bumps.exr", mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)))
+    >>> data = load_viewer_data("bumps.exr", roughness=0.2)
+    >>> [level.shape for level in data.leadr], data.meta["base"]
+    ([(8, 8, 5), (4, 4, 5), (2, 2, 5), (1, 1, 5)], 'Beckmann alpha 0.2')
     """
     from .. import fit as _fit
     from ..leadr import downsample_operator, read_pyramid
@@ -101,7 +150,34 @@ def load_viewer_data(pyramid_path, material=None, roughness=None, env_path=None)
 
 def make_server(data: ViewerData, port: int = 0) -> ThreadingHTTPServer:
     """An HTTP server on 127.0.0.1:``port`` (0: a free port) serving the viewer of ``data``;
-    raises ``OSError`` when the port is taken."""
+    raises ``OSError`` when the port is taken.
+
+    Parameters
+    ----------
+    data : ViewerData
+        What to serve (:func:`load_viewer_data`).
+    port : int
+        The port on :data:`HOST`.
+
+    Returns
+    -------
+    ThreadingHTTPServer
+        The server, not yet serving (call ``serve_forever``).
+
+    Examples
+    --------
+    >>> import json, threading, urllib.request
+    >>> import microfacet as mf
+    >>> _ = mf.leadr.write_pyramid("bumps.exr", mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)))
+    >>> server = make_server(load_viewer_data("bumps.exr"))
+    >>> threading.Thread(target=server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+    >>> url = f"http://{HOST}:{server.server_address[1]}"
+    >>> json.load(urllib.request.urlopen(url + "/meta.json"))["leadr"][:2]
+    [[8, 8, 5], [4, 4, 5]]
+    >>> urllib.request.urlopen(url + "/shader/leadr").read().splitlines()[0]
+    b'#version 300 es'
+    >>> server.shutdown(); server.server_close()
+    """
     blobs = data.blobs()
     web = resources.files(__package__).joinpath("web")
 

@@ -54,7 +54,37 @@ def source(name: str, version: str = "330", defines: dict | None = None) -> str:
     """The shader ``name`` (``"leadr"``, ``"microfacet"``, ``"tabulated"``, ``"viewer.frag"``,
     ...: :data:`SHADERS`) for ``version`` ``"330"`` (``#version 330 core``) or ``"es300"``
     (``#version 300 es``, WebGL2), includes inlined; ``defines`` maps macro names to values
-    (``None``: defined without a value). Library files have no ``main``: append yours."""
+    (``None``: defined without a value). Library files have no ``main``: append yours.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SHADERS` (a trailing ``.glsl`` is accepted).
+    version : str
+        A key of :data:`VERSIONS`.
+    defines : dict, optional
+        Macro name -> value (or None).
+
+    Returns
+    -------
+    str
+        The shader text.
+
+    Raises
+    ------
+    ValueError
+        An unknown shader, version or macro name.
+
+    Examples
+    --------
+    >>> SHADERS
+    ('common', 'glints', 'leadr', 'microfacet', 'tabulated', 'viewer.frag', 'viewer.vert')
+    >>> text = source("leadr", "es300", defines={"MF_LEVELS": 4})
+    >>> text.splitlines()[:2] == list(VERSIONS["es300"][:2]), "#define MF_LEVELS 4" in text
+    (True, True)
+    >>> text.count("// ---- common.glsl")                 # each include inlined once
+    1
+    """
     if version not in VERSIONS:
         raise ValueError(f"version must be one of {sorted(VERSIONS)}, got {version!r}")
     lines = list(VERSIONS[version])

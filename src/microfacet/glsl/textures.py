@@ -46,7 +46,30 @@ __all__ = ["export_textures", "pyramid_textures", "fit_textures"]
 
 
 def pyramid_textures(levels) -> dict:
-    """``{"e1234": [...], "e5": [...]}`` of a moment pyramid (list of ``(H_k, W_k, 5)``)."""
+    """``{"e1234": [...], "e5": [...]}`` of a moment pyramid (list of ``(H_k, W_k, 5)``).
+
+    Parameters
+    ----------
+    levels : list of (H_k, W_k, 5) array_like
+        The moment pyramid, level 0 first.
+
+    Returns
+    -------
+    dict
+        ``e1234``: ``(H_k, W_k, 4)`` float32 levels; ``e5``: ``(H_k, W_k, 1)`` float32 levels.
+
+    Raises
+    ------
+    ValueError
+        A level that is not ``(H, W, 5)``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> t = pyramid_textures(mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)))
+    >>> [a.shape for a in t["e1234"]], t["e5"][0].dtype.name
+    ([(8, 8, 4), (4, 4, 4), (2, 2, 4), (1, 1, 4)], 'float32')
+    """
     levels = [np.asarray(level, dtype=np.float32) for level in levels]
     for k, level in enumerate(levels):
         if level.ndim != 3 or level.shape[2] != 5:
@@ -56,7 +79,31 @@ def pyramid_textures(levels) -> dict:
 
 
 def fit_textures(fit) -> dict:
-    """Textures and uniforms of a :class:`~microfacet.fit.FittedBRDF` (module docstring)."""
+    """Textures and uniforms of a :class:`~microfacet.fit.FittedBRDF` (module docstring).
+
+    Parameters
+    ----------
+    fit : FittedBRDF
+        A tabulated fit (:func:`microfacet.fit.fit`) with Smith masking and scalar parameters.
+
+    Returns
+    -------
+    dict
+        ``fit_table``, ``fit_sizes``, ``fit_azimuths``, ``alpha``, ``rho``, ``mean_slope``,
+        ``diffuse``, ``shadowing``.
+
+    Raises
+    ------
+    MicrofacetError
+        A fit the shader cannot evaluate.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> t = fit_textures(mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), resolution=8))
+    >>> t["fit_table"].shape[0], t["fit_azimuths"].tolist(), t["fit_table"].dtype.name
+    (3, [0, 0], 'float32')
+    """
     from ..distributions.tabulated import TabulatedAnisotropic, TabulatedIsotropic
     from ..fresnel import Tabulated
     d = fit.distribution
@@ -94,7 +141,30 @@ def export_textures(path: str | os.PathLike, base=None) -> dict:
     """Textures (float32 arrays, layout in the module docstring) of a pyramid EXR written by
     ``microfacet bake`` (merged with the ``base`` material when given:
     :func:`microfacet.leadr.downsample_operator`) or of a fit ``.npz`` of ``microfacet fit``.
-    Raises :class:`MicrofacetError` naming the file when it is neither."""
+    Raises :class:`MicrofacetError` naming the file when it is neither.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A pyramid EXR or a fit ``.npz``.
+    base : optional
+        A base material merged into a pyramid's levels (a Beckmann alpha, a lobe or a fit).
+
+    Returns
+    -------
+    dict
+        :func:`pyramid_textures` or :func:`fit_textures`.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> _ = mf.leadr.write_pyramid("bumps.exr", mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)))
+    >>> sorted(export_textures("bumps.exr"))
+    ['e1234', 'e5']
+    >>> _ = mf.fit.fit(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), resolution=8).save("ggx.npz")
+    >>> export_textures("ggx.npz")["fit_sizes"].shape
+    (3,)
+    """
     path = Path(path)
     head = read_bytes(path, "a pyramid EXR or a fit .npz", 4)
     if head == EXR_MAGIC[:4]:
