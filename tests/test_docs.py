@@ -46,6 +46,15 @@ OWNED_MODULES = (
     "microfacet.mitsuba.reference", "microfacet.mitsuba.bsdf", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tree",
     "microfacet.mitsuba.tabulated", "microfacet.mitsuba.fitted", "microfacet.mitsuba.leadr", "microfacet.mitsuba.glints",
     "microfacet.mitsuba.demo",
+    # the exports, glints and real-time modules (export.blender_addon runs inside Blender only: it imports bpy)
+    "microfacet.export", "microfacet.export.analysis", "microfacet.export.blender", "microfacet.export.blender_nodes",
+    "microfacet.export.consumers", "microfacet.export.glints_threejs", "microfacet.export.gltf",
+    "microfacet.export.leadr_textures", "microfacet.export.leadr_threejs", "microfacet.export.mtlx",
+    "microfacet.export.threejs", "microfacet.export.usd",
+    "microfacet.glints", "microfacet.glints.microsurface", "microfacet.glints.pbrdf", "microfacet.glints.figures",
+    "microfacet.glints.reference",
+    "microfacet.glsl", "microfacet.glsl.sources", "microfacet.glsl.textures", "microfacet.glsl.harness",
+    "microfacet.glsl.server", "microfacet.glsl.browser", "microfacet.glsl.demo",
 )
 #: the documented modules of the Mitsuba plugins, checked apart (they need the optional mitsuba package)
 MITSUBA_MODULES = tuple(m for m in OWNED_MODULES if m.startswith("microfacet.mitsuba"))
@@ -54,9 +63,7 @@ MITSUBA_MODULES = tuple(m for m in OWNED_MODULES if m.startswith("microfacet.mit
 DOCTEST_MODULES = tuple(m for m in OWNED_MODULES if m not in (
     "microfacet.distributions", "microfacet.render", "microfacet.io", "microfacet.fit", "microfacet.leadr",
     "microfacet.batch")) + (
-    "microfacet.demo", "microfacet.cli.common",
-    "microfacet.export", "microfacet.export.gltf", "microfacet.export.mtlx", "microfacet.export.usd",
-    "microfacet.export.analysis", "microfacet.glints.microsurface", "microfacet.errors", "microfacet._buffers",
+    "microfacet.demo", "microfacet.cli.common", "microfacet.errors", "microfacet._buffers",
 )
 
 
