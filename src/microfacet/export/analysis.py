@@ -10,8 +10,8 @@ albedo (the lobe of largest directional albedo at normal incidence first).
 :func:`schlick_of` reads any Fresnel term as the Schlick ``(f0, f90)`` pair of least squares
 on ``cos theta_d`` (exact for :class:`~microfacet.fresnel.Schlick`).
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> a = analyse(mf.MicrofacetBRDF(mf.GGX(alpha_x=0.2, alpha_y=0.1)))
 >>> round(a.lobes[0].alpha1, 3), round(a.lobes[0].alpha2, 3), a.base is None

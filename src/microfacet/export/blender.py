@@ -13,8 +13,8 @@ has ``bpy`` (:func:`blender_python`: ``$MICROFACET_BLENDER_PYTHON``, else the re
 of every closure kind within 0.1 % relL1 of it), so the image error of an export is measured
 with the library's renderer on what Blender draws.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> desc, lost = blender_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.09), mf.fresnel.Conductor()))
 >>> desc["closures"][0]["node"], desc["closures"][0]["fresnel_type"]

@@ -34,8 +34,8 @@ whose long axis is the bitangent (``alpha_x = r^2 (1 - a)``, ``alpha_y = r^2/(1 
 not the library's single-scattering lobe). The tangent is the mesh's UV tangent (a Tangent
 node, UV Map mode), as glTF's.
 
-Example
--------
+Examples
+--------
 >>> spec = {"type": "microfacet", "distribution": {"type": "ggx", "alpha_x": 0.09, "alpha_y": 0.09, "rho": 0.0},
 ...         "fresnel": {"type": "conductor", "eta": [0.2, 0.9, 1.1], "k": [3.9, 2.4, 2.2]}}
 >>> desc, lost = closures_of_spec(spec)

@@ -7,8 +7,8 @@ three.js in Chromium (the exported ``.glb``: :mod:`.threejs`), each consumer tha
 and measures each image's relL1 (``sum |a - b| / sum |b|`` over ``r < 0.95``) against the
 library's. :func:`consumer_section` writes the PNGs and returns an HTML section for a demo page.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> renders, errors, missing = consumer_renders(mf.MicrofacetBRDF(mf.GGX(alpha=0.1)))   # doctest: +SKIP
 >>> errors["Blender (Cycles)"] < 0.005                                                  # doctest: +SKIP

@@ -26,8 +26,8 @@ window fits (:data:`MAX_WINDOW` lobes per axis) the sums are the library's. Larg
 are summed over the first coarser lobe level where they fit (the lobes' MIP levels, Sec.
 4.2.2): an approximation the library does not make.
 
-Example
--------
+Examples
+--------
 >>> import numpy as np, microfacet as mf
 >>> ms = mf.glints.Microsurface.from_slopes(0.1 * np.random.default_rng(0).standard_normal((4, 4, 2)))
 >>> sorted(p.name for p in export_glints_threejs(ms, "glints_web").iterdir())

@@ -19,8 +19,8 @@ mean diffuse weight ``1 - s max(F0c + (1 - F0c)/21)``; a coat is ``KHR_materials
 with the library's GGX (height-correlated Smith), so the image error of an export is
 measured against what a conforming renderer draws.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> mat, lost = gltf_material(mf.MicrofacetBRDF(mf.GGX(alpha=0.09), mf.fresnel.Schlick([0.9, 0.6, 0.5])))
 >>> mat["pbrMetallicRoughness"]["roughnessFactor"], mat["pbrMetallicRoughness"]["metallicFactor"]

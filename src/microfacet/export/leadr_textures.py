@@ -32,8 +32,8 @@ textured plane holding level 0 with the chains beside it (``--to gltf``; glTF ho
 MIP chain only as KTX2, ``KHR_texture_basisu``, and no KTX2 writer is installed here), and the
 report of what is not carried (:data:`NOT_CARRIED`) with the 8-bit round trip's error per level.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((16, 16), 0.3, seed=1))
 >>> levels = leadr_textures(pyramid, base_roughness=0.1)
@@ -87,6 +87,8 @@ def ellipse_of_covariance(vx, vy, cxy):
     from the tangent towards the bitangent. Negative eigenvalues (rounding) become 0.
     Exact to float64 rounding (:func:`covariance_of_ellipse` is the inverse).
 
+    Examples
+    --------
     >>> [round(float(v), 6) for v in ellipse_of_covariance(0.02, 0.02, 0.01)]
     [0.244949, 0.141421, 0.785398]
     """
@@ -103,6 +105,8 @@ def covariance_of_ellipse(alpha1, alpha2, phi):
     """``(vx, vy, cxy)``: the slope covariance of a Beckmann ellipse (radii ``alpha1,
     alpha2``, ``alpha1`` axis at ``phi``), ``R diag(a1^2, a2^2) R^T / 2``.
 
+    Examples
+    --------
     >>> [round(float(v), 6) for v in covariance_of_ellipse(0.3, 0.1, 0.0)]
     [0.045, 0.005, 0.0]
     """

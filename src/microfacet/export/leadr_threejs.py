@@ -25,8 +25,8 @@ the box-filtered level-0 textures, a constant roughness), (b) the LEADR MIPs and
 reference: level 0 without MIPs rendered at ``supersample`` times the resolution and
 box-downsampled, and returns the relative L1 error of (a) and (b) against (c).
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((64, 64), 0.4, seed=1), roughness=0.05)
 >>> with PlaneRenderer() as r:                                          # doctest: +SKIP

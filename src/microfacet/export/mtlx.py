@@ -18,8 +18,8 @@
   the tint through ``F(82 deg)``); a lobe over a Lambertian base is the dielectric with
   ``specular_ior`` from ``f0`` and ``base_color`` the base; a coat ``coat_weight 1``.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> doc, lost = mtlx_document(mf.MicrofacetBRDF(mf.GGX(alpha=0.1)))
 >>> validate(doc)

@@ -17,8 +17,8 @@ three.js evaluates Schlick's ``(1 - c)^5`` as Epic's ``exp2((-5.55473 c - 6.9831
 (Karis 2013), 0.7 % off on a dielectric sphere, replaced by the power the glTF specification
 writes. The page fails if three.js's chunks no longer contain these lines.
 
-Example
--------
+Examples
+--------
 >>> with ThreeRenderer() as r:                                   # doctest: +SKIP
 ...     image = r.render("sphere.glb", size=64)
 """

@@ -8,8 +8,8 @@ UsdPreviewSurface (USD 2.x specification) is isotropic GGX with ``alpha = roughn
 is ``clearcoat 1``, ``clearcoatRoughness = sqrt(alpha_coat)``. The OpenPBR inputs are those
 of :func:`microfacet.export.mtlx.openpbr_inputs`.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> inputs, lost = preview_inputs(mf.MicrofacetBRDF(mf.GGX(alpha=0.04)))
 >>> round(inputs["roughness"], 3), inputs["metallic"]

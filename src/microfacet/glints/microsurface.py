@@ -74,6 +74,8 @@ def lobe_grid(resolution, h) -> tuple[int, int]:
     ``resolution`` ``(H, W)`` texels and seed spacing ``h`` (Sec. 3: one lobe per ``h x h``
     texels); ``ValueError`` naming ``h`` outside :data:`SPACING_RANGE`.
 
+    Examples
+    --------
     >>> lobe_grid((512, 256), 2.0)
     (256, 128)
     """
