@@ -82,6 +82,17 @@ class Analysis:
     ``coat`` (a :class:`Lobe` with a Dielectric Fresnel, or None) of a BRDF tree; ``notes``:
     one line per approximation made (e.g. a TransmittedLambertian read as a Lambertian).
 
+    Attributes
+    ----------
+    lobes : list of Lobe
+        The specular lobes, largest albedo first.
+    base : (3,) ndarray or None
+        The Lambertian base's reflectance, clipped to ``[0, 1]``.
+    coat : Lobe or None
+        The coat lobe of a :class:`~microfacet.layered.LayeredBRDF`.
+    notes : list of str
+        The approximations made.
+
     Examples
     --------
     >>> import microfacet as mf

@@ -87,6 +87,16 @@ def ellipse_of_covariance(vx, vy, cxy):
     from the tangent towards the bitangent. Negative eigenvalues (rounding) become 0.
     Exact to float64 rounding (:func:`covariance_of_ellipse` is the inverse).
 
+    Parameters
+    ----------
+    vx, vy, cxy : array_like
+        Slope variances and covariance (broadcast together).
+
+    Returns
+    -------
+    alpha1, alpha2, phi : ndarray
+        The Beckmann ellipses' radii and the ``alpha1`` axis's azimuth (radians).
+
     Examples
     --------
     >>> [round(float(v), 6) for v in ellipse_of_covariance(0.02, 0.02, 0.01)]
@@ -104,6 +114,16 @@ def ellipse_of_covariance(vx, vy, cxy):
 def covariance_of_ellipse(alpha1, alpha2, phi):
     """``(vx, vy, cxy)``: the slope covariance of a Beckmann ellipse (radii ``alpha1,
     alpha2``, ``alpha1`` axis at ``phi``), ``R diag(a1^2, a2^2) R^T / 2``.
+
+    Parameters
+    ----------
+    alpha1, alpha2, phi : array_like
+        Radii and azimuth (radians) of the ellipses (broadcast together).
+
+    Returns
+    -------
+    vx, vy, cxy : ndarray
+        Slope variances and covariance.
 
     Examples
     --------

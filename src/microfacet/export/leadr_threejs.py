@@ -63,6 +63,25 @@ class PlaneView:
     "anisotropy": 0}``: the latter turns KHR_materials_anisotropy off, three.js's isotropic lobe).
     The default looks down 15 degrees at the point 15 units away, the horizon in view.
 
+    Attributes
+    ----------
+    extent : (float, float)
+        The plane's size along world x and z.
+    tiles : float
+        Repeats of the map along each axis.
+    eye, target : (float, float, float)
+        Camera position and the point it looks at.
+    fov : float
+        Vertical field of view, degrees.
+    light : (float, float, float)
+        Direction toward the directional light.
+    anisotropy : int
+        three.js ``texture.anisotropy`` of the textures.
+    width, height : int
+        Image size in pixels.
+    extra : dict
+        Material overrides.
+
     Examples
     --------
     >>> view = PlaneView(width=32, height=24, anisotropy=4)

@@ -74,6 +74,18 @@ def lobe_grid(resolution, h) -> tuple[int, int]:
     ``resolution`` ``(H, W)`` texels and seed spacing ``h`` (Sec. 3: one lobe per ``h x h``
     texels); ``ValueError`` naming ``h`` outside :data:`SPACING_RANGE`.
 
+    Parameters
+    ----------
+    resolution : (int, int)
+        ``(H, W)`` of the normal map.
+    h : float
+        Seed spacing in texels.
+
+    Returns
+    -------
+    (int, int)
+        ``(ny, nx)`` seeds.
+
     Examples
     --------
     >>> lobe_grid((512, 256), 2.0)
