@@ -150,8 +150,20 @@ for key, path in (("fit", fit_path), ("json", desc_path)):
     mat = bpy.data.materials[name]
     nodes = [(n.bl_idname, getattr(n, "distribution", None)) for n in mat.node_tree.nodes]
     out[key] = {"name": name, "nodes": nodes, "desc": json.loads(mat["microfacet"])}
+import microfacet_blender
+out["rule"] = [microfacet_blender._best_fit(m) for m in json.loads(sys.argv[4])]
 print("RESULT" + json.dumps(out))
 """
+
+#: best_fit cases (metrics by fit name) that the add-on's restated rule must decide as the library does
+RULE_CASES = [
+    {"best": {"image": 0.05, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.2},
+     "near": {"image": 0.07, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.01}},
+    {"best": {"image": 0.05, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.2},
+     "far": {"image": 0.08, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.01}},
+    {"black": {"image": 0.01, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.99},
+     "cast": {"image": 0.05, "log": 0.01, "chromaticity": 0.1}},
+]
 
 
 def test_addon_installs_and_imports_a_fit_file(tmp_path):
@@ -171,7 +183,8 @@ def test_addon_installs_and_imports_a_fit_file(tmp_path):
     script = tmp_path / "check.py"
     script.write_text(ADDON_CHECK)
     env = dict(os.environ, BLENDER_USER_SCRIPTS=str(tmp_path / "scripts"), BLENDER_USER_CONFIG=str(tmp_path / "cfg"))
-    r = subprocess.run([str(py), str(script), str(zip_path), str(fit_path), str(desc_path)], capture_output=True,
+    r = subprocess.run([str(py), str(script), str(zip_path), str(fit_path), str(desc_path), json.dumps(RULE_CASES)],
+                       capture_output=True,
                        text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     out = json.loads(r.stdout.split("RESULT", 1)[1].strip().splitlines()[0])
@@ -181,6 +194,8 @@ def test_addon_installs_and_imports_a_fit_file(tmp_path):
     assert {"ShaderNodeBsdfMetallic", "ShaderNodeBsdfDiffuse", "ShaderNodeTangent"} <= kinds
     assert all(d in (None, "GGX") for _, d in out["fit"]["nodes"])
     assert out["json"]["desc"] == desc and "(ggx)" in out["fit"]["name"]
+    from microfacet.fit.outputs import best_fit
+    assert out["rule"] == [best_fit(m) for m in RULE_CASES] == ["near", "best", "cast"]
 
 
 def test_cli_exports_a_fit_file_to_blender(tmp_path, capsys):

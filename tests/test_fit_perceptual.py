@@ -232,3 +232,15 @@ def test_best_fit_leaves_out_colour_casts():
     # every fit with a cast: the least image x log error
     assert best_fit({"cast": cast, "worse": {**cast, "image": 0.09}}) == "cast"
     assert best_fit({"a": clean, "b": {**clean, "log": 0.005}}) == "b"
+
+
+def test_best_fit_prefers_the_albedo_band_and_leaves_out_gross_albedo():
+    from microfacet.fit.outputs import ALBEDO_PREFERENCE, best_fit
+    best = {"image": 0.05, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.2}
+    near = {**best, "image": 0.05 * ALBEDO_PREFERENCE * 0.99, "albedo_error": 0.01}
+    far = {**near, "image": 0.05 * ALBEDO_PREFERENCE * 1.01}
+    black = {"image": 0.01, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.99}   # a near-black sphere
+    cast = {**best, "chromaticity": 0.1}
+    for fits, chosen in (({"best": best, "near": near}, "near"), ({"best": best, "far": far}, "best"),
+                         ({"black": black, "cast": cast}, "cast"), ({"black": black}, "black")):
+        assert best_fit(fits) == chosen

@@ -151,13 +151,14 @@ def _gltf(brdf, out: Path, options: dict):
 
 def _mtlx(brdf, out: Path, options: dict):
     from .mtlx import validate, write_mtlx
+    from .mtlx_render import mtlx_as_held
     doc, lost = mtlx_document(brdf)
     problems = validate(doc)
     if problems:
         raise MicrofacetError(f"MaterialX rejected the exported document: {problems[0]}")
     write_mtlx(doc, out)
     inputs, _ = openpbr_inputs(brdf)
-    return ({"pbrlib": pbrlib_brdf(brdf), "open_pbr_surface": openpbr_brdf(inputs)}, lost,
+    return ({"pbrlib": mtlx_as_held(brdf), "open_pbr_surface": openpbr_brdf(inputs)}, lost,
             {"open_pbr_surface": inputs})
 
 

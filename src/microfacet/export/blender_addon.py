@@ -52,14 +52,27 @@ def fit_spec(path: str, model: str = "best") -> tuple:
             with open(summary) as f:
                 metrics = {n: v["metrics"] for n, v in json.load(f).get("fits", {}).items()
                            if n in fits and {"image", "log"} <= set(v.get("metrics", {}))}
-            # microfacet.fit.outputs.best_fit's rule (this add-on runs without microfacet):
-            # of the fits without a colour cast, the least image error x log error
-            clean = {n: m for n, m in metrics.items() if float(m.get("chromaticity", 1.0)) <= 0.02} or metrics
-            if clean:
-                best = min(clean, key=lambda n: float(clean[n]["image"]) * float(clean[n]["log"]))
+            if metrics:
+                best = _best_fit(metrics)
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass
     return best, fits[best]
+
+
+def _best_fit(metrics: dict) -> str:
+    """microfacet.fit.outputs.best_fit's rule, restated (this add-on runs without microfacet):
+    leave out fits whose albedo is off by more than 50 %, then those with a colour cast
+    (chromaticity > 0.02); the least image x log error, or a fit within 5 % of the data's
+    albedo that scores within 1.5 times it."""
+    def score(n):
+        return float(metrics[n]["image"]) * float(metrics[n]["log"])
+    sound = [n for n in metrics if float(metrics[n].get("albedo_error", 0.0)) <= 0.5] or list(metrics)
+    clean = [n for n in sound if float(metrics[n].get("chromaticity", 1.0)) <= 0.02] or sound
+    best = min(clean, key=score)
+    held = [n for n in clean if float(metrics[n].get("albedo_error", 1.0)) <= 0.05]
+    if held and score(min(held, key=score)) <= 1.5 * score(best):
+        return min(held, key=score)
+    return best
 
 
 def load_description(path: str, model: str = "best") -> tuple:

@@ -520,6 +520,9 @@ CHROMA_LIMIT = 0.02
 
 #: Albedo band of a fit that reflects the data's energy: ``albedo_error`` at most this.
 ALBEDO_TOLERANCE = 0.05
+#: A fit whose albedo is off by more than this at some view (half or 1.5 times the data's)
+#: fails as a colour cast does: e.g. a near-black sphere, whose chromaticity means little.
+ALBEDO_GROSS = 0.5
 #: A fit within the albedo band is chosen over the best one when its score is at most this
 #: many times the best's.
 ALBEDO_PREFERENCE = 1.5
@@ -531,7 +534,8 @@ def best_fit(metrics: dict) -> str:
     (chromaticity difference at most :data:`CHROMA_LIMIT`), the one of least
     :func:`best_score`, unless a fit whose albedo is within the band
     (``albedo_error <= ALBEDO_TOLERANCE``) scores within :data:`ALBEDO_PREFERENCE` times it:
-    then the least of those. When every fit has a cast, the same among all. A cast is a
+    then the least of those. Fits whose albedo is grossly off (``albedo_error >
+    ALBEDO_GROSS``) are left out first; when every fit has a cast, the same among all. A cast is a
     visible failure that neither error weighs much (an iridescent gem's sphere can score best
     with a hue the data does not have); a fit that reflects less or more energy than the
     data at some view is one that the images, lit from a few directions, can miss.
@@ -544,7 +548,8 @@ def best_fit(metrics: dict) -> str:
     'b'
     """
     from .perceptual import select
-    clean = {k: m for k, m in metrics.items() if float(m.get("chromaticity", np.inf)) <= CHROMA_LIMIT} or metrics
+    sound = {k: m for k, m in metrics.items() if float(m.get("albedo_error", 0.0)) <= ALBEDO_GROSS} or metrics
+    clean = {k: m for k, m in sound.items() if float(m.get("chromaticity", np.inf)) <= CHROMA_LIMIT} or sound
     scores = {k: best_score(m) for k, m in clean.items()}
     best = select(scores)
     held = {k: v for k, v in scores.items() if float(clean[k].get("albedo_error", np.inf)) <= ALBEDO_TOLERANCE}
@@ -587,7 +592,8 @@ def format_fits_table(summary: dict) -> str:
                      f"{m['max_albedo']:.3f}"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
-    return "\n".join(lines) + ("\n* best: least image error x log error of the fits without a colour cast (images: spheres "
+    return "\n".join(lines) + ("\n* best: least image error x log error of the fits without a colour cast, or one within "
+                                "5 % of the data's albedo scoring within 1.5 times it (images: spheres "
                                 f"under 3 lights and an environment, {IMAGE_SIZE} px); log: cosine-weighted log error; "
                                 "albedo: worst ratio fit/data\n")
 
