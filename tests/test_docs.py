@@ -50,6 +50,7 @@ OWNED_MODULES = (
     "microfacet.export", "microfacet.export.analysis", "microfacet.export.blender", "microfacet.export.blender_nodes",
     "microfacet.export.consumers", "microfacet.export.glints_threejs", "microfacet.export.gltf",
     "microfacet.export.leadr_textures", "microfacet.export.leadr_threejs", "microfacet.export.mtlx",
+    "microfacet.export.mtlx_render",
     "microfacet.export.threejs", "microfacet.export.usd",
     "microfacet.glints", "microfacet.glints.microsurface", "microfacet.glints.pbrdf", "microfacet.glints.figures",
     "microfacet.glints.reference",

@@ -3,7 +3,9 @@
 :func:`render_mtlx` draws a material of a ``.mtlx`` document (by default the exact pbrlib
 graph ``M_microfacet_exact`` of :func:`microfacet.export.mtlx.mtlx_document`) with
 ``MaterialX.PyMaterialXRenderGlsl.GlslRenderer`` (OpenGL through GLX: it needs an X display;
-:func:`xvfb_display` starts a private ``Xvfb`` when none is set, kept for the process) on the comparison sphere of
+:func:`xvfb_display` starts a private ``Xvfb`` when none is set) in a process of its own,
+spawned on first use and kept (a GLX context cannot share a process with another OpenGL
+context, such as moderngl's EGL one), on the comparison sphere of
 :mod:`microfacet.export.consumers`: an orthographic unit sphere filling the image, lit by one
 directional light of irradiance 1 from :data:`~microfacet.export.consumers.LIGHT`, the tangent
 the world x axis projected on the surface, no environment. The image is linear Rec. 709 RGB,
@@ -153,14 +155,19 @@ def _start_xvfb(timeout: float) -> str:
 
 
 def stop_xvfb() -> None:
-    """Stop the Xvfb that :func:`xvfb_display` started in this process, if any (also run at
-    exit). MaterialX cannot reconnect to another display in the same process: afterwards
-    :func:`render_mtlx` raises ``RuntimeError`` instead of letting Xlib end the process.
+    """Stop :func:`render_mtlx`'s render process and the Xvfb that :func:`xvfb_display`
+    started in this process, if any (also run at exit). A later :func:`render_mtlx` spawns a
+    new render process; in a process whose Xvfb was stopped, :func:`xvfb_display` raises
+    ``RuntimeError`` (MaterialX cannot reconnect to another display in the same process).
 
     Examples
     --------
     >>> stop_xvfb()          # no-op when this process started none   # doctest: +SKIP
     """
+    executor = _RENDERER["executor"]
+    if executor is not None:                 # render_mtlx's process, which stops its own Xvfb
+        _RENDERER["executor"] = None
+        executor.shutdown()
     proc = _XVFB["proc"]
     if proc is None:
         return
@@ -364,16 +371,47 @@ def render_mtlx(path_or_document, size: int = 64, material: str = "M_microfacet_
     size = int(size)
     mx = _mx()
     doc = _document(mx, path_or_document)
-    mat = doc.getChild(material)
-    if mat is None:
+    if doc.getChild(material) is None:
         raise ValueError(f"render_mtlx: the document has no material {material!r}")
-    with tempfile.TemporaryDirectory() as tmp, xvfb_display():
-        # the renderer (its X window and GL context) is freed on return, before the display goes
-        img = _render(mx, doc, mat, Path(tmp), size, light, compensation)
+    from concurrent.futures.process import BrokenProcessPool
+    try:
+        img = _render_process().submit(_render_xml, mx.writeToXmlString(doc), material, size,
+                                       tuple(float(v) for v in np.ravel(light)), bool(compensation)).result()
+    except BrokenProcessPool:
+        _RENDERER["executor"] = None
+        raise RuntimeError("render_mtlx: MaterialX's render process ended abruptly (X display or OpenGL failed)") \
+            from None
     out = np.zeros((size, size, 3), np.float32)
     mask = sphere_mask(size)
     out[mask] = img[mask]
     return out
+
+
+# The process that renders (spawned on first use, kept): MaterialX's GLX context cannot share
+# a process with another OpenGL context (an EGL one of moderngl ends the process), and it
+# connects to its X display once per process.
+_RENDERER: dict = {"executor": None}
+
+
+def _render_process():
+    executor = _RENDERER["executor"]
+    if executor is None:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        executor = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        _RENDERER["executor"] = executor
+        atexit.register(executor.shutdown)
+    return executor
+
+
+def _render_xml(xml: str, material: str, size: int, light, compensation: bool) -> np.ndarray:
+    """:func:`render_mtlx`'s work, in the render process: the document from its XML."""
+    mx = _mx()
+    doc = mx.createDocument()
+    mx.readFromXmlString(doc, xml)
+    with tempfile.TemporaryDirectory() as tmp, xvfb_display():
+        # the renderer (its X window and GL context) is freed on return, before the display goes
+        return _render(mx, doc, doc.getChild(material), Path(tmp), size, light, compensation)
 
 
 def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool) -> np.ndarray:
