@@ -211,3 +211,13 @@ def test_cli_exports_a_fit_file_to_blender(tmp_path, capsys):
     assert np.isfinite(rep["image_error"]["exported_vs_tabulated"]["blender"])
     assert (tmp_path / "out.blend").is_file() and (tmp_path / "microfacet_blender.zip").is_file()
     assert "blender" in capsys.readouterr().out
+
+
+def test_render_cycles_of_a_description_with_the_default_light():
+    """A material description renders (the default light's negative x once read as an option)."""
+    _bpy_python()
+    from microfacet.export.blender import render_cycles
+    from microfacet.export.consumers import library_render, rel_l1
+    lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fr.Schlick(0.9))
+    image = render_cycles(blender_material(lobe)[0], size=24)
+    assert rel_l1(image, library_render(lobe, 24)) < 0.005

@@ -301,7 +301,7 @@ def render_cycles(source, size: int = 64, spp: int = 4, light=(-0.5, 0.5, 1.0),
         exr = Path(tmp) / "render.exr"
         args = ["--exr", str(exr), "--size", str(int(size)), "--spp", str(int(spp))]
         if isinstance(source, dict):
-            _run_bpy(source, args + ["--light", ",".join(str(float(v)) for v in light)], timeout)
+            _run_bpy(source, args + ["--light=" + ",".join(str(float(v)) for v in light)], timeout)
         else:
             _run_bpy(None, args + ["--open", str(Path(source).resolve())], timeout)
         return np.asarray(read_exr(exr), float)[..., :3]
