@@ -8,7 +8,7 @@ of every microfacet lobe by one smooth non-negative factor per channel ``s(theta
 
     f'(i, o) = f(i, o) + (s(theta_d) - 1) f_spec(i, o),
 
-chosen so that the directional albedo ``a(o) = int f' cos theta_i d i`` (Eq. 1.8) of the
+chosen so that the directional albedo ``a(o) = int f' cos theta_i d i`` (Dupuy 2015, Eq. 1.8) of the
 fit equals the data's at views :data:`VIEWS_DEG`. The albedo is linear in ``s``: with
 ``s`` piecewise linear on :data:`NODES_DEG` (hat functions ``h_k``),
 
@@ -35,8 +35,8 @@ Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes 
 enough energy at the view; the fit corpus's results page (``experiments/fit_corpus.py``)
 reports it for every material. A fit without microfacet lobes is returned unchanged.
 
-Example
--------
+Examples
+--------
 >>> import microfacet as mf
 >>> data = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Schlick(0.08)), mf.Lambertian(0.3))
 >>> fit = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.3))
