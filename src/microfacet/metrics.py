@@ -65,6 +65,16 @@ UNIFORM_PAIRS = 2**17
 def describe_fit_error(n: int = 32) -> str:
     """One sentence saying what :func:`fit_error` measures (for reports and JSON).
 
+    Parameters
+    ----------
+    n : int
+        Grid size per MERL coordinate.
+
+    Returns
+    -------
+    str
+        The description.
+
     Examples
     --------
     >>> describe_fit_error(32)[:60]
@@ -77,6 +87,18 @@ def describe_fit_error(n: int = 32) -> str:
 
 def describe_uniform_error(n: int = UNIFORM_PAIRS, seed: int = 0) -> str:
     """One sentence saying what :func:`uniform_error` measures.
+
+    Parameters
+    ----------
+    n : int
+        Sobol points.
+    seed : int
+        Digital shift of the Sobol sequence.
+
+    Returns
+    -------
+    str
+        The description.
 
     Examples
     --------
@@ -91,6 +113,16 @@ def describe_uniform_error(n: int = UNIFORM_PAIRS, seed: int = 0) -> str:
 
 def describe_albedo(views_deg=ALBEDO_VIEWS_DEG) -> str:
     """One sentence saying what :func:`albedo_ratios` measures.
+
+    Parameters
+    ----------
+    views_deg : sequence of float
+        Viewing angles ``theta_o``, degrees.
+
+    Returns
+    -------
+    str
+        The description.
 
     Examples
     --------
@@ -110,6 +142,16 @@ def measurement_directions(n: int = 32) -> tuple[np.ndarray, np.ndarray]:
     half-vector azimuth ``phi_h`` following the golden-ratio sequence so that anisotropic
     materials are probed at all azimuths. Pairs with either cosine below
     :data:`GRAZING_COS` are dropped. Deterministic.
+
+    Parameters
+    ----------
+    n : int
+        Cells per MERL coordinate.
+
+    Returns
+    -------
+    wi, wo : (M, 3) ndarray
+        Light and view directions, ``M <= n^3``.
 
     Examples
     --------
@@ -157,6 +199,18 @@ def sobol(n: int, seed: int | None = 0) -> np.ndarray:
     its Gray code ``i ^ (i >> 1)`` (:func:`_sobol_directions`; Antonov & Saleev's order,
     as SciPy's ``qmc.Sobol``): NumPy only, no SciPy import.
 
+    Parameters
+    ----------
+    n : int
+        Number of points.
+    seed : int or None
+        Seed of the digital shift; None: unshifted.
+
+    Returns
+    -------
+    (n, 4) ndarray
+        Points in ``[0, 1)``.
+
     Examples
     --------
     >>> u = sobol(4, seed=None)                     # unscrambled: the plain Sobol points
@@ -187,6 +241,20 @@ def uniform_directions(n: int = UNIFORM_PAIRS, seed: int = 0):
     (``n`` points). Pairs with either cosine below :data:`GRAZING_COS` are dropped.
     Deterministic for a seed.
 
+    Parameters
+    ----------
+    n : int
+        Sobol points (before grazing pairs are dropped).
+    seed : int
+        Digital shift of the Sobol sequence.
+
+    Returns
+    -------
+    wi, wo : (M, 3) ndarray
+        Light and view directions.
+    w : (M,) ndarray
+        Weights.
+
     Examples
     --------
     >>> wi, wo, w = uniform_directions(1024)
@@ -210,6 +278,18 @@ def measured_mask(reference, wi, wo) -> np.ndarray:
     """Mask of pairs ``(wi, wo)`` where ``reference`` rests on measured data only (a
     reference with a ``coverage`` method, MERL: coverage 1; every pair otherwise).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    wi, wo : (N, 3) ndarray
+        Light and view directions.
+
+    Returns
+    -------
+    (N,) ndarray of bool
+        True where the pair rests on measured samples.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -228,6 +308,18 @@ def compared_pairs(reference, directions) -> tuple[np.ndarray, ...]:
     flattened to ``(M, 3)``) that fit errors compare: both cosines ``>= GRAZING_COS`` and,
     for a reference with ``coverage`` (MERL), on measured samples only. Raises
     ``ValueError`` if none is left.
+
+    Parameters
+    ----------
+    reference : BRDF
+        The data (its ``coverage`` method, if any, restricts the pairs).
+    directions : tuple of ndarray
+        ``(wi, wo)`` or ``(wi, wo, w)``: unit vectors ``(..., 3)`` and weights ``(...)``.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(wi, wo)`` or ``(wi, wo, w)`` of the kept pairs, ``(M, 3)`` and ``(M,)``.
 
     Examples
     --------
@@ -294,6 +386,13 @@ class RelativeRMS:
     ``fit_error(reference, fits, directions=directions)``, bit for bit. Read-only after
     construction, so threads may call one at once.
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data, evaluated once at construction.
+    directions : tuple of ndarray
+        ``(wi, wo)`` or ``(wi, wo, w)``, unit vectors ``(..., 3)`` and weights.
+
     Examples
     --------
     >>> import numpy as np
@@ -330,6 +429,22 @@ def uniform_error(reference, fits, n: int = UNIFORM_PAIRS, seed: int = 0) -> dic
     angle), grazing and unmeasured pairs excluded. With the default ``n = 2^17`` the
     value changes by ~1 % between seeds on the shared materials (tests).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    fits : BRDF or dict of str to BRDF
+        Fits by name (see :func:`fit_error`).
+    n : int
+        Sobol points.
+    seed : int
+        Digital shift of the Sobol sequence.
+
+    Returns
+    -------
+    dict of str to float
+        As :func:`fit_error`.
+
     Examples
     --------
     >>> import numpy as np
@@ -349,6 +464,24 @@ def albedo_directions(views_deg=ALBEDO_VIEWS_DEG, min_cos: float = 0.0, n_theta:
     ``a(o_v) ~= sum_{view == v} w f_r(wi, wo) cos theta_i``. Half vectors ``h`` on
     :func:`hemisphere_grid`, ``wi = reflect(wo, h)``, ``d wi = 4 (o.h) d h``; views in the
     plane ``phi = 0``; nodes below the horizon or with ``cos theta_i < min_cos`` dropped.
+
+    Parameters
+    ----------
+    views_deg : sequence of float
+        Viewing angles ``theta_o``, degrees.
+    min_cos : float
+        Smallest ``cos theta_i`` kept.
+    n_theta, n_phi : int
+        Nodes of :func:`hemisphere_grid`.
+
+    Returns
+    -------
+    wi, wo : (K, 3) ndarray
+        Light and view directions.
+    w : (K,) ndarray
+        Quadrature weights (steradians times the Jacobian ``4 (o.h)``).
+    view : (K,) ndarray of int
+        Index in ``views_deg`` of each node.
 
     Examples
     --------
@@ -382,6 +515,24 @@ def directional_albedo(brdf, views_deg=ALBEDO_VIEWS_DEG, min_cos: float = 0.0, m
     nodes the albedo of a Lambertian BRDF is exact to 1e-3 and that of GGX/Beckmann
     lobes of alpha 0.02-1 agrees with Monte Carlo (1e5 samples) to 1 % (tests).
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF to integrate.
+    views_deg : sequence of float
+        Viewing angles ``theta_o``, degrees.
+    min_cos : float
+        Light directions with ``cos theta_i`` below it are left out.
+    mask : callable, optional
+        ``mask(wi, wo) -> bool array``: the nodes to keep; None keeps all.
+    n_theta, n_phi : int
+        Nodes of :func:`hemisphere_grid`.
+
+    Returns
+    -------
+    (len(views_deg), 3) ndarray
+        Albedo per view and RGB channel.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -411,6 +562,20 @@ def albedo_ratios(reference, fit, views_deg=ALBEDO_VIEWS_DEG):
     samples. NaN where the reference's albedo is 0. ``fit`` may be a dict of fits by name:
     then a dict of ratios (the reference's albedo computed once).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    fit : BRDF or dict of str to BRDF
+        One fit, or fits by name.
+    views_deg : sequence of float
+        Viewing angles ``theta_o``, degrees.
+
+    Returns
+    -------
+    (len(views_deg), 3) ndarray, or dict of str to ndarray
+        Albedo ratio fit / data per view and RGB channel.
+
     Examples
     --------
     >>> import numpy as np
@@ -428,6 +593,15 @@ class AlbedoRatios:
     """:func:`albedo_ratios` against ``reference``, its albedo computed once:
     ``AlbedoRatios(reference, views_deg)(fit)`` is ``albedo_ratios(reference, fit, views_deg)``.
     Read-only after construction, so threads may call one at once.
+
+    Parameters
+    ----------
+    reference : BRDF
+        The data (e.g. a :class:`~microfacet.measured.MERLBRDF`).
+    views_deg : sequence of float
+        Viewing angles ``theta_o``, degrees.
+    n_theta, n_phi : int
+        Nodes of the half-vector quadrature (:func:`hemisphere_grid`).
 
     Examples
     --------
@@ -448,7 +622,18 @@ class AlbedoRatios:
         self.ref = _albedo_sums(reference, self.nodes, self.n_views)
 
     def albedo(self, brdf) -> np.ndarray:
-        """Directional albedo of ``brdf`` on the reference's nodes, ``(len(views_deg), 3)``."""
+        """Directional albedo of ``brdf`` on the reference's nodes, ``(len(views_deg), 3)``.
+
+        Parameters
+        ----------
+        brdf : BRDF
+            The BRDF to integrate (a fit or the reference).
+
+        Returns
+        -------
+        (len(views_deg), 3) ndarray
+            Directional albedo per view and RGB channel.
+        """
         return _albedo_sums(brdf, self.nodes, self.n_views)
 
     def __call__(self, fit):
@@ -488,6 +673,18 @@ def white_furnace(brdf, views_deg=(0.0, 30.0, 60.0, 75.0, 85.0, 89.0)) -> float:
     on the default 128^2 quadrature is recomputed on 512^2 nodes (an irregular tabulated
     distribution can sit ~1e-3 above 1 on the coarse grid and below it once converged).
 
+    Parameters
+    ----------
+    brdf : BRDF
+        A microfacet BRDF, a layered or a sum of BRDFs.
+    views_deg : sequence of float
+        Viewing angles ``theta_o``, degrees.
+
+    Returns
+    -------
+    float
+        The largest albedo (0 if ``brdf`` has no microfacet lobe).
+
     Examples
     --------
     >>> import microfacet as mf
@@ -508,6 +705,18 @@ def hemisphere_grid(n_theta: int = 128, n_phi: int = 128) -> tuple[np.ndarray, n
     """Midpoint quadrature over the upper hemisphere: directions ``(n_theta * n_phi, 3)``
     and solid-angle weights, ``theta = u^2 pi / 2`` (dense near the normal), so that
     ``sum w g(h) ~= int g dw`` for smooth or sharp-at-the-pole ``g``.
+
+    Parameters
+    ----------
+    n_theta, n_phi : int
+        Cells in ``theta`` and ``phi``.
+
+    Returns
+    -------
+    directions : (n_theta * n_phi, 3) ndarray
+        Unit vectors, z up.
+    weights : (n_theta * n_phi,) ndarray
+        Solid angle of each cell, steradians (sum ``2 pi``).
 
     Examples
     --------
@@ -535,6 +744,18 @@ def ndf_error(ndf_ref, ndf_fit, n_theta: int = 128, n_phi: int = 128) -> dict[st
     Returns ``{"l2": e, "area_ref": ..., "area_fit": ...}`` where the areas are the
     projected areas before normalization (1 for a normalized NDF).
 
+    Parameters
+    ----------
+    ndf_ref, ndf_fit : callable
+        ``D(h)``: ``(N, 3)`` unit half vectors to ``(N,)`` densities.
+    n_theta, n_phi : int
+        Nodes of :func:`hemisphere_grid`.
+
+    Returns
+    -------
+    dict of str to float
+        ``"l2"``, ``"area_ref"`` and ``"area_fit"``.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -556,6 +777,18 @@ def ndf_error(ndf_ref, ndf_fit, n_theta: int = 128, n_phi: int = 128) -> dict[st
 
 def describe_log_error(n: int = UNIFORM_PAIRS, seed: int = 0) -> str:
     """One sentence saying what :func:`log_error` measures.
+
+    Parameters
+    ----------
+    n : int
+        Sobol points.
+    seed : int
+        Digital shift of the Sobol sequence.
+
+    Returns
+    -------
+    str
+        The description.
 
     Examples
     --------
@@ -596,6 +829,15 @@ class LogError:
     pair scores ``inf``. With the default ``n = 2^17`` the value changes by ~1 % between
     seeds (tests).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data, evaluated once at construction.
+    n : int
+        Sobol points of :func:`uniform_directions` (before grazing pairs are dropped).
+    seed : int
+        Digital shift of the Sobol sequence.
+
     Example
     -------
     >>> import microfacet as mf
@@ -613,7 +855,18 @@ class LogError:
             raise ValueError("the reference BRDF is not finite on the compared directions")
 
     def error(self, brdf) -> float:
-        """``E`` of one fit (class docstring)."""
+        """``E`` of one fit (class docstring).
+
+        Parameters
+        ----------
+        brdf : BRDF
+            The fit.
+
+        Returns
+        -------
+        float
+            ``E`` (``inf`` if the fit is not finite on some pair).
+        """
         d = _log_projected(brdf, self.wi, self.wo) - self.ref
         e = float(np.sqrt(np.sum(self.w * np.sum(d * d, axis=-1)) / 3.0))
         return e if np.isfinite(e) else float("inf")
@@ -629,6 +882,22 @@ def log_error(reference, fits, n: int = UNIFORM_PAIRS, seed: int = 0):
     """Cosine-weighted log error (Löw et al. 2012) of ``fits`` (a BRDF: float; a dict of
     BRDFs: dict of floats) against ``reference``: ``LogError(reference, n, seed)(fits)``
     (see :class:`LogError`).
+
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    fits : BRDF or dict of str to BRDF
+        One fit, or fits by name.
+    n : int
+        Sobol points.
+    seed : int
+        Digital shift of the Sobol sequence.
+
+    Returns
+    -------
+    float or dict of str to float
+        ``E`` of each fit.
 
     Examples
     --------
@@ -659,6 +928,16 @@ _ENV_CHUNK = 1 << 18                 # pairs per evaluation batch when rendering
 
 def describe_image_error(size: int = 64) -> str:
     """One sentence saying what :func:`image_error` measures.
+
+    Parameters
+    ----------
+    size : int
+        Image width and height, pixels.
+
+    Returns
+    -------
+    str
+        The description.
 
     Examples
     --------
@@ -861,6 +1140,20 @@ def render_images(brdf, size: int = 64, reference=None) -> list[np.ndarray]:
     (tests); single pixels near the horizon err more. Data and fits share the same
     nodes, so the bias is common to both.
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF to render.
+    size : int
+        Image width and height, pixels.
+    reference : BRDF, optional
+        Data whose unmeasured pairs are black too; None: only grazing pairs are.
+
+    Returns
+    -------
+    list of (size, size, 3) ndarray
+        The four images, in the order of :data:`IMAGE_NAMES`.
+
     Example
     -------
     >>> import microfacet as mf
@@ -925,6 +1218,13 @@ class ImageError:
     infinite on some pair); :meth:`chromaticity` gives the
     chromaticity difference of the same renders (:func:`chromaticity_difference`).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data whose images are rendered once, at construction.
+    size : int
+        Image width and height, pixels.
+
     Example
     -------
     >>> import microfacet as mf
@@ -950,11 +1250,35 @@ class ImageError:
         self.ref_rgb = self.ref.sum(axis=(0, 1))
 
     def render(self, brdf) -> np.ndarray:
-        """Pixel radiance ``(4, N, 3)`` of ``brdf`` on this reference's pairs."""
+        """Pixel radiance ``(4, N, 3)`` of ``brdf`` on this reference's pairs.
+
+        Parameters
+        ----------
+        brdf : BRDF
+            The fit.
+
+        Returns
+        -------
+        (4, N, 3) ndarray
+            Linear RGB radiance of the ``N`` sphere pixels in each image.
+        """
         return _render_pixels(brdf, self.scene, self.light_masks, self.env)
 
     def per_image(self, brdf, pixels=None) -> list[float]:
-        """``e`` of each image (``nan`` where the data image is black)."""
+        """``e`` of each image (``nan`` where the data image is black).
+
+        Parameters
+        ----------
+        brdf : BRDF
+            The fit.
+        pixels : (4, N, 3) ndarray, optional
+            Its radiance from :meth:`render`; None renders it.
+
+        Returns
+        -------
+        list of float
+            ``e`` per image of :data:`IMAGE_NAMES` (``inf`` where not finite).
+        """
         pixels = self.render(brdf) if pixels is None else pixels
         out = [float("nan")] * 4
         for j in self.used:
@@ -963,18 +1287,51 @@ class ImageError:
         return out
 
     def error(self, brdf) -> float:
-        """The image error of one fit (class docstring)."""
+        """The image error of one fit (class docstring).
+
+        Parameters
+        ----------
+        brdf : BRDF
+            The fit.
+
+        Returns
+        -------
+        float
+            Mean of ``e`` over the non-black images (0 for the reference).
+        """
         return float(np.nanmean(self.per_image(brdf)))
 
     def chromaticity(self, fits):
-        """:func:`chromaticity_difference` of a fit (float) or dict of fits (dict)."""
+        """:func:`chromaticity_difference` of a fit (float) or dict of fits (dict).
+
+        Parameters
+        ----------
+        fits : BRDF or dict of str to BRDF
+            One fit, or fits by name.
+
+        Returns
+        -------
+        float or dict of str to float
+            The chromaticity distance of each fit (0 for the data's colour).
+        """
         def one(brdf):
             return _chromaticity_distance(self.render(brdf).sum(axis=(0, 1)), self.ref_rgb)
         return {name: one(b) for name, b in fits.items()} if isinstance(fits, dict) else one(fits)
 
     def details(self, brdf) -> dict:
         """One render of ``brdf``, every figure: ``{"image": error, "per_image": [e per
-        image of IMAGE_NAMES], "chromaticity": difference}``."""
+        image of IMAGE_NAMES], "chromaticity": difference}``.
+
+        Parameters
+        ----------
+        brdf : BRDF
+            The fit.
+
+        Returns
+        -------
+        dict
+            ``"image"`` (float), ``"per_image"`` (list of 4 floats) and ``"chromaticity"`` (float).
+        """
         pixels = self.render(brdf)
         per = self.per_image(brdf, pixels)
         return {"image": float(np.nanmean(per)), "per_image": per,
@@ -1001,6 +1358,20 @@ def image_error(reference, fits, size: int = 64):
     of BRDFs: dict of floats) against ``reference``: ``ImageError(reference, size)(fits)``
     (see :class:`ImageError`).
 
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    fits : BRDF or dict of str to BRDF
+        One fit, or fits by name.
+    size : int
+        Image width and height, pixels.
+
+    Returns
+    -------
+    float or dict of str to float
+        The image error of each fit.
+
     Examples
     --------
     >>> import numpy as np
@@ -1022,6 +1393,20 @@ def chromaticity_difference(reference, fits, size: int = 64):
     scaled alike in R, G and B scores 0; a grey turned (0.55, 0.5, 0.45) scores 0.033.
     A fit (float) or a dict of fits (dict of floats), as
     ``ImageError(reference, size).chromaticity(fits)``.
+
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    fits : BRDF or dict of str to BRDF
+        One fit, or fits by name.
+    size : int
+        Image width and height, pixels.
+
+    Returns
+    -------
+    float or dict of str to float
+        Distance between ``(r, g)`` chromaticities.
 
     Examples
     --------
