@@ -48,6 +48,11 @@ def available() -> bool:
     """Whether the compiled backend may run now: :data:`microfacet.kernels.AVAILABLE` (Numba
     installed and ``MICROFACET_NUMBA`` not ``0``; a process may set it to False).
 
+    Returns
+    -------
+    bool
+        True where the compiled backend may run.
+
     Examples
     --------
     >>> from microfacet import kernels
@@ -62,6 +67,20 @@ def choose(requested: str = AUTO, compiled: bool = True, name: str = "backend") 
     ``"auto"`` or ``"numba"`` when :func:`available` and the caller has ``compiled`` code for the
     case, else :data:`NUMPY`. ``ValueError`` naming ``name`` for an unknown request, or for
     ``"numba"`` where it cannot run. Example: ``choose()`` is ``"numba"`` with Numba installed.
+
+    Parameters
+    ----------
+    requested : str
+        ``"auto"``, ``"numba"`` or ``"numpy"``.
+    compiled : bool
+        Whether the caller has compiled code for the case.
+    name : str
+        Parameter name for the error message.
+
+    Returns
+    -------
+    str
+        :data:`NUMBA` or :data:`NUMPY`.
 
     Examples
     --------
@@ -89,6 +108,16 @@ def smith(brdf) -> bool:
     ``smith_sample``) run for the :class:`~microfacet.MicrofacetBRDF` ``brdf``: the compiled
     backend is chosen (:func:`choose`) and the BRDF has a kernel record (``brdf.params``: Smith
     GAF, scalar Beckmann or GGX, a Fresnel term with a record). Example: ``smith(mf.MicrofacetBRDF(mf.GGX(0.3)))``.
+
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF
+        The BRDF.
+
+    Returns
+    -------
+    bool
+        True where the compiled kernels run for it.
 
     Examples
     --------

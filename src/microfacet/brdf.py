@@ -45,6 +45,18 @@ def unit_directions(w, name: str) -> np.ndarray:
     """``w`` as float64 unit directions ``(..., 3)``, checked as every BRDF method checks its
     ``wi``/``wo`` (one-line ``ValueError`` naming ``name``; :func:`microfacet.protocol.directions`).
 
+    Parameters
+    ----------
+    w : array_like
+        Directions, last axis 3.
+    name : str
+        Parameter name for the error message.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        The checked unit directions.
+
     Examples
     --------
     >>> unit_directions([0.0, 0.0, 1.0], "wi")
@@ -60,6 +72,16 @@ def unit_directions(w, name: str) -> np.ndarray:
 def uniforms(u) -> np.ndarray:
     """``u`` as float64 uniforms ``(..., 2)`` in ``[0, 1]``, checked as :meth:`BRDF.sample` does
     (:func:`microfacet.protocol.uniforms`).
+
+    Parameters
+    ----------
+    u : array_like
+        Uniform numbers, last axis 2.
+
+    Returns
+    -------
+    (..., 2) ndarray
+        The checked uniforms.
 
     Examples
     --------
@@ -122,11 +144,37 @@ class BRDF:
     """
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:  # pragma: no cover - interface
-        """Projected BRDF ``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (``evalp``)."""
+        """Projected BRDF ``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (``evalp``).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up); leading axes broadcast.
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values.
+        """
         raise NotImplementedError
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """BRDF value ``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
+        """BRDF value ``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up); leading axes broadcast.
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values, per steradian.
+        """
         wi = directions(wi, "wi")
         zi = wi[..., 2:3]
         fc = self.eval_cos(wi, wo)
@@ -136,16 +184,53 @@ class BRDF:
     def sample(self, u, wo, out=None):  # pragma: no cover - interface
         """Importance-sample ``f_r cos theta_i``: ``(wi, weight, pdf)`` from uniforms
         ``u`` in ``[0,1]^2`` (``ValueError`` outside), with ``weight = eval_cos / pdf``
-        (``evalp_is``)."""
+        (``evalp_is``).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions, local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf``, RGB (0 for a failed sample).
+        pdf : (...) ndarray
+            Density per steradian of ``wi``.
+        """
         raise NotImplementedError
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:  # pragma: no cover - interface
-        """Solid-angle density of ``sample`` producing ``wi`` from ``wo``."""
+        """Solid-angle density of ``sample`` producing ``wi`` from ``wo``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up); leading axes broadcast.
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        (...) ndarray
+            Density per steradian of ``wi``.
+        """
         raise NotImplementedError
 
 
 class Lambertian(BRDF):
     """Ideal diffuse BRDF ``f_r = k_d / pi`` (Eq. 1.9), sampled by the cosine warp.
+
+    Parameters
+    ----------
+    reflectance : float or (3,) array_like
+        Albedo ``k_d`` per RGB channel, ``[0, 1]``.
 
     References
     ----------
@@ -304,15 +389,50 @@ class MicrofacetBRDF(BRDF):
 
     # ------------------------------------------------------------------- terms
     def ndf(self, h) -> np.ndarray:
-        """Microfacet NDF ``D(h)`` (Eq. 2.11, 3.2)."""
+        """Microfacet NDF ``D(h)`` (Eq. 2.11, 3.2).
+
+        Parameters
+        ----------
+        h : (..., 3) array_like
+            Unit microfacet normals.
+
+        Returns
+        -------
+        (...) ndarray
+            ``D(h)``, per steradian.
+        """
         return self.distribution.ndf(h)
 
     def g1(self, k) -> np.ndarray:
-        """Smith masking ``G1(k)`` (Eq. 2.14, 3.3)."""
+        """Smith masking ``G1(k)`` (Eq. 2.14, 3.3).
+
+        Parameters
+        ----------
+        k : (..., 3) array_like
+            Unit directions.
+
+        Returns
+        -------
+        (...) ndarray
+            Masking in ``[0, 1]``.
+        """
         return self.distribution.g1(k)
 
     def vndf(self, h, k) -> np.ndarray:
-        """Distribution of visible normals ``D_k(h)`` (Eq. 2.17)."""
+        """Distribution of visible normals ``D_k(h)`` (Eq. 2.17).
+
+        Parameters
+        ----------
+        h : (..., 3) array_like
+            Unit microfacet normals.
+        k : (..., 3) array_like
+            Unit view directions.
+
+        Returns
+        -------
+        (...) ndarray
+            ``D_k(h)``, per steradian.
+        """
         return self.distribution.vndf(h, k)
 
     def gaf(self, wi, wo, h=None) -> np.ndarray:
@@ -327,6 +447,18 @@ class MicrofacetBRDF(BRDF):
         the form ``f(i, o) z_i c_o = f(o, i) z_o c_i``. Without shadowing: ``G1(o)``.
         V-groove: ``min(1, 2 z_i z_h / ih, 2 z_o z_h / oh)``. Normal map: ``z_o z_h / oh``.
         Without shadowing only the ``o`` factors remain.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions.
+        h : (..., 3) array_like, optional
+            Microfacet normals; None: the half vectors.
+
+        Returns
+        -------
+        (...) ndarray
+            ``G`` in ``[0, 1]``.
         """
         wi, wo = directions(wi, "wi"), directions(wo, "wo")
         h = half_vector(wi, wo) if h is None else np.asarray(h, dtype=np.float64)
@@ -405,18 +537,57 @@ class MicrofacetBRDF(BRDF):
         return into(out, (self.fresnel(oh) * s[..., None]).astype(self.dtype, copy=False), d.values())
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2)."""
+        """``f_r cos theta_i = F D G / (4 cos theta_o)`` (Listing 2.2).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values.
+        """
         return self._eval(wi, wo, False, out)
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
         """``f_r = F D G / (4 cos theta_i cos theta_o)`` (Eq. 2.1). ``out`` (see the module): of
         the BRDF's ``dtype``; the kernels write into it as they go, so its contents are
-        unspecified after a ``ValueError`` on the inputs."""
+        unspecified after a ``ValueError`` on the inputs.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values.
+        """
         return self._eval(wi, wo, True, out)
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Density of ``sample``: the density of the sampled normal over ``4 oh`` (one compiled
-        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`)."""
+        pass for Smith BRDFs with scalar parameters, :func:`microfacet.kernels.smith_pdf`).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        (...) ndarray
+            Density per steradian of ``wi``.
+        """
         def compiled(wi, wo):
             return kernels.smith_pdf(self, wi, wo, self.dtype, self._out(out, wi, wo, ()), True)
         d, fast = _fused(compiled if backend.smith(self) else _reference, self.dtype == np.float32, wi=wi, wo=wo)
@@ -450,7 +621,26 @@ class MicrofacetBRDF(BRDF):
         when the distribution supports it, slopes of ``P`` otherwise. Returns
         ``(wi, weight, pdf)``; the Smith weight is ``F G / G1(o)`` (Eq. 2.23). Failed
         samples have weight 0 and pdf 0. Smith BRDFs with scalar parameters and a
-        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`)."""
+        :mod:`microfacet.fresnel` term run one compiled pass (:func:`microfacet.kernels.smith_sample`).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions, local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf``, RGB.
+        pdf : (...) ndarray
+            Density per steradian.
+        """
         def compiled(wo, u):
             return kernels.smith_sample(self, u, wo, self.dtype, self._out(out, u, wo, None), True)
         d, fast = _fused(compiled if backend.smith(self) else _reference, self.dtype == np.float32, wo=wo, u=u)

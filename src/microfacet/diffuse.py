@@ -74,7 +74,18 @@ class TransmittedLambertian(BRDF):
         return f"TransmittedLambertian(reflectance={self.reflectance.tolist()}, eta={self.eta!r})"
 
     def transmittance(self, mu) -> np.ndarray:
-        """``t(mu) = 1 - F(eta, mu)``, 0 below the horizon."""
+        """``t(mu) = 1 - F(eta, mu)``, 0 below the horizon.
+
+        Parameters
+        ----------
+        mu : array_like
+            Cosines.
+
+        Returns
+        -------
+        ndarray
+            ``1 - F``, 0 where ``mu <= 0``.
+        """
         mu = np.asarray(mu, dtype=np.float64)
         f = self._fresnel(np.clip(mu, 0.0, 1.0))[..., 0]
         return np.where(mu > 0, 1.0 - f, 0.0)

@@ -61,7 +61,18 @@ class Fresnel:
         """This term's record for the compiled kernels (:class:`microfacet.params.FresnelParams`,
         ``fp`` as ``dtype``), or ``None`` where they do not compute it: this base class, and
         subclasses of the terms below (which may change the formula). Example:
-        ``Conductor.metal("Cu").kernel_params().kind == microfacet.params.CONDUCTOR``."""
+        ``Conductor.metal("Cu").kernel_params().kind == microfacet.params.CONDUCTOR``.
+
+        Parameters
+        ----------
+        dtype : dtype
+            Type of ``fp``.
+
+        Returns
+        -------
+        FresnelParams or None
+            The record, or None.
+        """
         return None
 
 
@@ -90,6 +101,11 @@ class Dielectric(Fresnel):
     ``F = 1/2 (g-c)^2/(g+c)^2 [1 + (c(g+c)-1)^2/(c(g-c)+1)^2]`` with
     ``c = cos theta_d`` and ``g^2 = eta^2 + c^2 - 1``; total internal reflection
     (``g^2 < 0``, possible for ``eta < 1``) gives ``F = 1``.
+
+    Parameters
+    ----------
+    eta : float or (3,) array_like
+        Relative index of refraction (``> 0``).
 
     Examples
     --------
@@ -129,6 +145,13 @@ class Schlick(Fresnel):
     :class:`Dielectric` (``f0`` from ``eta``, ``f90 = 1``) it errs by at most 0.036 for
     ``eta = 1.5``, at 85 degrees.
 
+    Parameters
+    ----------
+    f0 : float or (3,) array_like
+        Reflectance at normal incidence, ``[0, 1]``.
+    f90 : float or (3,) array_like
+        Reflectance at grazing incidence, ``[0, 1]``.
+
     Examples
     --------
     >>> from microfacet.fresnel import Schlick
@@ -144,7 +167,18 @@ class Schlick(Fresnel):
 
     @classmethod
     def from_eta(cls, eta) -> "Schlick":
-        """Schlick term with ``F0 = (eta - 1)^2 / (eta + 1)^2`` (Table 2.I)."""
+        """Schlick term with ``F0 = (eta - 1)^2 / (eta + 1)^2`` (Table 2.I).
+
+        Parameters
+        ----------
+        eta : float or (3,) array_like
+            Relative index of refraction.
+
+        Returns
+        -------
+        Schlick
+            The term (``f90 = 1``).
+        """
         eta = _rgb(eta, "eta")
         return cls(((eta - 1.0) / (eta + 1.0)) ** 2)
 
@@ -154,7 +188,18 @@ class Schlick(Fresnel):
         return self.f0 + (self.f90 - self.f0) * (m2 * m2 * m)[..., None]
 
     def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
-        """The record: ``f0`` (row 0) and ``f90`` (row 1)."""
+        """The record: ``f0`` (row 0) and ``f90`` (row 1).
+
+        Parameters
+        ----------
+        dtype : dtype
+            Type of ``fp``.
+
+        Returns
+        -------
+        FresnelParams or None
+            The record (None for a subclass).
+        """
         return FresnelParams.analytic(SCHLICK, dtype, self.f0, self.f90) if type(self) is Schlick else None
 
 
@@ -180,6 +225,13 @@ class F82Tint(Fresnel):
     :attr:`Conductor.METALS` it then errs by at most 0.035 over all angles, where Schlick's
     term through the same ``f0`` errs by up to 0.13 (aluminium; tests).
 
+    Parameters
+    ----------
+    f0 : float or (3,) array_like
+        Reflectance at normal incidence, ``[0, 1]``.
+    f82 : float or (3,) array_like
+        Tint at ``cos theta_d = 1/7``, ``[0, 1]``; 1 is Schlick's term.
+
     Examples
     --------
     >>> import numpy as np
@@ -200,7 +252,18 @@ class F82Tint(Fresnel):
     def from_conductor(cls, eta, k) -> "F82Tint":
         """The F82-tint term through the conductor ``eta + i k`` (:class:`Conductor`) at
         normal incidence and at ``c = 1/7`` (Hoffman 2019, Sec. 4): ``f0 = F(1)``,
-        ``f82 = F(1/7) / F_S(1/7)`` (clipped to ``[0, 1]``)."""
+        ``f82 = F(1/7) / F_S(1/7)`` (clipped to ``[0, 1]``).
+
+        Parameters
+        ----------
+        eta, k : float or (3,) array_like
+            Complex index of refraction per RGB channel.
+
+        Returns
+        -------
+        F82Tint
+            The matched term.
+        """
         cond = Conductor(eta, k)
         f0 = cond(1.0)
         schlick = f0 + (1.0 - f0) * (1.0 - F82_COS) ** 5
@@ -233,6 +296,11 @@ class Conductor(Fresnel):
     ``R_p = R_s ((a^2 + b^2) c^2 + s^4 - 2 a c s^2)/((a^2 + b^2) c^2 + s^4 + 2 a c s^2)``,
     ``s^2 = 1 - c^2``. With ``k = 0`` it is :class:`Dielectric`.
 
+    Parameters
+    ----------
+    eta, k : float or (3,) array_like
+        Real and imaginary parts of the index per RGB channel.
+
     Examples
     --------
     >>> from microfacet.fresnel import Conductor, Dielectric
@@ -259,7 +327,18 @@ class Conductor(Fresnel):
 
     @classmethod
     def metal(cls, name: str) -> "Conductor":
-        """Conductor from :attr:`METALS` (``"Au"``, ``"Ag"``, ``"Cu"``, ``"Al"``)."""
+        """Conductor from :attr:`METALS` (``"Au"``, ``"Ag"``, ``"Cu"``, ``"Al"``).
+
+        Parameters
+        ----------
+        name : str
+            A key of :attr:`METALS`.
+
+        Returns
+        -------
+        Conductor
+            The metal's term.
+        """
         try:
             return cls(*cls.METALS[name])
         except KeyError:
@@ -302,6 +381,13 @@ class Tabulated(Fresnel):
     ``cos_theta_d`` is an increasing ``(N,)`` grid and ``values`` its ``(N, 3)`` RGB
     samples (e.g. the Fresnel term extracted by the fitting of Ch. 4, Eq. 4.11).
 
+    Parameters
+    ----------
+    cos_theta_d : (N,) array_like
+        Increasing grid of ``cos theta_d``.
+    values : (N, 3) array_like
+        RGB values at the grid.
+
     Examples
     --------
     >>> from microfacet.fresnel import Tabulated
@@ -328,7 +414,18 @@ class Tabulated(Fresnel):
         return np.stack([np.interp(c, self.cos_theta_d, v) for v in self.values.T], axis=-1)
 
     def kernel_params(self, dtype=np.float64) -> FresnelParams | None:
-        """The table, read by the kernels in float64 whatever ``dtype`` (as ``np.interp``)."""
+        """The table, read by the kernels in float64 whatever ``dtype`` (as ``np.interp``).
+
+        Parameters
+        ----------
+        dtype : dtype
+            Ignored (the table stays float64).
+
+        Returns
+        -------
+        FresnelParams or None
+            The record (None for a subclass).
+        """
         if type(self) is not Tabulated:
             return None
         return FresnelParams(TABULATED, read_only(np.zeros((2, 3), dtype)),

@@ -19,6 +19,16 @@ __all__ = [
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dot product over the last axis, broadcasting leading axes.
 
+    Parameters
+    ----------
+    a, b : (..., n) array_like
+        Vectors (leading axes broadcast).
+
+    Returns
+    -------
+    (...) ndarray
+        The dot products.
+
     Examples
     --------
     >>> import numpy as np
@@ -30,6 +40,16 @@ def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def normalize(v: np.ndarray) -> np.ndarray:
     """``v / |v|`` over the last axis (zero vectors stay zero).
+
+    Parameters
+    ----------
+    v : (..., n) array_like
+        Vectors.
+
+    Returns
+    -------
+    (..., n) ndarray
+        Unit vectors (zero where ``v`` is zero).
 
     Examples
     --------
@@ -46,6 +66,16 @@ def unit_deviation(w: np.ndarray) -> float:
     """Largest ``| |w|^2 - 1 |`` over the directions ``w (..., 3)``; ``inf`` if any
     component is NaN or infinite, 0 for an empty array. (NumPy reference of
     :func:`microfacet.kernels.unit_deviation`.)
+
+    Parameters
+    ----------
+    w : (..., 3) array_like
+        Directions.
+
+    Returns
+    -------
+    float
+        The largest deviation.
 
     Examples
     --------
@@ -74,6 +104,16 @@ def sin_from_cos(c) -> np.ndarray:
 def spherical_to_cartesian(theta, phi) -> np.ndarray:
     """Unit direction of elevation ``theta`` and azimuth ``phi`` (Dupuy 2015, Eq. 1.2).
 
+    Parameters
+    ----------
+    theta, phi : array_like
+        Elevation from +z and azimuth from +x, radians (broadcast together).
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Unit directions.
+
     Examples
     --------
     >>> import numpy as np
@@ -88,6 +128,16 @@ def spherical_to_cartesian(theta, phi) -> np.ndarray:
 
 def cartesian_to_spherical(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(theta, phi)`` of unit directions, inverse of Eq. 1.2; ``phi`` in (-pi, pi].
+
+    Parameters
+    ----------
+    w : (..., 3) array_like
+        Unit directions.
+
+    Returns
+    -------
+    theta, phi : (...) ndarray
+        Elevation in ``[0, pi]`` and azimuth in ``(-pi, pi]``, radians.
 
     Examples
     --------
@@ -104,6 +154,16 @@ def cartesian_to_spherical(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def slope_to_normal(x, y) -> np.ndarray:
     """Normal of slope ``(x~, y~)``: ``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)`` (Eq. 2.10).
 
+    Parameters
+    ----------
+    x, y : array_like
+        Slopes ``x~, y~``.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Unit normals.
+
     Examples
     --------
     >>> slope_to_normal(0.0, 0.0)
@@ -117,6 +177,16 @@ def slope_to_normal(x, y) -> np.ndarray:
 
 def normal_to_slope(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Slope ``(x~, y~) = (-x_h / z_h, -y_h / z_h)`` of an upper normal (Eq. 2.9).
+
+    Parameters
+    ----------
+    h : (..., 3) array_like
+        Unit normals with ``z > 0``.
+
+    Returns
+    -------
+    x, y : (...) ndarray
+        Slopes.
 
     Examples
     --------
@@ -132,6 +202,16 @@ def normal_to_slope(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """Halfway vector ``h = (i + o) / |i + o|`` (Eq. 2.5); zero where ``i = -o``.
+
+    Parameters
+    ----------
+    wi, wo : (..., 3) array_like
+        Unit light and view directions.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Unit half vectors.
 
     Examples
     --------
@@ -151,6 +231,18 @@ def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
 def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Mirror direction ``2 (w.n) n - w`` (Eq. 2.4).
 
+    Parameters
+    ----------
+    w : (..., 3) array_like
+        Direction to mirror.
+    n : (..., 3) array_like
+        Unit normal.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        The mirrored direction.
+
     Examples
     --------
     >>> import numpy as np
@@ -162,6 +254,18 @@ def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 def rot_z(v: np.ndarray, angle) -> np.ndarray:
     """Rotate ``v`` by ``angle`` about z (right-handed).
+
+    Parameters
+    ----------
+    v : (..., 3) array_like
+        Vectors.
+    angle : float or array_like
+        Rotation angle, radians (broadcast with ``v[..., 0]``).
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Rotated vectors.
 
     Examples
     --------
@@ -176,6 +280,18 @@ def rot_z(v: np.ndarray, angle) -> np.ndarray:
 
 def rot_y(v: np.ndarray, angle) -> np.ndarray:
     """Rotate ``v`` by ``angle`` about y (right-handed).
+
+    Parameters
+    ----------
+    v : (..., 3) array_like
+        Vectors.
+    angle : float or array_like
+        Rotation angle, radians (broadcast with ``v[..., 0]``).
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Rotated vectors.
 
     Examples
     --------
@@ -193,6 +309,16 @@ def io_to_hd(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     ``h = (i + o)/|i + o|`` and ``d = Rot_y(-theta_h) Rot_z(-phi_h) i``.
 
+    Parameters
+    ----------
+    wi, wo : (..., 3) array_like
+        Unit light and view directions.
+
+    Returns
+    -------
+    h, d : (..., 3) ndarray
+        Halfway and difference vectors.
+
     Examples
     --------
     >>> import numpy as np
@@ -209,6 +335,16 @@ def io_to_hd(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def hd_to_io(h: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse Rusinkiewicz map (Eq. 1.8, right): ``i = Rot_z(phi_h) Rot_y(theta_h) d``,
     ``o = 2 (i.h) h - i``.
+
+    Parameters
+    ----------
+    h, d : (..., 3) array_like
+        Unit halfway and difference vectors.
+
+    Returns
+    -------
+    wi, wo : (..., 3) ndarray
+        Light and view directions.
 
     Examples
     --------
@@ -229,6 +365,16 @@ def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Branchless construction of Duff et al. 2017 ("Building an Orthonormal Basis, Revisited",
     JCGT 6(1)), vectorized.
+
+    Parameters
+    ----------
+    n : (..., 3) array_like
+        Unit normals.
+
+    Returns
+    -------
+    s, t : (..., 3) ndarray
+        Unit tangents.
 
     Examples
     --------
@@ -251,6 +397,18 @@ def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def to_local(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.ndarray:
     """World vector ``v`` expressed in the frame ``(s, t, n)``.
 
+    Parameters
+    ----------
+    v : (..., 3) array_like
+        World vectors.
+    s, t, n : (..., 3) array_like
+        Orthonormal frame (tangent, bitangent, normal).
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Coordinates in the frame.
+
     Examples
     --------
     >>> import numpy as np
@@ -264,6 +422,18 @@ def to_local(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.n
 
 def to_world(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Local vector ``v`` of the frame ``(s, t, n)`` in world coordinates.
+
+    Parameters
+    ----------
+    v : (..., 3) array_like
+        Local coordinates.
+    s, t, n : (..., 3) array_like
+        Orthonormal frame (tangent, bitangent, normal).
+
+    Returns
+    -------
+    (..., 3) ndarray
+        World vectors.
 
     Examples
     --------
@@ -279,6 +449,16 @@ def to_world(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.n
 
 def square_to_concentric_disk(u: np.ndarray) -> np.ndarray:
     """Concentric map of ``[0,1)^2`` onto the unit disk, ``(..., 2)`` (Shirley & Chiu 1997).
+
+    Parameters
+    ----------
+    u : (..., 2) array_like
+        Points of ``[0, 1)^2``.
+
+    Returns
+    -------
+    (..., 2) ndarray
+        Points of the unit disk.
 
     Examples
     --------
@@ -300,6 +480,16 @@ def square_to_concentric_disk(u: np.ndarray) -> np.ndarray:
 def square_to_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
     """Cosine-weighted upper-hemisphere direction (Malley's method, Listing 1.3).
 
+    Parameters
+    ----------
+    u : (..., 2) array_like
+        Points of ``[0, 1)^2``.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Unit directions, density :func:`cosine_hemisphere_pdf`.
+
     Examples
     --------
     >>> import numpy as np
@@ -314,6 +504,16 @@ def square_to_cosine_hemisphere(u: np.ndarray) -> np.ndarray:
 
 def cosine_hemisphere_pdf(w: np.ndarray) -> np.ndarray:
     """Solid-angle density ``max(0, cos theta) / pi`` of the cosine warp.
+
+    Parameters
+    ----------
+    w : (..., 3) array_like
+        Unit directions.
+
+    Returns
+    -------
+    (...) ndarray
+        Density per steradian (0 below the horizon).
 
     Examples
     --------

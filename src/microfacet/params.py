@@ -54,6 +54,16 @@ def read_only(a: np.ndarray) -> np.ndarray:
     whether the caller's are writeable or not (one compiled version instead of two: Numba
     compiles per read-only flag).
 
+    Parameters
+    ----------
+    a : ndarray
+        Any array.
+
+    Returns
+    -------
+    ndarray
+        A non-writeable view.
+
     Examples
     --------
     >>> import numpy as np
@@ -72,6 +82,17 @@ class FresnelParams(NamedTuple):
     a conductor's ``k``), ``tx`` ``(m,)`` and ``tv`` ``(m, 3)`` float64: a tabulated term's
     ``cos theta_d`` grid and values (zeros for the analytic terms). Arrays read-only.
 
+    Parameters
+    ----------
+    kind : int
+        Which term (:data:`IDEAL` ... :data:`TABULATED`).
+    fp : (2, 3) ndarray
+        Scalar parameters of the term.
+    tx : (m,) ndarray
+        Tabulated ``cos theta_d`` grid.
+    tv : (m, 3) ndarray
+        Tabulated RGB values.
+
     Examples
     --------
     >>> f = FresnelParams.analytic(SCHLICK, "float64", row0=0.04)
@@ -88,7 +109,22 @@ class FresnelParams(NamedTuple):
 
     @classmethod
     def analytic(cls, kind: int, dtype, row0=0.0, row1=0.0) -> "FresnelParams":
-        """The record of an analytic term (no table): ``fp = [row0, row1]`` as ``dtype``."""
+        """The record of an analytic term (no table): ``fp = [row0, row1]`` as ``dtype``.
+
+        Parameters
+        ----------
+        kind : int
+            :data:`IDEAL`, :data:`SCHLICK`, :data:`DIELECTRIC`, :data:`CONDUCTOR` ...
+        dtype : dtype
+            Type of ``fp``.
+        row0, row1 : float or (3,) array_like
+            ``fp``'s two rows.
+
+        Returns
+        -------
+        FresnelParams
+            The record.
+        """
         fp = np.zeros((2, 3), dtype)
         fp[0], fp[1] = row0, row1
         return cls(kind, read_only(fp), _NO_TABLE[0], _NO_TABLE[1])
@@ -100,6 +136,21 @@ _NO_TABLE = (read_only(np.zeros(2)), read_only(np.zeros((2, 3))))
 
 class SmithParams(NamedTuple):
     """Parameters of a Smith microfacet BRDF for the compiled kernels (module docstring).
+
+    Parameters
+    ----------
+    kind : int
+        :data:`BECKMANN` or :data:`GGX`.
+    ax, ay : float
+        Roughness along x and y.
+    rho : float
+        Slope correlation, ``(-1, 1)``.
+    xn, yn : float
+        Mean slope.
+    shadowing : bool
+        Smith shadowing on (else masking only).
+    fresnel : FresnelParams
+        The Fresnel term.
 
     Examples
     --------
@@ -123,6 +174,18 @@ def fresnel_params(fresnel, dtype=np.float64) -> FresnelParams | None:
     """``fresnel.kernel_params(dtype)`` (:meth:`microfacet.fresnel.Fresnel.kernel_params`), or
     ``None`` for ``None``: the ideal term (``F = 1``).
 
+    Parameters
+    ----------
+    fresnel : Fresnel or None
+        The term; None is ``F = 1``.
+    dtype : dtype
+        Type of ``fp``.
+
+    Returns
+    -------
+    FresnelParams or None
+        The record, or None where the kernels do not compute the term.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -145,6 +208,22 @@ def smith_params(distribution, fresnel=None, shadowing: bool = True, dtype=np.fl
     it: a distribution other than a :class:`~microfacet.distributions.Beckmann` or
     :class:`~microfacet.distributions.GGX` with scalar parameters (subclasses included: they
     may change the formulas), or a Fresnel term without a record.
+
+    Parameters
+    ----------
+    distribution : SlopeDistribution
+        The microfacet distribution.
+    fresnel : Fresnel, optional
+        The Fresnel term; None is ``F = 1``.
+    shadowing : bool
+        Smith shadowing on (else masking only).
+    dtype : dtype
+        Type of the scalars.
+
+    Returns
+    -------
+    SmithParams or None
+        The record, or None where the kernels do not cover the BRDF.
 
     Examples
     --------

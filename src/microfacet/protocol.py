@@ -52,6 +52,20 @@ def as_directions(w, name: str, float32: bool = False) -> np.ndarray:
     the compiled kernels, which read either); ``ValueError`` naming ``name`` if the last axis is not 3.
     Not checked for unit length: :func:`check_unit`.
 
+    Parameters
+    ----------
+    w : array_like
+        Directions, last axis 3.
+    name : str
+        Parameter name for the error message.
+    float32 : bool
+        Keep float32 input as float32.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        The directions, float64 (or float32).
+
     Examples
     --------
     >>> as_directions([0.0, 0.0, 2.0], "wo")          # not normalized, not checked for length
@@ -74,6 +88,15 @@ def check_unit(w, name: str, deviation=None) -> None:
     :data:`UNIT_TOLERANCE` (NaN, inf and zero vectors included). ``deviation``: the largest
     ``| |w|^2 - 1 |`` (or an upper bound of it) if a kernel measured it while reading ``w``, else,
     and where that fails, one compiled pass (:func:`microfacet.kernels.unit_deviation`).
+
+    Parameters
+    ----------
+    w : (..., 3) ndarray
+        Directions.
+    name : str
+        Parameter name for the error message.
+    deviation : float, optional
+        A kernel's bound on ``| |w|^2 - 1 |``; None: measured here.
 
     Examples
     --------
@@ -99,6 +122,20 @@ def directions(w, name: str, float32: bool = False) -> np.ndarray:
     """``w`` as unit directions ``(..., 3)``, the convention of every BRDF method:
     :func:`as_directions` and :func:`check_unit`.
 
+    Parameters
+    ----------
+    w : array_like
+        Directions, last axis 3, unit length.
+    name : str
+        Parameter name for the error message.
+    float32 : bool
+        Keep float32 input as float32.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        The checked directions.
+
     Examples
     --------
     >>> directions([[0.6, 0.0, 0.8]], "wi")
@@ -116,6 +153,18 @@ def directions(w, name: str, float32: bool = False) -> np.ndarray:
 def as_uniforms(u, float32: bool = False) -> np.ndarray:
     """``u`` as float64 uniforms ``(..., 2)`` (float32 arrays stay float32 if ``float32``);
     ``ValueError`` if the last axis is not 2. Not checked for range: :func:`check_uniforms`.
+
+    Parameters
+    ----------
+    u : array_like
+        Uniform numbers, last axis 2.
+    float32 : bool
+        Keep float32 input as float32.
+
+    Returns
+    -------
+    (..., 2) ndarray
+        The uniforms, float64 (or float32).
 
     Examples
     --------
@@ -137,6 +186,15 @@ def check_uniforms(u, name: str = "u", outside=None) -> None:
     """``ValueError`` if a value of ``u`` lies outside ``[0, 1]`` (NaN too). ``outside``: nonzero
     if a kernel found one while reading ``u``, else two NumPy passes.
 
+    Parameters
+    ----------
+    u : ndarray
+        Uniform numbers.
+    name : str
+        Parameter name for the error message.
+    outside : int or bool, optional
+        A kernel's count of values outside ``[0, 1]``; None: NumPy checks ``u``.
+
     Examples
     --------
     >>> import numpy as np
@@ -157,6 +215,18 @@ def check_uniforms(u, name: str = "u", outside=None) -> None:
 def uniforms(u, float32: bool = False) -> np.ndarray:
     """``u`` as uniforms ``(..., 2)`` in ``[0, 1]``: :func:`as_uniforms` and :func:`check_uniforms`.
 
+    Parameters
+    ----------
+    u : array_like
+        Uniform numbers, last axis 2.
+    float32 : bool
+        Keep float32 input as float32.
+
+    Returns
+    -------
+    (..., 2) ndarray
+        The checked uniforms.
+
     Examples
     --------
     >>> uniforms([[0.1, 0.9]])
@@ -174,6 +244,16 @@ def uniforms(u, float32: bool = False) -> np.ndarray:
 def pair_shape(a, b) -> tuple:
     """The batch shape of two inputs ``(..., k)`` (their leading axes broadcast); ``ValueError``
     if they do not broadcast.
+
+    Parameters
+    ----------
+    a, b : ndarray
+        Inputs ``(..., k)``.
+
+    Returns
+    -------
+    tuple of int
+        The broadcast leading shape.
 
     Examples
     --------
@@ -194,6 +274,24 @@ def output(out, shape, dtype, name="out", inputs=()):
     C-contiguous ndarray of ``shape`` and ``dtype`` that shares no memory with ``inputs``. New
     arrays come from the cache of freed outputs (:mod:`microfacet._buffers`,
     :func:`microfacet.kernels.release_outputs`).
+
+    Parameters
+    ----------
+    out : ndarray or None
+        The caller's output array, or None for a new one.
+    shape : tuple of int
+        Required shape.
+    dtype : dtype
+        Required dtype.
+    name : str
+        Parameter name for the error message.
+    inputs : tuple of ndarray
+        Arrays ``out`` must not share memory with.
+
+    Returns
+    -------
+    ndarray
+        ``out`` or a new (uninitialized) array.
 
     Examples
     --------
@@ -224,6 +322,22 @@ def sample_outputs(out, shape, dtype, inputs=()):
     """``(wi, weight, pdf)`` of a sample of ``shape``: ``out``'s three arrays (:func:`output`,
     named ``out[0]`` ... ``out[2]``, distinct), or new ones if it is ``None``.
 
+    Parameters
+    ----------
+    out : tuple of 3 ndarray or None
+        The caller's ``(wi, weight, pdf)`` arrays, or None for new ones.
+    shape : tuple of int
+        Batch shape (``wi`` and ``weight`` get a last axis of 3).
+    dtype : dtype
+        Required dtype.
+    inputs : tuple of ndarray
+        Arrays ``out`` must not share memory with.
+
+    Returns
+    -------
+    tuple of 3 ndarray
+        ``(wi, weight, pdf)``.
+
     Examples
     --------
     >>> import numpy as np
@@ -248,6 +362,20 @@ def sample_outputs(out, shape, dtype, inputs=()):
 def into(out, result: np.ndarray, inputs) -> np.ndarray:
     """``result``, or ``out`` with ``result`` copied in (checked by :func:`output`).
 
+    Parameters
+    ----------
+    out : ndarray or None
+        The caller's output array, or None.
+    result : ndarray
+        The computed values.
+    inputs : tuple of ndarray
+        Arrays ``out`` must not overlap.
+
+    Returns
+    -------
+    ndarray
+        ``out`` (filled) or ``result``.
+
     Examples
     --------
     >>> import numpy as np
@@ -266,6 +394,20 @@ def into(out, result: np.ndarray, inputs) -> np.ndarray:
 def into_sample(out, result, inputs):
     """``(wi, weight, pdf)`` ``result``, or ``out``'s three arrays with it copied in
     (checked by :func:`sample_outputs`).
+
+    Parameters
+    ----------
+    out : tuple of 3 ndarray or None
+        The caller's ``(wi, weight, pdf)`` arrays, or None.
+    result : tuple of 3 ndarray
+        The computed ``(wi, weight, pdf)``.
+    inputs : tuple of ndarray
+        Arrays ``out`` must not overlap.
+
+    Returns
+    -------
+    tuple of 3 ndarray
+        ``out`` (filled) or ``result``.
 
     Examples
     --------
