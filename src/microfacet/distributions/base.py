@@ -120,6 +120,20 @@ class SlopeDistribution:
         ``alpha_x^2 = (a1^2 + a2^2 + (a1^2 - a2^2) cos 2phi)/2``,
         ``alpha_y^2 = (a1^2 + a2^2 - (a1^2 - a2^2) cos 2phi)/2``,
         ``rho = (a1^2 - a2^2) cos phi sin phi / (alpha_x alpha_y)``.
+
+        Parameters
+        ----------
+        alpha1, alpha2 : float
+            Ellipse radii (roughness along the ellipse's axes), ``> 0``.
+        phi : float
+            Azimuth of the ``alpha1`` axis, radians.
+        mean_slope : (float, float)
+            Mean slope ``(x~n, y~n)``.
+
+        Returns
+        -------
+        SlopeDistribution
+            A distribution of this class.
         """
         a1, a2 = _roughness(alpha1, "alpha1") ** 2, _roughness(alpha2, "alpha2") ** 2
         phi = _param(phi, "phi")
@@ -138,6 +152,11 @@ class SlopeDistribution:
         Traceback (most recent call last):
         ...
         ValueError: alpha_x must be >= 1e-06 for dtype float32 (a narrower lobe is below float32's direction resolution; use float64), got 1e-12
+
+        Parameters
+        ----------
+        dtype : dtype
+            The BRDF's arithmetic type (float32 or float64).
         """
         dtype = np.dtype(dtype)
         low = MIN_ALPHA.get(dtype)
@@ -169,6 +188,11 @@ class SlopeDistribution:
         """Linear slope moments ``(E[x~], E[y~], E[x~^2], E[y~^2], E[x~ y~])`` (Eq. 3.5-3.9).
 
         Second moments are ``inf`` when the distribution's are not finite (GGX).
+
+        Returns
+        -------
+        tuple of 5 ndarray
+            ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~ y~]``.
         """
         m2 = self.second_moment_std
         if not np.isfinite(m2):
@@ -190,7 +214,18 @@ class SlopeDistribution:
         return self.alpha_x * self.alpha_y * self.sqrt_one_minus_rho2
 
     def to_standard(self, x, y) -> tuple[np.ndarray, np.ndarray]:
-        """Standard slope ``m~`` of the slope ``h~`` (inverse of Eq. 3.4)."""
+        """Standard slope ``m~`` of the slope ``h~`` (inverse of Eq. 3.4).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Slopes of this distribution.
+
+        Returns
+        -------
+        xm, ym : ndarray
+            Standard slopes.
+        """
         return self._unscale(x - self.xn, y - self.yn)
 
     def _unscale(self, dx, dy) -> tuple[np.ndarray, np.ndarray]:
@@ -199,7 +234,18 @@ class SlopeDistribution:
             self.alpha_x * self.alpha_y * self.sqrt_one_minus_rho2)
 
     def from_standard(self, xm, ym) -> tuple[np.ndarray, np.ndarray]:
-        """Slope ``h~`` of the standard slope ``m~`` (Eq. 3.4)."""
+        """Slope ``h~`` of the standard slope ``m~`` (Eq. 3.4).
+
+        Parameters
+        ----------
+        xm, ym : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        x, y : ndarray
+            Slopes of this distribution.
+        """
         return (self.alpha_x * xm + self.xn,
                 self.alpha_y * (self.rho * xm + self.sqrt_one_minus_rho2 * ym) + self.yn)
 
@@ -219,7 +265,18 @@ class SlopeDistribution:
 
     # ------------------------------------------------------------ NDF and slopes
     def p22(self, x, y) -> np.ndarray:
-        """Slope PDF ``P(x~, y~)`` (Eq. 2.27 with the shear of Eq. 3.2)."""
+        """Slope PDF ``P(x~, y~)`` (Eq. 2.27 with the shear of Eq. 3.2).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope area.
+        """
         xm, ym = self.to_standard(np.asarray(x, float), np.asarray(y, float))
         return self.p22_std(xm, ym) / self._det
 
@@ -228,6 +285,16 @@ class SlopeDistribution:
 
         Evaluated division-free as ``P_std(X/z, Y/z) / z^4`` with ``(X, Y) = z m~`` the
         standard slope scaled by ``z = z_h``, so it stays finite at grazing normals.
+
+        Parameters
+        ----------
+        h : (..., 3) array_like
+            Unit microfacet normals.
+
+        Returns
+        -------
+        (...) ndarray
+            ``D(h)``, per steradian.
         """
         h = np.asarray(h, dtype=np.float64)
         z = h[..., 2]
@@ -236,12 +303,36 @@ class SlopeDistribution:
         return np.where(z > 0, self.p22_std_over_z4(xm, ym, zs) / self._det, 0.0)
 
     def p22_std_over_z4(self, x, y, z):
-        """``P_std(x / z, y / z) / z^4`` for ``z > 0`` (overridden where a stabler form exists)."""
+        """``P_std(x / z, y / z) / z^4`` for ``z > 0`` (overridden where a stabler form exists).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Standard slopes times ``z``.
+        z : array_like
+            ``z > 0`` (the normal's ``z``).
+
+        Returns
+        -------
+        ndarray
+            ``P_std(x / z, y / z) / z^4``.
+        """
         return self.p22_std(x / z, y / z) / (z * z) ** 2
 
     # -------------------------------------------------------------- Smith masking
     def lambda_(self, k) -> np.ndarray:
-        """Smith ``Lambda(k) = A(k) / c_k - 1 = Lambda_std(k')``; ``inf`` where ``c_k <= 0``."""
+        """Smith ``Lambda(k) = A(k) / c_k - 1 = Lambda_std(k')``; ``inf`` where ``c_k <= 0``.
+
+        Parameters
+        ----------
+        k : (..., 3) array_like
+            Unit directions.
+
+        Returns
+        -------
+        (...) ndarray
+            ``Lambda >= 0``.
+        """
         return self._lambda_c(np.asarray(k, dtype=np.float64))[0]
 
     def _lambda_c(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -252,7 +343,18 @@ class SlopeDistribution:
     def lambda_warped(self, a, b, c):
         """Standard ``Lambda`` of the unnormalized direction ``k' = (a, b, c)`` (Eq. 3.3);
         ``inf`` where ``c <= 0``. Radial distributions depend on ``cot theta' = c / sqrt(a^2 + b^2)``
-        only (Sec. 2.4); a non-radial (e.g. tabulated anisotropic) one overrides this."""
+        only (Sec. 2.4); a non-radial (e.g. tabulated anisotropic) one overrides this.
+
+        Parameters
+        ----------
+        a, b, c : array_like
+            Components of the warped direction ``k'`` (need not be unit).
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0`` (``inf`` where ``c <= 0``).
+        """
         with np.errstate(divide="ignore", invalid="ignore"):
             return self.lambda_std(np.where(c > 0, c / np.sqrt(a * a + b * b), 0.0))
 
@@ -261,6 +363,16 @@ class SlopeDistribution:
 
         Equals ``c_k (1 + Lambda(k))`` with ``c_k = z_k - x_k x~n - y_k y~n`` (Eq. 3.3);
         0 where ``c_k <= 0``.
+
+        Parameters
+        ----------
+        k : (..., 3) array_like
+            Unit directions.
+
+        Returns
+        -------
+        (...) ndarray
+            ``A(k) >= 0`` (1 toward the normal of an unsheared surface).
         """
         lam, c = self._lambda_c(np.asarray(k, dtype=np.float64))
         with np.errstate(invalid="ignore"):
@@ -270,6 +382,16 @@ class SlopeDistribution:
         """Smith masking ``G1(k) = z_k / A(k) = (z_k / c_k) G1_std(k')`` (Eq. 2.14, 3.3).
 
         May exceed 1 for sheared surfaces; 0 for ``z_k <= 0`` or ``c_k <= 0``.
+
+        Parameters
+        ----------
+        k : (..., 3) array_like
+            Unit directions.
+
+        Returns
+        -------
+        (...) ndarray
+            ``G1 >= 0``.
         """
         k = np.asarray(k, dtype=np.float64)
         area = self.projected_area(k)
@@ -279,7 +401,20 @@ class SlopeDistribution:
 
     # ----------------------------------------------------------- visible normals
     def vndf(self, h, k) -> np.ndarray:
-        """Distribution of visible normals ``D_k(h) = <k,h>+ D(h) G1(k) / z_k`` (Eq. 2.17)."""
+        """Distribution of visible normals ``D_k(h) = <k,h>+ D(h) G1(k) / z_k`` (Eq. 2.17).
+
+        Parameters
+        ----------
+        h : (..., 3) array_like
+            Unit microfacet normals.
+        k : (..., 3) array_like
+            Unit view directions.
+
+        Returns
+        -------
+        (...) ndarray
+            ``D_k(h)``, per steradian.
+        """
         h, k = np.asarray(h, float), np.asarray(k, float)
         area = self.projected_area(k)
         kh = np.maximum(dot(k, h), 0.0)
@@ -287,7 +422,20 @@ class SlopeDistribution:
             return np.where(area > 0, kh * self.ndf(h) / area, 0.0)
 
     def vp22(self, x, y, k) -> np.ndarray:
-        """Distribution of visible slopes ``P_vis(h~; k)`` (Eq. 2.15)."""
+        """Distribution of visible slopes ``P_vis(h~; k)`` (Eq. 2.15).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Slopes.
+        k : (..., 3) array_like
+            Unit view directions.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope area.
+        """
         k = np.asarray(k, dtype=np.float64)
         area = self.projected_area(k)
         proj = np.maximum(k[..., 2] - k[..., 0] * x - k[..., 1] * y, 0.0)
@@ -300,6 +448,18 @@ class SlopeDistribution:
         Samples the standard visible slopes from ``k'`` and maps them by Eq. 3.4
         (Sec. 2.2, 3.2). Directions with ``c_k <= 0`` see no microfacet; they return a
         normal whose ``vndf`` is 0.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+        k : (..., 3) array_like
+            Unit view directions.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit microfacet normals.
         """
         u = np.asarray(u, dtype=np.float64)
         k = np.asarray(k, dtype=np.float64)
@@ -316,7 +476,18 @@ class SlopeDistribution:
         return self._normal_from_standard(m)
 
     def sample_p22(self, u) -> np.ndarray:
-        """Normal ``h`` whose slope is distributed as ``P`` (density ``D(h) z_h``)."""
+        """Normal ``h`` whose slope is distributed as ``P`` (density ``D(h) z_h``).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit microfacet normals.
+        """
         return self._normal_from_standard(self.sample_p22_std(np.asarray(u, dtype=np.float64)))
 
     # --------------------------------------------------------- standard form API
@@ -327,24 +498,97 @@ class SlopeDistribution:
 
     @staticmethod
     def p22_std(x, y):  # pragma: no cover - interface
+        """Standard slope PDF ``P_std(x~, y~)`` (``alpha = 1``, no shear; Table 2.II).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope area.
+        """
         raise NotImplementedError
 
     @staticmethod
     def p1_std(x):  # pragma: no cover - interface
+        """Standard marginal slope PDF ``P1(x~) = int P_std(x~, y~) dy~`` (Eq. 2.39).
+
+        Parameters
+        ----------
+        x : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope.
+        """
         raise NotImplementedError
 
     @staticmethod
     def lambda_std(cot_theta):  # pragma: no cover - interface
+        """Standard Smith ``Lambda`` of a direction of elevation ``theta`` (Table 2.III).
+
+        Parameters
+        ----------
+        cot_theta : array_like
+            ``cot theta`` of the direction; ``<= 0`` gives ``inf``.
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0``.
+        """
         raise NotImplementedError
 
     def g1_std(self, cot_theta):
-        """Standard Smith masking ``G1 = 1 / (1 + Lambda)`` (Table 2.III)."""
+        """Standard Smith masking ``G1 = 1 / (1 + Lambda)`` (Table 2.III).
+
+        Parameters
+        ----------
+        cot_theta : array_like
+            ``cot theta`` of the direction.
+
+        Returns
+        -------
+        ndarray
+            ``G1`` in ``[0, 1]``.
+        """
         return 1.0 / (1.0 + self.lambda_std(cot_theta))
 
     @staticmethod
     def sample_visible_std(u, cos_theta):  # pragma: no cover - interface
+        """Standard visible normal for a view at ``theta`` in the xz plane (Sec. 2.2).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+        cos_theta : array_like
+            ``cos theta`` of the view, ``(0, 1]``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         raise NotImplementedError
 
     @staticmethod
     def sample_p22_std(u):  # pragma: no cover - interface
+        """Standard normal whose slope is distributed as ``P_std``.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         raise NotImplementedError

@@ -63,6 +63,20 @@ def visible_slope_cdf(x, cos_theta, complement: bool = False):
     ``F2(x~) = (erfc(-x~) + t exp(-x~^2)/sqrt(pi)) / (erfc(-a) + t exp(-a^2)/sqrt(pi))``
     with ``a = cot theta``, ``t = tan theta``.
 
+    Parameters
+    ----------
+    x : array_like
+        Standard x-slopes.
+    cos_theta : array_like
+        ``cos theta`` of the view, ``(0, 1]``.
+    complement : bool
+        Return ``1 - F2`` (accurate in the upper tail).
+
+    Returns
+    -------
+    ndarray
+        ``F2(x~)`` (or ``1 - F2``) in ``[0, 1]``.
+
     Examples
     --------
     >>> import numpy as np
@@ -81,6 +95,20 @@ def visible_slope_quantile(u, cos_theta, max_iter: int = 64):
 
     Safeguarded Newton-bisection on ``F2 - u`` for ``u < 1/2`` and on
     ``(1 - u) - (1 - F2)`` otherwise, so both tails keep full relative precision.
+
+    Parameters
+    ----------
+    u : array_like
+        Probabilities in ``[0, 1]``.
+    cos_theta : array_like
+        ``cos theta`` of the view, ``(0, 1]``.
+    max_iter : int
+        Iterations of the Newton-bisection.
+
+    Returns
+    -------
+    ndarray
+        Standard x-slopes.
 
     Examples
     --------
@@ -132,6 +160,17 @@ class Beckmann(SlopeDistribution):
     Slope standard deviation per axis is ``alpha / sqrt(2)`` (the thesis's, Mitsuba's and
     pbrt's convention).
 
+    Parameters
+    ----------
+    alpha : float, optional
+        Isotropic roughness (sets ``alpha_x = alpha_y = alpha``), ``> 0``.
+    alpha_x, alpha_y : float, optional
+        Roughness (slope scale) along x and y, ``> 0``.
+    rho : float
+        Slope correlation, ``-1 < rho < 1`` (Eq. 2.26).
+    mean_slope : (float, float)
+        Mean slope ``(x~n, y~n)`` of the sheared surface (Eq. 3.2).
+
     Examples
     --------
     >>> import numpy as np
@@ -150,7 +189,18 @@ class Beckmann(SlopeDistribution):
     def from_moments(cls, e1, e2, e3, e4, e5) -> "Beckmann":
         """Beckmann surface of linear slope moments ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~y~]``
         (Eq. 3.5-3.9): ``alpha_x^2 = 2 (E3 - E1^2)``, ``alpha_y^2 = 2 (E4 - E2^2)``,
-        ``rho = 2 (E5 - E1 E2) / (alpha_x alpha_y)``."""
+        ``rho = 2 (E5 - E1 E2) / (alpha_x alpha_y)``.
+
+        Parameters
+        ----------
+        e1, e2, e3, e4, e5 : float or array_like
+            ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~ y~]``.
+
+        Returns
+        -------
+        Beckmann
+            The distribution with these moments.
+        """
         e1, e2, e3, e4, e5 = (np.asarray(e, dtype=np.float64) for e in (e1, e2, e3, e4, e5))
         vx, vy = e3 - e1 * e1, e4 - e2 * e2
         if np.any(vx <= 0) or np.any(vy <= 0):
@@ -170,13 +220,35 @@ class Beckmann(SlopeDistribution):
 
     @staticmethod
     def p1_std(x):
-        """Marginal ``P1(x~) = exp(-x~^2) / sqrt(pi)`` (Eq. 2.39)."""
+        """Marginal ``P1(x~) = exp(-x~^2) / sqrt(pi)`` (Eq. 2.39).
+
+        Parameters
+        ----------
+        x : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope.
+        """
         return np.exp(-np.asarray(x, float) ** 2) / _SQRT_PI
 
     @staticmethod
     def lambda_std(cot_theta):
         """``Lambda(v) = (exp(-v^2) / (v sqrt(pi)) - erfc(v)) / 2``, ``v = cot theta`` (Table 2.III),
-        written with ``erfcx`` so that it stays accurate for large ``v``; ``inf`` for ``v <= 0``."""
+        written with ``erfcx`` so that it stays accurate for large ``v``; ``inf`` for ``v <= 0``.
+
+        Parameters
+        ----------
+        cot_theta : array_like
+            ``cot theta`` of the direction; ``<= 0`` gives ``inf``.
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0``.
+        """
         v = np.asarray(cot_theta, dtype=np.float64)
         return np.where(v > 0, _lambda(np.maximum(v, 0.0)), np.inf)
 
@@ -190,7 +262,20 @@ class Beckmann(SlopeDistribution):
     def sample_visible_std(u, cos_theta):
         """Standard visible normal for a view at ``theta`` in the xz plane: ``x~ = Q2(u1)``
         (numerically inverted, :func:`visible_slope_quantile`), ``y~ = erfinv(2 u2 - 1)``
-        (Table 2.V)."""
+        (Table 2.V).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+        cos_theta : array_like
+            ``cos theta`` of the view, ``(0, 1]``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         u = np.asarray(u, dtype=np.float64)
         x = visible_slope_quantile(u[..., 0], cos_theta)
         y = erfinv(2.0 * np.clip(u[..., 1], _U_MIN, 1.0 - _U_MIN) - 1.0)
@@ -198,7 +283,18 @@ class Beckmann(SlopeDistribution):
 
     @staticmethod
     def sample_p22_std(u):
-        """Standard normal with Gaussian slopes ``x~, y~ = erfinv(2u - 1)``."""
+        """Standard normal with Gaussian slopes ``x~, y~ = erfinv(2u - 1)``.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         s = erfinv(2.0 * np.clip(np.asarray(u, float), _U_MIN, 1.0 - _U_MIN) - 1.0)
         return _slope_normal(s[..., 0], s[..., 1])
 

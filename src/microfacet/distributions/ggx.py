@@ -14,6 +14,17 @@ class GGX(SlopeDistribution):
 
     Its first slope moments are finite, its second ones are not.
 
+    Parameters
+    ----------
+    alpha : float, optional
+        Isotropic roughness (sets ``alpha_x = alpha_y = alpha``), ``> 0``.
+    alpha_x, alpha_y : float, optional
+        Roughness (slope scale) along x and y, ``> 0``.
+    rho : float
+        Slope correlation, ``-1 < rho < 1`` (Eq. 2.26).
+    mean_slope : (float, float)
+        Mean slope ``(x~n, y~n)`` of the sheared surface (Eq. 3.2).
+
     Examples
     --------
     >>> import numpy as np
@@ -40,13 +51,35 @@ class GGX(SlopeDistribution):
 
     @staticmethod
     def p1_std(x):
-        """Marginal ``P1(x~) = 1 / (2 (1 + x~^2)^(3/2))`` (Eq. 2.39)."""
+        """Marginal ``P1(x~) = 1 / (2 (1 + x~^2)^(3/2))`` (Eq. 2.39).
+
+        Parameters
+        ----------
+        x : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope.
+        """
         return 0.5 * (1.0 + np.asarray(x, float) ** 2) ** -1.5
 
     @staticmethod
     def lambda_std(cot_theta):
         """``Lambda(v) = (sqrt(1 + 1/v^2) - 1) / 2`` (Table 2.III), in the cancellation-free
-        form ``w / (2 (1 + sqrt(1 + w)))``, ``w = 1/v^2``, where ``w <= 1``."""
+        form ``w / (2 (1 + sqrt(1 + w)))``, ``w = 1/v^2``, where ``w <= 1``.
+
+        Parameters
+        ----------
+        cot_theta : array_like
+            ``cot theta`` of the direction; ``<= 0`` gives ``inf``.
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0``.
+        """
         v = np.asarray(cot_theta, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             w = 1.0 / (v * v)
@@ -57,7 +90,18 @@ class GGX(SlopeDistribution):
     @classmethod
     def lambda_warped(cls, a, b, c):
         """``Lambda = (|k'| - c) / (2c) = r2 / (2c (|k'| + c))``, ``r2 = a^2 + b^2``: Table 2.III
-        at ``cot theta = c / sqrt(r2)``, without cancellation or overflow."""
+        at ``cot theta = c / sqrt(r2)``, without cancellation or overflow.
+
+        Parameters
+        ----------
+        a, b, c : array_like
+            Components of the warped direction ``k'`` (need not be unit).
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0`` (``inf`` where ``c <= 0``).
+        """
         r2 = a * a + b * b
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = r2 / (2.0 * c * (np.sqrt(r2 + c * c) + c))
@@ -71,6 +115,18 @@ class GGX(SlopeDistribution):
         hemisphere of the (unit) ellipsoid, lifted onto it (Heitz 2018, "Sampling the GGX
         distribution of visible normals"). This is an exact transform of the
         visible-slope PDF of Eq. 2.15, equivalent to the quantiles of Table 2.V.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+        cos_theta : array_like
+            ``cos theta`` of the view, ``(0, 1]``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
         """
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
         s = sin_from_cos(c)
@@ -84,7 +140,18 @@ class GGX(SlopeDistribution):
 
     @staticmethod
     def sample_p22_std(u):
-        """Standard normal with GGX slopes: ``tan^2 theta = u1 / (1 - u1)``, ``phi = 2 pi u2``."""
+        """Standard normal with GGX slopes: ``tan^2 theta = u1 / (1 - u1)``, ``phi = 2 pi u2``.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         u = np.asarray(u, dtype=np.float64)
         cos_t = np.sqrt(1.0 - u[..., 0])
         sin_t = np.sqrt(u[..., 0])

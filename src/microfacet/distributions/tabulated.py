@@ -52,6 +52,16 @@ THETA_CAP = np.arctan(1e7)
 def theta_grid(n: int) -> np.ndarray:
     """Elevation nodes ``theta_j = (j / (n - 1))^2 pi / 2`` (Listing 4.1).
 
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+
+    Returns
+    -------
+    (n,) ndarray
+        Elevations from 0 to ``pi / 2``, radians.
+
     Examples
     --------
     >>> import numpy as np
@@ -94,6 +104,18 @@ def azimuthal_cosine_spectrum(theta_k, theta_h, m: int) -> np.ndarray:
     ``phi`` (Eq. 2.14, Eq. 4.8) diagonalized by the DFT. Returns ``(len(theta_k),
     len(theta_h), m // 2 + 1)`` (real, as ``c`` is even in ``d``).
 
+    Parameters
+    ----------
+    theta_k, theta_h : (n_k,), (n_h,) array_like
+        Elevations of the directions and of the normals, radians.
+    m : int
+        Azimuth nodes.
+
+    Returns
+    -------
+    (n_k, n_h, m // 2 + 1) ndarray
+        The real spectrum.
+
     Examples
     --------
     >>> import numpy as np
@@ -110,6 +132,18 @@ def circular_projection(spectrum: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``A[i, a] = sum_j sum_b <k_ia, h_jb>+ x[j, b]`` for node weights ``x`` ``(n_h, m)``
     (:func:`azimuthal_cosine_spectrum`): ``irfft(sum_j C[i, j] rfft(x_j))``, exact to
     rounding, ``O(n_k n_h m)`` instead of ``O(n_k n_h m^2)``.
+
+    Parameters
+    ----------
+    spectrum : (n_k, n_h, m // 2 + 1) ndarray
+        From :func:`azimuthal_cosine_spectrum`.
+    x : (n_h, m) ndarray
+        Node weights.
+
+    Returns
+    -------
+    (n_k, m) ndarray
+        ``A[i, a]``.
 
     Examples
     --------
@@ -243,6 +277,18 @@ def refine_radial(ndf, r: int) -> np.ndarray:
     :class:`TabulatedIsotropic` is second-order (``ln D = -tan^2 theta / alpha^2`` of a
     Beckmann lobe is quartic in ``u``).
 
+    Parameters
+    ----------
+    ndf : (n,) array_like
+        ``D`` at :func:`theta_grid` ``(n)``.
+    r : int
+        Refinement factor.
+
+    Returns
+    -------
+    (r (n - 1) + 1,) ndarray
+        The resampled table.
+
     Examples
     --------
     >>> import numpy as np
@@ -339,7 +385,20 @@ class _Tabulated(SlopeDistribution):
         """Nodes ``(x~, y~)`` of the standard slope plane and weights (summing to 1) for
         ``E[g(h~)] = int g P dh~ = int g(h~(h)) D cos theta dw`` (Gauss-Legendre per
         elevation interval; per azimuth interval for anisotropic tables, periodic
-        trapezoid for radial ones)."""
+        trapezoid for radial ones).
+
+        Parameters
+        ----------
+        n_phi : int
+            Azimuth nodes for a radial table.
+
+        Returns
+        -------
+        x, y : (M,) ndarray
+            Standard slopes of the nodes.
+        w : (M,) ndarray
+            Weights, summing to 1.
+        """
         th, wt = self._theta_quadrature()
         phi, wp = self._phi_quadrature(n_phi)
         TH, PH = np.meshgrid(th, phi, indexing="ij")
@@ -361,6 +420,8 @@ class TabulatedIsotropic(_Tabulated):
         normalized here (Eq. 2.8), so any positive scale may be given.
     alpha, alpha_x, alpha_y, rho, mean_slope
         Roughness map applied to the table (:class:`SlopeDistribution`); 1, 0, 0 keep it.
+    oversampling : int
+        Refinement of the sampling tables: ``oversampling (n - 1) + 1`` nodes (at least ``n``).
 
     Examples
     --------
@@ -407,7 +468,18 @@ class TabulatedIsotropic(_Tabulated):
         return (np.arange(n_phi) + 0.5) * (2 * np.pi / n_phi), np.full(n_phi, 2 * np.pi / n_phi)
 
     def p22_std(self, x, y):
-        """``P(x~, y~) = D(theta) cos^4 theta``, ``tan theta = |h~|`` (Eq. 2.11)."""
+        """``P(x~, y~) = D(theta) cos^4 theta``, ``tan theta = |h~|`` (Eq. 2.11).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope area.
+        """
         r2 = np.asarray(x, float) ** 2 + np.asarray(y, float) ** 2
         return self._d_interp(np.arctan(np.sqrt(r2))) / (1.0 + r2) ** 2
 
@@ -417,7 +489,18 @@ class TabulatedIsotropic(_Tabulated):
 
     def p1_std(self, x):
         """Marginal ``P1(x~) = int P(x~, y~) dy~`` (Abel transform, tabulated and
-        interpolated linearly on the fine sampling grid)."""
+        interpolated linearly on the fine sampling grid).
+
+        Parameters
+        ----------
+        x : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope.
+        """
         xi = np.abs(np.asarray(x, dtype=np.float64))
         return np.interp(self._fine_s(xi), self.s_fine, self.p1_fine)
 
@@ -477,7 +560,18 @@ class TabulatedIsotropic(_Tabulated):
     def lambda_std(self, cot_theta):
         """``Lambda(a) = L1(a) / a``, ``a = cot theta`` (Eq. 2.14 for radial P, Sec. 2.4):
         the projected area of the standard surface toward ``theta`` is
-        ``int (a - x~)+ P1(x~) dx~ / a = 1 + L1(a) / a`` (in units of ``cos theta``)."""
+        ``int (a - x~)+ P1(x~) dx~ / a = 1 + L1(a) / a`` (in units of ``cos theta``).
+
+        Parameters
+        ----------
+        cot_theta : array_like
+            ``cot theta`` of the direction; ``<= 0`` gives ``inf``.
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0``.
+        """
         a = np.asarray(cot_theta, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = self._L1(np.where(a > 0, a, 0.0)) / a
@@ -486,7 +580,18 @@ class TabulatedIsotropic(_Tabulated):
     # ------------------------------------------------------------ sampling
     def sample_p22_std(self, u):
         """Standard normal with slopes distributed as ``P``: ``theta`` from the marginal
-        ``2 pi D cos sin`` (interval by its mass, then exact inversion), ``phi = 2 pi u2``."""
+        ``2 pi D cos sin`` (interval by its mass, then exact inversion), ``phi = 2 pi u2``.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         u = np.asarray(u, dtype=np.float64)
         cdf = self._mass_cdf
         v = np.clip(u[..., 0], _U_MIN, 1.0 - _U_MIN)
@@ -506,6 +611,18 @@ class TabulatedIsotropic(_Tabulated):
         ``Z - ((a - xi) L0(xi) - L1(xi) + L1(a))`` for ``0 < x~ = xi <= a`` (bisection on
         the fine nodes, linear in ``s`` inside a cell); ``y~`` inverts the conditional CDF
         of ``P(x~, .)`` (tabulated per fine node, rows mixed linearly in ``s``).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+        cos_theta : array_like
+            ``cos theta`` of the view, ``(0, 1]``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
         """
         u = np.asarray(u, dtype=np.float64)
         c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
@@ -609,6 +726,10 @@ class TabulatedAnisotropic(_Tabulated):
     n_lambda : int, optional
         Elevation resolution of the projected-area table (default ``n_theta``); its nodes
         ``theta = pi/2 sin^2(pi s / 2)`` are dense at the normal and at grazing angles.
+    alpha, alpha_x, alpha_y, rho, mean_slope
+        Roughness map applied to the table (:class:`SlopeDistribution`); 1, 0, 0 keep it.
+    projected_area : (n_lambda, n_phi) array_like, optional
+        A precomputed projected-area table on these nodes (e.g. a saved one); None computes it.
 
     Notes
     -----
@@ -713,7 +834,18 @@ class TabulatedAnisotropic(_Tabulated):
         return np.sum(vals * ((tb - ta) * _GL_W[None, :, None]), axis=1)
 
     def p22_std(self, x, y):
-        """``P(x~, y~) = D(h) cos^4 theta_h`` with ``h ∝ (-x~, -y~, 1)`` (Eq. 2.11)."""
+        """``P(x~, y~) = D(h) cos^4 theta_h`` with ``h ∝ (-x~, -y~, 1)`` (Eq. 2.11).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Standard slopes.
+
+        Returns
+        -------
+        ndarray
+            Density per unit slope area.
+        """
         x, y = np.asarray(x, float), np.asarray(y, float)
         r2 = x * x + y * y
         return self._d_interp(np.arctan(np.sqrt(r2)), np.arctan2(-y, -x)) / (1.0 + r2) ** 2
@@ -729,7 +861,20 @@ class TabulatedAnisotropic(_Tabulated):
     def projected_area_nodes(self, k, chunk: int = 2048) -> np.ndarray:
         """``A(k) = int <k,h>+ D(h) dw_h`` (Eq. 2.14) by the node rule of the table:
         ``sum_n w_n <k, h_n>+ D_n`` with ``w_n ∝ int int hat_n sin theta dtheta dphi``,
-        scaled so that ``A(z) = 1`` (Eq. 2.8)."""
+        scaled so that ``A(z) = 1`` (Eq. 2.8).
+
+        Parameters
+        ----------
+        k : (..., 3) array_like
+            Unit directions.
+        chunk : int
+            Directions per batch (bounds the memory).
+
+        Returns
+        -------
+        (...) ndarray
+            ``A(k)``.
+        """
         k = np.asarray(k, dtype=np.float64)
         h = _normal(self.theta[:, None], self.phi[None, :]).reshape(-1, 3)
         # rescaled so that A(z) = int cos D dw = 1 holds as for the exactly normalized
@@ -756,7 +901,18 @@ class TabulatedAnisotropic(_Tabulated):
                                    self._node_area_weights())
 
     def lambda_warped(self, a, b, c):
-        """``Lambda = A(k') / cos theta_k' - 1`` from the bilinear projected-area table."""
+        """``Lambda = A(k') / cos theta_k' - 1`` from the bilinear projected-area table.
+
+        Parameters
+        ----------
+        a, b, c : array_like
+            Components of the warped direction ``k'`` (need not be unit).
+
+        Returns
+        -------
+        ndarray
+            ``Lambda >= 0`` (``inf`` where ``c <= 0``).
+        """
         a, b, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (a, b, c)))
         r = np.hypot(a, b)
         th = np.arctan2(r, np.maximum(c, 0.0))
@@ -784,7 +940,18 @@ class TabulatedAnisotropic(_Tabulated):
         """Normal whose slope is distributed as the interpolated ``P`` (App. A): a cell by
         its mass, ``theta`` from the cell's marginal (:meth:`_cell_marginal`, Newton on
         its CDF by 8-point Gauss-Legendre from the cell's edge), then ``phi`` from the
-        log-linear ``D(theta, .)`` in closed form (``w = log1p(v expm1(b)) / b``)."""
+        log-linear ``D(theta, .)`` in closed form (``w = log1p(v expm1(b)) / b``).
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1)``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Unit normals of the standard surface.
+        """
         u = np.asarray(u, dtype=np.float64)
         cdf = self._cell_cdf
         v = np.clip(u[..., 0], _U_MIN, 1.0 - _U_MIN) * cdf[-1]
