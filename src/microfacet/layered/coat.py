@@ -62,6 +62,16 @@ def grid(n: int) -> np.ndarray:
     """``n`` views ``mu_k = t_k^3``, ``t`` uniform from ``MU_MIN^(1/3)`` to 1 (dense near
     grazing): the nodes of every table of this module (read-only).
 
+    Parameters
+    ----------
+    n : int
+        Number of nodes.
+
+    Returns
+    -------
+    (n,) ndarray
+        ``mu_k``, increasing to 1.
+
     Examples
     --------
     >>> grid(4).round(4)
@@ -122,6 +132,20 @@ def sampled_albedo(brdf, mu, order: int = QUADRATURE_ORDER) -> np.ndarray:
     (failed samples count 0). Exact change of variables; the error is the rule's on the
     sampler's warp (see the module docstring for coat lobes).
 
+    Parameters
+    ----------
+    brdf : BRDF
+        Any library BRDF.
+    mu : (V,) array_like
+        ``cos theta_o`` of the views, ``(0, 1]``.
+    order : int
+        Gauss-Legendre nodes per uniform.
+
+    Returns
+    -------
+    (V, 3) ndarray
+        The albedo per view and RGB channel.
+
     Examples
     --------
     >>> import numpy as np
@@ -143,6 +167,18 @@ def sampled_albedo(brdf, mu, order: int = QUADRATURE_ORDER) -> np.ndarray:
 def lerp(table: np.ndarray, mu) -> np.ndarray:
     """Piecewise-linear interpolation of ``table`` (its values at :func:`grid` ``(len(table))``)
     in ``t = mu^(1/3)``, clamped at its ends: shape ``mu.shape + table.shape[1:]``.
+
+    Parameters
+    ----------
+    table : (n, ...) ndarray
+        Values at :func:`grid` ``(n)``.
+    mu : array_like
+        ``cos theta`` of the views.
+
+    Returns
+    -------
+    ndarray
+        Interpolated values, ``mu.shape + table.shape[1:]``.
 
     Examples
     --------
@@ -210,6 +246,20 @@ def lobe_albedo(coat, mu, orders: tuple[int, int] = QUADRATURE_ORDERS) -> np.nda
     (slope space, 500 x 500 nodes), GGX and Beckmann, ``alpha`` 0.003-2, views 0-89 deg:
     within 3e-5 (tests).
 
+    Parameters
+    ----------
+    coat : MicrofacetBRDF
+        An isotropic microfacet lobe.
+    mu : (V,) array_like
+        ``cos theta_o`` of the views, ``(0, 1]``.
+    orders : (int, int)
+        Gauss-Legendre nodes in ``cos theta_i`` and ``phi_i``.
+
+    Returns
+    -------
+    (V, 3) ndarray
+        The albedo per view and RGB channel.
+
     Examples
     --------
     >>> import numpy as np
@@ -258,6 +308,16 @@ def albedo_table(coat) -> np.ndarray:
     between (``R = E_c / F``, 0 where ``F = 0``, a cubic spline in ``mu^(1/3)`` through those
     nodes). Cached per coat (distribution, roughness, Fresnel term and GAF).
 
+    Parameters
+    ----------
+    coat : MicrofacetBRDF
+        An isotropic microfacet lobe.
+
+    Returns
+    -------
+    (1024, 3) ndarray
+        ``E_c`` at :data:`TABLE_NODES`.
+
     Examples
     --------
     >>> import numpy as np
@@ -284,6 +344,18 @@ def coat_albedo(coat, mu) -> np.ndarray:
     ``(..., 3)``) of the isotropic microfacet lobe ``coat`` at views ``cos theta_o = mu``,
     interpolated in its table (:func:`albedo_table`; accuracy in the module docstring).
 
+    Parameters
+    ----------
+    coat : MicrofacetBRDF
+        An isotropic microfacet lobe.
+    mu : array_like
+        ``cos theta_o`` of the views, ``[0, 1]``.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        ``E_c(mu)``.
+
     Examples
     --------
     >>> import numpy as np
@@ -297,6 +369,16 @@ def coat_albedo(coat, mu) -> np.ndarray:
 
 def luminance(rgb) -> np.ndarray:
     """Rec. 709 luminance of linear RGB ``(..., 3)``.
+
+    Parameters
+    ----------
+    rgb : (..., 3) array_like
+        Linear RGB.
+
+    Returns
+    -------
+    (...) ndarray
+        Luminance.
 
     Examples
     --------
@@ -367,12 +449,34 @@ class LayeredBRDF(BRDF):
 
     # ------------------------------------------------------------ coupling
     def coat_albedo(self, mu) -> np.ndarray:
-        """The coat's directional albedo ``E_c(mu)``, RGB ``(..., 3)`` (:func:`coat_albedo`)."""
+        """The coat's directional albedo ``E_c(mu)``, RGB ``(..., 3)`` (:func:`coat_albedo`).
+
+        Parameters
+        ----------
+        mu : array_like
+            ``cos theta_o`` of the views, ``[0, 1]``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            ``E_c(mu)``.
+        """
         return lerp(self.table, mu)
 
     def transmission(self, mu) -> np.ndarray:
         """``1 - E_c(mu)``: the fraction of light the coat lets through at ``mu``, RGB ``(..., 3)``
-        (``(..., 1)`` where the coat is grey, which broadcasts against RGB values)."""
+        (``(..., 1)`` where the coat is grey, which broadcasts against RGB values).
+
+        Parameters
+        ----------
+        mu : array_like
+            ``cos theta`` of the directions, ``[0, 1]``.
+
+        Returns
+        -------
+        (..., 3) or (..., 1) ndarray
+            ``1 - E_c(mu)``.
+        """
         return lerp(self._transmission, mu)
 
     @functools.cached_property
@@ -392,7 +496,18 @@ class LayeredBRDF(BRDF):
         coat's share of the albedo, ``E / (E + (1 - E)^2 a_b)`` (``E = E_c(mu)``, ``a_b`` the
         base's albedo estimated by an 8 x 8 Gauss rule over its sampler), at :data:`NODES`,
         clamped into :data:`PROBABILITY_BOUNDS` and interpolated as ``E_c``'s table. It changes
-        the variance of the estimates, never their mean."""
+        the variance of the estimates, never their mean.
+
+        Parameters
+        ----------
+        mu : array_like
+            ``cos theta_o`` of the views, ``[0, 1]``.
+
+        Returns
+        -------
+        ndarray
+            Probability of sampling the coat.
+        """
         return lerp(self.probability_table, mu)
 
     # ------------------------------------------------------------ protocol
@@ -403,15 +518,54 @@ class LayeredBRDF(BRDF):
         return fc + self.transmission(wi[..., 2]) * self.transmission(wo[..., 2]) * fb
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f cos theta_i = f_c cos theta_i + (1 - E_c(i))(1 - E_c(o)) f_b cos theta_i``."""
+        """``f cos theta_i = f_c cos theta_i + (1 - E_c(i))(1 - E_c(o)) f_b cos theta_i``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values.
+        """
         return _into(out, self._coupled(self.coat.eval_cos(wi, wo), self.base.eval_cos(wi, wo), wi, wo), (wi, wo))
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``f = f_c + (1 - E_c(i))(1 - E_c(o)) f_b``; 0 below either horizon."""
+        """``f = f_c + (1 - E_c(i))(1 - E_c(o)) f_b``; 0 below either horizon.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values, per steradian.
+        """
         return _into(out, self._coupled(self.coat.eval(wi, wo), self.base.eval(wi, wo), wi, wo), (wi, wo))
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """Mixture density ``p(mu_o) pdf_c + (1 - p(mu_o)) pdf_b`` of :meth:`sample`."""
+        """Mixture density ``p(mu_o) pdf_c + (1 - p(mu_o)) pdf_b`` of :meth:`sample`.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        (...) ndarray
+            Density per steradian of ``wi``.
+        """
         pc = np.asarray(self.coat.pdf(wi, wo), dtype=np.float64)
         pb = np.asarray(self.base.pdf(wi, wo), dtype=np.float64)
         p = self.coat_probability(np.asarray(wo, dtype=np.float64)[..., 2])
@@ -420,7 +574,26 @@ class LayeredBRDF(BRDF):
     def sample(self, u, wo, out=None):
         """The coat's sampler where ``u[..., 0] < p(mu_o)``, the base's elsewhere (``u[..., 0]``
         rescaled to ``[0, 1]``); returns ``(wi, eval_cos / pdf, pdf)`` of the mixture. Samples
-        that the chosen sampler fails (pdf 0) have weight 0 and pdf 0."""
+        that the chosen sampler fails (pdf 0) have weight 0 and pdf 0.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions, local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf``, RGB.
+        pdf : (...) ndarray
+            Density per steradian.
+        """
         wo = unit_directions(wo, "wo")
         u = uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])

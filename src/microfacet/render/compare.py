@@ -65,6 +65,24 @@ def backscattering_curve(brdf, phi: float = 0.0, n: int = 200,
     """``theta_k`` ``(n,)`` in ``[0, theta_max]`` and the luminance of ``f_r(k, k)`` for
     ``k`` at azimuth ``phi``.
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF.
+    phi : float
+        Azimuth of the directions, radians.
+    n : int
+        Number of angles.
+    theta_max : float
+        Largest elevation, radians.
+
+    Returns
+    -------
+    theta : (n,) ndarray
+        Elevations, radians.
+    luminance : (n,) ndarray
+        Luminance of ``f_r(k, k)``.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -79,6 +97,20 @@ def backscattering_curve(brdf, phi: float = 0.0, n: int = 200,
 
 def render_sphere(brdf, size: int, light: DirectionalLight = COMPARE_LIGHT) -> np.ndarray:
     """Linear RGB ``(size, size, 3)`` of ``brdf`` on an orthographic sphere under ``light``.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF.
+    size : int
+        Image width and height, pixels.
+    light : DirectionalLight
+        The light.
+
+    Returns
+    -------
+    (size, size, 3) ndarray
+        Linear RGB radiance (black background).
 
     Examples
     --------
@@ -167,6 +199,18 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
     """Write the comparison picture of :func:`fit_comparison_png` to ``path``, atomically;
     return ``path``.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The PNG file to write.
+    brdfs, title, views_deg, planes_deg, size, dpi, notes
+        As :func:`fit_comparison_png`.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -209,6 +253,11 @@ def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[floa
     notes : mapping of str -> str, optional
         Text under the spheres of a label (e.g. fit errors, a few short lines); labels
         not in ``brdfs`` are an error.
+
+    Returns
+    -------
+    bytes
+        The PNG file's content.
 
     Example
     -------

@@ -27,6 +27,22 @@ def shade_directional(brdf, wo, wi, irradiance) -> np.ndarray:
     """Radiance ``E f_r(wi, wo) cos theta_i`` ``(N, 3)`` reflected toward local ``wo``
     ``(N, 3)`` from a directional light of local direction ``wi`` ``(N, 3)``.
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF.
+    wo : (N, 3) ndarray
+        Local view directions.
+    wi : (N, 3) ndarray
+        Local light directions.
+    irradiance : float or (3,) array_like
+        ``E`` of the light.
+
+    Returns
+    -------
+    (N, 3) ndarray
+        Reflected radiance.
+
     Examples
     --------
     >>> import numpy as np
@@ -45,6 +61,16 @@ def sobol_02(n: int) -> np.ndarray:
     index), dimension 1 has direction numbers ``v_1 = 1/2``, ``v_j = v_(j-1) xor v_(j-1)/2``
     (Sobol' 1967), in natural order: for ``n = 2^m`` the same point set as
     ``scipy.stats.qmc.Sobol(2, scramble=False)``, a (0, m, 2)-net.
+
+    Parameters
+    ----------
+    n : int
+        Number of points.
+
+    Returns
+    -------
+    (n, 2) ndarray of uint32
+        The points, fixed point.
 
     Examples
     --------
@@ -69,6 +95,20 @@ def shifted_sobol(rng: np.random.Generator, n: int, spp: int) -> np.ndarray:
     """``(n, spp, 2)`` uniforms in ``[0, 1)``: the first ``spp`` Sobol' points
     (:func:`sobol_02`), XOR-ed with an independent random 32-bit digital shift per pixel
     and dimension (module docstring).
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the shifts.
+    n : int
+        Pixels.
+    spp : int
+        Points per pixel.
+
+    Returns
+    -------
+    (n, spp, 2) ndarray
+        Uniforms.
 
     Examples
     --------
@@ -100,6 +140,11 @@ def shade_environment(brdf, wo, frame, environment, spp: int, rng: np.random.Gen
         two stratify best.
     rng : numpy.random.Generator
         Source of the uniforms; a fixed seed gives a deterministic image.
+
+    Returns
+    -------
+    (N, 3) ndarray
+        Reflected radiance, the mean of ``spp`` samples.
 
     Examples
     --------

@@ -27,6 +27,13 @@ class DirectionalLight:
     ``irradiance`` ``E`` (scalar or RGB) on a surface facing it: reflected radiance is
     ``L_o = E f_r(wi, wo) cos theta_i`` (rendering equation with a Dirac emitter).
 
+    Parameters
+    ----------
+    direction : (float, float, float)
+        World direction toward the light (normalized by the renderer).
+    irradiance : float or (float, float, float)
+        ``E``, scalar or RGB.
+
     Examples
     --------
     >>> light = DirectionalLight(direction=(0.0, 0.0, 2.0), irradiance=(1.0, 0.5, 0.25))
@@ -58,6 +65,16 @@ class DirectionalLight:
 
 def latlong_directions(height: int, width: int) -> np.ndarray:
     """World directions ``(height, width, 3)`` of the texel centres of a lat-long map.
+
+    Parameters
+    ----------
+    height, width : int
+        Map size, texels.
+
+    Returns
+    -------
+    (height, width, 3) ndarray
+        Unit world directions (y up).
 
     Examples
     --------
@@ -103,7 +120,18 @@ class Environment:
 
     @classmethod
     def from_exr(cls, path: str | os.PathLike) -> Environment:
-        """Load a lat-long EXR (RGB, RGBA or Y) as an environment."""
+        """Load a lat-long EXR (RGB, RGBA or Y) as an environment.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The EXR file.
+
+        Returns
+        -------
+        Environment
+            The environment.
+        """
         image = read_exr(path)
         rgb = np.repeat(image, 3, axis=2) if image.shape[2] == 1 else image[..., :3]
         if np.any(rgb < 0):
@@ -114,6 +142,16 @@ class Environment:
         """Radiance ``L_env(w)`` ``(..., 3)`` arriving from world directions ``w``.
 
         Bilinear between texel centres, wrapping in ``phi`` and clamped in ``theta``.
+
+        Parameters
+        ----------
+        w : (..., 3) array_like
+            Unit world directions (y up).
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Radiance.
         """
         w = np.asarray(w, dtype=np.float64)
         h, wd = self.map.shape[:2]
@@ -164,6 +202,16 @@ def procedural_sky(height: int = 64, width: int = 128) -> np.ndarray:
     above-left on the viewer's side and a cool round rim light (radiance 2.5, 15 deg
     radius) low on the right behind the sphere. Contrasts are moderate so that a few tens
     of BRDF samples per pixel give clean images even for rough materials.
+
+    Parameters
+    ----------
+    height, width : int
+        Map size, texels.
+
+    Returns
+    -------
+    (height, width, 3) ndarray
+        Linear RGB radiance.
 
     Examples
     --------

@@ -35,6 +35,24 @@ def lobe_curve(brdf, theta_o: float, phi: float = 0.0, n: int = 721) -> tuple[np
     """Signed ``theta_i`` in ``[-pi/2, pi/2]`` ``(n,)`` and the luminance of
     ``f_r(wi, wo) cos theta_i`` along the plane of azimuth ``phi`` (module docstring).
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF.
+    theta_o : float
+        View elevation, radians.
+    phi : float
+        Azimuth of the plane, radians.
+    n : int
+        Number of light angles.
+
+    Returns
+    -------
+    theta_i : (n,) ndarray
+        Signed light elevations, radians.
+    luminance : (n,) ndarray
+        Luminance of ``f_r cos theta_i``.
+
     Examples
     --------
     >>> import numpy as np
@@ -53,6 +71,19 @@ def plot_lobes(ax, brdf, theta_o_deg: Sequence[float] = (0, 30, 60, 80),
                planes_deg: Sequence[float] = (0,), title: str = "") -> None:
     """Draw the lobes of ``brdf`` for each view angle (colour) and plane azimuth (line
     style) on a polar ``ax``; view directions are drawn as thin lines from the origin.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        A polar axes.
+    brdf : BRDF
+        The BRDF.
+    theta_o_deg : sequence of float
+        View angles, degrees.
+    planes_deg : sequence of float
+        Plane azimuths, degrees.
+    title : str
+        Panel title.
 
     Examples
     --------
@@ -98,6 +129,20 @@ def save_lobe_figure(path: str | os.PathLike, brdfs: Sequence, labels: Sequence[
                      dpi: int = 110) -> Path:
     """One polar panel per BRDF, shared legend, written atomically as a PNG (:func:`lobe_figure`).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The PNG file to write.
+    brdfs, labels, theta_o_deg, planes_deg, ncols
+        As :func:`lobe_figure`.
+    dpi : int
+        Resolution.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -114,6 +159,24 @@ def lobe_figure(brdfs: Sequence, labels: Sequence[str], theta_o_deg: Sequence[fl
                 planes_deg: Sequence[float] = (0,), ncols: int | None = None):
     """The Matplotlib figure of :func:`save_lobe_figure` (Agg canvas): one polar panel per
     BRDF (:func:`plot_lobes`) in ``ncols`` columns, and a shared legend.
+
+    Parameters
+    ----------
+    brdfs : sequence of BRDF
+        The BRDFs, one panel each.
+    labels : sequence of str
+        Panel titles.
+    theta_o_deg : sequence of float
+        View angles, degrees.
+    planes_deg : sequence of float
+        Plane azimuths, degrees.
+    ncols : int, optional
+        Columns; None: all panels in a row.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
 
     Examples
     --------

@@ -31,6 +31,18 @@ def tangent_frame(n: np.ndarray, tangent=(1.0, 0.0, 0.0)) -> tuple[np.ndarray, n
     ``tangent`` wherever it can. Where ``n`` is parallel to ``tangent`` the projection
     vanishes and the frame falls back to :func:`~microfacet.geometry.orthonormal_basis`.
 
+    Parameters
+    ----------
+    n : (..., 3) array_like
+        Unit normals.
+    tangent : (float, float, float)
+        World direction to follow.
+
+    Returns
+    -------
+    s, t : (..., 3) ndarray
+        Unit tangent and bitangent.
+
     Examples
     --------
     >>> import numpy as np
@@ -66,6 +78,15 @@ class Sphere:
     ``supersample x supersample`` subpixels (the pixel centre inside the disk), and
     composited over the background with its coverage, so silhouettes are antialiased
     without extra shading work.
+
+    Parameters
+    ----------
+    size : int
+        Image width and height, pixels.
+    supersample : int
+        Subpixels per axis for the coverage.
+    tangent : (float, float, float)
+        World direction the local x axis follows (:func:`tangent_frame`).
 
     Attributes
     ----------
@@ -111,16 +132,51 @@ class Sphere:
         return self.s, self.t, self.n
 
     def to_local(self, w_world) -> np.ndarray:
-        """World directions (``(3,)`` or ``(N, 3)``) in each pixel's local frame."""
+        """World directions (``(3,)`` or ``(N, 3)``) in each pixel's local frame.
+
+        Parameters
+        ----------
+        w_world : (3,) or (N, 3) array_like
+            World directions.
+
+        Returns
+        -------
+        (N, 3) ndarray
+            Local directions.
+        """
         return to_local(np.asarray(w_world, dtype=np.float64), self.s, self.t, self.n)
 
     def to_world(self, w_local) -> np.ndarray:
-        """Local directions ``(N, 3)`` in world coordinates."""
+        """Local directions ``(N, 3)`` in world coordinates.
+
+        Parameters
+        ----------
+        w_local : (N, 3) array_like
+            Local directions.
+
+        Returns
+        -------
+        (N, 3) ndarray
+            World directions.
+        """
         return to_world(np.asarray(w_local, dtype=np.float64), self.s, self.t, self.n)
 
     def image(self, values, background=0.0) -> np.ndarray:
         """Scatter per-pixel ``values`` ``(N, C)`` into a ``(size, size, C)`` image,
-        blended with ``background`` by coverage: ``c v + (1 - c) bg``."""
+        blended with ``background`` by coverage: ``c v + (1 - c) bg``.
+
+        Parameters
+        ----------
+        values : (N, C) array_like
+            One value per shaded pixel.
+        background : float or (C,) array_like
+            Background value.
+
+        Returns
+        -------
+        (size, size, C) ndarray
+            The image.
+        """
         values = np.asarray(values, dtype=np.float64)
         c = self.coverage.reshape((-1,) + (1,) * (values.ndim - 1))
         out = np.empty((self.size, self.size) + values.shape[1:])
