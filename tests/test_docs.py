@@ -362,10 +362,12 @@ class _Returns(ast.NodeVisitor):
         if node.value is not None and not (isinstance(node.value, ast.Constant) and node.value.value is None):
             self.returns = True
 
-    def visit_Yield(self, node):
-        self.yields = True
+    def visit_Yield(self, node):          # a bare ``yield`` (a context manager's) yields nothing
+        if node.value is not None and not (isinstance(node.value, ast.Constant) and node.value.value is None):
+            self.yields = True
 
-    visit_YieldFrom = visit_Yield
+    def visit_YieldFrom(self, node):
+        self.yields = True
 
     def visit_FunctionDef(self, node):   # nested definitions: not this function's returns
         pass

@@ -147,16 +147,18 @@ class SlopeDistribution:
         roughness of this distribution is below ``MIN_ALPHA[dtype]``, the smallest one results of
         ``dtype`` represent (:class:`microfacet.MicrofacetBRDF` calls it with its ``dtype``).
 
+        Parameters
+        ----------
+        dtype : dtype
+            The BRDF's arithmetic type (float32 or float64).
+
+        Examples
+        --------
         >>> from microfacet import Beckmann
         >>> Beckmann(alpha=1e-12).check_dtype(np.float32)
         Traceback (most recent call last):
         ...
         ValueError: alpha_x must be >= 1e-06 for dtype float32 (a narrower lobe is below float32's direction resolution; use float64), got 1e-12
-
-        Parameters
-        ----------
-        dtype : dtype
-            The BRDF's arithmetic type (float32 or float64).
         """
         dtype = np.dtype(dtype)
         low = MIN_ALPHA.get(dtype)

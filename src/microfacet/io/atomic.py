@@ -69,6 +69,11 @@ def check_writable(path: str | os.PathLike) -> None:
     missing, read-only, not a folder, ...), by creating and removing a temporary file there:
     commands check their outputs before their work.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file a command will write.
+
     Examples
     --------
     >>> check_writable("out.exr")                        # the current folder is writable: no error
@@ -90,6 +95,16 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     any exception it is removed and the exception propagates, leaving ``path`` as it was
     (an ``OSError`` that named no file or the temporary one, e.g. a full disk, is raised
     again naming ``path``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write; its folder must exist.
+
+    Yields
+    ------
+    Path
+        The temporary file to write.
 
     Examples
     --------
@@ -123,6 +138,18 @@ def temporary_owner(tmp: str | os.PathLike, path: str | os.PathLike) -> tuple[in
     """Who wrote the temporary file ``tmp`` of the output ``path``: ``(pid, host)``; ``None``
     for a temporary written before owners were recorded; ``False`` if ``tmp`` is not one of
     ``path``'s temporaries (e.g. one of ``path.x.exr``'s, whose name starts alike).
+
+    Parameters
+    ----------
+    tmp : str or os.PathLike
+        A file next to ``path``.
+    path : str or os.PathLike
+        The output.
+
+    Returns
+    -------
+    (int, str) or None or False
+        ``(pid, host)``, None or False (see above).
 
     Examples
     --------
@@ -169,6 +196,18 @@ def remove_stale(path: str | os.PathLike, other_hosts: bool = False) -> list[Pat
     ``other_hosts``, those of other machines too (a batch that holds its folder's
     :func:`folder_lock` and reruns a task whose worker died elsewhere). Temporaries of live
     processes (another command writing the same output) are kept. Returns the paths removed.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output whose temporaries are looked for.
+    other_hosts : bool
+        Remove the temporaries of other machines too.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
 
     Examples
     --------
@@ -218,6 +257,18 @@ def staging_folder(folder: str | os.PathLike, last: str = "") -> Iterator[Path]:
     relative path in ``folder``, replacing what is there, the file named ``last`` at the
     end; when it fails (a full disk, Ctrl-C), remove the staging folder, leaving ``folder``
     as it was. Staging folders of dead processes (a ``kill -9``) are removed first.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The destination folder (it must exist).
+    last : str
+        Relative path of the file to move last (e.g. a manifest); empty: none.
+
+    Yields
+    ------
+    Path
+        The staging folder.
 
     Examples
     --------
@@ -281,6 +332,20 @@ def folder_lock(folder: str | os.PathLike, wait: bool = True, on_wait=None) -> I
     dies with its process (``kill -9`` included: the file then stays, unlocked). Elsewhere
     than POSIX it is a no-op.
 
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The folder to lock (it must exist).
+    wait : bool
+        Block until the lock is free (else raise :class:`FolderBusy`).
+    on_wait : callable, optional
+        ``on_wait(pid)``, called once before blocking.
+
+    Yields
+    ------
+    Path
+        The lock file.
+
     Examples
     --------
     >>> import os
@@ -337,6 +402,18 @@ def folder_lock(folder: str | os.PathLike, wait: bool = True, on_wait=None) -> I
 def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically; return ``path``.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its folder must exist.
+    data : bytes
+        The content.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
     Examples
     --------
     >>> write_bytes("data.bin", b"MERL").read_bytes()
@@ -349,6 +426,18 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8, ``\\n`` line ends) to ``path`` atomically; return ``path``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file; its folder must exist.
+    text : str
+        The content.
+
+    Returns
+    -------
+    Path
+        ``path``.
 
     Examples
     --------

@@ -47,6 +47,16 @@ COMPRESSIONS = {"none": OpenEXR.NO_COMPRESSION, "rle": OpenEXR.RLE_COMPRESSION,
 def exr_compression(name: str):
     """The OpenEXR compression constant for a lossless ``name`` in :data:`COMPRESSIONS`.
 
+    Parameters
+    ----------
+    name : str
+        A key of :data:`COMPRESSIONS`.
+
+    Returns
+    -------
+    OpenEXR compression constant
+        The constant.
+
     Examples
     --------
     >>> exr_compression("zip") == COMPRESSIONS["zip"]
@@ -107,6 +117,11 @@ def exr_write_errors(path: str | os.PathLike):
     image file "...tmp". No space left on device.``) becomes an ``OSError`` naming ``path``,
     with the system error it reports (``ENOSPC``, ...; else ``EIO`` and OpenEXR's message), so
     that a command says it in one line: ``out.exr: No space left on device``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file written, for messages.
 
     Examples
     --------
@@ -176,6 +191,11 @@ def exr_read_errors(path: str | os.PathLike):
     and the cause OpenEXR gave (``trunc.exr: unreadable or corrupt EXR ((EXR_ERR_BAD_CHUNK_LEADER)
     ...)``, not its binding's "file has 0 parts").
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file read, for messages.
+
     Examples
     --------
     >>> from pathlib import Path
@@ -235,6 +255,11 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
         Write NaN/inf samples (and values beyond the float32/half range, which become inf)
         instead of raising ``ValueError``, as :func:`read_exr` reads them only when asked.
 
+    Returns
+    -------
+    Path
+        ``path``.
+
     Examples
     --------
     >>> import numpy as np
@@ -259,6 +284,13 @@ def write_exr(path: str | os.PathLike, image, half: bool = False, compression: s
 def check_exr_magic(path: Path, kind: str = "an OpenEXR file") -> None:
     """Raise :class:`MicrofacetError` "``path``: not ``kind``" unless ``path`` starts with :data:`EXR_MAGIC`.
 
+    Parameters
+    ----------
+    path : Path
+        The file.
+    kind : str
+        What the file should be, for the message.
+
     Examples
     --------
     >>> from pathlib import Path
@@ -278,6 +310,18 @@ def read_exr(path: str | os.PathLike, allow_nonfinite: bool = False) -> np.ndarr
 
     ``C`` is 1 for a luminance (``Y``) image, 3 for ``R, G, B`` and 4 when an ``A``
     channel is present as well.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The EXR file.
+    allow_nonfinite : bool
+        Accept NaN and inf samples.
+
+    Returns
+    -------
+    (H, W, C) ndarray
+        Float64 samples.
 
     Raises
     ------

@@ -29,6 +29,22 @@ code { background: #f3f3f3; padding: 0 0.2em; }
 def html_figure(src: str, caption: str, alt: str = "", css_class: str = "") -> str:
     """An ``<figure>`` with one image and its (escaped) caption.
 
+    Parameters
+    ----------
+    src : str
+        Image URL (relative path).
+    caption : str
+        Caption text.
+    alt : str
+        Alternative text; empty: the caption.
+    css_class : str
+        CSS class of the image; empty: none.
+
+    Returns
+    -------
+    str
+        HTML fragment.
+
     Examples
     --------
     >>> html_figure("a.png", "GGX & Beckmann")
@@ -41,6 +57,16 @@ def html_figure(src: str, caption: str, alt: str = "", css_class: str = "") -> s
 
 def html_grid(rows: Sequence[tuple[str, Sequence[tuple[str, str]]]]) -> str:
     """A table of images: each row is ``(row_label, cells)``, each cell ``(src, caption)``.
+
+    Parameters
+    ----------
+    rows : sequence of (str, sequence of (str, str))
+        Row label and ``(src, caption)`` cells.
+
+    Returns
+    -------
+    str
+        HTML fragment.
 
     Examples
     --------
@@ -59,6 +85,18 @@ def html_grid(rows: Sequence[tuple[str, Sequence[tuple[str, str]]]]) -> str:
 
 def html_page(title: str, body: str) -> str:
     """A complete, self-contained HTML5 page (inline CSS, no scripts).
+
+    Parameters
+    ----------
+    title : str
+        Page title (escaped).
+    body : str
+        HTML fragment.
+
+    Returns
+    -------
+    str
+        The page.
 
     Examples
     --------

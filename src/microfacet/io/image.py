@@ -18,6 +18,16 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     """The samples of a PNG (``uint8``/``uint16`` as stored, :func:`read_png_data`) or an
     EXR (float64, :func:`read_exr`), chosen by the file's signature, not its name.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A PNG or EXR file.
+
+    Returns
+    -------
+    ndarray
+        ``(H, W)`` or ``(H, W, C)`` samples.
+
     Examples
     --------
     >>> import numpy as np

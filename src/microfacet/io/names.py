@@ -25,6 +25,16 @@ DATA_SUFFIXES = (".png", ".exr", ".npz")
 def material_name(path: str | os.PathLike) -> str:
     """File name without its measured-BRDF suffix: ``nickel.binary.gz`` -> ``nickel``.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A measured-BRDF file path.
+
+    Returns
+    -------
+    str
+        The name.
+
     Examples
     --------
     >>> material_name("data/merl/nickel.binary.gz"), material_name("ibiza.bsdf")
@@ -39,6 +49,16 @@ def material_name(path: str | os.PathLike) -> str:
 
 def input_name(source: str | os.PathLike) -> str:
     """A file's name without its data suffixes: ``nickel.binary.gz`` -> ``nickel``, ``h.png`` -> ``h``.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        A file path.
+
+    Returns
+    -------
+    str
+        The name.
 
     Examples
     --------

@@ -89,6 +89,25 @@ class NormalMapReport:
     (or ``x^2 + y^2 > 1`` with ``z`` reconstructed); ``mean_length`` is the mean length of the
     decoded vectors before renormalization (``None`` when ``z`` is reconstructed).
 
+    Parameters
+    ----------
+    source : str
+        The file name (or a description of the array).
+    shape : (int, int)
+        ``(H, W)`` of the map.
+    encoding : str
+        ``"biased"`` or ``"signed"``.
+    detected : bool
+        Whether the encoding was chosen by content.
+    z : str
+        ``"stored"`` or ``"reconstruct"``.
+    repaired : int
+        Texels clamped.
+    facing_away : int
+        Texels facing away (see above).
+    mean_length : float or None
+        Mean decoded length before renormalization.
+
     Examples
     --------
     >>> import numpy as np
@@ -281,6 +300,20 @@ def read_normals(path_or_image, encoding: str = "auto", z: str = "auto", *,
     """Unit normals ``(H, W, 3)`` and report of a normal map file (8/16-bit PNG or EXR, by
     content) or array: :func:`decode_normals` of its samples.
 
+    Parameters
+    ----------
+    path_or_image : str, os.PathLike or array_like
+        A PNG/EXR file or its samples.
+    encoding, z, warn
+        As :func:`decode_normals`.
+
+    Returns
+    -------
+    normals : (H, W, 3) ndarray
+        Unit normals.
+    report : NormalMapReport
+        How the map was read.
+
     Examples
     --------
     >>> import numpy as np
@@ -300,6 +333,16 @@ def normals_to_slopes(normals) -> np.ndarray:
     Eq. 2.9, as :func:`microfacet.geometry.normal_to_slope`, into one array); decoded normals
     have ``|slope| <= tan 89deg``.
 
+    Parameters
+    ----------
+    normals : (..., 3) array_like
+        Unit normals with ``n_z > 0``.
+
+    Returns
+    -------
+    (..., 2) ndarray
+        Slopes.
+
     Examples
     --------
     >>> import numpy as np
@@ -316,6 +359,20 @@ def read_slopes(path_or_image, encoding: str = "auto", z: str = "auto", *,
                 warn: bool = True) -> tuple[np.ndarray, NormalMapReport]:
     """Texel slopes ``(H, W, 2)`` float64 and report of a normal map file or array
     (:func:`read_normals`, :func:`normals_to_slopes`).
+
+    Parameters
+    ----------
+    path_or_image : str, os.PathLike or array_like
+        A PNG/EXR file or its samples.
+    encoding, z, warn
+        As :func:`decode_normals`.
+
+    Returns
+    -------
+    slopes : (H, W, 2) ndarray
+        Texel slopes.
+    report : NormalMapReport
+        How the map was read.
 
     Examples
     --------

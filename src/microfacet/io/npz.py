@@ -36,6 +36,18 @@ def load_npz(path: str | os.PathLike, kind: str) -> dict[str, np.ndarray]:
     naming the file and saying that it is not ``kind`` (never NumPy's "pickled data ...
     allow_pickle" message, which describes how it tried to read it).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The archive.
+    kind : str
+        What the file should be, for messages.
+
+    Returns
+    -------
+    dict of str to ndarray
+        The arrays by name.
+
     Examples
     --------
     >>> import numpy as np

@@ -41,6 +41,18 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 def tonemap(linear, exposure: float = 0.0) -> np.ndarray:
     """Display-referred linear values ``clip(2^exposure L, 0, 1)``; NaN maps to 0.
 
+    Parameters
+    ----------
+    linear : array_like
+        Linear values.
+    exposure : float
+        Stops (scale ``2^exposure``).
+
+    Returns
+    -------
+    ndarray
+        Values in ``[0, 1]``.
+
     Examples
     --------
     >>> import numpy as np
@@ -54,6 +66,16 @@ def tonemap(linear, exposure: float = 0.0) -> np.ndarray:
 def srgb_encode(v) -> np.ndarray:
     """sRGB OETF (IEC 61966-2-1): ``12.92 v`` for ``v <= 0.0031308``, else
     ``1.055 v^(1/2.4) - 0.055``; ``v`` in ``[0, 1]``.
+
+    Parameters
+    ----------
+    v : array_like
+        Linear values in ``[0, 1]``.
+
+    Returns
+    -------
+    ndarray
+        Encoded values in ``[0, 1]``.
 
     Examples
     --------
@@ -69,6 +91,18 @@ def to_srgb8(linear, exposure: float = 0.0) -> np.ndarray:
     """``uint8`` sRGB preview of a linear image: :func:`tonemap`, :func:`srgb_encode`, round.
 
     An alpha channel (4th channel) is kept linear (scaled to 8 bits, not tone mapped).
+
+    Parameters
+    ----------
+    linear : array_like
+        Linear image ``(H, W)`` or ``(H, W, C)``.
+    exposure : float
+        Stops (scale ``2^exposure``).
+
+    Returns
+    -------
+    ndarray of uint8
+        The preview.
 
     Examples
     --------
@@ -87,6 +121,20 @@ def to_srgb8(linear, exposure: float = 0.0) -> np.ndarray:
 def write_png(path: str | os.PathLike, linear, exposure: float = 0.0) -> Path:
     """Write an 8-bit sRGB PNG preview of a linear ``(H, W)`` or ``(H, W, 1|3|4)`` image,
     atomically (see the module docstring for the tone map).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The PNG file.
+    linear : array_like
+        The linear image.
+    exposure : float
+        Stops (scale ``2^exposure``).
+
+    Returns
+    -------
+    Path
+        ``path``.
 
     Examples
     --------
@@ -109,6 +157,16 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
     ``uint8`` or ``uint16``. Palette images are expanded to RGB(A), 1/2/4-bit gray to 8 bits.
 
     Raises :class:`MicrofacetError` naming the file if it is missing, not a PNG or corrupt.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The PNG file.
+
+    Returns
+    -------
+    ndarray
+        ``uint8`` or ``uint16`` samples.
 
     Examples
     --------
@@ -141,6 +199,18 @@ def read_png_data(path: str | os.PathLike) -> np.ndarray:
 def write_png_data(path: str | os.PathLike, image) -> Path:
     """Write ``uint8`` or ``uint16`` samples ``(H, W)`` or ``(H, W, 1|2|3|4)`` as a PNG
     exactly (gray, gray+alpha, RGB, RGBA; no colour management), atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The PNG file.
+    image : array_like
+        ``uint8`` or ``uint16`` samples.
+
+    Returns
+    -------
+    Path
+        ``path``.
 
     Examples
     --------

@@ -26,6 +26,13 @@ def native_output_captured(into: list):
     several threads take turns (a lock): the descriptors are the process's, so what other
     threads print meanwhile is captured too.
 
+    Parameters
+    ----------
+    into : list
+        Receives the captured text.
+
+    Examples
+    --------
     >>> text = []
     >>> with native_output_captured(text):
     ...     _ = os.write(2, b"libfoo: warning\\n")
@@ -80,6 +87,13 @@ def log_captured(name: str, into: list):
     """Within the block, the records of logger ``name`` (e.g. ``"imagecodecs"``, which logs
     libpng's warnings) are appended to ``into`` as messages instead of being handled (printed
     by logging's last-resort handler when the application configured none).
+
+    Parameters
+    ----------
+    name : str
+        Logger name.
+    into : list
+        Receives the messages.
 
     Examples
     --------

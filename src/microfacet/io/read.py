@@ -26,6 +26,20 @@ def read_bytes(path: str | os.PathLike, kind: str, size: int | None = None) -> b
     or an unreadable file raises :class:`MicrofacetError` naming it (``kind``: what was
     expected, e.g. ``"a PNG file"``).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    kind : str
+        What the file should be, for messages.
+    size : int, optional
+        Bytes to read; None: all.
+
+    Returns
+    -------
+    bytes
+        The content.
+
     Examples
     --------
     >>> from pathlib import Path
@@ -54,6 +68,18 @@ def decompressed(data: bytes, path: str | os.PathLike) -> bytes:
     truncated stream raises :class:`MicrofacetError` naming ``path``. NumPy-free, and zlib
     releases the GIL: a thread can decompress while another imports modules.
 
+    Parameters
+    ----------
+    data : bytes
+        File content.
+    path : str or os.PathLike
+        The file, for messages.
+
+    Returns
+    -------
+    bytes
+        The (decompressed) content.
+
     Examples
     --------
     >>> import gzip
@@ -79,6 +105,18 @@ def decompressed(data: bytes, path: str | os.PathLike) -> bytes:
 def read_decompressed(path: str | os.PathLike, kind: str) -> bytes:
     """:func:`read_bytes` of all of ``path``, :func:`decompressed`: a file's content, gzipped
     or not. NumPy-free and releasing the GIL, as :func:`decompressed`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    kind : str
+        What the file should be, for messages.
+
+    Returns
+    -------
+    bytes
+        The (decompressed) content.
 
     Examples
     --------
