@@ -30,6 +30,16 @@ __all__ = ["load", "load_bytes", "detect", "MeasuredBRDF", "MERLBRDF", "RGLBRDF"
 def detect(data: bytes) -> str:
     """Format of uncompressed file bytes: ``"rgl"``, ``"merl"``, ``"utia"`` or ``""``.
 
+    Parameters
+    ----------
+    data : bytes
+        Uncompressed file content.
+
+    Returns
+    -------
+    str
+        The format, or ``""`` if none matches.
+
     Examples
     --------
     >>> import numpy as np
@@ -81,6 +91,18 @@ def load(path: str | os.PathLike) -> MeasuredBRDF:
 
 def load_bytes(data: bytes, path: str | os.PathLike) -> MeasuredBRDF:
     """:func:`load` of the file's uncompressed bytes ``data`` (``path`` names it in errors).
+
+    Parameters
+    ----------
+    data : bytes
+        Uncompressed file content.
+    path : str or os.PathLike
+        The file, for messages.
+
+    Returns
+    -------
+    MeasuredBRDF
+        A :class:`MERLBRDF`, :class:`RGLBRDF` or :class:`UTIABRDF`.
 
     Examples
     --------

@@ -33,6 +33,11 @@ def compiled_kernels():
     ``microfacet.kernels.AVAILABLE`` is False (:func:`microfacet.backend.choose`): then every reader
     runs its NumPy reference.
 
+    Returns
+    -------
+    module or None
+        :mod:`microfacet.measured._kernels`, or None.
+
     Examples
     --------
     >>> from microfacet import backend
@@ -60,6 +65,18 @@ def _rows(a, k: int) -> np.ndarray:
 def file_error(path, what: str) -> MicrofacetError:
     """A :class:`MicrofacetError` naming the file and what is wrong with it.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    what : str
+        What is wrong.
+
+    Returns
+    -------
+    MicrofacetError
+        The error (not raised).
+
     Examples
     --------
     >>> file_error("data/gold.binary", "truncated")
@@ -70,6 +87,15 @@ def file_error(path, what: str) -> MicrofacetError:
 
 def check_finite(path, values: np.ndarray, what: str) -> None:
     """Raise if ``values`` hold NaN or infinity, counting them in the message.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, for the message.
+    values : ndarray
+        The values read.
+    what : str
+        What they are, for the message.
 
     Examples
     --------
@@ -150,21 +176,79 @@ class MeasuredBRDF(BRDF):
         return out
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
+        """``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values, per steradian.
+        """
         return self._eval(wi, wo, False, out)
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (thesis: ``evalp``)."""
+        """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)`` (thesis: ``evalp``).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values.
+        """
         return self._eval(wi, wo, True, out)
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """Density of :meth:`sample`: ``cos theta_i / pi`` (0 if ``wo`` is below the horizon)."""
+        """Density of :meth:`sample`: ``cos theta_i / pi`` (0 if ``wo`` is below the horizon).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        (...) ndarray
+            Density per steradian of ``wi``.
+        """
         wi, wo = as_dirs(wi, "wi"), as_dirs(wo, "wo")
         return into(out, np.where(wo[..., 2] > 0, cosine_hemisphere_pdf(wi), 0.0), (wi, wo))
 
     def sample(self, u, wo, out=None):
         """Cosine-weighted light directions: ``(wi, eval_cos / pdf, pdf)``; weight and pdf
-        are 0 where ``wo`` or ``wi`` is below the horizon."""
+        are 0 where ``wo`` or ``wi`` is below the horizon.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions, local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf``, RGB.
+        pdf : (...) ndarray
+            Density per steradian.
+        """
         wo = as_dirs(wo, "wo")
         u = uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])

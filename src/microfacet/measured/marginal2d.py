@@ -107,7 +107,20 @@ class Marginal2D:
 
     # ------------------------------------------------------------------ public
     def eval(self, x, y, param=()) -> np.ndarray:
-        """Bilinear value at ``(x, y)`` in ``[0, 1]^2`` (clamped), ``(...)`` or ``(..., K)``."""
+        """Bilinear value at ``(x, y)`` in ``[0, 1]^2`` (clamped), ``(...)`` or ``(..., K)``.
+
+        Parameters
+        ----------
+        x, y : array_like
+            Coordinates in ``[0, 1]`` (columns, rows).
+        param : sequence of array_like
+            Values of the table's parameters (one per parameter axis).
+
+        Returns
+        -------
+        ndarray
+            ``(...)``, or ``(..., K)`` for a table with channels.
+        """
         c = self._slices(param)
         (i, fx), (j, fy) = self._cell(x, self.W), self._cell(y, self.H)
         fx, fy = fx[..., None], fy[..., None]             # the data's channel axis
@@ -120,7 +133,22 @@ class Marginal2D:
         """Inverse of the sample warp: the uniforms ``(u1, u2)`` that warp to ``(x, y)``,
         and the density there. ``u2`` inverts the marginal CDF of rows, ``u1`` the
         conditional CDF of columns, each integral of the bilinear patch (segment
-        ``t (v0 + (v1 - v0) t / 2) / (n - 1)``)."""
+        ``t (v0 + (v1 - v0) t / 2) / (n - 1)``).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Coordinates in ``[0, 1]``.
+        param : sequence of array_like
+            Values of the table's parameters.
+
+        Returns
+        -------
+        u1, u2 : ndarray
+            The uniforms.
+        pdf : ndarray
+            The density at ``(x, y)``.
+        """
         c = self._slices(param)
         (i, fx), (j, fy) = self._cell(x, self.W), self._cell(y, self.H)
         look = lambda t, *idx: self._lookup(t, idx, c)  # noqa: E731

@@ -52,6 +52,16 @@ def is_merl(data: bytes) -> bool:
     or any 3 positive int32 bin counts that match the file size (then :func:`read_merl`
     reports the unsupported resolution).
 
+    Parameters
+    ----------
+    data : bytes
+        Uncompressed file content.
+
+    Returns
+    -------
+    bool
+        Whether it looks like a MERL file.
+
     Examples
     --------
     >>> import numpy as np
@@ -69,6 +79,20 @@ def read_merl(data: bytes, path) -> tuple[np.ndarray, np.ndarray]:
     """Physical RGB values ``(90, 90, 180, 3)`` and the measured mask ``(90, 90, 180)``.
 
     ``data`` are the uncompressed file bytes; ``path`` only names the file in errors.
+
+    Parameters
+    ----------
+    data : bytes
+        Uncompressed file content.
+    path : str or os.PathLike
+        The file, for messages.
+
+    Returns
+    -------
+    rgb : (90, 90, 180, 3) ndarray
+        Physical RGB values.
+    valid : (90, 90, 180) ndarray of bool
+        Measured mask.
 
     Examples
     --------
@@ -156,6 +180,15 @@ def _digest(wi: np.ndarray, wo: np.ndarray) -> tuple:
 
 class MERLBRDF(MeasuredBRDF):
     """A MERL ``.binary`` BRDF, trilinearly interpolated in ``(u_h, u_d, u_phi)``.
+
+    Parameters
+    ----------
+    values : (90, 90, 180, 3) ndarray
+        Physical RGB values (:func:`read_merl`).
+    valid : (90, 90, 180) ndarray of bool
+        Measured mask.
+    path : str or os.PathLike
+        The file, for messages and ``repr``.
 
     Attributes
     ----------
@@ -247,5 +280,16 @@ class MERLBRDF(MeasuredBRDF):
 
     def coverage(self, wi, wo) -> np.ndarray:
         """Share of the trilinear weight on measured samples, in ``[0, 1]`` (0 below the
-        horizon): 1 where :meth:`eval` rests on measured data only."""
+        horizon): 1 where :meth:`eval` rests on measured data only.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions.
+
+        Returns
+        -------
+        (...) ndarray
+            Measured share in ``[0, 1]``.
+        """
         return self._interpolate(wi, wo)[1]

@@ -46,6 +46,27 @@ class RGLTables(NamedTuple):
     the flags ``isotropic``, ``reduction`` (the file's azimuthal symmetry), ``jacobian`` and
     ``clip_negative`` of :class:`RGLBRDF`. Example: ``brdf._kernel()[2].isotropic``.
 
+    Parameters
+    ----------
+    phi_nodes, theta_nodes : ndarray
+        Parameter nodes of the view.
+    vc : ndarray
+        VNDF values and conditional CDFs.
+    rows, marg : ndarray
+        Row integrals and marginal CDF.
+    normalized : bool
+        Whether the marginal sums to 1.
+    rgb, ndf, sigma : ndarray
+        The RGB, NDF and projected-area tables.
+    isotropic : bool
+        Isotropic file.
+    reduction : int
+        Azimuthal symmetry of the file.
+    jacobian : bool
+        The file's ``jacobian`` flag (the ``sigma`` factor applies).
+    clip_negative : bool
+        As :class:`RGLBRDF`.
+
     Examples
     --------
     >>> import numpy as np
@@ -104,6 +125,18 @@ def read_rgl(data: bytes, path) -> dict[str, np.ndarray]:
     """The fields of an RGL ``_rgb`` ``.bsdf`` file, checked as Mitsuba 3 does
     (dtypes, ranks, consistent ``phi_i`` / ``theta_i`` / table shapes) plus finiteness.
 
+    Parameters
+    ----------
+    data : bytes
+        Uncompressed file content.
+    path : str or os.PathLike
+        The file, for messages.
+
+    Returns
+    -------
+    dict of str to ndarray
+        The fields.
+
     Examples
     --------
     >>> import numpy as np
@@ -143,6 +176,15 @@ def read_rgl(data: bytes, path) -> dict[str, np.ndarray]:
 
 class RGLBRDF(MeasuredBRDF):
     """An RGL ``_rgb`` ``.bsdf`` BRDF, evaluated like Mitsuba 3's ``measured`` plugin.
+
+    Parameters
+    ----------
+    fields : dict of ndarray
+        The file's fields (:func:`read_rgl`).
+    path : str or os.PathLike
+        The file, for messages and ``repr``.
+    clip_negative : bool
+        Clip negative (out-of-gamut) RGB values to 0 (default False: as Mitsuba 3).
 
     Attributes
     ----------
@@ -190,13 +232,35 @@ class RGLBRDF(MeasuredBRDF):
         self._rgb = Marginal2D(np.moveaxis(fields["rgb"], 2, -1), params)   # channels last
 
     def ndf(self, h) -> np.ndarray:
-        """The file's NDF ``D(h)`` (bilinear in ``(sqrt(2 theta_h / pi), (phi_h + pi) / 2 pi)``)."""
+        """The file's NDF ``D(h)`` (bilinear in ``(sqrt(2 theta_h / pi), (phi_h + pi) / 2 pi)``).
+
+        Parameters
+        ----------
+        h : (..., 3) array_like
+            Unit microfacet normals.
+
+        Returns
+        -------
+        (...) ndarray
+            ``D(h)`` (0 below the horizon).
+        """
         h = as_dirs(h, "h")
         d = self._ndf.eval(theta2u(elevation(h)), phi2u(np.arctan2(h[..., 1], h[..., 0])))
         return np.where(h[..., 2] > 0, d, 0.0)
 
     def sigma(self, w) -> np.ndarray:
-        """The file's projected microsurface area ``sigma(w)`` (same parameterization)."""
+        """The file's projected microsurface area ``sigma(w)`` (same parameterization).
+
+        Parameters
+        ----------
+        w : (..., 3) array_like
+            Unit directions.
+
+        Returns
+        -------
+        (...) ndarray
+            ``sigma(w)``.
+        """
         w = as_dirs(w, "w")
         return self._sigma.eval(theta2u(elevation(w)), phi2u(np.arctan2(w[..., 1], w[..., 0])))
 

@@ -33,6 +33,16 @@ _CODES = {np.dtype(v).str: k for k, v in DTYPES.items()}
 def is_tensor_file(data: bytes) -> bool:
     """Whether ``data`` start with the ``tensor_file`` magic.
 
+    Parameters
+    ----------
+    data : bytes
+        File content.
+
+    Returns
+    -------
+    bool
+        Whether it starts with the magic.
+
     Examples
     --------
     >>> is_tensor_file(write_tensor_file({})), is_tensor_file(b"GIF89a")
@@ -46,6 +56,18 @@ def read_tensor_file(data: bytes, path) -> dict[str, np.ndarray]:
 
     Raises ``MicrofacetError`` (naming ``path``) on a bad magic, version, dtype, a
     truncated header or a field whose data run past the end of the file.
+
+    Parameters
+    ----------
+    data : bytes
+        File content.
+    path : str or os.PathLike
+        The file, for messages.
+
+    Returns
+    -------
+    dict of str to ndarray
+        The fields, read-only.
 
     Examples
     --------
@@ -99,6 +121,16 @@ def _field_header(data: bytes, pos: int):
 def write_tensor_file(fields: dict[str, np.ndarray]) -> bytes:
     """The bytes of a tensor file holding ``fields`` (8-byte aligned data); for tests and
     tools that write RGL-style files.
+
+    Parameters
+    ----------
+    fields : dict of str to ndarray
+        The fields.
+
+    Returns
+    -------
+    bytes
+        The file content.
 
     Examples
     --------

@@ -34,6 +34,16 @@ PHI_STEP = np.float64(UTIA_PHI_STEP)
 def is_utia(data: bytes) -> bool:
     """UTIA files have no header: recognised by their exact size.
 
+    Parameters
+    ----------
+    data : bytes
+        File content.
+
+    Returns
+    -------
+    bool
+        Whether its size is a UTIA file's.
+
     Examples
     --------
     >>> is_utia(bytes(N_BYTES)), is_utia(bytes(100))
@@ -46,6 +56,16 @@ def srgb_decode(c: np.ndarray) -> np.ndarray:
     """Inverse sRGB transfer (IEC 61966-2-1): ``c / 12.92`` up to 0.04045, else
     ``((c + 0.055) / 1.055)^2.4``.
 
+    Parameters
+    ----------
+    c : ndarray
+        sRGB-encoded values in ``[0, 1]``.
+
+    Returns
+    -------
+    ndarray
+        Linear values.
+
     Examples
     --------
     >>> import numpy as np
@@ -57,6 +77,18 @@ def srgb_decode(c: np.ndarray) -> np.ndarray:
 
 def read_utia(data: bytes, path) -> np.ndarray:
     """Physical RGB values, channels last: ``(6, 48, 6, 48, 3)``.
+
+    Parameters
+    ----------
+    data : bytes
+        Uncompressed file content.
+    path : str or os.PathLike
+        The file, for messages.
+
+    Returns
+    -------
+    (6, 48, 6, 48, 3) ndarray
+        Physical RGB values.
 
     Examples
     --------
@@ -97,6 +129,13 @@ def _phi_axis(phi):
 
 class UTIABRDF(MeasuredBRDF):
     """A UTIA BRDF, quadrilinearly interpolated in ``(theta_i, phi_i, theta_v, phi_v)``.
+
+    Parameters
+    ----------
+    values : (6, 48, 6, 48, 3) ndarray
+        Physical RGB values (:func:`read_utia`).
+    path : str or os.PathLike
+        The file, for messages and ``repr``.
 
     Attributes
     ----------
