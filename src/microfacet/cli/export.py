@@ -1,6 +1,7 @@
 """``microfacet export FIT.npz --to gltf|mtlx|usd|blender -o OUT``: a fit as a glTF, MaterialX,
 USD or Blender material; ``microfacet export PYRAMID.exr --to textures|gltf -o OUT``: a LEADR
-pyramid as engine textures."""
+pyramid as engine textures; ``microfacet export GLINTS.npz --to threejs -o OUT``: a glint
+microsurface as a three.js material (a folder)."""
 from __future__ import annotations
 
 import sys
@@ -22,10 +23,13 @@ def add(sub) -> None:
                     "and OUT.export.md, what the format "
                     "could not carry and the image error of the exported material (read back from OUT) against "
                     "the library's fit and the tabulated fit, measured now. Formulas: docs/export.md.")
-    p.add_argument("fit", metavar="FIT.npz|PYRAMID.exr",
+    p.add_argument("fit", metavar="FIT.npz|PYRAMID.exr|GLINTS.npz",
                    help="fit file written by 'microfacet fit', or a LEADR pyramid of 'microfacet bake' (--to "
-                        "textures|gltf: normal, roughness and anisotropy textures per MIP level, docs/export.md)")
-    p.add_argument("--to", required=True, choices=sorted([*FORMAT_SUFFIX, "textures"]), help="output format")
+                        "textures|gltf: normal, roughness and anisotropy textures per MIP level, docs/export.md), "
+                        "or a glint microsurface of 'microfacet glints' (--to threejs: a folder with the glint "
+                        "P-BRDF as a three.js material, docs/glints.md)")
+    p.add_argument("--to", required=True, choices=sorted([*FORMAT_SUFFIX, "textures", "threejs"]),
+                   help="output format")
     p.add_argument("--base-roughness", type=float, default=None, metavar="ALPHA",
                    help="PYRAMID.exr only: Beckmann roughness added to every level (leave out when baked with it)")
     p.add_argument("--model", default="best", metavar="NAME",
@@ -36,7 +40,13 @@ def add(sub) -> None:
 
 
 def run(args) -> int:
-    from ..export import export, is_pyramid
+    from ..export import export, is_microsurface, is_pyramid
+    if is_microsurface(args.fit):
+        from ..export.glints_export import run_cli as run_glints
+        return run_glints(args)
+    if args.to == "threejs":
+        raise ValueError(f"{args.fit}: --to threejs exports a glint microsurface (GLINTS.npz from 'microfacet "
+                         "glints'); a fit file exports --to gltf (three.js loads .glb)")
     if is_pyramid(args.fit) or args.to == "textures":
         from ..export.leadr_textures import run_cli
         return run_cli(args)

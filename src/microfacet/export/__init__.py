@@ -42,12 +42,14 @@ from .blender import (BlenderBRDF, blender_brdf, blender_material, blender_pytho
 from .consumers import consumer_renders, consumer_section
 from .mtlx import mtlx_document, openpbr_brdf, openpbr_inputs, pbrlib_brdf
 from .leadr_textures import export_leadr, leadr_textures
+from .glints_export import GLINT_TARGETS, export_glints, is_microsurface
 
 __all__ = ["export", "choose_model", "FORMATS", "SUFFIXES", "Analysis", "Lobe", "analyse", "schlick_of",
            "GltfBRDF", "alphas_of", "gltf_brdf", "gltf_material", "read_material", "roughness_anisotropy",
            "write_glb", "mtlx_document", "openpbr_brdf", "openpbr_inputs", "pbrlib_brdf", "BlenderBRDF", "blender_brdf",
            "blender_material", "blender_python", "render_cycles", "write_addon", "write_blend", "consumer_renders",
-           "consumer_section", "export_leadr", "leadr_textures", "is_pyramid"]
+           "consumer_section", "export_leadr", "leadr_textures", "is_pyramid",
+           "export_glints", "is_microsurface", "GLINT_TARGETS"]
 
 #: Formats of :func:`export` and the suffix of each one's file.
 SUFFIXES = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda", "blender": ".blend"}
@@ -238,6 +240,10 @@ def export(source, to: str, out, model: str = "best", compare_models: bool = Tru
     A LEADR pyramid (a ``.exr`` path or a list of moment levels) exports ``to="textures"`` or
     ``"gltf"`` through :func:`~microfacet.export.leadr_textures.export_leadr` (``options``:
     ``base_roughness``, ``tiles``, ``metallic``, ``base_color``), which returns its own report.
+    A glint microsurface (``microfacet glints``'s ``.npz`` or a ``Microsurface``) exports
+    ``to="threejs"``, a folder, through :func:`~microfacet.export.glints_export.export_glints`
+    (``options``: its keywords), which returns its own report; other formats raise one line
+    saying why they cannot hold a glint P-BRDF.
 
     Parameters
     ----------
@@ -283,6 +289,11 @@ def export(source, to: str, out, model: str = "best", compare_models: bool = Tru
     True
     """
     from ..metrics import ImageError
+    if is_microsurface(source):                     # glint microsurfaces: three.js (glints_export)
+        return export_glints(source, to, out, **options)
+    if to in GLINT_TARGETS:
+        raise ValueError(f"--to {to} exports a glint microsurface (GLINTS.npz from 'microfacet glints'); "
+                         "a fit or BRDF exports --to gltf (three.js loads .glb)")
     if is_pyramid(source) or to == "textures":      # LEADR pyramids: textures per MIP level (leadr_textures)
         if not is_pyramid(source):
             raise ValueError(f"--to textures exports a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
