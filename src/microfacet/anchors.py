@@ -96,7 +96,20 @@ class _Published(BRDF):
         return wi, wo, h, up
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon."""
+        """``f_r(wi, wo)``, RGB ``(..., 3)``; 0 below either horizon.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values, per steradian.
+        """
         wi, wo, h, up = self._pairs(wi, wo)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             f = self._f(wi, wo, h)
@@ -107,7 +120,20 @@ class _Published(BRDF):
         return f
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)``."""
+        """``f_r(wi, wo) cos theta_i``, RGB ``(..., 3)``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            RGB values.
+        """
         wi = unit_directions(wi, "wi")
         f = self.eval(wi, wo) * np.maximum(wi[..., 2:3], 0.0)
         if out is not None:
@@ -163,7 +189,18 @@ class ABC(_Published):
 
     def ndf(self, cos_h) -> np.ndarray:
         """``D = A / (1 + B (1 - cos theta_h))^C``, RGB ``(..., 3)`` (Löw et al. 2012, Eq. 9
-        with dj_brdf's ``1 - cos theta_h``)."""
+        with dj_brdf's ``1 - cos theta_h``).
+
+        Parameters
+        ----------
+        cos_h : array_like
+            ``cos theta_h``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            ``D`` per RGB channel.
+        """
         x = 1.0 - np.clip(np.asarray(cos_h, dtype=np.float64), -1.0, 1.0)
         return self.A / ((1.0 + self.B * x) ** self.C)[..., None]
 
@@ -198,7 +235,20 @@ class ABC(_Published):
         return np.where(ok, p_h / (4.0 * np.maximum(oh, 1e-300)), 0.0)
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """Density of :meth:`sample`: ``s p_lobe + (1 - s) cos theta_i / pi``."""
+        """Density of :meth:`sample`: ``s p_lobe + (1 - s) cos theta_i / pi``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        (...) ndarray
+            Density per steradian of ``wi``.
+        """
         wi, wo = np.broadcast_arrays(unit_directions(wi, "wi"), unit_directions(wo, "wo"))
         s = self.spec_fraction
         p = (1.0 - s) * self._cosine_pdf(wi, wo)
@@ -211,7 +261,26 @@ class ABC(_Published):
 
     def sample(self, u, wo, out=None):
         """``(wi, weight, pdf)``: the lobe (probability ``spec_fraction``; half vector from
-        ``D cos theta_h``, closed-form inverse) or the cosine, ``weight = eval_cos / pdf``."""
+        ``D cos theta_h``, closed-form inverse) or the cosine, ``weight = eval_cos / pdf``.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions, local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf``, RGB.
+        pdf : (...) ndarray
+            Density per steradian.
+        """
         wo, u = unit_directions(wo, "wo"), uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         u = np.broadcast_to(u, shape + (2,))
@@ -245,6 +314,19 @@ class SGD(_Published):
     of ``sgd_bagher2012_merl.csv``: ``rhoD, rhoS, alpha, p, f0, f1, kap, lam`` (the
     column ``lambda``), ``c, k, theta0`` (radians). Cosine-weighted sampling.
 
+    Parameters
+    ----------
+    rhoD, rhoS : float or (3,) array_like
+        Diffuse and specular albedo.
+    alpha, p : float or (3,) array_like
+        Width and shape of the shifted-gamma distribution.
+    f0, f1 : float or (3,) array_like
+        Fresnel parameters.
+    kap : float or (3,) array_like
+        Scale of the distribution.
+    lam, c, k, theta0 : float or (3,) array_like
+        Masking parameters (``theta0`` in radians).
+
     Example
     -------
     >>> import numpy as np
@@ -269,13 +351,35 @@ class SGD(_Published):
 
     def ndf(self, cos_h) -> np.ndarray:
         """``D = kap exp(-a) / (pi a^p cos^4 theta_h)``, ``a = alpha + tan^2 theta_h / alpha``,
-        RGB ``(..., 3)`` (Bagher et al. 2012, Eq. 6)."""
+        RGB ``(..., 3)`` (Bagher et al. 2012, Eq. 6).
+
+        Parameters
+        ----------
+        cos_h : array_like
+            ``cos theta_h``.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            ``D`` per RGB channel.
+        """
         c2 = np.clip(np.asarray(cos_h, dtype=np.float64), 1e-12, 1.0)[..., None] ** 2
         a = self.alpha + (1.0 - c2) / c2 / self.alpha
         return self.kap * np.exp(-a) / (np.pi * a ** self.p * c2 * c2)
 
     def g1(self, cos_k) -> np.ndarray:
-        """``clamp(1 + lambda (1 - exp(c max(0, theta_k - theta0)^k)), 0, 1)``, RGB."""
+        """``clamp(1 + lambda (1 - exp(c max(0, theta_k - theta0)^k)), 0, 1)``, RGB.
+
+        Parameters
+        ----------
+        cos_k : array_like
+            ``cos theta_k`` of the direction.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            Masking per RGB channel, ``[0, 1]``.
+        """
         t = np.maximum(np.arccos(np.clip(np.asarray(cos_k, dtype=np.float64), -1.0, 1.0))[..., None] - self.theta0, 0.0)
         return np.clip(1.0 + self.lam * (1.0 - np.exp(self.c * t ** self.k)), 0.0, 1.0)
 
@@ -287,7 +391,20 @@ class SGD(_Published):
         return (self.rhoD + spec) / np.pi
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """``cos theta_i / pi`` (0 where either direction is below the horizon)."""
+        """``cos theta_i / pi`` (0 where either direction is below the horizon).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions, local frame (z up).
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        (...) ndarray
+            Density per steradian of ``wi``.
+        """
         wi, wo = np.broadcast_arrays(unit_directions(wi, "wi"), unit_directions(wo, "wo"))
         p = self._cosine_pdf(wi, wo)
         if out is not None:
@@ -296,7 +413,26 @@ class SGD(_Published):
         return p
 
     def sample(self, u, wo, out=None):
-        """Cosine-weighted ``(wi, weight, pdf)``, ``weight = eval_cos / pdf``."""
+        """Cosine-weighted ``(wi, weight, pdf)``, ``weight = eval_cos / pdf``.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions, local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf``, RGB.
+        pdf : (...) ndarray
+            Density per steradian.
+        """
         wo, u = unit_directions(wo, "wo"), uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
         wi = square_to_cosine_hemisphere(np.broadcast_to(u, shape + (2,)))
@@ -340,6 +476,16 @@ def read_abc(csv_path) -> dict[str, ABC]:
     ``{material: ABC}``, in file order. ``MicrofacetError`` naming the file if it is
     unreadable or malformed, ``ValueError`` naming the parameter if a value is invalid.
 
+    Parameters
+    ----------
+    csv_path : str or os.PathLike
+        The CSV table.
+
+    Returns
+    -------
+    dict of str to ABC
+        The fits by material name.
+
     Examples
     --------
     >>> import numpy as np
@@ -363,6 +509,16 @@ def read_sgd(csv_path) -> dict[str, SGD]:
     """The SGD fits of a table with the columns of :data:`SGD_COLUMNS` (e.g.
     ``../shared/data/anchors/sgd_bagher2012_merl.csv``, Bagher et al. 2012 via dj_brdf) as
     ``{material: SGD}``, in file order (errors as :func:`read_abc`).
+
+    Parameters
+    ----------
+    csv_path : str or os.PathLike
+        The CSV table.
+
+    Returns
+    -------
+    dict of str to SGD
+        The fits by material name.
 
     Examples
     --------

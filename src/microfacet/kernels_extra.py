@@ -119,6 +119,16 @@ _CALLS = {"measured": _measured, "leadr": _leadr, "glints": _glints}
 def group_calls(groups=GROUPS) -> list:
     """``[(group, call)]`` of :func:`precompile`; ``ValueError`` for an unknown group.
 
+    Parameters
+    ----------
+    groups : sequence of str
+        Names in :data:`GROUPS`.
+
+    Returns
+    -------
+    list of (str, callable)
+        The group and its compile call.
+
     Examples
     --------
     >>> GROUPS
@@ -143,6 +153,18 @@ def precompile(groups=GROUPS, progress=None) -> int:
     once can corrupt Numba's cache index). ``progress(group, seconds)`` is called after each.
     Returns how many groups ran; 0 without Numba (or with ``MICROFACET_NUMBA=0``). The command
     line is :func:`microfacet.precompile.main`'s.
+
+    Parameters
+    ----------
+    groups : sequence of str
+        Names in :data:`GROUPS`.
+    progress : callable, optional
+        ``progress(group, seconds)``.
+
+    Returns
+    -------
+    int
+        Groups run.
 
     Examples
     --------

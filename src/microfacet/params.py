@@ -82,7 +82,7 @@ class FresnelParams(NamedTuple):
     a conductor's ``k``), ``tx`` ``(m,)`` and ``tv`` ``(m, 3)`` float64: a tabulated term's
     ``cos theta_d`` grid and values (zeros for the analytic terms). Arrays read-only.
 
-    Parameters
+    Attributes
     ----------
     kind : int
         Which term (:data:`IDEAL` ... :data:`TABULATED`).
@@ -137,7 +137,7 @@ _NO_TABLE = (read_only(np.zeros(2)), read_only(np.zeros((2, 3))))
 class SmithParams(NamedTuple):
     """Parameters of a Smith microfacet BRDF for the compiled kernels (module docstring).
 
-    Parameters
+    Attributes
     ----------
     kind : int
         :data:`BECKMANN` or :data:`GGX`.

@@ -78,6 +78,18 @@ def precompile(dtypes=PRECOMPILE_DEFAULT, progress=None) -> int:
 
     Example: ``microfacet.precompile.precompile(dtypes=("float64",))``.
 
+    Parameters
+    ----------
+    dtypes : sequence of str
+        Arithmetic types to compile for (``"float64"``, ``"float32"``).
+    progress : callable, optional
+        ``progress(name, seconds)``.
+
+    Returns
+    -------
+    int
+        Kernels compiled or loaded.
+
     Examples
     --------
     >>> precompile(dtypes=())        # no arithmetic type: nothing to compile
@@ -100,6 +112,20 @@ def main(argv=None, prog: str = "python -m microfacet.kernels", groups=("brdf",)
     microfacet.kernels_extra --precompile [--groups LIST] [-q]`` (``prog``; ``groups``: the groups it
     accepts, all of them by default): compiles the kernels of the groups (:data:`GROUPS`) in this
     process, printing each one's time (:func:`microfacet.kernels.precompile_calls`).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments; None: ``sys.argv[1:]``.
+    prog : str
+        Program name for the usage line.
+    groups : sequence of str
+        Groups the command accepts.
+
+    Returns
+    -------
+    int
+        Exit status (0).
 
     Examples
     --------

@@ -44,6 +44,18 @@ def _gl(n: int) -> tuple[np.ndarray, np.ndarray]:
 def lobe_shape(d: SlopeDistribution) -> tuple[np.ndarray, np.ndarray]:
     """Centre and shape matrix ``[[ax^2, rho ax ay], [rho ax ay, ay^2]]`` of a slope lobe.
 
+    Parameters
+    ----------
+    d : SlopeDistribution
+        The distribution.
+
+    Returns
+    -------
+    centre : (2,) ndarray
+        Mean slope.
+    sigma : (2, 2) ndarray
+        Shape matrix.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -60,6 +72,26 @@ def lobe_shape(d: SlopeDistribution) -> tuple[np.ndarray, np.ndarray]:
 def integrate_slopes(f, centre, sigma, direction=(1.0, 0.0), p0=np.inf, n=(256, 256)):
     """``int f(x, y) dx dy`` over the half plane ``p <= p0``, ``p = e . (s - 0)`` with
     ``e = direction / |direction|``; ``f`` takes and returns arrays.
+
+    Parameters
+    ----------
+    f : callable
+        ``f(x, y)`` over slope arrays.
+    centre : (2,) array_like
+        Centre of the lobe (its mean slope).
+    sigma : (2, 2) array_like
+        Shape matrix of the lobe (:func:`lobe_shape`).
+    direction : (float, float)
+        Normal ``e`` of the half plane's edge.
+    p0 : float
+        Edge position along ``e``; ``inf``: the whole plane.
+    n : (int, int)
+        Gauss-Legendre nodes across and along ``e``.
+
+    Returns
+    -------
+    float
+        The integral.
 
     Examples
     --------
@@ -99,6 +131,22 @@ def integrate_slopes(f, centre, sigma, direction=(1.0, 0.0), p0=np.inf, n=(256, 
 def integrate_hemisphere(g, d: SlopeDistribution, k=None, n=(256, 256)):
     """``int g(h) dw_h`` over upper normals, for integrands concentrated like ``d``'s lobe
     and, if ``k`` is given, vanishing where ``<k, h> <= 0``.
+
+    Parameters
+    ----------
+    g : callable
+        ``g(h)``, ``(..., 3)`` unit normals to values.
+    d : SlopeDistribution
+        The lobe the nodes follow.
+    k : (3,) array_like, optional
+        A direction; the integral is cut at ``<k, h> = 0``.
+    n : (int, int)
+        Quadrature nodes per slope axis.
+
+    Returns
+    -------
+    float
+        The integral.
 
     Examples
     --------
@@ -140,6 +188,30 @@ def _cell_masses(pdf, wo, res):
 
 def chi2_test(brdf, wo, n=400_000, res=(32, 64), seed=0):
     """Chi-square test of ``brdf.sample`` from ``wo``: ``(p_value, statistic, dof, integral_of_pdf)``.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF whose sampler is tested.
+    wo : (3,) array_like
+        Unit view direction.
+    n : int
+        Samples.
+    res : (int, int)
+        Histogram bins in ``cos theta`` and ``phi``.
+    seed : int
+        Random seed.
+
+    Returns
+    -------
+    p_value : float
+        Chi-square p-value.
+    statistic : float
+        The statistic.
+    dof : int
+        Degrees of freedom.
+    integral_of_pdf : float
+        Integral of ``pdf`` over the sphere (1 for a sampler that never fails).
 
     Examples
     --------
@@ -184,6 +256,20 @@ def chi2_test(brdf, wo, n=400_000, res=(32, 64), seed=0):
 def albedo(brdf: MicrofacetBRDF, wo, n=(200, 200)) -> float:
     """Directional albedo ``int f_r cos theta_i dw_i = int f_r(i(h), o) cos theta_i 4 (o.h) dw_h``
     (first channel), by slope-space quadrature around the BRDF's lobe.
+
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF
+        The BRDF.
+    wo : (3,) array_like
+        Unit view direction.
+    n : (int, int)
+        Quadrature nodes per slope axis.
+
+    Returns
+    -------
+    float
+        The albedo of the first channel.
 
     Examples
     --------
@@ -245,6 +331,18 @@ def core_report(quick: bool = False, progress=None) -> list[dict]:
     """Largest errors of the core checks for Beckmann and GGX: one row per check with
     ``check, distribution, cases, worst, bound, ok`` (the bound the test suite asserts);
     ``progress`` is called after each parameter set.
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer parameter sets.
+    progress : callable, optional
+        Called after each parameter set.
+
+    Returns
+    -------
+    list of dict
+        One row per check.
 
     Examples
     --------

@@ -46,7 +46,7 @@ class RGLTables(NamedTuple):
     the flags ``isotropic``, ``reduction`` (the file's azimuthal symmetry), ``jacobian`` and
     ``clip_negative`` of :class:`RGLBRDF`. Example: ``brdf._kernel()[2].isotropic``.
 
-    Parameters
+    Attributes
     ----------
     phi_nodes, theta_nodes : ndarray
         Parameter nodes of the view.
