@@ -163,3 +163,16 @@ def test_served_page_draws_the_plane(glints_file, tmp_path):
     from microfacet.glints.figures import PlaneScene
     assert img.shape[:2] == (PlaneScene(width=96).height, 96)
     assert (img.max(-1) > 30).mean() > 0.01                          # the plane is lit
+
+
+def test_without_chromium_the_report_says_not_measured(glints_file, tmp_path, capsys, monkeypatch):
+    """Where a consumer is absent the export still writes the folder, and the report and the
+    summary line say why no figure was measured (the consumer is made absent here)."""
+    import microfacet.export.glints_export as ge
+    monkeypatch.setattr(ge, "_consumer_missing", lambda: "no system Chromium (apt-get install chromium)")
+    assert main(["export", str(glints_file), "--to", "threejs", "-o", str(tmp_path / "web")]) == 0
+    line = capsys.readouterr().out
+    e = json.loads((tmp_path / "web.export.json").read_text())["image_error"]
+    assert e["measured"] is False and e["note"] == "not measured: no system Chromium (apt-get install chromium)"
+    assert e["note"] in line and e["note"] in (tmp_path / "web.export.md").read_text()
+    assert (tmp_path / "web" / "glints-material.js").is_file()
