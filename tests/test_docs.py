@@ -340,8 +340,6 @@ PARAMETER_DOCS_PENDING = (
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
     "microfacet._buffers", "microfacet.kernels",
-    "microfacet.batch.files", "microfacet.batch.memory", "microfacet.batch.runner", "microfacet.batch.tasks",
-    "microfacet.batch.workers",
     "microfacet.fit.extract",
     "microfacet.export.leadr_threejs", "microfacet.export.threejs",
     "microfacet.glints.figures", "microfacet.glints.microsurface", "microfacet.glints.pbrdf",

@@ -28,6 +28,17 @@ class Item:
     """One input file: its path, its path relative to the batch's root (the summary's
     ``file``) and its main output.
 
+    Parameters
+    ----------
+    source : Path
+        The input file.
+    rel : str
+        ``source``'s path relative to the batch's root (the summary's ``file`` column).
+    out : Path
+        The task's main output for ``source``.
+    problem : str, optional
+        Why the file cannot be processed; ``""`` (default) when it can.
+
     Examples
     --------
     >>> from pathlib import Path
@@ -102,6 +113,23 @@ def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir:
     :class:`MicrofacetError` when there is no input, an input is missing, or an output
     would overwrite an input.
 
+    Parameters
+    ----------
+    task : Task
+        The batch's task (:func:`microfacet.batch.tasks.get_task`): which files it accepts
+        and the name of its outputs.
+    inputs : str, path-like or sequence of them
+        A folder, or a list of files.
+    out_dir : str or path-like
+        Folder of the outputs; the inputs' relative paths are kept under it.
+    recursive : bool, optional
+        Also take the files of the sub-folders of a folder ``inputs`` (default ``False``).
+
+    Returns
+    -------
+    list of Item
+        One per input file, in order.
+
     Examples
     --------
     >>> import os
@@ -161,6 +189,18 @@ def plan(task, inputs: str | os.PathLike | Sequence[str | os.PathLike], out_dir:
 def up_to_date(task, item: Item) -> bool:
     """Whether every output of ``item`` exists and is not older than its input.
 
+    Parameters
+    ----------
+    task : Task
+        The batch's task, which names the outputs of ``item``.
+    item : Item
+        One file of the batch.
+
+    Returns
+    -------
+    bool
+        ``True`` when every output exists and none is older than the input.
+
     Examples
     --------
     >>> from pathlib import Path
@@ -183,6 +223,21 @@ def remove_partials(task, items: Iterable[Item], other_hosts: bool = False) -> i
     writer left beside the outputs of ``items`` (:func:`microfacet.io.atomic.remove_stale`:
     those of dead processes; a live writer's are kept; with ``other_hosts``, other machines'
     too); returns how many.
+
+    Parameters
+    ----------
+    task : Task
+        The batch's task, which names each item's outputs.
+    items : iterable of Item
+        The batch's files (:func:`plan`); those with a ``problem`` are skipped.
+    other_hosts : bool, optional
+        Also remove the temporary files written by other machines (default ``False``: only
+        those of dead processes of this machine).
+
+    Returns
+    -------
+    int
+        The number of temporary files removed.
 
     Examples
     --------

@@ -21,6 +21,11 @@ def reset_peak() -> bool:
     """Reset this process's peak resident set size to its current one; ``False`` where
     the system cannot (then :func:`peak_bytes` is the lifetime peak).
 
+    Returns
+    -------
+    bool
+        ``True`` when the peak was reset.
+
     Examples
     --------
     >>> reset_peak() in (True, False)
@@ -37,6 +42,11 @@ def reset_peak() -> bool:
 def peak_bytes() -> int:
     """This process's peak resident set size in bytes since :func:`reset_peak` (``VmHWM``),
     else since it started (``ru_maxrss``: kB on Linux, bytes on macOS).
+
+    Returns
+    -------
+    int
+        Peak resident set size in bytes.
 
     Examples
     --------
@@ -58,6 +68,11 @@ def available_bytes() -> int:
     """Memory available to new work: ``MemAvailable`` of ``/proc/meminfo``, else the free
     physical pages (``os.sysconf``).
 
+    Returns
+    -------
+    int
+        Available memory in bytes.
+
     Examples
     --------
     >>> available_bytes() > 0
@@ -75,6 +90,11 @@ def available_bytes() -> int:
 
 def cpu_count() -> int:
     """CPUs this process may run on.
+
+    Returns
+    -------
+    int
+        The number of CPUs (at least 1).
 
     Examples
     --------

@@ -73,6 +73,21 @@ def execute(task: Task, item: Item, other_hosts: bool = False) -> dict:
     messages, e.g. repaired normal-map texels, joined by `` / ``) and figures. A failed
     file leaves none of its outputs.
 
+    Parameters
+    ----------
+    task : Task
+        The task, with its options.
+    item : Item
+        The file to process (:func:`microfacet.batch.files.plan`).
+    other_hosts : bool, optional
+        Also remove the temporaries that other machines left (default ``False``).
+
+    Returns
+    -------
+    dict
+        The summary row: ``status``, ``seconds``, ``cpu_seconds``, ``peak_mb``,
+        ``warnings`` and the task's figures.
+
     Examples
     --------
     >>> import numpy as np
@@ -198,6 +213,18 @@ def connect_scheduler(address: str, timeout: float = CONNECT_TIMEOUT):
     client), an unknown host, a refused connection, no TCP connection, a listener that never
     answers, a client that does not start.
 
+    Parameters
+    ----------
+    address : str
+        The scheduler's address: ``tcp://host:port``, ``tls://host:port`` or ``host:port``.
+    timeout : float, optional
+        Seconds allowed to connect (default 10).
+
+    Returns
+    -------
+    distributed.Client
+        A client connected to the scheduler.
+
     Examples
     --------
     >>> client = connect_scheduler("tcp://127.0.0.1:8786", timeout=10)  # needs a Dask scheduler  # doctest: +SKIP
@@ -275,6 +302,16 @@ def summary_columns(task: Task) -> tuple[str, ...]:
     """Columns of a batch summary: ``file``, ``status``, ``seconds``, ``cpu_seconds``,
     ``peak_mb``, the task's figures and ``warnings``.
 
+    Parameters
+    ----------
+    task : Task
+        The batch's task.
+
+    Returns
+    -------
+    tuple of str
+        The column names in order.
+
     Examples
     --------
     >>> from microfacet.batch import get_task
@@ -286,6 +323,18 @@ def summary_columns(task: Task) -> tuple[str, ...]:
 
 def format_summary_csv(task: Task, rows: Sequence[dict]) -> str:
     """The rows as CSV (header :func:`summary_columns`, full precision).
+
+    Parameters
+    ----------
+    task : Task
+        The batch's task, which names the figure columns.
+    rows : sequence of dict
+        The summary rows (:func:`run`).
+
+    Returns
+    -------
+    str
+        The CSV text, header first.
 
     Examples
     --------
@@ -308,6 +357,18 @@ def _cell(value) -> str:
 
 def format_summary_markdown(task: Task, rows: Sequence[dict]) -> str:
     """The rows as a Markdown table and a count of each status.
+
+    Parameters
+    ----------
+    task : Task
+        The batch's task, which names the figure columns.
+    rows : sequence of dict
+        The summary rows (:func:`run`).
+
+    Returns
+    -------
+    str
+        The Markdown table followed by the status counts.
 
     Examples
     --------
@@ -362,6 +423,13 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
 
     Parameters
     ----------
+    task : str or Task
+        ``"bake"``, ``"glints"``, ``"fit"`` (:data:`microfacet.batch.tasks.TASKS`) or a
+        :class:`Task`.
+    inputs : str, path-like or sequence of them
+        A folder of input files, or a list of files (their root: their common folder).
+    out_dir : str or path-like
+        Folder of the outputs and of ``summary.csv``/``summary.md``; created if absent.
     jobs : int, optional
         Local worker processes; default: as many as fit in the available memory at the
         task's estimated peak (:func:`microfacet.batch.memory.default_jobs`), at most the
@@ -379,6 +447,9 @@ def run(task: str | Task, inputs: str | os.PathLike | Sequence[str | os.PathLike
     wait : bool
         When another batch writes into ``out_dir``: wait for it (default; a
         ``RuntimeWarning`` says so), else raise :class:`microfacet.io.atomic.FolderBusy`.
+    **options
+        Keyword arguments of the task's function (e.g. ``scale`` of ``bake``), given to
+        every file.
 
     Returns
     -------

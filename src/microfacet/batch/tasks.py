@@ -49,6 +49,17 @@ def image_pixels(path: str | os.PathLike) -> int:
     """Pixels of a PNG (its IHDR chunk) or EXR (its header), without decoding the image;
     for another or an unreadable file, its size in bytes (an upper bound for a PNG).
 
+    Parameters
+    ----------
+    path : str or path-like
+        An image file.
+
+    Returns
+    -------
+    int
+        Width times height for a PNG or EXR; else the file's size in bytes (0 when it
+        cannot be read).
+
     Examples
     --------
     >>> import numpy as np
@@ -80,6 +91,23 @@ class Task:
     the figures named by ``columns``. ``inputs`` are the input suffixes it takes from a
     folder (``()``: every file). ``peak(source)`` estimates its peak memory in bytes.
 
+    Parameters
+    ----------
+    name : str
+        The task's name (``bake``, ``glints``, ``fit``).
+    function : callable
+        ``function(source, out, **options) -> dict`` processing one file.
+    suffixes : tuple of str
+        Suffix of the main output, then of the side outputs.
+    inputs : tuple of str
+        Lower-case input suffixes taken from a folder; ``()``: every file.
+    columns : tuple of str
+        Names of the figures ``function`` returns (summary columns).
+    peak : callable
+        ``peak(source) -> float``: estimated peak memory in bytes for one file.
+    options : tuple of (str, object) pairs, optional
+        Keyword arguments given to ``function``, sorted by name (default none).
+
     Examples
     --------
     >>> task = get_task("bake", scale=0.02)
@@ -97,7 +125,18 @@ class Task:
     options: tuple[tuple[str, object], ...] = ()
 
     def with_options(self, **options) -> "Task":
-        """This task with ``options`` (keyword arguments of its function) set."""
+        """This task with ``options`` (keyword arguments of its function) set.
+
+        Parameters
+        ----------
+        **options
+            Keyword arguments of the task's function; they override those already set.
+
+        Returns
+        -------
+        Task
+            A new task (this one is unchanged).
+        """
         known = [p for p in inspect.signature(self.function).parameters][2:]
         unknown = sorted(set(options) - set(known))
         if unknown:
@@ -105,15 +144,43 @@ class Task:
         return dataclasses.replace(self, options=tuple(sorted({**dict(self.options), **options}.items())))
 
     def option_names(self) -> list[str]:
-        """Keyword arguments of the task's function."""
+        """Keyword arguments of the task's function.
+
+        Returns
+        -------
+        list of str
+            The names of the function's parameters after ``source`` and ``out``.
+        """
         return list(inspect.signature(self.function).parameters)[2:]
 
     def accepts(self, path: Path) -> bool:
-        """Whether a folder's file ``path`` is an input of this task."""
+        """Whether a folder's file ``path`` is an input of this task.
+
+        Parameters
+        ----------
+        path : Path
+            A file found in an input folder.
+
+        Returns
+        -------
+        bool
+            ``True`` when its suffix is one of :attr:`inputs` (or :attr:`inputs` is empty).
+        """
         return not self.inputs or path.suffix.lower() in self.inputs
 
     def outputs(self, out: Path) -> list[Path]:
-        """The files written for the main output ``out``."""
+        """The files written for the main output ``out``.
+
+        Parameters
+        ----------
+        out : Path
+            The main output (suffix ``suffixes[0]``).
+
+        Returns
+        -------
+        list of Path
+            ``out`` followed by its side outputs (``out.with_suffix(s)``).
+        """
         return [out, *(out.with_suffix(s) for s in self.suffixes[1:])]
 
     def __call__(self, source: Path, out: Path) -> dict:
@@ -139,6 +206,23 @@ def slope_scale_warning(source, top, scale: float, base=None) -> str | None:
     the base's variances (thesis Eq. 3.5-3.9); above :data:`PLAUSIBLE_ALPHA` the message gives
     the scale that makes it :data:`SUGGESTED_ALPHA` (slopes scale linearly with ``scale``),
     to one significant digit.
+
+    Parameters
+    ----------
+    source : str or Path
+        The height map, named in the message.
+    top : array-like, shape (5,)
+        Moments ``E1..E5`` of the pyramid's top level.
+    scale : float
+        The height scale the map was baked at.
+    base : optional
+        The base roughness merged into the moments (as given to
+        :func:`microfacet.leadr.base_moments`); ``None``: none.
+
+    Returns
+    -------
+    str or None
+        The warning message, or ``None`` when the roughness is plausible.
 
     References
     ----------
@@ -395,6 +479,18 @@ TASKS = {
 
 def get_task(task: "str | Task", **options) -> Task:
     """The task named ``task`` (``bake``, ``glints``, ``fit``) or ``task`` itself, with ``options``.
+
+    Parameters
+    ----------
+    task : str or Task
+        A name of :data:`TASKS` or a task.
+    **options
+        Keyword arguments of the task's function to set.
+
+    Returns
+    -------
+    Task
+        The task with ``options``.
 
     Examples
     --------

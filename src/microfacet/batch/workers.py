@@ -25,6 +25,16 @@ POLL_SECONDS = 0.5
 def process_ended(pid: int) -> bool:
     """Whether process ``pid`` has ended (gone, or a zombie not yet reaped).
 
+    Parameters
+    ----------
+    pid : int
+        Process id.
+
+    Returns
+    -------
+    bool
+        ``True`` when the process is gone or a zombie.
+
     Examples
     --------
     >>> import os, subprocess, sys
@@ -69,6 +79,13 @@ def exit_with(pid: int) -> None:
     waits on a ``pidfd`` of ``pid`` (Linux >= 5.3), else polls every :data:`POLL_SECONDS`.
     Call it in a worker's initializer with the main process's pid.
 
+    Parameters
+    ----------
+    pid : int
+        Process id to watch (usually the main process's).
+
+    Examples
+    --------
     >>> exit_with(os.getppid())             # in a worker started by a plain fork or spawn
     """
     if pid == os.getpid():
