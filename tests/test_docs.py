@@ -329,13 +329,6 @@ def test_author_year_citations_are_in_the_references():
 _SECTION = re.compile(r"^([A-Z][A-Za-z ]*)\n-{3,}[ \t]*$", re.M)
 #: the methods by which a Mitsuba 3 BSDF plugin implements Mitsuba's interface
 MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", "parameters_changed", "to_string"})
-#: modules left out of the Parameters/Returns check FOR NOW: files other engineers were editing
-#: when the check was written (the lead empties this tuple once they are committed)
-PARAMETER_DOCS_PENDING = (
-    "microfacet.fit.albedo", "microfacet.fit.outputs", "microfacet.fit.perceptual", "microfacet.fit.fitted",
-    "microfacet.fit.spec", "microfacet.fit.analytic",
-    "microfacet.export", "microfacet.export.mtlx_render", "microfacet.export.glints_threejs",
-)
 #: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
@@ -452,7 +445,7 @@ def _is_mitsuba_plugin(cls) -> bool:
     return any(b.__module__.startswith("mitsuba") and b.__name__ == "BSDF" for b in cls.__mro__)
 
 
-def parameter_doc_problems(modules, pending=PARAMETER_DOCS_PENDING + PARAMETER_DOCS_TODO) -> list[str]:
+def parameter_doc_problems(modules, pending=PARAMETER_DOCS_TODO) -> list[str]:
     """One line per public function, class or method of ``modules`` whose docstring lacks a
     numpydoc ``Parameters`` entry for one of its parameters, or a ``Returns``/``Yields``
     section where its source returns a value. Definitions of the modules of ``pending`` are

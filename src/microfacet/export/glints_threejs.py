@@ -487,7 +487,30 @@ class GlintsRenderer(ThreeRenderer):
         ``f0``: Schlick F0 (None: ideal mirror facets, the library's default); ``exact``, ``g2``
         as :class:`~microfacet.glints.PatchBRDF`; ``pixel_sigma`` default
         :data:`~microfacet.glints.figures.PIXEL_SIGMA`; ``max_window``: lobes per axis summed at
-        one level (wider footprints: coarser lobe levels)."""
+        one level (wider footprints: coarser lobe levels).
+
+        Parameters
+        ----------
+        ms : microfacet.glints.Microsurface
+            The glint microsurface (its lobe pyramid is written for the page).
+        scene : microfacet.glints.figures.PlaneScene
+            The plane, camera and point light (:func:`~microfacet.glints.figures.render_pbrdf`'s).
+        f0 : float or (3,) array_like, optional
+            Schlick ``F0`` (None: ideal mirror facets).
+        exact : bool
+            Exact lobe evaluation, as :class:`~microfacet.glints.PatchBRDF`.
+        g2 : {"correlated", "separable"}
+            Masking-shadowing form, as :class:`~microfacet.glints.PatchBRDF`.
+        pixel_sigma : float, optional
+            Pixel footprint's standard deviation (default :data:`~microfacet.glints.figures.PIXEL_SIGMA`).
+        max_window : int
+            Lobes per axis summed at one level (wider footprints use coarser levels).
+
+        Returns
+        -------
+        (height, width, 3) ndarray
+            Linear radiance read back from the render target.
+        """
         from ..glints.figures import PIXEL_SIGMA
         if g2 not in ("correlated", "separable"):
             raise ValueError(f"g2 must be 'correlated' or 'separable', got {g2!r}")

@@ -112,6 +112,10 @@ def xvfb_available() -> bool:
     """Whether :func:`render_mtlx` can have an X display: ``DISPLAY`` is set or ``Xvfb`` is on
     the ``PATH``.
 
+    Returns
+    -------
+    bool
+
     Examples
     --------
     >>> isinstance(xvfb_available(), bool)
@@ -193,6 +197,11 @@ def xvfb_display(timeout: float = 10.0):
     ----------
     timeout : float
         Seconds to wait for Xvfb to come up.
+
+    Yields
+    ------
+    str
+        The display (``":N"``).
 
     Raises
     ------
@@ -496,6 +505,11 @@ class MaterialXLayer:
     fit of the Schlick albedo, the rest of the difference). Only ``eval_cos`` and ``eval``:
     a reference for renders, not a sampler.
 
+    Parameters
+    ----------
+    layered : microfacet.layered.LayeredBRDF
+        The coat over its base, as the library models it.
+
     Examples
     --------
     >>> import numpy as np
@@ -514,13 +528,39 @@ class MaterialXLayer:
         self.layered = layered
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_c cos theta_i + (1 - E_c(theta_o)) f_b cos theta_i``."""
+        """``f_c cos theta_i + (1 - E_c(theta_o)) f_b cos theta_i``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : None
+            Not used (the protocol's signature); a new array is returned.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            :meth:`eval` times ``cos theta_i``.
+        """
         L = self.layered
         wo = np.asarray(wo, dtype=np.float64)
         return L.coat.eval_cos(wi, wo) + L.transmission(wo[..., 2]) * L.base.eval_cos(wi, wo)
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``f_c + (1 - E_c(theta_o)) f_b``."""
+        """``f_c + (1 - E_c(theta_o)) f_b``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : None
+            Not used (the protocol's signature); a new array is returned.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            ``f_c + (1 - E_c(theta_o)) f_b``.
+        """
         L = self.layered
         wo = np.asarray(wo, dtype=np.float64)
         return L.coat.eval(wi, wo) + L.transmission(wo[..., 2]) * L.base.eval(wi, wo)

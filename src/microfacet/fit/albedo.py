@@ -88,6 +88,13 @@ class AlbedoTarget(NamedTuple):
     """The data's side of :func:`match_albedo`: its albedo at :data:`VIEWS_DEG` and its log
     error's pairs (made by :func:`albedo_target`).
 
+    Attributes
+    ----------
+    ratios : microfacet.metrics.AlbedoRatios
+        The data's albedo at :data:`VIEWS_DEG`.
+    log : microfacet.metrics.LogError
+        The data's side of the log error.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -122,6 +129,17 @@ def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
     :data:`VIEWS_DEG` on a :data:`QUADRATURE` grid, light directions as the metrics compare
     them (:class:`~microfacet.metrics.AlbedoRatios`), and its log error ``log`` (default
     :class:`~microfacet.metrics.LogError` on :data:`LOG_PAIRS` pairs).
+
+    Parameters
+    ----------
+    reference : BRDF
+        The data.
+    log : microfacet.metrics.LogError, optional
+        Its log error, if already made (e.g. the fit's judge).
+
+    Returns
+    -------
+    AlbedoTarget
 
     Examples
     --------
@@ -215,6 +233,18 @@ def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
     data's :func:`albedo_target` and the fit ``brdf``; ones where it has no microfacet lobe.
     Per channel, the least of the module's quadratic among the shapes whose tables do not
     ring (free, one peak, constant: module docstring).
+
+    Parameters
+    ----------
+    target : AlbedoTarget
+        The data's side (:func:`albedo_target`).
+    brdf : MicrofacetBRDF or SumBRDF
+        The fit.
+
+    Returns
+    -------
+    (K, 3) ndarray
+        ``s`` per node of :data:`NODES_DEG` and RGB channel.
 
     Examples
     --------

@@ -113,6 +113,13 @@ class SumBRDF(BRDF):
     the weight is the exact ``eval_cos / pdf`` of the sum (multi-sample MIS, balance
     heuristic). ``weights`` default to equal; they change the variance, never the mean.
 
+    Parameters
+    ----------
+    *brdfs : BRDF
+        The terms (any objects of the BRDF protocol).
+    weights : sequence of float, optional
+        Probabilities of sampling each term (normalized; default equal).
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -139,21 +146,79 @@ class SumBRDF(BRDF):
         return "SumBRDF(" + ", ".join(map(repr, self.brdfs)) + f", weights={self.weights.round(4).tolist()})"
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``sum_j f_j cos theta_i``."""
+        """``sum_j f_j cos theta_i``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Output array.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            The sum of the terms' ``f_r cos theta_i``.
+        """
         return into(out, sum(b.eval_cos(wi, wo) for b in self.brdfs), (wi, wo))
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``sum_j f_j``."""
+        """``sum_j f_j``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Output array.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            The sum of the terms' ``f_r``.
+        """
         return into(out, sum(b.eval(wi, wo) for b in self.brdfs), (wi, wo))
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """Mixture density ``sum_j w_j pdf_j``."""
+        """Mixture density ``sum_j w_j pdf_j``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Output array.
+
+        Returns
+        -------
+        (...) ndarray
+            The mixture density ``sum_j w_j pdf_j``.
+        """
         return into(out, sum(w * b.pdf(wi, wo) for w, b in zip(self.weights, self.brdfs, strict=True) if w > 0),
                      (wi, wo))
 
     def sample(self, u, wo, out=None):
         """Choose lobe ``j`` with probability ``w_j`` by ``u[..., 0]``, sample it with the
-        rescaled uniform; return ``(wi, eval_cos / pdf, pdf)`` of the mixture."""
+        rescaled uniform; return ``(wi, eval_cos / pdf, pdf)`` of the mixture.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]`` (the first picks the term, then is rescaled).
+        wo : (..., 3) array_like
+            Unit view directions in the local frame.
+        out : tuple of ndarray, optional
+            Output arrays ``(wi, weight, pdf)``.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf`` of the sum.
+        pdf : (...) ndarray
+            The mixture density.
+        """
         wo = np.asarray(wo, dtype=np.float64)
         u = np.asarray(u, dtype=np.float64)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])

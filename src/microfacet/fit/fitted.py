@@ -56,6 +56,25 @@ class FittedBRDF(MicrofacetBRDF):
     proportional to their albedo estimates (``luminance(F(1))`` and ``luminance(k_d)``)
     and ``pdf`` is the mixture's, so that ``weight = eval_cos / pdf`` exactly.
 
+    Parameters
+    ----------
+    distribution : TabulatedDistribution
+        The fitted slope distribution (Ch. 4).
+    fresnel : microfacet.fresnel.Fresnel
+        The fitted Fresnel term (a table in ``cos theta_d``, Eq. 4.11).
+    gaf : {"smith", "vgroove", "normal_map"}
+        Geometric attenuation model (Table 2.IV).
+    shadowing : bool
+        Include shadowing (``G2``) or masking only.
+    f0 : float
+        Perron eigenvalue of the fit (luminance of ``F(0)``, Eq. 4.9); NaN if unknown.
+    iterations : int
+        Power iterations the fit used.
+    backscatter_gaf : {None, "height_correlated", "masking"}
+        Smith backscattering model the NDF was extracted with (Eq. 4.3).
+    diffuse : float or (3,) array_like
+        RGB reflectance ``k_d`` of the Lambertian base (0: none).
+
     References
     ----------
     Dupuy 2015, thesis, Ch. 4, Eq. 2.1, 4.3, 4.9; Dupuy et al. 2015.
@@ -97,18 +116,50 @@ class FittedBRDF(MicrofacetBRDF):
 
     # ------------------------------------------------------------ the protocol
     def specular(self) -> MicrofacetBRDF:
-        """The microfacet lobe alone (Eq. 2.1), without the diffuse base."""
+        """The microfacet lobe alone (Eq. 2.1), without the diffuse base.
+
+        Returns
+        -------
+        MicrofacetBRDF
+            The lobe with this fit's distribution, Fresnel term, GAF and shadowing.
+        """
         return MicrofacetBRDF(self.distribution, fresnel=self.fresnel, gaf=self.gaf_model,
                               shadowing=self.shadowing)
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r cos theta_i``: the microfacet lobe (Listing 2.2) plus ``k_d cos theta_i / pi``."""
+        """``f_r cos theta_i``: the microfacet lobe (Listing 2.2) plus ``k_d cos theta_i / pi``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Output array.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            ``f_r cos theta_i`` per RGB channel.
+        """
         if not self.has_diffuse:
             return super().eval_cos(wi, wo, out)
         return into(out, super().eval_cos(wi, wo) + self.base.eval_cos(wi, wo), (wi, wo))
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``f_r = F D G / (4 cos theta_i cos theta_o) + k_d / pi`` (Eq. 2.1, 1.9)."""
+        """``f_r = F D G / (4 cos theta_i cos theta_o) + k_d / pi`` (Eq. 2.1, 1.9).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame (``z`` the normal).
+        out : ndarray, optional
+            Output array (:func:`microfacet.protocol.output`).
+
+        Returns
+        -------
+        (..., 3) ndarray
+            ``f_r`` per RGB channel (sr^-1); 0 below the horizon.
+        """
         if not self.has_diffuse:
             return super().eval(wi, wo, out)
         return into(out, super().eval(wi, wo) + self.base.eval(wi, wo), (wi, wo))
@@ -122,7 +173,20 @@ class FittedBRDF(MicrofacetBRDF):
         return a_s / (a_s + a_d) if a_s + a_d > 0 else 1.0
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """Density of :meth:`sample`: ``p_s pdf_lobe + (1 - p_s) cos theta_i / pi``."""
+        """Density of :meth:`sample`: ``p_s pdf_lobe + (1 - p_s) cos theta_i / pi``.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Output array.
+
+        Returns
+        -------
+        (...) ndarray
+            Solid-angle density of ``wi`` given ``wo`` (sr^-1).
+        """
         if not self.has_diffuse:
             return super().pdf(wi, wo, out)
         p = self.lobe_probability
@@ -131,7 +195,26 @@ class FittedBRDF(MicrofacetBRDF):
     def sample(self, u, wo, out=None):
         """Sample the lobe (:meth:`MicrofacetBRDF.sample`) or the base (cosine warp),
         chosen by ``u[..., 0]`` against :attr:`lobe_probability` (rescaled to reuse it);
-        returns ``(wi, eval_cos / pdf, pdf)`` of the mixture."""
+        returns ``(wi, eval_cos / pdf, pdf)`` of the mixture.
+
+        Parameters
+        ----------
+        u : (..., 2) array_like
+            Uniform numbers in ``[0, 1]``.
+        wo : (..., 3) array_like
+            Unit view directions in the local frame.
+        out : tuple of ndarray, optional
+            Output arrays ``(wi, weight, pdf)``.
+
+        Returns
+        -------
+        wi : (..., 3) ndarray
+            Sampled light directions.
+        weight : (..., 3) ndarray
+            ``eval_cos / pdf`` per RGB channel (0 for a direction below the horizon).
+        pdf : (...) ndarray
+            Their density (:meth:`pdf`).
+        """
         if not self.has_diffuse:
             return super().sample(u, wo, out)
         u = np.asarray(u, dtype=np.float64)
@@ -155,7 +238,18 @@ class FittedBRDF(MicrofacetBRDF):
         """The model of the fit, ``F(1) D(k) G(k, k) / (4 cos^2 theta_k) + k_d / pi`` with
         the monostatic ``G(k, k)``: Smith ``1 / (1 + 2 Lambda(k))`` (height-correlated) or
         ``G1(k)`` (Eq. 4.2-4.3, ``backscatter_gaf="masking"``), ``min(1, 2 cos^2)`` for
-        V-grooves and ``cos^2`` for normal maps; RGB ``(..., 3)``."""
+        V-grooves and ``cos^2`` for normal maps; RGB ``(..., 3)``.
+
+        Parameters
+        ----------
+        k : (..., 3) array_like
+            Unit directions (light = view) in the local frame.
+
+        Returns
+        -------
+        (..., 3) ndarray
+            The model's backscattering ``f_r(k, k)`` per RGB channel.
+        """
         k = np.asarray(k, dtype=np.float64)
         z = k[..., 2]
         zs = np.where(z > 0, z, 1.0)
@@ -178,7 +272,15 @@ class FittedBRDF(MicrofacetBRDF):
         ``E[x~], E[y~], E[x~^2], E[y~^2], E[x~y~]`` and, about the mean, ``E|x~|, E|y~|``,
         ``beta1 = E[x~y~/(x~^2+y~^2)]``, ``beta2 = E[y~^2/(x~^2+y~^2)]`` (App. C). Kept for
         the distribution and roughness they were computed for (the moment conversions and
-        the least-squares fits started from them ask ~4 times)."""
+        the least-squares fits started from them ask ~4 times).
+
+        Returns
+        -------
+        dict
+            The moments ``e1 .. e5`` (mean, second moments), ``abs_x``, ``abs_y`` (first absolute
+            moments about the mean), the angular moments ``beta1``, ``beta2`` and the fitted
+            ``alpha_x``, ``alpha_y``, ``rho``.
+        """
         d = self.distribution
         key = extract.distribution_key(d)
         kept = getattr(self, "_kept_moments", None)
@@ -246,7 +348,24 @@ class FittedBRDF(MicrofacetBRDF):
         ``method="least_squares"``: the least-squares fit
         of this BRDF (:func:`~microfacet.fit.analytic.fit_analytic`, ``options`` passed
         on; a :class:`~microfacet.fit.analytic.SumBRDF` with a Lambertian base when the
-        fit has one)."""
+        fit has one).
+
+        Parameters
+        ----------
+        method : {"moments", "least_squares"}
+            Conversion by slope moments (App. C) or by least squares on the data.
+        reference : BRDF, optional
+            The data the Fresnel table is solved against (default: the fit's own lobe).
+        resolve_fresnel : bool
+            Solve the Fresnel table for the converted NDF (else keep the fit's).
+        **options
+            Passed to :func:`~microfacet.fit.analytic.fit_analytic` (``method="least_squares"``).
+
+        Returns
+        -------
+        MicrofacetBRDF or SumBRDF
+            The Beckmann BRDF (with the fit's Lambertian base, if any, as a SumBRDF).
+        """
         if _conversion(method, reference, resolve_fresnel) == "least_squares":
             return self._least_squares("beckmann", options)
         m = self.slope_moments()
@@ -264,7 +383,24 @@ class FittedBRDF(MicrofacetBRDF):
         ``(alpha_y / alpha_x) beta1 / (beta1^2 + beta2^2)`` when both hold exactly).
         Exact (up to the fit's quadrature) when the fitted BRDF is a GGX one. Fresnel
         term, ``reference``, ``resolve_fresnel`` and ``method="least_squares"``: as in
-        :meth:`to_beckmann`."""
+        :meth:`to_beckmann`.
+
+        Parameters
+        ----------
+        method : {"moments", "least_squares"}
+            Conversion by first absolute moments (App. C) or by least squares on the data.
+        reference : BRDF, optional
+            The data the Fresnel table is solved against (default: the fit's own lobe).
+        resolve_fresnel : bool
+            Solve the Fresnel table for the converted NDF (else keep the fit's).
+        **options
+            Passed to :func:`~microfacet.fit.analytic.fit_analytic` (``method="least_squares"``).
+
+        Returns
+        -------
+        MicrofacetBRDF or SumBRDF
+            The GGX BRDF (with the fit's Lambertian base, if any, as a SumBRDF).
+        """
         if _conversion(method, reference, resolve_fresnel) == "least_squares":
             return self._least_squares("ggx", options)
         m = self.slope_moments()
@@ -277,7 +413,18 @@ class FittedBRDF(MicrofacetBRDF):
     # ------------------------------------------------------------------- files
     def save(self, path: str | os.PathLike) -> Path:
         """Write the fit to ``path`` (the ``.npz`` of :meth:`to_bytes`) atomically
-        (:mod:`microfacet.io.atomic`); returns ``path``."""
+        (:mod:`microfacet.io.atomic`); returns ``path``.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The ``.npz`` file to write (replaced atomically).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         return write_bytes(path, self.to_bytes())
 
     def to_bytes(self, fits: dict | None = None, best: str | None = None) -> bytes:
@@ -292,7 +439,21 @@ class FittedBRDF(MicrofacetBRDF):
         and ``fresnel_rgb`` (a non-tabulated Fresnel term is sampled at 91 points), ``f0``,
         ``iterations``, ``alpha_x``, ``alpha_y``, ``rho``, ``mean_slope``, ``backscatter_gaf``,
         ``diffuse`` (RGB ``k_d``; both new in version 2) and, anisotropic,
-        ``projected_area`` (the Lambda table)."""
+        ``projected_area`` (the Lambda table).
+
+        Parameters
+        ----------
+        fits : dict, optional
+            Analytic fits to store beside the tabulated one, ``{name: spec}``
+            (:func:`microfacet.fit.spec.to_spec`).
+        best : str, optional
+            The name of the best fit (``"tabulated"`` or a key of ``fits``).
+
+        Returns
+        -------
+        bytes
+            The ``.npz`` file's bytes.
+        """
         d = self.distribution
         fresnel = self.fresnel
         if not isinstance(fresnel, _fresnel.Tabulated):          # e.g. a user-set analytic term
@@ -418,6 +579,8 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
     anisotropic : bool
         Fit ``D(theta, phi)`` (Algorithm 1, ``resolution x resolution_phi`` backscattering
         samples) instead of a radial ``D(theta)`` (Algorithm 3).
+    resolution_phi : int, optional
+        Azimuth nodes of an anisotropic fit (default ``resolution``).
     gaf : {"smith", "vgroove", "normal_map"}
         GAF of the fitted model: power iterations for Smith (Eq. 4.9, 4.15), closed forms
         otherwise (Eq. 4.16-4.18, their exact ``G(o, o)``).
@@ -437,6 +600,8 @@ def fit(brdf, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith
         ``diffuse_iterations`` steps, compared with ``b = 0``). Alternating NDF and base
         instead converges to a biased fixed point (part of the base stays in the NDF's
         tail).
+    diffuse_iterations : int
+        Most steps of that scalar search of ``b``.
     energy_constraint : bool
         Bound the fit's directional albedo by the data's plus :data:`ENERGY_MARGIN` at
         the views of :func:`_energy_views` (0-80 degrees; :func:`extract.albedo_rows`,
@@ -616,6 +781,19 @@ def load(path: str | os.PathLike, model: str | None = None):
     has when ``model`` is not one of them, and saying what it is when it is another
     microfacet ``.npz`` (a glint microsurface of ``microfacet glints``).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A fit file written by :meth:`FittedBRDF.save` or ``microfacet fit``.
+    model : str, optional
+        ``None`` or ``"tabulated"`` for the tabulated fit, ``"best"`` for the file's best, or
+        the name of an analytic fit (:func:`fit_names`).
+
+    Returns
+    -------
+    FittedBRDF or BRDF
+        The tabulated fit, or the analytic BRDF tree of ``model``.
+
     Example
     -------
     >>> best = load("nickel.npz", model="best")          # doctest: +SKIP
@@ -657,6 +835,18 @@ def _fits_of(data: dict) -> tuple[dict, str]:
 def fit_names(path: str | os.PathLike) -> tuple[list[str], str]:
     """``(names, best)``: the fits a fit file keeps (``"tabulated"`` first) and the name of
     the best one (``"tabulated"`` in files that keep only it).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A fit file (``.npz``).
+
+    Returns
+    -------
+    names : list of str
+        The fits it keeps, ``"tabulated"`` first.
+    best : str
+        The name of its best fit.
 
     Examples
     --------

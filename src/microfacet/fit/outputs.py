@@ -71,6 +71,16 @@ SUMMARY_COLUMNS = ("material", "file", "format", "status", "seconds", "best", "l
 def distribution_params(brdf) -> dict[str, float]:
     """``{"alpha_x", "alpha_y", "rho"}`` of a :class:`microfacet.MicrofacetBRDF`.
 
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF
+        A lobe over an analytic distribution.
+
+    Returns
+    -------
+    dict
+        ``{"alpha_x", "alpha_y", "rho"}`` as floats (``rho`` 0 below 1e-12).
+
     Examples
     --------
     >>> import microfacet as mf
@@ -85,6 +95,16 @@ def distribution_params(brdf) -> dict[str, float]:
 
 def fresnel_json(fresnel) -> dict:
     """A JSON-able description of a Fresnel term: its type and parameters or samples.
+
+    Parameters
+    ----------
+    fresnel : microfacet.fresnel.Fresnel
+        Any Fresnel term.
+
+    Returns
+    -------
+    dict
+        ``{"type", ...}``: its parameters, or ``cos_theta_d`` and ``rgb`` samples for a table.
 
     Examples
     --------
@@ -122,6 +142,16 @@ def analytic_json(brdf) -> dict:
     of an analytic fit (a MicrofacetBRDF, or a SumBRDF of one, an optional coat lobe and an
     optional Lambertian base); ``"coat"``: ``{"alpha", "fresnel"}`` or null.
 
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF or SumBRDF
+        An analytic fit: a lobe, optionally with a coat lobe and a Lambertian base.
+
+    Returns
+    -------
+    dict
+        The JSON-able entry.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -140,6 +170,16 @@ def analytic_json(brdf) -> dict:
 
 def analytic_from_json(entry: dict):
     """The BRDF of an :func:`analytic_json` entry (inverse up to the rounding of tables).
+
+    Parameters
+    ----------
+    entry : dict
+        An :func:`analytic_json` entry.
+
+    Returns
+    -------
+    MicrofacetBRDF or SumBRDF
+        The lobe, with its coat lobe and Lambertian base when the entry has them.
 
     Examples
     --------
@@ -225,6 +265,20 @@ def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -
     """The objective of :func:`microfacet.fit.fit_analytic` from the metrics:
     ``e_grid^2 + e_uniform^2 + albedo_weight^2 mean((ratio - 1)^2)`` (views x RGB, NaN ratios
     left out); :func:`fit_material` keeps the least-squares fit of least value.
+
+    Parameters
+    ----------
+    grid, uniform : float
+        Relative RMS errors on the measurement grid and on uniform pairs.
+    albedo_ratio : (V, 3) array_like
+        Albedo ratios fit/data per view and RGB channel.
+    albedo_weight : float
+        Weight of the albedo term.
+
+    Returns
+    -------
+    float
+        The objective.
 
     Examples
     --------
@@ -631,6 +685,24 @@ def _worst(ratios) -> float:
 def summary_row(name: str, path, fmt: str, summary: dict | None, status: str = "ok") -> dict:
     """A row of the folder summary (:data:`SUMMARY_COLUMNS`) from a JSON summary.
 
+    Parameters
+    ----------
+    name : str
+        The material's name.
+    path : str or os.PathLike
+        Its input file.
+    fmt : str
+        The input's format.
+    summary : dict or None
+        The JSON summary of :func:`fit_material` (None when the fit failed).
+    status : str
+        ``"ok"`` or what went wrong.
+
+    Returns
+    -------
+    dict
+        The row, keys :data:`SUMMARY_COLUMNS`.
+
     Examples
     --------
     >>> row = summary_row("gold", "gold.binary", "merl", None, status="error: unreadable")
@@ -668,6 +740,16 @@ def _cell(value, digits: int = 4) -> str:
 
 def format_summary_markdown(rows: Sequence[dict]) -> str:
     """The rows as a Markdown table, plus notes on the metrics.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of :func:`summary_row`.
+
+    Returns
+    -------
+    str
+        The Markdown table and its notes.
 
     Examples
     --------

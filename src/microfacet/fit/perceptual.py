@@ -108,6 +108,11 @@ def compress_slope(u: np.ndarray) -> np.ndarray:
 class Geometry:
     """Cosines of a set of pairs: ``cos th_i``, ``cos th_o``, ``cos th_h``, ``cos th_d``, each ``(n,)``.
 
+    Parameters
+    ----------
+    cos_i, cos_o, cos_h, cos_d : (n,) ndarray
+        ``cos theta_i``, ``cos theta_o``, ``cos theta_h`` and ``cos theta_d`` of the pairs.
+
     Examples
     --------
     >>> import numpy as np
@@ -122,6 +127,18 @@ class Geometry:
 
     @classmethod
     def of(cls, wi: np.ndarray, wo: np.ndarray) -> "Geometry":
+        """The cosines of the pairs ``(wi, wo)``.
+
+        Parameters
+        ----------
+        wi, wo : (n, 3) ndarray
+            Unit light and view directions.
+
+        Returns
+        -------
+        Geometry
+            ``cos theta_i``, ``cos theta_o``, ``cos theta_h``, ``cos theta_d`` of each pair.
+        """
         h = wi + wo
         h = h / np.linalg.norm(h, axis=-1, keepdims=True)
         return cls(wi[:, 2].copy(), wo[:, 2].copy(), h[:, 2].copy(), np.clip(np.sum(wi * h, -1), 0.0, 1.0))
@@ -141,6 +158,18 @@ def lobe_factor(alpha: float, g: Geometry) -> np.ndarray:
     Walter et al. 2007's ``D``, the height-correlated Smith ``G2 = 1 / (1 + Lambda_i +
     Lambda_o)``, Heitz 2014 Eq. 99): equal to ``MicrofacetBRDF(GGX(alpha)).eval`` with
     ``F = 1`` to rounding (tested).
+
+    Parameters
+    ----------
+    alpha : float
+        GGX roughness.
+    g : Geometry
+        The pairs.
+
+    Returns
+    -------
+    (n,) ndarray
+        ``D G2 / (4 cos theta_i cos theta_o)`` at the pairs.
 
     References
     ----------
@@ -210,6 +239,21 @@ class Model:
     pairs ``g``; ``mix (3, K, len(y))``: the reflectance of basis ``k`` in channel ``c`` is
     ``mix[c, k] @ y``; ``brdf(q, y)`` the library BRDF; ``starts(previous)`` the scanned
     ``q``'s (``previous``: the fitted ``(q, y)`` of earlier models by name).
+
+    Parameters
+    ----------
+    name : str
+        The model's name (:data:`MODELS`).
+    q_bounds : (lo, hi) tuple of ndarray
+        Bounds of the nonlinear parameters ``q``.
+    mix : (3, K, len(y)) ndarray
+        Reflectance of basis ``k`` in channel ``c``: ``mix[c, k] @ y``.
+    basis : callable
+        ``basis(q, g) -> (c, B)``.
+    brdf : callable
+        ``brdf(q, y)``: the library BRDF.
+    starts : callable
+        ``starts(previous)``: the scanned ``q``'s.
 
     Examples
     --------
@@ -417,6 +461,27 @@ class Target:
     ``albedo_w``/``albedo_view`` the nodes' weights (times ``cos th_i``) and views
     (:data:`ENERGY_VIEWS_DEG`), ``ratio_mask`` the nodes counted in the albedo ratios,
     ``albedo_data`` the data's albedo at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`.
+
+    Parameters
+    ----------
+    geometry : Geometry
+        The fitted pairs, then the albedo nodes.
+    n_pairs : int
+        Number of fitted pairs.
+    sqrt_w : ndarray
+        Square roots of the pairs' normalized weights.
+    scale : ndarray
+        Factor of each pair's ``u = f cos theta_i`` before compression.
+    log_data : ndarray
+        ``compress(scale u_d)`` of the data.
+    f_data : ndarray
+        The data's ``f_r`` at the pairs.
+    albedo_w, albedo_view : ndarray
+        Albedo nodes' weights (times ``cos theta_i``) and views.
+    ratio_mask : ndarray
+        Nodes counted in the albedo ratios.
+    albedo_data : ndarray
+        The data's albedo at :data:`microfacet.metrics.ALBEDO_VIEWS_DEG`.
 
     Examples
     --------
@@ -700,6 +765,24 @@ def fit_model(t: Target, model: Model, previous: dict | None = None, refine: int
     with its linearized ``y`` (:meth:`_Problem.linear_start`), the ``refine`` best by
     :func:`_levenberg_marquardt`; ``x = (q, y)``.
 
+    Parameters
+    ----------
+    t : Target
+        The data's side of the objective (:func:`target`).
+    model : Model
+        The model (:data:`MODEL_SPECS`).
+    previous : dict, optional
+        Fitted ``(q, y)`` of earlier models by name (some models start from them).
+    refine : int
+        Number of best starts refined by Levenberg-Marquardt.
+
+    Returns
+    -------
+    x : ndarray
+        ``(q, y)`` concatenated.
+    cost : float
+        Its objective.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -795,6 +878,20 @@ def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None)
     ``{name: BRDF}``, each a BRDF of the library (``eval``, ``pdf``, ``sample``);
     :func:`fit_parameters` with each model's BRDF built.
 
+    Parameters
+    ----------
+    reference : BRDF
+        The material.
+    models : sequence of str
+        Names of :data:`MODELS`.
+    t : Target, optional
+        The data's side of the objective (:func:`target`).
+
+    Returns
+    -------
+    dict
+        ``{name: BRDF}``.
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -811,6 +908,16 @@ def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None)
 def select(scores: dict) -> str:
     """The name of least score (e.g. :class:`microfacet.metrics.ImageError` values);
     ties go to the earlier (simpler) model.
+
+    Parameters
+    ----------
+    scores : dict
+        ``{name: score}``, in the order of preference on ties.
+
+    Returns
+    -------
+    str
+        The name of least finite score.
 
     Examples
     --------

@@ -41,6 +41,16 @@ def _list(v) -> list | float:
 def fresnel_spec(fresnel) -> dict:
     """The spec of a Fresnel term of :mod:`microfacet.fresnel`.
 
+    Parameters
+    ----------
+    fresnel : microfacet.fresnel.Fresnel
+        A Schlick, F82-tint, conductor, dielectric, tabulated or ideal term.
+
+    Returns
+    -------
+    dict
+        Its spec (module docstring).
+
     Examples
     --------
     >>> import microfacet as mf
@@ -68,6 +78,16 @@ def fresnel_spec(fresnel) -> dict:
 def fresnel_from_spec(spec: dict):
     """The Fresnel term of a :func:`fresnel_spec`.
 
+    Parameters
+    ----------
+    spec : dict
+        A :func:`fresnel_spec`.
+
+    Returns
+    -------
+    microfacet.fresnel.Fresnel
+        The Fresnel term.
+
     Examples
     --------
     >>> fresnel_from_spec({"type": "dielectric", "eta": 1.5})
@@ -90,6 +110,16 @@ def fresnel_from_spec(spec: dict):
 
 def to_spec(brdf) -> dict:
     """The spec (module docstring) of an analytic BRDF tree.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        An analytic tree: microfacet lobes (GGX, Beckmann), Lambertian terms, sums, layers.
+
+    Returns
+    -------
+    dict
+        Its spec.
 
     Examples
     --------
@@ -126,6 +156,16 @@ def to_spec(brdf) -> dict:
 
 def from_spec(spec: dict):
     """The BRDF of a :func:`to_spec` spec; ``ValueError`` naming what is wrong.
+
+    Parameters
+    ----------
+    spec : dict
+        A :func:`to_spec` spec.
+
+    Returns
+    -------
+    BRDF
+        The BRDF tree.
 
     Examples
     --------
