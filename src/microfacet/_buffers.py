@@ -73,7 +73,20 @@ _cache = _Cache(_limit())
 def empty(shape, dtype) -> np.ndarray:
     """``np.empty(shape, dtype)``, C-contiguous and writeable, whose memory returns to the cache
     when the array and its views are freed (a plain ``np.empty`` below :data:`MIN_BYTES`, or
-    with the cache off)."""
+    with the cache off).
+
+    Parameters
+    ----------
+    shape : int or tuple of int
+        The array's shape.
+    dtype : dtype-like
+        The array's dtype.
+
+    Returns
+    -------
+    numpy.ndarray
+        An uninitialised array of ``shape`` and ``dtype``.
+    """
     dtype = np.dtype(dtype)
     count = int(np.prod(shape))
     nbytes = count * dtype.itemsize
@@ -90,6 +103,11 @@ def empty(shape, dtype) -> np.ndarray:
 
 def release() -> int:
     """Give the cached memory back to the system; returns how many bytes the cache held.
+
+    Returns
+    -------
+    int
+        Bytes the cache held before it was emptied.
 
     Examples
     --------

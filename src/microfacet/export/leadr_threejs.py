@@ -273,7 +273,29 @@ class PlaneRenderer:
         seen as ``view``: with ``levels`` (a list of per-level texture dicts, level 0 first) its
         textures replaced by them (``mips``: the whole list as the MIP chain; else level 0 without
         MIPs), without ``levels`` the glb's own (``mips``: three.js's MIPs of level 0); rendered at
-        ``supersample`` times the resolution and box-averaged."""
+        ``supersample`` times the resolution and box-averaged.
+
+        Parameters
+        ----------
+        glb : str or path-like
+            The plane's ``.glb`` file.
+        view : PlaneView
+            The scene: camera, light, plane extent and tiling, image size.
+        levels : list of dict, optional
+            Per-level texture dicts (level 0 first) replacing the glb's textures; ``None``
+            (default): the glb's own textures.
+        mips : bool, optional
+            Use ``levels`` as the whole MIP chain (default ``True``; without ``levels``: let
+            three.js make the MIPs of level 0); ``False``: level 0 without MIPs.
+        supersample : int, optional
+            Render at this many times the resolution along each axis and box-average
+            (default 1).
+
+        Returns
+        -------
+        numpy.ndarray, shape (view.height, view.width, 3)
+            Linear radiance, row 0 at the top.
+        """
         name = f"p{abs(hash(str(glb))) % 10**8}.glb"
         shutil.copyfile(glb, Path(self._dir.name) / name)
         maps = None if levels is None else {t: _rgba_b64([lv[t] for lv in (levels if mips else levels[:1])])

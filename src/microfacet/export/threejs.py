@@ -304,7 +304,25 @@ class ThreeRenderer:
     def render(self, glb, size: int = 64, light=(-0.5, 0.5, 1.0), exact_schlick: bool | None = None) -> np.ndarray:
         """``(size, size, 3)`` linear radiance of ``glb`` (row 0 at the top) under a directional
         light of irradiance 1 from ``light``; ``exact_schlick`` (None: as constructed) reloads the
-        page with or without that patch."""
+        page with or without that patch.
+
+        Parameters
+        ----------
+        glb : str or path-like
+            The ``.glb`` file to render.
+        size : int, optional
+            Image width and height in pixels (default 64).
+        light : (float, float, float), optional
+            Direction toward the light, in world coordinates.
+        exact_schlick : bool, optional
+            Render with (``True``) or without the exact-Schlick patch; ``None`` (default): as
+            the renderer was constructed.
+
+        Returns
+        -------
+        numpy.ndarray, shape (size, size, 3)
+            Linear radiance, row 0 at the top.
+        """
         if exact_schlick is not None and exact_schlick != self.exact_schlick:
             self._load(exact_schlick)
         name = f"m{abs(hash(str(glb))) % 10**8}.glb"

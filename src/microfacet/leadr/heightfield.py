@@ -34,6 +34,28 @@ def slope_spectrum(shape, alpha_x, alpha_y, rho=0.0, correlation: float = 8.0, i
     and the per-frequency slope contributions ``(dx, dy)`` (used to compute estimator
     variances). ``correlation`` is the correlation length in texels.
 
+    Parameters
+    ----------
+    shape : (int, int)
+        ``(H, W)`` of the height field in texels.
+    alpha_x, alpha_y : float
+        Beckmann roughness of the slopes along x and y (slope variances ``alpha^2 / 2``).
+    rho : float, optional
+        Correlation coefficient of the x and y slopes, in (-1, 1) (default 0).
+    correlation : float, optional
+        Correlation length of the heights in texels (default 8).
+    iterations : int, optional
+        Most fixed-point iterations fitting the spectrum's shape to the slope covariance
+        (default 50; it stops earlier at 1e-14).
+
+    Returns
+    -------
+    S : numpy.ndarray, shape (H, W)
+        Height power per FFT coefficient (``S[0, 0] = 0``: zero mean height).
+    dx, dy : numpy.ndarray, shape (H, W)
+        Complex per-frequency factors of the central-difference slope operators along x
+        and y.
+
     Examples
     --------
     >>> S, dx, dy = slope_spectrum((16, 16), 0.3, 0.3)

@@ -29,6 +29,16 @@ MAX_ANISOTROPY = 16
 def mip_sizes(height: int, width: int) -> list[tuple[int, int]]:
     """``[(H_0, W_0), (H_1, W_1), ...]`` down to ``(1, 1)``: ``n_{k+1} = max(1, n_k // 2)``.
 
+    Parameters
+    ----------
+    height, width : int
+        Size of level 0 in texels.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(H_k, W_k)`` of each level, level 0 first.
+
     Examples
     --------
     >>> mip_sizes(16, 4)
@@ -49,6 +59,20 @@ def downsample_weights(n_in: int, n_out: int) -> tuple[np.ndarray, np.ndarray]:
     texel ``[i, i + 1)`` with ``[o r, (o + 1) r)``, ``r = n_in / n_out``, divided by ``r``
     (so each row sums to 1 and each input texel's weights sum to ``1 / r``). Computed in
     exact integer arithmetic (units of ``1 / n_out`` input texels).
+
+    Parameters
+    ----------
+    n_in : int
+        Input texels along the axis.
+    n_out : int
+        Output texels along the axis.
+
+    Returns
+    -------
+    index : numpy.ndarray of int, shape (n_out, T)
+        Input texel of each tap.
+    weight : numpy.ndarray of float, shape (n_out, T)
+        Weight of each tap; each row sums to 1.
 
     Examples
     --------
@@ -150,6 +174,19 @@ def mip_pyramid(moments, out: list[np.ndarray] | None = None) -> list[np.ndarray
     With ``out`` (levels of the pyramid's sizes, e.g. :func:`microfacet.leadr.pyramid_file`'s,
     ``out[0]`` holding the moments) the levels above 0 are written into it, and it is returned.
 
+    Parameters
+    ----------
+    moments : array-like, shape (H, W, C)
+        The level-0 map (float32 or float64).
+    out : list of numpy.ndarray, optional
+        Preallocated levels of the pyramid's sizes (:func:`mip_sizes`), ``out[0]``
+        holding ``moments``; default: new arrays.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The levels ``(H_k, W_k, C)``, level 0 first, down to ``1 x 1`` (``out`` when given).
+
     Examples
     --------
     >>> import numpy as np
@@ -249,6 +286,11 @@ def lookup(pyramid, uv, footprint=0.0, *, wrap: bool = True,
         Repeat the texture (default) or clamp to its border.
     max_anisotropy : int
         Most trilinear probes along the major axis.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., C)
+        The filtered moments (float64), one per texture coordinate.
 
     Notes
     -----

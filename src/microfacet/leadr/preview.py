@@ -26,6 +26,18 @@ def shade_level(level, min_alpha: float = 0.02) -> np.ndarray:
     irradiance (``f_r cos theta_i``, module docstring). ``min_alpha`` floors the
     roughness so that single-facet texels stay visible rather than sub-pixel spikes.
 
+    Parameters
+    ----------
+    level : array-like, shape (H, W, 5)
+        One level of LEAN moments ``E1..E5``.
+    min_alpha : float, optional
+        Smallest roughness used per texel (default 0.02).
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 3)
+        Linear RGB radiance of each texel.
+
     Examples
     --------
     >>> from microfacet.leadr import bake, gaussian_heightfield
@@ -49,6 +61,22 @@ def preview_image(pyramid, max_side: int = 256, count: int = 5, gap: int = 4) ->
     """Linear RGB preview ``(H, W, 3)``: ``count`` consecutive levels starting at the first
     whose larger side is at most ``max_side``, normalised so that the brightest 0.5 % of
     the coarsest shown level is at display white.
+
+    Parameters
+    ----------
+    pyramid : list of (H_k, W_k, 5) arrays
+        A moment pyramid (:func:`microfacet.leadr.bake`), level 0 first.
+    max_side : int, optional
+        Largest side of the first level shown, in pixels (default 256).
+    count : int, optional
+        Number of consecutive levels shown side by side (default 5).
+    gap : int, optional
+        Pixels between the levels (default 4).
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 3)
+        Linear RGB image, the levels left to right.
 
     Examples
     --------
