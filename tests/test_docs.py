@@ -332,13 +332,12 @@ MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", 
 #: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
-    "microfacet._buffers", "microfacet.kernels",
+"microfacet.kernels",
     "microfacet.fit.extract",
-    "microfacet.export.leadr_threejs", "microfacet.export.threejs",
     "microfacet.glints.figures", "microfacet.glints.microsurface", "microfacet.glints.pbrdf",
     "microfacet.glsl", "microfacet.glsl.server",
-    "microfacet.leadr.downsample", "microfacet.leadr.figures", "microfacet.leadr.files", "microfacet.leadr.heightfield",
-    "microfacet.leadr.maps", "microfacet.leadr.mip", "microfacet.leadr.moments", "microfacet.leadr.preview",
+    "microfacet.leadr.downsample", "microfacet.leadr.figures", "microfacet.leadr.files",
+    "microfacet.leadr.maps", "microfacet.leadr.moments",
     "microfacet.leadr.shading",
     "microfacet.mitsuba.bsdf", "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints", "microfacet.mitsuba.leadr",
     "microfacet.mitsuba.reference", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",
