@@ -332,12 +332,11 @@ MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", 
 #: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
-"microfacet.kernels",
+    "microfacet.kernels",
     "microfacet.fit.extract",
     "microfacet.glints.figures", "microfacet.glints.microsurface", "microfacet.glints.pbrdf",
     "microfacet.glsl", "microfacet.glsl.server",
-    "microfacet.leadr.downsample", "microfacet.leadr.figures", "microfacet.leadr.files",
-    "microfacet.leadr.maps", "microfacet.leadr.moments",
+    "microfacet.leadr.downsample",
     "microfacet.leadr.shading",
     "microfacet.mitsuba.bsdf", "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints", "microfacet.mitsuba.leadr",
     "microfacet.mitsuba.reference", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",

@@ -53,6 +53,24 @@ class PatchScene:
     """Camera and lights of the patch ``[0, 1]^2 x {0}`` (local frame, z up; texture
     ``u`` along x, ``v`` down the rows, so ``y = 1 - v``).
 
+    Parameters
+    ----------
+    camera : (float, float, float), optional
+        Camera position in the patch's local frame.
+    light : (float, float, float), optional
+        Point light position in the patch's local frame.
+    intensity : float, optional
+        The point light's intensity ``I`` (irradiance ``I / r^2``).
+    fresnel : Fresnel, optional
+        The surface's Fresnel term (default: silver).
+    env_size : (int, int), optional
+        ``(height, width)`` of the procedural sky environment map.
+    grid : int, optional
+        Samples per axis of the environment-lighting grid (Sec. 3.4).
+    lod_offset : float, optional
+        Bias added to the environment's MIP level; ``None`` (default): the supplemental's
+        banding-free bias.
+
     Examples
     --------
     >>> import numpy as np
@@ -72,7 +90,22 @@ class PatchScene:
 
     def directions(self, uv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(wo, wi, E)`` at texture coordinates ``uv (..., 2)``: unit directions toward
-        the camera and the light, and the light's irradiance ``I / r^2`` at the point."""
+        the camera and the light, and the light's irradiance ``I / r^2`` at the point.
+
+        Parameters
+        ----------
+        uv : array-like, shape (..., 2)
+            Texture coordinates on the patch.
+
+        Returns
+        -------
+        wo : numpy.ndarray, shape (..., 3)
+            Unit direction toward the camera.
+        wi : numpy.ndarray, shape (..., 3)
+            Unit direction toward the light.
+        E : numpy.ndarray, shape (...)
+            The point light's irradiance ``intensity / r^2``.
+        """
         uv = np.asarray(uv, dtype=np.float64)
         p = np.stack([uv[..., 0], 1.0 - uv[..., 1], np.zeros(uv.shape[:-1])], axis=-1)
         to_light = np.asarray(self.light) - p
@@ -80,6 +113,13 @@ class PatchScene:
         return normalize(np.asarray(self.camera) - p), normalize(to_light), self.intensity / r2
 
     def environment(self) -> shading.MipEnvironment:
+        """The scene's environment light: :func:`microfacet.render.lights.procedural_sky` of ``env_size``, MIP-mapped.
+
+        Returns
+        -------
+        shading.MipEnvironment
+            The environment, for :func:`render_level` with ``kind="env"``.
+        """
         return shading.MipEnvironment(procedural_sky(*self.env_size))
 
 
@@ -87,6 +127,18 @@ def default_heightfield(size: int = 256, seed: int = 3) -> np.ndarray:
     """A tileable displacement: smooth bumps (correlation 48 texels, ``alpha = 0.25``) plus
     fine anisotropic, correlated grooves (correlation 3 texels, ``alpha = (0.45, 0.15)``,
     ``rho = 0.5``), Gaussian random fields (:func:`microfacet.leadr.gaussian_heightfield`).
+
+    Parameters
+    ----------
+    size : int, optional
+        Side of the square map in texels (default 256).
+    seed : int, optional
+        Seed of the random fields (default 3).
+
+    Returns
+    -------
+    numpy.ndarray, shape (size, size)
+        Heights (float64).
 
     Examples
     --------
@@ -119,6 +171,28 @@ def render_level(method: str, level: int, pyramid0, naive, leadr, scene: PatchSc
     docstring). ``pyramid0`` is the merged level 0, ``naive`` and ``leadr`` the naive and
     merged pyramids; ``kind`` is ``"point"`` or ``"env"``.
 
+    Parameters
+    ----------
+    method : str
+        One of :data:`METHODS`: ``"reference"``, ``"naive"`` or ``"leadr"``.
+    level : int
+        MIP level rendered (``n_k = n_0 / 2^level`` pixels per side).
+    pyramid0 : ndarray, shape (n_0, n_0, 5)
+        The merged level-0 moments (used by ``"reference"``).
+    naive, leadr : list of ndarray
+        The naive and merged (LEADR) moment pyramids.
+    scene : PatchScene
+        Camera and lights.
+    kind : str, optional
+        ``"point"`` (point light, default) or ``"env"`` (environment).
+    env : shading.MipEnvironment, optional
+        The environment for ``kind="env"`` (:meth:`PatchScene.environment`).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_k, n_k, 3)
+        Linear RGB image.
+
     Examples
     --------
     >>> from microfacet.leadr import bake, naive_pyramid, downsample_operator
@@ -140,6 +214,18 @@ def render_level(method: str, level: int, pyramid0, naive, leadr, scene: PatchSc
 
 def relative_rms(image, reference) -> float:
     """``sqrt(mean((I - R)^2) / mean(R^2))`` over all pixels and channels.
+
+    Parameters
+    ----------
+    image : array-like
+        The image to compare.
+    reference : array-like
+        The reference, of the same shape.
+
+    Returns
+    -------
+    float
+        The relative RMS error (0: identical).
 
     Examples
     --------

@@ -145,6 +145,18 @@ def pyramid_file(path: str | os.PathLike, height: int, width: int) -> Iterator[l
     its memory twice (the array's pages and the file's), which costs most of a large bake.
     Do not write into the levels after the block: they remain mapped onto the file.
 
+    Parameters
+    ----------
+    path : str or path-like
+        The pyramid EXR to write.
+    height, width : int
+        Size of level 0 in texels.
+
+    Yields
+    ------
+    list of numpy.ndarray
+        The levels ``(H_k, W_k, 5)`` float32, mapped onto the file, level 0 first.
+
     Examples
     --------
     >>> from microfacet.leadr import bake, gaussian_heightfield
@@ -192,6 +204,16 @@ def read_pyramid(path: str | os.PathLike) -> list[np.ndarray]:
     Raises :class:`MicrofacetError` naming the file when it is not an EXR, is corrupt, or
     its parts are not ``mip0, mip1, ...`` with channels ``E1..E5``, the MIP sizes of
     level 0 and finite values.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A pyramid EXR.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The levels ``(H_k, W_k, 5)`` float32, level 0 first.
 
     Examples
     --------
@@ -244,6 +266,16 @@ def load_height_map(path: str | os.PathLike) -> np.ndarray:
     (:func:`_looks_like_normal_map`) is read as heights all the same, with a
     :class:`~microfacet.errors.HeightMapWarning` (its slopes would be meaningless).
 
+    Parameters
+    ----------
+    path : str or path-like
+        A PNG or EXR file.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W)
+        Heights (float64; a PNG's in ``[0, 1]``).
+
     Examples
     --------
     >>> import numpy as np
@@ -287,6 +319,16 @@ def load_normal_map(path: str | os.PathLike) -> np.ndarray:
     from an EXR; decode with :func:`microfacet.leadr.decode_normal_map` (or read and decode
     in one step with :func:`microfacet.io.normalmap.read_normals`).
 
+    Parameters
+    ----------
+    path : str or path-like
+        A PNG or EXR file.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 2|3|4)
+        The stored texels, not decoded.
+
     Examples
     --------
     >>> import numpy as np
@@ -307,6 +349,18 @@ def write_normal_map(path: str | os.PathLike, nmap) -> Path:
     """Write a normal map from :func:`microfacet.leadr.encode_normal_map`, atomically: a
     ``uint8``/``uint16`` one as an exact 8/16-bit RGB PNG, a float one as a float32 RGB
     EXR (normal components, not offset).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output file (PNG for integer maps, EXR for float ones).
+    nmap : ndarray, shape (H, W, 3)
+        The encoded normal map (uint8, uint16 or float).
+
+    Returns
+    -------
+    Path
+        The file written.
 
     Examples
     --------

@@ -105,6 +105,16 @@ def height_to_slopes(height, scale: float = 1.0, border: str = "wrap") -> np.nda
 def slopes_to_normals(slopes) -> np.ndarray:
     """Unit normals ``(..., 3)`` ``(-x~, -y~, 1) / sqrt(1 + x~^2 + y~^2)``.
 
+    Parameters
+    ----------
+    slopes : array-like, shape (..., 2)
+        Slopes ``(x~, y~)``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Unit normals.
+
     Examples
     --------
     >>> import numpy as np
@@ -120,6 +130,18 @@ def slopes_to_normals(slopes) -> np.ndarray:
 def encode_normal_map(slopes, dtype=np.uint8) -> np.ndarray:
     """Normal map ``(H, W, 3)`` of slopes: ``round((n + 1) / 2 * max)`` for ``uint8`` and
     ``uint16``, ``n`` itself for float dtypes.
+
+    Parameters
+    ----------
+    slopes : array-like, shape (H, W, 2)
+        Slopes ``(x~, y~)`` per texel.
+    dtype : dtype, optional
+        ``uint8`` (default), ``uint16`` or a float dtype.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 3)
+        The normal map in ``dtype``.
 
     Examples
     --------
@@ -180,6 +202,18 @@ def slopes_to_moments(slopes, base=None) -> np.ndarray:
     single facet ``(x~, y~, x~^2, y~^2, x~ y~)``, convolved with the base lobe's moments
     ``base (5,)`` when given (Listing 5.1).
 
+    Parameters
+    ----------
+    slopes : array-like, shape (H, W, 2)
+        Slopes ``(x~, y~)`` per texel.
+    base : array-like, shape (5,), optional
+        Moments of the base lobe (:func:`base_moments`); ``None``: none.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 5)
+        The moments (float64).
+
     References
     ----------
     Dupuy 2015, thesis, Listing 3.7, Listing 5.1.
@@ -201,6 +235,16 @@ def slopes_to_moments(slopes, base=None) -> np.ndarray:
 def base_moments(roughness) -> np.ndarray | None:
     """Moments ``(5,)`` of a base roughness: ``None``, an isotropic ``alpha``, ``(alpha_x,
     alpha_y)``, a :class:`~microfacet.Beckmann` or a BRDF whose ``distribution`` is one.
+
+    Parameters
+    ----------
+    roughness : None, float, (float, float), Beckmann or BRDF
+        The base roughness.
+
+    Returns
+    -------
+    numpy.ndarray, shape (5,), or None
+        Its moments ``E1..E5``; ``None`` for ``None``.
 
     Examples
     --------
@@ -409,6 +453,22 @@ def bake(height, scale: float = 1.0, roughness=None, *, border: str = "wrap",
 def bake_reference(height, scale: float = 1.0, roughness=None, *, border: str = "wrap") -> list[np.ndarray]:
     """:func:`bake` written with plain NumPy (float64 throughout): the reference it is
     tested against.
+
+    Parameters
+    ----------
+    height : ndarray, shape (H, W)
+        Heights, as for :func:`bake`.
+    scale : float, optional
+        Height scale (default 1).
+    roughness : None, float, (float, float) or Beckmann, optional
+        The base lobe merged into every texel (:func:`base_moments`).
+    border : {"wrap", "clamp"}, optional
+        Central differences at the edges: periodic (default) or one-sided.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The float64 levels ``(H_k, W_k, 5)``, level 0 first.
 
     Examples
     --------

@@ -83,6 +83,16 @@ def to_moments(alpha_x, alpha_y, rho=0.0, mean_slope=(0.0, 0.0)) -> np.ndarray:
 def covariance(E) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Central second moments ``(Var[x~], Var[y~], Cov[x~, y~])`` of moments ``E``.
 
+    Parameters
+    ----------
+    E : array-like, shape (..., 5)
+        Moments ``E1..E5``.
+
+    Returns
+    -------
+    var_x, var_y, cov_xy : numpy.ndarray, shape (...)
+        The slopes' variances and covariance.
+
     Examples
     --------
     >>> [round(float(v), 6) for v in covariance(to_moments(0.2, 0.4, rho=0.5))]   # alpha^2 / 2 ...
@@ -149,6 +159,16 @@ def convolve(Ea, Eb) -> np.ndarray:
     ``E1 = Ea1 + Eb1``, ``E3 = Ea3 + Eb3 + 2 Ea1 Eb1``,
     ``E5 = Ea5 + Eb5 + Ea1 Eb2 + Ea2 Eb1``: means and covariances add.
 
+    Parameters
+    ----------
+    Ea, Eb : array-like, shape (..., 5)
+        Moments of the two slope distributions (broadcast).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 5)
+        Moments of their sum.
+
     References
     ----------
     Dupuy 2015, thesis, Listing 5.1.
@@ -169,6 +189,18 @@ def convolve(Ea, Eb) -> np.ndarray:
 def scale_height(E, beta) -> np.ndarray:
     """Moments of the surface whose heights are scaled by ``beta`` (Sec. 3.4): ``E1, E2``
     scale by ``beta`` and ``E3, E4, E5`` by ``beta^2``.
+
+    Parameters
+    ----------
+    E : array-like, shape (..., 5)
+        Moments ``E1..E5``.
+    beta : float or array-like, shape (...)
+        Height scale factor (broadcast against ``E[..., 0]``).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 5)
+        The scaled moments.
 
     References
     ----------
@@ -193,6 +225,18 @@ def transform(E, jacobian) -> np.ndarray:
     ``(d xi/dx, d xi/dy) = J (d xi/du, d xi/dv)``; ``E1 = du/dx E1' + dv/dx E2'``,
     ``E3 = (du/dx)^2 E3' + (dv/dx)^2 E4' + 2 du/dx dv/dx E5'``,
     ``E5 = du/dx du/dy E3' + dv/dx dv/dy E4' + (du/dx dv/dy + dv/dx du/dy) E5'``.
+
+    Parameters
+    ----------
+    E : array-like, shape (..., 5)
+        Moments ``E'`` of uv slopes.
+    jacobian : array-like, shape (..., 2, 2)
+        ``[[du/dx, dv/dx], [du/dy, dv/dy]]``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 5)
+        Moments of world-space slopes.
 
     References
     ----------
@@ -228,6 +272,18 @@ def clean_moments(E, mode: str = "lean") -> np.ndarray:
     Unlike the five LEAN moments, ``mode="max"`` texels are not linear in the slopes:
     filter the ``"lean"`` form and convert after filtering.
 
+    Parameters
+    ----------
+    E : array-like, shape (..., 5)
+        LEAN moments ``E1..E5``.
+    mode : {"lean", "max"}, optional
+        Third component: ``E3 + E4`` (default) or the ``max(alpha1, alpha2)`` form.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        The CLEAN texels.
+
     References
     ----------
     Baker 2011; Dupuy 2015, thesis, Eq. 3.18.
@@ -253,6 +309,16 @@ def clean_moments(E, mode: str = "lean") -> np.ndarray:
 def clean_to_moments(C) -> np.ndarray:
     """Isotropic LEAN moments ``(..., 5)`` of CLEAN texels ``(E1, E2, E3 + E4)``:
     ``alpha^2 = third - E1^2 - E2^2`` (Eq. 3.18), ``rho = 0``.
+
+    Parameters
+    ----------
+    C : array-like, shape (..., 3)
+        CLEAN texels ``(E1, E2, E3 + E4)``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 5)
+        Isotropic LEAN moments.
 
     References
     ----------
