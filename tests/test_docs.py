@@ -336,8 +336,6 @@ PARAMETER_DOCS_TODO = (
     "microfacet.fit.extract",
     "microfacet.glints.figures", "microfacet.glints.microsurface", "microfacet.glints.pbrdf",
     "microfacet.glsl", "microfacet.glsl.server",
-    "microfacet.leadr.downsample",
-    "microfacet.leadr.shading",
     "microfacet.mitsuba.bsdf", "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints", "microfacet.mitsuba.leadr",
     "microfacet.mitsuba.reference", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",
     "microfacet.mitsuba.tree",

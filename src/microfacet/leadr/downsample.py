@@ -32,6 +32,16 @@ def base_lobe(base) -> np.ndarray:
     :mod:`microfacet.fit`, converted by equal second slope moments, App. C), or the
     moments ``(5,)`` themselves.
 
+    Parameters
+    ----------
+    base : None, float, (float, float), Beckmann, BRDF, fit or array-like (5,)
+        The base material.
+
+    Returns
+    -------
+    numpy.ndarray, shape (5,)
+        Its moments ``E1..E5`` (float64).
+
     References
     ----------
     Dupuy 2015, thesis, App. C.
@@ -58,6 +68,18 @@ def downsample_operator(pyramid, base) -> list[np.ndarray]:
     the input levels). Merging is affine in the moments, so it commutes with the MIP
     averaging: ``downsample_operator(bake(h), b) == bake(h, roughness=b)`` up to rounding.
 
+    Parameters
+    ----------
+    pyramid : list of (H_k, W_k, 5) arrays
+        A LEADR moment pyramid.
+    base : see :func:`base_lobe`
+        The base material merged into every level.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The merged levels, in the input levels' dtype.
+
     References
     ----------
     Dupuy 2015, thesis, Ch. 5, Listing 5.1; Dupuy et al. 2013.
@@ -78,6 +100,20 @@ def box_average(values, factor: int, weights=None) -> np.ndarray:
     """Average of ``values (H, W, ...)`` over ``factor x factor`` blocks, optionally
     weighted by ``weights (H, W)`` (e.g. projected areas); ``H`` and ``W`` must be
     multiples of ``factor``.
+
+    Parameters
+    ----------
+    values : array-like, shape (H, W, ...)
+        The values to average.
+    factor : int
+        Block side in texels; divides ``H`` and ``W``.
+    weights : array-like, shape (H, W), optional
+        Per-texel weights (default: equal); blocks of zero weight give 0.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H / factor, W / factor, ...)
+        The block averages.
 
     Examples
     --------
@@ -106,6 +142,18 @@ def naive_slopes(level0, factor: int) -> np.ndarray:
     renormalized (the "naive MIP mapping" of Fig. 5.3, which loses the roughness that
     the normals' spread should become).
 
+    Parameters
+    ----------
+    level0 : array-like, shape (H, W, >=2)
+        Level-0 moments; ``[..., :2]`` are the texels' mean slopes.
+    factor : int
+        Block side ``f`` in texels.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H / f, W / f, 2)
+        Slopes of the renormalized mean normals.
+
     References
     ----------
     Dupuy 2015, thesis, Fig. 5.3.
@@ -129,6 +177,20 @@ def naive_pyramid(level0, base=None, levels: int | None = None) -> list[np.ndarr
     """Moment pyramid ``(H_k, W_k, 5)`` of naive MIP mapping: each level a single facet
     of the averaged normal (:func:`naive_slopes`, factor ``2^k``) with the ``base`` lobe
     only. Stops at the first level whose size is not a whole number of blocks.
+
+    Parameters
+    ----------
+    level0 : array-like, shape (H, W, 5)
+        Level-0 moments (only ``E1, E2``, the mean slopes, are used).
+    base : see :func:`base_lobe`, optional
+        The base lobe of every level (default ``None``: a mirror).
+    levels : int, optional
+        Most levels (default: down to the smallest whole level).
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The levels ``(H_k, W_k, 5)``, level 0 first.
 
     Examples
     --------
@@ -190,12 +252,41 @@ class FilteredSurface:
         self.levels = downsample_operator(pyramid, self.base)
 
     def moments(self, uv, footprint=0.0) -> np.ndarray:
-        """Filtered moments ``(..., 5)`` at ``uv`` over ``footprint`` (``mf.leadr.lookup``)."""
+        """Filtered moments ``(..., 5)`` at ``uv`` over ``footprint`` (``mf.leadr.lookup``).
+
+        Parameters
+        ----------
+        uv : array-like, shape (..., 2)
+            Texture coordinates.
+        footprint : float or array-like, optional
+            Pixel footprint in uv units (:func:`microfacet.leadr.lookup`; default 0).
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 5)
+            The filtered moments.
+        """
         from .mip import lookup
         return lookup(self.levels, uv, footprint)
 
     def brdf(self, uv, footprint=0.0, shadowing: bool = True) -> MicrofacetBRDF:
         """Per-pixel :class:`~microfacet.MicrofacetBRDF` (Beckmann parameters as arrays
-        over ``uv``'s leading shape) of the filtered surface."""
+        over ``uv``'s leading shape) of the filtered surface.
+
+        Parameters
+        ----------
+        uv : array-like, shape (..., 2)
+            Texture coordinates (:func:`microfacet.leadr.lookup`).
+        footprint : float or array-like, optional
+            Pixel footprint in uv units, as for :func:`microfacet.leadr.lookup` (default 0:
+            level 0).
+        shadowing : bool, optional
+            Include Smith shadowing-masking in the BRDF (default ``True``).
+
+        Returns
+        -------
+        MicrofacetBRDF
+            Beckmann BRDF with per-pixel parameters of shape ``uv.shape[:-1]``.
+        """
         return MicrofacetBRDF(from_moments(self.moments(uv, footprint)), self.fresnel,
                               shadowing=shadowing)

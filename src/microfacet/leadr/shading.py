@@ -61,6 +61,16 @@ def slope_statistics(moments) -> tuple[np.ndarray, ...]:
     variances clamped to :data:`MIN_VARIANCE` and the correlation to ``[-0.99, 0.99]``
     (the clamping of Listing 3.5).
 
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments ``E1..E5``.
+
+    Returns
+    -------
+    tuple of numpy.ndarray, each shape (...)
+        ``(x0, y0, var_x, var_y, c_xy)``: mean slopes, clamped variances and covariance.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Sec. 3.1; Dupuy 2015, thesis, Listing 3.5 (the clamping).
@@ -85,6 +95,16 @@ def slope_statistics(moments) -> tuple[np.ndarray, ...]:
 def mesonormal(moments) -> np.ndarray:
     """Mesonormal ``w_n- = (-E[x~], -E[y~], 1) / |.|`` of the pixel (Eq. 5).
 
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Unit mesonormals in the local frame.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Eq. 5.
@@ -102,6 +122,18 @@ def mesonormal(moments) -> np.ndarray:
 def ndf(moments, h) -> np.ndarray:
     """Beckmann NDF ``D(h) = P22(h~) / z_h^4`` of the Gaussian slope PDF ``P22`` of the
     moments (Eq. 2 and Sec. 3.1); 0 for ``z_h <= 0``.
+
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments.
+    h : array-like, shape (..., 3)
+        Unit microfacet normals in the local frame.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        ``D(h)`` in 1/sr.
 
     References
     ----------
@@ -137,6 +169,18 @@ def lambda_(moments, k) -> np.ndarray:
     ``nu = (z - x x0 - y y0) / sqrt(2 (x^2 var_x + y^2 var_y + 2 x y c_xy))``, finite at
     normal incidence (``Lambda = 0``); ``inf`` where ``nu <= 0`` (``k`` below the mesosurface).
 
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments.
+    k : array-like, shape (..., 3)
+        Unit directions in the local frame.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        ``Lambda(k)`` (``inf`` below the mesosurface).
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Sec. 3.2.
@@ -164,6 +208,18 @@ def projected_area(moments, k) -> np.ndarray:
     """Projected area toward ``k`` of the microsurface of ``moments`` per unit macro area,
     ``A(k) = int <k, n>+ D(n) dn = c_k (1 + Lambda(k))`` with ``c_k = (-x0, -y0, 1) . k``
     the mesonormal's (supplemental Eq. 4, 9); 0 where ``c_k <= 0``.
+
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments.
+    k : array-like, shape (..., 3)
+        Unit directions in the local frame.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        ``A(k)`` per unit macro area (0 where the mesonormal faces away).
 
     References
     ----------
@@ -254,6 +310,21 @@ def sample_grid(n: int = 5, spacing: float | None = None) -> tuple[np.ndarray, n
     ``w = (0.0725, 0.2443, 0.3663, 0.2443, 0.0725)``); from ``n = 8`` on the grid spans
     ``[-3, 3]`` ("it is not necessary to place samples beyond"), spacing ``6 / (n - 1)``.
 
+    Parameters
+    ----------
+    n : int, optional
+        Samples per axis (default 5).
+    spacing : float, optional
+        Distance between samples in standard deviations (default: 0.9 below ``n = 8``,
+        ``6 / (n - 1)`` from 8 on).
+
+    Returns
+    -------
+    p : numpy.ndarray, shape (n,)
+        Positions in standard deviations.
+    w : numpy.ndarray, shape (n,)
+        Weights, summing to 1.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Sec. 3.4.
@@ -281,6 +352,16 @@ def sample_grid(n: int = 5, spacing: float | None = None) -> tuple[np.ndarray, n
 def grid_spacing(n: int) -> float:
     """Spacing of :func:`sample_grid` for ``n`` samples per axis.
 
+    Parameters
+    ----------
+    n : int
+        Samples per axis.
+
+    Returns
+    -------
+    float
+        Distance between neighbouring samples in standard deviations (0 for ``n = 1``).
+
     Examples
     --------
     >>> grid_spacing(5), grid_spacing(13)
@@ -295,6 +376,20 @@ def grid_slopes(moments, n: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray
     ``(..., n * n)`` (Algorithm 1): ``x~ = x0 + p_j sigma_x``,
     ``y~ = y0 + (r p_j + sqrt(1 - r^2) p_k) sigma_y`` with ``r = c_xy / (sigma_x sigma_y)``,
     i.e. the grid of the standard normal mapped by the Cholesky factor of the covariance.
+
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments.
+    n : int, optional
+        Samples per axis (default 5).
+
+    Returns
+    -------
+    x, y : numpy.ndarray, shape (..., n * n)
+        The grid's slopes.
+    W : numpy.ndarray, shape (..., n * n)
+        Their weights (summing to 1).
 
     References
     ----------
@@ -325,6 +420,16 @@ def lod_bias(n: int) -> float:
     """Constant of the LOD rule for an ``n x n`` grid: 0.5 for ``n <= 5``, -0.5 for 32,
     -1.48 (unbiased) from 128 on (Sec. 3.5), linear in ``log2 n`` in between.
 
+    Parameters
+    ----------
+    n : int
+        Grid samples per axis.
+
+    Returns
+    -------
+    float
+        The constant ``b`` of the LOD rule.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Sec. 3.5.
@@ -350,6 +455,20 @@ def artificial_micronormal(moments, wo, epsilon: float = ARTIFICIAL_EPSILON) -> 
     (``w_n-.o < 0``, a silhouette of a low-tessellated mesh) it is visible
     (``w~.o = -(eps - 1) w_n-.o |.|^-1 > 0``); elsewhere it is back-facing and contributes
     nothing. Used with weight :data:`ARTIFICIAL_WEIGHT` in the grid sums.
+
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments of each pixel.
+    wo : array-like, shape (..., 3)
+        Unit view directions in the local frames.
+    epsilon : float, optional
+        The bias ``eps`` (> 1; default 1.01).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Unit artificial micronormals.
 
     References
     ----------
@@ -397,6 +516,11 @@ class MipEnvironment(Environment):
     ``sum L dOmega``; the pyramid stops at the first odd dimension. Lookups are
     trilinear: bilinear in each level (wrapping in ``phi``), linear between levels.
 
+    Parameters
+    ----------
+    radiance : Environment or array-like, shape (H, W, 3)
+        The lat-long radiance map (level 0).
+
     Examples
     --------
     >>> import numpy as np
@@ -421,7 +545,20 @@ class MipEnvironment(Environment):
 
     def radiance_lod(self, w, lod) -> np.ndarray:
         """Radiance ``(..., 3)`` from world directions ``w`` at level of detail ``lod``
-        (broadcast against ``w[..., 0]``, clamped to the pyramid)."""
+        (broadcast against ``w[..., 0]``, clamped to the pyramid).
+
+        Parameters
+        ----------
+        w : array-like, shape (..., 3)
+            World directions (unit vectors).
+        lod : float or array-like
+            Level of detail (0: the full-resolution map), broadcast against ``w[..., 0]``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 3)
+            Trilinearly filtered radiance.
+        """
         w = np.asarray(w, dtype=np.float64)
         top = len(self.levels) - 1
         lod = np.clip(np.broadcast_to(np.asarray(lod, dtype=np.float64), w.shape[:-1]), 0.0, top)
@@ -475,9 +612,16 @@ def env_specular(moments, wo, env: MipEnvironment, frame=None, n: int = 5, fresn
         Grid samples per axis (5 by default).
     fresnel : Fresnel or None
         Microfacet Fresnel term of ``cos theta_d = <n_k, o>`` (default: ideal mirror).
+    lod_offset : float or None
+        The constant ``b`` of the LOD rule (``None``: :func:`lod_bias` of ``n``).
     fallback : bool
         Append the artificial micronormal (Sec. 3.7), so the result is defined even when
         every grid normal faces away from ``o``.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Reflected radiance toward ``wo``.
 
     References
     ----------
@@ -532,6 +676,16 @@ def sh_basis(w) -> np.ndarray:
     ``Y_2-2,2-1,21 = 1.092548 (xy, yz, xz)``, ``Y_20 = 0.315392 (3z^2 - 1)``,
     ``Y_22 = 0.546274 (x^2 - y^2)``), in the frame of ``w``.
 
+    Parameters
+    ----------
+    w : array-like, shape (..., 3)
+        Unit directions.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 9)
+        ``Y_lm(w)``.
+
     Examples
     --------
     >>> import numpy as np
@@ -552,6 +706,16 @@ def sh_project(env) -> np.ndarray:
     coordinates: ``int L(w) Y_lm(w) dw`` with ``L`` constant over each texel and ``Y_lm``
     integrated over the texel by a 3 x 3 Gauss-Legendre rule in ``(cos theta, phi)``
     (exact solid angles; a constant map is projected exactly, smooth ones to ~1e-6).
+
+    Parameters
+    ----------
+    env : Environment or array-like, shape (H, W, 3)
+        A lat-long radiance map.
+
+    Returns
+    -------
+    numpy.ndarray, shape (9, 3)
+        The SH coefficients ``L_lm``.
 
     Examples
     --------
@@ -582,6 +746,20 @@ def sh_add_directional(coeffs, direction, radiance) -> np.ndarray:
     """``coeffs`` plus a directional light of world ``direction`` and RGB ``radiance``
     (Algorithm 2: ``L_lm += Y_lm(w_i) L``); returns a new ``(9, 3)`` array.
 
+    Parameters
+    ----------
+    coeffs : array-like, shape (9, 3)
+        SH radiance coefficients.
+    direction : array-like, shape (3,)
+        World direction of the light (normalized here).
+    radiance : float or array-like, shape (3,)
+        RGB radiance of the light.
+
+    Returns
+    -------
+    numpy.ndarray, shape (9, 3)
+        The new coefficients.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Simplified Algorithm 2.
@@ -602,6 +780,18 @@ def sh_irradiance(coeffs, normals) -> np.ndarray:
     """Irradiance ``E(n) = int L(w) <n, w>+ dw`` ``(..., 3)`` of the 9-coefficient SH
     radiance at world normals ``n`` (Ramamoorthi and Hanrahan 2001, Eq. 13). Exact for
     radiance of degree <= 2 (constant and linear in particular).
+
+    Parameters
+    ----------
+    coeffs : array-like, shape (9, 3)
+        SH radiance coefficients.
+    normals : array-like, shape (..., 3)
+        Unit world normals.
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Irradiance ``E(n)``.
 
     References
     ----------
@@ -641,6 +831,28 @@ def diffuse_sh(moments, wo, coeffs, frame=None, albedo=1.0, n: int = 5,
 
     Masking only. ``frame`` as in :func:`env_specular` (``None``: local = world).
 
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments of each pixel.
+    wo : array-like, shape (..., 3)
+        Unit view directions in the local frames.
+    coeffs : array-like, shape (9, 3)
+        World-space SH radiance coefficients.
+    frame : (s, t, n) or None, optional
+        World tangents and normal of each local frame (``None``: local = world).
+    albedo : float or array-like, optional
+        Lambertian reflectance (scalar or RGB; default 1).
+    n : int, optional
+        Grid samples per axis (default 5).
+    fallback : bool, optional
+        Append the artificial micronormal (Sec. 3.7) (default ``True``).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Reflected radiance toward ``wo``.
+
     References
     ----------
     Dupuy et al. 2013, supplemental material, Simplified Algorithm 3, Sec. 3.6.
@@ -665,6 +877,28 @@ def diffuse_directional(moments, wo, wi, irradiance=1.0, albedo=1.0, n: int = 5,
                         fallback: bool = True) -> np.ndarray:
     """Rough diffuse microfacets under one directional light of local direction ``wi``:
     :func:`diffuse_sh` with ``E(n_k) = E <n_k, i>+`` (end of Sec. 3.6).
+
+    Parameters
+    ----------
+    moments : array-like, shape (..., 5)
+        Slope moments of each pixel.
+    wo : array-like, shape (..., 3)
+        Unit view directions in the local frames.
+    wi : array-like, shape (..., 3)
+        Unit direction toward the light in the local frames.
+    irradiance : float or array-like, optional
+        The light's irradiance (scalar or RGB; default 1).
+    albedo : float or array-like, optional
+        Lambertian reflectance (scalar or RGB; default 1).
+    n : int, optional
+        Grid samples per axis (default 5).
+    fallback : bool, optional
+        Append the artificial micronormal (Sec. 3.7) (default ``True``).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        Reflected radiance toward ``wo``.
 
     References
     ----------
