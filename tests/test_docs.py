@@ -334,7 +334,6 @@ MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", 
 PARAMETER_DOCS_TODO = (
     "microfacet.kernels",
     "microfacet.fit.extract",
-    "microfacet.glints.figures", "microfacet.glints.microsurface", "microfacet.glints.pbrdf",
     "microfacet.glsl", "microfacet.glsl.server",
     "microfacet.mitsuba.bsdf", "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints", "microfacet.mitsuba.leadr",
     "microfacet.mitsuba.reference", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",

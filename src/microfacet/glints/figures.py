@@ -159,6 +159,15 @@ class PlaneScene:
         Image row ``r`` runs from far (top) to near; a pixel is ``2 / width`` wide on the
         plane along x and ``2 / width`` along y (the orthographic foreshortening of the
         image's ``2 sin(e) / height`` pixel height).
+
+        Returns
+        -------
+        uv : numpy.ndarray, shape (P, 2)
+            Footprint centre of each pixel in uv, rows far to near.
+        cov : numpy.ndarray, shape (2, 2)
+            The footprint covariance in uv^2 (the same for every pixel).
+        p : numpy.ndarray, shape (P, 3)
+            The plane point seen by each pixel.
         """
         w, h = self.width, self.height
         x = (np.arange(w) + 0.5) / w * 2.0 - 1.0
@@ -171,7 +180,20 @@ class PlaneScene:
         return uv, np.diag([su * su, sv * sv]), p
 
     def lighting(self, p):
-        """Local light directions ``(P, 3)`` and ``I / r^2`` ``(P,)`` at plane points."""
+        """Local light directions ``(P, 3)`` and ``I / r^2`` ``(P,)`` at plane points.
+
+        Parameters
+        ----------
+        p : array-like, shape (P, 3)
+            Points on the plane (z = 0).
+
+        Returns
+        -------
+        wi : numpy.ndarray, shape (P, 3)
+            Unit directions toward the light.
+        E : numpy.ndarray, shape (P,)
+            ``intensity / r^2``.
+        """
         d = np.asarray(self.light, dtype=np.float64) - p
         r2 = np.sum(d * d, -1)
         return d / np.sqrt(r2)[:, None], self.intensity / r2

@@ -862,9 +862,18 @@ class LobeMixture:
             Floor of each lobe's principal slope standard deviations (Sec. 3.2, 0.01).
         samples : int
             Quadrature points per texel and axis for the lobe moments (Eq. 6).
+        encoding : str
+            ``"auto"``, ``"biased"``/``"offset"`` or ``"signed"`` (:func:`load_slopes`).
+        z : str
+            ``"auto"``, ``"stored"`` or ``"reconstruct"`` (:func:`load_slopes`).
         **kwargs
             ``cutoff``, ``slope_cutoff`` (float): truncation of the footprint weights (standard deviations of ``Sigma_P +
             sigma_k^2``) and of the lobes' slope boxes of the hierarchy (Sec. 5).
+
+        Returns
+        -------
+        LobeMixture
+            One lobe per seed, with its MIP levels and hierarchy.
         """
         return cls.from_slopes(load_slopes(path_or_array, encoding, z), h, sigma_eps,
                                samples=samples, **kwargs)
@@ -873,7 +882,26 @@ class LobeMixture:
     def from_slopes(cls, slopes, h: float = 1.0, sigma_eps: float = 0.01, *, samples: int = 4,
                     **kwargs) -> "LobeMixture":
         """Lobe mixture (Sec. 3, Eq. 3-6) of texel slopes ``(H, W, 2)`` (see
-        :meth:`from_normal_map` for the parameters): the lobe construction alone."""
+        :meth:`from_normal_map` for the parameters): the lobe construction alone.
+
+        Parameters
+        ----------
+        slopes : array-like, shape (H, W, 2)
+            Texel slopes ``(x~, y~)``.
+        h : float, optional
+            Seed spacing in texels (default 1), in :data:`SPACING_RANGE`.
+        sigma_eps : float, optional
+            Floor of each lobe's principal slope standard deviations (default 0.01).
+        samples : int, optional
+            Quadrature points per texel and axis for the lobe moments (default 4).
+        **kwargs
+            ``cutoff``, ``slope_cutoff`` as in :meth:`from_normal_map`.
+
+        Returns
+        -------
+        LobeMixture
+            The lobe mixture.
+        """
         slopes = np.asarray(slopes)
         if slopes.ndim != 3 or slopes.shape[2] != 2 or 0 in slopes.shape:
             raise ValueError(f"slopes must be an (H, W, 2) array, got shape {slopes.shape}")
@@ -897,14 +925,31 @@ class LobeMixture:
         return self.lobe_moments.shape[0]
 
     def lobes(self, indices=None):
-        """The lobes ``indices`` as one :class:`microfacet.Beckmann` with array parameters."""
+        """The lobes ``indices`` as one :class:`microfacet.Beckmann` with array parameters.
+
+        Parameters
+        ----------
+        indices : array-like of int, optional
+            Lobe indices (default ``None``: every lobe).
+
+        Returns
+        -------
+        Beckmann
+            The lobes, with parameters of the shape of ``indices``.
+        """
         E = self.lobe_moments if indices is None else self.lobe_moments[np.asarray(indices)]
         return from_moments(E, min_alpha=np.sqrt(2.0) * self.sigma_eps * 0.5, max_rho=MAX_RHO)
 
     def alpha_summary(self) -> tuple[float, float]:
         """Median and largest per-axis Beckmann roughness ``alpha = sqrt(2 var)`` of the
         lobes (both axes pooled, as ``np.median`` would give them to float32 rounding),
-        from a float32 copy partitioned in place (4 bytes per lobe and axis)."""
+        from a float32 copy partitioned in place (4 bytes per lobe and axis).
+
+        Returns
+        -------
+        median, largest : float
+            The median and largest per-axis roughness ``alpha``.
+        """
         a = _axis_alphas_float32(self.lobe_moments)
         k = a.size // 2
         a.partition([k - 1, k] if a.size > 1 else [0])
@@ -912,11 +957,33 @@ class LobeMixture:
         return med, float(a.max())
 
     def slopes_at(self, uv) -> np.ndarray:
-        """Slopes ``(..., 2)`` of the interpolated normal map at ``uv (..., 2)``."""
+        """Slopes ``(..., 2)`` of the interpolated normal map at ``uv (..., 2)``.
+
+        Parameters
+        ----------
+        uv : array-like, shape (..., 2)
+            Texture coordinates.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 2)
+            Slopes of the bilinearly interpolated normal map.
+        """
         return interpolate_slopes(self.slopes, uv)
 
     def normal_at(self, uv) -> np.ndarray:
-        """Unit normals ``(..., 3)`` of the interpolated normal map at ``uv (..., 2)``."""
+        """Unit normals ``(..., 3)`` of the interpolated normal map at ``uv (..., 2)``.
+
+        Parameters
+        ----------
+        uv : array-like, shape (..., 2)
+            Texture coordinates.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 3)
+            Unit normals.
+        """
         s = self.slopes_at(uv)
         inv = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
         return np.stack([-s[..., 0] * inv, -s[..., 1] * inv, inv], -1)
@@ -1005,6 +1072,24 @@ class LobeMixture:
         deviations) does not contain ``h``'s slope; ``"hierarchy-numpy"`` is the same
         traversal breadth-first in NumPy (the reference of the compiled one); ``"auto"``
         uses the compiled hierarchy when the footprint has more than 16 lobes.
+
+        Parameters
+        ----------
+        h : array-like, shape (..., 3)
+            Unit half vectors in the local frame.
+        center : array-like, shape (2,)
+            Footprint centre in uv.
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2 (0: a point footprint).
+        normalize : bool, optional
+            Normalize the weights to sum 1 (default ``True``; :meth:`weights`).
+        method : {"auto", "brute", "hierarchy", "hierarchy-numpy"}, optional
+            Evaluation method (default ``"auto"``).
+
+        Returns
+        -------
+        numpy.ndarray, shape (...)
+            ``D_P(h)`` in 1/sr.
         """
         if method not in ("auto", "brute", "hierarchy", "hierarchy-numpy"):
             raise ValueError(f"method must be 'auto', 'brute', 'hierarchy' or 'hierarchy-numpy', "
@@ -1037,7 +1122,24 @@ class LobeMixture:
         return (out * inv4).reshape(shape)
 
     def slope_pdf(self, slopes, center, cov, **kwargs) -> np.ndarray:
-        """The P-NDF in slope space, ``P_P(m~) = D_P(m) cos^4 theta_m`` at slopes ``(..., 2)``."""
+        """The P-NDF in slope space, ``P_P(m~) = D_P(m) cos^4 theta_m`` at slopes ``(..., 2)``.
+
+        Parameters
+        ----------
+        slopes : array-like, shape (..., 2)
+            Slopes ``(x~, y~)``.
+        center : array-like, shape (2,)
+            Footprint centre in uv.
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2.
+        **kwargs
+            ``normalize`` and ``method`` of :meth:`pndf`.
+
+        Returns
+        -------
+        numpy.ndarray, shape (...)
+            The slope-space density.
+        """
         s = np.asarray(slopes, dtype=np.float64)
         inv = 1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
         m = np.stack([-s[..., 0] * inv, -s[..., 1] * inv, inv], -1)
@@ -1048,7 +1150,24 @@ class LobeMixture:
         :meth:`slope_pdf`, i.e. ``D_P(m) cos m`` per solid angle): a lobe is chosen with
         probability ``W_i / sum W`` (``u[..., 0]``), then its Gaussian (Eq. 4) is sampled
         (Box-Muller, ``u[..., 1:3]``). ``u (..., 3)`` in ``[0, 1)``. With
-        ``normalize=False`` the density is ``slope_pdf / sum W``."""
+        ``normalize=False`` the density is ``slope_pdf / sum W``.
+
+        Parameters
+        ----------
+        u : array-like, shape (..., 3)
+            Uniform random numbers in ``[0, 1)``.
+        center : array-like, shape (2,)
+            Footprint centre in uv.
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2.
+        normalize : bool, optional
+            Normalized weights (default ``True``; :meth:`weights`).
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 2)
+            Sampled slopes.
+        """
         u = np.asarray(u, dtype=np.float64)
         if u.shape[-1:] != (3,):
             raise ValueError(f"u must have a last axis of size 3, got shape {u.shape}")
@@ -1069,7 +1188,18 @@ class LobeMixture:
 
     # ----------------------------------------------------------------- MIP (Sec. 4.2.2)
     def mip_level(self, cov) -> int:
-        """MIP level whose lobe spacing matches the footprint's largest std."""
+        """MIP level whose lobe spacing matches the footprint's largest std.
+
+        Parameters
+        ----------
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2.
+
+        Returns
+        -------
+        int
+            The MIP level, 0 (finest) to the coarsest.
+        """
         _, cov = _check_footprint((0.0, 0.0), cov)
         sd = np.sqrt(max(np.linalg.eigvalsh(cov).max(), 0.0))
         spacing = 1.0 / max(self.grid)
@@ -1079,7 +1209,22 @@ class LobeMixture:
     def mip_moments(self, center, cov, level: int | None = None) -> np.ndarray:
         """Moments ``(5,)`` of the single filtered lobe of a footprint (Sec. 4.2.2): the
         ``W``-weighted average of the lobes of MIP level ``level`` (default
-        :meth:`mip_level`), with kernels sized to that level's texels."""
+        :meth:`mip_level`), with kernels sized to that level's texels.
+
+        Parameters
+        ----------
+        center : array-like, shape (2,)
+            Footprint centre in uv.
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2.
+        level : int, optional
+            MIP level (default: :meth:`mip_level` of ``cov``).
+
+        Returns
+        -------
+        numpy.ndarray, shape (5,)
+            The filtered lobe's moments ``E1..E5``.
+        """
         lev = self.mip_level(cov) if level is None else int(level)
         if not 0 <= lev < len(self.mip):
             raise ValueError(f"level must lie in [0, {len(self.mip) - 1}], got {level}")
@@ -1092,7 +1237,22 @@ class LobeMixture:
         return E
 
     def mip_lobe(self, center, cov, level: int | None = None):
-        """The filtered lobe of :meth:`mip_moments` as a :class:`microfacet.Beckmann`."""
+        """The filtered lobe of :meth:`mip_moments` as a :class:`microfacet.Beckmann`.
+
+        Parameters
+        ----------
+        center : array-like, shape (2,)
+            Footprint centre in uv.
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2.
+        level : int, optional
+            MIP level (default: :meth:`mip_level` of ``cov``).
+
+        Returns
+        -------
+        Beckmann
+            The filtered lobe.
+        """
         return from_moments(self.mip_moments(center, cov, level), max_rho=MAX_RHO)
 
     # ----------------------------------------------------------------- files
@@ -1100,7 +1260,18 @@ class LobeMixture:
         """Write a versioned ``.npz`` atomically; return its path. Format 2: the lobes as
         float32 *central* moments (means, variances, covariance: no cancellation, unlike
         float32 raw moments ``E3 = var + mean^2``) and float32 slopes, uncompressed (fast);
-        loading refloors the lobes (the float32 rounding can sit 1 ulp below the floor)."""
+        loading refloors the lobes (the float32 rounding can sit 1 ulp below the floor).
+
+        Parameters
+        ----------
+        path : str or path-like
+            The ``.npz`` file to write.
+
+        Returns
+        -------
+        Path
+            The path written.
+        """
         path = Path(path)
         small = {"magic": np.array(_MAGIC), "version": np.array(FORMAT_VERSION), "slopes": self.slopes,
                  "params": np.array([self.h, self.sigma_eps, self.cutoff, self.slope_cutoff])}
@@ -1121,7 +1292,18 @@ class LobeMixture:
     @classmethod
     def load(cls, path) -> "LobeMixture":
         """Read a file written by :meth:`save` (format 2, or 1: float64 raw moments,
-        compressed); errors name the file."""
+        compressed); errors name the file.
+
+        Parameters
+        ----------
+        path : str or path-like
+            A ``.npz`` file written by :meth:`save`.
+
+        Returns
+        -------
+        LobeMixture
+            The stored lobe mixture.
+        """
         path = Path(path)
         z = load_npz(path, "a microfacet glints microsurface (.npz from 'microfacet glints')")
         if "magic" not in z or str(z["magic"]) != _MAGIC:

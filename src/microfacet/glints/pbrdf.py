@@ -260,7 +260,30 @@ class PatchBRDF(BRDF):
     def from_lobes(cls, moments, weights, fresnel: _fresnel.Fresnel | None = None,
                    exact: bool = True, g2: str = "correlated", merged=None,
                    backend: str = "auto") -> "PatchBRDF":
-        """P-BRDF of explicit lobes: slope moments ``(N, 5)`` and weights ``W`` ``(N,)``."""
+        """P-BRDF of explicit lobes: slope moments ``(N, 5)`` and weights ``W`` ``(N,)``.
+
+        Parameters
+        ----------
+        moments : array-like, shape (N, 5)
+            Raw slope moments of the lobes.
+        weights : array-like, shape (N,)
+            Their weights ``W_i`` (normalized here).
+        fresnel : Fresnel, optional
+            Microfacet Fresnel term (default: ideal mirrors).
+        exact : bool, optional
+            Exact patch masking (default) or the merged-lobe approximation.
+        g2 : {"correlated", "separable"}, optional
+            Masking-shadowing form.
+        merged : array-like, shape (5,), optional
+            The approximation's single lobe (default: the weighted merge of the lobes).
+        backend : {"auto", "numpy", "numba"}, optional
+            Evaluation backend.
+
+        Returns
+        -------
+        PatchBRDF
+            The P-BRDF, without a microsurface.
+        """
         self = cls.__new__(cls)
         self._setup(moments, weights, fresnel, exact, g2, merged, backend)
         self.microsurface, self.indices = None, np.arange(len(self.weights))
@@ -318,7 +341,18 @@ class PatchBRDF(BRDF):
         return tuple(o.reshape(shape) for o in out)
 
     def pndf(self, h) -> np.ndarray:
-        """P-NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9), weights normalized to ``sum W = 1``."""
+        """P-NDF ``D_P(h) = sum_i W_i D_i(h)`` (Eq. 9), weights normalized to ``sum W = 1``.
+
+        Parameters
+        ----------
+        h : array-like, shape (..., 3)
+            Unit normals in the local frame.
+
+        Returns
+        -------
+        numpy.ndarray, shape (...)
+            ``D_P(h)`` in 1/sr.
+        """
         h = directions(h, "h")
         if self.weight_sum <= 0:
             return np.zeros(h.shape[:-1])
@@ -331,7 +365,18 @@ class PatchBRDF(BRDF):
         """``(A_P(k), V_P(k))``: patch projected area (Eq. 17) and the visible projected
         area of the microfacets ``int <k,h>+ D_P = A_P (1 + Lambda_P)`` (Eq. 13-15);
         with ``exact=False`` ``A_P = V_P / (1 + Lambda_m)`` of the merged lobe (Sec.
-        4.2.2, :func:`_merged_area`)."""
+        4.2.2, :func:`_merged_area`).
+
+        Parameters
+        ----------
+        k : array-like, shape (..., 3)
+            Unit directions in the local frame.
+
+        Returns
+        -------
+        A_P, V_P : numpy.ndarray, shape (...)
+            Patch projected area and visible projected area of the microfacets.
+        """
         k = directions(k, "k")
         if self.lobes is None:
             z = np.zeros(k.shape[:-1])
@@ -349,13 +394,35 @@ class PatchBRDF(BRDF):
         return (a, v) if self.exact else _merged_area(v, self.merged, k)
 
     def lambda_p(self, k) -> np.ndarray:
-        """Patch Smith ``Lambda_P(k) = V_P / A_P - 1`` (Eq. 15); ``inf`` where ``A_P = 0``."""
+        """Patch Smith ``Lambda_P(k) = V_P / A_P - 1`` (Eq. 15); ``inf`` where ``A_P = 0``.
+
+        Parameters
+        ----------
+        k : array-like, shape (..., 3)
+            Unit directions in the local frame.
+
+        Returns
+        -------
+        numpy.ndarray, shape (...)
+            ``Lambda_P(k)``.
+        """
         a, v = self.areas(k)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(a > 0, v / np.where(a > 0, a, 1.0) - 1.0, np.inf)
 
     def g1(self, k) -> np.ndarray:
-        """Distant patch masking ``G1_dist(P, k) = A_P / V_P = 1 / (1 + Lambda_P)`` (Eq. 11, 14)."""
+        """Distant patch masking ``G1_dist(P, k) = A_P / V_P = 1 / (1 + Lambda_P)`` (Eq. 11, 14).
+
+        Parameters
+        ----------
+        k : array-like, shape (..., 3)
+            Unit directions in the local frame.
+
+        Returns
+        -------
+        numpy.ndarray, shape (...)
+            ``G1_dist`` in ``[0, 1]`` (0 where ``V_P = 0``).
+        """
         a, v = self.areas(k)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(v > 0, a / np.where(v > 0, v, 1.0), 0.0)
@@ -389,12 +456,36 @@ class PatchBRDF(BRDF):
         return oh, s
 
     def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``f_P(o, i) A_P(i) = F G2 D_P / (4 A_P(o))`` (Eq. 7), RGB ``(..., 3)``."""
+        """``f_P(o, i) A_P(i) = F G2 D_P / (4 A_P(o))`` (Eq. 7), RGB ``(..., 3)``.
+
+        Parameters
+        ----------
+        wi, wo : array-like, shape (..., 3)
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Array ``(..., 3)`` to write into.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 3)
+            ``f_P A_P(i)`` (``out`` when given).
+        """
         oh, s = self._projected(wi, wo)
         return into(out, self.fresnel(oh) * s[..., None], (wi, wo))
 
     def f_p(self, wi, wo) -> np.ndarray:
-        """The symmetric P-BRDF of Eq. 7, ``F G2 D_P / (4 A_P(o) A_P(i))``, RGB."""
+        """The symmetric P-BRDF of Eq. 7, ``F G2 D_P / (4 A_P(o) A_P(i))``, RGB.
+
+        Parameters
+        ----------
+        wi, wo : array-like, shape (..., 3)
+            Unit light and view directions in the local frame.
+
+        Returns
+        -------
+        numpy.ndarray, shape (..., 3)
+            The symmetric P-BRDF.
+        """
         oh, s = self._projected(wi, wo)
         ai, ao = self.areas(directions(wi, "wi"))[0], self.areas(directions(wo, "wo"))[0]
         with np.errstate(divide="ignore", invalid="ignore"):      # Eq. 7 needs A_P > 0 on both sides
@@ -402,7 +493,20 @@ class PatchBRDF(BRDF):
         return self.fresnel(oh) * s[..., None]
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
-        """Density of :meth:`sample`: ``D_P(h) z_h / (4 o.h)`` (Sec. 5)."""
+        """Density of :meth:`sample`: ``D_P(h) z_h / (4 o.h)`` (Sec. 5).
+
+        Parameters
+        ----------
+        wi, wo : array-like, shape (..., 3)
+            Unit light and view directions in the local frame.
+        out : ndarray, optional
+            Array ``(...)`` to write into.
+
+        Returns
+        -------
+        numpy.ndarray, shape (...)
+            Density per solid angle of ``wi`` (``out`` when given).
+        """
         wi, wo = directions(wi, "wi"), directions(wo, "wo")
         h = half_vector(wi, wo)
         oh = dot(wo, h)
@@ -415,7 +519,26 @@ class PatchBRDF(BRDF):
         """Footprint position, then normal (Sec. 5): lobe ``i`` with probability
         ``W_i / sum W`` from ``u[..., 0]`` (rescaled and reused), a normal of slope density
         ``P_i`` (``mf.Beckmann.sample_p22``), ``wi`` the reflection of ``wo``.
-        Returns ``(wi, weight, pdf)`` with ``weight = eval_cos / pdf`` (0 where pdf is 0)."""
+        Returns ``(wi, weight, pdf)`` with ``weight = eval_cos / pdf`` (0 where pdf is 0).
+
+        Parameters
+        ----------
+        u : array-like, shape (..., 2)
+            Uniform random numbers in ``[0, 1)``.
+        wo : array-like, shape (..., 3)
+            Unit view directions in the local frame.
+        out : tuple of 3 ndarray, optional
+            ``(wi, weight, pdf)`` arrays to write into.
+
+        Returns
+        -------
+        wi : numpy.ndarray, shape (..., 3)
+            Sampled light directions.
+        weight : numpy.ndarray, shape (..., 3)
+            ``eval_cos / pdf`` (0 where ``pdf`` is 0).
+        pdf : numpy.ndarray, shape (...)
+            Density per solid angle of ``wi``.
+        """
         wo = directions(wo, "wo")
         u = uniforms(u)
         shape = np.broadcast_shapes(u.shape[:-1], wo.shape[:-1])
@@ -445,7 +568,20 @@ class PatchBRDF(BRDF):
         ``s``) the integral is ``sum_i W_i E_{P_i}[F G2 (o.h) / (A_P(o) z_h)]`` (0 where
         ``wi`` falls below the horizon), computed by ``order x order`` Gauss-Hermite
         quadrature of each lobe's Gaussian slopes. Independent of :meth:`sample`;
-        ``<= 1`` for both models (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``."""
+        ``<= 1`` for both models (``G2 <= G1(o)`` and Eq. 11). Cost ``~ N^2 order^2``.
+
+        Parameters
+        ----------
+        wo : array-like, shape (3,)
+            Unit view direction in the local frame.
+        order : int, optional
+            Gauss-Hermite points per slope axis (default 24).
+
+        Returns
+        -------
+        float
+            The directional albedo (0 when the footprint has no lobe).
+        """
         wo = np.asarray(wo, dtype=np.float64).reshape(3)
         if self.lobes is None:
             return 0.0
@@ -480,6 +616,22 @@ class Microsurface(LobeMixture):
     Build it with :meth:`from_normal_map` or :meth:`from_slopes` (parameters of
     :class:`~microfacet.glints.microsurface.LobeMixture`).
 
+    Parameters
+    ----------
+    moments : array-like, shape (ny, nx, 5)
+        Raw lobe moments.
+    slopes : array-like, shape (H, W, 2)
+        The texel slopes they came from.
+    h : float, optional
+        Seed spacing in texels (default 1; :data:`SPACING_RANGE`).
+    sigma_eps : float, optional
+        Floor of the lobes' principal slope deviations (default 0.01).
+    cutoff, slope_cutoff : float, optional
+        Truncations of the footprint weights and of the hierarchy's slope boxes, in
+        standard deviations (defaults 3 and 4).
+    copy : bool, optional
+        Floor a copy of ``moments`` (default ``True``; ``False``: in place).
+
     Examples
     --------
     >>> import numpy as np, microfacet as mf
@@ -492,7 +644,26 @@ class Microsurface(LobeMixture):
     """
 
     def pbrdf(self, center, cov, fresnel=None, exact: bool = True, **kwargs) -> PatchBRDF:
-        """The patch BRDF (Eq. 7) of a footprint; see :class:`PatchBRDF`."""
+        """The patch BRDF (Eq. 7) of a footprint; see :class:`PatchBRDF`.
+
+        Parameters
+        ----------
+        center : array-like, shape (2,)
+            Footprint centre in uv.
+        cov : array-like, shape (2, 2)
+            Footprint covariance in uv^2.
+        fresnel : Fresnel, optional
+            Microfacet Fresnel term (default: ideal mirrors).
+        exact : bool, optional
+            Exact patch masking (default) or the merged-lobe approximation.
+        **kwargs
+            ``g2`` and ``backend`` of :class:`PatchBRDF`.
+
+        Returns
+        -------
+        PatchBRDF
+            The footprint's P-BRDF.
+        """
         return PatchBRDF(self, center, cov, fresnel, exact, **kwargs)
 
 
@@ -664,6 +835,15 @@ class Window(NamedTuple):
     window's half-width ``cutoff`` in standard deviations. Built once per grid
     (:meth:`of`) and passed whole to the compiled footprint kernels.
 
+    Attributes
+    ----------
+    nx, ny : int
+        Lobes along u and v.
+    ks2x, ks2y : float
+        Variances of the reconstruction kernel along u and v, in uv^2.
+    cutoff : float
+        The window's half-width in standard deviations.
+
     Examples
     --------
     >>> w = Window.of((64, 32), 3.0)
@@ -679,7 +859,20 @@ class Window(NamedTuple):
 
     @classmethod
     def of(cls, grid_shape, cutoff) -> "Window":
-        """The window of a lobe grid of shape ``(ny, nx)`` and ``cutoff`` deviations."""
+        """The window of a lobe grid of shape ``(ny, nx)`` and ``cutoff`` deviations.
+
+        Parameters
+        ----------
+        grid_shape : (int, int)
+            ``(ny, nx)`` of the lobe grid.
+        cutoff : float
+            The window's half-width in standard deviations.
+
+        Returns
+        -------
+        Window
+            The window.
+        """
         ny, nx = (int(n) for n in grid_shape[:2])
         ks2 = (np.array([1.0 / nx, 1.0 / ny]) / FWHM_PER_SIGMA) ** 2
         return cls(nx, ny, float(ks2[0]), float(ks2[1]), float(cutoff))
@@ -690,6 +883,17 @@ class LobeGrid(NamedTuple):
     moments ``(ny * nx * 5,)`` (Eq. 5), ``bounds`` the per-block bounds ``(nby, nbx, 7)`` of
     ``B x B`` blocks (:meth:`~microfacet.glints.microsurface.LobeMixture._block_bounds`, the
     pruning grid) and the footprint :class:`Window` of the grid.
+
+    Attributes
+    ----------
+    E : numpy.ndarray, shape (ny * nx * 5,)
+        Flat raw lobe moments (float64).
+    bounds : numpy.ndarray, shape (nby, nbx, 7)
+        Per-block bounds of the pruning grid.
+    B : int
+        Block side in lobes.
+    window : Window
+        The footprint window of the grid.
 
     Examples
     --------
@@ -707,7 +911,18 @@ class LobeGrid(NamedTuple):
 
     @classmethod
     def of(cls, ms) -> "LobeGrid":
-        """The record of a :class:`Microsurface` ``ms`` (level 0, its cutoff)."""
+        """The record of a :class:`Microsurface` ``ms`` (level 0, its cutoff).
+
+        Parameters
+        ----------
+        ms : Microsurface
+            The microsurface.
+
+        Returns
+        -------
+        LobeGrid
+            Its level-0 lobes, block bounds and footprint window.
+        """
         return cls(np.ascontiguousarray(ms.lobe_moments, dtype=np.float64).reshape(-1), ms._block_bounds, BLOCK,
                    Window.of(ms.grid, ms.cutoff))
 
@@ -718,6 +933,19 @@ class Footprints(NamedTuple):
     ``wo[p]`` (C-contiguous float64 rows); ``exo`` the lobes' tabulated area excess toward a
     shared ``wo`` (:func:`_area_excess`) or empty, ``prune`` the pruning width in standard
     deviations (:func:`eval_cos_footprints`).
+
+    Attributes
+    ----------
+    fp : numpy.ndarray, shape (P, 5)
+        Per footprint ``(u, v, cuu, cvv, cuv)``: centre in uv and covariance in uv^2.
+    h : numpy.ndarray, shape (P, 3)
+        Unit half vectors.
+    wi, wo : numpy.ndarray, shape (P, 3)
+        Unit light and view directions.
+    exo : numpy.ndarray
+        The lobes' tabulated area excess toward a shared ``wo``, or empty.
+    prune : float
+        Pruning width in standard deviations.
 
     Examples
     --------
