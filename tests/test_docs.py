@@ -333,7 +333,6 @@ MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", 
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
     "microfacet.kernels",
-    "microfacet.fit.extract",
     "microfacet.glsl", "microfacet.glsl.server",
     "microfacet.mitsuba.bsdf", "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints", "microfacet.mitsuba.leadr",
     "microfacet.mitsuba.reference", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",

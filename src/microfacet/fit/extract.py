@@ -54,6 +54,16 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 def luminance(rgb) -> np.ndarray:
     """Rec. 709 luminance of RGB values ``(..., 3)``.
 
+    Parameters
+    ----------
+    rgb : array-like, shape (..., 3)
+        Linear RGB values.
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        Their luminance (float64).
+
     Examples
     --------
     >>> import numpy as np
@@ -76,6 +86,21 @@ def _directions(theta, phi) -> np.ndarray:
 
 def backscattering(brdf, theta, phi=0.0) -> np.ndarray:
     """Luminance of ``f_r(o, o)`` at ``o = (theta, phi)``, garbage set to 0 (Eq. 4.1).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        The BRDF (``eval(wi, wo)`` RGB).
+    theta : array-like
+        Polar angles of ``o`` in radians.
+    phi : float or array-like, optional
+        Azimuths of ``o`` in radians (default 0), broadcast against ``theta``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Luminance of ``f_r(o, o)`` in 1/sr, of the broadcast shape (nonfinite or negative
+        values set to 0).
 
     References
     ----------
@@ -109,6 +134,16 @@ def screen_measured(brdf):
     and their count), or a :class:`~microfacet.errors.MicrofacetError` naming the file and
     the count when they are more. Costs one pass over the table (~5 ms) when all is well.
     Example: ``fit(screen_measured(load(path)))`` (:func:`microfacet.fit.fit` calls it).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Any BRDF; only a :class:`~microfacet.measured.MERLBRDF` is screened.
+
+    Returns
+    -------
+    BRDF
+        ``brdf`` itself, or a screened copy.
 
     Examples
     --------
@@ -219,6 +254,22 @@ def smith_kernel_isotropic(f_back: np.ndarray, theta: np.ndarray, model: str = "
     ``(2 K', (u, v))`` with the rank-one term ``u = 4 f cos^2 theta_o``, ``v = M[z]``
     (the row of ``A`` at the normal): ``F0 D = 2 K' D - u (v . D)`` (module docstring).
 
+    Parameters
+    ----------
+    f_back : numpy.ndarray, shape (n - 1,)
+        Backscattering luminance at ``theta[:-1]``.
+    theta : numpy.ndarray, shape (n,)
+        Polar nodes in radians, 0 to ``pi / 2``.
+    model : {"masking", "height_correlated"}, optional
+        Smith masking form (default ``"masking"``).
+
+    Returns
+    -------
+    K : numpy.ndarray, shape (n - 1, n - 1)
+        The kernel ``K'`` (``2 K'`` for ``"height_correlated"``).
+    rank_one : (numpy.ndarray, numpy.ndarray) or None
+        ``(u, v)`` of the rank-one term for ``"height_correlated"``, else ``None``.
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 4.4-4.6, 4.12-4.15; Dupuy et al. 2015.
@@ -260,6 +311,15 @@ class AzimuthalKernel:
     row of ``h`` takes the values of its neighbour (folded). ``k @ p`` and ``k.dense()``
     (the explicit matrix, for tests) are provided.
 
+    Parameters
+    ----------
+    theta : array-like, shape (n,)
+        Polar nodes in radians, increasing from 0 to ``pi / 2``.
+    m : int
+        Number of uniform azimuth nodes ``2 pi k / m``.
+    scale : array-like, shape ((n - 1) m,)
+        The row scale ``s`` (row-major over ``(theta_i, phi_j)``, ``i < n - 1``).
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 4.8.
@@ -291,7 +351,13 @@ class AzimuthalKernel:
         return self.scale * circular_projection(self.spectrum, self._weighted(p)).ravel()
 
     def dense(self) -> np.ndarray:
-        """The explicit matrix (``(n - 1) m`` square) of the same operator."""
+        """The explicit matrix (``(n - 1) m`` square) of the same operator.
+
+        Returns
+        -------
+        numpy.ndarray, shape ((n - 1) m, (n - 1) m)
+            The kernel as an explicit matrix.
+        """
         return np.stack([self @ e for e in np.eye(self.shape[1])], axis=1)
 
 
@@ -302,6 +368,24 @@ def smith_kernel_anisotropic(f_back: np.ndarray, theta: np.ndarray, phi: np.ndar
     (``phi`` must be the uniform ``2 pi k / m``). ``f_back`` is ``(n - 1, m)``.
     Returns ``(K, None)`` (``"masking"``) or ``(2 K, (u, v))`` (``"height_correlated"``),
     as :func:`smith_kernel_isotropic`, ``v`` the row of ``A`` at the normal.
+
+    Parameters
+    ----------
+    f_back : numpy.ndarray, shape (n - 1, m)
+        Backscattering luminance at the nodes.
+    theta : numpy.ndarray, shape (n,)
+        Polar nodes in radians, 0 to ``pi / 2``.
+    phi : numpy.ndarray, shape (m,)
+        Uniform azimuth nodes ``2 pi k / m``.
+    model : {"masking", "height_correlated"}, optional
+        Smith masking form (default ``"masking"``).
+
+    Returns
+    -------
+    K : AzimuthalKernel
+        The kernel (``2 K`` for ``"height_correlated"``).
+    rank_one : (numpy.ndarray, numpy.ndarray) or None
+        ``(u, v)`` of the rank-one term for ``"height_correlated"``, else ``None``.
 
     References
     ----------
@@ -338,6 +422,18 @@ def rule_area_at_normal(dist, refine: int = 1) -> float:
     (Eq. 4.9) for the exactly normalized ``D``. ``refine``: a radial table resampled from
     the kernel's nodes (:func:`~microfacet.distributions.tabulated.refine_radial`), whose
     every ``refine``-th node is one of the kernel's.
+
+    Parameters
+    ----------
+    dist : Tabulated distribution
+        A normalized tabulated NDF (``theta``, ``ndf_table``).
+    refine : int, optional
+        Resampling factor of a radial table (default 1: the kernel's nodes).
+
+    Returns
+    -------
+    float
+        The rule's projected area at the normal.
 
     References
     ----------
@@ -424,6 +520,20 @@ def ndf_closed_form(f_back: np.ndarray, theta: np.ndarray, gaf: str) -> np.ndarr
     ``4 f max(cos^2, 1/2)`` (Eq. 4.17 divided by ``cos^4``), normal map ``4 f``
     (Eq. 4.18). ``theta`` broadcasts against ``f_back``.
 
+    Parameters
+    ----------
+    f_back : numpy.ndarray
+        Backscattering ``f_r(h, h)`` (luminance) at ``theta``.
+    theta : numpy.ndarray
+        Polar angles of ``h`` in radians.
+    gaf : {"vgroove", "normal_map"}
+        The geometric attenuation factor (another value raises ``ValueError``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``F0 D(h)`` in 1/sr, of the broadcast shape.
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 4.16-4.18.
@@ -470,6 +580,27 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
     Returns ``wi, wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` (nonfinite or
     negative values set to 0) and ``finite`` ``(K,)`` (configurations to use).
 
+    Parameters
+    ----------
+    brdf : BRDF
+        The input (data) BRDF.
+    n_d : int
+        Nodes of the Fresnel table.
+    n_h : int, optional
+        ``theta_h`` samples (default 32).
+    n_phi_d : int, optional
+        ``phi_d`` samples (default 16).
+    n_phi_h : int, optional
+        ``phi_h`` samples (default 1).
+    isotropic : bool, optional
+        Sample ``phi_d`` on ``[0, pi)`` only (default ``False``).
+
+    Returns
+    -------
+    dict
+        ``wi``, ``wo`` ``(K, 3)``, ``cos_d`` ``(K,)``, ``f`` ``(K, 3)`` and ``finite``
+        ``(K,)``.
+
     References
     ----------
     Dupuy 2015, thesis, Algorithm 2.
@@ -505,6 +636,17 @@ class FresnelSolution(NamedTuple):
     the usable configurations (a weighting that does not depend on the NDF, so that fits
     with different NDFs compare), plus, with an albedo weight ``lambda``, the albedo term
     ``lambda^2 mean_{v, c} (a_fit / a_data - 1)^2`` at the solution.
+
+    Attributes
+    ----------
+    cos_theta_d : numpy.ndarray, shape (n_d,)
+        Increasing node cosines.
+    rgb : numpy.ndarray, shape (n_d, 3)
+        The table's values at the nodes, in ``[0, 1]``.
+    k_d : numpy.ndarray, shape (3,)
+        Diffuse reflectance of the Lambertian base (zeros without one).
+    misfit : float
+        :func:`chi2_residual` of the model, plus the albedo term with an albedo weight.
 
     Examples
     --------
@@ -571,6 +713,30 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     as well, while the constraint still bounds it from above.
 
     Returns a :class:`FresnelSolution` ``(cos_theta_d, rgb, k_d, misfit)``.
+
+    Parameters
+    ----------
+    samples : dict
+        Configurations and data values (:func:`fresnel_samples`).
+    ideal : BRDF
+        The fitted ideal-mirror BRDF ``f_id``.
+    diffuse : bool, optional
+        Also fit a Lambertian base ``k_d`` (default ``False``).
+    smoothing : float, optional
+        Smallest second-difference penalty weight (default 1e-6).
+    albedo : (a, a_data), optional
+        Albedo rows (:func:`albedo_rows`) for the energy constraints (default none).
+    kd_max : array-like, shape (3,), optional
+        Upper bounds of ``k_d`` per channel (default 1).
+    albedo_weight : float, optional
+        ``lambda`` of the albedo objective term (default 0: none).
+    energy_margin : float, optional
+        Slack of the energy constraints (default 0.01).
+
+    Returns
+    -------
+    FresnelSolution
+        ``(cos_theta_d, rgb, k_d, misfit)``.
 
     References
     ----------
@@ -686,6 +852,16 @@ def table_variation(values) -> np.ndarray:
     ``(n, C)``). Fresnel tables of the fits keep it at most :data:`TV_MAX`. Example:
     ``table_variation([0, 1, 0, 1]) == 3.0``.
 
+    Parameters
+    ----------
+    values : array-like, shape (n,) or (n, C)
+        A table, one column per channel.
+
+    Returns
+    -------
+    float or numpy.ndarray, shape (C,)
+        The variation over the range (a float for a 1-D table).
+
     Examples
     --------
     >>> table_variation([0.0, 1.0, 0.0, 1.0]), table_variation([0.1, 0.5, 0.9])
@@ -718,6 +894,33 @@ def smooth_table_qp(h: np.ndarray, g: np.ndarray, bounds, n_d: int, smoothing: f
     nondecreasing or nonincreasing whichever is nearer, scaled down to meet the albedo
     rows: its variation is then its range. ``x[n_d:]`` (a diffuse base) is not penalized.
     Returns ``(x, mu)`` (``mu`` inf for the monotone projection).
+
+    Parameters
+    ----------
+    h : numpy.ndarray, shape (n, n)
+        Normal-equation matrix (symmetric positive definite).
+    g : numpy.ndarray, shape (n,)
+        Linear term.
+    bounds : (numpy.ndarray, numpy.ndarray)
+        Lower and upper bounds of ``x``.
+    n_d : int
+        Table nodes: the first ``n_d`` unknowns.
+    smoothing : float, optional
+        Smallest penalty weight ``mu`` (default 1e-6).
+    energy : ((a, a_data), int, bool), optional
+        Albedo rows (:func:`albedo_rows`), the channel and whether ``x`` has a diffuse
+        base (default ``None``: no albedo constraint).
+    tv_max : float, optional
+        Largest table variation over its range (default 2).
+    hint : float, optional
+        The ``mu`` to start the walk from (default :data:`SMOOTHING_START`).
+
+    Returns
+    -------
+    x : numpy.ndarray, shape (n,)
+        The solution.
+    mu : float
+        The penalty weight used (``inf`` for the monotone projection).
 
     Examples
     --------
@@ -829,6 +1032,18 @@ def chi2_residual(model: np.ndarray, f: np.ndarray) -> float:
     chi-square, ``Y`` the luminance, ``eps`` 1e-3 of its mean): relative to the data
     everywhere, lobe and floor alike, whatever the model.
 
+    Parameters
+    ----------
+    model : numpy.ndarray, shape (..., 3)
+        Model values, RGB.
+    f : numpy.ndarray, shape (..., 3)
+        Data values, RGB, at the same configurations.
+
+    Returns
+    -------
+    float
+        The normalized chi-square (0: a perfect model).
+
     References
     ----------
     Rec. ITU-R BT.709 (the luminance weights).
@@ -919,6 +1134,26 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     per iteration), the same optimum as BVLS on ``|r x - y|`` with ``h = r^T r``,
     ``g = r^T y``. ``x0``: the start (projected on the box; default the unconstrained
     minimizer projected), e.g. the solution of a nearby problem, whose active set it guesses.
+
+    Parameters
+    ----------
+    h : numpy.ndarray, shape (n, n)
+        Symmetric positive definite matrix.
+    g : numpy.ndarray, shape (n,)
+        Linear term.
+    lo, hi : numpy.ndarray, shape (n,)
+        Lower and upper bounds (``hi`` may be ``inf``).
+    tol : float, optional
+        Stopping tolerance on the projected gradient, relative to ``|g|`` (default 1e-12).
+    max_iter : int, optional
+        Most Newton iterations (default 200).
+    x0 : array-like, shape (n,), optional
+        Start point (default: the projected unconstrained minimizer).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+        The minimizer.
 
     References
     ----------
@@ -1030,6 +1265,26 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
     rows and the data's albedo, so that they compare over the same directions. Returns ``(a,
     a_data)``, ``(V, n_d + 1)`` and ``(V, 3)``; ``brdf=None``: the model's rows alone
     (``a_data`` None), e.g. to bound a fit's own albedo.
+
+    Parameters
+    ----------
+    brdf : BRDF or None
+        The data (e.g. a measured BRDF); ``None``: the model's rows only.
+    ideal : BRDF
+        The fitted ideal-mirror BRDF ``f_id``.
+    n_d : int
+        Nodes of the Fresnel table.
+    views : array-like, shape (V, 3)
+        Unit view directions.
+    n_u : int, optional
+        Stratified samples per axis (``n_u x n_u`` per view and strategy; default 48).
+
+    Returns
+    -------
+    a : numpy.ndarray, shape (V, n_d + 1)
+        The model's albedo rows (Fresnel nodes, then the Lambertian base).
+    a_data : numpy.ndarray, shape (V, 3), or None
+        The data's directional albedo (``None`` when ``brdf`` is ``None``).
 
     References
     ----------
