@@ -98,6 +98,11 @@ class Compiled:
         f = Compiled(lambda c, eta, k: ...)      # kernels.compiled(...)
         f(np.linspace(0, 1, 5), 1.5, 2.0)
 
+    Parameters
+    ----------
+    function : callable
+        A NumPy function that Numba can compile (``nopython`` mode).
+
     Examples
     --------
     >>> import numpy as np
@@ -129,6 +134,16 @@ def compiled(function):
     as its fallback while it compiles), or ``None`` without Numba. Callers build it on first
     use and keep it (a dispatcher loads from Numba's cache in milliseconds, a ``numba.vectorize``
     ufunc takes ~0.5 s to build).
+
+    Parameters
+    ----------
+    function : callable
+        A NumPy function that Numba can compile.
+
+    Returns
+    -------
+    Compiled or None
+        The lazily compiled function, or ``None`` without Numba.
 
     Examples
     --------
@@ -297,6 +312,16 @@ def ready(wait: float | None = 0.0) -> bool:
     "background"``), after waiting up to ``wait`` seconds for it (``None``: until it is done).
     Example: ``mf.kernels.ready(wait=None)`` before timing a loop.
 
+    Parameters
+    ----------
+    wait : float or None, optional
+        Seconds to wait (default 0: do not wait); ``None``: until the queue is empty.
+
+    Returns
+    -------
+    bool
+        ``True`` when nothing is queued or compiling.
+
     Examples
     --------
     >>> ready(wait=None)             # nothing queued on the background thread any more
@@ -328,6 +353,15 @@ def threads() -> int:
 def launch(kernel, n: int, *args) -> None:
     """``kernel(*args)`` of a Numba ``parallel=True`` (``prange``) kernel over ``n`` elements,
     on one thread below :data:`PARALLEL_MIN` (for kernels that are not range kernels).
+
+    Parameters
+    ----------
+    kernel : Numba dispatcher
+        A ``parallel=True`` kernel.
+    n : int
+        Number of elements it processes.
+    *args
+        The kernel's arguments.
 
     Examples
     --------
@@ -369,6 +403,22 @@ def launch_ranges(kernel, n: int, *args, cost: int = 1) -> list:
     until none is left (the kernels release the GIL): the caller starts at once, without
     waiting for a pool thread to wake (~0.1 ms), and a thread slowed by the machine's load
     takes fewer. Returns the tasks' return values.
+
+    Parameters
+    ----------
+    kernel : Numba dispatcher
+        A range kernel ``kernel(start, stop, *args)`` that releases the GIL.
+    n : int
+        Number of indices.
+    *args
+        The kernel's other arguments.
+    cost : int, optional
+        Elements per index (default 1), to size the tasks.
+
+    Returns
+    -------
+    list
+        The tasks' return values, in task order.
 
     Examples
     --------
@@ -439,6 +489,16 @@ def covers(brdf) -> bool:
     visible-normal sampling) cover ``brdf``: Numba available, a Smith GAF, a scalar Beckmann or GGX
     and a :mod:`microfacet.fresnel` term they know. Imports neither Numba nor the kernels.
 
+    Parameters
+    ----------
+    brdf : BRDF
+        Any BRDF.
+
+    Returns
+    -------
+    bool
+        ``True`` when the fused kernels can evaluate it.
+
     Examples
     --------
     >>> import microfacet as mf
@@ -465,6 +525,24 @@ def smith_projected(distribution, shadowing: bool, wi, wo, divide_cos_i: bool, b
     """``(o.h, D G / (4 z_o) [/ z_i])`` by the compiled kernel, or ``None`` when it does
     not apply (no Numba, array parameters, another distribution) or, with ``background``,
     while it compiles (:func:`_kernel`; the caller runs the NumPy reference).
+
+    Parameters
+    ----------
+    distribution : Distribution
+        A scalar Beckmann or GGX distribution.
+    shadowing : bool
+        Whether ``G`` has the shadowing term ``Lambda(i)`` (else masking only).
+    wi, wo : ndarray, shape (..., 3)
+        Unit directions (their batch shapes broadcast).
+    divide_cos_i : bool
+        Divide by ``z_i`` (``True``) or not.
+    background : bool, optional
+        Return ``None`` instead of waiting while the kernel compiles (default ``False``).
+
+    Returns
+    -------
+    (ndarray, ndarray) or None
+        ``o.h`` and ``D G / (4 z_o)`` (``/ z_i``), each of the broadcast batch shape.
 
     Examples
     --------
@@ -550,6 +628,24 @@ def smith_pdf(brdf, wi, wo, dtype=np.float64, out=None, background: bool = False
     the checks of ``wi`` and ``wo`` (as :func:`smith_eval`), or ``None`` when the kernel does not apply
     (or, with ``background``, while it compiles).
 
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF
+        A Smith BRDF (:func:`covers`).
+    wi, wo : ndarray, shape (..., 3)
+        Unit directions (their batch shapes broadcast).
+    dtype : numpy.float64 or numpy.float32, optional
+        Arithmetic and output type (default float64).
+    out : ndarray, optional
+        The ``(...)`` output to write.
+    background : bool, optional
+        Return ``None`` instead of waiting while the kernel compiles (default ``False``).
+
+    Returns
+    -------
+    (ndarray, dict) or None
+        The density and the input checks ``{"wi": deviation, "wo": deviation}``.
+
     References
     ----------
     Dupuy 2015, thesis, Eq. 2.17; Heitz 2018 (visible normals).
@@ -582,6 +678,26 @@ def smith_sample(brdf, u, wo, dtype=np.float64, out=None, background: bool = Fal
     arrays, checked by :func:`microfacet.protocol.sample_outputs`), and the checks of ``u`` (values outside ``[0, 1]``) and
     ``wo`` (:func:`_checks`) made in that pass, or ``None`` when the kernel does not apply (or,
     with ``background``, while it compiles).
+
+    Parameters
+    ----------
+    brdf : MicrofacetBRDF
+        A Smith BRDF (:func:`covers`).
+    u : ndarray, shape (..., 2)
+        Uniform random numbers in ``[0, 1)``.
+    wo : ndarray, shape (..., 3)
+        Unit view directions (batch shapes broadcast with ``u``).
+    dtype : numpy.float64 or numpy.float32, optional
+        Arithmetic and output type (default float64).
+    out : tuple of 3 ndarray, optional
+        ``(wi, weight, pdf)`` arrays to write into.
+    background : bool, optional
+        Return ``None`` instead of waiting while the kernel compiles (default ``False``).
+
+    Returns
+    -------
+    ((ndarray, ndarray, ndarray), dict) or None
+        ``(wi, weight, pdf)`` and the input checks ``{"u": count, "wo": deviation}``.
 
     References
     ----------
@@ -616,6 +732,18 @@ def unit_deviation(w: np.ndarray, background: bool = True) -> float:
     for other arrays, without Numba or, with ``background`` (the default: this is the BRDFs' input
     check), while the pass compiles (:func:`_kernel`). Example: ``unit_deviation(np.array([[0, 0, 1.0]]))`` is 0.
 
+    Parameters
+    ----------
+    w : ndarray, shape (..., 3)
+        Directions.
+    background : bool, optional
+        Use the NumPy reference while the pass compiles (default ``True``).
+
+    Returns
+    -------
+    float
+        ``max | |w|^2 - 1 |`` (``inf`` on NaN or inf).
+
     Examples
     --------
     >>> import numpy as np
@@ -642,6 +770,18 @@ def precompile_calls(calls, progress=None) -> int:
     how many ran; 0 without Numba. The loop of every precompile entry point
     (:mod:`microfacet.precompile`, :mod:`microfacet.kernels_extra`). Example:
     ``precompile_calls([("unit deviation", lambda: unit_deviation(np.eye(3), False))])`` is 1.
+
+    Parameters
+    ----------
+    calls : sequence of (str, callable)
+        Named calls without arguments.
+    progress : callable, optional
+        ``progress(name, seconds)`` called after each call (default none).
+
+    Returns
+    -------
+    int
+        The number of calls run (0 without Numba).
 
     Examples
     --------

@@ -26,6 +26,16 @@ def evaluate(*args, **kwargs):
     """:func:`microfacet.glsl.harness.evaluate` (imports moderngl on first use); the parameters
     and the result are that function's.
 
+    Parameters
+    ----------
+    *args, **kwargs
+        Those of :func:`microfacet.glsl.harness.evaluate`.
+
+    Returns
+    -------
+    object
+        What :func:`microfacet.glsl.harness.evaluate` returns.
+
     Examples
     --------
     The shader's Schlick term against the library's (on a real OpenGL 3.3, headless EGL):
@@ -43,6 +53,16 @@ def evaluate(*args, **kwargs):
 def demo_section(*args, **kwargs):
     """:func:`microfacet.glsl.demo.demo_section` (imports Playwright on first use); the parameters
     and the result are that function's.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Those of :func:`microfacet.glsl.demo.demo_section`.
+
+    Returns
+    -------
+    object
+        What :func:`microfacet.glsl.demo.demo_section` returns.
 
     Examples
     --------

@@ -73,6 +73,14 @@ class ViewerData:
     meta: dict = field(default_factory=dict)
 
     def blobs(self) -> dict[str, bytes]:
+        """The files the page fetches, packed: the pyramids and the environment's levels as
+        flat float32 binaries, their shapes with the rest in ``/meta.json``.
+
+        Returns
+        -------
+        dict of str to bytes
+            ``/leadr.bin``, ``/naive.bin``, ``/env.bin`` and ``/meta.json`` by URL path.
+        """
         leadr, leadr_shapes = _pack(self.leadr)
         naive, naive_shapes = _pack(self.naive)
         env4 = [np.concatenate([m, np.ones(m.shape[:2] + (1,))], -1) for m in self.env_levels]
