@@ -332,8 +332,8 @@ MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", 
 #: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
-    "microfacet.mitsuba.bsdf", "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints", "microfacet.mitsuba.leadr",
-    "microfacet.mitsuba.reference", "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",
+    "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints",
+    "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",
     "microfacet.mitsuba.tree",
 )
 
@@ -434,7 +434,15 @@ def _plain(obj):
 
 
 def _is_mitsuba_plugin(cls) -> bool:
-    return any(b.__module__.startswith("mitsuba") and b.__name__ == "BSDF" for b in cls.__mro__)
+    """A subclass of ``mi.BSDF``, or a plain plugin class of :mod:`microfacet.mitsuba.registry`
+    (one that ``variant_class`` turns into one: its ``__init__`` starts ``mi.BSDF.__init__``)."""
+    if any(b.__module__.startswith("mitsuba") and b.__name__ == "BSDF" for b in cls.__mro__):
+        return True
+    init = cls.__dict__.get("__init__")
+    try:
+        return inspect.isfunction(init) and "mi.BSDF.__init__(self" in inspect.getsource(init)
+    except (OSError, TypeError):
+        return False
 
 
 def parameter_doc_problems(modules, pending=PARAMETER_DOCS_TODO) -> list[str]:

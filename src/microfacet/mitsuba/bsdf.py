@@ -78,6 +78,19 @@ class LobeModel:
     ``separable`` Smith ``G1 G1``, and whether sampling draws visible normals (Eq. 2.23) or
     slopes of ``P``.
 
+    Attributes
+    ----------
+    kind : str
+        Slope distribution: ``beckmann`` (default), ``ggx`` or ``tabulated``.
+    gaf : str
+        ``smith`` (default), ``vgroove`` or ``normal_map``.
+    shadowing : bool
+        Shadowing and masking (default); ``False``: masking only.
+    separable : bool
+        Smith ``G1(i) G1(o)`` (default ``False``: the library's Smith ``G``).
+    samples_visible : bool
+        Sample visible normals (default) or slopes of ``P``.
+
     Examples
     --------
 
@@ -100,6 +113,17 @@ class Roughness:
 
     ``alpha_u``, ``alpha_v`` (one texture when ``isotropic``), the slope correlation ``rho``
     and the mean slope ``(mean_slope_u, mean_slope_v)`` (Eq. 3.4).
+
+    Attributes
+    ----------
+    alpha_u, alpha_v : texture
+        Roughness along u and v (the same texture when ``isotropic``).
+    rho : texture
+        Slope correlation.
+    mean_slope_u, mean_slope_v : texture
+        The mean slope (Eq. 3.4).
+    isotropic : bool
+        Whether one texture gives both roughnesses.
 
     Examples
     --------
@@ -129,6 +153,19 @@ class FresnelParams:
     ``table`` (``table``: an :class:`~.tabulated.InterpolatedColor` of ``cos theta_d``, a
     fit's).
 
+    Attributes
+    ----------
+    kind : str
+        ``none``, ``conductor``, ``dielectric``, ``schlick`` or ``table``.
+    specular_reflectance : texture
+        Factor of ``F``.
+    eta, k : texture or Float, optional
+        Conductor indices (``eta`` alone: a dielectric's relative IOR).
+    f0, f90 : texture, optional
+        Schlick's reflectances at normal and grazing incidence.
+    table : InterpolatedColor, optional
+        A fit's Fresnel table of ``cos theta_d``.
+
     Examples
     --------
     >>> import mitsuba as mi
@@ -154,6 +191,19 @@ class Reflection(NamedTuple):
     ``light`` (the library's ``i``), ``view`` (``o``, Mitsuba's ``si.wi``), the half vector
     ``h``, ``oh = o.h`` and the lanes where it is ``active``.
 
+    Attributes
+    ----------
+    light : Vector3f
+        Direction toward the light (``i``), local frame.
+    view : Vector3f
+        Direction toward the viewer (``o``, ``si.wi``).
+    h : Vector3f
+        Unit half vector.
+    oh : Float
+        ``o.h``.
+    active : Bool
+        The lanes where the reflection is valid.
+
     Examples
     --------
     >>> import mitsuba as mi
@@ -176,6 +226,17 @@ class MicrofacetParams:
 
     The lobe's :class:`LobeModel`, its :class:`Roughness`, its :class:`FresnelParams` and
     whether the lobe is ``anisotropic`` (``alpha_u``/``alpha_v``, ``rho`` or a mean slope given).
+
+    Attributes
+    ----------
+    model : LobeModel
+        What the lobe computes.
+    roughness : Roughness
+        The lobe's textures.
+    fresnel : FresnelParams
+        The Fresnel term.
+    anisotropic : bool
+        Whether the lobe is anisotropic.
 
     Examples
     --------
@@ -958,9 +1019,39 @@ class MicrofacetLobe:
     model: LobeModel
 
     def lobe(self, si, active):
+        """The slope distribution at the shading point (implemented by each plugin).
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+            The shading point (its uv, differentials and ``wi``).
+        active : Bool
+            The lanes to compute.
+
+        Returns
+        -------
+        Lobe
+            A :class:`microfacet.mitsuba.slopes.Lobe` (per lane).
+        """
         raise NotImplementedError
 
     def fresnel(self, si, oh, active):
+        """The Fresnel term times the specular reflectance (implemented by each plugin).
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+            The shading point (for textured parameters).
+        oh : Float
+            ``cos theta_d = o.h`` per lane.
+        active : Bool
+            The lanes to compute.
+
+        Returns
+        -------
+        Spectrum
+            ``F(o.h)`` per lane.
+        """
         raise NotImplementedError
 
     def lobe_eval_pdf(self, ctx, si, light, active, want_value=True, want_pdf=True):
@@ -1054,6 +1145,11 @@ class MicrofacetBSDF(MicrofacetLobe):
     | `schlick_f0` | float or texture | 0.04 | reflectance at normal incidence of Schlick's approximation |
     | `schlick_f90` | float or texture | 1 | reflectance at grazing incidence of Schlick's approximation |
     | `specular_reflectance` | float or texture | 1 | factor on the whole BRDF |
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters (table above).
 
     Examples
     --------

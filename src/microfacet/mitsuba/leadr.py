@@ -214,6 +214,21 @@ class LeadrParams:
     :func:`.bsdf.read_fresnel`'s), the map's repetition ``uv_scale`` and the fallback
     ``footprint`` width (uv units).
 
+    Attributes
+    ----------
+    filename : str
+        The pyramid EXR.
+    pyramid : Pyramid
+        The pyramid merged with the base lobe.
+    model : LobeModel
+        The lobe's computation (Beckmann, Smith).
+    fresnel : FresnelParams
+        The Fresnel term.
+    uv_scale : float
+        Repetitions of the map over the uv square.
+    footprint : float
+        Fallback footprint width in uv units (without ray differentials).
+
     Examples
     --------
     >>> import numpy as np
@@ -418,6 +433,11 @@ class LeadrBSDF(MicrofacetBSDF):
     | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
     | `schlick_f90` | float or texture | 1 | Schlick Fresnel's grazing value, as `mf_microfacet` |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters (table above).
 
     Examples
     --------

@@ -40,6 +40,17 @@ class Parameter(NamedTuple):
 
     ``default`` is as written: ``required``, ``none``, a number or a backquoted word.
 
+    Attributes
+    ----------
+    name : str
+        The parameter's name.
+    type : str
+        Its type as written in the table (``float``, ``texture``, ``string``...).
+    default : str
+        Its default as written: ``required``, ``none``, a number or a backquoted word.
+    meaning : str
+        What it is.
+
     Examples
     --------
     >>> from microfacet.mitsuba.reference import Parameter, parameter_table
