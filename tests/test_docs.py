@@ -332,9 +332,7 @@ MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", 
 #: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
 #: work left to do; remove a module from this tuple once it passes)
 PARAMETER_DOCS_TODO = (
-    "microfacet.mitsuba.fitted", "microfacet.mitsuba.glints",
     "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",
-    "microfacet.mitsuba.tree",
 )
 
 

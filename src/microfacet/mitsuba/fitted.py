@@ -216,6 +216,21 @@ class FitLobe:
     Lambertian base texture (or ``None``) with the probability ``p_lobe`` of sampling the lobe,
     and whether the lobe is anisotropic.
 
+    Attributes
+    ----------
+    model : LobeModel
+        What the lobe computes.
+    fresnel : FresnelParams
+        The fit's Fresnel table.
+    make_lobe : callable
+        ``make_lobe() -> Lobe``: the lobe factory.
+    diffuse : texture or None
+        The Lambertian base's reflectance, or ``None``.
+    p_lobe : float
+        Probability of sampling the lobe (else the base).
+    anisotropic : bool
+        Whether the lobe is anisotropic.
+
     Examples
     --------
     >>> import mitsuba as mi
@@ -244,6 +259,21 @@ class FittedParams:
 
     The file, the fit it renders (``use``), ``specular_reflectance`` and either the analytic
     fit's BRDF ``tree`` with its :mod:`.tree` component ``root``, or a :class:`FitLobe`.
+
+    Attributes
+    ----------
+    filename : str
+        The fit's ``.npz``.
+    use : str
+        The fit rendered.
+    specular_reflectance : texture
+        Factor on the BRDF.
+    tree : BRDF, optional
+        The analytic fit's BRDF tree (``None`` for a lobe).
+    root : optional
+        Its :mod:`.tree` component.
+    lobe : FitLobe, optional
+        The tabulated fit or conversion (``None`` for a tree).
 
     Examples
     --------
@@ -542,6 +572,11 @@ class FittedBSDF(MicrofacetBSDF):
     | `use` | string | `best` | the fit to render: `best` (chosen by image error), `tabulated`, an analytic fit of the file, or the `ggx` / `beckmann` conversions |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
 
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters (table above).
+
     Examples
     --------
     The tabulated fit's value equals the library's ``f_r cos theta_i``:
@@ -576,7 +611,22 @@ class FittedBSDF(MicrofacetBSDF):
         return self.params.lobe.make_lobe()
 
     def fresnel(self, si, oh, active):
-        """The fit's Fresnel table ``F(o.h)`` (Eq. 4.11), times ``specular_reflectance``."""
+        """The fit's Fresnel table ``F(o.h)`` (Eq. 4.11), times ``specular_reflectance``.
+
+        Parameters
+        ----------
+        si : mi.SurfaceInteraction3f
+            The shading point (for a textured ``specular_reflectance``).
+        oh : Float
+            ``cos theta_d = o.h`` per lane.
+        active : Bool
+            The lanes to compute.
+
+        Returns
+        -------
+        Spectrum
+            ``F(o.h)`` per lane.
+        """
         return fresnel_term(self.params.lobe.fresnel, si, oh, active)
 
     def eval_pdf(self, ctx, si, wo, active=True):

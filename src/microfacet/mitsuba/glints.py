@@ -125,6 +125,13 @@ class Footprint(NamedTuple):
 
     Centre ``(cu, cv)`` wrapped into the unit square and covariance ``(uu, vv, uv)``.
 
+    Attributes
+    ----------
+    cu, cv : Float64
+        Footprint centre in uv, wrapped into the unit square.
+    cov : (Float64, Float64, Float64)
+        Covariance ``(uu, vv, uv)`` in uv^2.
+
     Examples
     --------
     >>> import numpy as np
@@ -153,6 +160,13 @@ class SeedGrid(NamedTuple):
     """The ``nx x ny`` lobe seeds of a level and the window ``cutoff`` in standard deviations.
 
     Per lane where a MIP level is chosen per lane.
+
+    Attributes
+    ----------
+    nx, ny : Int or int
+        Lobe seeds along u and v of the level (per lane).
+    cutoff : float
+        The window's half-width in standard deviations.
 
     Examples
     --------
@@ -225,6 +239,25 @@ class GlintParams:
     The microsurface's :class:`GlintTables`, the area model (``exact``), the ``g2`` model, the
     map's repetition ``uv_scale``, the fallback ``footprint`` (texels), the ``max_lobes``
     bound and the Fresnel term (:func:`.bsdf.read_fresnel`).
+
+    Attributes
+    ----------
+    filename : str
+        The microsurface ``.npz``.
+    tables : GlintTables
+        The microsurface's lobes and levels.
+    exact : bool
+        Exact patch areas (else the merged lobe).
+    g2 : str
+        ``correlated`` or ``separable``.
+    uv_scale : float
+        Repetitions of the map over the uv square.
+    footprint : float
+        Fallback pixel width in texels (without ray differentials).
+    max_lobes : int
+        Most lobes gathered per shading point.
+    fresnel : FresnelParams
+        The Fresnel term.
 
     Examples
     --------
@@ -723,6 +756,11 @@ class GlintsBSDF:
     | `schlick_f0` | float or texture | 0.04 | Schlick Fresnel, as `mf_microfacet` |
     | `schlick_f90` | float or texture | 1 | Schlick Fresnel's grazing value, as `mf_microfacet` |
     | `specular_reflectance` | float or texture | 1 | factor on the BRDF |
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's parameters (table above).
 
     Examples
     --------

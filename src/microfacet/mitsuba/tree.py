@@ -314,10 +314,53 @@ class TreeLobe(MicrofacetLobe):
         return self.fresnel_of(si, oh, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
+        """A light direction sampled by the lobe (:meth:`lobe_sample`), as the tree's
+        components sample.
+
+        Parameters
+        ----------
+        ctx : mi.BSDFContext
+            The context.
+        si : mi.SurfaceInteraction3f
+            The view is ``si.wi``.
+        sample1 : Float
+            Unused (the tree's component choice uses it).
+        sample2 : Point2f
+            Uniform numbers in ``[0, 1)^2`` for the normal.
+        active : Bool
+            The lanes to compute.
+
+        Returns
+        -------
+        light : Vector3f
+            The sampled light direction.
+        ok : Bool
+            The lanes with a sample of positive density.
+        """
         bs, _ = self.lobe_sample(ctx, si, sample2, active)
         return bs.wo, active & (bs.pdf > 0)
 
     def eval_pdf(self, ctx, si, light, active=True):
+        """``(f_r cos theta_i, pdf)`` of the lobe toward ``light`` (:meth:`lobe_eval_pdf`).
+
+        Parameters
+        ----------
+        ctx : mi.BSDFContext
+            The context.
+        si : mi.SurfaceInteraction3f
+            The view is ``si.wi``.
+        light : Vector3f
+            Direction toward the light, local frame.
+        active : Bool
+            The lanes to compute.
+
+        Returns
+        -------
+        value : Spectrum
+            ``f_r cos theta_i``.
+        pdf : Float
+            Solid-angle density of :meth:`sample`.
+        """
         return self.lobe_eval_pdf(ctx, si, light, active)
 
 
@@ -401,6 +444,14 @@ class TreeBSDF:
         self.set_tree(brdf)
 
     def set_tree(self, brdf):
+        """Render ``brdf``: build its components and set the BSDF's flags (diffuse
+        reflection when a component is diffuse).
+
+        Parameters
+        ----------
+        brdf : BRDF or None
+            A library BRDF tree (:func:`component_of` supports its nodes); ``None``: none yet.
+        """
         self.brdf = brdf
         self.root = None if brdf is None else component_of(brdf)
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
