@@ -266,8 +266,11 @@ def openpbr_brdf(p: dict):
 
 def pbrlib_brdf(brdf):
     """The library BRDF the pbrlib graph evaluates (the inverse mapping): the same tree with
-    Beckmann lobes as GGX of the same ellipse, mean slopes dropped and Fresnel tables as
-    their least-squares Schlick (MaterialX's own anisotropic shadowing is not modelled).
+    Beckmann lobes as GGX of the same ellipse, mean slopes dropped, Fresnel tables as
+    their least-squares Schlick and a diffuse seen through its surface
+    (:class:`~microfacet.diffuse.TransmittedLambertian`) as the Lambertian of the same mean
+    albedo (:func:`~microfacet.export.analysis.equivalent_lambertian`), as the graph holds them
+    (MaterialX's own anisotropic shadowing is not modelled).
 
     Parameters
     ----------
@@ -287,9 +290,11 @@ def pbrlib_brdf(brdf):
     ('GGX', 0.2)
     """
     from .. import fresnel as fr
-    from ..brdf import MicrofacetBRDF
+    from ..brdf import Lambertian, MicrofacetBRDF
+    from ..diffuse import TransmittedLambertian
     from ..distributions import GGX, Beckmann
     from ..fit.analytic import SumBRDF
+    from .analysis import equivalent_lambertian
 
     def lobe(b):
         d = b.distribution
@@ -304,6 +309,8 @@ def pbrlib_brdf(brdf):
             return lobe(b)
         if isinstance(b, SumBRDF):
             return SumBRDF(*(walk(p) for p in b.brdfs), weights=b.weights)
+        if isinstance(b, TransmittedLambertian):
+            return Lambertian(equivalent_lambertian(b))
         if type(b).__name__ == "LayeredBRDF":
             from ..layered import LayeredBRDF
             return LayeredBRDF(walk(b.coat), walk(b.base))

@@ -26,6 +26,10 @@ Set-up, what makes the comparison exact:
   lighting off (the environment maps bound are MaterialX's zero image), with
   ``hwSpecularEnvironmentMethod = SPECULAR_ENVIRONMENT_FIS`` (``NONE`` generates GLSL that
   does not compile in MaterialX 1.39.5: ``u_refractionTwoSided`` undeclared).
+* Shader compilation: the render process sets ``GALLIVM_PERF=nopt`` (unless set) so that
+  Mesa's llvmpipe skips LLVM's optimization passes: with them, the shader of a fit's mixture
+  of a dozen lobes takes minutes to compile on the CPU (LLVM's scalar evolution), without
+  them seconds, for the same image.
 * pbrlib's multiple-scattering energy compensation (Turquin 2019, ``mx_ggx_energy_compensation``)
   returns 1 in a copy of MaterialX's ``libraries`` folder written to a temporary folder
   (:func:`patched_libraries`; the installed package is untouched): the library's BRDFs are
@@ -415,6 +419,9 @@ def _render_process():
 
 def _render_xml(xml: str, material: str, size: int, light, compensation: bool) -> np.ndarray:
     """:func:`render_mtlx`'s work, in the render process: the document from its XML."""
+    # Mesa llvmpipe: no LLVM optimization passes (a graph of 13 lobes compiles in ~13 s, not
+    # minutes; the image is the same to float32); before the first GL context of this process
+    os.environ.setdefault("GALLIVM_PERF", "nopt")
     mx = _mx()
     doc = mx.createDocument()
     mx.readFromXmlString(doc, xml)
