@@ -331,9 +331,7 @@ _SECTION = re.compile(r"^([A-Z][A-Za-z ]*)\n-{3,}[ \t]*$", re.M)
 MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", "parameters_changed", "to_string"})
 #: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
 #: work left to do; remove a module from this tuple once it passes)
-PARAMETER_DOCS_TODO = (
-    "microfacet.mitsuba.slopes", "microfacet.mitsuba.tabulated",
-)
+PARAMETER_DOCS_TODO = ()
 
 
 def numpydoc_sections(doc: str) -> dict[str, str]:

@@ -163,7 +163,18 @@ class Lobe:
         return dr.normalize(mi.Vector3f(hx, hy, m.z))
 
     def warp(self, k):
-        """Unnormalized standard direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3)."""
+        """Unnormalized standard direction ``k' = (a, b, c)`` of ``k`` (Eq. 3.3).
+
+        Parameters
+        ----------
+        k : Vector3f
+            Unit direction, local frame.
+
+        Returns
+        -------
+        a, b, c : Float
+            The components of ``k'``.
+        """
         a = self.alpha_x * k.x + self.rho * self.alpha_y * k.y
         b = self.alpha_y * self.sqrt_one_minus_rho2 * k.y
         return a, b, k.z - k.x * self.xn - k.y * self.yn
@@ -171,7 +182,18 @@ class Lobe:
     # ------------------------------------------------------------------- NDF
     def ndf(self, h):
         """``D(h) = P_std(X/z, Y/z) / (z^4 det)`` with ``(X, Y) = z m~`` (Eq. 2.11, 3.2);
-        0 below the horizon (division-free, as the oracle's ``ndf``)."""
+        0 below the horizon (division-free, as the oracle's ``ndf``).
+
+        Parameters
+        ----------
+        h : Vector3f
+            Unit normal, local frame.
+
+        Returns
+        -------
+        Float
+            ``D(h)`` in 1/sr.
+        """
         z = dr.select(h.z > 0, h.z, 1.0)
         x, y = self._unscale(-h.x - self.xn * z, -h.y - self.yn * z)
         if self.kind == BECKMANN:     # exp(-(x^2 + y^2)/z^2 - 4 log z) / pi  (Table 2.II)
@@ -185,7 +207,20 @@ class Lobe:
     def lambda_c(self, k):
         """``(Lambda(k), c_k)``: Smith ``Lambda`` of the warped direction ``k'`` (Eq. 3.3,
         Table 2.III) and ``c_k = z_k - x_k x~n - y_k y~n``; ``Lambda`` is only meaningful
-        where ``c_k > 0`` (callers mask the rest)."""
+        where ``c_k > 0`` (callers mask the rest).
+
+        Parameters
+        ----------
+        k : Vector3f
+            Unit direction, local frame.
+
+        Returns
+        -------
+        lam : Float
+            Smith ``Lambda`` of ``k'``.
+        c : Float
+            ``c_k``.
+        """
         a, b, c = self.warp(k)
         r2 = a * a + b * b
         cp = dr.maximum(c, 1e-30)
@@ -199,25 +234,73 @@ class Lobe:
         return lam, c
 
     def projected_area(self, k):
-        """``A(k) = c_k (1 + Lambda(k))`` (Eq. 3.3); 0 where ``c_k <= 0``."""
+        """``A(k) = c_k (1 + Lambda(k))`` (Eq. 3.3); 0 where ``c_k <= 0``.
+
+        Parameters
+        ----------
+        k : Vector3f
+            Unit direction, local frame.
+
+        Returns
+        -------
+        Float
+            ``A(k)``.
+        """
         lam, c = self.lambda_c(k)
         return dr.select(c > 0, c * (1.0 + lam), 0.0)
 
     def g1(self, k):
-        """Smith masking ``G1(k) = z_k / A(k)`` (Eq. 2.14, 3.3); 0 for ``z_k <= 0`` or ``c_k <= 0``."""
+        """Smith masking ``G1(k) = z_k / A(k)`` (Eq. 2.14, 3.3); 0 for ``z_k <= 0`` or ``c_k <= 0``.
+
+        Parameters
+        ----------
+        k : Vector3f
+            Unit direction, local frame.
+
+        Returns
+        -------
+        Float
+            ``G1(k)`` in ``[0, 1]``.
+        """
         area = self.projected_area(k)
         return ratio(k.z, area, (k.z > 0) & (area > 0))
 
     # -------------------------------------------------------- visible normals
     def vndf(self, h, k):
-        """``D_k(h) = <k,h>+ D(h) / A(k)`` (Eq. 2.17)."""
+        """``D_k(h) = <k,h>+ D(h) / A(k)`` (Eq. 2.17).
+
+        Parameters
+        ----------
+        h : Vector3f
+            Unit normal, local frame.
+        k : Vector3f
+            Unit view direction, local frame.
+
+        Returns
+        -------
+        Float
+            ``D_k(h)`` in 1/sr.
+        """
         area = self.projected_area(k)
         kh = dr.maximum(dr.dot(k, h), 0.0)
         return ratio(kh * self.ndf(h), area, area > 0)
 
     def sample_visible(self, u, k):
         """Normal ``h`` distributed as :meth:`vndf` ``(., k)``: standard visible slopes
-        sampled from ``k'`` (Table 2.V) and mapped by Eq. 3.4 (Sec. 2.2, 3.2)."""
+        sampled from ``k'`` (Table 2.V) and mapped by Eq. 3.4 (Sec. 2.2, 3.2).
+
+        Parameters
+        ----------
+        u : Point2f
+            Uniform numbers in ``[0, 1)^2``.
+        k : Vector3f
+            Unit view direction, local frame.
+
+        Returns
+        -------
+        Vector3f
+            Unit normal, local frame.
+        """
         a, b, c = self.warp(k)
         c = dr.maximum(c, 0.0)
         r2 = a * a + b * b
@@ -235,6 +318,18 @@ class Lobe:
         Beckmann: ``x~ = Q2(u1)`` (:func:`beckmann_visible_slope_quantile`),
         ``y~ = erfinv(2 u2 - 1)``. GGX: the closed form of Heitz (JCGT 2018), a uniform disk
         point warped onto the visible half of the unit ellipsoid, as the oracle's.
+
+        Parameters
+        ----------
+        u : Point2f
+            Uniform numbers in ``[0, 1)^2``.
+        cos_theta : Float
+            ``cos theta`` of the standard view direction.
+
+        Returns
+        -------
+        Vector3f
+            Unit standard normal.
         """
         if self.kind == BECKMANN:
             x = beckmann_visible_slope_quantile(u.x, cos_theta)
@@ -251,7 +346,18 @@ class Lobe:
 
     def sample_p22(self, u):
         """Normal whose slope is distributed as ``P`` (density ``D(h) z_h``): Beckmann
-        ``x~, y~ = erfinv(2u - 1)``; GGX ``tan^2 theta = u1 / (1 - u1)``, ``phi = 2 pi u2``."""
+        ``x~, y~ = erfinv(2u - 1)``; GGX ``tan^2 theta = u1 / (1 - u1)``, ``phi = 2 pi u2``.
+
+        Parameters
+        ----------
+        u : Point2f
+            Uniform numbers in ``[0, 1)^2``.
+
+        Returns
+        -------
+        Vector3f
+            Unit normal, local frame.
+        """
         if self.kind == BECKMANN:
             s = dr.erfinv(2.0 * dr.clip(u, U_MIN, 1.0 - U_MIN) - 1.0)
             m = slope_normal(s.x, s.y)

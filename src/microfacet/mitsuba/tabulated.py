@@ -273,7 +273,18 @@ class _TabulatedLobe(Lobe):
         return i, dr.clip((theta - ta) / (tb - ta), 0.0, 1.0)
 
     def ndf(self, h):
-        """``D(h) = P_std(X/z, Y/z) / (z^4 det)`` with the interpolated table (Eq. 2.11)."""
+        """``D(h) = P_std(X/z, Y/z) / (z^4 det)`` with the interpolated table (Eq. 2.11).
+
+        Parameters
+        ----------
+        h : Vector3f
+            Unit normal, local frame.
+
+        Returns
+        -------
+        Float
+            ``D(h)`` in 1/sr.
+        """
         z = dr.select(h.z > 0, h.z, 1.0)
         x, y = self._unscale(-h.x - self.xn * z, -h.y - self.yn * z)
         r2 = x * x + y * y
@@ -288,6 +299,11 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
 
     Made by :func:`tabulated_lobe`; its elevation sampling inverts its tables with
     :data:`NEWTON_STEPS` safeguarded Newton steps.
+
+    Parameters
+    ----------
+    tables : _Tables
+        The fit's tables (:func:`tabulated_lobe`).
 
     Examples
     --------
@@ -307,7 +323,20 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
     """
 
     def d_interp(self, theta, x=None, y=None):
-        """``D`` interpolated log-linearly in ``theta``."""
+        """``D`` interpolated log-linearly in ``theta``.
+
+        Parameters
+        ----------
+        theta : Float
+            Polar angle of the normal in radians.
+        x, y : Float, optional
+            Unused (the anisotropic lobe's azimuth).
+
+        Returns
+        -------
+        Float
+            The interpolated ``D``.
+        """
         i, t = self._locate(theta)
         ld = self.t.log_ndf
         a = ld[i]
@@ -333,7 +362,20 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
 
     def lambda_c(self, k):
         """``(Lambda(k), c_k)`` with ``Lambda = L1(a) / a``, ``a = cot theta'`` of the warped
-        direction (Eq. 2.14, 3.3)."""
+        direction (Eq. 2.14, 3.3).
+
+        Parameters
+        ----------
+        k : Vector3f
+            Unit direction, local frame.
+
+        Returns
+        -------
+        lam : Float
+            ``Lambda`` of ``k'``.
+        c : Float
+            ``c_k``.
+        """
         a, b, c = self.warp(k)
         cot = dr.maximum(c, 1e-30) * dr.rsqrt(dr.maximum(a * a + b * b, 1e-30))
         return self._l1(cot) / cot, c
@@ -342,7 +384,20 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
     def sample_visible_std(self, u, cos_theta):
         """Standard visible normal for a view at ``theta`` in the xz plane (Sec. 2.2, 4.4):
         ``x~`` inverts the visible CDF written with the tail tables, ``y~`` the
-        conditional CDF (:meth:`TabulatedIsotropic.sample_visible_std`)."""
+        conditional CDF (:meth:`TabulatedIsotropic.sample_visible_std`).
+
+        Parameters
+        ----------
+        u : Point2f
+            Uniform numbers in ``[0, 1)^2``.
+        cos_theta : Float
+            ``cos theta`` of the standard view direction.
+
+        Returns
+        -------
+        Vector3f
+            Unit standard normal.
+        """
         c = dr.clip(cos_theta, 0.0, 1.0)
         sn = dr.safe_sqrt(1.0 - c * c)
         a = dr.minimum(c / dr.maximum(sn, 1e-30), 1e8)
@@ -412,7 +467,18 @@ class TabulatedIsotropicLobe(_TabulatedLobe):
 
     def sample_p22(self, u):
         """Normal with slopes distributed as ``P``: ``theta`` from the marginal
-        ``2 pi D cos sin`` (interval by its mass, then the closed-form CDF), ``phi = 2 pi u2``."""
+        ``2 pi D cos sin`` (interval by its mass, then the closed-form CDF), ``phi = 2 pi u2``.
+
+        Parameters
+        ----------
+        u : Point2f
+            Uniform numbers in ``[0, 1)^2``.
+
+        Returns
+        -------
+        Vector3f
+            Unit normal, local frame.
+        """
         t = self.t
         v = dr.clip(u.x, U_MIN, 1.0 - U_MIN)
         i = t.mass_search(v)
@@ -431,6 +497,11 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
     ``theta_fine`` x ``n_fine``), ``Lambda`` from the projected-area table (node azimuths),
     slopes of ``P`` sampled exactly from the interpolant (App. A). Made by
     :func:`tabulated_lobe`.
+
+    Parameters
+    ----------
+    tables : _Tables
+        The fit's tables (:func:`tabulated_lobe`).
 
     Examples
     --------
@@ -468,7 +539,20 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
 
     def d_interp(self, theta, x, y):
         """``D`` log-bilinear (the oracle's ``_d_interp``); ``phi = atan2(-y~, -x~)`` is the
-        azimuth of the normal of slope ``(x~, y~)``."""
+        azimuth of the normal of slope ``(x~, y~)``.
+
+        Parameters
+        ----------
+        theta : Float
+            Polar angle of the normal in radians.
+        x, y : Float
+            Its standard slope ``(x~, y~)`` (for the azimuth).
+
+        Returns
+        -------
+        Float
+            The interpolated ``D``.
+        """
         i, t = self._locate(theta)
         j, j1, w = self._wrap(dr.atan2(-y, -x), self.t.n_fine, self.t.dphi_fine)
         a = self._log_column(i, j, t)
@@ -476,7 +560,20 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
 
     def lambda_c(self, k):
         """``(Lambda(k), c_k)``, ``Lambda = A(k') / cos theta_k' - 1`` from the bilinear
-        projected-area table (Eq. 2.14, 3.3)."""
+        projected-area table (Eq. 2.14, 3.3).
+
+        Parameters
+        ----------
+        k : Vector3f
+            Unit direction, local frame.
+
+        Returns
+        -------
+        lam : Float
+            ``Lambda`` of ``k'``.
+        c : Float
+            ``c_k``.
+        """
         a, b, c = self.warp(k)
         r = dr.sqrt(a * a + b * b)
         th = dr.atan2(r, dr.maximum(c, 0.0))
@@ -508,7 +605,18 @@ class TabulatedAnisotropicLobe(_TabulatedLobe):
         cos sin`` (its CDF by 4-point Gauss-Legendre from the cell's edge, where the
         oracle uses 8: on these small smooth cells both are exact to float32), ``phi`` in
         closed form
-        ``w = log1p(v expm1(b)) / b``, ``b = ln D_(j+1) - ln D_j`` at ``theta``."""
+        ``w = log1p(v expm1(b)) / b``, ``b = ln D_(j+1) - ln D_j`` at ``theta``.
+
+        Parameters
+        ----------
+        u : Point2f
+            Uniform numbers in ``[0, 1)^2``.
+
+        Returns
+        -------
+        Vector3f
+            Unit normal, local frame.
+        """
         t = self.t
         cdf = t.cell_cdf
         v = dr.clip(u.x, U_MIN, 1.0 - U_MIN) * t.cell_total
