@@ -107,3 +107,18 @@ def test_mtlx_render_of_a_corpus_fit(mtlx_render, corpus, tmp_path):
     print(f"corpus fit {name}: relL1 vs fit {vs_fit:.4%}, vs as held {vs_held:.4%}")
     assert vs_held < 1e-3, f"{name}: relL1 against the graph as held {vs_held:.4%}"
     assert vs_fit < 0.15, f"{name}: relL1 against the fit {vs_fit:.4%}"
+
+
+def test_consumer_section_shows_materialx(mtlx_render, tmp_path):
+    """The demo's consumer section: MaterialX's render beside the library's, with its error
+    against the fit and against the graph as held (Blender and three.js: test_export_threejs.py)."""
+    from microfacet.export.consumers import consumer_renders, consumer_section
+    brdf, tolerance = CASES["dielectric_over_lambert"]
+    images, errors, missing = consumer_renders(brdf, size=SIZE, consumers=("MaterialX",))
+    assert sorted(images) == ["MaterialX", "microfacet"] and not missing
+    assert errors["MaterialX"] < tolerance and errors["MaterialX vs graph as held"] < tolerance
+    text = consumer_section(brdf, tmp_path, "a plastic", size=SIZE, consumers=("MaterialX",))
+    assert text.count("<img") == 2 and "MaterialX: relL1" in text and "pbrlib graph as held" in text
+    assert (tmp_path / "consumers_1.png").stat().st_size > 0
+    with pytest.raises(ValueError, match="consumers"):
+        consumer_renders(brdf, size=SIZE, consumers=("Unreal",))

@@ -138,7 +138,8 @@ def test_consumer_section_shows_each_consumer_with_its_error(tmp_path, three):
         _skip_or_fail("bpy absent: make setup-blender")
     brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX.from_ellipse(0.3, 0.1, 0.5), fr.Schlick([0.05, 0.05, 0.06], 1.0)),
                    mf.Lambertian([0.4, 0.1, 0.05]))
-    text = consumer_section(brdf, tmp_path, "a plastic", size=48, three=three)   # the module's browser session
+    text = consumer_section(brdf, tmp_path, "a plastic", size=48, three=three,   # the module's browser session
+                            consumers=("Blender (Cycles)", "three.js"))   # MaterialX: test_export_mtlx_render.py
     assert text.count("<img") == 4 and "not rendered" not in text          # + the glTF material as held
     assert all((tmp_path / f"consumers_{i}.png").stat().st_size > 0 for i in range(4))
     assert "Blender (Cycles): relL1" in text and "three.js: relL1" in text

@@ -493,14 +493,14 @@ def _viewer_section(out) -> str:
 
 
 def _exports_section(out, example: FitExample, fit_file: Path) -> str:
-    """One fitted material's best analytic fit rendered by the library, Blender (Cycles)
-    and three.js (:func:`microfacet.export.consumers.consumer_section`)."""
+    """One fitted material's best analytic fit rendered by the library, Blender (Cycles),
+    three.js and MaterialX (:func:`microfacet.export.consumers.consumer_section`)."""
     def render():
         from .export import choose_model
         from .export.consumers import consumer_section
         name, brdf, _ = choose_model(fit_file)
         return consumer_section(brdf, out / "exports", f"{example.label}: its {name} fit", href="exports/")
-    return _optional_section("exports", "Exported materials in Blender and three.js",
+    return _optional_section("exports", "Exported materials in Blender, three.js and MaterialX",
                              "make setup-blender, make setup-npm", render, (ImportError, MicrofacetError, OSError))
 
 
@@ -555,7 +555,7 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         says so and a warning is printed.
     exports : bool
         Include the exports section: the first fitting material's best fit exported to
-        Blender and glTF and rendered by Cycles and three.js beside the library
+        Blender, glTF and MaterialX and rendered by Cycles, three.js and MaterialX beside the library
         (:func:`microfacet.export.consumers.consumer_section`); a consumer that is not
         installed is named with what installs it.
 
