@@ -10,6 +10,8 @@ library's. :func:`consumer_section` writes the PNGs and returns an HTML section 
 
 Examples
 --------
+>>> CONSUMERS                                   # the names consumer_renders(consumers=...) takes
+('Blender (Cycles)', 'three.js', 'MaterialX')
 >>> import microfacet as mf
 >>> renders, errors, missing = consumer_renders(mf.MicrofacetBRDF(mf.GGX(alpha=0.1)))   # doctest: +SKIP
 >>> errors["Blender (Cycles)"] < 0.005                                                  # doctest: +SKIP
