@@ -329,9 +329,6 @@ def test_author_year_citations_are_in_the_references():
 _SECTION = re.compile(r"^([A-Z][A-Za-z ]*)\n-{3,}[ \t]*$", re.M)
 #: the methods by which a Mitsuba 3 BSDF plugin implements Mitsuba's interface
 MITSUBA_INTERFACE = frozenset({"eval", "sample", "pdf", "eval_pdf", "traverse", "parameters_changed", "to_string"})
-#: modules whose docstrings do not have their Parameters/Returns sections yet (issue 28: the
-#: work left to do; remove a module from this tuple once it passes)
-PARAMETER_DOCS_TODO = ()
 
 
 def numpydoc_sections(doc: str) -> dict[str, str]:
@@ -441,11 +438,10 @@ def _is_mitsuba_plugin(cls) -> bool:
         return False
 
 
-def parameter_doc_problems(modules, pending=PARAMETER_DOCS_TODO) -> list[str]:
+def parameter_doc_problems(modules) -> list[str]:
     """One line per public function, class or method of ``modules`` whose docstring lacks a
     numpydoc ``Parameters`` entry for one of its parameters, or a ``Returns``/``Yields``
-    section where its source returns a value. Definitions of the modules of ``pending`` are
-    left out; ``python tests/test_docs.py`` lists them all."""
+    section where its source returns a value (``python tests/test_docs.py`` lists them)."""
     seen, problems = set(), []
     for modname in modules:
         module = importlib.import_module(modname)
@@ -453,7 +449,7 @@ def parameter_doc_problems(modules, pending=PARAMETER_DOCS_TODO) -> list[str]:
         for name in names:
             obj = getattr(module, name)
             owner = getattr(obj, "__module__", None) or ""
-            if not owner.startswith("microfacet") or owner in pending or id(obj) in seen:
+            if not owner.startswith("microfacet") or id(obj) in seen:
                 continue
             seen.add(id(obj))
             label = f"{owner}.{getattr(obj, '__qualname__', name)}"
@@ -468,7 +464,7 @@ def parameter_doc_problems(modules, pending=PARAMETER_DOCS_TODO) -> list[str]:
                     pass
                 plugin = _is_mitsuba_plugin(obj)
                 for cls in obj.__mro__:
-                    if not cls.__module__.startswith("microfacet") or cls.__module__ in pending:
+                    if not cls.__module__.startswith("microfacet"):
                         continue
                     for mname, raw in vars(cls).items():
                         if mname.startswith("_") or isinstance(raw, property) or id(raw) in seen:
@@ -527,8 +523,8 @@ if __name__ == "__main__":      # python tests/test_docs.py: the public names wi
           "a re-exported name counts in each module that lists it)")
     for name in missing:
         print(" ", name)
-    problems = parameter_doc_problems([m for m in OWNED_MODULES if m in importable], pending=())
+    problems = parameter_doc_problems([m for m in OWNED_MODULES if m in importable])
     print(f"{len(problems)} missing numpydoc Parameters/Returns sections in the documented modules "
-          f"({len({p.split(': ')[0] for p in problems})} definitions), pending modules included:")
+          f"({len({p.split(': ')[0] for p in problems})} definitions):")
     for line in problems:
         print(" ", line)
