@@ -122,3 +122,57 @@ def test_consumer_section_shows_materialx(mtlx_render, tmp_path):
     assert (tmp_path / "consumers_1.png").stat().st_size > 0
     with pytest.raises(ValueError, match="consumers"):
         consumer_renders(brdf, size=SIZE, consumers=("Unreal",))
+
+
+KILLED = r"""
+import os, sys, time
+import microfacet as mf
+from microfacet.export.mtlx import mtlx_document
+from microfacet.export import mtlx_render as mr
+mr.render_mtlx(mtlx_document(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)))[0], size=8)
+print(os.getpid(), flush=True)
+time.sleep(60)
+"""
+
+
+def _children(pids) -> list[int]:
+    """Live children of the processes ``pids`` (from /proc; zombies left out)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        try:
+            status = open(f"/proc/{entry}/status").read()
+        except (OSError, ValueError):
+            continue
+        fields = dict(line.split(":\t", 1) for line in status.splitlines() if ":\t" in line)
+        if int(fields.get("PPid", "0")) in pids and not fields.get("State", "").startswith("Z"):
+            out.append(int(entry))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return not open(f"/proc/{pid}/status").read().split("State:\t", 1)[1].startswith("Z")
+    except OSError:
+        return False
+
+
+def test_render_process_and_xvfb_end_with_a_killed_parent(mtlx_render):
+    """kill -9 of a process that rendered leaves neither its render process nor its Xvfb."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}      # its own Xvfb
+    p = subprocess.Popen([sys.executable, "-c", KILLED], stdout=subprocess.PIPE, text=True, env=env)
+    pid = int(p.stdout.readline())
+    workers = _children({pid})
+    spawned = workers + _children(set(workers))                        # the render process, its Xvfb
+    assert workers and len(spawned) > len(workers), spawned
+    os.kill(pid, signal.SIGKILL)
+    p.wait()
+    for _ in range(100):
+        alive = [q for q in spawned if _alive(q)]
+        if not alive:
+            break
+        time.sleep(0.1)
+    assert not alive, f"left behind: {alive}"

@@ -133,6 +133,18 @@ def xvfb_available() -> bool:
 _XVFB: dict = {"proc": None, "display": None, "stopped": False}
 
 
+def _end_with_parent() -> None:
+    """In the child before ``exec``: SIGTERM when the process that started it ends, even by
+    ``kill -9`` (Linux ``prctl(PR_SET_PDEATHSIG)``; elsewhere nothing), so that no Xvfb is
+    left behind."""
+    import ctypes
+    import signal
+    try:
+        ctypes.CDLL(None).prctl(1, signal.SIGTERM)      # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):                   # pragma: no cover - not Linux
+        pass
+
+
 def _start_xvfb(timeout: float) -> str:
     """Start ``Xvfb`` on a display number it picks itself (``-displayfd``: no race between
     processes) and return ``":N"``."""
@@ -141,7 +153,8 @@ def _start_xvfb(timeout: float) -> str:
         raise RuntimeError("xvfb_display: no DISPLAY and no Xvfb: apt-get install xvfb")
     read, write = os.pipe()
     proc = subprocess.Popen([exe, "-displayfd", str(write), "-screen", "0", "640x480x24", "-nolisten", "tcp"],
-                            pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            preexec_fn=_end_with_parent)
     os.close(write)
     number = b""
     t0 = time.monotonic()
@@ -411,7 +424,9 @@ def _render_process():
     if executor is None:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
-        executor = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        from ..batch.workers import exit_with
+        executor = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=exit_with,
+                                       initargs=(os.getpid(),))       # ends with this process, even after kill -9
         _RENDERER["executor"] = executor
         atexit.register(executor.shutdown)
     return executor
