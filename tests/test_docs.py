@@ -58,6 +58,8 @@ OWNED_MODULES = (
     "microfacet.glints.reference",
     "microfacet.glsl", "microfacet.glsl.sources", "microfacet.glsl.textures", "microfacet.glsl.harness",
     "microfacet.glsl.server", "microfacet.glsl.browser", "microfacet.glsl.demo",
+    # the command line and the demo
+    "microfacet.cli", "microfacet.demo_materials", "microfacet.demo",
 )
 #: the documented modules of the Mitsuba plugins, checked apart (they need the optional mitsuba package)
 MITSUBA_MODULES = tuple(m for m in OWNED_MODULES if m.startswith("microfacet.mitsuba"))
@@ -66,7 +68,7 @@ MITSUBA_MODULES = tuple(m for m in OWNED_MODULES if m.startswith("microfacet.mit
 DOCTEST_MODULES = tuple(m for m in OWNED_MODULES if m not in (
     "microfacet.distributions", "microfacet.render", "microfacet.io", "microfacet.fit", "microfacet.leadr",
     "microfacet.batch")) + (
-    "microfacet.demo", "microfacet.cli.common", "microfacet.errors", "microfacet._buffers",
+    "microfacet.cli.common", "microfacet.errors", "microfacet._buffers",
 )
 
 

@@ -8,6 +8,13 @@ Carlo with the BRDF's own importance sampling), written as EXR (data) and PNG (p
 plotted as polar lobes, and gathered in ``index.html``. The fitting section fits measured
 materials of the shared corpus (or, without it, built-in analytic ones) as ``microfacet
 fit`` does and shows data, best fit, tabulated fit and the published ABC fit side by side.
+
+>>> DEFAULT_SIZE, DEFAULT_SPP, DEFAULT_SEED
+(128, 64, 0)
+>>> ABC_LABEL
+'ABC (Löw 2012)'
+>>> run_demo("demo-output", size=48, workers=default_workers())   # doctest: +SKIP
+PosixPath('demo-output/index.html')
 """
 from __future__ import annotations
 
@@ -50,8 +57,11 @@ __all__ = ["Panel", "DemoFigure", "thesis_figures", "render_panel", "run_demo", 
 #: Logger of the demo's section times (INFO; ``microfacet demo --timings`` prints them).
 log = logging.getLogger(__name__)
 
-DEFAULT_SIZE = 128      # sphere image side, pixels
-DEFAULT_SPP = 64        # environment samples per pixel (a power of two stratifies best)
+#: Sphere image side, pixels.
+DEFAULT_SIZE = 128
+#: Environment samples per pixel (a power of two stratifies best).
+DEFAULT_SPP = 64
+#: Random seed of the environment samples.
 DEFAULT_SEED = 0
 EXPOSURE = 0.0          # preview exposure in stops, the same for every image
 #: Grazing side light (102 deg from the view), where GAFs differ most (Fig. 2.3).
@@ -60,7 +70,25 @@ SIDE_LIGHT = DirectionalLight(direction=(-1.0, 0.3, -0.2), irradiance=1.0)
 
 @dataclass(frozen=True)
 class Panel:
-    """One BRDF of a figure: file-name ``key``, short ``label``, optional ``detail``."""
+    """One BRDF of a figure, captioned ``label (detail)``.
+
+    Parameters
+    ----------
+    key : str
+        File-name key of its images.
+    label : str
+        Short label.
+    brdf : BRDF
+        The BRDF rendered.
+    detail : str
+        Optional detail, in parentheses in the caption.
+
+    Examples
+    --------
+    >>> from microfacet import GGX, MicrofacetBRDF
+    >>> Panel("ggx", "GGX", MicrofacetBRDF(GGX(alpha=0.2)), "α = 0.2").caption
+    'GGX (α = 0.2)'
+    """
 
     key: str
     label: str
@@ -74,7 +102,38 @@ class Panel:
 
 @dataclass(frozen=True)
 class DemoFigure:
-    """A thesis figure: rows of panels, with what the rows share stated in ``caption``."""
+    """A thesis figure: rows of panels, with what the rows share stated in ``caption``.
+
+    Parameters
+    ----------
+    key : str
+        File-name key of the figure.
+    title : str
+        Its heading.
+    caption : str
+        What its panels share and show.
+    rows : tuple of (str, tuple of Panel)
+        Rows of panels, each with its label (``""``: none).
+    lobe_views_deg : tuple of float
+        View angles (degrees) of the polar lobe plots.
+    lobe_planes_deg : tuple of float
+        Azimuths (degrees) of the planes of incidence of the lobe plots.
+    light : DirectionalLight
+        The spheres' directional light; default :data:`LIGHT`.
+
+    Attributes
+    ----------
+    panels : tuple of Panel
+        Every panel, row by row.
+
+    Examples
+    --------
+    >>> from microfacet import GGX, MicrofacetBRDF
+    >>> p = Panel("ggx", "GGX", MicrofacetBRDF(GGX(alpha=0.2)))
+    >>> fig = DemoFigure("one", "One panel", "A GGX sphere.", (("", (p,)),))
+    >>> fig.panels == (p,), fig.light == LIGHT
+    (True, True)
+    """
 
     key: str
     title: str
@@ -168,7 +227,18 @@ def _orientation_figure() -> DemoFigure:
 
 
 def thesis_figures() -> list[DemoFigure]:
-    """The figures of the demo, in thesis order (Figs. 2.2-2.6)."""
+    """The figures of the demo, in thesis order (Figs. 2.2-2.6).
+
+    Returns
+    -------
+    list of DemoFigure
+        The five figures.
+
+    Examples
+    --------
+    >>> [fig.key for fig in thesis_figures()]
+    ['fig2_2', 'fig2_3', 'fig2_4', 'fig2_5', 'fig2_6']
+    """
     return [_fresnel_figure(), _gaf_figure(), _roughness_figure(), _anisotropy_figure(),
             _orientation_figure()]
 
@@ -187,8 +257,22 @@ def fit_sizes(size: int) -> tuple[int, int]:
     """Sphere sides (px) of the fitting section for a demo of ``size``: the comparison
     picture's (:data:`FIT_SPHERE_SIZE` at the default 128) and the environment row's.
 
+    Parameters
+    ----------
+    size : int
+        The demo's sphere side (px).
+
+    Returns
+    -------
+    tuple of int
+        The comparison picture's and the environment row's sphere sides (px).
+
+    Examples
+    --------
     >>> fit_sizes(128)
     (192, 96)
+    >>> fit_sizes(16)
+    (32, 16)
     """
     return max(32, min(FIT_SPHERE_SIZE, 3 * size // 2)), max(16, min(FIT_ENV_SIZE, size))
 
@@ -196,7 +280,25 @@ def fit_sizes(size: int) -> tuple[int, int]:
 def shown_fits(summary: dict) -> list[tuple[str, str]]:
     """``(label, fit name)`` of the fits the demo shows from a ``microfacet fit`` summary:
     the best and the tabulated fit, or, where the tabulated fit is the best, the best
-    analytic fit (:func:`microfacet.fit.outputs.best_fit` of those with a model)."""
+    analytic fit (:func:`microfacet.fit.outputs.best_fit` of those with a model).
+
+    Parameters
+    ----------
+    summary : dict
+        A fit's summary (``OUT.json``, :func:`fit_demo_material`): its ``"best"`` fit and
+        its ``"fits"``.
+
+    Returns
+    -------
+    list of (str, str)
+        Label and fit name of each fit shown.
+
+    Examples
+    --------
+    >>> summary = {"best": "ggx", "fits": {"ggx": {"model": "ggx"}, "tabulated": {"model": None}}}
+    >>> shown_fits(summary)
+    [('best: ggx', 'ggx'), ('tabulated fit', 'tabulated')]
+    """
     from .fit.outputs import best_fit
     fits, best = summary["fits"], summary["best"]
     out = [(f"best: {best}", best)]
@@ -226,9 +328,28 @@ def fit_and_picture(example: FitExample, work: str | os.PathLike, size: int) -> 
     (:func:`microfacet.render.fit_comparison_png`) of data | best | tabulated | ABC with
     each one's errors, and the environment images of :func:`microfacet.metrics.render_images`.
 
-    Returns ``{"summary", "npz", "shown": [(label, fit name)], "abc": {"image", "log",
-    "chromaticity"} or None, "picture": PNG bytes, "environment": {label: (S, S, 3) image},
-    "seconds": wall time of this work}``.
+    Parameters
+    ----------
+    example : FitExample
+        The material.
+    work : path-like
+        The folder of its fit files.
+    size : int
+        The demo's sphere side (px; :func:`fit_sizes`).
+
+    Returns
+    -------
+    dict
+        ``{"summary", "npz", "shown": [(label, fit name)], "abc": {"image", "log",
+        "chromaticity"} or None, "picture": PNG bytes, "environment": {label: (S, S, 3)
+        image}, "seconds": wall time of this work}``.
+
+    Examples
+    --------
+    >>> example = fit_examples()[0]
+    >>> r = fit_and_picture(example, ".", size=32)      # doctest: +SKIP
+    >>> r["picture"][:4]                                # doctest: +SKIP
+    b'\x89PNG'
     """
     from .fit import load
     from .fit.outputs import IMAGE_SIZE, LOG_PAIRS
@@ -284,7 +405,35 @@ def fit_section(out: Path, size: int, examples: Sequence[FitExample] | None = No
     lights with backscattering and in-plane curves, and the same under the environment;
     return the HTML section. ``results``: the materials' :func:`fit_and_picture` results or
     futures of them (``.result()``), as :func:`run_demo` computes them in its pool; default
-    computed here, the fit files into a temporary folder. ``note``: what the materials are."""
+    computed here, the fit files into a temporary folder.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's folder.
+    size : int
+        The demo's sphere side (px; :func:`fit_sizes`).
+    examples : sequence of FitExample, optional
+        The materials; default :func:`fit_materials`.
+    progress : callable, optional
+        Called with 1 after each material.
+    results : sequence, optional
+        The materials' :func:`fit_and_picture` results or futures of them.
+    note : str
+        What the materials are (the second value of :func:`fit_materials`).
+
+    Returns
+    -------
+    str
+        The HTML section.
+
+    Examples
+    --------
+    >>> examples, note = fit_materials(quick=True)
+    >>> html = fit_section(Path("."), 32, examples, note=note)   # doctest: +SKIP
+    >>> html.startswith('<section id="fitting">')               # doctest: +SKIP
+    True
+    """
     from .fit.outputs import IMAGE_SIZE, LOG_PAIRS
     from .metrics import describe_image_error, describe_log_error
     if examples is None:
@@ -357,7 +506,37 @@ def _sphere(size: int) -> Sphere:
 def render_panel(brdf: BRDF, light: DirectionalLight, size: int, env_map: np.ndarray, spp: int,
                  seed: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
     """Directional and environment renders ``(size, size, 3)`` of one BRDF on the sphere;
-    the environment uniforms come from ``default_rng(seed)``."""
+    the environment uniforms come from ``default_rng(seed)``.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        The material.
+    light : DirectionalLight
+        The directional light.
+    size : int
+        Image side (pixels).
+    env_map : ndarray
+        Lat-long environment ``(H, W, 3)`` (:func:`microfacet.render.procedural_sky`).
+    spp : int
+        Environment samples per pixel.
+    seed : sequence of int
+        Seed of the environment samples.
+
+    Returns
+    -------
+    direct, environment : ndarray
+        The two ``(size, size, 3)`` images (0 outside the sphere).
+
+    Examples
+    --------
+    >>> from microfacet import GGX, MicrofacetBRDF
+    >>> direct, lit = render_panel(MicrofacetBRDF(GGX(alpha=0.3)), LIGHT, 8, procedural_sky(8, 16), 1, (0,))
+    >>> direct.shape, lit.shape
+    ((8, 8, 3), (8, 8, 3))
+    >>> bool(direct.max() > 0)
+    True
+    """
     sphere = _sphere(size)
     direct = shade_directional(brdf, sphere.wo, sphere.to_local(light.w), light.rgb)
     lit = shade_environment(brdf, sphere.wo, sphere.frame, Environment(env_map), spp,
@@ -451,7 +630,18 @@ def _intro_html(size: int, spp: int, seed: int) -> str:
 
 
 def default_workers() -> int:
-    """Worker processes for the demo: the CPUs this process may use, at most 4."""
+    """Worker processes for the demo: the CPUs this process may use, at most 4.
+
+    Returns
+    -------
+    int
+        Between 1 and 4.
+
+    Examples
+    --------
+    >>> 1 <= default_workers() <= 4
+    True
+    """
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
@@ -521,6 +711,13 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
              viewer: bool = True, mitsuba: bool = True, exports: bool = True) -> Path:
     """Render every figure into ``out_dir`` and write ``out_dir/index.html`` (last).
 
+    The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
+    environment samples of panel ``j`` of figure ``i`` come from
+    ``default_rng([seed, i, j])``. All or nothing, as ``microfacet fit``: the files are
+    rendered into a hidden staging folder inside ``out_dir`` and moved into place only when
+    every one is written (``index.html`` last); a demo that fails (a full disk, Ctrl-C)
+    leaves ``out_dir`` as it was (:func:`microfacet.io.atomic.staging_folder`).
+
     Parameters
     ----------
     out_dir : path-like
@@ -559,13 +756,26 @@ def run_demo(out_dir, size: int = DEFAULT_SIZE, spp: int = DEFAULT_SPP, seed: in
         (:func:`microfacet.export.consumers.consumer_section`); a consumer that is not
         installed is named with what installs it.
 
-    The output depends only on ``size``, ``spp`` and ``seed`` (not on ``workers``): the
-    environment samples of panel ``j`` of figure ``i`` come from
-    ``default_rng([seed, i, j])``. All or nothing, as ``microfacet fit``: the files are
-    rendered into a hidden staging folder inside ``out_dir`` and moved into place only when
-    every one is written (``index.html`` last); a demo that fails (a full disk, Ctrl-C)
-    leaves ``out_dir`` as it was (:func:`microfacet.io.atomic.staging_folder`). Returns the
-    path of ``index.html``.
+    Returns
+    -------
+    Path
+        The path of ``index.html``.
+
+    Raises
+    ------
+    ValueError
+        Where ``size``, ``spp`` or ``workers`` is not an integer in range.
+    MicrofacetError
+        Where ``out_dir`` is empty or not a folder.
+
+    Examples
+    --------
+    >>> run_demo("demo-output", size=48, spp=4)      # doctest: +SKIP
+    PosixPath('demo-output/index.html')
+    >>> run_demo("demo-output", size=4)
+    Traceback (most recent call last):
+    ...
+    ValueError: size must be an integer >= 8, got 4
     """
     for name, v, lo in (("size", size, 8), ("spp", spp, 1), ("workers", workers, 1)):
         if isinstance(v, bool) or int(v) != v or v < lo:

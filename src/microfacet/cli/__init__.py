@@ -35,7 +35,20 @@ COMMANDS = (demo, validate, fit, bake, glints, view, export)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the ``microfacet`` command."""
+    """The argument parser of the ``microfacet`` command (one subcommand per module of
+    :mod:`microfacet.cli`; ``glints render`` has its own parser, which :func:`main` picks).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser; each subcommand's namespace carries its ``run`` function.
+
+    Examples
+    --------
+    >>> args = build_parser().parse_args(["demo", "-o", "demo-output", "--size", "48"])
+    >>> args.command, args.output, args.size
+    ('demo', 'demo-output', 48)
+    """
     parser = Parser(prog=PROG, description="Multiscale microfacet rendering: BRDFs in slope space, "
                                            "fitting, LEAN/LEADR prefiltering and glints.")
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
@@ -59,7 +72,28 @@ def _one_line(e: Exception) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    """Run the command line with ``argv``; bad input prints one line on stderr, without a
+    traceback.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments, without the program name; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success, else that of a usage error, a failed command or an
+        interruption (:mod:`microfacet.cli.common`).
+
+    Examples
+    --------
+    >>> main(["--version"])
+    microfacet ...
+    0
+    >>> main(["demo", "-o", "demo-output", "--size", "48"])     # doctest: +SKIP
+    0
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if argv[:2] == ["glints", "render"]:        # second form of 'glints'
