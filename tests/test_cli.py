@@ -50,8 +50,8 @@ def test_demo_writes_a_complete_report(demo_dir, capsys):
     fit_srcs = [s for s in srcs if s.startswith("fitting/")]
     assert len(fit_srcs) == sum(1 + 3 + (ex.abc is not None) for ex in examples)
     assert (ABC_LABEL in html) == any(ex.abc is not None for ex in examples)
-    exports_srcs = [s for s in srcs if s.startswith("exports/")]    # library, Cycles, three.js, glTF as held
-    assert len(exports_srcs) == 4 if os.environ.get("CI") == "true" else 1 <= len(exports_srcs) <= 4
+    exports_srcs = [s for s in srcs if s.startswith("exports/")]    # library, Cycles, three.js, glTF as held, MaterialX
+    assert len(exports_srcs) == 5 if os.environ.get("CI") == "true" else 1 <= len(exports_srcs) <= 5
     assert len(srcs) == 1 + 2 * n_panels + len(figures) + len(fit_srcs) + LEADR_STEPS + 5 + len(exports_srcs)
     for src in srcs:
         with Image.open(demo_dir / src) as im:
