@@ -33,7 +33,7 @@ import numpy as np
 
 import microfacet as mf
 from microfacet import fresnel as fr
-from microfacet.export.consumers import LIGHT, library_render, rel_l1
+from microfacet.export.comparison import LIGHT, library_render, rel_l1
 from microfacet.export.mtlx import mtlx_document
 from microfacet.export.mtlx_render import compare_mtlx, render_mtlx
 from microfacet.fit import SumBRDF

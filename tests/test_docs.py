@@ -49,7 +49,7 @@ OWNED_MODULES = (
     "microfacet.mitsuba.demo",
     # the exports, glints and real-time modules (export.blender_addon runs inside Blender only: it imports bpy)
     "microfacet.export", "microfacet.export.analysis", "microfacet.export.blender", "microfacet.export.blender_nodes",
-    "microfacet.export.consumers", "microfacet.export.glints_threejs", "microfacet.export.gltf",
+    "microfacet.export.comparison", "microfacet.export.consumers", "microfacet.export.glints_threejs", "microfacet.export.gltf",
     "microfacet.export.glints_export",
     "microfacet.export.leadr_textures", "microfacet.export.leadr_threejs", "microfacet.export.mtlx",
     "microfacet.export.mtlx_render",

@@ -217,7 +217,7 @@ def test_render_cycles_of_a_description_with_the_default_light():
     """A material description renders (the default light's negative x once read as an option)."""
     _bpy_python()
     from microfacet.export.blender import render_cycles
-    from microfacet.export.consumers import library_render, rel_l1
+    from microfacet.export.comparison import library_render, rel_l1
     lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), fr.Schlick(0.9))
     image = render_cycles(blender_material(lobe)[0], size=24)
     assert rel_l1(image, library_render(lobe, 24)) < 0.005

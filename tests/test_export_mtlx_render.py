@@ -55,7 +55,7 @@ def test_mtlx_render_matches_library(mtlx_render, name):
 def test_mtlx_render_rotation_sign_and_compensation(mtlx_render):
     """The exported ellipse turns the library's way (the mirror image is far off), and the
     patched library matters: with pbrlib's energy compensation kept the error is > 5 %."""
-    from microfacet.export.consumers import library_render, rel_l1
+    from microfacet.export.comparison import library_render, rel_l1
     from microfacet.export.mtlx import mtlx_document
     brdf, _ = CASES["aniso_rotated"]
     mirror = mf.MicrofacetBRDF(mf.GGX.from_ellipse(0.35, 0.08, -0.6), fr.Schlick([0.9, 0.8, 0.5]))
@@ -96,7 +96,7 @@ def test_mtlx_render_of_a_corpus_fit(mtlx_render, corpus, tmp_path):
     (the fit's Fresnel tables as Schlick pairs, its subsurface diffuse as a Lambertian)."""
     from microfacet.cli import main
     from microfacet.export import choose_model
-    from microfacet.export.consumers import library_render, rel_l1
+    from microfacet.export.comparison import library_render, rel_l1
     fit = tmp_path / "plastic"
     assert main(["fit", str(corpus("merl/specular-orange-phenolic")), "-o", str(fit), "--no-picture"]) == 0
     assert main(["export", str(fit.with_suffix(".npz")), "--to", "mtlx", "-o", str(tmp_path / "out.mtlx")]) == 0

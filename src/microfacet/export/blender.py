@@ -289,7 +289,7 @@ def render_cycles(source, size: int = 64, spp: int = 4, light=(-0.5, 0.5, 1.0),
     Examples
     --------
     >>> import microfacet as mf
-    >>> from microfacet.export.consumers import library_render, rel_l1
+    >>> from microfacet.export.comparison import library_render, rel_l1
     >>> lobe = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Conductor())
     >>> blend = write_blend(blender_material(lobe)[0], "lobe.blend")         # doctest: +SKIP
     >>> image = render_cycles(blend, size=32)                                # doctest: +SKIP

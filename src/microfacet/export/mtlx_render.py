@@ -7,10 +7,10 @@ graph ``M_microfacet_exact`` of :func:`microfacet.export.mtlx.mtlx_document`) wi
 spawned on first use and kept (a GLX context cannot share a process with another OpenGL
 context, such as moderngl's EGL one), on the comparison sphere of
 :mod:`microfacet.export.consumers`: an orthographic unit sphere filling the image, lit by one
-directional light of irradiance 1 from :data:`~microfacet.export.consumers.LIGHT`, the tangent
+directional light of irradiance 1 from :data:`~microfacet.export.comparison.LIGHT`, the tangent
 the world x axis projected on the surface, no environment. The image is linear Rec. 709 RGB,
 ``E f cos theta_i`` per pixel, directly comparable with
-:func:`~microfacet.export.consumers.library_render` (same pixel centres, same frame).
+:func:`~microfacet.export.comparison.library_render` (same pixel centres, same frame).
 
 Set-up, what makes the comparison exact:
 
@@ -70,7 +70,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .consumers import LIGHT, library_render, rel_l1
+from .comparison import LIGHT, library_render, rel_l1
 
 __all__ = ["render_mtlx", "compare_mtlx", "xvfb_display", "xvfb_available", "patched_libraries",
            "stop_xvfb", "sphere_obj", "sphere_mask", "MaterialXLayer", "mtlx_as_held", "EYE_DISTANCE"]
@@ -92,7 +92,7 @@ def _mx():
 
 def sphere_mask(size: int) -> np.ndarray:
     """The pixels of a ``size x size`` comparison image whose centre lies inside the unit disk
-    (the pixels :func:`~microfacet.export.consumers.library_render` shades).
+    (the pixels :func:`~microfacet.export.comparison.library_render` shades).
 
     Parameters
     ----------
@@ -355,7 +355,7 @@ def render_mtlx(path_or_document, size: int = 64, material: str = "M_microfacet_
     """Render a material of a MaterialX document with MaterialX's ``GlslRenderer`` on the
     comparison sphere (module docstring): ``E f cos theta_i`` per pixel, ``E = 1``.
 
-    Against :func:`~microfacet.export.consumers.library_render` of the BRDF the graph holds,
+    Against :func:`~microfacet.export.comparison.library_render` of the BRDF the graph holds,
     relL1 ~1e-6 for isotropic lobes (float32); see the module docstring for what differs.
 
     Parameters
@@ -620,7 +620,7 @@ def mtlx_as_held(brdf):
 
 def compare_mtlx(brdf, size: int = 64, light=LIGHT, material: str = "M_microfacet_exact") -> dict:
     """Export ``brdf`` (:func:`~microfacet.export.mtlx.mtlx_document`), render it with
-    :func:`render_mtlx` and with the library (:func:`~microfacet.export.consumers.library_render`)
+    :func:`render_mtlx` and with the library (:func:`~microfacet.export.comparison.library_render`)
     and measure the difference.
 
     Parameters
