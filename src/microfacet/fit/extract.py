@@ -1198,55 +1198,34 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     return x
 
 
-def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse, max_iter: int = 50):
+def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse):
     """``min 1/2 x^T h x - g^T x`` under ``bounds`` and ``a x <= a_data`` (the albedo
     rows of channel ``c``), from the box-constrained solution ``x0`` (returned when
-    feasible).
-
-    Dual Newton on the multipliers ``lambda >= 0`` of the ``V`` rows: ``x(lambda)`` is
-    the box QP with ``g - a^T lambda`` (:func:`box_qp`, started from the last ``x``: the same
-    optimum), the dual gradient is
-    ``a x - a_data`` and its Hessian ``-a_F h_FF^-1 a_F^T`` over the variables ``F``
-    strictly inside their bounds; each step maximizes that local quadratic model over
-    ``lambda >= 0`` (itself a small box QP, started from the current ``lambda``, so that
-    at the optimum it returns ``lambda`` exactly and the iteration stops: from its
-    unconstrained minimizer it returned it only to rounding, and steps in rounding noise
-    followed; damped so that the dual never decreases), exact once the free set settles.
-    A remaining violation is removed by scaling ``x`` down (all rows are nonnegative), so
-    the result is feasible."""
+    feasible): Goldfarb & Idnani's dual active-set method (1983; the ``quadprog``
+    package), exact for a strictly convex ``h``. A matrix that is numerically only
+    semidefinite is retried with a ridge of 1e-12, then 1e-9 of its mean diagonal; should
+    that fail too, ``x0`` is kept. A remaining violation (rounding) is removed by scaling
+    ``x`` down (all rows are nonnegative), so the result is feasible."""
+    import quadprog
     a, a_data = albedo
     rows = _albedo_rows_of(a, diffuse)
     limit = a_data[:, c]
     if np.all(rows @ x0 <= limit + 1e-9):
         return x0
     lo, hi = bounds
-    v = len(rows)
-    delta = 1e-8 * max(float(np.trace(rows @ spd_solve(h, rows.T))), 1e-300)
-    dual = lambda x, lam: 0.5 * x @ h @ x - g @ x + lam @ (rows @ x - limit)   # noqa: E731
-    lam, x = np.zeros(v), x0
-    value = dual(x, lam)
-    zero, inf = np.zeros(v), np.full(v, np.inf)
-    for _ in range(max_iter):
-        gap = rows @ x - limit
-        if np.all(gap <= 1e-10 * np.abs(limit)) and np.all(lam * np.abs(gap) <= 1e-10 * np.abs(value)):
+    eye = np.eye(len(g))
+    low, high = np.isfinite(lo), np.isfinite(hi)
+    constraints = np.concatenate([eye[low], -eye[high], -rows]).T      # C^T x >= b
+    b = np.concatenate([lo[low], -hi[high], -limit])
+    h = 0.5 * (h + h.T)
+    x, mean = x0, float(np.trace(h)) / len(h)
+    for ridge in (0.0, 1e-12, 1e-9):
+        try:
+            x = quadprog.solve_qp(h + ridge * mean * eye, np.asarray(g, dtype=np.float64), constraints, b)[0]
             break
-        free = (x > lo) & (x < hi)
-        m = np.zeros((v, v))
-        if np.any(free):
-            af = rows[:, free]
-            m = af @ spd_solve(h[np.ix_(free, free)], af.T)
-        target = box_qp(m + delta * np.eye(v), gap + m @ lam, zero, inf, x0=lam)
-        step = 1.0
-        for _ in range(40):                        # the dual may only increase
-            lam_n = lam + step * (target - lam)
-            x_n = box_qp(h, g - rows.T @ lam_n, lo, hi, x0=x)
-            value_n = dual(x_n, lam_n)
-            if value_n >= value - 1e-13 * abs(value):
-                break
-            step *= 0.5
-        if np.array_equal(lam_n, lam):
-            break
-        lam, x, value = lam_n, x_n, value_n
+        except ValueError:
+            continue
+    x = np.minimum(np.maximum(x, lo), hi)
     excess = np.max((rows @ x) / np.maximum(limit, 1e-300))
     return x / excess if excess > 1.0 else x
 
