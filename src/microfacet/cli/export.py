@@ -1,5 +1,5 @@
 """``microfacet export FIT.npz --to gltf|mtlx|usd|blender -o OUT``: a fit as a glTF, MaterialX,
-USD or Blender material; ``microfacet export PYRAMID.exr --to textures|gltf -o OUT``: a LEADR
+USD or Blender material; ``microfacet export PYRAMID.exr --to textures|ktx2|gltf -o OUT``: a LEADR
 pyramid as engine textures; ``microfacet export GLINTS.npz --to threejs -o OUT``: a glint
 microsurface as a three.js material (a folder)."""
 from __future__ import annotations
@@ -25,10 +25,11 @@ def add(sub) -> None:
                     "the library's fit and the tabulated fit, measured now. Formulas: docs/export.md.")
     p.add_argument("fit", metavar="FIT.npz|PYRAMID.exr|GLINTS.npz",
                    help="fit file written by 'microfacet fit', or a LEADR pyramid of 'microfacet bake' (--to "
-                        "textures|gltf: normal, roughness and anisotropy textures per MIP level, docs/export.md), "
+                        "textures|ktx2|gltf: normal, roughness and anisotropy textures per MIP level as PNG files, "
+                        "KTX2 MIP chains or a .glb plane holding them, docs/export.md), "
                         "or a glint microsurface of 'microfacet glints' (--to threejs: a folder with the glint "
                         "P-BRDF as a three.js material, docs/glints.md)")
-    p.add_argument("--to", required=True, choices=sorted([*FORMAT_SUFFIX, "textures", "threejs"]),
+    p.add_argument("--to", required=True, choices=sorted([*FORMAT_SUFFIX, "textures", "ktx2", "threejs"]),
                    help="output format")
     p.add_argument("--base-roughness", type=float, default=None, metavar="ALPHA",
                    help="PYRAMID.exr only: Beckmann roughness added to every level (leave out when baked with it)")
@@ -47,7 +48,7 @@ def run(args) -> int:
     if args.to == "threejs":
         raise ValueError(f"{args.fit}: --to threejs exports a glint microsurface (GLINTS.npz from 'microfacet "
                          "glints'); a fit file exports --to gltf (three.js loads .glb)")
-    if is_pyramid(args.fit) or args.to == "textures":
+    if is_pyramid(args.fit) or args.to in ("textures", "ktx2"):
         from ..export.leadr_textures import run_cli
         return run_cli(args)
     if args.base_roughness is not None:

@@ -294,9 +294,9 @@ def export(source, to: str, out, model: str = "best", compare_models: bool = Tru
     if to in GLINT_TARGETS:
         raise ValueError(f"--to {to} exports a glint microsurface (GLINTS.npz from 'microfacet glints'); "
                          "a fit or BRDF exports --to gltf (three.js loads .glb)")
-    if is_pyramid(source) or to == "textures":      # LEADR pyramids: textures per MIP level (leadr_textures)
+    if is_pyramid(source) or to in ("textures", "ktx2"):   # LEADR pyramids: textures per MIP level (leadr_textures)
         if not is_pyramid(source):
-            raise ValueError(f"--to textures exports a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
+            raise ValueError(f"--to {to} exports a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
                              f"got {source if isinstance(source, (str, os.PathLike)) else type(source).__name__}")
         return export_leadr(source, to, out, **options)
     if to not in _WRITERS:

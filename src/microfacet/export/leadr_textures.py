@@ -27,10 +27,15 @@ level, the five slope moments ``E1..E5 = E[x~], E[y~], E[x~^2], E[y~^2], E[x~ y~
   to 1, ``phi`` in ``(-pi/2, pi/2]`` (``cos phi >= 0``; isotropic texels point along the tangent).
 
 :func:`decode_level` is the inverse (what a conforming engine evaluates at a texel centre).
-:func:`export_leadr` writes the PNG MIP chains (``--to textures``) or a ``.glb`` of a
-textured plane holding level 0 with the chains beside it (``--to gltf``; glTF holds a custom
-MIP chain only as KTX2, ``KHR_texture_basisu``, and no KTX2 writer is installed here), and the
-report of what is not carried (:data:`NOT_CARRIED`) with the 8-bit round trip's error per level.
+:func:`export_leadr` writes the PNG MIP chains (``--to textures``: lossless, one file per level,
+for an application to upload as mipmaps), the KTX2 MIP chains (``--to ktx2``: one file per
+texture holding every level, Basis Universal UASTC, linear; :func:`encode_ktx2`) or a ``.glb`` of
+a textured plane whose three textures are those KTX2 chains (``--to gltf``; glTF holds a custom
+MIP chain only as KTX2, ``KHR_texture_basisu``, so engines sample the LEADR levels instead of
+building their own), and the report of what is not carried (:data:`NOT_CARRIED`) with the 8-bit
+round trip's error per level and, for KTX2, the UASTC round trip's (:func:`ktx2_error`). The KTX2
+encoder is ``alktx2`` (Binomial's basisu behind a Python interface; the ``export`` extra):
+:func:`ktx2_writer`. :func:`ktx2_info` reads a KTX2 header from the specification alone.
 
 Examples
 --------
@@ -55,12 +60,13 @@ from ..io.png import read_png_data, write_png_data
 __all__ = ["ellipse_of_covariance", "covariance_of_ellipse", "gltf_parameters", "level_parameters",
            "encode_level", "decode_level", "leadr_textures", "naive_textures", "box_downsample",
            "write_chains", "read_chains", "plane_mesh", "write_plane_glb", "export_leadr", "quantization_error",
-           "run_cli", "TEXTURES", "TARGETS", "NOT_CARRIED"]
+           "ktx2_writer", "ktx2_level_sizes", "encode_ktx2", "ktx2_info", "decode_ktx2", "write_ktx2_chains",
+           "ktx2_error", "run_cli", "TEXTURES", "TARGETS", "NOT_CARRIED", "KTX2_CODEC", "KTX2_EFFORT", "KTX2_ZSTD"]
 
 #: The three textures of a level, in the order they are written.
 TEXTURES = ("normal", "metallic_roughness", "anisotropy")
 #: ``export_leadr``'s formats.
-TARGETS = ("textures", "gltf")
+TARGETS = ("textures", "ktx2", "gltf")
 #: What engines' textures cannot carry exactly (written into every report).
 NOT_CARRIED = [
     "Beckmann lobe: engines' lobe is GGX; it takes the Beckmann alpha (same peak D(0) = 1/(pi a1 a2), "
@@ -514,6 +520,315 @@ def read_chains(folder) -> list[dict]:
     return [{name: read_png_data(folder / name / f.name)[..., :3] for name in TEXTURES} for f in files]
 
 
+# --- KTX2 (Basis Universal UASTC) MIP chains: KHR_texture_basisu ------------------------------------------
+
+#: Basis Universal mode of the KTX2 images. KHR_texture_basisu allows ETC1S and UASTC LDR 4x4; UASTC
+#: (8 bits per texel, BC7-class) is the one for normal maps and data textures (ETC1S: 1-2 bits per texel,
+#: made for colour).
+KTX2_CODEC = "uastc"
+#: The encoder's effort (basisu 0..10: UASTC pack level; above 3 changes the error by < 1/255 RMS at many
+#: times the time) and the Zstandard supercompression level of the KTX2 files (lossless).
+KTX2_EFFORT, KTX2_ZSTD = 3, 6
+_KTX2_ID = b"\xabKTX 20\xbb\r\n\x1a\n"
+_SUPERCOMPRESSION = {0: "none", 1: "basislz", 2: "zstd", 3: "zlib"}
+_COLOR_MODELS = {1: "rgbsda", 163: "etc1s", 166: "uastc"}
+
+
+def ktx2_writer(required: bool = True):
+    """The Basis Universal KTX2 encoder (the ``alktx2`` module: Binomial's basisu behind a
+    Python interface, with a custom MIP chain) or, when it is not installed, ``None``
+    (``required=False``) or one line saying how to install it.
+
+    Parameters
+    ----------
+    required : bool
+        Raise when the writer is absent.
+
+    Returns
+    -------
+    module or None
+        ``alktx2``.
+
+    Raises
+    ------
+    MicrofacetError
+        ``required`` and ``alktx2`` is not installed.
+
+    Examples
+    --------
+    >>> ktx2_writer(required=False) is None or hasattr(ktx2_writer(), "encode_raw_mips_to_ktx2")
+    True
+    >>> KTX2_CODEC, KTX2_EFFORT, KTX2_ZSTD
+    ('uastc', 3, 6)
+    """
+    try:
+        import alktx2
+    except ImportError:
+        if required:
+            raise MicrofacetError("KTX2 (KHR_texture_basisu) needs the Basis Universal encoder alktx2: "
+                                  "pip install 'microfacet[export]' (Python >= 3.11)") from None
+        return None
+    return alktx2
+
+
+def ktx2_level_sizes(height: int, width: int, levels: int) -> list[tuple[int, int]]:
+    """``(H, W)`` of each MIP level KTX2 requires of a ``height x width`` level 0:
+    ``max(1, floor(size / 2^k))`` (KTX 2.0 specification, section 4.1; the sizes of
+    :func:`microfacet.leadr.mip_pyramid`).
+
+    Parameters
+    ----------
+    height, width : int
+        Level 0's size.
+    levels : int
+        How many levels.
+
+    Returns
+    -------
+    list of (int, int)
+        Level 0 first.
+
+    Examples
+    --------
+    >>> ktx2_level_sizes(48, 32, 6)
+    [(48, 32), (24, 16), (12, 8), (6, 4), (3, 2), (1, 1)]
+    """
+    return [(max(1, height >> k), max(1, width >> k)) for k in range(levels)]
+
+
+def encode_ktx2(chain, effort: int = KTX2_EFFORT, zstd: int | None = KTX2_ZSTD) -> bytes:
+    """The KTX2 file (bytes) of one texture's MIP chain ``chain`` (``(H, W, 3)`` uint8 arrays, level 0
+    first, sizes :func:`ktx2_level_sizes`): Basis Universal UASTC LDR 4x4 (:data:`KTX2_CODEC`), linear
+    transfer function (data, not colour: no sRGB decode), Zstandard supercompression ``zstd`` (None:
+    none), every given level stored as is (the encoder makes no MIPs of its own; basisu's
+    ``m_source_mipmap_images``). UASTC is lossy: :func:`decode_ktx2` gives back what an engine
+    samples (a few 1/255 RMS, up to ~30/255 in 4x4 blocks whose three channels vary independently,
+    e.g. anisotropy direction and strength; the export's report measures it per level).
+
+    Parameters
+    ----------
+    chain : list of (H, W, 3) uint8 arrays
+        The levels.
+    effort : int
+        basisu's effort, 0..10.
+    zstd : int or None
+        Zstandard level (1..22), or None.
+
+    Returns
+    -------
+    bytes
+        The ``.ktx2`` file.
+
+    Raises
+    ------
+    ValueError
+        An empty chain, a level that is not ``(H, W, 3)`` uint8 or whose size is not KTX2's.
+    MicrofacetError
+        The writer (:func:`ktx2_writer`) is not installed.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> levels = leadr_textures(mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)), 0.1)
+    >>> data = encode_ktx2([lv["normal"] for lv in levels])               # doctest: +SKIP
+    >>> info = ktx2_info(data)                                            # doctest: +SKIP
+    >>> info["levels"], info["color_model"], info["transfer"]             # doctest: +SKIP
+    ([(8, 8), (4, 4), (2, 2), (1, 1)], 'uastc', 'linear')
+    """
+    chain = [np.asarray(a) for a in chain]
+    if not chain or any(a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8 for a in chain):
+        raise ValueError("a KTX2 chain must be a non-empty list of (H, W, 3) uint8 levels")
+    want = ktx2_level_sizes(*chain[0].shape[:2], len(chain))
+    got = [a.shape[:2] for a in chain]
+    if got != want:
+        raise ValueError(f"KTX2 MIP levels must halve (floor, at least 1) level by level: got sizes {got}, "
+                         f"KTX2 needs {want}")
+    writer = ktx2_writer()
+    raw = [(np.ascontiguousarray(np.concatenate([a, np.full(a.shape[:2] + (1,), 255, np.uint8)], -1)).tobytes(),
+            int(a.shape[1]), int(a.shape[0])) for a in chain]
+    return bytes(writer.encode_raw_mips_to_ktx2(
+        raw, has_alpha=False, codec=KTX2_CODEC, quality=100, effort=int(effort), srgb=False, linear=True,
+        zstd_supercompression_level=zstd, threads=0))
+
+
+def ktx2_info(data) -> dict:
+    """The header of a KTX2 file (bytes or a path), read here from the KTX 2.0 specification
+    (Khronos, sections 3-4: identifier, index, level index, Data Format Descriptor, key/value data),
+    independently of the encoder: ``vk_format`` (0 for Basis Universal), ``type_size``, ``width``,
+    ``height``, ``layers``, ``faces``, ``levels`` (``(H, W)`` per level, level 0 first),
+    ``level_bytes`` (stored bytes per level), ``supercompression`` (``"none"``, ``"basislz"``,
+    ``"zstd"``, ``"zlib"``), the DFD's ``color_model`` (``"uastc"``, ``"etc1s"``, ``"rgbsda"`` or its
+    number), ``transfer`` (``"linear"``, ``"srgb"`` or its number) and ``channels`` (its sample
+    channel ids), and ``kv`` (key/value strings).
+
+    Parameters
+    ----------
+    data : bytes, str or os.PathLike
+        The file or its bytes.
+
+    Returns
+    -------
+    dict
+        The fields above.
+
+    Raises
+    ------
+    MicrofacetError
+        Not a KTX2 file, or one cut short.
+
+    Examples
+    --------
+    >>> ktx2_info(b"not a ktx2 file")
+    Traceback (most recent call last):
+    ...
+    microfacet.errors.MicrofacetError: not a KTX2 file (no KTX 20 identifier)
+    """
+    import struct
+    if isinstance(data, (str, os.PathLike)):
+        data = Path(data).read_bytes()
+    data = bytes(data)
+    if data[:12] != _KTX2_ID:
+        raise MicrofacetError("not a KTX2 file (no KTX 20 identifier)")
+    try:
+        (vk, type_size, w, h, _depth, layers, faces, nlev, scheme) = struct.unpack_from("<9I", data, 12)
+        dfd_off, _dfd_len, kvd_off, kvd_len = struct.unpack_from("<4I", data, 48)
+        index = [struct.unpack_from("<3Q", data, 80 + 24 * k) for k in range(max(nlev, 1))]
+        model, _primaries, transfer = struct.unpack_from("<3B", data, dfd_off + 12)
+        block_size = struct.unpack_from("<H", data, dfd_off + 4 + 6)[0]
+        channels = [data[dfd_off + 4 + 24 + 16 * i + 3] & 0x0F for i in range((block_size - 24) // 16)]
+        kv, pos = {}, kvd_off
+        while pos < kvd_off + kvd_len:
+            n = struct.unpack_from("<I", data, pos)[0]
+            key, _, value = data[pos + 4:pos + 4 + n].partition(b"\0")
+            kv[key.decode("utf-8", "replace")] = value.rstrip(b"\0").decode("utf-8", "replace")
+            pos += 4 + n + (-n % 4)
+    except struct.error:
+        raise MicrofacetError("KTX2 file cut short (its index points past the end)") from None
+    if any(off + length > len(data) for off, length, _ in index):
+        raise MicrofacetError("KTX2 file cut short (a MIP level lies past the end)")
+    return {"vk_format": vk, "type_size": type_size, "width": w, "height": h, "layers": layers, "faces": faces,
+            "levels": ktx2_level_sizes(h, w, max(nlev, 1)), "level_bytes": [int(length) for _, length, _ in index],
+            "supercompression": _SUPERCOMPRESSION.get(scheme, scheme), "color_model": _COLOR_MODELS.get(model, model),
+            "transfer": {1: "linear", 2: "srgb"}.get(transfer, transfer), "channels": channels, "kv": kv}
+
+
+def decode_ktx2(data) -> list[np.ndarray]:
+    """The levels of a Basis Universal KTX2 file (bytes or a path) transcoded to 8-bit RGB
+    (basisu's transcoder, :func:`ktx2_writer`'s module): ``(H, W, 3)`` uint8 per level, level 0
+    first: the texels an engine samples (before its own transcode to a GPU block format, which
+    for UASTC -> ASTC 4x4 or BC7 is near lossless).
+
+    Parameters
+    ----------
+    data : bytes, str or os.PathLike
+        The ``.ktx2`` file or its bytes.
+
+    Returns
+    -------
+    list of (H, W, 3) uint8 arrays
+
+    Raises
+    ------
+    MicrofacetError
+        Not a KTX2 file, or the transcoder is not installed.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> levels = leadr_textures(mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)), 0.1)
+    >>> back = decode_ktx2(encode_ktx2([lv["metallic_roughness"] for lv in levels]))   # doctest: +SKIP
+    >>> [b.shape for b in back]                                                         # doctest: +SKIP
+    [(8, 8, 3), (4, 4, 3), (2, 2, 3), (1, 1, 3)]
+    """
+    import imagecodecs
+    if isinstance(data, (str, os.PathLike)):
+        data = Path(data).read_bytes()
+    info = ktx2_info(data)
+    writer = ktx2_writer()
+    out = []
+    for k, (h, w) in enumerate(info["levels"]):
+        png, _ = writer.decode_ktx2_to_bytes(bytes(data), format="png", level=k)
+        img = imagecodecs.png_decode(png)
+        out.append(np.ascontiguousarray(img[:h, :w, :3]))     # the transcoder pads levels below 4 x 4 to a block
+    return out
+
+
+def write_ktx2_chains(levels: list[dict], folder, effort: int = KTX2_EFFORT) -> dict[str, Path]:
+    """Write ``folder/<texture>.ktx2`` for each of :data:`TEXTURES`: its whole MIP chain in one
+    KTX2 file (:func:`encode_ktx2`, UASTC, linear); returns the paths.
+
+    Parameters
+    ----------
+    levels : list of dict
+        Textures per level (:func:`leadr_textures`).
+    folder : str or os.PathLike
+        The folder (created).
+    effort : int
+        basisu's effort (:func:`encode_ktx2`).
+
+    Returns
+    -------
+    dict
+        Texture name -> its ``.ktx2``.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> levels = leadr_textures(mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)), 0.1)
+    >>> paths = write_ktx2_chains(levels, "maps_ktx2")                        # doctest: +SKIP
+    >>> sorted(p.name for p in paths.values())                                # doctest: +SKIP
+    ['anisotropy.ktx2', 'metallic_roughness.ktx2', 'normal.ktx2']
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for name in TEXTURES:
+        paths[name] = folder / f"{name}.ktx2"
+        paths[name].write_bytes(encode_ktx2([lv[name] for lv in levels], effort=effort))
+    return paths
+
+
+def ktx2_error(params: list[dict], levels: list[dict], blobs: dict[str, bytes]) -> list[dict]:
+    """Per level, the error of the KTX2 chains ``blobs`` (texture name -> ``.ktx2`` bytes of
+    ``levels``) decoded as an engine samples them (:func:`decode_ktx2`): ``quantization``
+    (:func:`quantization_error` of the decoded textures against the exact ``params``), and per
+    texture the largest and the RMS texel difference from the 8-bit textures (``texel_max``,
+    ``texel_rms``, in 1/255).
+
+    Parameters
+    ----------
+    params : list of dict
+        :func:`level_parameters` per level.
+    levels : list of dict
+        The 8-bit textures per level (:func:`encode_level`).
+    blobs : dict
+        :data:`TEXTURES` name -> KTX2 bytes.
+
+    Returns
+    -------
+    list of dict
+        One dict per level.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> levels, params = leadr_textures(mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1)), 0.1,
+    ...                                 with_parameters=True)
+    >>> blobs = {t: encode_ktx2([lv[t] for lv in levels]) for t in TEXTURES}          # doctest: +SKIP
+    >>> sorted(ktx2_error(params, levels, blobs)[0])                                  # doctest: +SKIP
+    ['quantization', 'texel_max', 'texel_rms']
+    """
+    decoded = {name: decode_ktx2(blobs[name]) for name in TEXTURES}
+    out = []
+    for k, (p, lv) in enumerate(zip(params, levels)):
+        images = {name: decoded[name][k] for name in TEXTURES}
+        diff = {name: images[name].astype(np.int16) - lv[name].astype(np.int16) for name in TEXTURES}
+        out.append({"quantization": quantization_error(p, images),
+                    "texel_max": {n: int(np.abs(d).max()) for n, d in diff.items()},
+                    "texel_rms": {n: float(np.sqrt(np.mean(d.astype(np.float64) ** 2))) for n, d in diff.items()}})
+    return out
+
+
 def plane_mesh(tiles: float = 1.0):
     """``(positions, normals, tangents, uvs, indices)`` of the unit square ``[-1/2, 1/2]^2`` in
     glTF's ground plane (x, z; normal +y), tangent +x (``w = 1``: bitangent ``n x t = -z``), uv
@@ -555,17 +870,26 @@ def _glb_material(metallic: float, base_color) -> dict:
                                                     "anisotropyTexture": {"index": 2}}}}
 
 
-def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.0, base_color=(0.9, 0.9, 0.9)) -> Path:
-    """Write ``path`` (``.glb``): a unit plane (:func:`plane_mesh`) whose material holds the level-0
-    textures of ``level0`` (:data:`TEXTURES`) as embedded PNG images: ``normalTexture``,
-    ``metallicRoughnessTexture`` and ``KHR_materials_anisotropy.anisotropyTexture`` (strength 1,
-    rotation 0), sampler REPEAT with trilinear minification (engines make their own MIPs from
-    level 0: glTF holds a custom chain only as KTX2).
+def write_plane_glb(textures, path, tiles: float = 1.0, metallic: float = 1.0, base_color=(0.9, 0.9, 0.9),
+                    ktx2: dict | None = None, png_fallback: bool = False) -> Path:
+    """Write ``path`` (``.glb``): a unit plane (:func:`plane_mesh`) whose material holds the
+    textures (:data:`TEXTURES`) as ``normalTexture``, ``metallicRoughnessTexture`` and
+    ``KHR_materials_anisotropy.anisotropyTexture`` (strength 1, rotation 0), sampler REPEAT with
+    trilinear minification.
+
+    Without ``ktx2``: level 0 (``textures``, or ``textures[0]`` of a chain) as embedded PNG images;
+    engines make their own (naive) MIPs of it. With ``ktx2`` (texture name -> the ``.ktx2`` bytes of
+    its whole chain, :func:`encode_ktx2`): each texture's image is that KTX2 file
+    (``mimeType image/ktx2``), referenced through ``KHR_texture_basisu`` (glTF's only way to carry a
+    custom MIP chain: engines sample the LEADR levels); ``KHR_texture_basisu`` is then in
+    ``extensionsRequired`` (a viewer without it cannot load the file), unless ``png_fallback``
+    adds level 0 as each texture's PNG ``source`` (viewers without the extension take it, with
+    naive MIPs; the extension is then only in ``extensionsUsed``).
 
     Parameters
     ----------
-    level0 : dict
-        The level-0 textures (:func:`encode_level`).
+    textures : dict or list of dict
+        The level-0 textures (:func:`encode_level`) or the chain (:func:`leadr_textures`).
     path : str or os.PathLike
         The ``.glb`` to write.
     tiles : float
@@ -574,6 +898,11 @@ def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.
         ``metallicFactor`` in ``[0, 1]``.
     base_color : (3,) sequence
         Linear RGB ``baseColorFactor``.
+    ktx2 : dict, optional
+        :data:`TEXTURES` name -> KTX2 bytes (Basis Universal: ETC1S or UASTC, as KHR_texture_basisu
+        requires).
+    png_fallback : bool
+        With ``ktx2``: also embed level 0 as PNG fallbacks.
 
     Returns
     -------
@@ -584,16 +913,26 @@ def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.
     --------
     >>> import microfacet as mf
     >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1))
-    >>> glb = write_plane_glb(leadr_textures(pyramid, 0.1)[0], "plane.glb", tiles=4)
+    >>> levels = leadr_textures(pyramid, 0.1)
+    >>> glb = write_plane_glb(levels[0], "plane.glb", tiles=4)
     >>> from microfacet.export.gltf import read_material
     >>> sorted(read_material(glb)["extensions"])
     ['KHR_materials_anisotropy']
+    >>> blobs = {t: encode_ktx2([lv[t] for lv in levels]) for t in TEXTURES}           # doctest: +SKIP
+    >>> glb = write_plane_glb(levels, "plane_ktx2.glb", ktx2=blobs)                   # doctest: +SKIP
+    >>> import pygltflib; pygltflib.GLTF2.load("plane_ktx2.glb").extensionsRequired   # doctest: +SKIP
+    ['KHR_texture_basisu']
     """
     import imagecodecs
     import pygltflib as g
+    level0 = textures[0] if isinstance(textures, (list, tuple)) else textures
+    if ktx2 is not None and sorted(ktx2) != sorted(TEXTURES):
+        raise ValueError(f"ktx2 must map each of {', '.join(TEXTURES)} to its KTX2 bytes, got {sorted(ktx2)}")
     path = Path(path)
-    gl = g.GLTF2(asset=g.Asset(version="2.0", generator="microfacet.export.leadr_textures"),
-                 extensionsUsed=["KHR_materials_anisotropy"])
+    used = ["KHR_materials_anisotropy"] + ([] if ktx2 is None else ["KHR_texture_basisu"])
+    gl = g.GLTF2(asset=g.Asset(version="2.0", generator="microfacet.export.leadr_textures"), extensionsUsed=used)
+    if ktx2 is not None and not png_fallback:
+        gl.extensionsRequired = ["KHR_texture_basisu"]
     blob = b""
     arrays = [(a, ct, kind, tgt) for a, (ct, kind, tgt) in zip(plane_mesh(tiles), [
         (g.FLOAT, "VEC3", g.ARRAY_BUFFER), (g.FLOAT, "VEC3", g.ARRAY_BUFFER), (g.FLOAT, "VEC4", g.ARRAY_BUFFER),
@@ -606,13 +945,21 @@ def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.
             acc.min, acc.max = arr.min(axis=0).tolist(), arr.max(axis=0).tolist()
         gl.accessors.append(acc)
         blob += data + b"\0" * (-len(data) % 4)
-    for name in TEXTURES:
-        data = imagecodecs.png_encode(np.ascontiguousarray(level0[name]), level=6)
+
+    def image(data: bytes, mime: str, name: str) -> int:
+        nonlocal blob
         gl.bufferViews.append(g.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
-        gl.images.append(g.Image(bufferView=len(gl.bufferViews) - 1, mimeType="image/png", name=name))
+        gl.images.append(g.Image(bufferView=len(gl.bufferViews) - 1, mimeType=mime, name=name))
         blob += data + b"\0" * (-len(data) % 4)
+        return len(gl.images) - 1
+
     gl.samplers = [g.Sampler(magFilter=9729, minFilter=9987, wrapS=10497, wrapT=10497)]
-    gl.textures = [g.Texture(sampler=0, source=k) for k in range(len(TEXTURES))]
+    for name in TEXTURES:
+        png = (None if ktx2 is not None and not png_fallback else
+               image(imagecodecs.png_encode(np.ascontiguousarray(level0[name]), level=6), "image/png", name))
+        ext = None if ktx2 is None else {"KHR_texture_basisu": {"source": image(bytes(ktx2[name]), "image/ktx2",
+                                                                                 name + " (KTX2 MIP chain)")}}
+        gl.textures.append(g.Texture(sampler=0, source=png, extensions=ext or {}))
     mat = _glb_material(metallic, base_color)
     pbr = g.PbrMetallicRoughness(**mat["pbrMetallicRoughness"])
     gl.materials = [g.Material(name=mat["name"], pbrMetallicRoughness=pbr,
@@ -630,10 +977,17 @@ def write_plane_glb(level0: dict, path, tiles: float = 1.0, metallic: float = 1.
     return path
 
 
-def _ktx2_note() -> str:
-    return ("glTF holds a custom MIP chain only in KTX2 images (KHR_texture_basisu); no KTX2 writer is installed, "
-            "so the .glb holds level 0 (engines build their own naive MIPs from it) and the LEADR chains are PNG "
-            "files beside it, to upload as the textures' mipmaps (three.js: texture.mipmaps, generateMipmaps false)")
+def _ktx2_note(glb: bool, fallback: bool = False) -> str:
+    """What the KTX2 chains lose (UASTC) and, for the ``.glb``, what a viewer needs to read them."""
+    text = ("the custom MIP chains are Basis Universal UASTC LDR 4x4 KTX2 images (KHR_texture_basisu, the only "
+            "Basis mode fit for normal and data textures): a lossy block codec, 8 bits per texel; where a 4x4 block's "
+            "three channels vary independently (anisotropy direction and strength, noisy normals) a texel moves by up "
+            "to a few tens of 1/255: the decoded chain's error per level is in the KTX2 table. Engines transcode UASTC to a GPU "
+            "format (ASTC 4x4 or BC7: near lossless; ETC2, BC1/BC3 or RGBA8 where those are absent)")
+    if not glb:
+        return text
+    return text + (". Viewers without KHR_texture_basisu fall back to level 0 (PNG) and build naive MIPs from it"
+                   if fallback else ". KHR_texture_basisu is required: a viewer without it cannot load the .glb")
 
 
 def _markdown(report: dict) -> str:
@@ -649,22 +1003,39 @@ def _markdown(report: dict) -> str:
                      f"| {q['covariance_max']:.4f} "
                      f"| {q['alpha_max']:.4f} | {q['slope_max']:.4f} | {q['clipped']:.2%} | {lv['alpha1_mean']:.4f} "
                      f"| {lv['alpha2_mean']:.4f} |")
+    if all("ktx2" in lv for lv in report["levels"]):
+        lines += ["", f"## KTX2 (Basis {KTX2_CODEC.upper()}) round trip per level (the chain transcoded to RGBA8)", "",
+                  "| level | size | covariance rel. error mean | max | mean-slope error max | "
+                  + " | ".join(f"{t} texel error max / RMS (1/255)" for t in TEXTURES) + " |",
+                  "|---|---|---|---|---|" + "---|" * len(TEXTURES)]
+        for k, lv in enumerate(report["levels"]):
+            e = lv["ktx2"]
+            q = e["quantization"]
+            lines.append(f"| {k} | {lv['size'][1]}x{lv['size'][0]} | {q['covariance_mean']:.4f} "
+                         f"| {q['covariance_max']:.4f} | {q['slope_max']:.4f} | "
+                         + " | ".join(f"{e['texel_max'][t]} / {e['texel_rms'][t]:.2f}" for t in TEXTURES) + " |")
     lines += ["", "## Not carried", ""] + [f"- {x}" for x in report["lost"]]
     return "\n".join(lines) + "\n"
 
 
 def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, metallic: float = 1.0,
-                 base_color=(0.9, 0.9, 0.9)) -> dict:
+                 base_color=(0.9, 0.9, 0.9), png_fallback: bool = False) -> dict:
     """Export a LEADR moment pyramid (a pyramid EXR of ``microfacet bake`` or a list of
     ``(H, W, 5)`` levels) for engines (module docstring) and return the report.
 
     ``to="textures"``: the folder ``out`` with ``normal/``, ``metallic_roughness/``,
-    ``anisotropy/`` each holding ``level_00.png ...`` (8-bit RGB, one file per MIP level).
+    ``anisotropy/`` each holding ``level_00.png ...`` (8-bit RGB, one lossless file per MIP level:
+    an application uploads them as the textures' mipmaps).
+    ``to="ktx2"``: the folder ``out`` with ``normal.ktx2``, ``metallic_roughness.ktx2`` and
+    ``anisotropy.ktx2``, each the texture's whole MIP chain (:func:`write_ktx2_chains`: Basis UASTC,
+    linear).
     ``to="gltf"``: ``out`` (``.glb`` added if missing), a textured unit plane (:func:`write_plane_glb`,
-    uv ``tiles`` times the map, ``metallic``, ``base_color``) holding level 0, and the chains in
-    ``out.mips/``. Either writes the report ``<out>.export.json`` / ``.export.md``: what is not
-    carried and, per level, the error of the 8-bit textures decoded as an engine reads them
-    (:func:`quantization_error`).
+    uv ``tiles`` times the map, ``metallic``, ``base_color``) whose three textures are those KTX2
+    chains (``KHR_texture_basisu``, required unless ``png_fallback``).
+    Each writes the report ``<out>.export.json`` / ``.export.md``: what is not carried and, per
+    level, the error of the 8-bit textures decoded as an engine reads them
+    (:func:`quantization_error`) and, for ``ktx2`` and ``gltf``, of the KTX2 chains transcoded back
+    (:func:`ktx2_error`).
 
     Parameters
     ----------
@@ -673,64 +1044,89 @@ def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, 
     to : str
         One of :data:`TARGETS`.
     out : str or os.PathLike
-        The folder (``"textures"``) or the ``.glb`` (``"gltf"``).
+        The folder (``"textures"``, ``"ktx2"``) or the ``.glb`` (``"gltf"``).
     base_roughness : None, float, (float, float) or Beckmann
         A base lobe added to every level.
     tiles, metallic, base_color
         The plane's (``"gltf"``; :func:`write_plane_glb`).
+    png_fallback : bool
+        ``"gltf"``: also embed level 0 as PNG, for viewers without KHR_texture_basisu.
 
     Returns
     -------
     dict
         The report: ``format``, ``file``, ``chains``, ``lost`` (:data:`NOT_CARRIED`, and for
-        glTF the KTX2 note), ``levels`` (per level its size, mean alphas and
-        :func:`quantization_error`), ...
+        KTX2 the UASTC note), ``levels`` (per level its size, mean alphas,
+        :func:`quantization_error` and, for KTX2, ``ktx2``: :func:`ktx2_error`), ...
 
     Raises
     ------
     ValueError
         ``to``, ``tiles`` or ``metallic`` out of range, or levels that are not ``(H, W, 5)``.
     MicrofacetError
-        No such pyramid file, or ``out`` is a file where a folder is written.
+        No such pyramid file, ``out`` is a file where a folder is written, or the KTX2 writer
+        (:func:`ktx2_writer`) is not installed for ``"ktx2"`` or ``"gltf"``.
 
     Examples
     --------
     >>> import microfacet as mf
     >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=0), roughness=0.05)
     >>> TARGETS
-    ('textures', 'gltf')
-    >>> report = export_leadr(pyramid, "gltf", "bumps")
-    >>> report["file"], report["chains"], len(report["levels"]), report["lost"][:len(NOT_CARRIED)] == NOT_CARRIED
-    ('bumps.glb', 'bumps.mips', 4, True)
+    ('textures', 'ktx2', 'gltf')
+    >>> report = export_leadr(pyramid, "textures", "bumps")
+    >>> report["file"], report["chains"], len(report["levels"]), report["lost"] == NOT_CARRIED
+    ('bumps', 'bumps', 4, True)
+    >>> report = export_leadr(pyramid, "gltf", "bumps")                                     # doctest: +SKIP
+    >>> report["file"], sorted(report["levels"][0]["ktx2"])                                  # doctest: +SKIP
+    ('bumps.glb', ['quantization', 'texel_max', 'texel_rms'])
     """
     if to not in TARGETS:
         raise ValueError(f"to must be one of {', '.join(TARGETS)} for a LEADR pyramid, got {to!r}")
     for name, v in (("tiles", tiles), ("metallic", metallic)):
         if not (np.isfinite(v) and v > 0 if name == "tiles" else np.isfinite(v) and 0 <= v <= 1):
             raise ValueError(f"{name} must be {'> 0' if name == 'tiles' else 'in [0, 1]'}, got {v!r}")
+    if to != "textures":
+        ktx2_writer()                               # one line before any work when the encoder is absent
     levels, label = _levels_of(source)
     images, params = leadr_textures(levels, base_roughness, with_parameters=True)
     out = Path(out)
+    blobs = None
     if to == "gltf":
         if out.suffix.lower() != ".glb":
             out = out.with_name(out.name + ".glb")
-        chains = out.with_name(out.stem + ".mips")
-        write_plane_glb(images[0], out, tiles=tiles, metallic=metallic, base_color=base_color)
-        lost = NOT_CARRIED + [_ktx2_note()]
+        blobs = {name: encode_ktx2([lv[name] for lv in images]) for name in TEXTURES}
+        write_plane_glb(images, out, tiles=tiles, metallic=metallic, base_color=base_color, ktx2=blobs,
+                        png_fallback=png_fallback)
+        chains, files = out, {name: f"KTX2 image '{name} (KTX2 MIP chain)' (KHR_texture_basisu)" for name in TEXTURES}
+        lost = NOT_CARRIED + [_ktx2_note(True, png_fallback)]
     else:
         if out.exists() and not out.is_dir():
-            raise MicrofacetError(f"{out}: exists and is not a folder (--to textures writes a folder)")
+            raise MicrofacetError(f"{out}: exists and is not a folder (--to {to} writes a folder)")
         chains = out
-        lost = list(NOT_CARRIED)
-    write_chains(images, chains)
+        if to == "ktx2":
+            paths = write_ktx2_chains(images, out)
+            blobs = {name: p.read_bytes() for name, p in paths.items()}
+            files = {name: f"{name}.ktx2" for name in TEXTURES}
+            lost = NOT_CARRIED + [_ktx2_note(False)]
+        else:
+            write_chains(images, out)
+            files = {name: f"{name}/level_NN.png" for name in TEXTURES}
+            lost = list(NOT_CARRIED)
     summary = [{"size": list(p["alpha1"].shape), "quantization": quantization_error(p, im),
                 "alpha1_mean": float(p["alpha1"].mean()), "alpha2_mean": float(p["alpha2"].mean()),
                 "strength_mean": float(p["strength"].mean())} for p, im in zip(params, images)]
+    if blobs is not None:
+        for lv, e in zip(summary, ktx2_error(params, images, blobs)):
+            lv["ktx2"] = e
     report = {"format": to, "file": str(out), "chains": str(chains), "source": label, "lost": lost,
               "base_roughness": None if base_roughness is None else str(base_roughness), "levels": summary,
               "convention": "alpha^2 = 2 sigma^2 (Beckmann); GGX alpha = Beckmann alpha; r = sqrt(alpha2), "
                             "s = sqrt((alpha1 - alpha2)/(1 - alpha2)), direction (cos phi, sin phi)",
-              "textures": {name: f"{name}/level_NN.png" for name in TEXTURES}}
+              "textures": files}
+    if blobs is not None:
+        report["ktx2"] = {"codec": f"Basis Universal {KTX2_CODEC.upper()} LDR 4x4", "transfer": "linear",
+                          "effort": KTX2_EFFORT, "zstd": KTX2_ZSTD,
+                          "bytes": {name: len(b) for name, b in blobs.items()}}
     stem = str(out).rstrip("/\\")
     Path(stem + ".export.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
     Path(stem + ".export.md").write_text(_markdown(report))
@@ -738,8 +1134,8 @@ def export_leadr(source, to: str, out, base_roughness=None, tiles: float = 1.0, 
 
 
 def run_cli(args) -> int:
-    """``microfacet export PYRAMID.exr --to textures|gltf -o OUT [--base-roughness A]`` (called by
-    :mod:`microfacet.cli.export` for a pyramid or ``--to textures``): one line per error.
+    """``microfacet export PYRAMID.exr --to textures|ktx2|gltf -o OUT [--base-roughness A]`` (called by
+    :mod:`microfacet.cli.export` for a pyramid, ``--to textures`` or ``--to ktx2``): one line per error.
 
     Parameters
     ----------
@@ -768,10 +1164,11 @@ def run_cli(args) -> int:
     from ..cli.common import check_output_name, output_path
     source = Path(args.fit)
     if source.suffix.lower() != ".exr":
-        raise MicrofacetError(f"{source}: --to textures takes a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
+        raise MicrofacetError(f"{source}: --to {args.to} takes a LEADR pyramid (PYRAMID.exr from 'microfacet bake'), "
                               "not a fit file")
     if args.to not in TARGETS:
-        raise MicrofacetError(f"{source}: a LEADR pyramid exports --to textures or --to gltf, not --to {args.to}")
+        raise MicrofacetError(f"{source}: a LEADR pyramid exports --to textures, --to ktx2 or --to gltf, "
+                              f"not --to {args.to}")
     if getattr(args, "model", "best") != "best":
         raise MicrofacetError("--model applies to fit files, not to a LEADR pyramid")
     base = getattr(args, "base_roughness", None)
@@ -782,9 +1179,12 @@ def run_cli(args) -> int:
     out = output_path(args.output, ".glb", source=source) if args.to == "gltf" else Path(check_output_name(args.output))
     report = export_leadr(source, args.to, out, base_roughness=base)
     q = [lv["quantization"]["covariance_max"] for lv in report["levels"]]
+    k = [lv["ktx2"]["quantization"]["covariance_mean"] for lv in report["levels"] if "ktx2" in lv]
     print(f"{report['file']}: {len(report['levels'])} MIP levels as {args.to}"
-          + (f" (chains in {report['chains']})" if args.to == "gltf" else "")
-          + f"; 8-bit covariance error max {max(q):.4f}; report {report['file'].rstrip('/')}.export.md")
+          + (" (KTX2 MIP chains, KHR_texture_basisu)" if args.to == "gltf" else "")
+          + f"; 8-bit covariance error max {max(q):.4f}"
+          + (f"; UASTC covariance error mean, worst level {max(k):.4f}" if k else "")
+          + f"; report {report['file'].rstrip('/')}.export.md")
     for line in report["lost"]:
         print(f"  not carried: {line}", file=sys.stderr)
     return 0

@@ -2,8 +2,9 @@
 supersampled reference (the validation of :mod:`microfacet.export.leadr_textures`).
 
 :class:`PlaneRenderer` serves a page on 127.0.0.1 that loads the exported plane ``.glb`` with
-three.js's ``GLTFLoader`` (so the glTF material becomes the ``MeshPhysicalMaterial`` any three.js
-application gets: normal map, roughness from ``metallicRoughness`` G, ``KHR_materials_anisotropy``),
+three.js's ``GLTFLoader`` and ``KTX2Loader`` (KHR_texture_basisu images load with their own MIP
+chains), so that the glTF material becomes the ``MeshPhysicalMaterial`` any three.js application
+gets (normal map, roughness from ``metallicRoughness`` G, ``KHR_materials_anisotropy``),
 optionally replaces its three textures by ``DataTexture`` s carrying a given MIP chain
 (``texture.mipmaps = [...]``, ``generateMipmaps = false``: three.js keeps its own MIP selection) or
 level 0 alone without MIPs, scales the plane, looks at it from a grazing camera under one
@@ -108,6 +109,14 @@ PLANE_PAGE = PAGE_PROLOGUE + """if (new URLSearchParams(location.search).get('fr
 }
 const renderer = new THREE.WebGLRenderer({ antialias: false });
 renderer.setPixelRatio(1);
+const { KTX2Loader } = await import('three/addons/loaders/KTX2Loader.js');
+const ktx2Loader = new KTX2Loader().setTranscoderPath('/node_modules/three/examples/jsm/libs/basis/')
+  .detectSupport(renderer);
+const gltfLoader = new GLTFLoader().setKTX2Loader(ktx2Loader);
+function describe(t) {
+  return { compressed: !!t.isCompressedTexture, format: t.format, levels: t.mipmaps ? t.mipmaps.length : 0,
+           width: t.image.width, height: t.image.height, minFilter: t.minFilter, colorSpace: t.colorSpace };
+}
 function bytes(s) { const b = atob(s); const a = new Uint8Array(b.length);
   for (let i = 0; i < b.length; i++) a[i] = b.charCodeAt(i); return a; }
 function dataTexture(levels, mips, anisotropy) {
@@ -124,12 +133,14 @@ function dataTexture(levels, mips, anisotropy) {
   return tex;
 }
 window.renderPlane = async (url, maps, mips, o) => {
-  const gltf = await new GLTFLoader().loadAsync(url);
+  const gltf = await gltfLoader.loadAsync(url);
   let mesh = null;
   gltf.scene.traverse(x => { if (x.isMesh) mesh = x; });
   mesh.scale.set(o.extent[0], 1, o.extent[1]);
   const m = mesh.material;
   if (!m.normalMap || !m.roughnessMap || !m.anisotropyMap) throw new Error('the glb material lacks a texture');
+  const own = { normal: describe(m.normalMap), metallic_roughness: describe(m.roughnessMap),
+                anisotropy: describe(m.anisotropyMap) };
   if (maps) {
     m.normalMap = dataTexture(maps.normal, mips, o.anisotropy);
     m.roughnessMap = m.metalnessMap = dataTexture(maps.metallic_roughness, mips, o.anisotropy);
@@ -163,7 +174,8 @@ window.renderPlane = async (url, maps, mips, o) => {
     const i = 4 * (y * W + x), j = 3 * (Math.floor(y / o.ss) * o.width + Math.floor(x / o.ss));
     out[j] += k * buf[i]; out[j + 1] += k * buf[i + 1]; out[j + 2] += k * buf[i + 2];
   }
-  return { revision: THREE.REVISION, maxAnisotropy: renderer.capabilities.getMaxAnisotropy(), pixels: Array.from(out) };
+  return { revision: THREE.REVISION, maxAnisotropy: renderer.capabilities.getMaxAnisotropy(), textures: own,
+           pixels: Array.from(out) };
 };
 window.pageReady = true;
 </script></body></html>
@@ -193,8 +205,12 @@ def _rgba_b64(levels: list[np.ndarray]) -> list[dict]:
 class PlaneRenderer:
     """Renders the LEADR plane ``.glb`` in three.js in headless Chromium (module docstring): a
     context manager holding one server (127.0.0.1) and one page. ``revision``: three.js's;
-    ``max_anisotropy``: the GPU's (SwiftShader's) largest ``texture.anisotropy``; ``mapped_frame``:
-    the anisotropy frame patch (module docstring).
+    ``max_anisotropy``: the GPU's (SwiftShader's) largest ``texture.anisotropy``; ``textures``: per
+    texture of the last ``.glb`` loaded, what three.js made of its own image (``compressed``, the
+    GPU ``format``, MIP ``levels``, ``width``, ``height``, ``minFilter``, ``colorSpace``);
+    ``mapped_frame``: the anisotropy frame patch (module docstring). The page's ``GLTFLoader``
+    has a ``KTX2Loader`` (three.js's Basis transcoder, WebAssembly, in a worker), so a ``.glb``
+    of KHR_texture_basisu textures loads with its KTX2 MIP chains.
 
     Parameters
     ----------
@@ -230,6 +246,7 @@ class PlaneRenderer:
         self.mapped_frame = mapped_frame
         self.revision = None
         self.max_anisotropy = None
+        self.textures = None
 
     def __enter__(self):
         from playwright.sync_api import sync_playwright
@@ -306,6 +323,7 @@ class PlaneRenderer:
         if self.errors:
             raise MicrofacetError(f"three.js page error: {self.errors[-1]}")
         self.revision, self.max_anisotropy = out["revision"], out["maxAnisotropy"]
+        self.textures = out["textures"]
         img = np.asarray(out["pixels"], np.float64).reshape(view.height, view.width, 3)[::-1]
         return np.ascontiguousarray(img)
 
@@ -333,12 +351,16 @@ def relative_l1(image, reference) -> float:
 
 
 def compare_plane(pyramid, renderer: PlaneRenderer, folder, view: PlaneView | None = None,
-                  base_roughness=None, supersample: int = 8) -> dict:
+                  base_roughness=None, supersample: int = 8, ktx2: bool = False) -> dict:
     """Render the horizon plane (module docstring) of a moment pyramid (list of levels or EXR)
     three ways and return ``{"errors": {"naive": e_a, "leadr": e_b}, "images": {"naive",
     "leadr", "reference"}, "glb", "revision"}``; ``e`` is :func:`relative_l1` against the
     reference (level 0 without MIPs at ``supersample`` x the resolution, box-downsampled).
-    ``folder`` receives the plane ``.glb``.
+    ``folder`` receives the plane ``.glb``. With ``ktx2`` a fourth: the ``.glb`` of
+    :func:`~microfacet.export.leadr_textures.export_leadr` ``"gltf"`` (the LEADR chains as
+    KHR_texture_basisu KTX2 images, UASTC) loaded by three.js's ``GLTFLoader`` + ``KTX2Loader``
+    and rendered with its own textures (``errors["ktx2"]``, ``images["ktx2"]``, ``ktx2_glb`` and
+    ``ktx2_textures``: what three.js made of them, :attr:`PlaneRenderer.textures`).
 
     Parameters
     ----------
@@ -354,20 +376,24 @@ def compare_plane(pyramid, renderer: PlaneRenderer, folder, view: PlaneView | No
         A base lobe added to every level.
     supersample : int
         The reference's supersampling per axis.
+    ktx2 : bool
+        Also render the KTX2 ``.glb`` (needs the KTX2 writer,
+        :func:`~microfacet.export.leadr_textures.ktx2_writer`).
 
     Returns
     -------
     dict
-        ``errors``, ``images``, ``glb``, ``revision``, ``max_anisotropy``.
+        ``errors``, ``images``, ``glb``, ``revision``, ``max_anisotropy`` (and with ``ktx2``:
+        ``ktx2_glb``, ``ktx2_textures``).
 
     Examples
     --------
     >>> import microfacet as mf
     >>> pyramid = mf.leadr.bake(mf.leadr.gaussian_heightfield((8, 8), 0.3, seed=1), roughness=0.05)
     >>> with PlaneRenderer() as r:                                                         # doctest: +SKIP
-    ...     result = compare_plane(pyramid, r, ".", PlaneView(width=32, height=24), supersample=2)
+    ...     result = compare_plane(pyramid, r, ".", PlaneView(width=32, height=24), supersample=2, ktx2=True)
     >>> sorted(result["errors"]), result["images"]["leadr"].shape                          # doctest: +SKIP
-    (['leadr', 'naive'], (24, 32, 3))
+    (['ktx2', 'leadr', 'naive'], (24, 32, 3))
     """
     view = view or PlaneView()
     levels = leadr_textures(pyramid, base_roughness)
@@ -376,6 +402,13 @@ def compare_plane(pyramid, renderer: PlaneRenderer, folder, view: PlaneView | No
     images = {"reference": renderer.render(glb, view, levels, mips=False, supersample=supersample),
               "naive": renderer.render(glb, view, naive, mips=True),
               "leadr": renderer.render(glb, view, levels, mips=True)}
-    errors = {k: relative_l1(images[k], images["reference"]) for k in ("naive", "leadr")}
+    extra = {}
+    if ktx2:
+        from .leadr_textures import export_leadr
+        rep = export_leadr(pyramid, "gltf", Path(folder) / "leadr_plane_ktx2.glb", base_roughness=base_roughness,
+                           tiles=view.tiles)
+        images["ktx2"] = renderer.render(rep["file"], view)
+        extra = {"ktx2_glb": rep["file"], "ktx2_textures": renderer.textures}
+    errors = {k: relative_l1(images[k], images["reference"]) for k in images if k != "reference"}
     return {"errors": errors, "images": images, "glb": str(glb), "revision": renderer.revision,
-            "max_anisotropy": renderer.max_anisotropy}
+            "max_anisotropy": renderer.max_anisotropy, **extra}
