@@ -33,6 +33,8 @@ def add(sub) -> None:
                    help="output format")
     p.add_argument("--base-roughness", type=float, default=None, metavar="ALPHA",
                    help="PYRAMID.exr only: Beckmann roughness added to every level (leave out when baked with it)")
+    p.add_argument("--level", type=int, default=None, metavar="L",
+                   help="PYRAMID.exr --to blender|mtlx|usd only: the MIP level exported (default 0)")
     p.add_argument("--model", default="best", metavar="NAME",
                    help="fit of the file to export: best (default) or a name (microfacet.fit.fit_names)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
@@ -48,6 +50,11 @@ def run(args) -> int:
     if args.to == "threejs":
         raise ValueError(f"{args.fit}: --to threejs exports a glint microsurface (GLINTS.npz from 'microfacet "
                          "glints'); a fit file exports --to gltf (three.js loads .glb)")
+    if is_pyramid(args.fit) and args.to in ("blender", "mtlx", "usd"):
+        from ..export.leadr_consumers import run_cli as run_leadr_consumers
+        return run_leadr_consumers(args)
+    if getattr(args, "level", None) is not None:
+        raise ValueError("--level applies to a LEADR pyramid exported --to blender, mtlx or usd")
     if is_pyramid(args.fit) or args.to in ("textures", "ktx2"):
         from ..export.leadr_textures import run_cli
         return run_cli(args)
