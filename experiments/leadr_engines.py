@@ -2,7 +2,9 @@
 """LEADR for engines: a plane receding to the horizon in three.js (system Chromium, SwiftShader),
 textured with (a) naive MIPs (the level-0 textures box-filtered, constant roughness: what
 ``generateMipmap`` gives), (b) the LEADR MIPs of :mod:`microfacet.export.leadr_textures` uploaded
-as the textures' ``mipmaps``, (b') the same with an isotropic roughness ``sqrt(alpha1 alpha2)``
+as the textures' ``mipmaps``, (b KTX2) the ``.glb`` of ``microfacet export --to gltf`` whose textures
+are those chains as KTX2 images (Basis UASTC, KHR_texture_basisu) loaded by three.js's GLTFLoader +
+KTX2Loader (what an application gets from the file alone), (b') the same LEADR MIPs with an isotropic roughness ``sqrt(alpha1 alpha2)``
 and no anisotropy (what stock three.js renders correctly, see below), against (c) the reference:
 level 0 without MIPs rendered at 8x the resolution and box-downsampled. Relative L1 error of each
 against (c), per map, view and texture filtering (three.js ``texture.anisotropy`` 1 = trilinear,
@@ -31,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 import microfacet as mf
-from microfacet.export.leadr_textures import (encode_level, gltf_parameters, leadr_textures, level_parameters,
-                                             naive_textures, write_plane_glb)
+from microfacet.export.leadr_textures import (encode_level, export_leadr, gltf_parameters, ktx2_writer,
+                                             leadr_textures, level_parameters, naive_textures, write_plane_glb)
 from microfacet.export.leadr_threejs import PlaneRenderer, PlaneView, relative_l1
 from microfacet.io.png import write_png
 
@@ -82,6 +84,9 @@ def scaled_levels(pyramid, k: float) -> list[dict]:
 
 
 SCALES = (0.7, 1.0, 1.2, 1.4, 1.7)
+#: three.js texture formats (WebGL enums) KTX2Loader may transcode UASTC to
+GPU_FORMATS = {37808: "ASTC 4x4", 36492: "BC7 (BPTC)", 37496: "ETC2 RGBA", 33779: "BC3 (DXT5)", 33776: "BC1",
+               1023: "RGBA8"}
 
 
 def run(quick: bool, out: Path) -> None:
@@ -93,13 +98,17 @@ def run(quick: bool, out: Path) -> None:
     cases = maps(quick)
     views = dict(list(VIEWS.items())[1:2]) if quick else VIEWS
     ss = 4 if quick else 8
-    renders, sens = {}, {}
+    renders, sens, formats = {}, {}, set()
+    has_ktx2 = ktx2_writer(required=False) is not None
+    if not has_ktx2:
+        print("the KTX2 writer alktx2 is absent (pip install -e '.[export]'): no KTX2 column", file=sys.stderr)
     for stock in (False, True):
         with PlaneRenderer(mapped_frame=not stock) as r:
             for mname, (pyramid, tiles) in cases.items():
                 levels = leadr_textures(pyramid)
                 naive, iso = naive_textures(levels[0]), isotropic_levels(pyramid)
                 glb = write_plane_glb(levels[0], work / "plane.glb", tiles=tiles)
+                kglb = export_leadr(pyramid, "gltf", work / "plane_ktx2.glb", tiles=tiles)["file"] if has_ktx2 else None
                 for vname, view in views.items():
                     for aniso in (1, 16):
                         v = dataclasses.replace(view, tiles=tiles, anisotropy=aniso)
@@ -116,12 +125,17 @@ def run(quick: bool, out: Path) -> None:
                                         "leadr": r.render(glb, v, levels), "leadr_iso": r.render(glb, off, iso),
                                         "ref_with_extension": r.render(glb, v, levels, mips=False, supersample=2),
                                         "ref_without_extension": r.render(glb, off, levels, mips=False, supersample=2)}
+                        if kglb is not None:
+                            renders[key]["ktx2"] = r.render(kglb, v)
+                            formats.add(tuple(sorted((t["format"], t["levels"]) for t in r.textures.values())))
                 revision = r.revision
     for (mname, vname, aniso), im in renders.items():
-        e = {k: relative_l1(im[k], im["reference"]) for k in ("naive", "leadr", "leadr_iso", "leadr_stock")}
+        e = {k: relative_l1(im[k], im["reference"]) for k in ("naive", "leadr", "leadr_iso", "leadr_stock", "ktx2")
+             if k in im}
+        ktx2 = f"{e['ktx2']:.3f}" if "ktx2" in e else "—"
         same = relative_l1(im["ref_with_extension"], im["ref_without_extension"])
         floor = "" if im["fine"] is None else f"{relative_l1(im['reference'], im['fine']):.3f}"
-        rows.append(f"| {mname} | {vname} | {aniso} | {e['naive']:.3f} | {e['leadr']:.3f} | {e['leadr_iso']:.3f} "
+        rows.append(f"| {mname} | {vname} | {aniso} | {e['naive']:.3f} | {e['leadr']:.3f} | {ktx2} | {e['leadr_iso']:.3f} "
                     f"| {e['leadr_stock']:.3f} | {same:.1e} | {floor} |")
         if aniso == 16:
             s = np.percentile(im["reference"], 99.5)
@@ -143,12 +157,17 @@ def run(quick: bool, out: Path) -> None:
         "its anisotropy frame re-orthogonalised against the mapped normal; (b') LEADR MIPs, isotropic "
         "roughness sqrt(alpha1 alpha2), anisotropy off (correct in stock three.js); (b stock) (b) in stock "
         "three.js, whose anisotropic lobe keeps the geometric tangent frame so that the normal map barely "
-        "moves it. Last column: the reference with the anisotropy extension on (strength 0, patched frame) "
+        "moves it; (b KTX2) (b) as the exported .glb holds it: KTX2 chains (Basis UASTC LDR 4x4, linear, "
+        "KHR_texture_basisu) that three.js's KTX2Loader transcodes to the GPU format "
+        f"{', '.join(sorted({GPU_FORMATS.get(f, str(f)) for fs in formats for f, _ in fs})) or '(none: no writer)'} "
+        f"with {', '.join(sorted({str(n) for fs in formats for _, n in fs})) or '-'} MIP levels per texture, "
+        "patched frame. Last column: the reference with the anisotropy extension on (strength 0, patched frame) "
         "against off: the patched anisotropic lobe reduces to the isotropic one. "
         f"Reference noise: the reference against the same at {2 * ss}x (its own aliasing of glints, a floor under "
         "every error; measured with texture.anisotropy 16).", "",
-        "| map | view | texture.anisotropy | (a) naive | (b) LEADR | (b') LEADR isotropic | (b) stock three.js "
-        "| ref. ext. on vs off | reference noise |", "|---|---|---|---|---|---|---|---|---|", *rows, "",
+        "| map | view | texture.anisotropy | (a) naive | (b) LEADR | (b KTX2) LEADR, KTX2 chain | (b') LEADR isotropic "
+        "| (b) stock three.js | ref. ext. on vs off | reference noise |", "|---|---|---|---|---|---|---|---|---|---|",
+        *rows, "",
         f"![naive | LEADR | LEADR isotropic | reference, texture.anisotropy 16, one row per map and view]"
         f"(figures/{png.name})", "",
         "Image: rows are the map x view cases with texture.anisotropy 16 (in the table's order); columns (a), "
