@@ -45,6 +45,8 @@ Examples
 (['anisotropy', 'normal', 'roughness'], (4, 4, 3))
 >>> plane_for_level(pyramid, 2, size=32).tiles
 8.0
+>>> CONSUMERS, NOT_CARRIED[0][:15]
+(('blender', 'mtlx'), 'Beckmann lobe: ')
 """
 from __future__ import annotations
 
