@@ -263,17 +263,21 @@ def test_cli_exports_and_errors_in_one_line(pyramid, tmp_path, capsys):
         assert "UASTC covariance error" in capsys.readouterr().out
     (tmp_path / "fit.npz").write_bytes(b"x")
     (tmp_path / "junk.exr").write_bytes(b"junk")
-    cases = [([str(exr), "--to", "mtlx"], "--to textures, --to ktx2 or --to gltf"),
+    cases = [([str(exr), "--to", "threejs"], "--to threejs exports a glint microsurface"),
              ([str(tmp_path / "none.exr"), "--to", "gltf"], "no such file"),
              ([str(exr), "--to", "gltf", "--base-roughness", "-1"], "--base-roughness"),
              ([str(tmp_path / "fit.npz"), "--to", "textures"], "takes a LEADR pyramid"),
              ([str(exr), "--to", "gltf", "--model", "ggx"], "--model"),
-             ([str(tmp_path / "junk.exr"), "--to", "gltf"], "junk.exr")]
+             ([str(tmp_path / "junk.exr"), "--to", "textures"], "junk.exr")]
     capsys.readouterr()
     for argv, text in cases:
         assert main(["export", *argv, "-o", str(tmp_path / "e")]) != 0
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and text in err[0], err
+    import argparse                         # --to mtlx|usd|blender of a pyramid: export.leadr_consumers
+    with pytest.raises(mf.MicrofacetError, match="--to textures, --to ktx2 or --to gltf, not --to mtlx"):
+        lt.run_cli(argparse.Namespace(fit=str(exr), to="mtlx", output=str(tmp_path / "e"), base_roughness=None,
+                                      model="best"))
 
 
 @pytest.fixture(scope="module")
