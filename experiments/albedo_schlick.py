@@ -48,7 +48,7 @@ CACHE = Path.home() / ".cache" / "microfacet" / "corpus"
 METHODS = ("table", "schlick", "schlick_base", "shared", "shared_base")
 #: Fallback variants ``"S|table"``: the Schlick match ``S`` where its band error is within
 #: :data:`BAND` and its log error within ``1 + LOG_SLACK`` times the table's, else the table.
-FALLBACKS = ("schlick", "shared", "schlick_base")
+FALLBACKS = ("schlick", "shared", "schlick_base", "shared_base")
 LOG_SLACK = 0.05
 EXPORT_MATERIALS = ("merl/ss440", "merl/specular-orange-phenolic", "merl/nickel")
 EXPORT_METHODS = ("table", "schlick", "shared_base", "fallback")
@@ -213,10 +213,17 @@ def report(cache: Path, export_json: Path, command: str) -> str:
                      f"{np.nanmedian(s) if v != 'fit' else 0:.2f} |")
     lines += ["", "`fit`: before any match. `S|table`: the Schlick match `S` where its band error is within 5 % and "
               f"its log error within {1 + LOG_SLACK:g} times the table match's, else the table match "
-              "(`match_albedo(method=\"fallback\")` with `S = schlick`); its seconds are `S`'s only. "
+              "(`match_albedo(method=\"fallback\")` is `shared_base|table`, its band judged on the match's own 64x64 quadrature); its seconds are `S`'s only. "
               "`schlick`: every Schlick lobe's f0 (RGB) and grey f90; `shared`: one factor per channel on every "
               "lobe's f0 and one on every f90 (the lobes keep their relative weights); `_base`: also the base "
               "colours.", ""]
+    best_schlick = max(METHODS[1:], key=lambda v: sum(_variant(r, v)["band"] <= BAND for r in recs))
+    n_table = sum(r["table"]["band"] <= BAND for r in recs)
+    n_best = sum(r[best_schlick]["band"] <= BAND for r in recs)
+    lines += ["Decision: a Schlick match replaces the table as the default only if it holds (nearly) the table's band "
+              f"count and image error. Best Schlick form: `{best_schlick}`, {n_best}/{len(recs)} within the band vs "
+              f"the table's {n_table}/{len(recs)}" + (": the table stays the default." if n_best < n_table - 2 else "."),
+              ""]
     by_model = {}
     for r in recs:
         by_model.setdefault(r["model"], []).append(r)
