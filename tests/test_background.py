@@ -5,7 +5,7 @@ import signal
 import numpy as np
 import pytest
 
-from microfacet._background import can_fork, in_background, in_process
+from microfacet._background import can_fork, in_background, in_process, in_process_items
 
 
 def _pid_and_sum(a):
@@ -40,3 +40,49 @@ def test_in_process_says_when_its_worker_dies():
 def test_in_background_runs_on_a_thread_of_this_process():
     pid, total = in_background(_pid_and_sum, np.ones(3)).result(timeout=60)
     assert (pid, total) == (os.getpid(), 3.0)
+
+
+def _pids_and_squares(n, fail_at=None):
+    for k in range(n):
+        if k == fail_at:
+            raise ValueError(f"bad item {k}")
+        yield os.getpid(), k * k
+
+
+def test_in_process_items_arrive_in_order_from_another_process():
+    items = list(in_process_items(_pids_and_squares, 4))
+    assert [v for _, v in items] == [0, 1, 4, 9]
+    assert all((pid != os.getpid()) == can_fork() for pid, _ in items)
+
+
+def test_in_process_items_raise_the_workers_exception_after_the_items_made():
+    got = []
+    with pytest.raises(ValueError, match="bad item 2"):
+        for _, v in in_process_items(_pids_and_squares, 5, 2):
+            got.append(v)
+    assert got == [0, 1]
+
+
+@pytest.mark.skipif(not can_fork(), reason="this machine's in_process_items runs in this process (one CPU or not Linux)")
+def test_in_process_items_left_early_stop_the_worker():
+    def endless():
+        yield os.getpid()
+        while True:
+            yield 0
+    items = in_process_items(endless)
+    pid = next(items)
+    items.close()                                # the caller stops reading
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
+
+
+@pytest.mark.skipif(not can_fork(), reason="this machine's in_process_items runs in this process (one CPU or not Linux)")
+def test_in_process_items_say_when_their_worker_dies():
+    def dies_after_one():
+        yield 1
+        os.kill(os.getpid(), signal.SIGKILL)
+        yield 2
+    items = in_process_items(dies_after_one)
+    assert next(items) == 1
+    with pytest.raises(RuntimeError, match="worker process ended"):
+        next(items)

@@ -320,7 +320,7 @@ def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monke
     for mode in ("threads", "serial"):
         if mode == "serial":
             monkeypatch.setattr(outputs, "in_background", _waited)
-            monkeypatch.setattr(outputs, "in_process", _waited)
+            monkeypatch.setattr(outputs, "in_process_items", lambda fn, *args: fn(*args))   # in this process
         out = tmp_path / mode / "gold.npz"
         summary = outputs.fit_material(data, out, resolution=16, picture=False)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5

@@ -8,10 +8,10 @@ import multiprocessing
 import os
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 
-__all__ = ["in_background", "in_process", "can_fork"]
+__all__ = ["in_background", "in_process", "in_process_items", "can_fork"]
 
 
 def in_background(fn: Callable, *args) -> Future:
@@ -37,18 +37,48 @@ def can_fork() -> bool:
             and multiprocessing.parent_process() is None and not multiprocessing.current_process().daemon)
 
 
-def _child(fn: Callable, args: tuple, conn) -> None:
+def _child(fn: Callable, args: tuple, conn, stream: bool) -> None:
     from .batch.workers import exit_with
     exit_with(os.getppid())                      # no orphan computing for a parent killed by kill -9
     try:
-        message = ("ok", fn(*args))
+        if stream:
+            for item in fn(*args):
+                _send(conn, ("item", item), fn)
+            message = ("ok", None)
+        else:
+            message = ("ok", fn(*args))
     except BaseException as e:                   # sent back as the parent's exception
         message = ("error", e)
+    _send(conn, message, fn)
+    conn.close()
+
+
+def _send(conn, message: tuple, fn: Callable) -> None:
     try:
         conn.send(message)
     except Exception as e:                       # an unpicklable result or exception
         conn.send(("error", RuntimeError(f"{getattr(fn, '__name__', 'work')}: {e!r}")))
-    conn.close()
+
+
+def _fork(fn: Callable, args: tuple, stream: bool):
+    """Start ``fn(*args)`` in a forked daemonic child: ``(child, receiving end)``."""
+    context = multiprocessing.get_context("fork")
+    receive, send = context.Pipe(duplex=False)
+    child = context.Process(target=_child, args=(fn, args, send, stream), daemon=True,
+                            name=f"microfacet-{getattr(fn, '__name__', 'work')}")
+    child.start()
+    send.close()
+    return child, receive
+
+
+def _receive(fn: Callable, child, receive) -> tuple:
+    """The child's next message, ``(status, value)``; an exception if it ended without one."""
+    try:
+        return receive.recv()
+    except EOFError:
+        child.join()
+        raise RuntimeError(f"{getattr(fn, '__name__', 'work')}: worker process ended "
+                           f"(exit code {child.exitcode})") from None
 
 
 def in_process(fn: Callable, *args) -> Future:
@@ -60,20 +90,11 @@ def in_process(fn: Callable, *args) -> Future:
     command does not wait for it."""
     if not can_fork():
         return in_background(fn, *args)
-    context = multiprocessing.get_context("fork")
-    receive, send = context.Pipe(duplex=False)
-    child = context.Process(target=_child, args=(fn, args, send), daemon=True,
-                            name=f"microfacet-{getattr(fn, '__name__', 'work')}")
-    child.start()
-    send.close()
+    child, receive = _fork(fn, args, stream=False)
 
     def wait():
         try:
-            status, value = receive.recv()
-        except EOFError:
-            child.join()
-            raise RuntimeError(f"{getattr(fn, '__name__', 'work')}: worker process ended "
-                               f"(exit code {child.exitcode})") from None
+            status, value = _receive(fn, child, receive)
         finally:
             receive.close()
         child.join()
@@ -81,3 +102,51 @@ def in_process(fn: Callable, *args) -> Future:
             raise value
         return value
     return in_background(wait)
+
+
+def in_process_items(fn: Callable, *args) -> Iterator:
+    """The items of the generator ``fn(*args)`` made in a forked child process, each as soon
+    as it is made (as :func:`in_process`, whose conditions apply; without a fork, the
+    generator itself, run as it is read): the caller works on early items while the child
+    makes the next. An exception in the child is raised where the items stop; a caller that
+    stops reading early stops the child.
+
+    Parameters
+    ----------
+    fn : callable
+        A generator function; its items must pickle.
+    *args
+        Its arguments.
+
+    Returns
+    -------
+    Iterator
+        The items, in the order made.
+
+    Examples
+    --------
+    >>> def squares(n):
+    ...     for k in range(n):
+    ...         yield k * k
+    >>> list(in_process_items(squares, 4))
+    [0, 1, 4, 9]
+    """
+    if not can_fork():
+        return fn(*args)
+    child, receive = _fork(fn, args, stream=True)
+
+    def items():
+        status = "item"
+        try:
+            while status == "item":
+                status, value = _receive(fn, child, receive)
+                if status == "item":
+                    yield value
+                elif status == "error":
+                    raise value
+        finally:                                 # read to the end, or left early (then the child stops)
+            receive.close()
+            if status == "item":
+                child.terminate()
+            child.join()
+    return items()

@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._background import in_background, in_process
+from .._background import in_background, in_process_items
 from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
@@ -370,15 +370,18 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     # runs NumPy only: Numba's GNU OpenMP kernels cannot run in a forked child)
     from .perceptual import target as perceptual_target
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
-    perceptual_job = in_process(_perceptual, perceptual_target(brdf), models)
+    perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
     legacy = _legacy_fits(brdf, method, settings)
     data_albedo = legacy.metrics[2].ref
     fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3], data_albedo)  # while the perceptual fits run
     if picture:
         from ..render import fit_comparison_png         # imports matplotlib, also while they run
     target = albedo_target(brdf, log=legacy.judges[0])
-    perceptual, t3 = _perceptual_brdfs(target, *perceptual_job.result())
-    fits_summary.update(_fit_summaries(legacy.judges, perceptual, _scores(legacy.metrics, perceptual)[:3], data_albedo))
+    perceptual = {}
+    for name, (q, y), t3 in perceptual_items:          # each judged while the next is fitted
+        perceptual[name] = _perceptual_brdf(target, name, q, y)
+        one = {name: perceptual[name]}
+        fits_summary.update(_fit_summaries(legacy.judges, one, _scores(legacy.metrics, one)[:3], data_albedo))
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
                "seconds_perceptual": round(t3 - legacy.times[1], 4)}
@@ -516,21 +519,21 @@ LOG_PAIRS = 2**15
 ENERGY_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
 
 
-def _perceptual(t, models) -> tuple[dict, float]:
-    """``({name: (q, y)}, end time)`` of :func:`microfacet.fit.perceptual.fit_parameters` on
-    the target ``t`` (run in a process of its own: many small solves, mostly Python, that
-    threads would serialize)."""
-    from .perceptual import fit_parameters
-    return fit_parameters(None, models, t), time.perf_counter()
+def _perceptual(t, models):
+    """``(name, (q, y), end time)`` of :func:`microfacet.fit.perceptual.iter_parameters` on the
+    target ``t``, each as fitted (run in a process of its own: many small solves, mostly
+    Python, that threads would serialize)."""
+    from .perceptual import iter_parameters
+    for name, parameters in iter_parameters(None, models, t):
+        yield name, parameters, time.perf_counter()
 
 
-def _perceptual_brdfs(target, parameters: dict, end: float) -> tuple[dict, float]:
-    """``({name: BRDF}, end)`` of :func:`_perceptual`'s parameters, each with its albedo
-    matched to the data's (:func:`microfacet.fit.albedo.match_albedo`; ``target``: the data's
+def _perceptual_brdf(target, name: str, q, y):
+    """The BRDF of the perceptual fit ``name`` of parameters ``(q, y)``, its albedo matched
+    to the data's (:func:`microfacet.fit.albedo.match_albedo`; ``target``: the data's
     :func:`~microfacet.fit.albedo.albedo_target`)."""
     from .perceptual import MODEL_SPECS
-    return {name: match_albedo(None, MODEL_SPECS[name].brdf(q, y), target)
-            for name, (q, y) in parameters.items()}, end
+    return match_albedo(None, MODEL_SPECS[name].brdf(q, y), target)
 
 
 def _judges(brdf) -> tuple:

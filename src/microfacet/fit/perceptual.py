@@ -60,7 +60,7 @@ from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, measure
                        uniform_directions)
 from .extract import box_qp
 
-__all__ = ["MODELS", "MODEL_SPECS", "Geometry", "Target", "Model", "target", "fit_model", "fit_parameters", "fit_models", "select",
+__all__ = ["MODELS", "MODEL_SPECS", "Geometry", "Target", "Model", "target", "fit_model", "fit_parameters", "iter_parameters", "fit_models", "select",
            "lobe_factor", "PENALTY"]
 
 #: The models of :func:`fit_models`, in the order they are fitted.
@@ -832,8 +832,7 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
     """Every model of ``models`` (names of :data:`MODELS`) fitted to ``reference`` (or to its
     :func:`target` ``t``, which then is all that is read): ``{name: (q, y)}``, its nonlinear
     parameters and reflectances (``MODEL_SPECS[name].brdf(q, y)`` is the BRDF; plain arrays,
-    so that they cross processes). NumPy only once ``t`` is made. Linear algebra runs on one
-    BLAS thread (the matrices are small; idle BLAS threads spin).
+    so that they cross processes); :func:`iter_parameters` collected.
 
     Parameters
     ----------
@@ -858,6 +857,40 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
     >>> np.exp(q).round(3), y[:3].round(3)         # alpha, then the Schlick F0 per channel
     (array([0.3]), array([0.04, 0.04, 0.04]))
     """
+    return dict(iter_parameters(reference, models, t))
+
+
+def iter_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = None):
+    """``(name, (q, y))`` of every model of ``models`` in the order of :data:`MODELS`, each
+    as soon as it is fitted (:func:`fit_model`; a later model may start from an earlier
+    one), e.g. for a caller that judges early models while later ones are fitted
+    (:func:`microfacet._background.in_process_items`). NumPy only once ``t`` is made. Linear
+    algebra runs on one BLAS thread (the matrices are small; idle BLAS threads spin).
+
+    Parameters
+    ----------
+    reference : BRDF
+        The material (read only to make ``t`` when it is not given).
+    models : sequence of str
+        Names of :data:`MODELS`.
+    t : Target, optional
+        The data's side of the objective (:func:`target`).
+
+    Yields
+    ------
+    name : str
+        The model's name.
+    (q, y) : tuple of ndarray
+        Its nonlinear parameters and reflectances.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> reference = mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04))
+    >>> t = target(reference, n=256, grid=8, image_size=0, albedo_grid=(16, 8))
+    >>> [name for name, _ in iter_parameters(reference, models=("two_lobes", "lobe"), t=t)]
+    ['lobe', 'two_lobes']
+    """
     from threadpoolctl import threadpool_limits
     unknown = set(models) - set(MODELS)
     if unknown:
@@ -870,7 +903,7 @@ def fit_parameters(reference, models=("lobe", "two_lobes"), t: Target | None = N
             x, _ = fit_model(t, model, fitted)
             nq = len(model.q_bounds[0])
             fitted[name] = (x[:nq], x[nq:])
-    return fitted
+            yield name, fitted[name]
 
 
 def fit_models(reference, models=("lobe", "two_lobes"), t: Target | None = None) -> dict:
