@@ -105,6 +105,7 @@ def test_cli_other_formats_one_error_line(glints_file, tmp_path, capsys):
              (["--to", "usd"], "--to usd cannot hold a glint P-BRDF (UsdPreviewSurface"),
              (["--to", "blender"], "--to blender cannot hold a glint P-BRDF (Cycles"),
              (["--to", "textures"], "--to textures cannot hold a glint P-BRDF"),
+             (["--to", "ktx2"], "--to ktx2 cannot hold a glint P-BRDF (KTX2 MIP chains"),
              (["--to", "threejs", "--model", "ggx"], "--model applies to fit files"),
              (["--to", "threejs", "--base-roughness", "0.1"], "--base-roughness applies to a LEADR pyramid")]
     capsys.readouterr()

@@ -65,7 +65,8 @@ NOT_HELD = {
     "blender": "Cycles and EEVEE closures are fixed lobes (an OSL script composes them and cannot return a BRDF "
                "value per light direction)",
 }
-_OTHER = {"textures": "engine textures carry one filtered lobe per texel and MIP level (a LEADR pyramid's)"}
+_OTHER = {"textures": "engine textures carry one filtered lobe per texel and MIP level (a LEADR pyramid's)",
+          "ktx2": "KTX2 MIP chains carry one filtered lobe per texel and MIP level (a LEADR pyramid's)"}
 #: The common reason, after each format's own.
 _WHY = ("the glint P-BRDF sums a pixel footprint's noncentred Beckmann lobes (Chermain et al. 2019, Eq. 7-17): "
         "it needs the pixel's footprint and the lobe textures at every shading point")
