@@ -109,6 +109,7 @@ RESULTS = {
     "glints_pndf_validation": ("Glints P-NDF validation", "python experiments/glints_pndf_validation.py"),
     "glints_threejs": ("Glints in three.js", "python experiments/glints_threejs.py"),
     "leadr_engines": ("LEADR textures in three.js", "python experiments/leadr_engines.py"),
+    "leadr_consumers": ("LEADR in Blender and MaterialX", "python experiments/leadr_consumers.py"),
     "albedo_band": ("Albedo within 5 % of the data", "python experiments/albedo_band.py --data DATA"),
     "sheared_chi2": ("Sheared lobes at grazing views: chi-square", "python experiments/sheared_chi2.py"),
     "glsl_gpu": ("GLSL shaders on an NVIDIA GPU", "python experiments/glsl_gpu.py"),
