@@ -83,7 +83,8 @@ def build_material(bpy, scene: dict):
     mapping.inputs["Scale"].default_value = (t, t, 1.0)
     nt.links.new(uv.outputs["UV"], mapping.inputs["Vector"])
     interp = scene.get("interpolation", "Linear")
-    tex = {k: _image_node(bpy, nt, scene["textures"][k], interp, mapping) for k in ("normal", "roughness", "anisotropy")}
+    tex = {k: _image_node(bpy, nt, scene["textures"][k], interp, mapping)
+           for k in ("normal", "roughness", "anisotropy")}
     for k, node in tex.items():
         node.name = node.label = f"leadr {k}"
     nmap = nt.nodes.new("ShaderNodeNormalMap")

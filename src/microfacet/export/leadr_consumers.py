@@ -65,7 +65,8 @@ from ..errors import MicrofacetError
 from ..io.png import write_png_data
 
 __all__ = ["LeadrPlane", "plane_for_level", "level_ellipses", "level_textures", "write_level_textures",
-           "leadr_blend", "render_leadr_blender", "leadr_mtlx_document", "leadr_mtlx", "MtlxPlaneRenderer", "render_mtlx_plane",
+           "leadr_blend", "render_leadr_blender", "leadr_mtlx_document", "leadr_mtlx", "MtlxPlaneRenderer",
+           "render_mtlx_plane",
            "render_leadr_mtlx", "leadr_usd", "compare_leadr", "run_cli", "CONSUMERS", "TEXTURES",
            "NOT_CARRIED"]
 
@@ -550,7 +551,8 @@ def leadr_mtlx_document(textures: dict, plane: LeadrPlane | None = None, name: s
     sh.setInputValue("base_color", mx.Color3(*[float(plane.base_color)] * 3))
     sh.setInputValue("base_metalness", float(plane.metallic))
     sh.setInputValue("specular_color", mx.Color3(1.0, 1.0, 1.0))
-    for inp, out, kind in (("geometry_normal", "normal_out", "vector3"), ("specular_roughness", "roughness_out", "float"),
+    for inp, out, kind in (("geometry_normal", "normal_out", "vector3"),
+                           ("specular_roughness", "roughness_out", "float"),
                            ("specular_roughness_anisotropy", "anisotropy_out", "float"),
                            ("geometry_tangent", "tangent_out", "vector3")):
         sh.addInput(inp, kind).setConnectedOutput(outs[out])
