@@ -66,7 +66,6 @@ from ..io.png import write_png_data
 
 __all__ = ["LeadrPlane", "plane_for_level", "level_ellipses", "level_textures", "write_level_textures",
            "leadr_blend", "render_leadr_blender", "leadr_mtlx_document", "leadr_mtlx", "MtlxPlaneRenderer",
-           "render_mtlx_plane",
            "render_leadr_mtlx", "leadr_usd", "compare_leadr", "run_cli", "CONSUMERS", "TEXTURES",
            "NOT_CARRIED"]
 
@@ -618,116 +617,10 @@ def leadr_mtlx(pyramid, level: int, out, plane: LeadrPlane | None = None, base_r
     return out
 
 
-def _plane_obj(path: Path) -> Path:
-    """The plane ``[-1, 1]^2`` (normal +z, uv ``(x + 1)/2, (y + 1)/2``) as an OBJ of two triangles."""
-    path.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
-                    "f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
-    return path
-
-
-def render_mtlx_plane(xml: str, folder: str, material: str, size: int, light) -> np.ndarray:
-    """In the render process: MaterialX's ``GlslRenderer`` draws ``material`` of the document
-    ``xml`` (its textures resolved in ``folder``) on the plane of :class:`LeadrPlane`, seen from
-    straight above (orthographic over ``[-1, 1]^2``), lit by one directional light of irradiance 1
-    from ``light``, no indirect light, pbrlib's energy compensation removed
-    (:func:`~microfacet.export.mtlx_render.patched_libraries`); ``size x size`` linear RGB, row 0 at
-    the top. Called by :class:`MtlxPlaneRenderer` in a spawned process (GLX, an X display).
-
-    Parameters
-    ----------
-    xml : str
-        The document.
-    folder : str
-        Where its texture file names resolve.
-    material : str
-        The material node.
-    size : int
-        Image side in pixels.
-    light : (3,) sequence
-        Direction toward the light.
-
-    Returns
-    -------
-    (size, size, 3) float32 ndarray
-
-    Examples
-    --------
-    >>> image = render_mtlx_plane(xml, "textures", "M_leadr", 32, (0.5, 0.3, 0.8))   # doctest: +SKIP
-    """
-    os.environ.setdefault("GALLIVM_PERF", "nopt")
-    import MaterialX as mx
-    import MaterialX.PyMaterialXGenGlsl as gen_glsl
-    import MaterialX.PyMaterialXGenShader as gen
-    import MaterialX.PyMaterialXRender as mx_render
-    import MaterialX.PyMaterialXRenderGlsl as mx_glsl
-
-    from .mtlx_render import EYE_DISTANCE, patched_libraries, xvfb_display
-    doc = mx.createDocument()
-    mx.readFromXmlString(doc, xml)
-    with tempfile.TemporaryDirectory() as tmp, xvfb_display():
-        tmp = Path(tmp)
-        root = patched_libraries(tmp / "mx")
-        search = mx.FileSearchPath(str(root))
-        lib = mx.createDocument()
-        mx.loadLibraries(mx.getDefaultDataLibraryFolders(), search, lib)
-        doc.setDataLibrary(lib)
-        generator = gen_glsl.GlslShaderGenerator.create()
-        ctx = gen.GenContext(generator)
-        ctx.registerSourceCodeSearchPath(search)
-        opts = ctx.getOptions()
-        opts.hwSpecularEnvironmentMethod = gen.SPECULAR_ENVIRONMENT_FIS
-        opts.hwMaxActiveLightSources = 1
-        opts.hwShadowMap = False
-        opts.hwAmbientOcclusion = False
-        opts.hwSrgbEncodeOutput = False
-        opts.targetColorSpaceOverride = "lin_rec709"
-        opts.fileTextureVerticalFlip = True          # v = 0 at the image's bottom row (MaterialX's convention)
-        w = np.asarray(light, float) / np.linalg.norm(light)
-        light_doc = mx.createDocument()
-        light_doc.setDataLibrary(lib)
-        sun = light_doc.addNode("directional_light", "sun", "lightshader")
-        sun.setInputValue("direction", mx.Vector3(*(float(-c) for c in w)))
-        sun.setInputValue("color", mx.Color3(1.0, 1.0, 1.0))
-        sun.setInputValue("intensity", 1.0)
-        lights = mx_render.LightHandler.create()
-        lights.registerLights(lib, [sun], ctx)
-        lights.setLightSources([sun])
-        lights.setIndirectLighting(False)
-        shader = generator.generate("leadr_plane", mx.getShaderNodes(doc.getChild(material))[0], ctx)
-        renderer = mx_glsl.GlslRenderer.create(size, size, mx_render.BaseType.FLOAT)
-        renderer.initialize()
-        images = mx_glsl.GLTextureHandler.create(mx_render.StbImageLoader.create())
-        images.setSearchPath(mx.FileSearchPath(str(folder)))
-        renderer.setImageHandler(images)
-        renderer.setLightHandler(lights)
-        geometry = renderer.getGeometryHandler()
-        geometry.clearGeometry()
-        if not geometry.loadGeometry(mx.FilePath(str(_plane_obj(tmp / "plane.obj"))), False):
-            raise RuntimeError("render_mtlx_plane: MaterialX could not load the plane")
-        camera = renderer.getCamera()
-        camera.setViewMatrix(mx_render.Camera.createViewMatrix(mx.Vector3(0, 0, EYE_DISTANCE), mx.Vector3(0, 0, 0),
-                                                               mx.Vector3(0, 1, 0)))
-        camera.setProjectionMatrix(mx_render.Camera.createOrthographicMatrix(-1, 1, -1, 1, EYE_DISTANCE - 4,
-                                                                             EYE_DISTANCE + 4))
-        camera.setWorldMatrix(mx.Matrix44.IDENTITY)
-        renderer.createProgram(shader)
-        renderer.validateInputs()
-        renderer.render()
-        img = renderer.captureImage(None)
-        h, wd = img.getHeight(), img.getWidth()
-        out = np.empty((h, wd, 3), np.float32)
-        for i in range(h):
-            for j in range(wd):
-                c = img.getTexelColor(j, i)
-                out[i, j] = (c[0], c[1], c[2])
-        del renderer
-        return out[::-1].copy()                      # OpenGL rows: bottom first
-
-
 class MtlxPlaneRenderer:
     """A process that renders LEADR levels with MaterialX's ``GlslRenderer``
-    (:func:`render_mtlx_plane`): spawned on entering (a GLX context cannot share a process with
-    another OpenGL context), with a private Xvfb when no display is set
+    (:func:`~microfacet.export.mtlx_render.render_xml` on a plane): spawned on entering (a GLX
+    context cannot share a process with another OpenGL context), with a private Xvfb when no display is set
     (:func:`~microfacet.export.mtlx_render.xvfb_display`), ended on exit and with this process.
 
     Examples
@@ -776,14 +669,16 @@ class MtlxPlaneRenderer:
         (size, size, 3) ndarray
         """
         import MaterialX as mx
+
+        from .mtlx_render import render_xml
         k = int(supersample)
         if k < 1:
             raise ValueError(f"supersample must be an integer >= 1, got {supersample!r}")
         with tempfile.TemporaryDirectory() as tmp:
             paths = write_level_textures(level_textures(pyramid, level, "mtlx", base_roughness, naive), tmp)
             doc = leadr_mtlx_document({n: p.name for n, p in paths.items()}, plane)
-            big = self.executor.submit(render_mtlx_plane, mx.writeToXmlString(doc), tmp, "M_leadr",
-                                       int(plane.size) * k, tuple(float(v) for v in plane.light)).result()
+            big = self.executor.submit(render_xml, mx.writeToXmlString(doc), "M_leadr", int(plane.size) * k,
+                                       tuple(float(v) for v in plane.light), mesh="plane", folder=tmp).result()
         n = int(plane.size)
         return big.reshape(n, k, n, k, 3).mean(axis=(1, 3)).astype(np.float64)
 

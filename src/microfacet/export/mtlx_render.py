@@ -73,7 +73,8 @@ import numpy as np
 from .comparison import LIGHT, library_render, rel_l1
 
 __all__ = ["render_mtlx", "compare_mtlx", "xvfb_display", "xvfb_available", "patched_libraries",
-           "stop_xvfb", "sphere_obj", "sphere_mask", "MaterialXLayer", "mtlx_as_held", "EYE_DISTANCE"]
+           "stop_xvfb", "sphere_obj", "plane_obj", "sphere_mask", "render_xml", "MaterialXLayer", "mtlx_as_held",
+           "EYE_DISTANCE"]
 
 #: Distance of the (orthographic) eye: the view direction the shader derives is ``+z`` to
 #: ``1/EYE_DISTANCE`` rad.
@@ -339,6 +340,29 @@ def sphere_obj(path, size: int) -> Path:
     return path
 
 
+def plane_obj(path) -> Path:
+    """Write the plane ``[-1, 1]^2`` (normal ``+z``, uv ``((x + 1) / 2, (y + 1) / 2)``) as an OBJ of two triangles.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.obj`` to write.
+
+    Returns
+    -------
+    Path
+
+    Examples
+    --------
+    >>> plane_obj("plane.obj").read_text().count("\\nf ")
+    2
+    """
+    path = Path(path)
+    path.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+                    "f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
+    return path
+
+
 def _document(mx, path_or_document):
     if isinstance(path_or_document, (str, os.PathLike)):
         path = Path(path_or_document)
@@ -401,7 +425,7 @@ def render_mtlx(path_or_document, size: int = 64, material: str = "M_microfacet_
         raise ValueError(f"render_mtlx: the document has no material {material!r}")
     from concurrent.futures.process import BrokenProcessPool
     try:
-        img = _render_process().submit(_render_xml, mx.writeToXmlString(doc), material, size,
+        img = _render_process().submit(render_xml, mx.writeToXmlString(doc), material, size,
                                        tuple(float(v) for v in np.ravel(light)), bool(compensation)).result()
     except BrokenProcessPool:
         _RENDERER["executor"] = None
@@ -432,21 +456,64 @@ def _render_process():
     return executor
 
 
-def _render_xml(xml: str, material: str, size: int, light, compensation: bool) -> np.ndarray:
-    """:func:`render_mtlx`'s work, in the render process: the document from its XML."""
+def render_xml(xml: str, material: str, size: int, light, compensation: bool = False, mesh: str = "sphere",
+               folder=None) -> np.ndarray:
+    """In a render process (GLX, an X display: a private Xvfb when none is set): MaterialX's
+    ``GlslRenderer`` draws ``material`` of the document ``xml`` on ``mesh`` seen along ``-z``
+    (orthographic over ``[-1, 1]^2``), lit by one directional light of irradiance 1 from
+    ``light``, no indirect light: ``"sphere"`` the comparison sphere (:func:`sphere_obj`),
+    ``"plane"`` the plane ``z = 0`` (:func:`plane_obj`); texture file names resolve in
+    ``folder``, ``v = 0`` at an image's bottom row (MaterialX's convention). pbrlib's energy
+    compensation is removed unless ``compensation`` (:func:`patched_libraries`).
+    :func:`render_mtlx` calls it in its render process, which it keeps.
+
+    Parameters
+    ----------
+    xml : str
+        The document.
+    material : str
+        The material node to render.
+    size : int
+        Image side in pixels.
+    light : (3,) sequence
+        Direction toward the light (normalized here).
+    compensation : bool
+        Keep pbrlib's multiple-scattering energy compensation.
+    mesh : {"sphere", "plane"}
+        What is drawn.
+    folder : str or PathLike, optional
+        Where texture file names resolve.
+
+    Returns
+    -------
+    (size, size, 3) float32 ndarray
+        Linear Rec. 709 RGB, row 0 at the top (outside the sphere: what the rasterizer drew).
+
+    Examples
+    --------
+    >>> import MaterialX as mx, microfacet as mf
+    >>> from microfacet.export.mtlx import mtlx_document
+    >>> doc, lost = mtlx_document(mf.MicrofacetBRDF(mf.GGX(alpha=0.2)))            # doctest: +SKIP
+    >>> render_xml(mx.writeToXmlString(doc), "M_microfacet_exact", 32, (0, 0, 1)).shape   # doctest: +SKIP
+    (32, 32, 3)
+    """
     # Mesa llvmpipe: no LLVM optimization passes (a graph of 13 lobes compiles in ~13 s, not
     # minutes; the image is the same to float32); before the first GL context of this process
     os.environ.setdefault("GALLIVM_PERF", "nopt")
+    if mesh not in ("sphere", "plane"):
+        raise ValueError(f"mesh must be 'sphere' or 'plane', got {mesh!r}")
     mx = _mx()
     doc = mx.createDocument()
     mx.readFromXmlString(doc, xml)
     with tempfile.TemporaryDirectory() as tmp, xvfb_display():
+        tmp = Path(tmp)
+        obj = sphere_obj(tmp / "sphere.obj", size) if mesh == "sphere" else plane_obj(tmp / "plane.obj")
         # the renderer (its X window and GL context) is freed on return, before the display goes
-        return _render(mx, doc, doc.getChild(material), Path(tmp), size, light, compensation)
+        return _render(mx, doc, doc.getChild(material), tmp, size, light, compensation, obj, folder)
 
 
-def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool) -> np.ndarray:
-    """The GlslRenderer part of :func:`render_mtlx` (an X display is set)."""
+def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool, obj: Path, folder) -> np.ndarray:
+    """The GlslRenderer part of :func:`render_xml` (an X display is set)."""
     import MaterialX.PyMaterialXGenGlsl as gen_glsl
     import MaterialX.PyMaterialXGenShader as gen
     import MaterialX.PyMaterialXRender as mx_render
@@ -471,6 +538,7 @@ def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool) -> np
     opts.hwAmbientOcclusion = False
     opts.hwSrgbEncodeOutput = False
     opts.targetColorSpaceOverride = "lin_rec709"
+    opts.fileTextureVerticalFlip = True          # v = 0 at the image's bottom row (MaterialX's convention)
 
     w = np.asarray(light, float) / np.linalg.norm(light)
     light_doc = mx.createDocument()
@@ -489,12 +557,14 @@ def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool) -> np
     renderer = mx_glsl.GlslRenderer.create(size, size, mx_render.BaseType.FLOAT)
     renderer.initialize()
     images = mx_glsl.GLTextureHandler.create(mx_render.StbImageLoader.create())
+    if folder is not None:
+        images.setSearchPath(mx.FileSearchPath(str(folder)))
     renderer.setImageHandler(images)
     renderer.setLightHandler(lights)
     geometry = renderer.getGeometryHandler()
     geometry.clearGeometry()
-    if not geometry.loadGeometry(mx.FilePath(str(sphere_obj(tmp / "sphere.obj", size))), False):
-        raise RuntimeError("render_mtlx: MaterialX could not load the comparison sphere")
+    if not geometry.loadGeometry(mx.FilePath(str(obj)), False):
+        raise RuntimeError(f"render_xml: MaterialX could not load {obj.name}")
     camera = renderer.getCamera()
     camera.setViewMatrix(mx_render.Camera.createViewMatrix(mx.Vector3(0, 0, EYE_DISTANCE), mx.Vector3(0, 0, 0),
                                                            mx.Vector3(0, 1, 0)))
@@ -505,7 +575,7 @@ def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool) -> np
     renderer.validateInputs()
     renderer.render()
     captured = renderer.captureImage(None)
-    return _to_array(captured)[::-1]          # OpenGL rows: bottom first
+    return _to_array(captured)[::-1].copy()   # OpenGL rows: bottom first
 
 
 def _to_array(image) -> np.ndarray:
