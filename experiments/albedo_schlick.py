@@ -1,10 +1,11 @@
 """The albedo match as Schlick parameters vs as a Fresnel table, on the fit corpus.
 
 :func:`microfacet.fit.albedo.match_albedo` matches a perceptual fit's directional albedo to
-the data's either by a smooth table ``s(theta_d)`` on every lobe's Fresnel term
-(``method="table"``), which the exports (glTF, MaterialX, USD, Blender) cannot hold and
-refit as a least-squares Schlick, or by solving the lobes' Schlick ``f0``/``f90`` (and the
-base colours) directly (``"schlick"``, ``"schlick_base"``), which they hold exactly.
+the data's by a smooth table ``s(theta_d)`` on every lobe's Fresnel term (``"table"``), which
+the exports (glTF, MaterialX, USD, Blender) cannot hold and refit as a least-squares Schlick.
+The alternative measured here (``albedo_schlick_match.match``, this study's own code) solves
+the lobes' Schlick ``f0``/``f90`` (and the base colours) directly (``"schlick"``,
+``"schlick_base"``, ``"shared"``, ``"shared_base"``), which the exports hold exactly.
 
 Phase ``corpus``: for every material of the fit corpus whose best fit
 (``experiments/results/fit_corpus.csv``) is a perceptual model, that model is fitted again
@@ -42,7 +43,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from albedo_schlick_match import band_error, match  # noqa: E402  (this study's Schlick match)
+
+ROOT = HERE.parent
 RESULTS = ROOT / "experiments" / "results"
 CACHE = Path.home() / ".cache" / "microfacet" / "corpus"
 METHODS = ("table", "schlick", "schlick_base", "shared", "shared_base")
@@ -85,18 +90,19 @@ def run_material(group: str, name: str, model: str) -> dict:
     matched = {}
     for method in METHODS:
         t0 = time.perf_counter()
-        matched[method] = A.match_albedo(None, fit, target, method=method)
+        matched[method] = match(None, fit, target, method=method)
         dt = time.perf_counter() - t0
         out[method] = {**measure(data, matched[method], band, le, ie), "s": dt}
     return out
 
 
-def phase_corpus(cache: Path, limit: int | None) -> None:
+def phase_corpus(cache: Path, limit: int | None, only: list[str] | None = None) -> None:
     from microfacet.fit.outputs import PERCEPTUAL_MODELS
     done = set()
     if cache.exists():
         done = {(r["group"], r["name"]) for r in map(json.loads, cache.read_text().splitlines())}
-    rows = [r for r in corpus_rows() if r["best"] in PERCEPTUAL_MODELS and (r["group"], r["name"]) not in done]
+    rows = [r for r in corpus_rows() if r["best"] in PERCEPTUAL_MODELS and (r["group"], r["name"]) not in done
+            and (only is None or f"{r['group']}/{r['name']}" in only)]
     for r in rows[:limit]:
         t0 = time.perf_counter()
         try:
@@ -143,8 +149,8 @@ def phase_export(out: Path) -> None:
             fit = fit_models(data, (model,))[model]
             target, ie = A.albedo_target(data), ImageError(data, size=32)
             for method in EXPORT_METHODS:
-                brdf = A.match_albedo(None, fit, target, method=method)
-                row = {"material": key, "model": model, "method": method, "band": A.band_error(target, brdf),
+                brdf = match(None, fit, target, method=method)
+                row = {"material": key, "model": model, "method": method, "band": band_error(target, brdf),
                        "fit_vs_data": ie(brdf), "as_exported_vs_data": ie(as_exported(brdf))}
                 for to in ("mtlx", "gltf"):
                     rep = export(brdf, to, Path(tmp) / f"{name}_{method}_{to}")
@@ -189,7 +195,8 @@ def report(cache: Path, export_json: Path, command: str) -> str:
              f"Python {platform.python_version()}, commit {_commit()}; `{command}`.", "",
              "Materials: every fit-corpus material whose best fit (`experiments/results/fit_corpus.csv`) is a "
              f"perceptual model ({len(recs)} of {len(rows)}), that model fitted again "
-             "(`perceptual.fit_models`) and matched by each method (`microfacet.fit.albedo.match_albedo`). "
+             "(`perceptual.fit_models`) and matched by each method (table: `microfacet.fit.albedo.match_albedo`; "
+             "the Schlick forms: `experiments/albedo_schlick_match.py`). "
              "band: worst |a_fit/a_data - 1| at 0/30/60/75 deg over channels with data albedo > 0.03 "
              "(`metrics.AlbedoRatios`, 128x128); log: `metrics.LogError` (2^15 pairs); image: `metrics.ImageError` "
              "(32 px); chroma: its chromaticity difference. Geometric means over the materials; change vs the "
@@ -213,7 +220,7 @@ def report(cache: Path, export_json: Path, command: str) -> str:
                      f"{np.nanmedian(s) if v != 'fit' else 0:.2f} |")
     lines += ["", "`fit`: before any match. `S|table`: the Schlick match `S` where its band error is within 5 % and "
               f"its log error within {1 + LOG_SLACK:g} times the table match's, else the table match "
-              "(`match_albedo(method=\"fallback\")` is `shared_base|table`, its band judged on the match's own 64x64 quadrature); its seconds are `S`'s only. "
+              "(`albedo_schlick_match.match(method=\"fallback\")` is `shared_base|table`, its band judged on the match's own 64x64 quadrature); its seconds are `S`'s only. "
               "`schlick`: every Schlick lobe's f0 (RGB) and grey f90; `shared`: one factor per channel on every "
               "lobe's f0 and one on every f90 (the lobes keep their relative weights); `_base`: also the base "
               "colours.", ""]
@@ -276,14 +283,17 @@ def main(argv=None) -> None:
     p.add_argument("--cache", type=Path, default=RESULTS / "albedo_schlick.jsonl")
     p.add_argument("--export-json", type=Path, default=RESULTS / "albedo_schlick_export.json")
     p.add_argument("--limit", type=int, default=None, help="at most this many new materials")
+    p.add_argument("--report", type=Path, default=RESULTS / "albedo_schlick.md", help="the results page to write")
+    p.add_argument("--only", nargs="+", default=None, metavar="GROUP/NAME",
+                   help="phase corpus: only these materials (e.g. to check that rows reproduce)")
     a = p.parse_args(argv)
     if "corpus" in a.phase:
-        phase_corpus(a.cache, a.limit)
+        phase_corpus(a.cache, a.limit, a.only)
     if "export" in a.phase:
         phase_export(a.export_json)
     if "report" in a.phase:
         text = report(a.cache, a.export_json, "python experiments/albedo_schlick.py " + " ".join(sys.argv[1:]))
-        (RESULTS / "albedo_schlick.md").write_text(text)
+        a.report.write_text(text)
         print(text)
 
 
