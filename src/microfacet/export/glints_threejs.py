@@ -36,6 +36,7 @@ Examples
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +45,8 @@ from ..glsl import source
 from .threejs import ThreeRenderer
 
 __all__ = ["lobe_textures", "vertex_shader", "fragment_shader", "material_module", "export_glints_threejs",
-           "GlintsRenderer", "write_lobes", "MAX_WINDOW", "LOBES_FORMAT"]
+           "GlintsRenderer", "write_lobes", "MAX_WINDOW", "LOBES_FORMAT", "DEBUG_OUTPUTS", "SphereScene",
+           "ShaderInputs", "sphere_frame", "sphere_hits", "sphere_inputs", "pbrdf_at_inputs"]
 
 #: Most lobes per axis summed at one level (``MF_GLINT_MAX_WINDOW``).
 MAX_WINDOW = 48
@@ -52,6 +54,13 @@ MAX_WINDOW = 48
 THREE_URL = "https://unpkg.com/three@0.187.0/build/three.module.js"
 #: Tag of ``lobes.json``.
 LOBES_FORMAT = "microfacet.glints.threejs/1"
+#: The material's ``debug`` outputs (RGBA per mode): the inputs of the P-BRDF at each pixel as the
+#: shader sees them (``uv`` scaled by ``uvScale``, its screen derivatives, ``I / d^2`` of the
+#: first point light, local-frame ``wo``/``wi``, the shading frame and position in world space).
+DEBUG_OUTPUTS = {1: ("u", "v", "du/dx", "dv/dx"), 2: ("du/dy", "dv/dy", "irradiance", "1"),
+                 3: ("wo.x", "wo.y", "wo.z", "1"), 4: ("wi.x", "wi.y", "wi.z", "1"),
+                 5: ("T.x", "T.y", "T.z", "1"), 6: ("B.x", "B.y", "B.z", "1"),
+                 7: ("N.x", "N.y", "N.z", "1"), 8: ("x", "y", "z", "1")}
 
 
 def lobe_textures(ms) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -103,17 +112,19 @@ def vertex_shader() -> str:
     (True, True)
     """
     return """uniform vec2 mfUvScale;
+#ifndef USE_TANGENT
+in vec4 tangent;
+#endif
 out vec2 vMfUv;
 out vec3 vMfViewPos;
-out vec3 vMfT;
-out vec3 vMfB;
 out vec3 vMfN;
+out vec4 vMfT;
 void main() {
     vMfUv = uv * mfUvScale;
     vec4 mv = modelViewMatrix * vec4(position, 1.0);
     vMfViewPos = mv.xyz;
-    mat3 m = mat3(modelViewMatrix);
-    vMfT = m[0]; vMfB = m[1]; vMfN = m[2];
+    vMfN = normalMatrix * normal;
+    vMfT = vec4(mat3(modelViewMatrix) * tangent.xyz, tangent.w);
     gl_Position = projectionMatrix * mv;
 }
 """
@@ -127,34 +138,77 @@ uniform float mfPixelSigma;
 uniform vec3 mfF0;
 uniform bool mfExact;
 uniform bool mfSeparable;
+uniform float mfBitangentSign;
+uniform int mfDebug;
 in vec2 vMfUv;
 in vec3 vMfViewPos;
-in vec3 vMfT;
-in vec3 vMfB;
 in vec3 vMfN;
+in vec4 vMfT;
+
+// The shading frame (view space) of a fragment: N the interpolated normal (the geometric one
+// where the mesh has none), T the interpolated tangent Gram-Schmidt orthogonalized against N, or
+// where the mesh has none (or it is parallel to N) dP/du from the screen derivatives of the
+// position and uv; B = cross(N, T) w s (w the tangent's handedness or the sign of dP/dv along it,
+// s = mfBitangentSign), so that (T, B) follow the map's (u, v).
+mat3 mf_glint_frame(vec3 dpx, vec3 dpy, vec2 dx, vec2 dy) {
+    vec3 ng = cross(dpx, dpy);
+    float nn = dot(vMfN, vMfN);
+    vec3 N = nn > 0.0 ? vMfN * inversesqrt(nn) : normalize(ng);
+    vec3 T = vMfT.xyz - N * dot(N, vMfT.xyz);
+    float w = vMfT.w < 0.0 ? -1.0 : 1.0;
+    float tt = dot(T, T);
+    if (!(tt > 1e-8 * dot(vMfT.xyz, vMfT.xyz))) {
+        float s = (dx.x * dy.y - dy.x * dx.y) < 0.0 ? -1.0 : 1.0;
+        vec3 tu = s * (dpx * dy.y - dpy * dx.y);           // dP/du (det of the uv Jacobian)
+        vec3 tv = s * (dpy * dx.x - dpx * dy.x);           // dP/dv
+        T = tu - N * dot(N, tu);
+        tt = dot(T, T);
+        w = dot(cross(N, T), tv) < 0.0 ? -1.0 : 1.0;
+    }
+    T *= inversesqrt(tt);
+    return mat3(T, cross(N, T) * (w * mfBitangentSign), N);
+}
+
 void main() {
-    vec3 T = normalize(vMfT), B = normalize(vMfB), N = normalize(vMfN);
-    vec3 v = isOrthographic ? vec3(0.0, 0.0, 1.0) : normalize(-vMfViewPos);
-    vec3 wo = vec3(dot(T, v), dot(B, v), dot(N, v));
     // Gaussian pixel filter of mfPixelSigma pixels mapped to uv: Sigma_P = s^2 J J^T
     vec2 dx = dFdx(vMfUv), dy = dFdy(vMfUv);
+    vec3 dpx = dFdx(vMfViewPos), dpy = dFdy(vMfViewPos);
+    mat3 F = mf_glint_frame(dpx, dpy, dx, dy);
+    vec3 v = isOrthographic ? vec3(0.0, 0.0, 1.0) : normalize(-vMfViewPos);
+    vec3 wo = v * F;                                     // (dot(T, v), dot(B, v), dot(N, v))
     vec3 cov = mfPixelSigma * mfPixelSigma
         * vec3(dx.x * dx.x + dy.x * dy.x, dx.y * dx.y + dy.y * dy.y, dx.x * dx.y + dy.x * dy.y);
     vec3 color = vec3(0.0);
+    vec3 wi0 = vec3(0.0);
+    float e0 = 0.0;
 #if NUM_POINT_LIGHTS > 0
     PointLight pl;
     for (int i = 0; i < NUM_POINT_LIGHTS; i++) {
         pl = pointLights[i];
         vec3 L = pl.position - vMfViewPos;
         float d = length(L);
-        vec3 l = L / d;
-        vec3 wi = vec3(dot(T, l), dot(B, l), dot(N, l));
+        vec3 wi = (L / d) * F;
+        float att = getDistanceAttenuation(d, pl.distance, pl.decay);
+        if (i == 0) { wi0 = wi; e0 = pl.color.r * att; }
+        if (mfDebug != 0) continue;
         float f = mf_glint_eval_cos(mfGlintA, mfGlintB, vMfUv, cov, mfCutoff, wi, wo, mfExact, mfSeparable);
-        vec3 F = mf_fresnel_schlick(mfF0, vec3(1.0), dot(wo, normalize(wi + wo)));
-        color += pl.color * getDistanceAttenuation(d, pl.distance, pl.decay) * F * f;
+        vec3 Fr = mf_fresnel_schlick(mfF0, vec3(1.0), dot(wo, normalize(wi + wo)));
+        color += pl.color * att * Fr * f;
     }
 #endif
     gl_FragColor = vec4(color, 1.0);
+    if (mfDebug != 0) {       // the per-pixel inputs (world-space frame and position)
+        mat3 toWorld = transpose(mat3(viewMatrix));
+        if (mfDebug == 1) gl_FragColor = vec4(vMfUv, dx);
+        else if (mfDebug == 2) gl_FragColor = vec4(dy, e0, 1.0);
+        else if (mfDebug == 3) gl_FragColor = vec4(wo, 1.0);
+        else if (mfDebug == 4) gl_FragColor = vec4(wi0, 1.0);
+        else if (mfDebug == 5) gl_FragColor = vec4(toWorld * F[0], 1.0);
+        else if (mfDebug == 6) gl_FragColor = vec4(toWorld * F[1], 1.0);
+        else if (mfDebug == 7) gl_FragColor = vec4(toWorld * F[2], 1.0);
+        else gl_FragColor = vec4(toWorld * (vMfViewPos - viewMatrix[3].xyz), 1.0);
+        return;
+    }
 #include <tonemapping_fragment>
 #include <colorspace_fragment>
 }
@@ -219,7 +273,13 @@ export async function loadGlintLobes(THREE, jsonUrl) {
 // pixelSigma (pixel filter deviation in pixels, default 0.5), cutoff (default the file's),
 // exact (default true: Eq. 10-17; false: the merged-lobe approximation of Sec. 4.2.2),
 // separable (default false: height-correlated G2), maxWindow (lobes per axis summed at one
-// level, default %(max_window)d; wider footprints use coarser lobe levels).
+// level, default %(max_window)d; wider footprints use coarser lobe levels), bitangentSign (default 1:
+// the bitangent cross(N, T) w points along +v, as computeTangents() and derivative tangents give;
+// -1 for a glTF TANGENT attribute, whose bitangent points along -v), debug (default 0: radiance;
+// 1-8 the per-pixel inputs: see DEBUG_OUTPUTS).
+// The mesh needs uv and normals; tangents (a 'tangent' attribute, xyz + handedness w) are used
+// where present, else derived per pixel from the screen derivatives of position and uv.
+export const DEBUG_OUTPUTS = %(debug)s;
 export function createGlintMaterial(THREE, lobes, options = {}) {
   const uniforms = THREE.UniformsUtils.merge([THREE.UniformsLib.lights]);
   const f0 = options.f0 ?? [1, 1, 1];
@@ -231,12 +291,18 @@ export function createGlintMaterial(THREE, lobes, options = {}) {
     mfF0: { value: new THREE.Vector3(f0[0], f0[1], f0[2]) },
     mfUvScale: { value: new THREE.Vector2(uv[0], uv[1]) },
     mfExact: { value: options.exact ?? true }, mfSeparable: { value: options.separable ?? false },
+    mfBitangentSign: { value: options.bitangentSign ?? 1 }, mfDebug: { value: options.debug ?? 0 },
   });
   const maxWindow = options.maxWindow ?? %(max_window)d;
   if (!(Number.isInteger(maxWindow) && maxWindow >= 1)) throw new Error(`maxWindow must be an integer >= 1`);
-  return new THREE.ShaderMaterial({ uniforms, lights: true,
-                                    defines: { MF_GLINT_MAX_WINDOW: maxWindow },
-                                    vertexShader: VERTEX_SHADER, fragmentShader: FRAGMENT_SHADER });
+  if (!(Math.abs(uniforms.mfBitangentSign.value) === 1)) throw new Error(`bitangentSign must be 1 or -1`);
+  const material = new THREE.ShaderMaterial({ uniforms, lights: true,
+                                              defines: { MF_GLINT_MAX_WINDOW: maxWindow },
+                                              vertexShader: VERTEX_SHADER, fragmentShader: FRAGMENT_SHADER });
+  // a mesh without tangents (or normals) reads these zero vectors: the shader derives its own
+  material.defaultAttributeValues.tangent = [0, 0, 0, 1];
+  material.defaultAttributeValues.normal = [0, 0, 0];
+  return material;
 }
 """
 
@@ -259,7 +325,7 @@ def material_module() -> str:
     (48, True, True)
     """
     return _MODULE % {"vertex": json.dumps(vertex_shader()), "fragment": json.dumps(fragment_shader()),
-                      "format": LOBES_FORMAT, "max_window": MAX_WINDOW}
+                      "format": LOBES_FORMAT, "max_window": MAX_WINDOW, "debug": json.dumps(DEBUG_OUTPUTS)}
 
 
 def write_lobes(ms, folder, name: str = "lobes") -> Path:
@@ -307,27 +373,319 @@ def write_lobes(ms, folder, name: str = "lobes") -> Path:
     return path
 
 
-#: Scene shared by the demo page and :class:`GlintsRenderer`: the library's
-#: :class:`~microfacet.glints.figures.PlaneScene` (plane ``[-1, 1]^2`` in ``xy``, orthographic
-#: camera of elevation ``viewDeg`` from azimuth ``-y``, a point light), read back as float.
+@dataclass
+class SphereScene:
+    """A glinty sphere for three.js: ``THREE.SphereGeometry(1, *segments)`` at the origin (its
+    ``uv``: ``u = phi / 2 pi`` around ``y``, ``v = 1 - theta / pi`` from the ``+y`` pole, times
+    ``uv_scale``), tangents from ``computeTangents()`` (``tangents``; else the shader derives them
+    from screen derivatives), a perspective camera at ``(0, 0, distance)`` looking at the origin
+    (vertical field of view ``fov_deg``, square image of ``width`` pixels) and a point light
+    (``intensity``, decay 2) at ``light``.
+
+    Parameters
+    ----------
+    width : int
+        Image width and height in pixels.
+    fov_deg : float
+        Vertical field of view, degrees.
+    distance : float
+        Camera distance from the sphere's centre (> 1).
+    light : (3,) tuple
+        Position of the point light (outside the sphere).
+    intensity : float
+        The light's intensity ``I`` (irradiance ``I / d^2``).
+    segments : (int, int)
+        ``widthSegments, heightSegments`` of the geometry.
+    uv_scale : (float, float)
+        The material's ``uvScale`` (tiling; ``(2, 1)`` gives square texels at the equator).
+    tangents : bool
+        Call ``computeTangents()`` (tangent attribute) or let the shader derive them.
+
+    Examples
+    --------
+    >>> SphereScene(width=32).height
+    32
+    """
+
+    width: int = 64
+    fov_deg: float = 30.0
+    distance: float = 4.0
+    light: tuple = (2.0, 2.5, 3.0)
+    intensity: float = 10.0
+    segments: tuple = (64, 32)
+    uv_scale: tuple = (2.0, 1.0)
+    tangents: bool = True
+
+    def __post_init__(self):
+        if isinstance(self.width, bool) or int(self.width) != self.width or self.width < 1:
+            raise ValueError(f"width must be a positive integer, got {self.width!r}")
+        if not 0 < self.fov_deg < 180:
+            raise ValueError(f"fov_deg must lie in (0, 180), got {self.fov_deg!r}")
+        if not self.distance > 1:
+            raise ValueError(f"distance must exceed the sphere's radius 1, got {self.distance!r}")
+        lt = np.asarray(self.light, dtype=np.float64)
+        if lt.shape != (3,) or not np.all(np.isfinite(lt)) or np.linalg.norm(lt) <= 1:
+            raise ValueError(f"light must be a finite position outside the unit sphere, got {self.light!r}")
+        sg = tuple(int(v) for v in self.segments)
+        if len(sg) != 2 or sg[0] < 3 or sg[1] < 2 or sg != tuple(self.segments):
+            raise ValueError(f"segments must be two integers (>= 3, >= 2), got {self.segments!r}")
+        us = np.asarray(self.uv_scale, dtype=np.float64)
+        if us.shape != (2,) or not np.all(us > 0):
+            raise ValueError(f"uv_scale must be two positive numbers, got {self.uv_scale!r}")
+        self.width, self.segments = int(self.width), sg
+
+    @property
+    def height(self) -> int:
+        return self.width
+
+    def params(self) -> dict:
+        """The page's scene parameters (``renderGlints``)."""
+        return {"mesh": "sphere", "width": self.width, "height": self.height, "fovDeg": float(self.fov_deg),
+                "distance": float(self.distance), "light": [float(v) for v in self.light],
+                "intensity": float(self.intensity), "segments": list(self.segments),
+                "tangents": bool(self.tangents)}
+
+
+@dataclass
+class ShaderInputs:
+    """The P-BRDF's inputs at each pixel as the material's fragment shader computes them (its
+    ``debug`` outputs, :data:`DEBUG_OUTPUTS`, read back from float render targets), row 0 the
+    image's top: ``uv`` (scaled by ``uvScale``) and its screen derivatives ``duv_dx``, ``duv_dy``
+    ``(H, W, 2)`` (``dFdx``/``dFdy``, one pixel; ``duv_dy`` toward the image's top), the first
+    point light's ``irradiance`` ``I / d^2`` ``(H, W)``, local-frame ``wo``, ``wi`` and the
+    world-space shading frame ``tangent``, ``bitangent``, ``normal`` and ``position``
+    ``(H, W, 3)``; ``covered`` ``(H, W)``: the pixels the mesh covers.
+    """
+
+    uv: np.ndarray
+    duv_dx: np.ndarray
+    duv_dy: np.ndarray
+    irradiance: np.ndarray
+    wo: np.ndarray
+    wi: np.ndarray
+    tangent: np.ndarray
+    bitangent: np.ndarray
+    normal: np.ndarray
+    position: np.ndarray
+    covered: np.ndarray
+
+    def covariance(self, pixel_sigma: float) -> np.ndarray:
+        """``(H, W, 2, 2)``: the footprint covariance in uv^2 the shader uses,
+        ``pixel_sigma^2 (J J^T)``, ``J = [duv_dx, duv_dy]``."""
+        J = np.stack([self.duv_dx, self.duv_dy], -1)
+        return pixel_sigma * pixel_sigma * np.einsum("...ik,...jk->...ij", J, J)
+
+
+def sphere_frame(points) -> dict:
+    """The analytic shading frame of ``THREE.SphereGeometry`` (unit sphere, its parametrization
+    ``x = -cos(phi) sin(theta), y = cos(theta), z = sin(phi) sin(theta)``, ``u = phi / 2 pi``,
+    ``v = 1 - theta / pi``) at the radial projections of ``points`` ``(..., 3)``: ``uv``
+    (before ``uvScale``), ``tangent = dP/du``, ``bitangent = dP/dv`` and ``normal`` (unit).
+
+    Parameters
+    ----------
+    points : array_like, shape (..., 3)
+        Points near the sphere (e.g. a tessellation's).
+
+    Returns
+    -------
+    dict
+        ``{"uv", "tangent", "bitangent", "normal"}``.
+
+    Examples
+    --------
+    >>> f = sphere_frame([0.0, 0.0, 1.0])
+    >>> f["uv"], f["tangent"], f["bitangent"]
+    (array([0.25, 0.5 ]), array([1., 0., 0.]), array([0., 1., 0.]))
+    """
+    p = np.asarray(points, dtype=np.float64)
+    n = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    theta = np.arccos(np.clip(n[..., 1], -1.0, 1.0))
+    phi = np.arctan2(n[..., 2], -n[..., 0]) % (2 * np.pi)
+    sp, cp, st, ct = np.sin(phi), np.cos(phi), np.sin(theta), np.cos(theta)
+    zero = np.zeros_like(phi)
+    return {"uv": np.stack([phi / (2 * np.pi), 1.0 - theta / np.pi], -1),
+            "tangent": np.stack([sp, zero, cp], -1) + 0.0,
+            "bitangent": np.stack([cp * ct, st, -sp * ct], -1) + 0.0, "normal": n}
+
+
+def sphere_hits(scene: SphereScene, offset=(0.0, 0.0)):
+    """Where the ray of each pixel of ``scene`` (:class:`SphereScene`'s perspective camera,
+    through the pixel's centre moved by ``offset`` pixels, right and up) meets the exact unit
+    sphere: ``(points (H, W, 3), hit (H, W))``, row 0 the image's top (NaN where missed).
+
+    Parameters
+    ----------
+    scene : SphereScene
+        The camera.
+    offset : (float, float)
+        Sub-pixel offset (right, up) in pixels.
+
+    Returns
+    -------
+    points : (H, W, 3) ndarray
+        The nearest intersections.
+    hit : (H, W) ndarray of bool
+        Rays that meet the sphere.
+
+    Examples
+    --------
+    >>> pts, hit = sphere_hits(SphereScene(width=4))
+    >>> hit.tolist()[1], bool(np.allclose(np.linalg.norm(pts[hit], axis=-1), 1))
+    ([False, True, True, False], True)
+    """
+    w = h = scene.width
+    t = np.tan(np.radians(scene.fov_deg) / 2)
+    x = ((np.arange(w) + 0.5 + offset[0]) / w * 2 - 1) * t * (w / h)
+    y = (1 - (np.arange(h) + 0.5 - offset[1]) / h * 2) * t
+    X, Y = np.meshgrid(x, y)
+    d = np.stack([X, Y, -np.ones_like(X)], -1)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    o = np.array([0.0, 0.0, float(scene.distance)])
+    b = d @ o                                             # |o + s d| = 1: s^2 + 2 b s + |o|^2 - 1 = 0
+    disc = b * b - (o @ o - 1.0)
+    hit = disc >= 0
+    sd = -b - np.sqrt(np.where(hit, disc, np.nan))
+    return o + sd[..., None] * d, hit
+
+
+def sphere_inputs(scene: SphereScene) -> ShaderInputs:
+    """The P-BRDF's inputs of :class:`ShaderInputs` on the exact unit sphere of ``scene``, in
+    float64: each pixel's ray hit (:func:`sphere_hits`), its analytic frame and ``uv * uv_scale``
+    (:func:`sphere_frame`), the uv Jacobian per pixel by central differences of the hits 1e-3
+    pixel apart (the exact derivative to ~1e-6), ``I / d^2`` and local ``wi``, ``wo``: the
+    reference that a tessellated sphere and the shader's one-pixel ``dFdx``/``dFdy`` approximate.
+
+    Parameters
+    ----------
+    scene : SphereScene
+        Sphere, camera and light.
+
+    Returns
+    -------
+    ShaderInputs
+        ``covered``: the pixels whose centre ray (and its differentials) meets the sphere.
+
+    Examples
+    --------
+    >>> inp = sphere_inputs(SphereScene(width=8))
+    >>> int(inp.covered.sum()), bool(np.all(inp.wo[inp.covered][:, 2] > 0))
+    (20, True)
+    """
+    scale = np.asarray(scene.uv_scale, dtype=np.float64)
+    p, hit = sphere_hits(scene)
+    f = sphere_frame(np.where(hit[..., None], p, 1.0))
+    eps = 1e-3
+
+    def uv_at(off):
+        q, ok = sphere_hits(scene, off)
+        return sphere_frame(np.where(ok[..., None], q, 1.0))["uv"], ok
+
+    def derivative(a, b):
+        (ua, oka), (ub, okb) = a, b
+        d = ub - ua
+        d[..., 0] = (d[..., 0] + 0.5) % 1.0 - 0.5         # across the seam u = 0 | 1
+        return d / (2 * eps) * scale, oka & okb
+    jx, okx = derivative(uv_at((-eps, 0.0)), uv_at((eps, 0.0)))
+    jy, oky = derivative(uv_at((0.0, -eps)), uv_at((0.0, eps)))
+    covered = hit & okx & oky
+    frame = np.stack([f["tangent"], f["bitangent"], f["normal"]], -2)         # rows T, B, N
+    cam = np.array([0.0, 0.0, float(scene.distance)])
+    v = cam - p
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    L = np.asarray(scene.light, dtype=np.float64) - p
+    d2 = np.sum(L * L, -1)
+    L /= np.sqrt(d2)[..., None]
+    return ShaderInputs(uv=f["uv"] * scale, duv_dx=jx, duv_dy=jy, irradiance=float(scene.intensity) / d2,
+                        wo=np.einsum("...ij,...j->...i", frame, v), wi=np.einsum("...ij,...j->...i", frame, L),
+                        tangent=f["tangent"], bitangent=f["bitangent"], normal=f["normal"], position=p,
+                        covered=covered)
+
+
+def pbrdf_at_inputs(ms, inputs: ShaderInputs, *, pixel_sigma: float | None = None, f0=None, exact: bool = True,
+                    g2: str = "correlated") -> np.ndarray:
+    """The library's image at the shader's own per-pixel inputs: ``I / d^2 F eval_cos`` with
+    :func:`~microfacet.glints.pbrdf.eval_cos_footprints` (Chermain et al. 2019, Eq. 7; float64)
+    at ``inputs`` (:class:`ShaderInputs`: uv, footprint ``pixel_sigma^2 J J^T``, local ``wi``,
+    ``wo``, irradiance), zero off the mesh: what the material's radiance should be, up to its
+    float32 rounding, on any mesh.
+
+    Parameters
+    ----------
+    ms : Microsurface
+        The lobe mixture.
+    inputs : ShaderInputs
+        Read back by :meth:`GlintsRenderer.render_sphere`.
+    pixel_sigma : float, optional
+        Pixel footprint's standard deviation (default :data:`~microfacet.glints.figures.PIXEL_SIGMA`).
+    f0 : float or (3,) array_like, optional
+        Schlick ``F0`` (None: ideal mirror facets).
+    exact : bool
+        Exact lobe evaluation, as :class:`~microfacet.glints.PatchBRDF`.
+    g2 : {"correlated", "separable"}
+        Masking-shadowing form.
+
+    Returns
+    -------
+    (H, W, 3) ndarray
+        Linear radiance.
+
+    Examples
+    --------
+    >>> with GlintsRenderer() as r:                                    # doctest: +SKIP
+    ...     img, inputs = r.render_sphere(ms, SphereScene(width=32))
+    >>> np.abs(img - pbrdf_at_inputs(ms, inputs)).sum() / img.sum() < 1e-3  # doctest: +SKIP
+    True
+    """
+    from .. import fresnel as _fr
+    from ..glints.figures import PIXEL_SIGMA
+    from ..glints.pbrdf import eval_cos_footprints
+    sigma = PIXEL_SIGMA if pixel_sigma is None else float(pixel_sigma)
+    m = inputs.covered
+    out = np.zeros(m.shape + (3,))
+    if not m.any():
+        return out
+    fres = None if f0 is None else _fr.Schlick(f0)
+    f = eval_cos_footprints(ms, inputs.uv[m], inputs.covariance(sigma)[m], inputs.wi[m], inputs.wo[m],
+                            fresnel=fres, exact=exact, g2=g2)
+    out[m] = inputs.irradiance[m][:, None] * f
+    return out
+
+
+#: Scenes shared by the demo page and :class:`GlintsRenderer`: ``p.mesh`` "plane" (default), the
+#: library's :class:`~microfacet.glints.figures.PlaneScene` (plane ``[-1, 1]^2`` in ``xy``,
+#: orthographic camera of elevation ``viewDeg`` from azimuth ``-y``, a point light), or "sphere",
+#: :class:`SphereScene` (``THREE.SphereGeometry`` of radius 1 at the origin with
+#: ``computeTangents()`` unless ``p.tangents`` is false, a perspective camera on ``+z``).
 _SCENE_JS = """
 async function renderGlints(THREE, renderer, M, p) {
   const lobes = await M.loadGlintLobes(THREE, p.lobes);
   const material = M.createGlintMaterial(THREE, lobes, p.options || {});
   const scene = new THREE.Scene();
-  const plane = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), material);
-  scene.add(plane);
+  let geometry, camera;
+  if (p.mesh === 'sphere') {
+    geometry = new THREE.SphereGeometry(1, p.segments[0], p.segments[1]);
+    if (p.tangents !== false) geometry.computeTangents();
+    camera = new THREE.PerspectiveCamera(p.fovDeg, p.width / p.height, 0.1, 20);
+    camera.position.set(0, 0, p.distance);
+    camera.lookAt(0, 0, 0);
+  } else {
+    geometry = new THREE.PlaneGeometry(2, 2);
+    if (p.tangents === true) geometry.computeTangents();
+    const e = p.viewDeg * Math.PI / 180, se = Math.sin(e);
+    camera = new THREE.OrthographicCamera(-1, 1, se, -se, 0.1, 20);
+    camera.up.set(0, 0, 1);
+    camera.position.set(0, -5 * Math.cos(e), 5 * se);
+    camera.lookAt(0, 0, 0);
+  }
+  const mesh = new THREE.Mesh(geometry, material);
+  scene.add(mesh);
   const light = new THREE.PointLight(0xffffff, p.intensity, 0, 2);
   light.position.set(p.light[0], p.light[1], p.light[2]);
   scene.add(light);
-  const e = p.viewDeg * Math.PI / 180, se = Math.sin(e);
-  const camera = new THREE.OrthographicCamera(-1, 1, se, -se, 0.1, 20);
-  camera.up.set(0, 0, 1);
-  camera.position.set(0, -5 * Math.cos(e), 5 * se);
-  camera.lookAt(0, 0, 0);
   renderer.setSize(p.width, p.height);
-  const dispose = () => { material.dispose(); plane.geometry.dispose(); lobes.a.dispose(); lobes.b.dispose(); };
-  return { scene, camera, dispose };
+  const dispose = () => { material.dispose(); geometry.dispose(); lobes.a.dispose(); lobes.b.dispose(); };
+  return { scene, camera, material, dispose };
 }
 """
 
@@ -344,14 +702,20 @@ window.renderGlints = async (p) => {
   const target = new THREE.WebGLRenderTarget(p.width, p.height, { type: THREE.FloatType, format: THREE.RGBAFormat });
   renderer.setRenderTarget(target);
   renderer.setClearColor(0x000000, 0);
-  renderer.clear();
-  renderer.render(s.scene, s.camera);
-  const buf = new Float32Array(p.width * p.height * 4);
-  renderer.readRenderTargetPixels(target, 0, 0, p.width, p.height, buf);
+  const images = [];
+  for (const mode of (p.modes || [0])) {      // 0: radiance; 1-8: the material's debug outputs
+    s.material.uniforms.mfDebug.value = mode;
+    s.material.uniformsNeedUpdate = true;
+    renderer.clear();
+    renderer.render(s.scene, s.camera);
+    const buf = new Float32Array(p.width * p.height * 4);
+    renderer.readRenderTargetPixels(target, 0, 0, p.width, p.height, buf);
+    images.push(Array.from(buf));
+  }
   renderer.setRenderTarget(null);
   target.dispose();
   s.dispose();
-  return { revision: THREE.REVISION, pixels: Array.from(buf) };
+  return { revision: THREE.REVISION, pixels: images[0], images };
 };
 window.pageReady = true;
 </script></body></html>
@@ -374,7 +738,7 @@ let t0 = performance.now();
 renderer.setAnimationLoop(() => {            // the light circles: the glints move
   const t = (performance.now() - t0) / 4000;
   const light = s.scene.children.find(o => o.isPointLight);
-  const r = Math.hypot(p.light[0], p.light[1]);
+  const r = p.mesh === 'sphere' ? 0.5 * Math.hypot(p.light[0], p.light[1]) : Math.hypot(p.light[0], p.light[1]);
   light.position.set(r * Math.sin(2 * Math.PI * t) + p.light[0], p.light[1], p.light[2]);
   renderer.render(s.scene, s.camera);
 });
@@ -511,23 +875,67 @@ class GlintsRenderer(ThreeRenderer):
         (height, width, 3) ndarray
             Linear radiance read back from the render target.
         """
+        p = {"width": int(scene.width), "height": int(scene.height), "viewDeg": float(scene.view_deg),
+             "light": [float(v) for v in scene.light], "intensity": float(scene.intensity)}
+        return self._render(ms, p, f0, exact, g2, pixel_sigma, max_window, [0])[0][..., :3].copy()
+
+    def render_sphere(self, ms, scene: SphereScene, *, f0=None, exact: bool = True, g2: str = "correlated",
+                      pixel_sigma: float | None = None, max_window: int = MAX_WINDOW, bitangent_sign: int = 1):
+        """Render :class:`SphereScene` with the material and read back, from the same material in
+        its ``debug`` modes (:data:`DEBUG_OUTPUTS`), the inputs it evaluated at each pixel.
+        Arguments as :meth:`render_scene`; ``bitangent_sign``: the material's ``bitangentSign``.
+
+        Parameters
+        ----------
+        ms : microfacet.glints.Microsurface
+            The glint microsurface.
+        scene : SphereScene
+            Sphere, camera and point light.
+        f0, exact, g2, pixel_sigma, max_window
+            As :meth:`render_scene`.
+        bitangent_sign : int
+            1 or -1 (the material's ``bitangentSign``).
+
+        Returns
+        -------
+        image : (width, width, 3) ndarray
+            Linear radiance, row 0 the image's top.
+        inputs : ShaderInputs
+            The per-pixel inputs (:func:`pbrdf_at_inputs` evaluates the library there).
+        """
+        if not isinstance(scene, SphereScene):
+            raise ValueError(f"scene must be a SphereScene, got {type(scene).__name__}")
+        p = scene.params()
+        imgs = self._render(ms, p, f0, exact, g2, pixel_sigma, max_window, list(range(9)),
+                            uv_scale=scene.uv_scale, bitangent_sign=bitangent_sign)
+        covered = imgs[2][..., 3] > 0.5      # debug mode 2 writes alpha 1, the clear colour is 0
+        m1, m2 = imgs[1], imgs[2]
+        inputs = ShaderInputs(uv=m1[..., :2], duv_dx=m1[..., 2:], duv_dy=m2[..., :2], irradiance=m2[..., 2],
+                              wo=imgs[3][..., :3], wi=imgs[4][..., :3], tangent=imgs[5][..., :3],
+                              bitangent=imgs[6][..., :3], normal=imgs[7][..., :3], position=imgs[8][..., :3],
+                              covered=covered)
+        return imgs[0][..., :3].copy(), inputs
+
+    def _render(self, ms, p, f0, exact, g2, pixel_sigma, max_window, modes, uv_scale=(1.0, 1.0),
+                bitangent_sign=1):
+        """The page's float images ``(h, w, 4)`` per debug mode, row 0 the top."""
         from ..glints.figures import PIXEL_SIGMA
         if g2 not in ("correlated", "separable"):
             raise ValueError(f"g2 must be 'correlated' or 'separable', got {g2!r}")
+        if bitangent_sign not in (1, -1):
+            raise ValueError(f"bitangent_sign must be 1 or -1, got {bitangent_sign!r}")
         root = self.root
         if not (root / "glints-material.js").exists():
             (root / "glints-material.js").write_text(material_module())
         self._count += 1
         lobes = write_lobes(ms, root, f"lobes{self._count}")
         f0 = [1.0, 1.0, 1.0] if f0 is None else list(np.broadcast_to(np.asarray(f0, float), (3,)))
-        p = {"lobes": "/" + lobes.name, "width": int(scene.width), "height": int(scene.height),
-             "viewDeg": float(scene.view_deg), "light": [float(v) for v in scene.light],
-             "intensity": float(scene.intensity),
-             "options": {"f0": f0, "exact": bool(exact), "separable": g2 == "separable",
-                         "pixelSigma": float(PIXEL_SIGMA if pixel_sigma is None else pixel_sigma),
-                         "maxWindow": _max_window(max_window)}}
+        p = dict(p, lobes="/" + lobes.name, modes=[int(m) for m in modes],
+                 options={"f0": f0, "exact": bool(exact), "separable": g2 == "separable",
+                          "pixelSigma": float(PIXEL_SIGMA if pixel_sigma is None else pixel_sigma),
+                          "maxWindow": _max_window(max_window), "uvScale": [float(v) for v in uv_scale],
+                          "bitangentSign": int(bitangent_sign)})
         out = self.page.evaluate("(p) => window.renderGlints(p)", p)
         self.revision = out["revision"]
         w, h = p["width"], p["height"]
-        img = np.asarray(out["pixels"], np.float64).reshape(h, w, 4)[::-1, :, :3]
-        return np.ascontiguousarray(img)
+        return [np.ascontiguousarray(np.asarray(im, np.float64).reshape(h, w, 4)[::-1]) for im in out["images"]]
