@@ -845,13 +845,15 @@ class GlintsRenderer(ThreeRenderer):
         self._count = 0
 
     def render_scene(self, ms, scene, *, f0=None, exact: bool = True, g2: str = "correlated",
-                     pixel_sigma: float | None = None, max_window: int = MAX_WINDOW) -> np.ndarray:
+                     pixel_sigma: float | None = None, max_window: int = MAX_WINDOW,
+                     tangents: bool = False) -> np.ndarray:
         """``(scene.height, scene.width, 3)`` linear radiance (row 0 the far edge, as
         :func:`~microfacet.glints.figures.render_pbrdf`): ``I / r^2 F eval_cos`` per pixel.
         ``f0``: Schlick F0 (None: ideal mirror facets, the library's default); ``exact``, ``g2``
         as :class:`~microfacet.glints.PatchBRDF`; ``pixel_sigma`` default
         :data:`~microfacet.glints.figures.PIXEL_SIGMA`; ``max_window``: lobes per axis summed at
-        one level (wider footprints: coarser lobe levels).
+        one level (wider footprints: coarser lobe levels); ``tangents``: give the plane a tangent
+        attribute (``computeTangents()``) instead of the shader's derivative tangents.
 
         Parameters
         ----------
@@ -869,6 +871,8 @@ class GlintsRenderer(ThreeRenderer):
             Pixel footprint's standard deviation (default :data:`~microfacet.glints.figures.PIXEL_SIGMA`).
         max_window : int
             Lobes per axis summed at one level (wider footprints use coarser levels).
+        tangents : bool
+            ``computeTangents()`` on the plane (else the shader derives the tangent).
 
         Returns
         -------
@@ -876,7 +880,8 @@ class GlintsRenderer(ThreeRenderer):
             Linear radiance read back from the render target.
         """
         p = {"width": int(scene.width), "height": int(scene.height), "viewDeg": float(scene.view_deg),
-             "light": [float(v) for v in scene.light], "intensity": float(scene.intensity)}
+             "light": [float(v) for v in scene.light], "intensity": float(scene.intensity),
+             "tangents": bool(tangents)}
         return self._render(ms, p, f0, exact, g2, pixel_sigma, max_window, [0])[0][..., :3].copy()
 
     def render_sphere(self, ms, scene: SphereScene, *, f0=None, exact: bool = True, g2: str = "correlated",
