@@ -37,6 +37,8 @@ def add(sub) -> None:
                    help="PYRAMID.exr --to blender|mtlx|usd only: the MIP level exported (default 0)")
     p.add_argument("--model", default="best", metavar="NAME",
                    help="fit of the file to export: best (default) or a name (microfacet.fit.fit_names)")
+    p.add_argument("--mesh", choices=["plane", "sphere"], default=None,
+                   help="GLINTS.npz --to threejs only: the mesh of the folder's demo page (default plane)")
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="output file (.glb/.mtlx/.usda added if missing) or folder (FIT's name)")
     p.set_defaults(run=run)
@@ -47,6 +49,8 @@ def run(args) -> int:
     if is_microsurface(args.fit):
         from ..export.glints_export import run_cli as run_glints
         return run_glints(args)
+    if getattr(args, "mesh", None) is not None:
+        raise ValueError("--mesh applies to a glint microsurface (GLINTS.npz) exported --to threejs")
     if args.to == "threejs":
         raise ValueError(f"{args.fit}: --to threejs exports a glint microsurface (GLINTS.npz from 'microfacet "
                          "glints'); a fit file exports --to gltf (three.js loads .glb)")

@@ -309,7 +309,7 @@ def _scene(width: int, view_deg: float, light, intensity: float):
 
 def export_glints(source, to: str, out, *, width: int = 512, check_width: int = 128, view_deg: float = 50.0,
                   light=(0.0, 0.35, 0.9), intensity: float = 1.0, max_window: int | None = None,
-                  measure: bool = True) -> dict:
+                  measure: bool = True, mesh: str = "plane") -> dict:
     """Export a glint microsurface to ``to="threejs"``: the folder ``out`` and the report
     ``out.export.json`` / ``.export.md`` beside it (module docstring); returns the report.
 
@@ -333,6 +333,9 @@ def export_glints(source, to: str, out, *, width: int = 512, check_width: int = 
         :data:`~microfacet.export.glints_threejs.MAX_WINDOW`).
     measure : bool
         Measure the image error (needs Chromium, playwright and three.js; else a note).
+    mesh : {"plane", "sphere"}
+        The page's mesh (:func:`~microfacet.export.glints_threejs.export_glints_threejs`); the
+        image error is measured on the plane.
 
     Returns
     -------
@@ -373,7 +376,8 @@ def export_glints(source, to: str, out, *, width: int = 512, check_width: int = 
     out.mkdir(parents=True, exist_ok=True)
     three = _bundle_three(out)
     export_glints_threejs(ms, out, width=page.width, view_deg=page.view_deg, light=page.light,
-                          intensity=page.intensity, three_url=three or THREE_URL, max_window=max_window)
+                          intensity=page.intensity, three_url=three or THREE_URL, max_window=max_window,
+                          mesh=mesh)
     if measure:
         image = measure_threejs(ms, out, check, max_window)
     else:
@@ -385,7 +389,8 @@ def export_glints(source, to: str, out, *, width: int = 512, check_width: int = 
               "image_error": image, "three": three or THREE_URL,
               "serve": f"python -m http.server -d {out} 8000",
               "page": {"width": page.width, "height": page.height, "view_deg": page.view_deg,
-                       "light": list(page.light), "intensity": page.intensity, "max_window": max_window},
+                       "light": list(page.light), "intensity": page.intensity, "max_window": max_window,
+                       "mesh": mesh},
               "map": [int(v) for v in ms.resolution], "lobes": [int(ms.mip[0].shape[1]), int(ms.mip[0].shape[0])]}
     stem = str(out).rstrip("/\\")
     Path(stem + ".export.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
@@ -425,7 +430,7 @@ def run_cli(args) -> int:
     if getattr(args, "base_roughness", None) is not None:
         raise MicrofacetError("--base-roughness applies to a LEADR pyramid, not to a glint microsurface")
     out = Path(check_output_name(args.output).rstrip("/\\") or args.output)
-    report = export_glints(source, args.to, out)
+    report = export_glints(source, args.to, out, mesh=getattr(args, "mesh", None) or "plane")
     e = report["image_error"]
     figure = (f"three.js vs library relL1 {e['rel_l1']:.2e} at {e['size'][0]} px (lobe level {e['level']})"
               if e["measured"] else e["note"])

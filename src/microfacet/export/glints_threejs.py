@@ -45,13 +45,15 @@ from ..glsl import source
 from .threejs import ThreeRenderer
 
 __all__ = ["lobe_textures", "vertex_shader", "fragment_shader", "material_module", "export_glints_threejs",
-           "GlintsRenderer", "write_lobes", "MAX_WINDOW", "LOBES_FORMAT", "DEBUG_OUTPUTS", "SphereScene",
+           "GlintsRenderer", "write_lobes", "MAX_WINDOW", "LOBES_FORMAT", "DEBUG_OUTPUTS", "MESHES", "SphereScene",
            "ShaderInputs", "sphere_frame", "sphere_hits", "sphere_inputs", "pbrdf_at_inputs"]
 
 #: Most lobes per axis summed at one level (``MF_GLINT_MAX_WINDOW``).
 MAX_WINDOW = 48
 #: three.js of the demo page's import map (the revision the tests render with).
 THREE_URL = "https://unpkg.com/three@0.187.0/build/three.module.js"
+#: Meshes of the demo page (:func:`export_glints_threejs`).
+MESHES = ("plane", "sphere")
 #: Tag of ``lobes.json``.
 LOBES_FORMAT = "microfacet.glints.threejs/1"
 #: The material's ``debug`` outputs (RGBA per mode): the inputs of the P-BRDF at each pixel as the
@@ -754,12 +756,14 @@ def _max_window(n) -> int:
 
 def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, light=(0.0, 0.35, 0.9),
                           intensity: float = 1.0, three_url: str = THREE_URL,
-                          max_window: int = MAX_WINDOW) -> Path:
+                          max_window: int = MAX_WINDOW, mesh: str = "plane") -> Path:
     """Write the folder ``out``: ``glints-material.js`` (:func:`material_module`),
-    ``lobes.json``/``lobes.bin`` (:func:`write_lobes`) and ``index.html``, a page that renders the
-    plane of :class:`~microfacet.glints.figures.PlaneScene` (``width`` pixels, elevation
-    ``view_deg``) under a point light at ``light`` circling over it, with three.js from
-    ``three_url``. Serve the folder over HTTP (``python -m http.server``); returns ``out``.
+    ``lobes.json``/``lobes.bin`` (:func:`write_lobes`) and ``index.html``, a page that renders
+    (``mesh="plane"``) the plane of :class:`~microfacet.glints.figures.PlaneScene` (``width``
+    pixels, elevation ``view_deg``) under a point light at ``light`` circling over it, or
+    (``mesh="sphere"``) the sphere of :class:`SphereScene` (``width`` pixels square, its own
+    camera and light, which circles), with three.js from ``three_url``. Serve the folder over
+    HTTP (``python -m http.server``); returns ``out``.
 
     Parameters
     ----------
@@ -779,6 +783,8 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
         The ``three.module.js`` of the page's import map.
     max_window : int
         Lobes per axis summed at one level.
+    mesh : {"plane", "sphere"}
+        The demo's mesh (``view_deg``, ``light`` and ``intensity`` are the plane's).
 
     Returns
     -------
@@ -788,7 +794,7 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
     Raises
     ------
     ValueError
-        ``max_window`` is not a positive integer.
+        ``max_window`` is not a positive integer, or ``mesh`` is neither ``"plane"`` nor ``"sphere"``.
 
     Examples
     --------
@@ -801,6 +807,8 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
     """
     from ..glints.figures import PlaneScene
     max_window = _max_window(max_window)
+    if mesh not in MESHES:
+        raise ValueError(f"mesh must be one of {', '.join(MESHES)}, got {mesh!r}")
     scene = PlaneScene(width=int(width), view_deg=float(view_deg), light=tuple(map(float, light)),
                        intensity=float(intensity))
     out = Path(out)
@@ -810,6 +818,10 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
     params = {"lobes": "./lobes.json", "width": scene.width, "height": scene.height, "viewDeg": scene.view_deg,
               "light": list(scene.light), "intensity": scene.intensity,
               "options": {"maxWindow": max_window}}
+    if mesh == "sphere":
+        sphere = SphereScene(width=int(width))
+        params = dict(sphere.params(), lobes="./lobes.json",
+                      options={"maxWindow": max_window, "uvScale": list(sphere.uv_scale)})
     (out / "index.html").write_text(_DEMO_PAGE % {"three": three_url, "scene": _SCENE_JS,
                                                   "params": json.dumps(params)})
     return out
