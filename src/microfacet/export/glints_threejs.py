@@ -7,9 +7,12 @@ Gaussian pixel filter (``pixelSigma`` pixels, from the screen derivatives of ``u
 window and weights (Eq. 9), the P-NDF and the patch areas (Eq. 13-17) and
 ``eval_cos = F D_P G2 / (4 A_P(o))`` (Eq. 7) for each three.js ``PointLight`` (its
 ``color * intensity / d^2``: ``decay`` 2, ``distance`` 0), as
-:func:`microfacet.glints.pbrdf.eval_cos_footprints` computes it. The mesh's object-space
-``x, y, z`` is the shading frame (a plane in its ``xy``, e.g. ``THREE.PlaneGeometry``) and its
-``uv`` the map's (``u`` along columns, ``v = 0`` the map's first row, wrapped).
+:func:`microfacet.glints.pbrdf.eval_cos_footprints` computes it, on any mesh with normals and
+``uv`` (``u`` along the map's columns, ``v = 0`` its first row, wrapped): the shading frame of a
+fragment is its interpolated normal ``N`` and tangent ``T`` (a ``tangent`` attribute, xyz and
+handedness ``w``: ``computeTangents()`` or glTF ``TANGENT``; else ``dP/du`` from the screen
+derivatives of position and uv), Gram-Schmidt orthonormalized, ``B = cross(N, T) w``; light and
+view are taken into that frame. On a plane (``THREE.PlaneGeometry``) this frame is its ``x, y, z``.
 
 - :func:`lobe_textures`: per MIP level of the lobe grid, the central moments
   ``(E[x~], E[y~], Var x~, Var y~)`` (RGBA32F) and ``Cov(x~, y~)`` (R32F), float32.
@@ -17,12 +20,20 @@ window and weights (Eq. 9), the P-NDF and the patch areas (Eq. 13-17) and
 - :func:`material_module`: the ES module ``glints-material.js`` (``loadGlintLobes(THREE, url)``,
   ``createGlintMaterial(THREE, lobes, options)``).
 - :func:`export_glints_threejs`: a folder with the module, ``lobes.bin``/``lobes.json`` and a
-  demo page (a plane under a point light).
+  demo page (a plane or a sphere under a point light).
 - :class:`GlintsRenderer`: the same material rendered in the system Chromium (the headless
-  harness of :mod:`microfacet.export.threejs`), for tests against the library.
+  harness of :mod:`microfacet.export.threejs`), for tests against the library: a plane
+  (:meth:`GlintsRenderer.render_scene`) or a sphere (:class:`SphereScene`,
+  :meth:`GlintsRenderer.render_sphere`, which also reads back the shader's per-pixel inputs,
+  :class:`ShaderInputs`, from its ``debug`` outputs :data:`DEBUG_OUTPUTS`).
+- :func:`pbrdf_at_inputs`: the library's image at those inputs; :func:`sphere_inputs`,
+  :func:`sphere_frame`, :func:`sphere_hits`: the exact sphere's (ray-traced, analytic frame and
+  footprints).
 
 Accuracy: float32 throughout (the library sums in float64); at the footprints where the
-window fits (:data:`MAX_WINDOW` lobes per axis) the sums are the library's. Larger footprints
+window fits (:data:`MAX_WINDOW` lobes per axis) the sums are the library's (on a curved mesh at
+the inputs the shader computes: interpolated uv and frame, one-pixel ``dFdx``/``dFdy``
+footprints, which approximate the smooth surface's as its tessellation does). Larger footprints
 are summed over the first coarser lobe level where they fit (the lobes' MIP levels, Sec.
 4.2.2): an approximation the library does not make.
 
@@ -405,8 +416,8 @@ class SphereScene:
 
     Examples
     --------
-    >>> SphereScene(width=32).height
-    32
+    >>> SphereScene(width=32).height, SphereScene().params()["mesh"] in MESHES
+    (32, True)
     """
 
     width: int = 64
@@ -441,7 +452,14 @@ class SphereScene:
         return self.width
 
     def params(self) -> dict:
-        """The page's scene parameters (``renderGlints``)."""
+        """The page's scene parameters (``renderGlints``).
+
+        Returns
+        -------
+        dict
+            ``mesh``, ``width``, ``height``, ``fovDeg``, ``distance``, ``light``, ``intensity``,
+            ``segments``, ``tangents``.
+        """
         return {"mesh": "sphere", "width": self.width, "height": self.height, "fovDeg": float(self.fov_deg),
                 "distance": float(self.distance), "light": [float(v) for v in self.light],
                 "intensity": float(self.intensity), "segments": list(self.segments),
@@ -457,6 +475,28 @@ class ShaderInputs:
     point light's ``irradiance`` ``I / d^2`` ``(H, W)``, local-frame ``wo``, ``wi`` and the
     world-space shading frame ``tangent``, ``bitangent``, ``normal`` and ``position``
     ``(H, W, 3)``; ``covered`` ``(H, W)``: the pixels the mesh covers.
+
+    Parameters
+    ----------
+    uv, duv_dx, duv_dy : (H, W, 2) ndarray
+        Footprint centre (scaled uv) and its derivatives along the image's x and y (up).
+    irradiance : (H, W) ndarray
+        ``I / d^2`` of the first point light.
+    wo, wi : (H, W, 3) ndarray
+        View and light directions in the shading frame.
+    tangent, bitangent, normal, position : (H, W, 3) ndarray
+        The shading frame and the surface point, world space.
+    covered : (H, W) ndarray of bool
+        Pixels the mesh covers.
+
+    Examples
+    --------
+    The exact sphere's inputs have the same form (:func:`sphere_inputs`); the modes they are
+    read back from:
+
+    >>> inp = sphere_inputs(SphereScene(width=8))
+    >>> inp.uv.shape, inp.covariance(0.5).shape, DEBUG_OUTPUTS[1]
+    ((8, 8, 2), (8, 8, 2, 2), ('u', 'v', 'du/dx', 'dv/dx'))
     """
 
     uv: np.ndarray
@@ -472,8 +512,19 @@ class ShaderInputs:
     covered: np.ndarray
 
     def covariance(self, pixel_sigma: float) -> np.ndarray:
-        """``(H, W, 2, 2)``: the footprint covariance in uv^2 the shader uses,
-        ``pixel_sigma^2 (J J^T)``, ``J = [duv_dx, duv_dy]``."""
+        """The footprint covariance in uv^2 the shader uses, ``pixel_sigma^2 (J J^T)``,
+        ``J = [duv_dx, duv_dy]``.
+
+        Parameters
+        ----------
+        pixel_sigma : float
+            Pixel filter's standard deviation in pixels.
+
+        Returns
+        -------
+        (H, W, 2, 2) ndarray
+            Per pixel.
+        """
         J = np.stack([self.duv_dx, self.duv_dy], -1)
         return pixel_sigma * pixel_sigma * np.einsum("...ik,...jk->...ij", J, J)
 
@@ -497,7 +548,7 @@ def sphere_frame(points) -> dict:
     Examples
     --------
     >>> f = sphere_frame([0.0, 0.0, 1.0])
-    >>> f["uv"], f["tangent"], f["bitangent"]
+    >>> f["uv"], f["tangent"].round(12) + 0.0, f["bitangent"].round(12) + 0.0
     (array([0.25, 0.5 ]), array([1., 0., 0.]), array([0., 1., 0.]))
     """
     p = np.asarray(points, dtype=np.float64)
@@ -532,7 +583,7 @@ def sphere_hits(scene: SphereScene, offset=(0.0, 0.0)):
 
     Examples
     --------
-    >>> pts, hit = sphere_hits(SphereScene(width=4))
+    >>> pts, hit = sphere_hits(SphereScene(width=4, distance=8.0))
     >>> hit.tolist()[1], bool(np.allclose(np.linalg.norm(pts[hit], axis=-1), 1))
     ([False, True, True, False], True)
     """
@@ -572,7 +623,7 @@ def sphere_inputs(scene: SphereScene) -> ShaderInputs:
     --------
     >>> inp = sphere_inputs(SphereScene(width=8))
     >>> int(inp.covered.sum()), bool(np.all(inp.wo[inp.covered][:, 2] > 0))
-    (20, True)
+    (52, True)
     """
     scale = np.asarray(scene.uv_scale, dtype=np.float64)
     p, hit = sphere_hits(scene)
