@@ -302,36 +302,27 @@ def test_fit_material_writes_the_three_files(tmp_path):
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def _waited(fn, *args):
-    """``in_background(fn, *args)``, waited for: the jobs run one after the other."""
-    from microfacet._background import in_background
-    future = in_background(fn, *args)
-    future.exception()                      # waits; raises nothing
-    return future
-
-
-def test_fit_material_on_threads_writes_the_serial_bytes(inputs, tmp_path, monkeypatch):
-    """The least-squares fits and metrics run on threads, and the perceptual fits in a forked
-    process, give the same bytes as run one after the other (issue 10: overlapping stages
-    changes no result); only the fit times differ."""
+def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monkeypatch):
+    """The perceptual fits in a forked process, each judged as it comes, give the same bytes
+    as made in this process (issue 10: overlapping stages changes no result); only the fit
+    times differ."""
     from microfacet.fit import outputs
     data = mf.measured.load(inputs / "gold-ggx.binary")
     files = {}
-    for mode in ("threads", "serial"):
-        if mode == "serial":
-            monkeypatch.setattr(outputs, "in_background", _waited)
-            monkeypatch.setattr(outputs, "in_process_items", lambda fn, *args: fn(*args))   # in this process
+    for mode in ("process", "here"):
+        if mode == "here":
+            monkeypatch.setattr(outputs, "in_process_items", lambda fn, *args: fn(*args))
         out = tmp_path / mode / "gold.npz"
         summary = outputs.fit_material(data, out, resolution=16, picture=False)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5
         text = out.with_suffix(".json").read_text().splitlines()
         files[mode] = out.read_bytes(), [line for line in text if '"seconds' not in line]
-    assert files["threads"] == files["serial"]
+    assert files["process"] == files["here"]
 
 
-def test_fit_material_interrupted_on_a_thread_writes_nothing(inputs, tmp_path, monkeypatch):
-    """A Ctrl-C (or an error) inside a least-squares fit running on a worker thread reaches
-    the caller, and no file is written."""
+def test_fit_material_interrupted_writes_nothing(inputs, tmp_path, monkeypatch):
+    """A Ctrl-C (or an error) inside a least-squares fit reaches the caller (the perceptual
+    fits' process ends with it), and no file is written."""
     import microfacet.fit.analytic
     from microfacet.fit.outputs import fit_material
 

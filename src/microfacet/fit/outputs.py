@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._background import in_background, in_process_items
+from .._background import in_process_items
 from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
@@ -233,9 +233,9 @@ def _write_all(files: dict) -> None:
 
 
 def _least_squares_fit(brdf, fit, model: str, anisotropic: bool, diffuse: str, fresnel: str, albedo_weight: float,
-                       coat: bool = False) -> tuple[str, object, float]:
-    """``(name, fit, end time)``: the least-squares fit of ``model`` named as ``ggx``,
-    ``ggx_diffuse``, ``beckmann_coat_diffuse``, ... and the ``time.perf_counter()`` it ended at.
+                       coat: bool = False) -> tuple[str, object]:
+    """``(name, fit)``: the least-squares fit of ``model`` named as ``ggx``,
+    ``ggx_diffuse``, ``beckmann_coat_diffuse``, ....
     ``diffuse="auto"``: one fit with a base, the base dropped where it fits to less than
     :data:`NEGLIGIBLE_BASE` (the model without a base is the special case ``k_d = 0`` of
     the one with, so fitting both is redundant)."""
@@ -245,7 +245,7 @@ def _least_squares_fit(brdf, fit, model: str, anisotropic: bool, diffuse: str, f
     *lobes, base = _parts(b)
     if diffuse == "auto" and base is not None and np.all(base.reflectance < NEGLIGIBLE_BASE):
         b, base = (lobes[0] if lobes[1] is None else SumBRDF(*lobes)), None
-    return f"{model}{'_coat' if coat else ''}{'_diffuse' if base is not None else ''}", b, time.perf_counter()
+    return f"{model}{'_coat' if coat else ''}{'_diffuse' if base is not None else ''}", b
 
 
 def _metrics(brdf) -> tuple:
@@ -307,11 +307,11 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     :func:`microfacet.fit.fit` as ``diffuse``. The picture is rendered in memory first,
     then the three files are written, each atomically; if a write fails or is interrupted
     the ones already written are removed (no ``.npz`` without its ``.json`` and
-    ``.png``). The data's side of the metrics and the least-squares fits run on threads
-    (:func:`microfacet._background.in_background`; the same bytes as one after the other).
-    Returns the JSON summary (module docstring); ``seconds`` holds the time of the tabulated
-    fit and of the least-squares fits (wall, until the last ends; not of the errors,
-    picture or files).
+    ``.png``). The perceptual fits run in a process of their own
+    (:func:`microfacet._background.in_process_items`; the same bytes as in this process),
+    each judged here as it comes. Returns the JSON summary (module docstring); ``seconds``
+    holds the time of the tabulated fit and of the least-squares fits (wall; not of the
+    errors, picture or files).
 
     Parameters
     ----------
@@ -416,31 +416,24 @@ class _Legacy(NamedTuple):
 
 
 def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
-    """The tabulated fit and the fits made from it, with their metrics. Independent work on
-    threads (NumPy releases the GIL in its array loops): the data's side of the metrics
-    beside the tabulated fit, then the two least-squares fits beside the moment conversions
-    and the metrics of the tabulated and moment fits; every result as computed serially."""
+    """The tabulated fit and the fits made from it, with their metrics, one after the other:
+    the perceptual fits' process, which runs beside them, takes longer, and threads here
+    (NumPy releases the GIL in its loops) would take CPU from it."""
     _import_numba()
-    metrics_job = in_background(_metrics, brdf)
-    judges_job = in_background(_judges, brdf)
+    metrics, judges = _metrics(brdf), _judges(brdf)
     t0 = time.perf_counter()
     fit = _run_fit(brdf, settings["resolution"], settings["anisotropic"], settings["gaf"],
                    settings["tabulated_diffuse"], settings["albedo_weight"])
     t1 = time.perf_counter()
-    least_jobs = [in_background(_least_squares_fit, brdf, fit, model, settings["anisotropic"], settings["diffuse"],
-                                settings["fresnel_model"], settings["albedo_weight"], settings["coat"])
-                  for model in (("ggx", "beckmann") if method == "least_squares" else ())]
+    least = dict(_least_squares_fit(brdf, fit, model, settings["anisotropic"], settings["diffuse"],
+                                    settings["fresnel_model"], settings["albedo_weight"], settings["coat"])
+                 for model in (("ggx", "beckmann") if method == "least_squares" else ()))
+    t2 = time.perf_counter()
     moments, moments_failed = _moment_fits(fit, brdf, required=method == "moments")
-    first = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()}}
-    metrics = metrics_job.result()
-    scores = [_scores(metrics, first)]
-    least = [job.result() for job in least_jobs]
-    t2 = max((end for *_, end in least), default=t1)
-    least = {name: b for name, b, _ in least}
-    named = {**first, **{f"{k}_least_squares": b for k, b in least.items()}}
-    scores.append(_scores(metrics, {k: b for k, b in named.items() if k not in first}))
-    scores = tuple({k: v for part in scores for k, v in part[i].items()} for i in range(4))
-    return _Legacy(fit, moments, moments_failed, least, named, metrics, judges_job.result(), scores, (t0, t1, t2))
+    named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
+             **{f"{k}_least_squares": b for k, b in least.items()}}
+    return _Legacy(fit, moments, moments_failed, least, named, metrics, judges, _scores(metrics, named),
+                   (t0, t1, t2))
 
 
 def _legacy_json(legacy: _Legacy, method: str) -> dict:
@@ -501,9 +494,9 @@ def _moment_fits(fit, brdf, required: bool) -> tuple[dict, dict]:
 def _import_numba() -> None:
     """Import Numba, where the kernels will use it (:data:`microfacet.kernels.AVAILABLE`; the
     command's single-file fit runs the NumPy references and never imports it), on this
-    thread before the fit's threads start: two threads whose first use of a kernel imports
-    Numba at once can deadlock in its package imports (``_DeadlockError`` on
-    ``numba.core.compiler_lock``)."""
+    thread before any other starts (the kernels' background compiles): two threads whose
+    first use of a kernel imports Numba at once can deadlock in its package imports
+    (``_DeadlockError`` on ``numba.core.compiler_lock``)."""
     from .. import kernels
     if kernels.AVAILABLE:
         import numba  # noqa: F401
