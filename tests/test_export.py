@@ -187,3 +187,26 @@ def test_cli_exports_a_fit_file(tmp_path, corpus):
         assert rep["model"] != "tabulated"
         assert all(np.isfinite(v) for v in rep["image_error"]["exported_vs_tabulated"].values())
     assert main(["export", str(fit_path), "--to", "gltf", "--model", "tabulated", "-o", str(tmp_path / "t")]) == 1
+
+
+def test_cli_exports_a_measured_file_in_one_command(tmp_path, corpus, capsys):
+    """A measured file is fitted first (the fit files kept beside OUT, as 'microfacet fit'
+    writes them) and its best fit exported; the report names that fit file. A file that is
+    neither a fit nor a measured BRDF: one line, nothing written."""
+    _need("pygltflib")
+    from microfacet.cli import main
+    assert main(["export", str(corpus("merl/chrome")), "--to", "gltf", "-o", str(tmp_path / "chrome.glb")]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["chrome.glb", "chrome.glb.export.json",
+                                                          "chrome.glb.export.md", "chrome.json", "chrome.npz",
+                                                          "chrome.png"]
+    rep = json.loads((tmp_path / "chrome.glb.export.json").read_text())
+    assert rep["source"] == str(tmp_path / "chrome.npz")
+    best = json.loads((tmp_path / "chrome.json").read_text())["best"]
+    assert rep["model"] == best if best != "tabulated" else rep["model"] != "tabulated"
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "notes.txt").write_text("not a BRDF")
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "bad" / "notes.txt"), "--to", "gltf", "-o", str(tmp_path / "bad" / "x")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "notes.txt: unknown measured-BRDF format" in err[0], err
+    assert sorted(p.name for p in (tmp_path / "bad").iterdir()) == ["notes.txt"]

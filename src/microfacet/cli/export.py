@@ -1,12 +1,15 @@
 """``microfacet export FIT.npz --to gltf|mtlx|usd|blender -o OUT``: a fit as a glTF, MaterialX,
-USD or Blender material; ``microfacet export PYRAMID.exr --to textures|ktx2|gltf -o OUT``: a LEADR
+USD or Blender material (a measured file instead of FIT.npz: fitted first, as ``microfacet fit``
+does, its fit files kept beside OUT); ``microfacet export PYRAMID.exr --to textures|ktx2|gltf -o OUT``: a LEADR
 pyramid as engine textures; ``microfacet export GLINTS.npz --to threejs -o OUT``: a glint
 microsurface as a three.js material (a folder)."""
 from __future__ import annotations
 
 import sys
 
-from .common import output_path
+from pathlib import Path
+
+from .common import input_name, output_path
 
 FORMAT_SUFFIX = {"gltf": ".glb", "mtlx": ".mtlx", "usd": ".usda", "blender": ".blend"}
 
@@ -23,8 +26,10 @@ def add(sub) -> None:
                     "and OUT.export.md, what the format "
                     "could not carry and the image error of the exported material (read back from OUT) against "
                     "the library's fit and the tabulated fit, measured now. Formulas: docs/export.md.")
-    p.add_argument("fit", metavar="FIT.npz|PYRAMID.exr|GLINTS.npz",
-                   help="fit file written by 'microfacet fit', or a LEADR pyramid of 'microfacet bake' (--to "
+    p.add_argument("fit", metavar="FIT.npz|MEASURED|PYRAMID.exr|GLINTS.npz",
+                   help="fit file written by 'microfacet fit', or a measured file (MERL .binary(.gz), RGL .bsdf, "
+                        "UTIA .bin: fitted first as 'microfacet fit' does, OUT's name .npz/.json/.png kept "
+                        "beside OUT), or a LEADR pyramid of 'microfacet bake' (--to "
                         "textures|ktx2|gltf: normal, roughness and anisotropy textures per MIP level as PNG files, "
                         "KTX2 MIP chains or a .glb plane holding them, docs/export.md), "
                         "or a glint microsurface of 'microfacet glints' (--to threejs: a folder with the glint "
@@ -66,7 +71,8 @@ def run(args) -> int:
         raise ValueError("--base-roughness applies to a LEADR pyramid (PYRAMID.exr), not to a fit file")
     suffix = FORMAT_SUFFIX[args.to]
     out = output_path(args.output, suffix, source=args.fit)
-    report = export(args.fit, args.to, out, model=args.model)
+    source = args.fit if Path(args.fit).suffix.lower() == ".npz" else _fitted(Path(args.fit), out)
+    report = export(source, args.to, out, model=args.model)
     e = report["image_error"]
     print(f"{report['file']}: {report['model']} as {args.to}; report {report['file']}.export.md")
     for k, v in e["exported_vs_fit"].items():
@@ -76,3 +82,15 @@ def run(args) -> int:
     for line in report["lost"]:
         print(f"  not carried: {line}", file=sys.stderr)
     return 0
+
+
+def _fitted(measured: Path, out: Path) -> Path:
+    """``measured`` fitted as ``microfacet fit MEASURED -o OUT.npz`` does (``.json`` and
+    ``.png`` beside it, ``OUT`` the export's name): the fit file to export."""
+    from ..batch.tasks import fit_file
+    from .fit import numpy_kernels
+    target = output_path(out.with_suffix(".npz"), ".npz", measured, side=(".json", ".png"))
+    with numpy_kernels():
+        fit_file(measured, target)
+    print(f"{input_name(measured)}: fitted, fits written to {target} (.json, .png)")
+    return target
