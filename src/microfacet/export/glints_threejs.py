@@ -878,6 +878,21 @@ def export_glints_threejs(ms, out, *, width: int = 512, view_deg: float = 50.0, 
     return out
 
 
+def _material_options(f0, exact: bool, g2: str, pixel_sigma, max_window: int, uv_scale=(1.0, 1.0),
+                      bitangent_sign: int = 1) -> dict:
+    """``createGlintMaterial``'s options for :class:`GlintsRenderer`, checked."""
+    from ..glints.figures import PIXEL_SIGMA
+    if g2 not in ("correlated", "separable"):
+        raise ValueError(f"g2 must be 'correlated' or 'separable', got {g2!r}")
+    if bitangent_sign not in (1, -1):
+        raise ValueError(f"bitangent_sign must be 1 or -1, got {bitangent_sign!r}")
+    f0 = [1.0, 1.0, 1.0] if f0 is None else list(np.broadcast_to(np.asarray(f0, float), (3,)))
+    return {"f0": f0, "exact": bool(exact), "separable": g2 == "separable",
+            "pixelSigma": float(PIXEL_SIGMA if pixel_sigma is None else pixel_sigma),
+            "maxWindow": _max_window(max_window), "uvScale": [float(v) for v in uv_scale],
+            "bitangentSign": int(bitangent_sign)}
+
+
 class GlintsRenderer(ThreeRenderer):
     """Renders a :class:`~microfacet.glints.Microsurface` on the plane of a
     :class:`~microfacet.glints.figures.PlaneScene` with the three.js material, in the system
@@ -945,7 +960,8 @@ class GlintsRenderer(ThreeRenderer):
         p = {"width": int(scene.width), "height": int(scene.height), "viewDeg": float(scene.view_deg),
              "light": [float(v) for v in scene.light], "intensity": float(scene.intensity),
              "tangents": bool(tangents)}
-        return self._render(ms, p, f0, exact, g2, pixel_sigma, max_window, [0])[0][..., :3].copy()
+        options = _material_options(f0, exact, g2, pixel_sigma, max_window)
+        return self._render(ms, p, options, [0])[0][..., :3].copy()
 
     def render_sphere(self, ms, scene: SphereScene, *, f0=None, exact: bool = True, g2: str = "correlated",
                       pixel_sigma: float | None = None, max_window: int = MAX_WINDOW, bitangent_sign: int = 1):
@@ -974,8 +990,8 @@ class GlintsRenderer(ThreeRenderer):
         if not isinstance(scene, SphereScene):
             raise ValueError(f"scene must be a SphereScene, got {type(scene).__name__}")
         p = scene.params()
-        imgs = self._render(ms, p, f0, exact, g2, pixel_sigma, max_window, list(range(9)),
-                            uv_scale=scene.uv_scale, bitangent_sign=bitangent_sign)
+        options = _material_options(f0, exact, g2, pixel_sigma, max_window, scene.uv_scale, bitangent_sign)
+        imgs = self._render(ms, p, options, list(range(9)))
         covered = imgs[2][..., 3] > 0.5      # debug mode 2 writes alpha 1, the clear colour is 0
         m1, m2 = imgs[1], imgs[2]
         inputs = ShaderInputs(uv=m1[..., :2], duv_dx=m1[..., 2:], duv_dy=m2[..., :2], irradiance=m2[..., 2],
@@ -984,25 +1000,15 @@ class GlintsRenderer(ThreeRenderer):
                               covered=covered)
         return imgs[0][..., :3].copy(), inputs
 
-    def _render(self, ms, p, f0, exact, g2, pixel_sigma, max_window, modes, uv_scale=(1.0, 1.0),
-                bitangent_sign=1):
-        """The page's float images ``(h, w, 4)`` per debug mode, row 0 the top."""
-        from ..glints.figures import PIXEL_SIGMA
-        if g2 not in ("correlated", "separable"):
-            raise ValueError(f"g2 must be 'correlated' or 'separable', got {g2!r}")
-        if bitangent_sign not in (1, -1):
-            raise ValueError(f"bitangent_sign must be 1 or -1, got {bitangent_sign!r}")
+    def _render(self, ms, p, options: dict, modes):
+        """The page's float images ``(h, w, 4)`` per debug mode, row 0 the top (``options``:
+        :func:`_material_options`)."""
         root = self.root
         if not (root / "glints-material.js").exists():
             (root / "glints-material.js").write_text(material_module())
         self._count += 1
         lobes = write_lobes(ms, root, f"lobes{self._count}")
-        f0 = [1.0, 1.0, 1.0] if f0 is None else list(np.broadcast_to(np.asarray(f0, float), (3,)))
-        p = dict(p, lobes="/" + lobes.name, modes=[int(m) for m in modes],
-                 options={"f0": f0, "exact": bool(exact), "separable": g2 == "separable",
-                          "pixelSigma": float(PIXEL_SIGMA if pixel_sigma is None else pixel_sigma),
-                          "maxWindow": _max_window(max_window), "uvScale": [float(v) for v in uv_scale],
-                          "bitangentSign": int(bitangent_sign)})
+        p = dict(p, lobes="/" + lobes.name, modes=[int(m) for m in modes], options=options)
         out = self.page.evaluate("(p) => window.renderGlints(p)", p)
         self.revision = out["revision"]
         w, h = p["width"], p["height"]

@@ -527,8 +527,10 @@ def read_chains(folder) -> list[dict]:
 #: made for colour).
 KTX2_CODEC = "uastc"
 #: The encoder's effort (basisu 0..10: UASTC pack level; above 3 changes the error by < 1/255 RMS at many
-#: times the time) and the Zstandard supercompression level of the KTX2 files (lossless).
-KTX2_EFFORT, KTX2_ZSTD = 3, 6
+#: times the time).
+KTX2_EFFORT = 3
+#: The Zstandard supercompression level of the KTX2 files (lossless).
+KTX2_ZSTD = 6
 _KTX2_ID = b"\xabKTX 20\xbb\r\n\x1a\n"
 _SUPERCOMPRESSION = {0: "none", 1: "basislz", 2: "zstd", 3: "zlib"}
 _COLOR_MODELS = {1: "rgbsda", 163: "etc1s", 166: "uastc"}

@@ -509,11 +509,12 @@ def render_xml(xml: str, material: str, size: int, light, compensation: bool = F
         tmp = Path(tmp)
         obj = sphere_obj(tmp / "sphere.obj", size) if mesh == "sphere" else plane_obj(tmp / "plane.obj")
         # the renderer (its X window and GL context) is freed on return, before the display goes
-        return _render(mx, doc, doc.getChild(material), tmp, size, light, compensation, obj, folder)
+        return _render(doc, doc.getChild(material), tmp, size, light, compensation, obj, folder)
 
 
-def _render(mx, doc, mat, tmp: Path, size: int, light, compensation: bool, obj: Path, folder) -> np.ndarray:
+def _render(doc, mat, tmp: Path, size: int, light, compensation: bool, obj: Path, folder) -> np.ndarray:
     """The GlslRenderer part of :func:`render_xml` (an X display is set)."""
+    mx = _mx()
     import MaterialX.PyMaterialXGenGlsl as gen_glsl
     import MaterialX.PyMaterialXGenShader as gen
     import MaterialX.PyMaterialXRender as mx_render
