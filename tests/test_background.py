@@ -1,40 +1,15 @@
-"""``microfacet._background``: work on a thread or in a forked process, as a ``Future``."""
+"""``microfacet._background``: work on a thread (a ``Future``) or in a forked process (its items)."""
 import os
 import signal
 
 import numpy as np
 import pytest
 
-from microfacet._background import can_fork, in_background, in_process, in_process_items
+from microfacet._background import can_fork, in_background, in_process_items
 
 
 def _pid_and_sum(a):
     return os.getpid(), float(np.sum(a))
-
-
-def _fails():
-    raise ValueError("bad parameter: alpha")
-
-
-def _dies():
-    os.kill(os.getpid(), signal.SIGKILL)
-
-
-def test_in_process_returns_the_result_from_another_process():
-    pid, total = in_process(_pid_and_sum, np.arange(10.0)).result(timeout=60)
-    assert total == 45.0
-    assert (pid != os.getpid()) == can_fork()
-
-
-def test_in_process_raises_the_workers_exception():
-    with pytest.raises(ValueError, match="bad parameter: alpha"):
-        in_process(_fails).result(timeout=60)
-
-
-@pytest.mark.skipif(not can_fork(), reason="this machine's in_process runs on a thread (one CPU or not Linux)")
-def test_in_process_says_when_its_worker_dies():
-    with pytest.raises(RuntimeError, match="worker process ended"):
-        in_process(_dies).result(timeout=60)
 
 
 def test_in_background_runs_on_a_thread_of_this_process():
@@ -47,6 +22,10 @@ def _pids_and_squares(n, fail_at=None):
         if k == fail_at:
             raise ValueError(f"bad item {k}")
         yield os.getpid(), k * k
+
+
+def _unpicklable():
+    yield lambda: 0
 
 
 def test_in_process_items_arrive_in_order_from_another_process():
@@ -86,3 +65,9 @@ def test_in_process_items_say_when_their_worker_dies():
     assert next(items) == 1
     with pytest.raises(RuntimeError, match="worker process ended"):
         next(items)
+
+
+@pytest.mark.skipif(not can_fork(), reason="this machine's in_process_items runs in this process (one CPU or not Linux)")
+def test_in_process_items_say_when_an_item_does_not_pickle():
+    with pytest.raises((RuntimeError, AttributeError, TypeError), match="pickle|_unpicklable|lambda"):
+        list(in_process_items(_unpicklable))

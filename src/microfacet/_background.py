@@ -1,7 +1,7 @@
-"""Work started on a daemon thread or in a forked process, as a ``Future``: what the
-commands overlap with their imports or with other work. A thread suits work that releases
-the GIL (a file's decode or decompression, NumPy loops); work that runs much Python (the
-perceptual fits' many small solves) runs in a process (:func:`in_process`)."""
+"""Work started on a daemon thread (a ``Future``) or in a forked process (an iterator of its
+items): what the commands overlap with their imports or with other work. A thread suits work
+that releases the GIL (a file's decode or decompression, NumPy loops); work that runs much
+Python (the perceptual fits' many small solves) runs in a process (:func:`in_process_items`)."""
 from __future__ import annotations
 
 import multiprocessing
@@ -11,7 +11,7 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 
-__all__ = ["in_background", "in_process", "in_process_items", "can_fork"]
+__all__ = ["in_background", "in_process_items", "can_fork"]
 
 
 def in_background(fn: Callable, *args) -> Future:
@@ -31,22 +31,19 @@ def in_background(fn: Callable, *args) -> Future:
 
 
 def can_fork() -> bool:
-    """Whether :func:`in_process` forks: on Linux, with two CPUs or more, from a process that
+    """Whether :func:`in_process_items` forks: on Linux, with two CPUs or more, from a process that
     is not itself a worker (a batch's workers already use the CPUs; daemons cannot fork)."""
     return (sys.platform.startswith("linux") and (os.cpu_count() or 1) > 1
             and multiprocessing.parent_process() is None and not multiprocessing.current_process().daemon)
 
 
-def _child(fn: Callable, args: tuple, conn, stream: bool) -> None:
+def _child(fn: Callable, args: tuple, conn) -> None:
     from .batch.workers import exit_with
     exit_with(os.getppid())                      # no orphan computing for a parent killed by kill -9
     try:
-        if stream:
-            for item in fn(*args):
-                _send(conn, ("item", item), fn)
-            message = ("ok", None)
-        else:
-            message = ("ok", fn(*args))
+        for item in fn(*args):
+            _send(conn, ("item", item), fn)
+        message = ("ok", None)
     except BaseException as e:                   # sent back as the parent's exception
         message = ("error", e)
     _send(conn, message, fn)
@@ -56,19 +53,8 @@ def _child(fn: Callable, args: tuple, conn, stream: bool) -> None:
 def _send(conn, message: tuple, fn: Callable) -> None:
     try:
         conn.send(message)
-    except Exception as e:                       # an unpicklable result or exception
+    except Exception as e:                       # an unpicklable item or exception
         conn.send(("error", RuntimeError(f"{getattr(fn, '__name__', 'work')}: {e!r}")))
-
-
-def _fork(fn: Callable, args: tuple, stream: bool):
-    """Start ``fn(*args)`` in a forked daemonic child: ``(child, receiving end)``."""
-    context = multiprocessing.get_context("fork")
-    receive, send = context.Pipe(duplex=False)
-    child = context.Process(target=_child, args=(fn, args, send, stream), daemon=True,
-                            name=f"microfacet-{getattr(fn, '__name__', 'work')}")
-    child.start()
-    send.close()
-    return child, receive
 
 
 def _receive(fn: Callable, child, receive) -> tuple:
@@ -81,34 +67,13 @@ def _receive(fn: Callable, child, receive) -> tuple:
                            f"(exit code {child.exitcode})") from None
 
 
-def in_process(fn: Callable, *args) -> Future:
-    """``fn(*args)`` run in a forked child process (:func:`can_fork`; else on a thread, as
-    :func:`in_background`): a ``Future`` of its result, which must pickle, or of its
-    exception. Fork it before starting threads; ``fn`` must not run Numba's parallel kernels
-    (GNU OpenMP aborts a forked child that does, once its parent has used them). The child
-    ends with its parent (even one killed by ``kill -9``) and is daemonic, so an interrupted
-    command does not wait for it."""
-    if not can_fork():
-        return in_background(fn, *args)
-    child, receive = _fork(fn, args, stream=False)
-
-    def wait():
-        try:
-            status, value = _receive(fn, child, receive)
-        finally:
-            receive.close()
-        child.join()
-        if status == "error":
-            raise value
-        return value
-    return in_background(wait)
-
-
 def in_process_items(fn: Callable, *args) -> Iterator:
-    """The items of the generator ``fn(*args)`` made in a forked child process, each as soon
-    as it is made (as :func:`in_process`, whose conditions apply; without a fork, the
-    generator itself, run as it is read): the caller works on early items while the child
-    makes the next. An exception in the child is raised where the items stop; a caller that
+    """The items of the generator ``fn(*args)`` made in a forked child process
+    (:func:`can_fork`; else the generator itself, run as it is read), each as soon as it is
+    made: the caller works on early items while the child makes the next. Items must pickle.
+    Fork it before starting threads; ``fn`` must not run Numba's parallel kernels (GNU OpenMP
+    aborts a forked child that does, once its parent has used them). The child ends with its
+    parent (even one killed by ``kill -9``) and is daemonic. An exception in the child is raised where the items stop; a caller that
     stops reading early stops the child.
 
     Parameters
@@ -133,7 +98,12 @@ def in_process_items(fn: Callable, *args) -> Iterator:
     """
     if not can_fork():
         return fn(*args)
-    child, receive = _fork(fn, args, stream=True)
+    context = multiprocessing.get_context("fork")
+    receive, send = context.Pipe(duplex=False)
+    child = context.Process(target=_child, args=(fn, args, send), daemon=True,
+                            name=f"microfacet-{getattr(fn, '__name__', 'work')}")
+    child.start()
+    send.close()
 
     def items():
         status = "item"
