@@ -215,7 +215,11 @@ def test_mitsuba_doc_snippet_runs(tmp_path):
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "mitsuba.md").read_text(encoding="utf-8"), re.S)
     assert len(blocks) == 1
     (tmp_path / "example.py").write_text(blocks[0], encoding="utf-8")
-    env = {**os.environ, "PYTHONPATH": str(Path(mf.__file__).parents[1])}
+    # its own HOME, so its own Dr.Jit kernel cache (~/.drjit, which follows HOME): once, under
+    # CI, loading the envmap failed with "basic_string::_M_create" while other workers' Mitsuba
+    # tests were writing kernels to the shared cache; a cold cache costs this script ~1 s
+    (tmp_path / "home").mkdir()
+    env = {**os.environ, "PYTHONPATH": str(Path(mf.__file__).parents[1]), "HOME": str(tmp_path / "home")}
     done = subprocess.run([sys.executable, "example.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
