@@ -689,18 +689,8 @@ def render_leadr_mtlx(pyramid, level: int, plane: LeadrPlane, base_roughness=Non
 
     Parameters
     ----------
-    pyramid : list of (H, W, 5) arrays, str or os.PathLike
-        A moment pyramid or its EXR.
-    level : int
-        The MIP level.
-    plane : LeadrPlane
-        The scene.
-    base_roughness : None, float, (float, float) or Beckmann
-        A base lobe added to every level.
-    naive : bool
-        The naive level instead.
-    supersample : int
-        Rendered ``supersample x supersample`` pixels per pixel.
+    pyramid, level, plane, base_roughness, naive, supersample
+        As :meth:`MtlxPlaneRenderer.render`.
 
     Returns
     -------
@@ -825,10 +815,6 @@ def leadr_usd(pyramid, level: int, out, plane: LeadrPlane | None = None, base_ro
 
 
 # --------------------------------------------------------------------------- measurement
-def _rel_l1(a, b) -> float:
-    return float(np.abs(np.asarray(a, float) - b).sum() / max(np.abs(b).sum(), 1e-300))
-
-
 def compare_leadr(pyramid, level: int, consumer: str, plane: LeadrPlane | None = None, base_roughness=None,
                   reference: int = 256, renderer: MtlxPlaneRenderer | None = None, noise: bool = False) -> dict:
     """Render, in ``consumer``'s own renderer, (a) ``level``'s LEADR textures, (b) its naive
@@ -894,8 +880,9 @@ def compare_leadr(pyramid, level: int, consumer: str, plane: LeadrPlane | None =
                 if noise else None
             leadr, naive = r.render(levels, level, plane, base_roughness), r.render(levels, level, plane,
                                                                                      base_roughness, naive=True)
-    return {"leadr": _rel_l1(leadr, ref), "naive": _rel_l1(naive, ref),
-            "noise": None if second is None else _rel_l1(second, ref), "leadr_image": leadr, "naive_image": naive,
+    from .leadr_threejs import relative_l1
+    return {"leadr": relative_l1(leadr, ref), "naive": relative_l1(naive, ref),
+            "noise": None if second is None else relative_l1(second, ref), "leadr_image": leadr, "naive_image": naive,
             "reference_image": ref, "plane": plane}
 
 
