@@ -26,6 +26,27 @@ def test_lobe_factor_is_the_library_ggx(alpha):
     np.testing.assert_allclose(mine, ref, rtol=1e-9)
 
 
+@pytest.mark.parametrize("model", perceptual.MODELS)
+def test_normal_equations_are_those_of_the_residuals(model):
+    """J^T J and J^T r of _Problem.normal_equations (analytic slopes in q, Gram matrices in y)
+    equal those of the residuals' Jacobian by central differences, on a material with a base."""
+    t = perceptual.target(_plastic(), n=256, grid=6, image_size=8, albedo_grid=(12, 6))
+    spec = perceptual.MODEL_SPECS[model]
+    problem = perceptual._Problem(spec, t)
+    rng = np.random.default_rng(1)
+    x = np.concatenate([np.mean(spec.q_bounds, axis=0) + 0.1, rng.uniform(0.0, 0.5, spec.n_y)])
+    cost, jtj, g = problem.normal_equations(x)
+    r = problem.residuals(x)
+    jac = np.empty((len(r), len(x)))
+    for k in range(len(x)):
+        h = 1e-6 * max(1.0, abs(x[k]))
+        step = np.eye(len(x))[k] * h
+        jac[:, k] = (problem.residuals(x + step) - problem.residuals(x - step)) / (2.0 * h)
+    assert cost == pytest.approx(r @ r, rel=1e-12)
+    np.testing.assert_allclose(jtj, jac.T @ jac, atol=1e-5 * np.abs(jtj).max())
+    np.testing.assert_allclose(g, jac.T @ r, atol=1e-5 * np.abs(g).max())
+
+
 def test_coat_albedo_matches_directional_albedo():
     mu, e = perceptual.coat_albedo(0.1, 1.5)
     coat = mf.MicrofacetBRDF(mf.GGX(alpha=0.1), fresnel=mf.fresnel.Dielectric(1.5))

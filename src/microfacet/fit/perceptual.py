@@ -37,7 +37,9 @@ Each model is linear in its reflectances given its nonlinear parameters ``q`` (l
 roughnesses, the coat's index): ``f = C(q) + A(q) y``. The fit scans ``q``, solves ``y``
 for each scanned ``q`` by a bounded linearized least squares (:func:`.extract.box_qp`),
 then refines the best starts by a projected Levenberg-Marquardt method on ``(q, y)``
-(Jacobian exact in ``y``, forward differences in ``q``). :func:`fit_models` returns every
+(Jacobian exact in ``y`` and, for the lobe models, in ``q``: the GGX lobe's derivative in
+``log alpha``; forward differences in the coat's ``q``; the normal equations formed
+through the basis's Gram matrices). :func:`fit_models` returns every
 model's BRDF; :func:`select` picks the one whose rendered spheres look most like the data's
 (Bieron & Peers 2020: choose by image error, not by the fitting metric).
 
@@ -52,6 +54,7 @@ Example
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
@@ -146,11 +149,61 @@ class Geometry:
     def __len__(self) -> int:
         return len(self.cos_i)
 
+    # the factors of every lobe that do not depend on its roughness, computed once per pair
+    # set; 0 at a pair at or below the horizon, where every lobe is then 0
+    @cached_property
+    def tan2_i(self) -> np.ndarray:
+        """``tan^2 theta_i``."""
+        return _tan2(self.cos_i)
 
-def _smith_lambda(alpha: float, mu: np.ndarray) -> np.ndarray:
-    """GGX's ``Lambda(mu) = (sqrt(1 + alpha^2 tan^2) - 1) / 2`` (Heitz 2014, Eq. 72), cancellation-free."""
-    t2 = alpha * alpha * (1.0 - mu * mu) / (mu * mu)
-    return t2 / (2.0 * (np.sqrt(1.0 + t2) + 1.0))
+    @cached_property
+    def tan2_o(self) -> np.ndarray:
+        """``tan^2 theta_o``."""
+        return _tan2(self.cos_o)
+
+    @cached_property
+    def cos2_h(self) -> np.ndarray:
+        """``cos^2 theta_h``."""
+        return self.cos_h * self.cos_h
+
+    @cached_property
+    def jacobian(self) -> np.ndarray:
+        """``1 / (4 cos theta_i cos theta_o)``."""
+        product = 4.0 * self.cos_i * self.cos_o
+        return np.divide(1.0, product, out=np.zeros_like(product), where=(self.cos_i > 0) & (self.cos_o > 0))
+
+    @cached_property
+    def schlick(self) -> np.ndarray:
+        """Schlick's weight ``(1 - cos theta_d)^5``."""
+        m = 1.0 - self.cos_d
+        return (m * m) * (m * m) * m
+
+
+def _tan2(mu: np.ndarray) -> np.ndarray:
+    """``tan^2 theta = (1 - mu^2) / mu^2``, 0 where ``mu <= 0``."""
+    mu2 = mu * mu
+    return np.divide(1.0 - mu2, mu2, out=np.zeros_like(mu2), where=mu > 0)
+
+
+def _lobe_factors(log_alpha, g: Geometry, slopes: bool = False):
+    """:func:`lobe_factor` of every roughness ``exp(log_alpha)`` (``(L,)``) at ``g``: ``(L, n)``;
+    with ``slopes``, also its derivative in ``log alpha``,
+    ``s (2 - 4 a^2 c^2 / (c^2 (a^2 - 1) + 1) - G2 sum_{i,o} t / (2 sqrt(1 + t)))``,
+    ``t = a^2 tan^2`` (differentiating ``D``, and ``Lambda = t / (2 (sqrt(1 + t) + 1))`` of
+    Heitz 2014, Eq. 72)."""
+    log_alpha = np.atleast_1d(np.asarray(log_alpha, dtype=np.float64))
+    out = np.empty((len(log_alpha), len(g)))
+    slope = np.empty_like(out) if slopes else None
+    c2 = g.cos2_h
+    for j, a2 in enumerate(np.exp(2.0 * log_alpha)):    # a lobe at a time: its arrays stay in cache
+        den = c2 * (a2 - 1.0) + 1.0
+        ti, to = a2 * g.tan2_i, a2 * g.tan2_o
+        si, so = np.sqrt(1.0 + ti), np.sqrt(1.0 + to)
+        g2 = 1.0 / (1.0 + ti / (2.0 * (si + 1.0)) + to / (2.0 * (so + 1.0)))
+        out[j] = a2 / np.pi * g2 * g.jacobian / (den * den)
+        if slopes:
+            slope[j] = out[j] * (2.0 - 4.0 * a2 * c2 / den - g2 * (ti / (2.0 * si) + to / (2.0 * so)))
+    return (out, slope) if slopes else out
 
 
 def lobe_factor(alpha: float, g: Geometry) -> np.ndarray:
@@ -185,11 +238,7 @@ def lobe_factor(alpha: float, g: Geometry) -> np.ndarray:
     >>> float(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)).eval(wi, wo)[0].round(4))     # the same
     1.3479
     """
-    a2 = alpha * alpha
-    c2 = g.cos_h * g.cos_h
-    d = a2 / (np.pi * (c2 * (a2 - 1.0) + 1.0) ** 2)
-    g2 = 1.0 / (1.0 + _smith_lambda(alpha, g.cos_i) + _smith_lambda(alpha, g.cos_o))
-    return d * g2 / (4.0 * g.cos_i * g.cos_o)
+    return _lobe_factors(np.log(alpha), g)[0]
 
 
 def dielectric(eta: float, c: np.ndarray) -> np.ndarray:
@@ -254,6 +303,9 @@ class Model:
         ``brdf(q, y)``: the library BRDF.
     starts : callable
         ``starts(previous)``: the scanned ``q``'s.
+    slopes : callable, optional
+        ``slopes(q, g) -> (c, B, dc, dB)``: the basis and its derivatives in each ``q``,
+        ``dc (len(q), n)`` or None and ``dB (len(q), n, K)`` (None: forward differences).
 
     Examples
     --------
@@ -269,17 +321,31 @@ class Model:
     basis: Callable
     brdf: Callable
     starts: Callable
+    slopes: Callable | None = None
 
     @property
     def n_y(self) -> int:
         return self.mix.shape[-1]
 
 
-def _schlick_basis(s: np.ndarray, g: Geometry) -> list[np.ndarray]:
-    """A lobe factor ``s`` weighted by Schlick's ``f0`` and ``f90`` terms: ``s (1 - m^5)``, ``s m^5``, ``m = 1 - cos th_d``."""
-    m = 1.0 - g.cos_d
-    m5 = (m * m) * (m * m) * m
-    return [s * (1.0 - m5), s * m5]
+def _basis_rows(s: np.ndarray, g: Geometry, extra: tuple = ()) -> np.ndarray:
+    """The basis ``(2L + 1 + len(extra), n)`` of lobe factors ``s (L, n)``: each lobe weighted by
+    Schlick's ``f0`` and ``f90`` terms, ``s (1 - m^5)`` and ``s m^5`` (``m = 1 - cos th_d``),
+    then the Lambertian base ``1 / pi``, then the rows ``extra``; its transpose is the
+    ``(n, K)`` basis of :class:`Model` (rows, so that each is written contiguously)."""
+    n_lobes = len(s)
+    out = np.empty((2 * n_lobes + 1 + len(extra), s.shape[1]))
+    np.multiply(s, g.schlick, out=out[1:2 * n_lobes:2])
+    np.subtract(s, out[1:2 * n_lobes:2], out=out[0:2 * n_lobes:2])
+    out[2 * n_lobes] = 1.0 / np.pi
+    for k, row in enumerate(extra):
+        out[2 * n_lobes + 1 + k] = row
+    return out
+
+
+def _finite(a: np.ndarray) -> np.ndarray:
+    """``a`` with its non-finite entries set to 0."""
+    return np.where(np.isfinite(a), a, 0.0)
 
 
 def _lobes_mix(n_lobes: int) -> np.ndarray:
@@ -295,8 +361,17 @@ def _lobes_mix(n_lobes: int) -> np.ndarray:
 
 
 def _lobes_basis(q, g):
-    columns = [b for lq in q for b in _schlick_basis(lobe_factor(np.exp(lq), g), g)]
-    return None, np.stack(columns + [np.full(len(g), 1.0 / np.pi)], axis=1)
+    return None, _basis_rows(_lobe_factors(q, g), g).T
+
+
+def _lobes_slopes(q, g):
+    """``(c, B, dc, dB)``: :func:`_lobes_basis` and its derivatives in each ``q`` (lobe ``j``'s
+    log roughness moves lobe ``j``'s two columns only)."""
+    s, ds = _lobe_factors(q, g, slopes=True)
+    db = np.zeros((len(q), 2 * len(q) + 1, len(g)))
+    for j in range(len(q)):
+        db[j, 2 * j:2 * j + 2] = _basis_rows(ds[j:j + 1], g)[:2]
+    return None, _basis_rows(s, g).T, None, db.transpose(0, 2, 1)
 
 
 def _ggx_lobe(alpha, f0, f90):
@@ -348,6 +423,16 @@ def _mixture_basis(q, g):
     return _lobes_basis(_ladder(q), g)
 
 
+def _mixture_slopes(q, g, extra: tuple = ()):
+    """:func:`_mixture_basis` (with the rows ``extra``) and its derivative in ``q = log
+    alpha_0`` (every lobe below the cap moves with it)."""
+    ladder = _ladder(q)
+    s, ds = _lobe_factors(ladder, g, slopes=True)
+    db = _basis_rows(ds * (ladder < np.log(ALPHA_MAX))[:, None], g, (0.0,) * len(extra))
+    db[2 * len(ladder)] = 0.0
+    return None, _basis_rows(s, g, extra).T, None, db.T[None]
+
+
 def _mixture_brdf(q, y):
     return _lobes_brdf(_ladder(q), y)
 
@@ -372,10 +457,18 @@ def _dielectric_mix() -> np.ndarray:
     return mix
 
 
+def _body(g) -> np.ndarray:
+    """The second base: the diffuse body seen through the surface, ``t(mu_i) t(mu_o) / pi``."""
+    return _transmittance(g.cos_i) * _transmittance(g.cos_o) / np.pi
+
+
 def _dielectric_basis(q, g):
-    _, basis = _mixture_basis(q, g)
-    body = _transmittance(g.cos_i) * _transmittance(g.cos_o) / np.pi
-    return None, np.concatenate([basis, body[:, None]], axis=1)
+    return None, _basis_rows(_lobe_factors(_ladder(q), g), g, (_body(g),)).T
+
+
+def _dielectric_slopes(q, g):
+    """:func:`_dielectric_basis` and its derivative in ``q`` (the body does not depend on it)."""
+    return _mixture_slopes(q, g, (_body(g),))
 
 
 def _dielectric_brdf(q, y):
@@ -439,12 +532,13 @@ def _log_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
 MODEL_BOUNDS_MIXTURE = (np.array([np.log(ALPHA_MIN)]), np.array([np.log(ALPHA_MIN * MIXTURE_RATIO)]))
 #: The models by name.
 MODEL_SPECS = {
-    "lobe": Model("lobe", _log_bounds(1), _lobes_mix(1), _lobes_basis, _lobes_brdf, _lobe_starts),
-    "two_lobes": Model("two_lobes", _log_bounds(2), _lobes_mix(2), _lobes_basis, _lobes_brdf, _two_lobe_starts),
+    "lobe": Model("lobe", _log_bounds(1), _lobes_mix(1), _lobes_basis, _lobes_brdf, _lobe_starts, _lobes_slopes),
+    "two_lobes": Model("two_lobes", _log_bounds(2), _lobes_mix(2), _lobes_basis, _lobes_brdf, _two_lobe_starts,
+                       _lobes_slopes),
     "mixture": Model("mixture", MODEL_BOUNDS_MIXTURE, _lobes_mix(MIXTURE_LOBES), _mixture_basis, _mixture_brdf,
-                     _mixture_starts),
+                     _mixture_starts, _mixture_slopes),
     "dielectric_mixture": Model("dielectric_mixture", MODEL_BOUNDS_MIXTURE, _dielectric_mix(), _dielectric_basis,
-                                _dielectric_brdf, _mixture_starts),
+                                _dielectric_brdf, _mixture_starts, _dielectric_slopes),
     "coat": Model("coat", (np.array([np.log(ALPHA_MIN), ETA_MIN, np.log(ALPHA_MIN)]),
                            np.array([np.log(ALPHA_MAX), ETA_MAX, np.log(ALPHA_MAX)])), _lobes_mix(1),
                   _coat_basis, _coat_brdf, _coat_starts),
@@ -602,78 +696,117 @@ def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16, image_size:
 
 
 class _Problem:
-    """The residuals of one model against a :class:`Target`, and their Jacobian."""
+    """The residuals of one model against a :class:`Target`, and their normal equations."""
 
     def __init__(self, model: Model, t: Target):
         self.model, self.t = model, t
         self.lo = np.concatenate([model.q_bounds[0], np.zeros(model.n_y)])
         self.hi = np.concatenate([model.q_bounds[1], np.ones(model.n_y)])
         self.nq = len(model.q_bounds[0])
-        ok = t.albedo_data > ALBEDO_FLOOR
-        self.band_mask = ok
+        self.band_mask = t.albedo_data > ALBEDO_FLOOR
 
     def values(self, q, y):
         """``(f (n, 3), c, B)`` at all pairs and albedo nodes."""
         c, basis = self.model.basis(q, self.t.geometry)
+        return self._combine(c, basis, y), c, basis
+
+    def _combine(self, c, basis, y):
         f = basis @ (self.model.mix @ y).T
         if c is not None:
             f += c[:, None]
-        return np.where(np.isfinite(f), f, 0.0), c, basis
+        return _finite(f)
 
     def albedo(self, f, mask=None):
         """Albedo ``(views, 3)`` of values ``f`` at the albedo nodes (``mask``: the ratio nodes)."""
         t = self.t
         return self._albedo_sums(f, t.albedo_w if mask is None else t.albedo_w * mask)
 
-    def residuals(self, x, jacobian: bool = False):
+    def _fit_residuals(self, f):
+        """``(r (n, 3), u)``: the weighted compressed differences at the pairs and ``u = f cos th_i`` scaled."""
+        t, n = self.t, self.t.n_pairs
+        u = np.maximum(f[:n], 0.0) * t.geometry.cos_i[:n, None] * t.scale[:, None]
+        return t.sqrt_w[:, None] * (compress(u) - t.log_data), u
+
+    def residuals(self, x):
         """The residuals at ``x = (q, y)``: the weighted log differences (pairs x RGB), the
-        albedo band's and the energy bound's penalties; with ``jacobian``, also ``d r / d x``."""
-        t, nq = self.t, self.nq
+        albedo band's and the energy bound's penalties."""
+        f = self.values(x[:self.nq], x[self.nq:])[0]
+        r_band, r_energy, _, _ = self._energy(f)
+        return np.concatenate([self._fit_residuals(f)[0].ravel(), r_band.ravel(), r_energy.ravel()])
+
+    def normal_equations(self, x):
+        """``(cost, J^T J, J^T r)`` at ``x = (q, y)``, ``cost = r^T r``: the Jacobian exact in
+        ``y``, and in ``q`` where the model has :attr:`Model.slopes` (forward differences
+        otherwise); the pairs' rows are summed per channel through the basis's Gram matrix
+        (``B^T diag(d_c^2) B``, ``K x K``), never formed."""
+        t, nq, mix = self.t, self.nq, self.model.mix
         q, y = x[:nq], x[nq:]
-        f, c, basis = self.values(q, y)
-        n = t.n_pairs
-        ci = t.geometry.cos_i[:n, None]
-        scale = t.scale[:, None]
-        u = np.maximum(f[:n], 0.0) * ci * scale
-        r_fit = t.sqrt_w[:, None] * (compress(u) - t.log_data)
+        c, basis, df = self._basis_slopes(q, y)
+        f = self._combine(c, basis, y)
+        r_fit, u = self._fit_residuals(f)
         r_band, r_energy, band_scale, energy_active = self._energy(f)
-        r = np.concatenate([r_fit.ravel(), r_band.ravel(), r_energy.ravel()])
-        if not jacobian:
-            return r
-        # d f / d x at the pairs and d albedo / d x: exact in y, forward differences in q
-        ratio_w, all_w = t.albedo_w * t.ratio_mask, t.albedo_w
-        jf = np.empty((n, 3, len(x)))
-        j_ratio = np.empty((len(t.view_starts), 3, len(x)))
-        j_all = np.empty_like(j_ratio)
-        jf[..., nq:] = self._linear_jacobian(basis[:n])
-        j_ratio[..., nq:] = self._linear_jacobian(self._albedo_sums(basis, ratio_w))
-        j_all[..., nq:] = self._linear_jacobian(self._albedo_sums(basis, all_w))
-        for k in range(nq):
+        n = t.n_pairs
+        d = t.sqrt_w[:, None] * t.geometry.cos_i[:n, None] * t.scale[:, None] * compress_slope(u)
+        jtj, jtr = self.gram(basis[:n], d, r_fit)
+        jtj = np.pad(jtj, ((nq, 0), (nq, 0)))
+        jtr = np.concatenate([np.zeros(nq), jtr])
+        for ch in range(3):                          # the q columns of the pairs' rows
+            dq = df[:n, ch] * d[:, ch, None]          # (n, nq)
+            cross = mix[ch].T @ (basis[:n].T @ (dq * d[:, ch, None]))     # (n_y, nq)
+            jtj[:nq, :nq] += dq.T @ dq
+            jtj[nq:, :nq] += cross
+            jtj[:nq, nq:] += cross.T
+            jtr[:nq] += dq.T @ r_fit[:, ch]
+        # the penalties' few rows, formed
+        j_ratio = self._albedo_jacobian(basis, df, t.albedo_w * t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
+        j_all = self._albedo_jacobian(basis, df, t.albedo_w)
+        rows = np.concatenate([(band_scale[..., None] * j_ratio).reshape(-1, len(x)),
+                               (energy_active[..., None] * PENALTY * j_all).reshape(-1, len(x))])
+        r_rows = np.concatenate([r_band.ravel(), r_energy.ravel()])
+        cost = float(np.sum(r_fit * r_fit) + r_rows @ r_rows)
+        return cost, jtj + rows.T @ rows, jtr + rows.T @ r_rows
+
+    def gram(self, basis, w, v):
+        """``(sum_c M_c^T A_c^T A_c M_c, sum_c M_c^T A_c^T v_c)``, ``A_c = diag(w_c) B``,
+        ``M_c = mix[c]``: the normal equations in ``y`` of rows ``w_c B M_c y ~ v_c``
+        (``basis`` ``(n, K)``, ``w``, ``v`` ``(n, 3)``)."""
+        mix = self.model.mix
+        h, b = np.zeros((mix.shape[2],) * 2), np.zeros(mix.shape[2])
+        for ch in range(3):
+            a = basis * w[:, ch, None]
+            h += mix[ch].T @ (a.T @ a) @ mix[ch]
+            b += mix[ch].T @ (a.T @ v[:, ch])
+        return h, b
+
+    def _basis_slopes(self, q, y):
+        """``(c, B, df)``: the basis at ``q`` and ``d f / d q`` ``(N, 3, nq)`` at all rows."""
+        g, model = self.t.geometry, self.model
+        if model.slopes is not None:
+            c, basis, dc, db = model.slopes(q, g)
+            yc = (model.mix @ y).T                                   # (K, 3)
+            df = np.stack([db[k] @ yc + (0.0 if dc is None else dc[k][:, None]) for k in range(len(q))], -1)
+            return c, basis, df
+        c, basis = model.basis(q, g)
+        f = self._combine(c, basis, y)
+        df = np.empty(f.shape + (len(q),))
+        for k in range(len(q)):
             h = 1e-5 * max(1.0, abs(q[k]))
             qk = q.copy()
             qk[k] += h
-            df = (self.values(qk, y)[0] - f) / h
-            jf[..., k] = df[:n]
-            j_ratio[..., k] = self._albedo_sums(df, ratio_w)
-            j_all[..., k] = self._albedo_sums(df, all_w)
-        d = (t.sqrt_w[:, None] * ci * scale * compress_slope(u))[..., None]
-        j_fit = (d * jf).reshape(-1, len(x))
-        j_band = band_scale[..., None] * j_ratio[:len(ALBEDO_VIEWS_DEG)]
-        j_energy = energy_active[..., None] * PENALTY * j_all
-        return r, np.concatenate([j_fit, j_band.reshape(-1, len(x)), j_energy.reshape(-1, len(x))])
+            df[..., k] = (self.values(qk, y)[0] - f) / h
+        return c, basis, df
 
-    def _linear_jacobian(self, basis):
-        """``d f / d y`` ``(n, 3, len(y))`` of basis values ``(n, K)`` (one matrix product)."""
-        mix = self.model.mix
-        flat = mix.transpose(1, 0, 2).reshape(mix.shape[1], -1)
-        return (np.where(np.isfinite(basis), basis, 0.0) @ flat).reshape(len(basis), 3, mix.shape[2])
+    def _albedo_jacobian(self, basis, df, w):
+        """``d albedo / d x`` ``(views, 3, nq + n_y)`` with the albedo weights ``w``."""
+        sums = self._albedo_sums(basis, w)                          # (views, K)
+        return np.concatenate([self._albedo_sums(df.reshape(len(df), -1), w).reshape(len(sums), 3, -1),
+                               np.einsum("vk,cky->vcy", sums, self.model.mix)], axis=2)
 
     def _albedo_sums(self, values, w):
         """Per view, the sums of ``values`` (rows: all pairs then the albedo nodes) at the
         albedo nodes weighted by ``w``: albedos, or their basis functions' (linear in ``y``)."""
         t = self.t
-        return np.add.reduceat(np.where(np.isfinite(values[t.n_pairs:]), values[t.n_pairs:], 0.0) * w[:, None],
-                               t.view_starts, axis=0)
+        return np.add.reduceat(values[t.n_pairs:] * w[:, None], t.view_starts, axis=0)
 
     def _energy(self, f):
         """Penalty residuals of the albedo band (:data:`PENALTY` above it, :data:`PENALTY_BELOW`
@@ -693,27 +826,23 @@ class _Problem:
         """``y`` minimizing, in the box, the log error linearized about the data
         (``ln(1 + u) ~ ln(1 + u_d) + (u - u_d) / (1 + u_d)``) plus the albedo band's
         residuals taken as equalities (the data's albedo at the ratio views)."""
-        t = self.t
+        t, mix = self.t, self.model.mix
         c, basis = self.model.basis(q, t.geometry)
-        basis = np.where(np.isfinite(basis), basis, 0.0)
-        c = np.zeros(len(basis)) if c is None else np.where(np.isfinite(c), c, 0.0)
+        c = np.zeros(len(basis)) if c is None else _finite(c)
         n = t.n_pairs
-        a = self._linear_jacobian(basis[:n])
         ci = t.geometry.cos_i[:n, None]
         k = t.scale[:, None]
         wt = t.sqrt_w[:, None] * ci * k * compress_slope(t.f_data * ci * k)
-        rows = [(a * wt[..., None]).reshape(-1, a.shape[-1])]
-        rhs = [((t.f_data - c[:n, None]) * wt).ravel()]
+        h, b = self.gram(basis[:n], wt, (t.f_data - c[:n, None]) * wt)
         ad = np.where(self.band_mask, t.albedo_data, 1.0)
         scale = np.where(self.band_mask, PENALTY_BELOW / ad, 0.0)
-        a_albedo = self._linear_jacobian(self._albedo_sums(basis, t.albedo_w * t.ratio_mask))
-        rows.append((a_albedo[:len(ALBEDO_VIEWS_DEG)] * scale[..., None]).reshape(-1, a.shape[-1]))
+        sums = self._albedo_sums(basis, t.albedo_w * t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
+        rows = (np.einsum("vk,cky->vcy", sums, mix) * scale[..., None]).reshape(-1, mix.shape[2])
         c_albedo = self.albedo(np.repeat(c[:, None], 3, axis=1), t.ratio_mask)[:len(ALBEDO_VIEWS_DEG)]
-        rhs.append(((t.albedo_data - c_albedo) * scale).ravel())
-        m, b = np.concatenate(rows), np.concatenate(rhs)
-        h = m.T @ m
+        rhs = ((t.albedo_data - c_albedo) * scale).ravel()
+        h = h + rows.T @ rows
         h += np.eye(len(h)) * (1e-10 * np.trace(h) / len(h) + 1e-30)
-        return box_qp(h, m.T @ b, np.zeros(len(h)), np.ones(len(h)))
+        return box_qp(h, b + rows.T @ rhs, np.zeros(len(h)), np.ones(len(h)))
 
 
 def _levenberg_marquardt(problem: _Problem, x0: np.ndarray, max_iter: int = 40, tol: float = 1e-6) -> tuple:
@@ -722,16 +851,14 @@ def _levenberg_marquardt(problem: _Problem, x0: np.ndarray, max_iter: int = 40, 
     the damping adapts by Nielsen's rule."""
     lo, hi = problem.lo, problem.hi
     x = np.clip(x0, lo, hi)
-    r, jac = problem.residuals(x, jacobian=True)
-    cost = float(r @ r)
+    cost, jtj, g = problem.normal_equations(x)
     lam, nu = 1e-3, 2.0
     for _ in range(max_iter):
-        g = jac.T @ r
         held = ((x <= lo + 1e-12) & (g > 0)) | ((x >= hi - 1e-12) & (g < 0))
         free = ~held
         if not np.any(free):
             break
-        h = (jac.T @ jac)[np.ix_(free, free)]
+        h = jtj[np.ix_(free, free)]
         diag = np.maximum(np.diag(h), 1e-12 * max(np.max(np.diag(h)), 1e-300))
         improved = False
         for _ in range(12):
@@ -756,7 +883,7 @@ def _levenberg_marquardt(problem: _Problem, x0: np.ndarray, max_iter: int = 40, 
         lam, nu = max(lam / 3.0, 1e-12), 2.0
         if done:
             break
-        r, jac = problem.residuals(x, jacobian=True)
+        cost, jtj, g = problem.normal_equations(x)
     return x, cost
 
 
