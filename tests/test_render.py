@@ -331,7 +331,7 @@ def test_fit_comparison_shows_five_brdfs_on_large_spheres_with_every_label_insid
     texts = list(fig.texts) + [t for leg in fig.legends for t in leg.get_texts()]
     for ax in fig.axes:
         texts += [ax.title, ax.xaxis.label, ax.yaxis.label]
-        texts += in_view(ax.xaxis, ax.get_xlim()) + in_view(ax.yaxis, ax.get_ylim())
+        texts += in_view(ax.xaxis, ax.get_xlim()) + in_view(ax.yaxis, ax.get_ylim()) + list(ax.texts)
         if ax.get_legend() is not None:
             texts += list(ax.get_legend().get_texts()) + [ax.get_legend().get_title()]
     boxes = [t.get_window_extent(renderer) for t in texts if t.get_visible() and t.get_text().strip()]

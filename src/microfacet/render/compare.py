@@ -30,6 +30,7 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Mapping, Sequence
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,6 @@ import numpy as np
 from ..geometry import spherical_to_cartesian
 from ..io import to_srgb8, write_bytes
 from ..metrics import GRAZING_COS
-from .integrate import shade_directional
 from .lights import DirectionalLight
 from .lobes import LUMINANCE, lobe_curve
 from .sphere import Sphere
@@ -58,6 +58,15 @@ _GRAZING_DEG = float(np.degrees(np.arccos(GRAZING_COS)))
 #: here (no ticks or labels above any axes): given explicitly, it skips measuring every
 #: tick label again at drawing time (~40 % of the drawing, the same pixels; tested).
 _TITLE_Y = 1.0
+#: Gap between a sphere and its label above, points (Matplotlib's ``axes.titlepad``).
+_LABEL_PAD_PT = 6.0
+#: Ticks of the curves: length and label gap (Matplotlib's defaults), label size, points.
+_TICK_PT, _TICK_PAD_PT, _TICK_FONT = 3.5, 3.5, 7
+#: Silhouette circle of the spheres: line width (points) and grey level (8-bit sRGB).
+_SILHOUETTE_PT = 0.6
+_SILHOUETTE_GREY = 0.35 * 255.0
+#: zlib level of the PNG (as small as the default level 6 here, 40 % faster).
+_PNG_LEVEL = 3
 
 
 def backscattering_curve(brdf, phi: float = 0.0, n: int = 200,
@@ -119,9 +128,43 @@ def render_sphere(brdf, size: int, light: DirectionalLight = COMPARE_LIGHT) -> n
     >>> image.shape, float(image[0, 0].max())                       # black outside the sphere
     ((64, 64, 3), 0.0)
     """
+    return _render_spheres(brdf, size, (light,))[0]
+
+
+@lru_cache(maxsize=4)
+def _sphere(size: int) -> Sphere:
+    """The :class:`Sphere` of ``size`` px, built once (its arrays read-only): building it
+    costs several times shading it."""
     sphere = Sphere(size)
-    radiance = shade_directional(brdf, sphere.wo, sphere.to_local(light.w), light.rgb)
-    return sphere.image(np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0))
+    for value in vars(sphere).values():
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return sphere
+
+
+def _render_spheres(brdf, size: int, lights: Sequence[DirectionalLight]) -> list[np.ndarray]:
+    """:func:`render_sphere` of ``brdf`` under each of ``lights``, with one evaluation of
+    the BRDF for all of them."""
+    sphere = _sphere(int(size))
+    wo, wi = _directions(sphere.size, tuple(tuple(light.w) for light in lights))
+    images = []
+    for light, f_cos in zip(lights, np.split(brdf.eval_cos(wi, wo), len(lights))):
+        radiance = np.nan_to_num(np.asarray(light.rgb, dtype=np.float64) * f_cos, nan=0.0, posinf=0.0, neginf=0.0)
+        image = np.zeros((sphere.size, sphere.size, 3))             # black background: Sphere.image, faster
+        image[sphere.mask] = sphere.coverage[:, None] * radiance
+        images.append(image)
+    return images
+
+
+@lru_cache(maxsize=4)
+def _directions(size: int, lights: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """Local view and light directions ``(N * len(lights), 3)`` of the pixels of
+    :func:`_sphere` ``(size)`` under each light direction (world) of ``lights``, read-only."""
+    sphere = _sphere(size)
+    wo = np.concatenate([sphere.wo] * len(lights))
+    wi = np.concatenate([sphere.to_local(w) for w in lights])
+    wo.flags.writeable = wi.flags.writeable = False
+    return wo, wi
 
 
 def _positive(y: np.ndarray) -> np.ndarray:
@@ -129,14 +172,64 @@ def _positive(y: np.ndarray) -> np.ndarray:
     return np.where(y > 0, y, np.nan)
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
 def _log_ticks(ax) -> None:
-    """At most ~6 labelled decades on a log y axis, unlabelled minor ticks, small labels:
-    no two tick labels overlap."""
-    from matplotlib.ticker import LogLocator, NullFormatter
-    ax.yaxis.set_major_locator(LogLocator(base=10.0, numticks=6))
-    ax.yaxis.set_minor_locator(LogLocator(base=10.0, subs=(), numticks=6))
-    ax.yaxis.set_minor_formatter(NullFormatter())
-    ax.tick_params(labelsize=7)
+    """Decade ticks on the log y axis of ``ax`` (its limits set, :func:`_ticks`): at most 6
+    labelled decades (every decade, or every 2nd, 3rd, ...), the others unlabelled minor
+    ticks, labels ``10⁻³`` in plain text (no mathtext)."""
+    lo, hi = sorted(ax.get_ylim())
+    decades = np.arange(np.ceil(np.log10(lo) - 1e-9), np.floor(np.log10(hi) + 1e-9) + 1).astype(int)
+    stride = max(1, -(-len(decades) // 6))
+    major = decades[(decades - decades[-1]) % stride == 0] if len(decades) else decades
+    _ticks(ax, "y", 10.0 ** major, [f"10{str(e).translate(_SUPERSCRIPT)}" for e in major],
+           10.0 ** np.setdiff1d(decades, major))
+
+
+def _ticks(ax, which: str, major: Sequence[float], labels: Sequence[str], minor: Sequence[float] = ()) -> list:
+    """Ticks of the ``which`` (``"x"``, ``"y"``) axis of ``ax`` at data positions ``major``
+    (labelled) and ``minor``, drawn as Matplotlib's default outward ticks (major 3.5 pt
+    long and 0.8 pt wide, minor 2 and 0.6 pt, 7 pt labels 3.5 pt beyond the marks) but as
+    one marker line per kind and one text per label, instead of the Axis' ticks (four
+    artists and a locator/formatter pass per tick: most of the drawing time here); the
+    label texts."""
+    from matplotlib.lines import Line2D
+    from matplotlib.markers import TICKDOWN, TICKLEFT
+    from matplotlib.ticker import NullLocator
+    from matplotlib.transforms import offset_copy
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    axis.set_major_locator(NullLocator())
+    axis.set_minor_locator(NullLocator())
+    along = ax.get_xaxis_transform() if which == "x" else ax.get_yaxis_transform()
+    for where, size, width in ((major, _TICK_PT, 0.8), (minor, 2.0, 0.6)):
+        if len(where):
+            xy = (where, np.zeros(len(where)))
+            ax.add_artist(Line2D(*(xy if which == "x" else xy[::-1]), linestyle="none", color="black",
+                                 marker=TICKDOWN if which == "x" else TICKLEFT, markersize=size,
+                                 markeredgewidth=width, transform=along, clip_on=False))
+    pad = _TICK_PT + _TICK_PAD_PT
+    if which == "x":
+        at = offset_copy(along, fig=ax.figure, y=-pad, units="points")
+        return [ax.text(x, 0.0, label, transform=at, ha="center", va="top", fontsize=_TICK_FONT, clip_on=False)
+                for x, label in zip(major, labels)]
+    at = offset_copy(along, fig=ax.figure, x=-pad, units="points")
+    return [ax.text(0.0, y, label, transform=at, ha="right", va="center_baseline", fontsize=_TICK_FONT,
+                    clip_on=False) for y, label in zip(major, labels)]
+
+
+def _x_axis(ax, ticks: Sequence[int], label: str) -> None:
+    """x ticks at ``ticks`` (degrees, labelled as Matplotlib's default formatter: Unicode
+    minus) and the x label 4 pt under the tick labels, where Matplotlib puts it (their
+    extents measured once, on the renderer that draws them, which keeps the measures)."""
+    from matplotlib.transforms import offset_copy
+    texts = _ticks(ax, "x", ticks, [f"{t:d}".replace("-", "\u2212") for t in ticks])
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    bottom = min(t.get_window_extent(renderer).y0 for t in texts)
+    below = (ax.transAxes.transform((0.0, 0.0))[1] - bottom) * 72.0 / fig.dpi + 4.0
+    ax.set_xlabel(label, fontsize=8)
+    ax.xaxis.set_label_coords(0.5, 0.0, transform=offset_copy(ax.transAxes, fig=fig, y=-below, units="points"))
 
 
 def _plot_backscattering(ax, brdfs: Mapping, planes_deg: Sequence[float]) -> None:
@@ -161,7 +254,7 @@ def _plot_backscattering(ax, brdfs: Mapping, planes_deg: Sequence[float]) -> Non
         ax.set_ylim(max(lo / 30.0, top * 1e-8), top)
     ax.axvspan(_GRAZING_DEG, 90.0, color="0.85", lw=0)
     ax.set_xlim(0, 90)
-    ax.set_xlabel("θ (deg)", fontsize=8)
+    _x_axis(ax, range(0, 91, 10), "θ (deg)")
     ax.set_title("backscattering f(k, k) (log)", fontsize=9, y=_TITLE_Y)
     if len(planes_deg) > 1:
         ax.legend(fontsize=7, frameon=True, framealpha=0.85, title="line style", title_fontsize=7,
@@ -184,10 +277,10 @@ def _plot_slices(ax, brdfs: Mapping, views_deg: Sequence[float]) -> None:
     for side in (-1, 1):
         ax.axvspan(side * _GRAZING_DEG, side * 90.0, color="0.85", lw=0)
     ax.set_xlim(-90, 90)
+    _x_axis(ax, range(-80, 81, 20), "θi (deg), view at −θo, plane φ = 0")
     ax.set_yscale("log")
     if top > 0:
         ax.set_ylim(top * 1e-6, top * 3.0)
-    ax.set_xlabel("θi (deg), view at −θo, plane φ = 0", fontsize=8)
     ax.set_title("in-plane f cos θi (log)", fontsize=9, y=_TITLE_Y)
     _log_ticks(ax)
     ax.legend(fontsize=7, frameon=True, framealpha=0.85, title="line style", title_fontsize=7, loc="lower center")
@@ -267,19 +360,79 @@ def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[floa
     >>> png[:4] == b"\\x89PNG"
     True
     """
-    fig = _comparison_figure(brdfs, title, views_deg, planes_deg, size, dpi, notes)
+    return _png(_comparison_figure(brdfs, title, views_deg, planes_deg, size, dpi, notes))
+
+
+def _png(fig) -> bytes:
+    """PNG bytes (RGB, no metadata) of ``fig`` drawn on its Agg canvas at its own dpi; fast
+    zlib level (the picture is mostly flat colour: a few % larger than the default level,
+    several times faster)."""
+    from PIL import Image
+    fig.canvas.draw()
+    rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
+    Image.fromarray(rgb).save(buf, format="PNG", compress_level=_PNG_LEVEL)
     return buf.getvalue()
+
+
+def _silhouette(size: int, width: float) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """Pixels ``(rows, columns)`` and coverage ``(M, 1)`` in ``(0, 1]`` of a circle of line
+    ``width`` px through the edge of a ``size`` px square (centre at the square's centre,
+    radius ``size / 2``): the box-filtered radial profile of the line, as Agg antialiases it."""
+    i = np.arange(size) - (size - 1) / 2.0
+    d = np.hypot(i[:, None], i[None, :])
+    r = size / 2.0
+    alpha = np.clip(np.minimum(d + 0.5, r + width / 2.0) - np.maximum(d - 0.5, r - width / 2.0), 0.0, 1.0)
+    where = np.nonzero(alpha > 0)
+    return where, alpha[where][:, None]
+
+
+def _sphere_canvas(rows: Sequence[Sequence[np.ndarray]], exposures: Sequence[float], xs: Sequence[int],
+                   row_step: int, line_px: float) -> np.ndarray:
+    """One white ``uint8`` RGBA canvas with every sphere (row ``r`` of ``rows`` at
+    ``r * row_step`` px from the top, column ``k`` at ``xs[k]`` px from the left) in sRGB at
+    its row's exposure, each with its silhouette circle (:func:`_silhouette`, grey 0.35)."""
+    size = rows[0][0].shape[0]
+    canvas = np.full(((len(rows) - 1) * row_step + size, xs[-1] + size, 4), 255, dtype=np.uint8)
+    ring, alpha = _silhouette(size, line_px)
+    for r, (images, exposure) in enumerate(zip(rows, exposures)):
+        for x, image in zip(xs, images):
+            srgb = to_srgb8(image, exposure)
+            srgb[ring] = np.rint(srgb[ring] * (1.0 - alpha) + _SILHOUETTE_GREY * alpha).astype(np.uint8)
+            canvas[r * row_step:r * row_step + size, x:x + size, :3] = srgb
+    return canvas
+
+
+@lru_cache(maxsize=None)
+def _pixels_artist():
+    """The Matplotlib artist class drawing an RGBA ``uint8`` image pixel for pixel at a
+    pixel position of the figure: :class:`matplotlib.image.FigureImage` without its
+    resampling pass (one blit)."""
+    from matplotlib.artist import Artist
+
+    class Pixels(Artist):
+        def __init__(self, rgba: np.ndarray, x: int, y: int):
+            super().__init__()
+            # Agg's draw_image takes the bottom row first; y: of the bottom row, from below
+            self.rgba, self.x, self.y = np.ascontiguousarray(rgba[::-1]), int(x), int(y)
+
+        def draw(self, renderer):
+            if self.get_visible():
+                gc = renderer.new_gc()
+                renderer.draw_image(gc, self.x, self.y, self.rgba)
+                gc.restore()
+
+    return Pixels
 
 
 def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], planes_deg: Sequence[float],
                        size: int, dpi: int, notes: Mapping[str, str] | None):
-    """The Matplotlib figure of :func:`fit_comparison_png` (Agg canvas attached)."""
+    """The Matplotlib figure of :func:`fit_comparison_png` (Agg canvas attached): the
+    spheres one image (:func:`_sphere_canvas`) placed pixel for pixel, texts on the figure,
+    two Axes for the curves."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
-    from matplotlib.patches import Circle
     if not brdfs:
         raise ValueError("save_fit_comparison needs at least one BRDF")
     if int(size) != size or size < 8:
@@ -290,7 +443,7 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     if unknown:
         raise ValueError(f"save_fit_comparison: notes for labels not in brdfs: {unknown}")
     n = len(brdfs)
-    rows = [[render_sphere(b, size, light) for b in brdfs.values()] for light in (COMPARE_LIGHT, GRAZING_LIGHT)]
+    rows = list(zip(*(_render_spheres(b, size, (COMPARE_LIGHT, GRAZING_LIGHT)) for b in brdfs.values())))
     exposures = [_exposure(images[0]) for images in rows]
 
     # layout in pixels, from the top
@@ -312,17 +465,14 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     left = (width - n * cell) / 2.0
     rows_top = title_h
     labels = list(brdfs)
-    for r, (images, exposure) in enumerate(zip(rows, exposures)):
-        y = rows_top + r * (label_h + size + gap) + label_h
-        for k, (label, image) in enumerate(zip(labels, images)):
-            ax = fig.add_axes(box(left + k * cell + (cell - size) / 2.0, y, size, size))
-            ax.imshow(to_srgb8(image, exposure), interpolation="nearest")
-            ax.add_patch(Circle(((size - 1) / 2.0, (size - 1) / 2.0), size / 2.0, fill=False, lw=0.6,
-                                color="0.35"))       # the silhouette, where the sphere is dark
-            ax.set_axis_off()
-            if r == 0:
-                ax.set_title(label, fontsize=9, color=_COLOURS[k % len(_COLOURS)], y=_TITLE_Y)
+    xs = [int(round(left + k * cell + (cell - size) / 2.0)) for k in range(n)]
+    row_step = label_h + size + gap
+    canvas = _sphere_canvas(rows, exposures, [x - xs[0] for x in xs], row_step, _SILHOUETTE_PT * dpi / 72.0)
+    fig.add_artist(_pixels_artist()(canvas, xs[0], height - (rows_top + label_h) - canvas.shape[0]))
+    title_base = rows_top + label_h - _LABEL_PAD_PT * dpi / 72.0  # where an axes title would sit
     for k, label in enumerate(labels):
+        fig.text((xs[k] + size / 2.0) / width, 1.0 - title_base / height, label, ha="center", va="baseline",
+                 fontsize=9, color=_COLOURS[k % len(_COLOURS)])
         if label in notes:
             fig.text((left + (k + 0.5) * cell) / width, 1.0 - (rows_top + spheres_h - notes_h + 4) / height,
                      notes[label], ha="center", va="top", fontsize=7.5, linespacing=1.25)
