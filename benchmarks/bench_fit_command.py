@@ -1,142 +1,174 @@
 #!/usr/bin/env python3
-"""Where the single-file ``microfacet fit FILE -o OUT --no-picture`` spends its time, and what
-its threads overlap (issue 10).
+"""Where ``microfacet fit FILE -o OUT`` spends its time (issue 24: the whole command in 2 s).
 
-* ``stages`` (default): each stage of the command alone, one after the other, in
-  ``--runs`` fresh processes: thread CPU seconds (``time.thread_time``), min and median.
-  The command runs "read + gunzip" beside the "measured + fit" imports, the tabulated
-  fit beside the data's side of the metrics, and the two least-squares fits beside the
-  metrics of the tabulated and moment fits (:func:`microfacet.fit.outputs.fit_material`);
-  the critical path printed is that schedule on 2 cores with free overlap.
-* ``threads``: those pairs of stages one after the other and on two threads, alternated
-  ``--runs`` times in one process, beside a control (two GIL-free NumPy loops on two
-  threads): process CPU / wall near 2 for the control and near 1 for a pair means the GIL
-  serializes the pair; near 1 for the control means the machine has no second core free.
+* ``wall``: the command end to end in ``--runs`` fresh processes, wall and CPU (user + system,
+  the fitting process included); with ``--baseline SRC`` (the ``src`` folder of another
+  checkout, e.g. a ``git worktree`` of an older commit), its runs alternate with that
+  checkout's, so the two are compared in one run on a shared machine.
+* ``stages``: each stage of the command alone, one after the other, in one fresh process per
+  run, with the evaluations on the NumPy path as the command runs them
+  (:func:`microfacet.cli.fit.numpy_kernels`): thread CPU seconds (``time.thread_time``), min
+  and median over the runs. Their sum is the command's CPU work; half of it is the least
+  wall time that two cores can give it.
+
+Writes ``benchmarks/results/fit_command.md`` (both tables, with the machine's load averages).
 
 Usage::
 
-    python benchmarks/bench_fit_command.py [stages|threads] [--file FILE] [--runs 5]
+    python benchmarks/bench_fit_command.py [--file FILE] [--runs 5] [--baseline SRC]
 """
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
-FILE = os.path.join(os.environ.get("MICROFACET_DATA", "../shared/data"), "merl", "nickel.binary.gz")
-STAGES = ("imports NumPy + CLI", "read + gunzip", "measured + fit imports", "MERL parse + table", "tabulated fit",
-          "moment conversions", "metrics: data side", "least squares GGX", "least squares Beckmann",
-          "metrics: tabulated + moments", "metrics: least squares")
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("MICROFACET_DATA") or ROOT.parent / "shared" / "data")
+CORPUS = Path(os.environ.get("MICROFACET_CORPUS_CACHE")
+              or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus")
+FILES = (CORPUS / "merl__nickel.binary", DATA / "merl" / "nickel.binary.gz")
+RESULTS = ROOT / "benchmarks" / "results" / "fit_command.md"
+GOAL_S = 2.0
 
 
-def one_process(path: str) -> list[float]:
-    """Thread CPU of each of :data:`STAGES`, run one after the other in this (fresh) process."""
-    times, clock = [], [time.thread_time()]
+def load() -> str:
+    return " / ".join(f"{x:.1f}" for x in os.getloadavg())
 
-    def mark():
+
+def command(src: Path, path: Path, out: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of ``microfacet fit path -o out`` with ``src`` first on ``PYTHONPATH``."""
+    env = dict(os.environ, PYTHONPATH=str(src))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "microfacet", "fit", str(path), "-o", str(out)], env=env,
+                       capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"microfacet fit failed ({src}):\n{r.stderr[-2000:]}")
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def one_process(path: str) -> list[tuple[str, float]]:
+    """``(stage, thread CPU seconds)`` of every stage of the command, one after the other, here."""
+    out, clock = [], [time.thread_time()]
+
+    def mark(name):
         clock.append(time.thread_time())
-        times.append(clock[-1] - clock[-2])
-    import microfacet.cli  # noqa: F401  (NumPy, as before the command runs)
-    from microfacet.batch.tasks import _file_data
-    mark()
-    data = _file_data(path)
-    mark()
-    from microfacet.fit import outputs
+        out.append((name, clock[-1] - clock[-2]))
+    import microfacet.cli  # noqa: F401
+    from microfacet.cli.fit import numpy_kernels
+    from microfacet.fit import outputs, perceptual
+    from microfacet.fit.albedo import albedo_target
+    from microfacet.io.read import MEASURED_BRDF, read_decompressed
     from microfacet.measured import load_bytes
-    mark()
-    brdf = load_bytes(data, path)
-    mark()
-    from microfacet.cli.fit import numpy_kernels
+    mark("imports")
+    brdf = load_bytes(read_decompressed(Path(path), MEASURED_BRDF), path)
+    mark("read + parse")
     with numpy_kernels():
+        t = perceptual.target(brdf)
+        mark("perceptual: data's side")
+        fitted = {}
+        for name in outputs.PERCEPTUAL_MODELS:
+            x, _ = perceptual.fit_model(t, perceptual.MODEL_SPECS[name], fitted)
+            nq = len(perceptual.MODEL_SPECS[name].q_bounds[0])
+            fitted[name] = (x[:nq], x[nq:])
+            mark(f"perceptual fit: {name}")
+        metrics, judges = outputs._metrics(brdf), outputs._judges(brdf)
+        target = albedo_target(brdf, log=judges[0])
+        mark("metrics and judges: data's side")
         fit = outputs._run_fit(brdf, 90, False, "smith", False, 4.0)
-        mark()
-        first = {"tabulated": fit, "ggx_moments": fit.to_ggx(), "beckmann_moments": fit.to_beckmann()}
-        mark()
-        metrics = outputs._metrics(brdf)
-        mark()
-        least = []
+        mark("tabulated fit")
+        least = {}
         for model in ("ggx", "beckmann"):
-            least.append(outputs._least_squares_fit(brdf, fit, model, False, "auto", "table", 4.0))
-            mark()
-        outputs._scores(metrics, first)
-        mark()
-        outputs._scores(metrics, {f"{name}_least_squares": b for name, b, _ in least})
-        mark()
-    return times
+            key, b = outputs._least_squares_fit(brdf, fit, model, False, "auto", "table", 4.0)
+            least[f"{key}_least_squares"] = b
+            mark(f"least squares {model}")
+        named = {"tabulated": fit, "ggx_moments": fit.to_ggx(reference=brdf),
+                 "beckmann_moments": fit.to_beckmann(reference=brdf), **least}
+        mark("moment conversions")
+        summaries = outputs._fit_summaries(judges, named, outputs._scores(metrics, named)[:3], metrics[2].ref)
+        mark("metrics of the 5 fits above")
+        perceptual_fits = {}
+        for name, (q, y) in fitted.items():
+            perceptual_fits[name] = outputs._perceptual_brdf(target, name, q, y)
+            one = {name: perceptual_fits[name]}
+            summaries.update(outputs._fit_summaries(judges, one, outputs._scores(metrics, one)[:3], metrics[2].ref))
+            mark(f"albedo match + metrics: {name}")
+        from microfacet.render import fit_comparison_png
+        mark("picture: imports")
+        best = outputs.best_fit({k: v["metrics"] for k, v in summaries.items()})
+        shown, notes = outputs._shown_fits({**named, **perceptual_fits}, summaries, best)
+        fit_comparison_png({"data": brdf, **shown}, title="bench", notes=notes)
+        mark("picture")
+    return out
 
 
-def stages(path: str, runs: int) -> None:
-    rows = [[float(v) for v in subprocess.run([sys.executable, __file__, "_one", "--file", path], check=True,
-                                              capture_output=True, text=True).stdout.split()] for _ in range(runs)]
-    best = [min(col) for col in zip(*rows, strict=True)]
-    for name, col, b in zip(STAGES, zip(*rows, strict=True), best, strict=True):
-        print(f"{name:30s} min {b:.3f}  median {statistics.median(col):.3f}")
-    s = dict(zip(STAGES, best, strict=True))
-    path2 = (s["imports NumPy + CLI"] + max(s["read + gunzip"], s["measured + fit imports"]) + s["MERL parse + table"]
-             + max(s["tabulated fit"] + s["moment conversions"], s["metrics: data side"])
-             + max(s["least squares GGX"], s["least squares Beckmann"],
-                   (s["least squares GGX"] + s["least squares Beckmann"] + s["metrics: tabulated + moments"]) / 2)
-             + s["metrics: least squares"])
-    print(f"total {sum(best):.3f} s thread CPU; critical path on 2 cores, free overlap: {path2:.3f} s")
+def stages(path: Path, runs: int) -> list[str]:
+    rows = []
+    for _ in range(runs):
+        r = subprocess.run([sys.executable, __file__, "_one", "--file", str(path)], check=True, capture_output=True,
+                           text=True, env=dict(os.environ, PYTHONPATH=str(ROOT / "src")))
+        rows.append([line.rsplit("\t", 1) for line in r.stdout.strip().splitlines()])
+    names = [name for name, _ in rows[0]]
+    cols = [[float(row[k][1]) for row in rows] for k in range(len(names))]
+    total = sum(min(c) for c in cols)
+    lines = [f"### Stages, one after the other ({runs} fresh processes, load {load()})", "",
+             "| stage | thread CPU min s | median s |", "|---|---:|---:|"]
+    lines += [f"| {n} | {min(c):.3f} | {statistics.median(c):.3f} |" for n, c in zip(names, cols, strict=True)]
+    lines += [f"| **sum** | **{total:.3f}** | |", "",
+              f"The sum is the command's CPU work; on 2 cores it takes at least half of it, {total / 2:.2f} s, "
+              f"against the goal of {GOAL_S:g} s."]
+    return lines
 
 
-def threads(path: str, runs: int) -> None:
-    from concurrent.futures import ThreadPoolExecutor
-
-    import numpy as np
-
-    from microfacet.cli.fit import numpy_kernels
-    from microfacet.fit import outputs
-    from microfacet.measured import load
-    a = np.random.default_rng(0).random(2_000_000)
-
-    def control():
-        for _ in range(3):
-            np.sqrt(np.exp(a) * a + 1.0)
-    with numpy_kernels():
-        brdf = load(path)
-        fit = outputs._run_fit(brdf, 90, False, "smith", False, 4.0)
-        metrics = outputs._metrics(brdf)
-        first = {"tabulated": fit, "ggx_moments": fit.to_ggx(), "beckmann_moments": fit.to_beckmann()}
-
-        def least(model):
-            return outputs._least_squares_fit(brdf, fit, model, False, "auto", "table", 4.0)
-        pairs = {"tabulated fit | metrics data side": (lambda: outputs._run_fit(brdf, 90, False, "smith", False, 4.0),
-                                                       lambda: outputs._metrics(brdf)),
-                 "least squares GGX | Beckmann": (lambda: least("ggx"), lambda: least("beckmann")),
-                 "least squares GGX | metrics first": (lambda: least("ggx"), lambda: outputs._scores(metrics, first))}
-        with ThreadPoolExecutor(2) as pool:
-            for name, (f, g) in pairs.items():
-                got = {"serial": [], "threads": [], "control": []}
-                for _ in range(runs):
-                    for mode, out in got.items():
-                        t, c = time.perf_counter(), time.process_time()
-                        if mode == "serial":
-                            f(), g()
-                        else:
-                            [job.result() for job in ((pool.submit(f), pool.submit(g)) if mode == "threads"
-                                                      else (pool.submit(control), pool.submit(control)))]
-                        out.append((time.perf_counter() - t, time.process_time() - c))
-                (ws, _), (wt, ct), (wc, cc) = ([statistics.median(v) for v in zip(*got[m], strict=True)] for m in got)
-                print(f"{name:36s} serial wall {ws:.3f}  threads wall {wt:.3f} ({wt / ws:.2f}x), "
-                      f"threads CPU/wall {ct / wt:.2f}; control CPU/wall {cc / wc:.2f}")
+def walls(path: Path, runs: int, baseline: Path | None) -> list[str]:
+    sources = {"this checkout": ROOT / "src", **({f"baseline ({baseline})": baseline} if baseline else {})}
+    got = {k: [] for k in sources}
+    with tempfile.TemporaryDirectory(prefix="bench-fit-") as tmp:
+        for i in range(runs):
+            for label, src in sources.items():
+                got[label].append(command(src, path, Path(tmp) / f"fit{i}.npz"))
+                print(f"  {label:40s} {got[label][-1][0]:6.2f} s wall {got[label][-1][1]:6.2f} s CPU", flush=True)
+    lines = [f"### `microfacet fit {path.name} -o OUT` end to end ({runs} fresh processes each, alternated, "
+             f"load {load()})", "", "| code | wall min s | wall median s | CPU median s |", "|---|---:|---:|---:|"]
+    for label, v in got.items():
+        w, c = zip(*v)
+        lines.append(f"| {label} | {min(w):.2f} | {statistics.median(w):.2f} | {statistics.median(c):.2f} |")
+    return lines
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("mode", nargs="?", default="stages", choices=("stages", "threads", "_one"))
-    p.add_argument("--file", default=FILE)
+    p.add_argument("mode", nargs="?", default="all", choices=("all", "_one"))
+    p.add_argument("--file", type=Path, default=next((f for f in FILES if f.exists()), FILES[0]))
     p.add_argument("--runs", type=int, default=5)
+    p.add_argument("--baseline", type=Path, help="src folder of another checkout, timed alternately")
     args = p.parse_args()
-    print(f"load average {os.getloadavg()[0]:.2f}", file=sys.stderr)
     if args.mode == "_one":
-        print(" ".join(f"{v:.4f}" for v in one_process(args.file)))
-    else:
-        (stages if args.mode == "stages" else threads)(args.file, args.runs)
-    print(f"load average {os.getloadavg()[0]:.2f}", file=sys.stderr)
+        print("\n".join(f"{name}\t{seconds:.4f}" for name, seconds in one_process(str(args.file))))
+        return
+    if not args.file.exists():
+        raise SystemExit(f"{args.file}: no such file (--file, or the corpus cache of tests/conftest.py)")
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
+    lines = ["# `microfacet fit FILE` (issue 24: <= 2 s end to end)", "",
+             f"`python benchmarks/bench_fit_command.py --runs {args.runs}"
+             f"{' --baseline ' + str(args.baseline) if args.baseline else ''}`, {time.strftime('%Y-%m-%d %H:%M')}, "
+             f"commit {head}, {os.cpu_count()} CPUs shared with other work (load averages 1 / 5 / 15 min). "
+             f"File: {args.file.name}.", ""]
+    lines += walls(args.file, args.runs, args.baseline) + [""] + stages(args.file, args.runs)
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"wrote {RESULTS}")
 
 
 if __name__ == "__main__":

@@ -1069,12 +1069,15 @@ _INDICATORS: dict = {}
 
 
 def _measured_pairs(reference, wi, wo) -> np.ndarray:
-    """:func:`measured_mask` of ``reference`` on ``(wi, wo)``; for a MERL file it
-    interpolates its ``valid`` indicator with the compiled MERL lookup (the same
-    trilinear weights as ``coverage``, several times faster on 10^6 pairs; the indicator
-    is kept for the last two masks, which the MERL files of a session usually share)."""
+    """:func:`measured_mask` of ``reference`` on ``(wi, wo)``; for a MERL file, where the
+    compiled backend runs (:func:`microfacet.backend.choose`), it interpolates its ``valid``
+    indicator with the compiled MERL lookup (the same trilinear weights as ``coverage``,
+    several times faster on 10^6 pairs; the indicator is kept for the last two masks, which
+    the MERL files of a session usually share). On the NumPy path ``coverage`` is the
+    cheaper: one interpolation gives the data and their coverage, which the file remembers."""
+    from . import backend
     from .measured import MERLBRDF
-    if not isinstance(reference, MERLBRDF):
+    if not isinstance(reference, MERLBRDF) or backend.choose() != backend.NUMBA:
         return measured_mask(reference, wi, wo)
     import hashlib
     key = hashlib.sha1(np.packbits(reference.valid)).digest()

@@ -371,17 +371,23 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     from .perceptual import target as perceptual_target
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
-    legacy = _legacy_fits(brdf, method, settings)
-    data_albedo = legacy.metrics[2].ref
-    fits_summary = _fit_summaries(legacy.judges, legacy.named, legacy.scores[:3], data_albedo)  # while the perceptual fits run
-    if picture:
-        from ..render import fit_comparison_png         # imports matplotlib, also while they run
-    target = albedo_target(brdf, log=legacy.judges[0])
-    perceptual = {}
-    for name, (q, y), t3 in perceptual_items:          # each judged while the next is fitted
-        perceptual[name] = _perceptual_brdf(target, name, q, y)
-        one = {name: perceptual[name]}
-        fits_summary.update(_fit_summaries(legacy.judges, one, _scores(legacy.metrics, one)[:3], data_albedo))
+    _import_numba()
+    metrics, judges = _metrics(brdf), _judges(brdf)
+    data_albedo = metrics[2].ref
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(2) as pool, ThreadPoolExecutor(1) as feeder:
+        # each perceptual fit is judged as it comes, beside the legacy fits (NumPy releases the
+        # GIL in its loops: the two cores stay busy once the fitting process is done)
+        judged = feeder.submit(_judge_perceptual, perceptual_items, albedo_target(brdf, log=judges[0]), metrics,
+                               judges, pool)
+        legacy = _legacy_fits(brdf, method, settings, metrics, judges)
+        fits_summary = _fit_summaries(judges, legacy.named, legacy.scores[:3], data_albedo)
+        if picture:
+            from ..render import fit_comparison_png         # imports matplotlib, also while they run
+        perceptual, t3 = judged.result()
+    for name in (m for m in models if m in perceptual):     # in the order of the models
+        fits_summary[name] = perceptual[name][1]
+    perceptual = {name: b for name, (b, _) in perceptual.items()}
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
                "seconds_perceptual": round(t3 - legacy.times[1], 4)}
@@ -415,12 +421,9 @@ class _Legacy(NamedTuple):
     times: tuple
 
 
-def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
-    """The tabulated fit and the fits made from it, with their metrics, one after the other:
-    the perceptual fits' process, which runs beside them, takes longer, and threads here
-    (NumPy releases the GIL in its loops) would take CPU from it."""
-    _import_numba()
-    metrics, judges = _metrics(brdf), _judges(brdf)
+def _legacy_fits(brdf, method: str, settings: dict, metrics: tuple, judges: tuple) -> _Legacy:
+    """The tabulated fit and the fits made from it, with their metrics (``metrics``,
+    ``judges``: :func:`_metrics` and :func:`_judges` of the data), one after the other."""
     t0 = time.perf_counter()
     fit = _run_fit(brdf, settings["resolution"], settings["anisotropic"], settings["gaf"],
                    settings["tabulated_diffuse"], settings["albedo_weight"])
@@ -510,6 +513,22 @@ IMAGE_SIZE = 32
 LOG_PAIRS = 2**15
 #: Views (deg) of the energy check ``max_albedo``: the largest directional albedo of a fit.
 ENERGY_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
+
+
+def _judge_perceptual(items, target, metrics: tuple, judges: tuple, pool) -> tuple[dict, float]:
+    """``({name: (BRDF, summary)}, end time)`` of the perceptual fits ``items`` (of
+    :func:`_perceptual`, the last one's end time), each matched to the data's albedo
+    (``target``) and judged (``metrics``, ``judges``: :func:`_metrics` and :func:`_judges`
+    of the data) on the thread pool ``pool`` as it comes."""
+    def judge(name, q, y):
+        b = _perceptual_brdf(target, name, q, y)
+        one = {name: b}
+        return b, _fit_summaries(judges, one, _scores(metrics, one)[:3], metrics[2].ref)[name]
+
+    t3, futures = time.perf_counter(), {}
+    for name, (q, y), t3 in items:
+        futures[name] = pool.submit(judge, name, q, y)
+    return {name: f.result() for name, f in futures.items()}, t3
 
 
 def _perceptual(t, models):
