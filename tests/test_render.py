@@ -341,3 +341,85 @@ def test_fit_comparison_shows_five_brdfs_on_large_spheres_with_every_label_insid
     for i, a in enumerate(boxes):
         for b in boxes[i + 1:]:
             assert not a.overlaps(b) or a.width == 0 or b.width == 0, (a, b)
+
+
+def _comparison_brdfs():
+    return {"data": mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), "GGX": mf.MicrofacetBRDF(mf.GGX(alpha=0.3)),
+            "Beckmann": mf.MicrofacetBRDF(mf.Beckmann(alpha=0.3), fresnel=mf.fresnel.Conductor.metal("Cu"))}
+
+
+def test_fit_comparison_shows_the_spheres_pixel_for_pixel():
+    """The PNG holds every sphere of render_sphere, in sRGB at its row's exposure (the first
+    BRDF's), pixel for pixel where it is written, except under the silhouette circle."""
+    import io
+
+    from PIL import Image
+
+    from microfacet.io import to_srgb8
+    from microfacet.render import compare
+    brdfs, size = _comparison_brdfs(), 40
+    png = compare.fit_comparison_png(brdfs, "title", size=size)
+    with Image.open(io.BytesIO(png)) as im:
+        assert im.format == "PNG" and im.mode == "RGB"
+        picture = np.asarray(im)
+    with compare._drawing():
+        fig = compare._comparison_figure(brdfs, "title", (0, 30, 60), (0,), size, 100, None)
+    pixels, = [a for a in fig.artists if hasattr(a, "rgba")]
+    canvas = pixels.rgba[::-1, :, :3]                              # stored bottom row first
+    top = picture.shape[0] - pixels.y - canvas.shape[0]
+    np.testing.assert_array_equal(picture[top:top + canvas.shape[0], pixels.x:pixels.x + canvas.shape[1]], canvas)
+    ring, _ = compare._silhouette(size, compare._SILHOUETTE_PT * 100 / 72.0)
+    off_ring = np.ones((size, size), bool)
+    off_ring[ring] = False
+    assert 0.05 * size * size < (~off_ring).sum() < 0.3 * size * size
+    columns = sorted({int(c) for c in np.nonzero(np.all(canvas[size // 2] != 255, axis=-1))[0][::size]})
+    assert len(columns) == len(brdfs)
+    row_step = canvas.shape[0] - size
+    for r, light in enumerate((compare.COMPARE_LIGHT, compare.GRAZING_LIGHT)):
+        images = [compare.render_sphere(b, size, light) for b in brdfs.values()]
+        exposure = compare._exposure(images[0])
+        for x, image in zip(columns, images):
+            shown = canvas[r * row_step:r * row_step + size, x:x + size]
+            np.testing.assert_array_equal(shown[off_ring], to_srgb8(image, exposure)[off_ring])
+            assert shown[ring].min() > 0                           # the grey circle over the black
+
+
+def test_fit_comparison_ticks_sit_where_matplotlib_puts_them():
+    """The comparison's hand-made ticks (marker lines, texts, the x label placed from their
+    extents) give the pixels of Matplotlib's own Axis ticks at the same places and labels."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
+
+    from microfacet.render import compare
+    with compare._drawing():
+        fig = compare._comparison_figure(_comparison_brdfs(), "title", (0, 30, 60), (0,), 24, 100, None)
+        fig.canvas.draw()
+        ours = np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+        ref = Figure(figsize=fig.get_size_inches(), dpi=fig.dpi)
+        FigureCanvasAgg(ref)
+        for ax in fig.axes:
+            rax = ref.add_axes(ax.get_position().bounds)
+            rax.set_yscale(ax.get_yscale())
+            rax.set_xlim(ax.get_xlim())
+            rax.set_ylim(ax.get_ylim())
+            xs = [t for t in ax.texts if t.get_va() == "top"]
+            ys = [t for t in ax.texts if t.get_ha() == "right"]
+            assert len(xs) >= 9 and len(ys) >= 3
+            rax.set_xticks([t.get_position()[0] for t in xs], [t.get_text() for t in xs])
+            rax.set_yticks([t.get_position()[1] for t in ys], [t.get_text() for t in ys])
+            minor = [line for line in ax.get_children() if getattr(line, "get_markersize", lambda: 0)() == 2.0]
+            rax.set_yticks(np.concatenate([line.get_ydata() for line in minor]) if minor else [], minor=True)
+            rax.yaxis.set_minor_formatter(NullFormatter())
+            rax.tick_params(labelsize=7)
+            rax.set_xlabel(ax.get_xlabel(), fontsize=8)
+        ref.canvas.draw()
+        theirs = np.asarray(ref.canvas.buffer_rgba())[..., :3]
+    height = ours.shape[0]
+    for ax in fig.axes:
+        b = ax.get_window_extent()
+        below = slice(int(height - b.y0) + 2, int(height - b.y0) + 45), slice(int(b.x0) - 30, int(b.x1) + 10)
+        beside = slice(int(height - b.y1) - 5, int(height - b.y0) + 2), slice(int(b.x0) - 45, int(b.x0) - 1)
+        for region in (below, beside):
+            assert (theirs[region] < 128).sum() > 100              # ticks and labels there
+            np.testing.assert_array_equal(ours[region], theirs[region])

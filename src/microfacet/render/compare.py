@@ -146,20 +146,29 @@ def _sphere(size: int) -> Sphere:
 
 
 def _render_spheres(brdf, size: int, lights: Sequence[DirectionalLight]) -> list[np.ndarray]:
-    """:func:`render_sphere` of ``brdf`` under each of ``lights``, with one evaluation of
-    the BRDF for all of them, at the pixels each light reaches (``f_r`` is 0 below the
-    horizon: the others stay black)."""
+    """:func:`render_sphere` of ``brdf`` under each of ``lights`` (:func:`_sphere_pixels`)."""
+    images = []
+    for where, values in _sphere_pixels(brdf, size, lights):
+        image = np.zeros((size * size, 3))                          # black background, as Sphere.image
+        image[where] = values
+        images.append(image.reshape(size, size, 3))
+    return images
+
+
+def _sphere_pixels(brdf, size: int, lights: Sequence[DirectionalLight]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per light of ``lights``, the flat indices of the pixels of the ``size`` px sphere it
+    reaches and their linear RGB ``(M, 3)`` (:func:`render_sphere`'s values there; ``f_r``
+    is 0 below the horizon: the other pixels are black), with one evaluation of ``brdf``
+    for all the lights."""
     wo, wi, pixels = _directions(int(size), tuple(tuple(light.w) for light in lights))
     f_cos = brdf.eval_cos(wi, wo)
-    images, start = [], 0
+    out, start = [], 0
     for light, (where, coverage) in zip(lights, pixels):
         part = f_cos[start:start + len(where)]
         start += len(where)
         radiance = np.nan_to_num(np.asarray(light.rgb, dtype=np.float64) * part, nan=0.0, posinf=0.0, neginf=0.0)
-        image = np.zeros((size * size, 3))                       # black background, as Sphere.image
-        image[where] = coverage * radiance
-        images.append(image.reshape(size, size, 3))
-    return images
+        out.append((where, coverage * radiance))
+    return out
 
 
 @lru_cache(maxsize=4)
@@ -399,7 +408,11 @@ def _drawing():
 def _png(fig) -> bytes:
     """PNG bytes of ``fig`` drawn on its Agg canvas at its own dpi (:func:`_png_rgb`)."""
     fig.canvas.draw()
-    return _png_rgb(np.asarray(fig.canvas.buffer_rgba())[..., :3])
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    rgb = np.empty(rgba.shape[:2] + (3,), dtype=np.uint8)
+    for c in range(3):                                              # 5x faster than rgba[..., :3].copy()
+        rgb[..., c] = rgba[..., c]
+    return _png_rgb(rgb)
 
 
 def _png_rgb(rgb: np.ndarray) -> bytes:
@@ -433,17 +446,19 @@ def _silhouette(size: int, width: float) -> tuple[tuple[np.ndarray, np.ndarray],
     return where, alpha[where][:, None]
 
 
-def _sphere_canvas(rows: Sequence[Sequence[np.ndarray]], exposures: Sequence[float], xs: Sequence[int],
-                   row_step: int, line_px: float) -> np.ndarray:
-    """One white ``uint8`` RGBA canvas with every sphere (row ``r`` of ``rows`` at
-    ``r * row_step`` px from the top, column ``k`` at ``xs[k]`` px from the left) in sRGB at
-    its row's exposure, each with its silhouette circle (:func:`_silhouette`, grey 0.35)."""
-    size = rows[0][0].shape[0]
+def _sphere_canvas(rows: Sequence[Sequence[tuple[np.ndarray, np.ndarray]]], exposures: Sequence[float],
+                   size: int, xs: Sequence[int], row_step: int, line_px: float) -> np.ndarray:
+    """One white ``uint8`` RGBA canvas with every sphere of ``size`` px (row ``r`` of ``rows``
+    at ``r * row_step`` px from the top, column ``k`` at ``xs[k]`` px from the left; each
+    sphere as :func:`_sphere_pixels` gives it) in sRGB at its row's exposure on black, each
+    with its silhouette circle (:func:`_silhouette`, grey 0.35)."""
     canvas = np.full(((len(rows) - 1) * row_step + size, xs[-1] + size, 4), 255, dtype=np.uint8)
     ring, alpha = _silhouette(size, line_px)
-    for r, (images, exposure) in enumerate(zip(rows, exposures)):
-        for x, image in zip(xs, images):
-            srgb = to_srgb8(image, exposure)
+    for r, (spheres, exposure) in enumerate(zip(rows, exposures)):
+        for x, (where, values) in zip(xs, spheres):
+            srgb = np.zeros((size * size, 3), dtype=np.uint8)
+            srgb[where] = to_srgb8(values, exposure)
+            srgb = srgb.reshape(size, size, 3)
             srgb[ring] = np.rint(srgb[ring] * (1.0 - alpha) + _SILHOUETTE_GREY * alpha).astype(np.uint8)
             canvas[r * row_step:r * row_step + size, x:x + size, :3] = srgb
     return canvas
@@ -489,8 +504,8 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     if unknown:
         raise ValueError(f"save_fit_comparison: notes for labels not in brdfs: {unknown}")
     n = len(brdfs)
-    rows = list(zip(*(_render_spheres(b, size, (COMPARE_LIGHT, GRAZING_LIGHT)) for b in brdfs.values())))
-    exposures = [_exposure(images[0]) for images in rows]
+    rows = list(zip(*(_sphere_pixels(b, size, (COMPARE_LIGHT, GRAZING_LIGHT)) for b in brdfs.values())))
+    exposures = [_exposure(spheres[0][1]) for spheres in rows]      # the black pixels do not count
 
     # layout in pixels, from the top
     note_lines = max((v.count("\n") + 1 for v in notes.values()), default=0)
@@ -513,7 +528,7 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     labels = list(brdfs)
     xs = [int(round(left + k * cell + (cell - size) / 2.0)) for k in range(n)]
     row_step = label_h + size + gap
-    canvas = _sphere_canvas(rows, exposures, [x - xs[0] for x in xs], row_step, _SILHOUETTE_PT * dpi / 72.0)
+    canvas = _sphere_canvas(rows, exposures, size, [x - xs[0] for x in xs], row_step, _SILHOUETTE_PT * dpi / 72.0)
     fig.add_artist(_pixels_artist()(canvas, xs[0], height - (rows_top + label_h) - canvas.shape[0]))
     title_base = rows_top + label_h - _LABEL_PAD_PT * dpi / 72.0  # where an axes title would sit
     for k, label in enumerate(labels):
