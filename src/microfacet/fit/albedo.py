@@ -1,4 +1,5 @@
-"""A fit's directional albedo matched to the data's by a smooth table in ``theta_d``.
+"""A fit's directional albedo matched to the data's by a smooth table in ``theta_d`` and, where
+the lobes cannot carry it, by its diffuse bases' reflectances.
 
 A fit made in a compressed space (:mod:`microfacet.fit.perceptual`) weighs the specular
 peak little: its shape can be right while the energy it reflects at grazing views falls
@@ -32,8 +33,27 @@ a channel's tables would have a total variation above twice their range, ``s`` i
 again rising to one peak and falling after it (every peak node tried), and, if that fails
 too, as a constant.
 
-Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes carry
-enough energy at the view; the fit corpus's results page (``experiments/fit_corpus.py``)
+Where the lobes carry too little of the albedo to reach the band (every channel whose data
+albedo exceeds :data:`BAND_FLOOR` within 5 % at :data:`BAND_VIEWS_DEG`; the match aims at
+:data:`BAND_TARGET`), the diffuse bases' reflectances are scaled too, one factor ``b`` per
+base and channel: the albedo is linear in ``b`` as in ``s``,
+
+    a'(o) = a(o) + sum_k (s_k - 1) A_k(o) + sum_j (b_j - 1) int f_base,j cos theta_i d i,
+
+so ``(s, b)`` solve the same bounded least squares (the log-error term linearized in ``b``
+too), the band views still outside :data:`BAND_TARGET` weighed up fourfold for up to
+:data:`BAND_ROUNDS` rounds. Each factor lies within ``[1 / BASE_RANGE, BASE_RANGE]`` and keeps
+the reflectance at most 1; a factor above 1 is drawn back toward 1 until the total albedo
+at :data:`ENERGY_VIEWS_DEG` stays below ``1 - ENERGY_MARGIN``. The scaled bases are kept only
+if they bring the band error down and the log error grows by at most :data:`LOG_TOLERANCE`
+(fewer weighing rounds are tried first otherwise); the base keeps its class
+(:class:`~microfacet.Lambertian`, :class:`~microfacet.diffuse.TransmittedLambertian` of the
+same index) with the new reflectance, so the result is still the fit's tree.
+
+Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes, or the
+lobes and bases together, carry the albedo's variation with the view; a data albedo that
+jumps within a degree of normal view or rises more steeply toward grazing than the lobes
+can follow is left out of the band rather than matched at the cost of the shape; the fit corpus's results page (``experiments/fit_corpus.py``)
 reports it for every material. A fit without microfacet lobes is returned unchanged.
 A Schlick form of the match (new ``f0``, ``f90`` and base colours, which every export holds
 exactly) was measured on the fit corpus and not adopted: ``(1 - cos theta_d)^5`` moves only
@@ -60,7 +80,7 @@ from ..metrics import AlbedoRatios, LogError
 from .extract import box_qp
 
 __all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "LOG_WEIGHT", "AlbedoTarget", "albedo_target", "albedo_scale",
-           "match_albedo", "LOG_PAIRS"]
+           "AlbedoFactors", "albedo_factors", "match_albedo", "LOG_PAIRS", "BAND_VIEWS_DEG", "BAND_TARGET"]
 
 #: Views (deg) at which the albedo is matched.
 VIEWS_DEG = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 55.0, 60.0, 65.0, 70.0, 75.0, 80.0)
@@ -87,6 +107,23 @@ TABLE_SIZE = 46
 QUADRATURE = 64
 #: Pairs of the log-error term.
 LOG_PAIRS = 2**15
+#: Views (deg) and half-width of the albedo band that the match aims at (the issue's check:
+#: every channel whose data albedo exceeds :data:`BAND_FLOOR` within ``1 +- BAND`` there);
+#: the match aims at :data:`BAND_TARGET`, inside it, to leave room for the quadrature.
+BAND_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0)
+BAND, BAND_TARGET, BAND_FLOOR = 0.05, 0.04, 0.03
+#: Rounds of weighing up the band views outside :data:`BAND_TARGET` (fourfold each) when
+#: the bases are scaled too.
+BAND_ROUNDS = 3
+#: Largest factor of a base's reflectance and its inverse, the smallest.
+BASE_RANGE = 2.0
+#: Largest relative growth of the log error (:class:`~microfacet.metrics.LogError` on the
+#: target's pairs) that the bases' factors may cost over the lobes' match alone.
+LOG_TOLERANCE = 0.1
+#: Views (deg) beyond :data:`VIEWS_DEG` where the total albedo of a fit whose bases were
+#: scaled up must stay below ``1 - ENERGY_MARGIN``.
+ENERGY_VIEWS_DEG = (85.0, 89.0)
+ENERGY_MARGIN = 2e-3
 
 
 class AlbedoTarget(NamedTuple):
@@ -157,53 +194,76 @@ def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
 
 
 class _System(NamedTuple):
-    """One channel's least squares: relative albedo residuals ``m s - rhs`` (``a'/a_data - 1``
-    per view) and the other terms' quadratic ``1/2 s^T h s - g^T s``."""
+    """One channel's least squares: relative albedo residuals ``m x - rhs`` (``a'/a_data - 1``
+    per view) and the other terms' quadratic ``1/2 x^T h x - g^T x``; ``band``: the views
+    held to the band (:data:`BAND_VIEWS_DEG`, data albedo above :data:`BAND_FLOOR`)."""
     m: np.ndarray
     rhs: np.ndarray
     h: np.ndarray
     g: np.ndarray
+    band: np.ndarray
 
-    def solve(self, t: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, float]:
-        """``s = t z`` of least objective over ``0 <= z <= upper``, views whose albedo would
+    def solve(self, t: np.ndarray, upper: np.ndarray, band_rounds: int = 0,
+              offset: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+        """``x = offset + t z`` of least objective over ``0 <= z <= upper``, views whose albedo would
         exceed the data's by more than ``ALBEDO_ABOVE`` weighed up tenfold until none does
-        (:data:`OVERSHOOT_ROUNDS`); and its objective with unit weights."""
+        (:data:`OVERSHOOT_ROUNDS`), then, ``band_rounds`` times, the band views outside
+        :data:`BAND_TARGET` fourfold; and its objective with unit weights."""
         w = np.ones(len(self.rhs))
-        for _ in range(OVERSHOOT_ROUNDS):
+        x0 = np.zeros(t.shape[0]) if offset is None else offset
+        overshoot = 1
+        while True:
             h = self.m.T @ (w[:, None] * self.m) + self.h
             g = self.m.T @ (w * self.rhs) + self.g
-            s = t @ box_qp(t.T @ h @ t, t.T @ g, np.zeros(len(upper)), upper)
-            over = self.m @ s - self.rhs > ALBEDO_ABOVE
-            if not np.any(over):
+            x = x0 + t @ box_qp(t.T @ h @ t, t.T @ (g - h @ x0), np.zeros(len(upper)), upper)
+            r = self.m @ x - self.rhs
+            if np.any(over := r > ALBEDO_ABOVE) and overshoot < OVERSHOOT_ROUNDS:
+                w, overshoot = np.where(over, 10.0 * w, w), overshoot + 1
+            elif band_rounds > 0 and np.any(out := self.band & (np.abs(r) > BAND_TARGET)):
+                w, band_rounds = np.where(out, 4.0 * w, w), band_rounds - 1
+            else:
                 break
-            w = np.where(over, 10.0 * w, w)
         h, g = self.m.T @ self.m + self.h, self.m.T @ self.rhs + self.g
-        return s, float(0.5 * s @ h @ s - g @ s)
+        return x, float(0.5 * x @ h @ x - g @ x)
+
+    def band_error(self, x: np.ndarray) -> float:
+        """The largest ``|a'/a_data - 1|`` over the band views (0 where none is held)."""
+        r = np.abs(self.m @ x - self.rhs)[self.band]
+        return float(r.max()) if len(r) else 0.0
 
 
-def _systems(target: AlbedoTarget, brdf, lobes) -> list[_System]:
-    """The least squares of :func:`albedo_scale` per channel (module docstring)."""
+def _systems(target: AlbedoTarget, brdf, lobes, bases=()) -> list[_System]:
+    """The least squares of :func:`albedo_factors` per channel (module docstring): unknowns
+    the table's nodes ``s`` and, for each of ``bases``, its reflectance's factor ``b``."""
     ratios, log = target
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
     fitted = ratios.albedo(brdf)
     spec = w[:, None] * sum(np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes)
+    diffuse = [w[:, None] * np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in bases]
     hats = _hats(_theta_d(wi, wo))
     f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
     f_spec = sum(np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes)
+    f_bases = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in bases]
     log_hats = _hats(_theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
     pair_w = LOG_WEIGHT * log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
     second = np.diff(np.eye(k), 2, axis=0)
-    regular = SMOOTHNESS * second.T @ second + PULL * np.eye(k)
+    n = k + len(bases)
+    regular = PULL * np.eye(n)
+    regular[:k, :k] += SMOOTHNESS * second.T @ second
+    in_band = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)
     out = []
     for c in range(3):
-        a = np.stack([np.bincount(view, spec[:, c] * hats[:, j], minlength=ratios.n_views) for j in range(k)], axis=-1)
+        a = np.stack([np.bincount(view, spec[:, c] * hats[:, j], minlength=ratios.n_views) for j in range(k)]
+                     + [np.bincount(view, d[:, c], minlength=ratios.n_views) for d in diffuse], axis=-1)
         ref = np.maximum(ratios.ref[:, c], 1e-4)
-        m = a / ref[:, None]                                        # a' = fitted + a (s - 1)
-        j = (f_spec[:, c] / (1.0 + f[:, c]))[:, None] * log_hats    # d ln(1 + f') / d s
+        m = a / ref[:, None]                                        # a' = fitted + a (x - 1)
+        j = np.concatenate([(f_spec[:, c] / (1.0 + f[:, c]))[:, None] * log_hats]      # d ln(1 + f') / d x
+                           + [(fb[:, c] / (1.0 + f[:, c]))[:, None] for fb in f_bases], axis=-1)
         out.append(_System(m, (ref - fitted[:, c]) / ref + m.sum(axis=1), (j.T * pair_w) @ j + regular,
-                           (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL))
+                           (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL,
+                           in_band & (ratios.ref[:, c] > BAND_FLOOR)))
     return out
 
 
@@ -233,11 +293,159 @@ def _rings(values: np.ndarray) -> np.ndarray:
     return tv > TV_LIMIT * np.ptp(values, axis=0) + 1e-9
 
 
+class AlbedoFactors(NamedTuple):
+    """The factors of :func:`match_albedo` (made by :func:`albedo_factors`).
+
+    Attributes
+    ----------
+    s : (K, 3) ndarray
+        The factor of the lobes' Fresnel terms per node of :data:`NODES_DEG` and RGB channel.
+    bases : (B, 3) ndarray
+        The factor of each diffuse base's reflectance (in the fit's order) per RGB channel;
+        ones where the lobes reach the band alone.
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> fit = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.3))
+    >>> f = albedo_factors(albedo_target(fit), fit)
+    >>> f.s.shape, f.bases.shape
+    ((10, 3), (1, 3))
+    """
+    s: np.ndarray
+    bases: np.ndarray
+
+
+def _bases(brdf) -> list:
+    """The diffuse bases of a fit (:class:`~microfacet.Lambertian`,
+    :class:`~microfacet.diffuse.TransmittedLambertian`), in its order."""
+    from ..brdf import Lambertian
+    from ..diffuse import TransmittedLambertian
+    return [b for b in getattr(brdf, "brdfs", [brdf]) if isinstance(b, (Lambertian, TransmittedLambertian))]
+
+
+def _pick(system: _System, c: int, brdf, s: np.ndarray, base_lower: np.ndarray, base_upper: np.ndarray,
+          band_rounds: int) -> np.ndarray:
+    """Channel ``c``'s unknowns ``(s_c, b_c)``: the least objective among the shapes of ``s``
+    (:func:`_shapes`) whose tables do not ring (with ``band_rounds``: the least excess of the
+    band error over :data:`BAND_TARGET` first), a constant ``s`` if every shape rings;
+    ``base_lower``, ``base_upper``: the bounds of the bases' factors (none: the lobes alone)."""
+    k, nb = len(NODES_DEG), len(base_upper)
+
+    def joint(t, upper):
+        tj = np.zeros((k + nb, t.shape[1] + nb))
+        tj[:k, :t.shape[1]], tj[k:, t.shape[1]:] = t, np.eye(nb)
+        return system.solve(tj, np.concatenate([upper, base_upper - base_lower]), band_rounds,
+                            np.concatenate([np.zeros(k), base_lower]))
+
+    best, chosen = (np.inf, np.inf), None
+    for t, upper in _shapes(k):
+        x, objective = joint(t, upper)
+        trial = s.copy()
+        trial[:, c] = x[:k]
+        key = (max(system.band_error(x) - BAND_TARGET, 0.0) if band_rounds else 0.0, objective)
+        if key < best and not any(_rings(v)[c] for v in _tables(brdf, trial)[1]):
+            best, chosen = key, x
+    if chosen is None:                                # a constant factor keeps each table's shape
+        chosen = joint(np.ones((k, 1)), np.full(1, S_MAX))[0]
+    return chosen
+
+
+def _energy_limited(matched, bases: list, factors: np.ndarray) -> np.ndarray:
+    """``factors`` of the ``bases`` drawn toward 1 (per channel, along the line to 1) as far
+    as needed for the total albedo at :data:`ENERGY_VIEWS_DEG` of the fit (``matched``: its
+    lobes' tables made, its bases as they were) to stay below ``1 - ENERGY_MARGIN`` (at
+    :data:`VIEWS_DEG` the match holds it below the data's + 1 %)."""
+    from ..metrics import directional_albedo
+    if not np.any(factors > 1.0):
+        return factors
+
+    def albedo(b):
+        return directional_albedo(b, ENERGY_VIEWS_DEG, n_theta=QUADRATURE, n_phi=QUADRATURE)
+
+    a0 = albedo(matched)
+    rise = sum((f - 1.0) * albedo(base) for base, f in zip(bases, factors))
+    limit = 1.0 - ENERGY_MARGIN
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where((a0 + rise > limit) & (rise > 0), np.maximum(limit - a0, 0.0) / rise, 1.0)
+    return 1.0 + (factors - 1.0) * np.clip(room.min(axis=0), 0.0, 1.0)
+
+
+def _band_error(target: AlbedoTarget, brdf) -> float:
+    """The largest ``|a/a_data - 1|`` of ``brdf`` at :data:`BAND_VIEWS_DEG` over the channels
+    whose data albedo exceeds :data:`BAND_FLOOR` (the match's quadrature)."""
+    ratios = target.ratios(brdf)
+    held = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)[:, None] & (target.ratios.ref > BAND_FLOOR)
+    r = np.abs(np.asarray(ratios, float) - 1.0)[held]
+    return float(np.nanmax(r)) if len(r) else 0.0
+
+
+def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
+    """The factors of :func:`match_albedo` for the data's :func:`albedo_target` and the fit
+    ``brdf`` (module docstring): per channel, the table ``s`` of least quadratic among the
+    shapes whose tables do not ring (free, one peak, constant); where that leaves a view of
+    the band farther than :data:`BAND_TARGET` from the data's albedo, ``s`` and the bases'
+    factors solved together (the band views outside it weighed up), kept if they come
+    closer to the band. All ones where the fit has no microfacet lobe.
+
+    Parameters
+    ----------
+    target : AlbedoTarget
+        The data's side (:func:`albedo_target`).
+    brdf : MicrofacetBRDF or SumBRDF
+        The fit.
+
+    Returns
+    -------
+    AlbedoFactors
+
+    Examples
+    --------
+    >>> import microfacet as mf
+    >>> data = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.5))
+    >>> fit = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.3))
+    >>> f = albedo_factors(albedo_target(data), fit)     # the lobe cannot carry 0.2 more at every view
+    >>> (0.3 * f.bases[0]).round(2)
+    array([0.5, 0.5, 0.5])
+    """
+    lobes, bases = _lobes(brdf), _bases(brdf)
+    k = len(NODES_DEG)
+    s, b = np.ones((k, 3)), np.ones((len(bases), 3))
+    if not lobes:
+        return AlbedoFactors(s, b)
+    systems = _systems(target, brdf, lobes)
+    for c, system in enumerate(systems):
+        s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
+    errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
+    if not bases or max(errors) <= BAND_TARGET:
+        return AlbedoFactors(s, b)
+    joint = _systems(target, brdf, lobes, bases)
+    reflectance = np.array([base.reflectance for base in bases])
+    with np.errstate(divide="ignore"):
+        upper = np.minimum(1.0 / reflectance, BASE_RANGE)    # reflectance <= 1
+    lower = np.minimum(1.0 / BASE_RANGE, upper)
+    matched = _rebuilt(brdf, s, b)
+    log_before, band_before = target.log(matched), _band_error(target, matched)
+    for rounds in range(BAND_ROUNDS, -1, -1):
+        s2, b2 = s.copy(), b.copy()
+        for c, system in enumerate(joint):
+            if errors[c] <= BAND_TARGET:
+                continue
+            x = _pick(system, c, brdf, s2, lower[:, c], upper[:, c], rounds)
+            if system.band_error(x) < errors[c]:
+                s2[:, c], b2[:, c] = x[:k], x[k:]
+        b2 = _energy_limited(_rebuilt(brdf, s2, np.ones_like(b2)), bases, b2)
+        if np.all(b2 == 1.0):
+            continue
+        candidate = _rebuilt(brdf, s2, b2)
+        if _band_error(target, candidate) < band_before and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before:
+            return AlbedoFactors(s2, b2)
+    return AlbedoFactors(s, b)
+
+
 def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
-    """The factor ``s`` of :func:`match_albedo` on :data:`NODES_DEG`, ``(K, 3)``, for the
-    data's :func:`albedo_target` and the fit ``brdf``; ones where it has no microfacet lobe.
-    Per channel, the least of the module's quadratic among the shapes whose tables do not
-    ring (free, one peak, constant: module docstring).
+    """The factor ``s`` of :func:`albedo_factors` on :data:`NODES_DEG`, ``(K, 3)``: ones
+    where ``brdf`` has no microfacet lobe.
 
     Parameters
     ----------
@@ -260,32 +468,42 @@ def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
     >>> s.shape == (len(NODES_DEG), 3), bool(s[0, 0] > 1.5)      # SMOOTHNESS, LOG_WEIGHT: module docstring
     (True, True)
     """
-    lobes = _lobes(brdf)
-    k = len(NODES_DEG)
-    s = np.ones((k, 3))
-    if not lobes:
-        return s
-    systems = _systems(target, brdf, lobes)
-    solved = [[system.solve(t, upper) for system in systems] for t, upper in _shapes(k)]
-    for c, system in enumerate(systems):
-        best = np.inf
-        for shape in solved:
-            s_c, objective = shape[c]
-            trial = s.copy()
-            trial[:, c] = s_c
-            if objective < best and not any(_rings(v)[c] for v in _tables(brdf, trial)[1]):
-                s[:, c], best = s_c, objective
-        if not np.isfinite(best):                     # a constant factor keeps each table's shape
-            s[:, c] = system.solve(np.ones((k, 1)), np.full(1, S_MAX))[0]
-    return s
+    return albedo_factors(target, brdf).s
+
+
+def _rebuilt(brdf, s: np.ndarray, b: np.ndarray):
+    """``brdf``'s tree with each lobe's Fresnel term the table ``clip(F s, 0, 1)`` and each
+    base's reflectance times ``b`` (clipped to 1)."""
+    from .. import fresnel as fr
+    from ..brdf import Lambertian, MicrofacetBRDF
+    from ..diffuse import TransmittedLambertian
+    from .analytic import SumBRDF
+    cos_d, tables = _tables(brdf, s)
+    tables, factors = iter(tables), iter(b)
+
+    def scaled(part):
+        if isinstance(part, MicrofacetBRDF):
+            return MicrofacetBRDF(part.distribution, fresnel=fr.Tabulated(cos_d, next(tables)), gaf=part.gaf_model,
+                                  shadowing=part.shadowing, dtype=part.dtype)
+        if isinstance(part, TransmittedLambertian):
+            return TransmittedLambertian(np.clip(part.reflectance * next(factors), 0.0, 1.0), part.eta)
+        if isinstance(part, Lambertian):
+            factor = next(factors)
+            return part if np.all(factor == 1.0) else Lambertian(np.clip(part.reflectance * factor, 0.0, 1.0))
+        return part
+
+    if isinstance(brdf, SumBRDF):
+        return SumBRDF(*map(scaled, brdf.brdfs), weights=brdf.weights)
+    return scaled(brdf)
 
 
 def match_albedo(reference, brdf, target: AlbedoTarget | None = None):
     """``brdf`` with each microfacet lobe's Fresnel term ``F`` replaced by the table
-    ``clip(F s, 0, 1)`` (:func:`albedo_scale`; module docstring), so that its directional
-    albedo matches ``reference``'s at :data:`VIEWS_DEG`. ``target``: the reference's
-    :func:`albedo_target`, to share among fits. A BRDF without microfacet lobes is
-    returned as is.
+    ``clip(F s, 0, 1)`` and, where the lobes alone cannot reach the albedo band, each diffuse
+    base's reflectance scaled (:func:`albedo_factors`; module docstring), so that its
+    directional albedo matches ``reference``'s at :data:`VIEWS_DEG`. ``target``: the
+    reference's :func:`albedo_target`, to share among fits. A BRDF without microfacet lobes
+    is returned as is.
 
     Parameters
     ----------
@@ -299,7 +517,8 @@ def match_albedo(reference, brdf, target: AlbedoTarget | None = None):
     Returns
     -------
     BRDF
-        The same tree with tabulated Fresnel terms (``TABLE_SIZE`` nodes uniform in ``theta_d``).
+        The same tree with tabulated Fresnel terms (``TABLE_SIZE`` nodes uniform in
+        ``theta_d``) and bases of the same classes.
 
     Examples
     --------
@@ -309,20 +528,6 @@ def match_albedo(reference, brdf, target: AlbedoTarget | None = None):
     >>> type(fit.fresnel).__name__, bool(abs(fit.fresnel(1.0)[0] - 0.5) < 0.02)
     ('Tabulated', True)
     """
-    from .. import fresnel as fr
-    from ..brdf import MicrofacetBRDF
-    from .analytic import SumBRDF
     if not _lobes(brdf):
         return brdf
-    cos_d, tables = _tables(brdf, albedo_scale(albedo_target(reference) if target is None else target, brdf))
-    tables = iter(tables)
-
-    def scaled(b):
-        if not isinstance(b, MicrofacetBRDF):
-            return b
-        return MicrofacetBRDF(b.distribution, fresnel=fr.Tabulated(cos_d, next(tables)), gaf=b.gaf_model,
-                              shadowing=b.shadowing, dtype=b.dtype)
-
-    if isinstance(brdf, SumBRDF):
-        return SumBRDF(*map(scaled, brdf.brdfs), weights=brdf.weights)
-    return scaled(brdf)
+    return _rebuilt(brdf, *albedo_factors(albedo_target(reference) if target is None else target, brdf))
