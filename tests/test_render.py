@@ -423,3 +423,16 @@ def test_fit_comparison_ticks_sit_where_matplotlib_puts_them():
         for region in (below, beside):
             assert (theirs[region] < 128).sum() > 100              # ticks and labels there
             np.testing.assert_array_equal(ours[region], theirs[region])
+
+
+def test_fit_comparison_of_a_black_brdf_still_has_log_axes():
+    """Nothing positive to plot (a black BRDF): positive log axes with labelled decades
+    (10^-3..1 where Matplotlib's own limits are not positive), not an error."""
+    from microfacet.render import compare
+    with compare._drawing():
+        fig = compare._comparison_figure({"black": mf.Lambertian(0.0)}, "", (0, 30), (0,), 8, 100, None)
+    limits = [ax.get_ylim() for ax in fig.axes]
+    assert all(0 < lo < hi < np.inf for lo, hi in limits) and (1e-3, 1.0) in limits
+    for ax in fig.axes:
+        assert [t.get_text() for t in ax.texts if t.get_ha() == "right"][-1] in ("10⁰", "10¹")
+    assert compare.fit_comparison_png({"black": mf.Lambertian(0.0)}, size=8)[:8] == b"\x89PNG\r\n\x1a\n"

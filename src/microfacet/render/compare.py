@@ -203,6 +203,9 @@ def _log_ticks(ax) -> None:
     labelled decades (every decade, or every 2nd, 3rd, ...), the others unlabelled minor
     ticks, labels ``10⁻³`` in plain text (no mathtext)."""
     lo, hi = sorted(ax.get_ylim())
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 < lo < hi):   # no positive value to show
+        lo, hi = 1e-3, 1.0
+        ax.set_ylim(lo, hi)
     decades = np.arange(np.ceil(np.log10(lo) - 1e-9), np.floor(np.log10(hi) + 1e-9) + 1).astype(int)
     stride = max(1, -(-len(decades) // 6))
     major = decades[(decades - decades[-1]) % stride == 0] if len(decades) else decades
@@ -339,7 +342,8 @@ def save_fit_comparison(path: str | os.PathLike, brdfs: Mapping, title: str = ""
 
 
 def _exposure(image: np.ndarray) -> float:
-    """Exposure (stops) putting the 99.5th-percentile luminance of ``image`` at 1."""
+    """Exposure (stops) putting the 99.5th-percentile luminance of ``image`` (linear RGB
+    ``(..., 3)``: an image or some of its pixels; black ones do not count) at 1."""
     lum = image @ LUMINANCE
     top = float(np.percentile(lum[lum > 0], 99.5)) if np.any(lum > 0) else 1.0
     return float(np.log2(1.0 / top)) if np.isfinite(top) and top > 0 else 0.0
