@@ -112,6 +112,7 @@ RESULTS = {
     "leadr_consumers": ("LEADR in Blender and MaterialX", "python experiments/leadr_consumers.py"),
     "albedo_band": ("Albedo within 5 % of the data", "python experiments/albedo_band.py --data DATA"),
     "albedo_schlick": ("Albedo match: Schlick forms vs the table", "python experiments/albedo_schlick.py"),
+    "albedo_bases": ("Albedo match with the bases scaled", "python experiments/albedo_bases.py --base SRC"),
     "sheared_chi2": ("Sheared lobes at grazing views: chi-square", "python experiments/sheared_chi2.py"),
     "glsl_gpu": ("GLSL shaders on an NVIDIA GPU", "python experiments/glsl_gpu.py"),
     "cold_start": ("Cold start", "python benchmarks/bench_cold_start.py"),
