@@ -68,6 +68,8 @@ _TICK_PT, _TICK_PAD_PT, _TICK_FONT = 3.5, 3.5, 7
 #: Silhouette circle of the spheres: line width (points) and grey level (8-bit sRGB).
 _SILHOUETTE_PT = 0.6
 _SILHOUETTE_GREY = 0.35 * 255.0
+#: Largest sphere size whose pixel geometry is kept between calls (:func:`_directions`).
+_CACHED_SIZE = 512
 #: zlib level of the PNG (:func:`_png_rgb`).
 _PNG_LEVEL = 3
 
@@ -134,17 +136,6 @@ def render_sphere(brdf, size: int, light: DirectionalLight = COMPARE_LIGHT) -> n
     return _render_spheres(brdf, size, (light,))[0]
 
 
-@lru_cache(maxsize=4)
-def _sphere(size: int) -> Sphere:
-    """The :class:`Sphere` of ``size`` px, built once (its arrays read-only): building it
-    costs several times shading it."""
-    sphere = Sphere(size)
-    for value in vars(sphere).values():
-        if isinstance(value, np.ndarray):
-            value.flags.writeable = False
-    return sphere
-
-
 def _render_spheres(brdf, size: int, lights: Sequence[DirectionalLight]) -> list[np.ndarray]:
     """:func:`render_sphere` of ``brdf`` under each of ``lights`` (:func:`_sphere_pixels`)."""
     images = []
@@ -171,12 +162,18 @@ def _sphere_pixels(brdf, size: int, lights: Sequence[DirectionalLight]) -> list[
     return out
 
 
-@lru_cache(maxsize=4)
 def _directions(size: int, lights: tuple) -> tuple[np.ndarray, np.ndarray, list]:
-    """Local view and light directions (read-only) of the pixels of :func:`_sphere`
-    ``(size)`` that each light direction (world) of ``lights`` reaches, one light after
-    the other, and per light the pixels' flat indices and coverages ``(M, 1)``."""
-    sphere = _sphere(size)
+    """Local view and light directions (read-only) of the pixels of the :class:`Sphere` of
+    ``size`` px that each light direction (world) of ``lights`` reaches, one light after
+    the other, and per light the pixels' flat indices and coverages ``(M, 1)``; kept for
+    the last two sizes up to :data:`_CACHED_SIZE` (building the sphere costs more than
+    shading it)."""
+    return (_cached_directions if size <= _CACHED_SIZE else _new_directions)(size, lights)
+
+
+def _new_directions(size: int, lights: tuple) -> tuple[np.ndarray, np.ndarray, list]:
+    """:func:`_directions`, computed."""
+    sphere = Sphere(size)
     flat = np.flatnonzero(sphere.mask)
     wo, wi, pixels = [], [], []
     for w in lights:
@@ -186,8 +183,12 @@ def _directions(size: int, lights: tuple) -> tuple[np.ndarray, np.ndarray, list]
         wi.append(local[lit])
         pixels.append((flat[lit], sphere.coverage[lit][:, None]))
     wo, wi = np.concatenate(wo), np.concatenate(wi)
-    wo.flags.writeable = wi.flags.writeable = False
+    for a in [wo, wi] + [a for pair in pixels for a in pair]:
+        a.flags.writeable = False
     return wo, wi, pixels
+
+
+_cached_directions = lru_cache(maxsize=2)(_new_directions)
 
 
 def _positive(y: np.ndarray) -> np.ndarray:
