@@ -71,7 +71,7 @@ _SILHOUETTE_GREY = 0.35 * 255.0
 #: Largest sphere size whose pixel geometry is kept between calls (:func:`_directions`).
 _CACHED_SIZE = 512
 #: zlib level of the PNG (:func:`_png_rgb`).
-_PNG_LEVEL = 3
+_PNG_LEVEL = 1
 
 
 def backscattering_curve(brdf, phi: float = 0.0, n: int = 200,
@@ -422,9 +422,9 @@ def _png(fig) -> bytes:
 
 def _png_rgb(rgb: np.ndarray) -> bytes:
     """A PNG file (8-bit RGB, no metadata) of ``rgb`` ``(H, W, 3)`` uint8: every row with
-    the "up" filter (the difference to the row above), zlib level 3. The picture is mostly
-    flat colour: as small as Pillow's adaptive filters at level 6, twice as fast (PNG
-    specification, ISO/IEC 15948, filter type 2)."""
+    the "up" filter (the difference to the row above; PNG specification, ISO/IEC 15948,
+    filter type 2), zlib's fastest level. The comparison picture is mostly flat colour:
+    ~15 % larger than with Pillow's adaptive filters at level 6, 4x faster."""
     h, w, _ = rgb.shape
     rows = np.empty((h, 1 + 3 * w), dtype=np.uint8)
     rows[:, 0] = 2                                                  # filter type: up
