@@ -28,9 +28,8 @@ Examples
 from __future__ import annotations
 
 import gc
+import io
 import os
-import struct
-import zlib
 from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from functools import lru_cache
@@ -70,7 +69,7 @@ _SILHOUETTE_PT = 0.6
 _SILHOUETTE_GREY = 0.35 * 255.0
 #: Largest sphere size whose pixel geometry is kept between calls (:func:`_directions`).
 _CACHED_SIZE = 512
-#: zlib level of the PNG (:func:`_png_rgb`).
+#: zlib level of the PNG (Pillow's ``compress_level``; the picture is mostly flat colour).
 _PNG_LEVEL = 1
 
 
@@ -411,32 +410,17 @@ def _drawing():
 
 
 def _png(fig) -> bytes:
-    """PNG bytes of ``fig`` drawn on its Agg canvas at its own dpi (:func:`_png_rgb`)."""
+    """PNG bytes (8-bit RGB, no metadata) of ``fig`` drawn on its Agg canvas at its own dpi,
+    encoded by Pillow at zlib level :data:`_PNG_LEVEL`."""
+    from PIL import Image
     fig.canvas.draw()
     rgba = np.asarray(fig.canvas.buffer_rgba())
     rgb = np.empty(rgba.shape[:2] + (3,), dtype=np.uint8)
     for c in range(3):                                              # 5x faster than rgba[..., :3].copy()
         rgb[..., c] = rgba[..., c]
-    return _png_rgb(rgb)
-
-
-def _png_rgb(rgb: np.ndarray) -> bytes:
-    """A PNG file (8-bit RGB, no metadata) of ``rgb`` ``(H, W, 3)`` uint8: every row with
-    the "up" filter (the difference to the row above; PNG specification, ISO/IEC 15948,
-    filter type 2), zlib's fastest level. The comparison picture is mostly flat colour:
-    ~15 % larger than with Pillow's adaptive filters at level 6, 4x faster."""
-    h, w, _ = rgb.shape
-    rows = np.empty((h, 1 + 3 * w), dtype=np.uint8)
-    rows[:, 0] = 2                                                  # filter type: up
-    flat = rgb.reshape(h, 3 * w)
-    rows[0, 1:] = flat[0]
-    np.subtract(flat[1:], flat[:-1], out=rows[1:, 1:])              # modulo 256
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(rows.tobytes(), _PNG_LEVEL)) + chunk(b"IEND", b""))
+    buf = io.BytesIO()
+    Image.fromarray(rgb).save(buf, format="PNG", compress_level=_PNG_LEVEL)
+    return buf.getvalue()
 
 
 def _silhouette(size: int, width: float) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
