@@ -107,11 +107,15 @@ TABLE_SIZE = 46
 QUADRATURE = 64
 #: Pairs of the log-error term.
 LOG_PAIRS = 2**15
-#: Views (deg) and half-width of the albedo band that the match aims at (the issue's check:
-#: every channel whose data albedo exceeds :data:`BAND_FLOOR` within ``1 +- BAND`` there);
-#: the match aims at :data:`BAND_TARGET`, inside it, to leave room for the quadrature.
+#: Views (deg) of the albedo band (issue 24's check: every channel whose data albedo
+#: exceeds :data:`BAND_FLOOR` within ``1 +- BAND`` of it there).
 BAND_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0)
-BAND, BAND_TARGET, BAND_FLOOR = 0.05, 0.04, 0.03
+#: Half-width of the albedo band.
+BAND = 0.05
+#: Half-width that the match aims at, inside :data:`BAND`, to leave room for the quadrature.
+BAND_TARGET = 0.04
+#: Channels whose data albedo is below this are not held to the band.
+BAND_FLOOR = 0.03
 #: Rounds of weighing up the band views outside :data:`BAND_TARGET` (fourfold each) when
 #: the bases are scaled too.
 BAND_ROUNDS = 3
