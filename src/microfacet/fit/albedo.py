@@ -45,10 +45,19 @@ too), the band views still outside :data:`BAND_TARGET` weighed up fourfold for u
 :data:`BAND_ROUNDS` rounds. Each factor lies within ``[1 / BASE_RANGE, BASE_RANGE]`` and keeps
 the reflectance at most 1; a factor above 1 is drawn back toward 1 until the total albedo
 at :data:`ENERGY_VIEWS_DEG` stays below ``1 - ENERGY_MARGIN``. The scaled bases are kept only
-if they bring the band error down and the log error grows by at most :data:`LOG_TOLERANCE`
+if they bring the band error down, exceed the data's albedo at no view of the band by more
+than :data:`ALBEDO_ABOVE` (or than the lobes' match alone did), and the log error grows by at most
+:data:`LOG_TOLERANCE`
 (fewer weighing rounds are tried first otherwise); the base keeps its class
 (:class:`~microfacet.Lambertian`, :class:`~microfacet.diffuse.TransmittedLambertian` of the
 same index) with the new reflectance, so the result is still the fit's tree.
+
+Energy comes before the data's albedo (measured albedos can exceed 1 near grazing views, and
+a table matched up to 80 deg can overshoot beyond it): where the matched fit's total albedo
+at :data:`VIEWS_DEG` or :data:`ENERGY_VIEWS_DEG` exceeds ``1 - ENERGY_MARGIN`` in a channel,
+that channel's factor at the nodes beyond the band views (:data:`NODES_DEG` above 75 deg) is
+scaled down until it does not, and, where that is not enough, the channel's lobes and bases
+as a whole (:func:`albedo_factors`).
 
 Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes, or the
 lobes and bases together, carry the albedo's variation with the view; a data albedo that
@@ -375,6 +384,14 @@ def _energy_limited(matched, bases: list, factors: np.ndarray) -> np.ndarray:
     return 1.0 + (factors - 1.0) * np.clip(room.min(axis=0), 0.0, 1.0)
 
 
+def _overshoot(target: AlbedoTarget, brdf) -> float:
+    """The largest ``a/a_data - 1`` of ``brdf`` at :data:`BAND_VIEWS_DEG` over the channels
+    whose data albedo exceeds :data:`BAND_FLOOR` (the match's quadrature)."""
+    held = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)[:, None] & (target.ratios.ref > BAND_FLOOR)
+    ratios = np.asarray(target.ratios(brdf), float)[held]
+    return float(np.nanmax(ratios)) - 1.0 if len(ratios) else 0.0
+
+
 def _band_error(target: AlbedoTarget, brdf) -> float:
     """The largest ``|a/a_data - 1|`` of ``brdf`` at :data:`BAND_VIEWS_DEG` over the channels
     whose data albedo exceeds :data:`BAND_FLOOR` (the match's quadrature)."""
@@ -422,7 +439,7 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
     errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
     if not bases or max(errors) <= BAND_TARGET:
-        return AlbedoFactors(s, b)
+        return _energy_bounded(brdf, AlbedoFactors(s, b))
     joint = _systems(target, brdf, lobes, bases)
     reflectance = np.array([base.reflectance for base in bases])
     with np.errstate(divide="ignore"):
@@ -430,6 +447,7 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     lower = np.minimum(1.0 / BASE_RANGE, upper)
     matched = _rebuilt(brdf, s, b)
     log_before, band_before = target.log(matched), _band_error(target, matched)
+    over_before = max(_overshoot(target, matched), ALBEDO_ABOVE)
     for rounds in range(BAND_ROUNDS, -1, -1):
         s2, b2 = s.copy(), b.copy()
         for c, system in enumerate(joint):
@@ -442,8 +460,44 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
         if np.all(b2 == 1.0):
             continue
         candidate = _rebuilt(brdf, s2, b2)
-        if _band_error(target, candidate) < band_before and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before:
-            return AlbedoFactors(s2, b2)
+        if (_band_error(target, candidate) < band_before and _overshoot(target, candidate) <= over_before
+                and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before):
+            return _energy_bounded(brdf, AlbedoFactors(s2, b2))
+    return _energy_bounded(brdf, AlbedoFactors(s, b))
+
+
+def _energy_bounded(brdf, factors: AlbedoFactors, rounds: int = 3) -> AlbedoFactors:
+    """``factors`` with the total albedo of the matched fit below ``1 - ENERGY_MARGIN`` at
+    :data:`VIEWS_DEG` and :data:`ENERGY_VIEWS_DEG` (module docstring): per channel over it,
+    the factor at the nodes above the band views scaled by the ``mu`` at which the albedo
+    carried by those nodes, taken as linear in ``mu``, meets the bound (a few rounds: the
+    tables are clipped to 1); then, where a channel is still over, its lobes' factor and its
+    bases' scaled by ``limit / albedo`` (rounds again)."""
+    from ..metrics import directional_albedo
+    views, limit = VIEWS_DEG + ENERGY_VIEWS_DEG, 1.0 - ENERGY_MARGIN
+    grazing = np.asarray(NODES_DEG) > max(BAND_VIEWS_DEG)
+    s, b = factors.s.copy(), factors.bases.copy()
+
+    def albedo(s, b):
+        return directional_albedo(_rebuilt(brdf, s, b), views, n_theta=QUADRATURE, n_phi=QUADRATURE)
+
+    a = albedo(s, b)
+    for step in range(2 * rounds):
+        over = np.any(a > limit, axis=0)
+        if not np.any(over):
+            break
+        if step < rounds:                          # the grazing nodes
+            low = s.copy()
+            low[np.ix_(grazing, over)] = 0.0
+            carried = a - albedo(low, b)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mu = np.where((a > limit) & (carried > 0), 1.0 - (a - limit) / carried, 1.0)
+            s[np.ix_(grazing, over)] *= np.clip(mu.min(axis=0), 0.0, 1.0)[over]
+        else:                                      # the whole channel
+            scale = np.minimum(limit / np.max(a, axis=0), 1.0) * (1.0 - 1e-9)
+            s[:, over] *= scale[over]
+            b[:, over] *= scale[over]
+        a = albedo(s, b)
     return AlbedoFactors(s, b)
 
 
