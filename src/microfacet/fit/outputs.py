@@ -309,7 +309,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     the ones already written are removed (no ``.npz`` without its ``.json`` and
     ``.png``). The perceptual fits run in a process of their own
     (:func:`microfacet._background.in_process_items`; the same bytes as in this process),
-    each judged here as it comes. Returns the JSON summary (module docstring); ``seconds``
+    each judged here as it comes, on two threads beside the other fits. Returns the JSON summary (module docstring); ``seconds``
     holds the time of the tabulated fit and of the least-squares fits (wall; not of the
     errors, picture or files).
 
