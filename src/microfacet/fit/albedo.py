@@ -56,8 +56,9 @@ Energy comes before the data's albedo (measured albedos can exceed 1 near grazin
 a table matched up to 80 deg can overshoot beyond it): where the matched fit's total albedo
 at :data:`VIEWS_DEG` or :data:`ENERGY_VIEWS_DEG` exceeds ``1 - ENERGY_MARGIN`` in a channel,
 that channel's factor at the nodes beyond the band views (:data:`NODES_DEG` above 75 deg) is
-scaled down until it does not, and, where that is not enough, the channel's lobes and bases
-as a whole (:func:`albedo_factors`).
+scaled down until it does not, or, where that makes a table ring, the channel's tables get the
+largest ceiling that holds it (their grazing rise cut flat: a ceiling adds no ripple), the
+bases scaled down too where they alone exceed it (:class:`AlbedoFactors`).
 
 Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes, or the
 lobes and bases together, carry the albedo's variation with the view; a data albedo that
@@ -293,11 +294,12 @@ def _shapes(k: int) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def _tables(brdf, s: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-    """The cosines of the tables and each lobe's ``clip(F s, 0, 1)`` for factors ``s`` ``(K, 3)``."""
+def _tables(brdf, s: np.ndarray, ceiling=1.0) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The cosines of the tables and each lobe's ``clip(F s, 0, ceiling)`` for factors ``s``
+    ``(K, 3)`` (``ceiling``: per channel, at most 1)."""
     theta = np.linspace(np.pi / 2, 0.0, TABLE_SIZE)
     cos_d, factor = np.cos(theta), _hats(theta) @ s
-    return cos_d, [np.clip(np.asarray(b.fresnel(cos_d), float) * factor, 0.0, 1.0) for b in _lobes(brdf)]
+    return cos_d, [np.clip(np.asarray(b.fresnel(cos_d), float) * factor, 0.0, ceiling) for b in _lobes(brdf)]
 
 
 def _rings(values: np.ndarray) -> np.ndarray:
@@ -316,17 +318,21 @@ class AlbedoFactors(NamedTuple):
     bases : (B, 3) ndarray
         The factor of each diffuse base's reflectance (in the fit's order) per RGB channel;
         ones where the lobes reach the band alone.
+    ceiling : (3,) ndarray
+        The largest value of the lobes' tables per RGB channel (1: none; below 1 where the
+        fit would otherwise reflect more than 1 at some view).
 
     Examples
     --------
     >>> import microfacet as mf
     >>> fit = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.3))
     >>> f = albedo_factors(albedo_target(fit), fit)
-    >>> f.s.shape, f.bases.shape
-    ((10, 3), (1, 3))
+    >>> f.s.shape, f.bases.shape, f.ceiling
+    ((10, 3), (1, 3), array([1., 1., 1.]))
     """
     s: np.ndarray
     bases: np.ndarray
+    ceiling: np.ndarray
 
 
 def _bases(brdf) -> list:
@@ -433,13 +439,13 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     k = len(NODES_DEG)
     s, b = np.ones((k, 3)), np.ones((len(bases), 3))
     if not lobes:
-        return AlbedoFactors(s, b)
+        return AlbedoFactors(s, b, np.ones(3))
     systems = _systems(target, brdf, lobes)
     for c, system in enumerate(systems):
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
     errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
     if not bases or max(errors) <= BAND_TARGET:
-        return _energy_bounded(brdf, AlbedoFactors(s, b))
+        return _energy_bounded(brdf, AlbedoFactors(s, b, np.ones(3)))
     joint = _systems(target, brdf, lobes, bases)
     reflectance = np.array([base.reflectance for base in bases])
     with np.errstate(divide="ignore"):
@@ -462,43 +468,51 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
         candidate = _rebuilt(brdf, s2, b2)
         if (_band_error(target, candidate) < band_before and _overshoot(target, candidate) <= over_before
                 and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before):
-            return _energy_bounded(brdf, AlbedoFactors(s2, b2))
-    return _energy_bounded(brdf, AlbedoFactors(s, b))
+            return _energy_bounded(brdf, AlbedoFactors(s2, b2, np.ones(3)))
+    return _energy_bounded(brdf, AlbedoFactors(s, b, np.ones(3)))
 
 
-def _energy_bounded(brdf, factors: AlbedoFactors, rounds: int = 3) -> AlbedoFactors:
+def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFactors:
     """``factors`` with the total albedo of the matched fit below ``1 - ENERGY_MARGIN`` at
-    :data:`VIEWS_DEG` and :data:`ENERGY_VIEWS_DEG` (module docstring): per channel over it,
-    the factor at the nodes above the band views scaled by the ``mu`` at which the albedo
-    carried by those nodes, taken as linear in ``mu``, meets the bound (a few rounds: the
-    tables are clipped to 1); then, where a channel is still over, its lobes' factor and its
-    bases' scaled by ``limit / albedo`` (rounds again)."""
+    :data:`VIEWS_DEG` and :data:`ENERGY_VIEWS_DEG` (module docstring). Per channel over it:
+    first the factor at the nodes above the band views scaled by the ``mu`` at which the
+    albedo they carry, taken as linear in ``mu``, meets the bound (2 rounds: the tables are
+    clipped), kept if it holds the bound and no table rings; else the largest ceiling of the
+    lobes' tables that holds it (bisection, ``steps`` halvings: a ceiling keeps a table's
+    single peak or monotone rise), the bases scaled by ``limit / albedo`` where even a
+    ceiling of 0 does not."""
     from ..metrics import directional_albedo
     views, limit = VIEWS_DEG + ENERGY_VIEWS_DEG, 1.0 - ENERGY_MARGIN
     grazing = np.asarray(NODES_DEG) > max(BAND_VIEWS_DEG)
-    s, b = factors.s.copy(), factors.bases.copy()
+    s, b, ceiling = factors.s.copy(), factors.bases.copy(), factors.ceiling.copy()
 
-    def albedo(s, b):
-        return directional_albedo(_rebuilt(brdf, s, b), views, n_theta=QUADRATURE, n_phi=QUADRATURE)
+    def albedo(s, b, c):
+        return directional_albedo(_rebuilt(brdf, s, b, c), views, n_theta=QUADRATURE, n_phi=QUADRATURE)
 
-    a = albedo(s, b)
-    for step in range(2 * rounds):
-        over = np.any(a > limit, axis=0)
-        if not np.any(over):
-            break
-        if step < rounds:                          # the grazing nodes
-            low = s.copy()
-            low[np.ix_(grazing, over)] = 0.0
-            carried = a - albedo(low, b)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                mu = np.where((a > limit) & (carried > 0), 1.0 - (a - limit) / carried, 1.0)
-            s[np.ix_(grazing, over)] *= np.clip(mu.min(axis=0), 0.0, 1.0)[over]
-        else:                                      # the whole channel
-            scale = np.minimum(limit / np.max(a, axis=0), 1.0) * (1.0 - 1e-9)
-            s[:, over] *= scale[over]
-            b[:, over] *= scale[over]
-        a = albedo(s, b)
-    return AlbedoFactors(s, b)
+    a = albedo(s, b, ceiling)
+    over = np.any(a > limit, axis=0)
+    if not np.any(over):
+        return factors
+    s_mu, a_mu = s.copy(), a
+    for _ in range(2):                               # the grazing nodes scaled down
+        low = s_mu.copy()
+        low[np.ix_(grazing, over)] = 0.0
+        carried = a_mu - albedo(low, b, ceiling)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mu = np.where((a_mu > limit) & (carried > 0), 1.0 - (a_mu - limit) / carried, 1.0)
+        s_mu[np.ix_(grazing, over)] *= np.clip(mu.min(axis=0), 0.0, 1.0)[over]
+        a_mu = albedo(s_mu, b, ceiling)
+    rings = np.any([_rings(v) for v in _tables(brdf, s_mu, ceiling)[1]], axis=0)
+    if np.all(a_mu[:, over] <= limit) and not np.any(rings & over):
+        return AlbedoFactors(s_mu, b, ceiling)
+    top = np.max(albedo(s, b, np.where(over, 0.0, ceiling)), axis=0)     # a ceiling of 0: the bases alone
+    b *= np.where(over & (top > limit), limit / np.maximum(top, 1e-300) * (1.0 - 1e-9), 1.0)
+    low, high = np.zeros(3), ceiling.copy()
+    for _ in range(steps):                           # the largest ceiling that holds the bound
+        mid = np.where(over, 0.5 * (low + high), ceiling)
+        good = np.all(albedo(s, b, mid) <= limit, axis=0)
+        low, high = np.where(over & good, mid, low), np.where(over & ~good, mid, high)
+    return AlbedoFactors(s, b, np.where(over, low, ceiling))
 
 
 def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
@@ -529,14 +543,14 @@ def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
     return albedo_factors(target, brdf).s
 
 
-def _rebuilt(brdf, s: np.ndarray, b: np.ndarray):
-    """``brdf``'s tree with each lobe's Fresnel term the table ``clip(F s, 0, 1)`` and each
-    base's reflectance times ``b`` (clipped to 1)."""
+def _rebuilt(brdf, s: np.ndarray, b: np.ndarray, ceiling=1.0):
+    """``brdf``'s tree with each lobe's Fresnel term the table ``clip(F s, 0, ceiling)`` and
+    each base's reflectance times ``b`` (clipped to 1)."""
     from .. import fresnel as fr
     from ..brdf import Lambertian, MicrofacetBRDF
     from ..diffuse import TransmittedLambertian
     from .analytic import SumBRDF
-    cos_d, tables = _tables(brdf, s)
+    cos_d, tables = _tables(brdf, s, ceiling)
     tables, factors = iter(tables), iter(b)
 
     def scaled(part):
