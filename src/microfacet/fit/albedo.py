@@ -57,8 +57,9 @@ a table matched up to 80 deg can overshoot beyond it): where the matched fit's t
 at :data:`VIEWS_DEG` or :data:`ENERGY_VIEWS_DEG` exceeds ``1 - ENERGY_MARGIN`` in a channel,
 that channel's factor at the nodes beyond the band views (:data:`NODES_DEG` above 75 deg) is
 scaled down until it does not, or, where that makes a table ring, the channel's tables get the
-largest ceiling that holds it (their grazing rise cut flat: a ceiling adds no ripple), the
-bases scaled down too where they alone exceed it (:class:`AlbedoFactors`).
+largest ceiling that holds it (their grazing rise cut flat), the bases scaled down too where
+they alone exceed it, or, where a capped table still rings, the whole channel is scaled
+down (:class:`AlbedoFactors`).
 
 Accuracy: the albedo is matched to a few percent at 0-75 deg wherever the lobes, or the
 lobes and bases together, carry the albedo's variation with the view; a data albedo that
@@ -480,7 +481,9 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
     clipped), kept if it holds the bound and no table rings; else the largest ceiling of the
     lobes' tables that holds it (bisection, ``steps`` halvings: a ceiling keeps a table's
     single peak or monotone rise), the bases scaled by ``limit / albedo`` where even a
-    ceiling of 0 does not."""
+    ceiling of 0 does not; where a capped table rings (a valley), the channel's factors,
+    bases and ceiling all scaled by ``limit / albedo`` (``clip(F l s, 0, l c) = l clip(F s, 0,
+    c)``: the tables keep their shape, the albedo scales exactly)."""
     from ..metrics import directional_albedo
     views, limit = VIEWS_DEG + ENERGY_VIEWS_DEG, 1.0 - ENERGY_MARGIN
     grazing = np.asarray(NODES_DEG) > max(BAND_VIEWS_DEG)
@@ -505,6 +508,7 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
     rings = np.any([_rings(v) for v in _tables(brdf, s_mu, ceiling)[1]], axis=0)
     if np.all(a_mu[:, over] <= limit) and not np.any(rings & over):
         return AlbedoFactors(s_mu, b, ceiling)
+    b0 = b.copy()
     top = np.max(albedo(s, b, np.where(over, 0.0, ceiling)), axis=0)     # a ceiling of 0: the bases alone
     b *= np.where(over & (top > limit), limit / np.maximum(top, 1e-300) * (1.0 - 1e-9), 1.0)
     low, high = np.zeros(3), ceiling.copy()
@@ -512,7 +516,13 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
         mid = np.where(over, 0.5 * (low + high), ceiling)
         good = np.all(albedo(s, b, mid) <= limit, axis=0)
         low, high = np.where(over & good, mid, low), np.where(over & ~good, mid, high)
-    return AlbedoFactors(s, b, np.where(over, low, ceiling))
+    ceiling = np.where(over, low, ceiling)
+    rings = over & np.any([_rings(v) for v in _tables(brdf, s, ceiling)[1]], axis=0)
+    if np.any(rings):          # a capped valley can ring: the channel scaled as a whole, exactly
+        scale = np.where(rings, limit / np.max(a, axis=0) * (1.0 - 1e-9), 1.0)
+        s, b = s * scale, np.where(rings, b0 * scale, b)
+        ceiling = np.where(rings, factors.ceiling * scale, ceiling)
+    return AlbedoFactors(s, b, ceiling)
 
 
 def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
