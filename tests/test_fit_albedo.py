@@ -102,19 +102,27 @@ def test_corpus_base_dominated_plastic_reaches_the_band(corpus):
     assert [type(b) for b in matched.brdfs] == [type(b) for b in fit.brdfs]
 
 
-@pytest.mark.parametrize("model", ["lobe", "two_lobes"])
-def test_corpus_bright_satin_stays_within_energy(corpus, model):
-    """satin_white: the data's albedo reaches ~1.02 at 80 deg (a measurement above 1) and the
-    table matched there overshoots beyond it (1.17 at 89 deg before the energy bound); the
-    matched fit now reflects at most 1 at every view, its tables do not ring (total variation
-    at most twice the range: scaling the grazing nodes alone made two_lobes' ring) and it stays
-    in the band at 0-75 deg."""
-    data = mf.measured.load(corpus("rgl/satin_white_rgb"))
+@pytest.mark.parametrize("name, model", [("rgl/satin_white_rgb", "lobe"), ("rgl/satin_white_rgb", "two_lobes"),
+                                         ("rgl/paper_yellow_rgb", "mixture")])
+def test_corpus_bright_materials_stay_within_energy(corpus, name, model):
+    """Bright RGL materials whose data albedo reaches ~1.02 near grazing (a measurement above
+    1): the table matched there overshot beyond it (satin_white: 1.17 at 89 deg before the
+    energy bound); the matched fit now reflects at most 1 at every view and its tables do not
+    ring (total variation at most twice the range), though scaling the grazing nodes alone
+    made satin_white's two_lobes ring and a ceiling alone paper_yellow's mixture (a valley)."""
+    data = mf.measured.load(corpus(name))
     fit = fit_models(data, (model,))[model]
     matched = A.match_albedo(data, fit)
     assert np.max(directional_albedo(matched, (0, 30, 60, 75, 80, 85, 89))) <= 1.0
-    for lobe in matched.brdfs[:-1]:
-        v = lobe.fresnel.values
-        assert np.all(np.abs(np.diff(v, axis=0)).sum(axis=0) <= 2.0 * np.ptp(v, axis=0) + 1e-9)
+    for lobe in matched.brdfs:
+        if isinstance(lobe, mf.MicrofacetBRDF):
+            v = lobe.fresnel.values
+            assert np.all(np.abs(np.diff(v, axis=0)).sum(axis=0) <= 2.0 * np.ptp(v, axis=0) + 1e-9)
+
+
+def test_corpus_bright_satin_stays_in_the_band(corpus):
+    """satin_white's one lobe, held within energy, still reaches the data's albedo at 0-75 deg."""
+    data = mf.measured.load(corpus("rgl/satin_white_rgb"))
+    matched = A.match_albedo(data, fit_models(data, ("lobe",))["lobe"])
     judge = AlbedoRatios(data)
-    assert _worst(judge(matched), judge.ref) <= 0.08
+    assert _worst(judge(matched), judge.ref) <= 0.05
