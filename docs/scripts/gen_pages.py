@@ -116,6 +116,7 @@ RESULTS = {
     "sheared_chi2": ("Sheared lobes at grazing views: chi-square", "python experiments/sheared_chi2.py"),
     "glsl_gpu": ("GLSL shaders on an NVIDIA GPU", "python experiments/glsl_gpu.py"),
     "cold_start": ("Cold start", "python benchmarks/bench_cold_start.py"),
+    "fit_command": ("The fit command's time", "python benchmarks/bench_fit_command.py --baseline SRC"),
 }
 RESULT_DIRS = (ROOT / "experiments" / "results", ROOT / "benchmarks" / "results")
 LINK = re.compile(r"\]\(([^)#\s]+)\)")
