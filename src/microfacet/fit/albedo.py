@@ -80,6 +80,8 @@ Examples
 >>> ratios = mf.metrics.albedo_ratios(data, matched, views_deg=(0.0, 60.0))
 >>> bool(abs(ratios - 1.0).max() < 0.01)
 True
+>>> BAND_VIEWS_DEG, BAND_TARGET                  # the band's views (deg) and the half-width aimed at
+((0.0, 30.0, 60.0, 75.0), 0.04)
 """
 from __future__ import annotations
 
