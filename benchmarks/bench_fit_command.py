@@ -29,17 +29,10 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("MICROFACET_DATA") or ROOT.parent / "shared" / "data")
-CORPUS = Path(os.environ.get("MICROFACET_CORPUS_CACHE")
-              or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus")
-FILES = (CORPUS / "merl__nickel.binary", DATA / "merl" / "nickel.binary.gz")
+from bench_cold_start import FILES, ROOT, load   # the same file and load line as the cold-start benchmark
+
 RESULTS = ROOT / "benchmarks" / "results" / "fit_command.md"
 GOAL_S = 2.0
-
-
-def load() -> str:
-    return " / ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
 def command(src: Path, path: Path, out: Path) -> tuple[float, float]:
