@@ -380,7 +380,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         # GIL in its loops: the two cores stay busy once the fitting process is done)
         judged = feeder.submit(_judge_perceptual, perceptual_items, albedo_target(brdf, log=judges[0]), metrics,
                                judges, pool)
-        legacy = _legacy_fits(brdf, method, settings, metrics, judges)
+        legacy = _legacy_fits(brdf, method, settings, metrics)
         fits_summary = _fit_summaries(judges, legacy.named, legacy.scores[:3], data_albedo)
         if picture:
             from ..render import fit_comparison_png         # imports matplotlib, also while they run
@@ -407,23 +407,20 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
 
 class _Legacy(NamedTuple):
     """The tabulated fit, its moment conversions and the least-squares fits (``named``, by
-    name), the data's side of the metrics and of the judges, the fits' ``scores`` (grid,
-    uniform, albedo, furnace) and the times ``(t0, t1, t2)``: start, tabulated fit done,
-    least-squares fits done."""
+    name), the fits' ``scores`` (grid, uniform, albedo, furnace) and the times ``(t0, t1,
+    t2)``: start, tabulated fit done, least-squares fits done."""
     fit: object
     moments: dict
     moments_failed: dict
     least: dict
     named: dict
-    metrics: tuple
-    judges: tuple
     scores: tuple
     times: tuple
 
 
-def _legacy_fits(brdf, method: str, settings: dict, metrics: tuple, judges: tuple) -> _Legacy:
-    """The tabulated fit and the fits made from it, with their metrics (``metrics``,
-    ``judges``: :func:`_metrics` and :func:`_judges` of the data), one after the other."""
+def _legacy_fits(brdf, method: str, settings: dict, metrics: tuple) -> _Legacy:
+    """The tabulated fit and the fits made from it, with their metrics (``metrics``:
+    :func:`_metrics` of the data), one after the other."""
     t0 = time.perf_counter()
     fit = _run_fit(brdf, settings["resolution"], settings["anisotropic"], settings["gaf"],
                    settings["tabulated_diffuse"], settings["albedo_weight"])
@@ -435,8 +432,7 @@ def _legacy_fits(brdf, method: str, settings: dict, metrics: tuple, judges: tupl
     moments, moments_failed = _moment_fits(fit, brdf, required=method == "moments")
     named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
              **{f"{k}_least_squares": b for k, b in least.items()}}
-    return _Legacy(fit, moments, moments_failed, least, named, metrics, judges, _scores(metrics, named),
-                   (t0, t1, t2))
+    return _Legacy(fit, moments, moments_failed, least, named, _scores(metrics, named), (t0, t1, t2))
 
 
 def _legacy_json(legacy: _Legacy, method: str) -> dict:
