@@ -302,11 +302,15 @@ def test_fit_material_writes_the_three_files(tmp_path):
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monkeypatch):
-    """The perceptual fits in a forked process, each judged as it comes, give the same bytes
-    as made in this process (issue 10: overlapping stages changes no result); only the fit
-    times differ."""
+@pytest.mark.parametrize("numba", [True, False], ids=["kernels", "numpy"])
+def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monkeypatch, numba):
+    """The perceptual fits (and, on the NumPy path, the legacy fits) in forked processes, each
+    judged as it comes, give the same bytes as made in this process (issue 10: overlapping
+    stages changes no result); only the fit times differ."""
+    from microfacet import kernels
     from microfacet.fit import outputs
+    if not numba:
+        monkeypatch.setattr(kernels, "AVAILABLE", False)
     data = mf.measured.load(inputs / "gold-ggx.binary")
     files = {}
     for mode in ("process", "here"):

@@ -26,6 +26,34 @@ def test_lobe_factor_is_the_library_ggx(alpha):
     np.testing.assert_allclose(mine, ref, rtol=1e-9)
 
 
+def test_lobes_evaluated_together_equal_their_sum():
+    """GGXLobes (the lobes on one Geometry, Schlick terms and tables on one grid combined) equals
+    the SumBRDF of the same parts: Schlick lobes, the tables of an albedo match, a conductor
+    lobe, an anisotropic lobe and both bases; pairs below the horizon; broadcast shapes; out=."""
+    from microfacet.diffuse import TransmittedLambertian
+    from microfacet.fit.albedo import albedo_target, match_albedo
+    rng = np.random.default_rng(5)
+    lobes = [mf.MicrofacetBRDF(mf.GGX(alpha=a), mf.fresnel.Schlick(rng.uniform(size=3), 0.7)) for a in (0.01, 0.1, 0.5)]
+    others = [mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Conductor.metal("Au")),
+              mf.MicrofacetBRDF(mf.GGX(alpha_x=0.1, alpha_y=0.3)), mf.Lambertian(0.2), TransmittedLambertian(0.3)]
+    wi, wo = rng.normal(size=(2, 2000, 3))
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)              # half of them below the horizon
+    wo = np.abs(wo) / np.linalg.norm(wo, axis=1, keepdims=True)
+    joint = perceptual.GGXLobes(*lobes, *others)
+    matched = match_albedo(None, joint, albedo_target(_plastic()))
+    assert type(matched) is perceptual.GGXLobes
+    assert {type(b.fresnel) for b in matched.brdfs[:3]} == {mf.fresnel.Tabulated}
+    for brdf in (joint, matched):
+        plain = mf.fit.SumBRDF(*brdf.brdfs, weights=brdf.weights)
+        for method in ("eval", "eval_cos"):
+            ref = getattr(plain, method)(wi, wo)
+            np.testing.assert_allclose(getattr(brdf, method)(wi, wo), ref, rtol=1e-10, atol=1e-14)
+        grid = brdf.eval(wi[:5, None], wo[None, :7])
+        np.testing.assert_allclose(grid, plain.eval(wi[:5, None], wo[None, :7]), rtol=1e-10, atol=1e-14)
+        out = np.empty((2000, 3))
+        assert brdf.eval_cos(wi, wo, out=out) is out
+
+
 @pytest.mark.parametrize("model", perceptual.MODELS)
 def test_normal_equations_are_those_of_the_residuals(model):
     """J^T J and J^T r of _Problem.normal_equations (analytic slopes in q, Gram matrices in y)

@@ -122,7 +122,13 @@ class Dielectric(Fresnel):
 
     def __call__(self, cos_theta_d) -> np.ndarray:
         c = _cos(cos_theta_d)
-        g2 = self.eta**2 + c * c - 1.0
+        if self.eta[0] == self.eta[1] == self.eta[2]:      # grey: one channel, repeated
+            return np.repeat(self._reflectance(self.eta[:1], c), 3, axis=-1)
+        return self._reflectance(self.eta, c)
+
+    @staticmethod
+    def _reflectance(eta: np.ndarray, c: np.ndarray) -> np.ndarray:
+        g2 = eta**2 + c * c - 1.0
         g = np.sqrt(np.maximum(g2, 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
             a = (g - c) / (g + c)

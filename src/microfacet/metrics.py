@@ -40,6 +40,7 @@ Examples
 """
 from __future__ import annotations
 
+import functools
 import threading
 
 import numpy as np
@@ -540,11 +541,22 @@ def directional_albedo(brdf, views_deg=ALBEDO_VIEWS_DEG, min_cos: float = 0.0, m
     array([[0.5, 0.5, 0.5],
            [0.5, 0.5, 0.5]])
     """
-    nodes = albedo_directions(views_deg, min_cos, n_theta, n_phi)
+    nodes = _albedo_nodes(tuple(np.atleast_1d(np.asarray(views_deg, dtype=np.float64)).tolist()), float(min_cos),
+                          int(n_theta), int(n_phi))
     if mask is not None:
         keep = np.asarray(mask(nodes[0], nodes[1]), dtype=bool)
         nodes = tuple(a[keep] for a in nodes)
     return _albedo_sums(brdf, nodes, len(views_deg))
+
+
+@functools.lru_cache(maxsize=8)
+def _albedo_nodes(views_deg: tuple, min_cos: float, n_theta: int, n_phi: int) -> tuple:
+    """:func:`albedo_directions`, read-only and remembered (a fit's metrics integrate every
+    candidate on the same nodes)."""
+    nodes = albedo_directions(views_deg, min_cos, n_theta, n_phi)
+    for a in nodes:
+        a.flags.writeable = False
+    return nodes
 
 
 def _albedo_sums(brdf, nodes, n_views: int) -> np.ndarray:

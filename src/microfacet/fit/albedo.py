@@ -577,7 +577,7 @@ def _rebuilt(brdf, s: np.ndarray, b: np.ndarray, ceiling=1.0):
         return part
 
     if isinstance(brdf, SumBRDF):
-        return SumBRDF(*map(scaled, brdf.brdfs), weights=brdf.weights)
+        return type(brdf)(*map(scaled, brdf.brdfs), weights=brdf.weights)     # a GGXLobes stays one
     return scaled(brdf)
 
 

@@ -40,7 +40,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._background import in_process_items
+from .._background import can_fork, in_background, in_process_items
 from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
@@ -307,9 +307,11 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     :func:`microfacet.fit.fit` as ``diffuse``. The picture is rendered in memory first,
     then the three files are written, each atomically; if a write fails or is interrupted
     the ones already written are removed (no ``.npz`` without its ``.json`` and
-    ``.png``). The perceptual fits run in a process of their own
+    ``.png``). The perceptual fits and, where this process can fork, the tabulated fit and
+    the fits made from it run in processes of their own
     (:func:`microfacet._background.in_process_items`; the same bytes as in this process),
-    each judged here as it comes, on two threads beside the other fits. Returns the JSON summary (module docstring); ``seconds``
+    each judged here as it comes, on two threads, while the picture's drawing warms up on
+    another (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module docstring); ``seconds``
     holds the time of the tabulated fit and of the least-squares fits (wall; not of the
     errors, picture or files).
 
@@ -371,25 +373,31 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     from .perceptual import target as perceptual_target
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
+    from .. import kernels            # on the NumPy path (the CLI's): Numba's parallel kernels abort a forked child
+    legacy_items = in_process_items(_legacy_item, brdf, method, settings) \
+        if can_fork() and not kernels.AVAILABLE else None
     _import_numba()
+    if picture:                     # Matplotlib's imports and fonts, on a thread while the fits run
+        from ..render import fit_comparison_png
+        from ..render.compare import warm_up
+        drawing = in_background(warm_up)
     metrics, judges = _metrics(brdf), _judges(brdf)
     data_albedo = metrics[2].ref
     from concurrent.futures import ThreadPoolExecutor
     with ThreadPoolExecutor(2) as pool, ThreadPoolExecutor(1) as feeder:
-        # each perceptual fit is judged as it comes, beside the legacy fits (NumPy releases the
-        # GIL in its loops: the two cores stay busy once the fitting process is done)
+        # each perceptual fit is judged as it comes, while the legacy fits are made (in a
+        # process of their own where one can fork) and judged here
         judged = feeder.submit(_judge_perceptual, perceptual_items, albedo_target(brdf, log=judges[0]), metrics,
                                judges, pool)
-        legacy = _legacy_fits(brdf, method, settings, metrics)
-        fits_summary = _fit_summaries(judges, legacy.named, legacy.scores[:3], data_albedo)
-        if picture:
-            from ..render import fit_comparison_png         # imports matplotlib, also while they run
+        legacy, = legacy_items if legacy_items is not None else (_legacy_fits(brdf, method, settings),)
+        scores = _scores(metrics, legacy.named)
+        fits_summary = _fit_summaries(judges, legacy.named, scores[:3], data_albedo)
         perceptual, t3 = judged.result()
     for name in (m for m in models if m in perceptual):     # in the order of the models
         fits_summary[name] = perceptual[name][1]
     perceptual = {name: b for name, (b, _) in perceptual.items()}
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
-    summary = {**_legacy_json(legacy, method), **settings, "best": best, "fits": fits_summary,
+    summary = {**_legacy_json(legacy, scores, method), **settings, "best": best, "fits": fits_summary,
                "seconds_perceptual": round(t3 - legacy.times[1], 4)}
     if legacy.moments_failed:
         summary["moments_failed"] = legacy.moments_failed
@@ -397,6 +405,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     files = {out_npz: legacy.fit.to_bytes(fits=specs, best=best),
              out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
     if picture:                                     # rendered before any file is written
+        drawing.result()
         shown, notes = _shown_fits({**legacy.named, **perceptual}, fits_summary, best)
         files[out_npz.with_suffix(".png")] = fit_comparison_png(
             {"data": brdf, **shown}, title=title or material_name(out_npz),
@@ -407,20 +416,22 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
 
 class _Legacy(NamedTuple):
     """The tabulated fit, its moment conversions and the least-squares fits (``named``, by
-    name), the fits' ``scores`` (grid, uniform, albedo, furnace) and the times ``(t0, t1,
-    t2)``: start, tabulated fit done, least-squares fits done."""
+    name) and the times ``(t0, t1, t2)``: start, tabulated fit done, least-squares fits done."""
     fit: object
     moments: dict
     moments_failed: dict
     least: dict
     named: dict
-    scores: tuple
     times: tuple
 
 
-def _legacy_fits(brdf, method: str, settings: dict, metrics: tuple) -> _Legacy:
-    """The tabulated fit and the fits made from it, with their metrics (``metrics``:
-    :func:`_metrics` of the data), one after the other."""
+def _legacy_item(brdf, method: str, settings: dict):
+    """:func:`_legacy_fits` as the one item of a generator (for :func:`in_process_items`)."""
+    yield _legacy_fits(brdf, method, settings)
+
+
+def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
+    """The tabulated fit and the fits made from it, one after the other."""
     t0 = time.perf_counter()
     fit = _run_fit(brdf, settings["resolution"], settings["anisotropic"], settings["gaf"],
                    settings["tabulated_diffuse"], settings["albedo_weight"])
@@ -432,13 +443,14 @@ def _legacy_fits(brdf, method: str, settings: dict, metrics: tuple) -> _Legacy:
     moments, moments_failed = _moment_fits(fit, brdf, required=method == "moments")
     named = {"tabulated": fit, **{f"{k}_moments": b for k, b in moments.items()},
              **{f"{k}_least_squares": b for k, b in least.items()}}
-    return _Legacy(fit, moments, moments_failed, least, named, _scores(metrics, named), (t0, t1, t2))
+    return _Legacy(fit, moments, moments_failed, least, named, (t0, t1, t2))
 
 
-def _legacy_json(legacy: _Legacy, method: str) -> dict:
+def _legacy_json(legacy: _Legacy, scores: tuple, method: str) -> dict:
     """The summary's entries of the tabulated, moment and least-squares fits: the headline
-    ``"ggx"``/``"beckmann"`` fits of ``method``, every fit's parameters, errors and times."""
-    grid, uniform, albedo, furnace = legacy.scores
+    ``"ggx"``/``"beckmann"`` fits of ``method``, every fit's parameters, errors (``scores``:
+    :func:`_scores` of ``legacy.named``) and times."""
+    grid, uniform, albedo, furnace = scores
     least, named = legacy.least, legacy.named
     chosen = legacy.moments if method == "moments" else {
         family: next(b for k, b in least.items() if k.startswith(family)) for family in ("ggx", "beckmann")}

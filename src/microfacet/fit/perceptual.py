@@ -61,9 +61,11 @@ import numpy as np
 
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, measured_mask, measurement_directions,
                        uniform_directions)
+from ..protocol import directions, into
+from .analytic import SumBRDF
 from .extract import box_qp
 
-__all__ = ["MODELS", "MODEL_SPECS", "Geometry", "Target", "Model", "target", "fit_model", "fit_parameters", "iter_parameters", "fit_models", "select",
+__all__ = ["MODELS", "MODEL_SPECS", "Geometry", "GGXLobes", "Target", "Model", "target", "fit_model", "fit_parameters", "iter_parameters", "fit_models", "select",
            "lobe_factor", "PENALTY"]
 
 #: The models of :func:`fit_models`, in the order they are fitted.
@@ -140,11 +142,14 @@ class Geometry:
         Returns
         -------
         Geometry
-            ``cos theta_i``, ``cos theta_o``, ``cos theta_h``, ``cos theta_d`` of each pair.
+            ``cos theta_i``, ``cos theta_o``, ``cos theta_h``, ``cos theta_d`` of each pair
+            (``cos theta_h = cos theta_d = 0`` where ``wo = -wi``).
         """
         h = wi + wo
-        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
-        return cls(wi[:, 2].copy(), wo[:, 2].copy(), h[:, 2].copy(), np.clip(np.sum(wi * h, -1), 0.0, 1.0))
+        n2 = np.einsum("ij,ij->i", h, h)
+        inv = np.divide(1.0, np.sqrt(n2), out=np.zeros_like(n2), where=n2 > 0)
+        return cls(wi[:, 2].copy(), wo[:, 2].copy(), h[:, 2] * inv,
+                   np.clip(np.einsum("ij,ij->i", wi, h) * inv, 0.0, 1.0))
 
     def __len__(self) -> int:
         return len(self.cos_i)
@@ -189,8 +194,8 @@ def _lobe_factors(log_alpha, g: Geometry, slopes: bool = False):
     """:func:`lobe_factor` of every roughness ``exp(log_alpha)`` (``(L,)``) at ``g``: ``(L, n)``;
     with ``slopes``, also its derivative in ``log alpha``,
     ``s (2 - 4 a^2 c^2 / (c^2 (a^2 - 1) + 1) - G2 sum_{i,o} t / (2 sqrt(1 + t)))``,
-    ``t = a^2 tan^2`` (differentiating ``D``, and ``Lambda = t / (2 (sqrt(1 + t) + 1))`` of
-    Heitz 2014, Eq. 72)."""
+    ``t = a^2 tan^2`` (differentiating ``D``, and ``Lambda = (sqrt(1 + t) - 1) / 2`` of
+    Heitz 2014, Eq. 72, so that ``G2 = 2 / (sqrt(1 + t_i) + sqrt(1 + t_o))``)."""
     log_alpha = np.atleast_1d(np.asarray(log_alpha, dtype=np.float64))
     out = np.empty((len(log_alpha), len(g)))
     slope = np.empty_like(out) if slopes else None
@@ -199,8 +204,8 @@ def _lobe_factors(log_alpha, g: Geometry, slopes: bool = False):
         den = c2 * (a2 - 1.0) + 1.0
         ti, to = a2 * g.tan2_i, a2 * g.tan2_o
         si, so = np.sqrt(1.0 + ti), np.sqrt(1.0 + to)
-        g2 = 1.0 / (1.0 + ti / (2.0 * (si + 1.0)) + to / (2.0 * (so + 1.0)))
-        out[j] = a2 / np.pi * g2 * g.jacobian / (den * den)
+        g2 = 2.0 / (si + so)                        # 1 + Lambda_i + Lambda_o = (s_i + s_o) / 2
+        out[j] = (a2 / np.pi) * g2 * g.jacobian / (den * den)
         if slopes:
             slope[j] = out[j] * (2.0 - 4.0 * a2 * c2 / den - g2 * (ti / (2.0 * si) + to / (2.0 * so)))
     return (out, slope) if slopes else out
@@ -386,8 +391,98 @@ def _luminance(rgb) -> float:
 
 
 def _sum(parts, weights):
-    from .analytic import SumBRDF
-    return parts[0] if len(parts) == 1 else SumBRDF(*parts, weights=np.maximum(weights, 0.02))
+    return parts[0] if len(parts) == 1 else GGXLobes(*parts, weights=np.maximum(weights, 0.02))
+
+
+def _isotropic_ggx(part) -> bool:
+    """Whether ``part`` is a lobe of :func:`lobe_factor`: a float64 Smith (height-correlated,
+    shadowing) :class:`~microfacet.brdf.MicrofacetBRDF` of a central isotropic GGX."""
+    from ..brdf import MicrofacetBRDF
+    from ..distributions import GGX
+    if not (isinstance(part, MicrofacetBRDF) and isinstance(part.distribution, GGX)):
+        return False
+    d = part.distribution
+    return (part.gaf_model == "smith" and part.shadowing and part.dtype == np.float64 and d.alpha_x == d.alpha_y
+            and d.rho == 0.0 and not np.any(d.mean_slope))
+
+
+class GGXLobes(SumBRDF):
+    """The :class:`~microfacet.fit.SumBRDF` of the perceptual fits, whose isotropic GGX lobes
+    are evaluated together: the pairs' :class:`Geometry` once per call, then each lobe's
+    :func:`lobe_factor` (the closed form of ``D G2 / (4 cos th_i cos th_o)``) times its own
+    Fresnel term at ``cos th_d``; the other parts (bases, other lobes) by their own ``eval``.
+    Equal to the :class:`~microfacet.fit.SumBRDF` of the same parts to rounding (tested);
+    sampling, ``pdf`` and the fit file's spec are the sum's.
+
+    Parameters
+    ----------
+    *brdfs : BRDF
+        The terms.
+    weights : sequence of float, optional
+        Probabilities of sampling each term (:class:`~microfacet.fit.SumBRDF`).
+
+    Examples
+    --------
+    >>> import numpy as np, microfacet as mf
+    >>> parts = (mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Schlick(0.9)),
+    ...          mf.MicrofacetBRDF(mf.GGX(alpha=0.4), mf.fresnel.Schlick(0.2)), mf.Lambertian(0.1))
+    >>> wi, wo = np.array([0.6, 0.0, 0.8]), np.array([-0.5, 0.1, np.sqrt(0.74)])
+    >>> bool(np.allclose(GGXLobes(*parts).eval(wi, wo), mf.fit.SumBRDF(*parts).eval(wi, wo), rtol=1e-12))
+    True
+    """
+
+    def __init__(self, *brdfs, weights=None):
+        super().__init__(*brdfs, weights=weights)
+        self._lobes = [b for b in self.brdfs if _isotropic_ggx(b)]
+        self._others = [b for b in self.brdfs if not _isotropic_ggx(b)]
+        self._log_alpha = np.log([b.distribution.alpha_x for b in self._lobes])
+
+    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
+        """``sum_j f_j cos theta_i`` (:meth:`microfacet.fit.SumBRDF.eval_cos`)."""
+        return into(out, self._sum(wi, wo, True), (wi, wo))
+
+    def eval(self, wi, wo, out=None) -> np.ndarray:
+        """``sum_j f_j`` (:meth:`microfacet.fit.SumBRDF.eval`)."""
+        return into(out, self._sum(wi, wo, False), (wi, wo))
+
+    def _sum(self, wi, wo, cos: bool) -> np.ndarray:
+        wi, wo = np.broadcast_arrays(directions(wi, "wi"), directions(wo, "wo"))
+        total = np.zeros(wi.shape)
+        for b in self._others:
+            total += b.eval_cos(wi, wo) if cos else b.eval(wi, wo)
+        if self._lobes:              # every factor is 0 below either horizon (Geometry.jacobian)
+            g = Geometry.of(wi.reshape(-1, 3), wo.reshape(-1, 3))
+            s = _lobe_factors(self._log_alpha, g) * (g.cos_i if cos else 1.0)
+            total += _fresnel_sum([lobe.fresnel for lobe in self._lobes], s, g.cos_d).reshape(wi.shape)
+        return total
+
+
+def _fresnel_sum(fresnels: list, s: np.ndarray, cos_d: np.ndarray) -> np.ndarray:
+    """``sum_k s_k F_k(cos_d)``, ``(n, 3)``, of the Fresnel terms ``fresnels`` and factors ``s``
+    ``(L, n)``: Schlick terms through two matrix products, tables on one grid through one
+    lookup of the grid (the tables of :func:`microfacet.fit.albedo.match_albedo`), any other
+    term by its own call."""
+    from ..fresnel import Schlick, Tabulated
+    out = np.zeros((len(cos_d), 3))
+    kinds = [Schlick if type(f) is Schlick else Tabulated if type(f) is Tabulated else None for f in fresnels]
+    schlick = [k for k, kind in enumerate(kinds) if kind is Schlick]
+    if schlick:
+        f0 = np.array([np.broadcast_to(fresnels[k].f0, 3) for k in schlick])
+        f90 = np.array([np.broadcast_to(fresnels[k].f90, 3) for k in schlick])
+        m = 1.0 - np.clip(cos_d, 0.0, 1.0)
+        out += s[schlick].T @ f0 + ((m * m) * (m * m) * m)[:, None] * (s[schlick].T @ (f90 - f0))
+    grid = next((fresnels[k].cos_theta_d for k, kind in enumerate(kinds) if kind is Tabulated), None)
+    tables = [k for k, kind in enumerate(kinds) if kind is Tabulated and np.array_equal(fresnels[k].cos_theta_d, grid)]
+    if tables:
+        values = np.array([fresnels[k].values for k in tables])          # (L, J, 3)
+        i = np.clip(np.searchsorted(grid, cos_d, side="right") - 1, 0, len(grid) - 2)
+        t = np.clip((cos_d - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)    # np.interp's, clamped at the ends
+        for c in range(3):
+            lo = np.einsum("kn,kn->n", s[tables], values[:, i, c])
+            out[:, c] += lo + (np.einsum("kn,kn->n", s[tables], values[:, i + 1, c]) - lo) * t
+    for k in set(range(len(fresnels))) - set(schlick) - set(tables):
+        out += s[k][:, None] * fresnels[k](cos_d)
+    return out
 
 
 def _lobes_brdf(q, y):

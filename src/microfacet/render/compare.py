@@ -44,7 +44,7 @@ from .lights import DirectionalLight
 from .lobes import LUMINANCE, lobe_curve
 from .sphere import Sphere
 
-__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "COMPARE_LIGHT",
+__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "warm_up", "COMPARE_LIGHT",
            "GRAZING_LIGHT"]
 
 #: Light of the comparison spheres: up-left of the view, 35 deg from it, unit irradiance.
@@ -389,6 +389,33 @@ def fit_comparison_png(brdfs: Mapping, title: str = "", views_deg: Sequence[floa
     """
     with _drawing():
         return _png(_comparison_figure(brdfs, title, views_deg, planes_deg, size, dpi, notes))
+
+
+def warm_up() -> None:
+    """Import what :func:`fit_comparison_png` draws with and draw a small figure in its fonts:
+    the first picture's fixed cost (Matplotlib's imports and font loading, ~0.4 s), paid here
+    (e.g. on another thread while a fit runs) rather than in the first picture.
+
+    Example
+    -------
+    >>> warm_up()
+    """
+    from matplotlib import artist, lines, markers, ticker, transforms  # noqa: F401  (the picture's modules)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from PIL import Image  # noqa: F401
+    with _drawing():
+        fig = Figure(figsize=(1.0, 0.5), dpi=50)
+        FigureCanvasAgg(fig)
+        for size in (7, 9, 11):
+            fig.text(0.5, 0.5, "0.042 θ", fontsize=size)
+        ax = fig.add_axes((0.1, 0.1, 0.8, 0.8))
+        ax.plot([0.0, 1.0], label="fit")
+        ax.set_title("f", fontsize=9)
+        ax.legend(fontsize=7, title="line style", title_fontsize=7)
+        fig.legend(*ax.get_legend_handles_labels(), fontsize=8, frameon=False)
+        fig.suptitle("title", fontsize=11)
+        fig.canvas.draw()
 
 
 @contextmanager
