@@ -84,6 +84,7 @@ def _choose(row: dict, policy: str) -> str:
 
 
 def selection_study(corpus: dict) -> list[str]:
+    from microfacet.fit.outputs import ALBEDO_PREFERENCE
     rows = corpus["raw"]
     counts = {}
     for row in rows:
@@ -113,7 +114,7 @@ def selection_study(corpus: dict) -> list[str]:
         lines.append(f"| {policy} | {held}/{len(rows)} | {chroma}/{len(rows)} | {wins}/{merl} | "
                      f"{np.median(ratios):.3f} |")
     lines += ["", "`library`: `microfacet.fit.outputs.best_fit` (of the fits without a colour cast, the "
-              "least image x log error, or a fit within the band scoring within 1.5 times it; fits whose "
+              f"least image x log error, or a fit within the band scoring within {ALBEDO_PREFERENCE:g} times it; fits whose "
               "albedo is off by more than half left out); `no band preference`: the same without the "
               "albedo rules; `band within k x`: the best of the fits that hold the band if its image x log "
               "error is within k times the best's; `band first`: the best of the fits that hold it "

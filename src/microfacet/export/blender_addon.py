@@ -63,14 +63,14 @@ def _best_fit(metrics: dict) -> str:
     """microfacet.fit.outputs.best_fit's rule, restated (this add-on runs without microfacet):
     leave out fits whose albedo is off by more than 50 %, then those with a colour cast
     (chromaticity > 0.02); the least image x log error, or a fit within 5 % of the data's
-    albedo that scores within 1.5 times it."""
+    albedo that scores within 2 times it."""
     def score(n):
         return float(metrics[n]["image"]) * float(metrics[n]["log"])
     sound = [n for n in metrics if float(metrics[n].get("albedo_error", 0.0)) <= 0.5] or list(metrics)
     clean = [n for n in sound if float(metrics[n].get("chromaticity", 1.0)) <= 0.02] or sound
     best = min(clean, key=score)
     held = [n for n in clean if float(metrics[n].get("albedo_error", 1.0)) <= 0.05]
-    if held and score(min(held, key=score)) <= 1.5 * score(best):
+    if held and score(min(held, key=score)) <= 2.0 * score(best):
         return min(held, key=score)
     return best
 

@@ -602,7 +602,7 @@ ALBEDO_TOLERANCE = 0.05
 ALBEDO_GROSS = 0.5
 #: A fit within the albedo band is chosen over the best one when its score is at most this
 #: many times the best's.
-ALBEDO_PREFERENCE = 1.5
+ALBEDO_PREFERENCE = 2.0
 
 
 def best_fit(metrics: dict) -> str:
@@ -670,7 +670,7 @@ def format_fits_table(summary: dict) -> str:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
     return "\n".join(lines) + ("\n* best: least image error x log error of the fits without a colour cast, or one within "
-                                "5 % of the data's albedo scoring within 1.5 times it (images: spheres "
+                                f"5 % of the data's albedo scoring within {ALBEDO_PREFERENCE:g} times it (images: spheres "
                                 f"under 3 lights and an environment, {IMAGE_SIZE} px); log: cosine-weighted log error; "
                                 "albedo: worst ratio fit/data\n")
 
