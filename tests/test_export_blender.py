@@ -15,6 +15,7 @@ from microfacet import fresnel as fr
 from microfacet.export import blender_material, blender_brdf, blender_python, export, render_cycles, write_blend
 from microfacet.export.blender import write_addon
 from microfacet.export.blender_nodes import alphas_of, node_ellipse, roughness_anisotropy
+from microfacet.fit.outputs import ALBEDO_PREFERENCE
 from microfacet.fit import SumBRDF
 from microfacet.metrics import ImageError
 from microfacet.render import Sphere
@@ -160,7 +161,7 @@ RULE_CASES = [
     {"best": {"image": 0.05, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.2},
      "near": {"image": 0.07, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.01}},
     {"best": {"image": 0.05, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.2},
-     "far": {"image": 0.08, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.01}},
+     "far": {"image": 0.05 * ALBEDO_PREFERENCE * 1.1, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.01}},
     {"black": {"image": 0.01, "log": 0.01, "chromaticity": 0.0, "albedo_error": 0.99},
      "cast": {"image": 0.05, "log": 0.01, "chromaticity": 0.1}},
 ]
