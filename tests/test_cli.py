@@ -139,3 +139,37 @@ def test_demo_mitsuba_section_without_mitsuba_is_a_note(tmp_path, monkeypatch):
         html = _mitsuba_section(tmp_path)
     assert html.startswith('<section id="mitsuba">') and "Skipped on this machine" in html
     assert not (tmp_path / "mitsuba").exists()
+
+
+
+_RETAINED = """
+import contextlib, io, os, sys
+import numpy as np
+from microfacet.cli import main
+
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+with contextlib.redirect_stdout(io.StringIO()):
+    sys.argv = ["microfacet", "--version"]
+    main(None) if {program} else main(["--version"])
+before = rss()
+a = np.ones(2**23)                           # 64 MiB, then freed
+del a
+print((rss() - before) / 2**20)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt: Linux only")
+def test_the_program_keeps_freed_memory_for_reuse():
+    """Run as the program (``main()``), the CLI keeps freed memory for reuse: a freed 64 MiB
+    array stays in the process (the next large temporaries reuse its pages instead of faulting
+    in fresh ones), where a caller's process (``main(argv)``) keeps glibc's default, which
+    returns it to the system at once."""
+    kept = {}
+    for program in (True, False):
+        r = subprocess.run([sys.executable, "-c", _RETAINED.format(program=program)], capture_output=True,
+                           text=True, check=True)
+        kept[program] = float(r.stdout.split()[-1])
+    assert kept[True] > 60 and kept[False] < 8, kept

@@ -71,9 +71,29 @@ def _one_line(e: Exception) -> str:
     return " ".join(text.split())
 
 
+def _keep_freed_memory() -> None:
+    """glibc's ``malloc`` told to serve large blocks from its heap and never to trim it
+    (``mallopt``: ``M_MMAP_THRESHOLD`` 1 GiB, ``M_TRIM_THRESHOLD`` 2 GiB), as
+    ``MALLOC_MMAP_THRESHOLD_`` and ``MALLOC_TRIM_THRESHOLD_`` would: NumPy's large
+    temporaries then reuse memory already mapped rather than fault in fresh pages at each
+    allocation, in this process and the ones it forks (``benchmarks/bench_fit_command.py``).
+    Freed memory stays with the process until it exits. Nothing elsewhere than Linux, or
+    where the C library has no ``mallopt``."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(-3, 1 << 30)                # M_MMAP_THRESHOLD
+    mallopt(-1, (1 << 31) - 1)          # M_TRIM_THRESHOLD
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line with ``argv``; bad input prints one line on stderr, without a
-    traceback.
+    traceback. Run as the program (``argv`` None: ``sys.argv``), it first sets the
+    process's allocator to keep freed memory for reuse (:func:`_keep_freed_memory`).
 
     Parameters
     ----------
@@ -94,6 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     >>> main(["demo", "-o", "demo-output", "--size", "48"])     # doctest: +SKIP
     0
     """
+    if argv is None:
+        _keep_freed_memory()
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if argv[:2] == ["glints", "render"]:        # second form of 'glints'
