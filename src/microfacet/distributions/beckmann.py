@@ -9,21 +9,17 @@ from .base import SlopeDistribution
 __all__ = ["Beckmann", "visible_slope_cdf", "visible_slope_quantile"]
 
 
-# SciPy's special functions, imported at the first Beckmann evaluation rather than with the
-# package (~0.1 s of every command's start otherwise)
-def erfc(x):
-    from scipy.special import erfc as f
-    return f(x)
+def _scipy_special(name: str):
+    """SciPy's special function ``name``, imported at its first call rather than with the
+    package (SciPy's import is a noticeable part of every command's start)."""
+    def f(x):
+        from scipy import special
+        return getattr(special, name)(x)
+    f.__name__ = name
+    return f
 
 
-def erfcx(x):
-    from scipy.special import erfcx as f
-    return f(x)
-
-
-def erfinv(x):
-    from scipy.special import erfinv as f
-    return f(x)
+erfc, erfcx, erfinv = (_scipy_special(name) for name in ("erfc", "erfcx", "erfinv"))
 
 _SQRT_PI = np.sqrt(np.pi)
 _U_MIN = 2.0**-53  # uniforms are clamped to [_U_MIN, 1 - _U_MIN]

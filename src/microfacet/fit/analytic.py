@@ -160,7 +160,7 @@ class SumBRDF(BRDF):
         (..., 3) ndarray
             The sum of the terms' ``f_r cos theta_i``.
         """
-        return into(out, sum(b.eval_cos(wi, wo) for b in self.brdfs), (wi, wo))
+        return into(out, self._sum(wi, wo, True), (wi, wo))
 
     def eval(self, wi, wo, out=None) -> np.ndarray:
         """``sum_j f_j``.
@@ -177,7 +177,11 @@ class SumBRDF(BRDF):
         (..., 3) ndarray
             The sum of the terms' ``f_r``.
         """
-        return into(out, sum(b.eval(wi, wo) for b in self.brdfs), (wi, wo))
+        return into(out, self._sum(wi, wo, False), (wi, wo))
+
+    def _sum(self, wi, wo, cos: bool) -> np.ndarray:
+        """The terms' ``eval_cos`` (``cos``) or ``eval``, summed (a subclass may evaluate them together)."""
+        return sum(b.eval_cos(wi, wo) if cos else b.eval(wi, wo) for b in self.brdfs)
 
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Mixture density ``sum_j w_j pdf_j``.

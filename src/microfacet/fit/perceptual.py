@@ -61,7 +61,7 @@ import numpy as np
 
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, measured_mask, measurement_directions,
                        uniform_directions)
-from ..protocol import directions, into
+from ..protocol import directions
 from .analytic import SumBRDF
 from .extract import box_qp
 
@@ -436,40 +436,6 @@ class GGXLobes(SumBRDF):
         self._lobes = [b for b in self.brdfs if _isotropic_ggx(b)]
         self._others = [b for b in self.brdfs if not _isotropic_ggx(b)]
         self._log_alpha = np.log([b.distribution.alpha_x for b in self._lobes])
-
-    def eval_cos(self, wi, wo, out=None) -> np.ndarray:
-        """``sum_j f_j cos theta_i`` (:meth:`microfacet.fit.SumBRDF.eval_cos`).
-
-        Parameters
-        ----------
-        wi, wo : (..., 3) array_like
-            Unit light and view directions in the local frame.
-        out : ndarray, optional
-            Output array.
-
-        Returns
-        -------
-        (..., 3) ndarray
-            The sum of the terms' ``f_r cos theta_i``.
-        """
-        return into(out, self._sum(wi, wo, True), (wi, wo))
-
-    def eval(self, wi, wo, out=None) -> np.ndarray:
-        """``sum_j f_j`` (:meth:`microfacet.fit.SumBRDF.eval`).
-
-        Parameters
-        ----------
-        wi, wo : (..., 3) array_like
-            Unit light and view directions in the local frame.
-        out : ndarray, optional
-            Output array.
-
-        Returns
-        -------
-        (..., 3) ndarray
-            The sum of the terms' ``f_r``.
-        """
-        return into(out, self._sum(wi, wo, False), (wi, wo))
 
     def _sum(self, wi, wo, cos: bool) -> np.ndarray:
         wi, wo = np.broadcast_arrays(directions(wi, "wi"), directions(wo, "wo"))
