@@ -37,6 +37,9 @@ setup: $(VENV)/.installed
 	  echo "setup: installing the system packages chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 xvfb with apt-get (as root): the demo's real-time section and the viewer tests run the WebGL2 viewer in headless Chromium, the GLSL tests run on Mesa's EGL (llvmpipe), the MaterialX render tests run MaterialX's GlslRenderer on a private Xvfb display"; \
 	  apt-get update -qq && apt-get install -y -qq chromium libegl1 libgl1 libgl1-mesa-dri libegl-mesa0 xvfb >/dev/null; \
 	else echo "setup: no chromium/Mesa EGL/Xvfb and no root apt: GLSL, viewer and MaterialX render tests will skip"; fi
+# The package's bytecode compiled now (~1 s), not by each command's first run (nor at every run
+# where PYTHONDONTWRITEBYTECODE is set)
+	@$(PY) -m compileall -q src/microfacet >/dev/null
 # Numba kernels compiled into Numba's cache now, not at their first use in the demo or the tests
 # (docs/performance.md): the BRDF kernels (python -m microfacet.kernels --help; float32 ones too under
 # CI=true, for the tests) beside the measured-BRDF readers', LEADR and glints kernels

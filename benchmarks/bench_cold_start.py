@@ -14,7 +14,9 @@ filled by the precompile steps of ``make setup`` (after setup):
 * with ``--demo``: ``microfacet demo -o DIR`` as ``make demo`` runs it, after those steps (goal
   <= 90 s), and with ``--demo-cold`` also with an empty cache (minutes).
 
-Wall and CPU (user + system, child processes included) seconds, min and median of ``--runs``; the
+Python writes its bytecode as it does by default (``PYTHONDONTWRITEBYTECODE`` is removed): a fresh
+clone's first runs compile the modules they import (the wheel's are compiled at install).
+Wall and CPU (user + system, child processes included) seconds, min, median and max of ``--runs``; the
 machine's load average is printed beside each (a shared machine: compare within one table).
 Writes ``benchmarks/results/cold_start.md``.
 
@@ -76,11 +78,17 @@ class Install:
         return elapsed, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+def _user_environment() -> dict:
+    """This environment as a user's shell has it: Python writes its bytecode (``__pycache__``),
+    so a clone's first commands compile the modules they import and later ones load them."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
 def clone_install(work: Path) -> Install:
     """A fresh ``git clone`` of ``HEAD``: its ``src`` first on ``PYTHONPATH``, with this interpreter."""
     dest = work / "clone"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(dest)], check=True)
-    env = dict(os.environ, PYTHONPATH=str(dest / "src"))
+    env = dict(_user_environment(), PYTHONPATH=str(dest / "src"))
     head = subprocess.run(["git", "-C", str(dest), "rev-parse", "--short", "HEAD"], capture_output=True,
                           text=True).stdout.strip()
     return Install(f"fresh clone ({head})", sys.executable, env, dest / "README.md")
@@ -97,7 +105,7 @@ def wheel_install(work: Path, clone: Path) -> tuple[Install, float]:
     subprocess.run(["python3", "-m", "venv", str(venv)], check=True)
     subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet", str(wheel)], check=True,
                    stderr=subprocess.DEVNULL)
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "MICROFACET_DATA")}
+    env = {k: v for k, v in _user_environment().items() if k not in ("PYTHONPATH", "MICROFACET_DATA")}
     return Install(f"wheel ({wheel.name}, clean venv)", str(venv / "bin" / "python"), env, clone / "README.md"), \
         time.perf_counter() - t
 
@@ -175,15 +183,18 @@ def main() -> None:
              f"{time.strftime('%Y-%m-%d %H:%M')}, niceness {os.nice(0)}, {os.cpu_count()} CPUs shared with other work (load averages "
              "1 / 5 / 15 min at the start of each run beside it; at the end "
              f"{load()}). Wall and CPU (user + system, child processes included) seconds of fresh processes. "
+             "Python writes its bytecode as by default: the clone's first runs compile the modules they import "
+             "(the max column of its first series). "
              "Empty cache: `NUMBA_CACHE_DIR` a new empty folder per run; after precompile: the folder that "
              "`python -m microfacet.kernels --precompile` and `python -m microfacet.kernels_extra --precompile` "
              "(`make setup`'s compile steps) filled. Goals: quick start <= 5 s and `microfacet fit` <= 3 s "
              "with an empty cache, `make demo` <= 90 s after `make setup`.",
-             "", "| install | what | MICROFACET_COMPILE | runs | wall min s | wall median s | CPU median s | load averages |",
-             "|---|---|---|---:|---:|---:|---:|---|"]
+             "", "| install | what | MICROFACET_COMPILE | runs | wall min s | wall median s | wall max s | CPU median s "
+             "| load averages |",
+             "|---|---|---|---:|---:|---:|---:|---:|---|"]
     for inst, label, mode, times, cpus, loads in rows:
         lines.append(f"| {inst} | {label} | {mode} | {len(times)} | {min(times):.2f} | "
-                     f"{statistics.median(times):.2f} | {statistics.median(cpus):.2f} | {'; '.join(loads)} |")
+                     f"{statistics.median(times):.2f} | {max(times):.2f} | {statistics.median(cpus):.2f} | {'; '.join(loads)} |")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text("\n".join(lines) + "\n")
     print(f"wrote {RESULTS}")

@@ -309,11 +309,14 @@ def test_anisotropic_table_between_nodes(n, tol_phi, tol):
         assert np.max(np.abs(a[keep] / b[keep] - 1.0)) < tolerance
 
 
-def test_box_qp_matches_bvls_and_energy_rows_hold():
-    """The projected-Newton box QP equals BVLS (its oracle) on random bounded least
-    squares, and the energy-constrained solve meets ``a x <= a_data`` at the optimum of
-    BVLS on the slack form of the same problem."""
+@pytest.mark.parametrize("dual", [True, False], ids=["quadprog", "projected-newton"])
+def test_box_qp_matches_bvls_and_energy_rows_hold(dual, monkeypatch):
+    """The box QP equals BVLS (its oracle) on random bounded least squares, by quadprog and
+    by the projected Newton method it falls back on, and the energy-constrained solve
+    meets ``a x <= a_data`` at the optimum of BVLS on the slack form of the same problem."""
     from scipy.optimize import lsq_linear
+    if not dual:
+        monkeypatch.setattr(extract, "_dual_active_set", lambda *args: None)
     rng = np.random.default_rng(5)
     for n in (3, 17, 60):
         r, y = rng.normal(size=(n + 4, n)), 3.0 * rng.normal(size=n + 4)

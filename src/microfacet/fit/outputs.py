@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .._background import can_fork, in_background, in_process_items
 from ..errors import MicrofacetError
@@ -291,6 +292,7 @@ def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -
     return grid**2 + uniform**2 + (albedo_weight**2 * float(np.mean((r - 1.0) ** 2)) if len(r) else 0.0)
 
 
+@threadpool_limits.wrap(limits=1, user_api="blas")     # one BLAS thread per process: its processes use the cores
 def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotropic: bool = False,
                  gaf: str = "smith", title: str = "", method: str = "least_squares", diffuse: str = "auto",
                  fresnel: str = "table", tabulated_diffuse: bool = False, picture: bool = True,
@@ -374,8 +376,10 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
     from .. import kernels            # on the NumPy path (the CLI's): Numba's parallel kernels abort a forked child
-    legacy_items = in_process_items(_legacy_item, brdf, method, settings) \
-        if can_fork() and not kernels.AVAILABLE else None
+    legacy_items = None
+    if can_fork() and not kernels.AVAILABLE:
+        _import_scipy_special()
+        legacy_items = in_process_items(_legacy_item, brdf, method, settings)
     _import_numba()
     if picture:                     # Matplotlib's imports and fonts, on a thread while the fits run
         from ..render import fit_comparison_png
@@ -500,6 +504,14 @@ def _moment_fits(fit, brdf, required: bool) -> tuple[dict, dict]:
                 raise
             failed[family] = str(e)
     return out, failed
+
+
+def _import_scipy_special() -> None:
+    """Import SciPy's special functions (Beckmann's Smith term,
+    :mod:`microfacet.distributions.beckmann`, imports them at its first evaluation) before the
+    legacy fits' child forks: that child, which fits Beckmann lobes, and this process, which
+    judges them, then share one import instead of making one each."""
+    import scipy.special  # noqa: F401
 
 
 def _import_numba() -> None:

