@@ -466,12 +466,14 @@ def _fresnel_sum(fresnels: list, s: np.ndarray, cos_d: np.ndarray) -> np.ndarray
     grid = next((fresnels[k].cos_theta_d for k, kind in enumerate(kinds) if kind is Tabulated), None)
     tables = [k for k, kind in enumerate(kinds) if kind is Tabulated and np.array_equal(fresnels[k].cos_theta_d, grid)]
     if tables:
-        values = np.array([fresnels[k].values for k in tables])          # (L, J, 3)
+        rows = np.stack([fresnels[k].values for k in tables], axis=1).reshape(len(grid), -1)   # (J, L 3)
         i = np.clip(np.searchsorted(grid, cos_d, side="right") - 1, 0, len(grid) - 2)
         t = np.clip((cos_d - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)    # np.interp's, clamped at the ends
-        for c in range(3):
-            lo = np.einsum("kn,kn->n", s[tables], values[:, i, c])
-            out[:, c] += lo + (np.einsum("kn,kn->n", s[tables], values[:, i + 1, c]) - lo) * t
+        lo, v = np.take(rows, i, axis=0), np.take(rows, i + 1, axis=0)       # every lobe's RGB at a pair's nodes
+        v -= lo
+        v *= t[:, None]
+        v += lo
+        out += np.einsum("kn,nkc->nc", s[tables], v.reshape(len(cos_d), len(tables), 3))
     for k in set(range(len(fresnels))) - set(schlick) - set(tables):
         out += s[k][:, None] * fresnels[k](cos_d)
     return out
