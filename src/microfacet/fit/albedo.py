@@ -47,8 +47,8 @@ the reflectance at most 1; a factor above 1 is drawn back toward 1 until the tot
 at :data:`ENERGY_VIEWS_DEG` stays below ``1 - ENERGY_MARGIN``. The scaled bases are kept only
 if they bring the band error down, exceed the data's albedo at no view of the band by more
 than :data:`ALBEDO_ABOVE` (or than the lobes' match alone did), and the log error grows by at most
-:data:`LOG_TOLERANCE`
-(fewer weighing rounds are tried first otherwise); the base keeps its class
+:data:`LOG_TOLERANCE` (:data:`LOG_TOLERANCE_INTO_BAND` where they bring a match outside the band
+into it) (fewer weighing rounds are tried first otherwise); the base keeps its class
 (:class:`~microfacet.Lambertian`, :class:`~microfacet.diffuse.TransmittedLambertian` of the
 same index) with the new reflectance, so the result is still the fit's tree.
 
@@ -135,8 +135,9 @@ BAND_ROUNDS = 3
 #: Largest factor of a base's reflectance and its inverse, the smallest.
 BASE_RANGE = 2.0
 #: Largest relative growth of the log error (:class:`~microfacet.metrics.LogError` on the
-#: target's pairs) that the bases' factors may cost over the lobes' match alone.
-LOG_TOLERANCE = 0.1
+#: target's pairs) that the bases' factors may cost over the lobes' match alone, and the
+#: larger one allowed where they bring a match whose band error exceeds :data:`BAND` within it.
+LOG_TOLERANCE, LOG_TOLERANCE_INTO_BAND = 0.1, 0.15
 #: Views (deg) beyond :data:`VIEWS_DEG` where the total albedo of a fit whose bases were
 #: scaled up must stay below ``1 - ENERGY_MARGIN``.
 ENERGY_VIEWS_DEG = (85.0, 89.0)
@@ -249,6 +250,15 @@ class _System(NamedTuple):
         return float(r.max()) if len(r) else 0.0
 
 
+def _together(brdf, lobes):
+    """The sum of ``lobes`` (parts of ``brdf``) as one BRDF of ``brdf``'s sum type, whose own
+    evaluation of them together (e.g. :class:`microfacet.fit.perceptual.GGXLobes`) it keeps."""
+    from .analytic import SumBRDF
+    if len(lobes) == 1 or not isinstance(brdf, SumBRDF):
+        return lobes[0] if len(lobes) == 1 else SumBRDF(*lobes)
+    return type(brdf)(*lobes)
+
+
 def _systems(target: AlbedoTarget, brdf, lobes, bases=()) -> list[_System]:
     """The least squares of :func:`albedo_factors` per channel (module docstring): unknowns
     the table's nodes ``s`` and, for each of ``bases``, its reflectance's factor ``b``."""
@@ -256,11 +266,12 @@ def _systems(target: AlbedoTarget, brdf, lobes, bases=()) -> list[_System]:
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
     fitted = ratios.albedo(brdf)
-    spec = w[:, None] * sum(np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes)
+    specular = _together(brdf, lobes)
+    spec = w[:, None] * np.nan_to_num(np.asarray(specular.eval_cos(wi, wo), float))
     diffuse = [w[:, None] * np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in bases]
     hats = _hats(_theta_d(wi, wo))
     f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
-    f_spec = sum(np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes)
+    f_spec = np.nan_to_num(np.asarray(specular.eval_cos(log.wi, log.wo), float))
     f_bases = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in bases]
     log_hats = _hats(_theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
@@ -469,8 +480,10 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
         if np.all(b2 == 1.0):
             continue
         candidate = _rebuilt(brdf, s2, b2)
-        if (_band_error(target, candidate) < band_before and _overshoot(target, candidate) <= over_before
-                and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before):
+        band = _band_error(target, candidate)
+        tolerance = LOG_TOLERANCE_INTO_BAND if band_before > BAND >= band else LOG_TOLERANCE
+        if (band < band_before and _overshoot(target, candidate) <= over_before
+                and target.log(candidate) <= (1.0 + tolerance) * log_before):
             return _energy_bounded(brdf, AlbedoFactors(s2, b2, np.ones(3)))
     return _energy_bounded(brdf, AlbedoFactors(s, b, np.ones(3)))
 
