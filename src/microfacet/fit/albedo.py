@@ -47,8 +47,8 @@ the reflectance at most 1; a factor above 1 is drawn back toward 1 until the tot
 at :data:`ENERGY_VIEWS_DEG` stays below ``1 - ENERGY_MARGIN``. The scaled bases are kept only
 if they bring the band error down, exceed the data's albedo at no view of the band by more
 than :data:`ALBEDO_ABOVE` (or than the lobes' match alone did), and the log error grows by at most
-:data:`LOG_TOLERANCE` (:data:`LOG_TOLERANCE_INTO_BAND` where they bring a match outside the band
-into it) (fewer weighing rounds are tried first otherwise); the base keeps its class
+:data:`LOG_TOLERANCE`
+(fewer weighing rounds are tried first otherwise); the base keeps its class
 (:class:`~microfacet.Lambertian`, :class:`~microfacet.diffuse.TransmittedLambertian` of the
 same index) with the new reflectance, so the result is still the fit's tree.
 
@@ -135,9 +135,8 @@ BAND_ROUNDS = 3
 #: Largest factor of a base's reflectance and its inverse, the smallest.
 BASE_RANGE = 2.0
 #: Largest relative growth of the log error (:class:`~microfacet.metrics.LogError` on the
-#: target's pairs) that the bases' factors may cost over the lobes' match alone, and the
-#: larger one allowed where they bring a match whose band error exceeds :data:`BAND` within it.
-LOG_TOLERANCE, LOG_TOLERANCE_INTO_BAND = 0.1, 0.15
+#: target's pairs) that the bases' factors may cost over the lobes' match alone.
+LOG_TOLERANCE = 0.1
 #: Views (deg) beyond :data:`VIEWS_DEG` where the total albedo of a fit whose bases were
 #: scaled up must stay below ``1 - ENERGY_MARGIN``.
 ENERGY_VIEWS_DEG = (85.0, 89.0)
@@ -480,10 +479,8 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
         if np.all(b2 == 1.0):
             continue
         candidate = _rebuilt(brdf, s2, b2)
-        band = _band_error(target, candidate)
-        tolerance = LOG_TOLERANCE_INTO_BAND if band_before > BAND >= band else LOG_TOLERANCE
-        if (band < band_before and _overshoot(target, candidate) <= over_before
-                and target.log(candidate) <= (1.0 + tolerance) * log_before):
+        if (_band_error(target, candidate) < band_before and _overshoot(target, candidate) <= over_before
+                and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before):
             return _energy_bounded(brdf, AlbedoFactors(s2, b2, np.ones(3)))
     return _energy_bounded(brdf, AlbedoFactors(s, b, np.ones(3)))
 
