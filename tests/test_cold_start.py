@@ -147,33 +147,6 @@ def test_quick_start_with_an_empty_numba_cache(tmp_path):
     assert elapsed < 20.0, f"quick start took {elapsed:.1f} s with an empty Numba cache"
 
 
-def test_background_thread_reads_llvmlite_before_numba_imports_it():
-    """The background compile thread reads llvmlite's shared library (GIL released) before
-    Numba's import loads it: that load holds the GIL while the library's pages fault in, which
-    from a cold page cache stalled a quick start's main thread for seconds (5.8-10 s wall on
-    0.8 s of CPU). Before the read-ahead, Python never opened the library."""
-    pytest.importorskip("numba")
-    code = """
-import sys
-opened = []
-def audit(event, args):
-    if event == "open" and "libllvmlite" in str(args[0]):
-        opened.append("numba" in sys.modules)
-sys.addaudithook(audit)
-import numpy as np, microfacet as mf
-b = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
-w = np.array([[0.0, 0.0, 1.0]])
-b.eval(w, w)
-mf.kernels.ready(wait=None)
-print(opened, "numba" in sys.modules)
-"""
-    env = {k: v for k, v in os.environ.items() if k != "MICROFACET_COMPILE"}
-    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr[-2000:]
-    assert r.stdout.split() == ["[False]", "True"], r.stdout
-    assert kernels._read_ahead() > 10 << 20         # the library's bytes (~170 MB)
-
-
 @pytest.mark.slow
 def test_precompile_fills_the_cache_that_a_later_process_loads(tmp_path):
     """``python -m microfacet.kernels --precompile --dtypes float64`` into the project's cache (as

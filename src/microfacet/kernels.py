@@ -25,9 +25,7 @@ install and signature; Numba's cache then loads it in milliseconds). By default
 (``background``) the BRDF methods (``MicrofacetBRDF.eval`` ...) and the functions of
 :func:`compiled` do not wait for it: a call whose kernel is not ready in this process queues
 its compilation (or its load from the cache) on one background thread and runs the NumPy
-reference, batches of up to :data:`BACKGROUND_MAX` pairs (the thread first reads Numba's
-compiler library into the page cache with the GIL released, :func:`_read_ahead`, so that
-loading it stalls no other thread); larger batches, and every call once
+reference, batches of up to :data:`BACKGROUND_MAX` pairs; larger batches, and every call once
 the kernel is ready, run the kernel (a larger batch waits for it). The two paths agree to
 1e-12 (float64; ``tests/test_kernels.py``) and to the float32 kernels' accuracy (1e-5) for
 float32 BRDFs, so a result may move by that much between a call made while its kernel
@@ -260,31 +258,8 @@ def _fork_safely() -> None:
                         after_in_child=child)
 
 
-def _read_ahead() -> int:
-    """Read llvmlite's shared library (~180 MB, which Numba's import loads) into the page
-    cache; returns the bytes read. The import's ``dlopen`` holds the GIL while the library's
-    pages fault in: from a cold page cache (the first run after an install) every other
-    thread of the process waited seconds for it. These reads release the GIL."""
-    spec = importlib.util.find_spec("llvmlite")
-    if spec is None or not spec.submodule_search_locations:
-        return 0
-    folder = os.path.join(next(iter(spec.submodule_search_locations)), "binding")
-    buffer, total = bytearray(1 << 23), 0
-    for name in sorted(os.listdir(folder)) if os.path.isdir(folder) else ():
-        if name.startswith("libllvmlite"):
-            try:
-                with open(os.path.join(folder, name), "rb", buffering=0) as f:
-                    while n := f.readinto(buffer):
-                        total += n
-            except OSError:                      # only a head start: the import reads it anyway
-                pass
-    return total
-
-
 def _work() -> None:
-    """The background thread: reads Numba's compiler library ahead (:func:`_read_ahead`), then
-    compiles (or loads from Numba's cache) the queued kernels, in order."""
-    _read_ahead()
+    """The background thread: compiles (or loads from Numba's cache) the queued kernels, in order."""
     if hasattr(os, "register_at_fork"):
         _fork_safely()
     while True:
