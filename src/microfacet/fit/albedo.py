@@ -249,15 +249,6 @@ class _System(NamedTuple):
         return float(r.max()) if len(r) else 0.0
 
 
-def _together(brdf, lobes):
-    """The sum of ``lobes`` (parts of ``brdf``) as one BRDF of ``brdf``'s sum type, whose own
-    evaluation of them together (e.g. :class:`microfacet.fit.perceptual.GGXLobes`) it keeps."""
-    from .analytic import SumBRDF
-    if len(lobes) == 1 or not isinstance(brdf, SumBRDF):
-        return lobes[0] if len(lobes) == 1 else SumBRDF(*lobes)
-    return type(brdf)(*lobes)
-
-
 def _systems(target: AlbedoTarget, brdf, lobes, bases=()) -> list[_System]:
     """The least squares of :func:`albedo_factors` per channel (module docstring): unknowns
     the table's nodes ``s`` and, for each of ``bases``, its reflectance's factor ``b``."""
@@ -265,12 +256,11 @@ def _systems(target: AlbedoTarget, brdf, lobes, bases=()) -> list[_System]:
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
     fitted = ratios.albedo(brdf)
-    specular = _together(brdf, lobes)
-    spec = w[:, None] * np.nan_to_num(np.asarray(specular.eval_cos(wi, wo), float))
+    spec = w[:, None] * sum(np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes)
     diffuse = [w[:, None] * np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in bases]
     hats = _hats(_theta_d(wi, wo))
     f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
-    f_spec = np.nan_to_num(np.asarray(specular.eval_cos(log.wi, log.wo), float))
+    f_spec = sum(np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes)
     f_bases = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in bases]
     log_hats = _hats(_theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
