@@ -1175,7 +1175,7 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     if x is not None:
         return np.minimum(np.maximum(x, lo), hi)
     # np.clip, np.ix_, np.linalg.norm and np.array_equal spelled with ufuncs and masks (the
-    # same values): this loop runs ~10^4 times in a coat fit's energy-constrained solves
+    # same values), as the loop was written when it solved every box QP of a fit
     x = np.minimum(np.maximum(spd_solve(h, g) if x0 is None else x0, lo), hi)
     # the gradient's rounding error (~eps |h| |x|): a stiff h (a strong smoothing penalty)
     # cannot bring it below tol |g|
@@ -1204,16 +1204,20 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     return x
 
 
-def _dual_active_set(h, g, lo, hi):
-    """:func:`box_qp` by ``quadprog.solve_qp`` (the box as ``x >= lo``, ``-x >= -hi``, each
-    where finite), or None where it finds ``h`` not positive definite."""
-    import quadprog
-    eye = np.eye(len(g))
+def _box_rows(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """The box ``lo <= x <= hi`` as quadprog's rows ``C x >= b``: ``x >= lo``, ``-x >= -hi``,
+    each where finite."""
+    eye = np.eye(len(lo))
     low, high = np.isfinite(lo), np.isfinite(hi)
+    return np.concatenate([eye[low], -eye[high]]), np.concatenate([lo[low], -hi[high]]).astype(np.float64)
+
+
+def _dual_active_set(h, g, lo, hi):
+    """:func:`box_qp` by ``quadprog.solve_qp``, or None where it finds ``h`` not positive definite."""
+    import quadprog
+    rows, b = _box_rows(lo, hi)
     try:
-        return quadprog.solve_qp(np.asarray(h, dtype=np.float64), np.asarray(g, dtype=np.float64),
-                                 np.concatenate([eye[low], -eye[high]]).T,
-                                 np.concatenate([lo[low], -hi[high]]).astype(np.float64))[0]
+        return quadprog.solve_qp(np.asarray(h, dtype=np.float64), np.asarray(g, dtype=np.float64), rows.T, b)[0]
     except ValueError:
         return None
 
@@ -1234,9 +1238,9 @@ def _energy_constrained(h, g, x0, bounds, albedo, c, diffuse):
         return x0
     lo, hi = bounds
     eye = np.eye(len(g))
-    low, high = np.isfinite(lo), np.isfinite(hi)
-    constraints = np.concatenate([eye[low], -eye[high], -rows]).T      # C^T x >= b
-    b = np.concatenate([lo[low], -hi[high], -limit])
+    box, b = _box_rows(lo, hi)
+    constraints = np.concatenate([box, -rows]).T                        # C^T x >= b
+    b = np.concatenate([b, -limit])
     h = 0.5 * (h + h.T)
     x, mean = x0, float(np.trace(h)) / len(h)
     for ridge in (0.0, 1e-12, 1e-9):
