@@ -116,8 +116,10 @@ OVERSHOOT_ROUNDS = 4
 TV_LIMIT = 2.0
 #: Nodes of the tabulated Fresnel terms, uniform in ``theta_d``.
 TABLE_SIZE = 46
-#: Quadrature of the albedo (half-vector grid per view, :func:`microfacet.metrics.albedo_directions`).
-QUADRATURE = 64
+#: Quadrature of the albedo: ``(n_theta, n_phi)`` of the half-vector grid per view
+#: (:func:`microfacet.metrics.albedo_directions`). A sharp peak needs the nodes in ``theta``;
+#: ``phi`` needs few (the integrand is smooth and periodic in it).
+QUADRATURE = (128, 32)
 #: Pairs of the log-error term.
 LOG_PAIRS = 2**15
 #: Views (deg) of the albedo band (issue 24's check: every channel whose data albedo
@@ -206,7 +208,7 @@ def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
     >>> albedo_target(mf.Lambertian(0.5)).ratios.ref.shape
     (12, 3)
     """
-    return AlbedoTarget(AlbedoRatios(reference, VIEWS_DEG, n_theta=QUADRATURE, n_phi=QUADRATURE),
+    return AlbedoTarget(AlbedoRatios(reference, VIEWS_DEG, n_theta=QUADRATURE[0], n_phi=QUADRATURE[1]),
                         LogError(reference, n=LOG_PAIRS) if log is None else log)
 
 
@@ -383,7 +385,7 @@ def _energy_limited(matched, bases: list, factors: np.ndarray) -> np.ndarray:
         return factors
 
     def albedo(b):
-        return directional_albedo(b, ENERGY_VIEWS_DEG, n_theta=QUADRATURE, n_phi=QUADRATURE)
+        return directional_albedo(b, ENERGY_VIEWS_DEG, n_theta=QUADRATURE[0], n_phi=QUADRATURE[1])
 
     a0 = albedo(matched)
     rise = sum((f - 1.0) * albedo(base) for base, f in zip(bases, factors))
@@ -492,7 +494,7 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
     s, b, ceiling = factors.s.copy(), factors.bases.copy(), factors.ceiling.copy()
 
     def albedo(s, b, c):
-        return directional_albedo(_rebuilt(brdf, s, b, c), views, n_theta=QUADRATURE, n_phi=QUADRATURE)
+        return directional_albedo(_rebuilt(brdf, s, b, c), views, n_theta=QUADRATURE[0], n_phi=QUADRATURE[1])
 
     a = albedo(s, b, ceiling)
     over = np.any(a > limit, axis=0)
