@@ -251,34 +251,39 @@ class _System(NamedTuple):
         return float(r.max()) if len(r) else 0.0
 
 
-def _systems(target: AlbedoTarget, brdf, lobes, bases=()) -> list[_System]:
+def _systems(target: AlbedoTarget, brdf, lobes, bases=(), each: bool = False) -> list[_System]:
     """The least squares of :func:`albedo_factors` per channel (module docstring): unknowns
-    the table's nodes ``s`` and, for each of ``bases``, its reflectance's factor ``b``."""
+    the table's nodes ``s`` (with ``each``, one table per lobe, in the lobes' order) and, for
+    each of ``bases``, its reflectance's factor ``b``."""
     ratios, log = target
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
     fitted = ratios.albedo(brdf)
-    spec = w[:, None] * sum(np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes)
+    lobe_values = [np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes]
+    spec = [w[:, None] * v for v in lobe_values] if each else [w[:, None] * sum(lobe_values)]
     diffuse = [w[:, None] * np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in bases]
     hats = _hats(_theta_d(wi, wo))
     f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
-    f_spec = sum(np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes)
+    lobe_values = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes]
+    f_spec = lobe_values if each else [sum(lobe_values)]
     f_bases = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in bases]
     log_hats = _hats(_theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
     pair_w = LOG_WEIGHT * log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
     second = np.diff(np.eye(k), 2, axis=0)
-    n = k + len(bases)
+    n = k * len(spec) + len(bases)
     regular = PULL * np.eye(n)
-    regular[:k, :k] += SMOOTHNESS * second.T @ second
+    for i in range(len(spec)):
+        regular[i * k:(i + 1) * k, i * k:(i + 1) * k] += SMOOTHNESS * second.T @ second
     in_band = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)
     out = []
     for c in range(3):
-        a = np.stack([np.bincount(view, spec[:, c] * hats[:, j], minlength=ratios.n_views) for j in range(k)]
+        a = np.stack([np.bincount(view, sp[:, c] * hats[:, j], minlength=ratios.n_views) for sp in spec
+                      for j in range(k)]
                      + [np.bincount(view, d[:, c], minlength=ratios.n_views) for d in diffuse], axis=-1)
         ref = np.maximum(ratios.ref[:, c], 1e-4)
         m = a / ref[:, None]                                        # a' = fitted + a (x - 1)
-        j = np.concatenate([(f_spec[:, c] / (1.0 + f[:, c]))[:, None] * log_hats]      # d ln(1 + f') / d x
+        j = np.concatenate([(fs[:, c] / (1.0 + f[:, c]))[:, None] * log_hats for fs in f_spec]   # d ln(1 + f') / d x
                            + [(fb[:, c] / (1.0 + f[:, c]))[:, None] for fb in f_bases], axis=-1)
         out.append(_System(m, (ref - fitted[:, c]) / ref + m.sum(axis=1), (j.T * pair_w) @ j + regular,
                            (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL,
@@ -299,12 +304,16 @@ def _shapes(k: int) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def _tables(brdf, s: np.ndarray, ceiling=1.0) -> tuple[np.ndarray, list[np.ndarray]]:
-    """The cosines of the tables and each lobe's ``clip(F s, 0, ceiling)`` for factors ``s``
-    ``(K, 3)`` (``ceiling``: per channel, at most 1)."""
+def _tables(brdf, s: np.ndarray, ceiling=1.0, each=None) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The cosines of the tables and each lobe's ``clip(F s r_l, 0, ceiling)`` for factors ``s``
+    ``(K, 3)`` and the lobes' own ``r = each`` ``(L, K, 3)`` (none: 1; ``ceiling``: per
+    channel, at most 1)."""
     theta = np.linspace(np.pi / 2, 0.0, TABLE_SIZE)
-    cos_d, factor = np.cos(theta), _hats(theta) @ s
-    return cos_d, [np.clip(np.asarray(b.fresnel(cos_d), float) * factor, 0.0, ceiling) for b in _lobes(brdf)]
+    cos_d, hats = np.cos(theta), _hats(theta)
+    factor = hats @ s
+    lobes = _lobes(brdf)
+    own = [factor] * len(lobes) if each is None else [factor * (hats @ r) for r in each]
+    return cos_d, [np.clip(np.asarray(b.fresnel(cos_d), float) * f, 0.0, ceiling) for b, f in zip(lobes, own)]
 
 
 def _rings(values: np.ndarray) -> np.ndarray:
@@ -326,18 +335,22 @@ class AlbedoFactors(NamedTuple):
     ceiling : (3,) ndarray
         The largest value of the lobes' tables per RGB channel (1: none; below 1 where the
         fit would otherwise reflect more than 1 at some view).
+    each : (L, K, 3) ndarray
+        Each microfacet lobe's own factor on top of ``s`` (in the fit's order) per node and
+        RGB channel; ones where ``s`` and the bases reach the band.
 
     Examples
     --------
     >>> import microfacet as mf
     >>> fit = mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.1), mf.fresnel.Schlick(0.04)), mf.Lambertian(0.3))
     >>> f = albedo_factors(albedo_target(fit), fit)
-    >>> f.s.shape, f.bases.shape, f.ceiling
-    ((10, 3), (1, 3), array([1., 1., 1.]))
+    >>> f.s.shape, f.bases.shape, f.ceiling, f.each.shape
+    ((10, 3), (1, 3), array([1., 1., 1.]), (1, 10, 3))
     """
     s: np.ndarray
     bases: np.ndarray
     ceiling: np.ndarray
+    each: np.ndarray
 
 
 def _bases(brdf) -> list:
@@ -349,26 +362,34 @@ def _bases(brdf) -> list:
 
 
 def _pick(system: _System, c: int, brdf, s: np.ndarray, base_lower: np.ndarray, base_upper: np.ndarray,
-          band_rounds: int) -> np.ndarray:
+          band_rounds: int, each: np.ndarray | None = None) -> np.ndarray:
     """Channel ``c``'s unknowns ``(s_c, b_c)``: the least objective among the shapes of ``s``
     (:func:`_shapes`) whose tables do not ring (with ``band_rounds``: the least excess of the
     band error over :data:`BAND_TARGET` first), a constant ``s`` if every shape rings;
-    ``base_lower``, ``base_upper``: the bounds of the bases' factors (none: the lobes alone)."""
+    ``base_lower``, ``base_upper``: the bounds of the bases' factors (none: the lobes alone).
+    With ``each`` (the lobes' own factors, ``(L, K, 3)``): the unknowns are the lobes' own
+    factors ``r_l,c`` on top of ``s`` instead of ``s_c``, every lobe's of the same shape."""
     k, nb = len(NODES_DEG), len(base_upper)
+    copies = 1 if each is None else len(each)
+    n = k * copies
 
     def joint(t, upper):
-        tj = np.zeros((k + nb, t.shape[1] + nb))
-        tj[:k, :t.shape[1]], tj[k:, t.shape[1]:] = t, np.eye(nb)
+        t, upper = np.kron(np.eye(copies), t), np.tile(upper, copies)
+        tj = np.zeros((n + nb, t.shape[1] + nb))
+        tj[:n, :t.shape[1]], tj[n:, t.shape[1]:] = t, np.eye(nb)
         return system.solve(tj, np.concatenate([upper, base_upper - base_lower]), band_rounds,
-                            np.concatenate([np.zeros(k), base_lower]))
+                            np.concatenate([np.zeros(n), base_lower]))
 
     best, chosen = (np.inf, np.inf), None
     for t, upper in _shapes(k):
         x, objective = joint(t, upper)
-        trial = s.copy()
-        trial[:, c] = x[:k]
+        trial, own = s.copy(), None if each is None else each.copy()
+        if each is None:
+            trial[:, c] = x[:k]
+        else:
+            own[:, :, c] = x[:n].reshape(copies, k)
         key = (max(system.band_error(x) - BAND_TARGET, 0.0) if band_rounds else 0.0, objective)
-        if key < best and not any(_rings(v)[c] for v in _tables(brdf, trial)[1]):
+        if key < best and not any(_rings(v)[c] for v in _tables(brdf, trial, each=own)[1]):
             best, chosen = key, x
     if chosen is None:                                # a constant factor keeps each table's shape
         chosen = joint(np.ones((k, 1)), np.full(1, S_MAX))[0]
@@ -443,38 +464,82 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     lobes, bases = _lobes(brdf), _bases(brdf)
     k = len(NODES_DEG)
     s, b = np.ones((k, 3)), np.ones((len(bases), 3))
+    factors = AlbedoFactors(s, b, np.ones(3), np.ones((len(lobes), k, 3)))
     if not lobes:
-        return AlbedoFactors(s, b, np.ones(3))
+        return factors
     systems = _systems(target, brdf, lobes)
     for c, system in enumerate(systems):
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
     errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
-    if not bases or max(errors) <= BAND_TARGET:
-        return _energy_bounded(brdf, AlbedoFactors(s, b, np.ones(3)))
-    joint = _systems(target, brdf, lobes, bases)
+    if max(errors) <= BAND_TARGET:
+        return _energy_bounded(brdf, factors)
+    matched = _rebuilt(brdf, s, b)
+    before = target.log(matched), _band_error(target, matched), max(_overshoot(target, matched), ALBEDO_ABOVE)
+    if bases:
+        factors = _with_bases(target, brdf, factors, errors, before) or factors
+    if len(lobes) > 1 and _band_error(target, _rebuilt(brdf, *factors)) > BAND_TARGET:
+        factors = _each_lobe(target, brdf, factors, before) or factors
+    return _energy_bounded(brdf, factors)
+
+
+def _kept(target: AlbedoTarget, candidate, before: tuple, band: float) -> bool:
+    """Whether a match ``candidate`` is kept: its band error below ``band``, its overshoot at
+    most and its log error at most :data:`LOG_TOLERANCE` above those of ``before = (log,
+    band, overshoot)`` (the lobes' match alone)."""
+    log_before, _, over_before = before
+    return (_band_error(target, candidate) < band and _overshoot(target, candidate) <= over_before
+            and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before)
+
+
+def _with_bases(target: AlbedoTarget, brdf, factors: AlbedoFactors, errors: list, before: tuple):
+    """``factors`` (the lobes' match) with ``s`` and the bases' factors solved together in the
+    channels whose band ``errors`` exceed :data:`BAND_TARGET`, the band views outside it
+    weighed up for :data:`BAND_ROUNDS` rounds, then fewer: the first kept (:func:`_kept`), or
+    None."""
+    bases, k = _bases(brdf), len(NODES_DEG)
+    joint = _systems(target, brdf, _lobes(brdf), bases)
     reflectance = np.array([base.reflectance for base in bases])
     with np.errstate(divide="ignore"):
         upper = np.minimum(1.0 / reflectance, BASE_RANGE)    # reflectance <= 1
     lower = np.minimum(1.0 / BASE_RANGE, upper)
-    matched = _rebuilt(brdf, s, b)
-    log_before, band_before = target.log(matched), _band_error(target, matched)
-    over_before = max(_overshoot(target, matched), ALBEDO_ABOVE)
     for rounds in range(BAND_ROUNDS, -1, -1):
-        s2, b2 = s.copy(), b.copy()
+        s, b = factors.s.copy(), factors.bases.copy()
         for c, system in enumerate(joint):
             if errors[c] <= BAND_TARGET:
                 continue
-            x = _pick(system, c, brdf, s2, lower[:, c], upper[:, c], rounds)
+            x = _pick(system, c, brdf, s, lower[:, c], upper[:, c], rounds)
             if system.band_error(x) < errors[c]:
-                s2[:, c], b2[:, c] = x[:k], x[k:]
-        b2 = _energy_limited(_rebuilt(brdf, s2, np.ones_like(b2)), bases, b2)
-        if np.all(b2 == 1.0):
-            continue
-        candidate = _rebuilt(brdf, s2, b2)
-        if (_band_error(target, candidate) < band_before and _overshoot(target, candidate) <= over_before
-                and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before):
-            return _energy_bounded(brdf, AlbedoFactors(s2, b2, np.ones(3)))
-    return _energy_bounded(brdf, AlbedoFactors(s, b, np.ones(3)))
+                s[:, c], b[:, c] = x[:k], x[k:]
+        b = _energy_limited(_rebuilt(brdf, s, np.ones_like(b)), bases, b)
+        if not np.all(b == 1.0) and _kept(target, _rebuilt(brdf, s, b), before, before[1]):
+            return factors._replace(s=s, bases=b)
+    return None
+
+
+def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple):
+    """``factors`` with each lobe's own factor ``r_l`` on top of ``s``, solved in the channels
+    still outside :data:`BAND_TARGET` (the band views weighed up for :data:`BAND_ROUNDS`
+    rounds, then fewer): the first kept (:func:`_kept`) that comes closer to the band, or
+    None. A sharp lobe's energy at a view comes from ``theta_d`` near it, a rough one's from a
+    wide range: their own tables follow a steep rise of the albedo that one shared table
+    cannot."""
+    current = _rebuilt(brdf, *factors)
+    systems = _systems(target, current, _lobes(current), each=True)
+    lobes, k = len(factors.each), len(NODES_DEG)
+    errors = [system.band_error(np.ones(lobes * k)) for system in systems]
+    band = _band_error(target, current)
+    for rounds in range(BAND_ROUNDS, -1, -1):
+        each = factors.each.copy()
+        for c, system in enumerate(systems):
+            if errors[c] <= BAND_TARGET:
+                continue
+            x = _pick(system, c, brdf, factors.s, np.zeros(0), np.zeros(0), rounds, each)
+            if system.band_error(x) < errors[c]:
+                each[:, :, c] = x.reshape(lobes, k)
+        if not np.array_equal(each, factors.each) and _kept(
+                target, _rebuilt(brdf, factors.s, factors.bases, factors.ceiling, each), before, band):
+            return factors._replace(each=each)
+    return None
 
 
 def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFactors:
@@ -491,10 +556,11 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
     from ..metrics import directional_albedo
     views, limit = VIEWS_DEG + ENERGY_VIEWS_DEG, 1.0 - ENERGY_MARGIN
     grazing = np.asarray(NODES_DEG) > max(BAND_VIEWS_DEG)
-    s, b, ceiling = factors.s.copy(), factors.bases.copy(), factors.ceiling.copy()
+    s, b, ceiling, each = factors.s.copy(), factors.bases.copy(), factors.ceiling.copy(), factors.each
 
     def albedo(s, b, c):
-        return directional_albedo(_rebuilt(brdf, s, b, c), views, n_theta=QUADRATURE[0], n_phi=QUADRATURE[1])
+        return directional_albedo(_rebuilt(brdf, s, b, c, each), views, n_theta=QUADRATURE[0],
+                                  n_phi=QUADRATURE[1])
 
     a = albedo(s, b, ceiling)
     over = np.any(a > limit, axis=0)
@@ -509,9 +575,9 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
             mu = np.where((a_mu > limit) & (carried > 0), 1.0 - (a_mu - limit) / carried, 1.0)
         s_mu[np.ix_(grazing, over)] *= np.clip(mu.min(axis=0), 0.0, 1.0)[over]
         a_mu = albedo(s_mu, b, ceiling)
-    rings = np.any([_rings(v) for v in _tables(brdf, s_mu, ceiling)[1]], axis=0)
+    rings = np.any([_rings(v) for v in _tables(brdf, s_mu, ceiling, each)[1]], axis=0)
     if np.all(a_mu[:, over] <= limit) and not np.any(rings & over):
-        return AlbedoFactors(s_mu, b, ceiling)
+        return AlbedoFactors(s_mu, b, ceiling, each)
     b0 = b.copy()
     top = np.max(albedo(s, b, np.where(over, 0.0, ceiling)), axis=0)     # a ceiling of 0: the bases alone
     b *= np.where(over & (top > limit), limit / np.maximum(top, 1e-300) * (1.0 - 1e-9), 1.0)
@@ -521,12 +587,12 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
         good = np.all(albedo(s, b, mid) <= limit, axis=0)
         low, high = np.where(over & good, mid, low), np.where(over & ~good, mid, high)
     ceiling = np.where(over, low, ceiling)
-    rings = over & np.any([_rings(v) for v in _tables(brdf, s, ceiling)[1]], axis=0)
+    rings = over & np.any([_rings(v) for v in _tables(brdf, s, ceiling, each)[1]], axis=0)
     if np.any(rings):          # a capped valley can ring: the channel scaled as a whole, exactly
         scale = np.where(rings, limit / np.max(a, axis=0) * (1.0 - 1e-9), 1.0)
         s, b = s * scale, np.where(rings, b0 * scale, b)
         ceiling = np.where(rings, factors.ceiling * scale, ceiling)
-    return AlbedoFactors(s, b, ceiling)
+    return AlbedoFactors(s, b, ceiling, each)
 
 
 def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
@@ -557,14 +623,14 @@ def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
     return albedo_factors(target, brdf).s
 
 
-def _rebuilt(brdf, s: np.ndarray, b: np.ndarray, ceiling=1.0):
-    """``brdf``'s tree with each lobe's Fresnel term the table ``clip(F s, 0, ceiling)`` and
-    each base's reflectance times ``b`` (clipped to 1)."""
+def _rebuilt(brdf, s: np.ndarray, b: np.ndarray, ceiling=1.0, each=None):
+    """``brdf``'s tree with each lobe's Fresnel term the table ``clip(F s r_l, 0, ceiling)``
+    (``r = each``, :func:`_tables`) and each base's reflectance times ``b`` (clipped to 1)."""
     from .. import fresnel as fr
     from ..brdf import Lambertian, MicrofacetBRDF
     from ..diffuse import TransmittedLambertian
     from .analytic import SumBRDF
-    cos_d, tables = _tables(brdf, s, ceiling)
+    cos_d, tables = _tables(brdf, s, ceiling, each)
     tables, factors = iter(tables), iter(b)
 
     def scaled(part):
