@@ -265,6 +265,19 @@ def test_image_error_leaves_out_unmeasured_pairs_and_measures_colour_casts():
     assert c["same"] == 0.0 and 0.02 < c["warm"] < 0.06            # (r, g) moves by (0.033, 0)
 
 
+def test_colour_cast_of_a_sharp_highlight_does_not_depend_on_the_image_size():
+    """A mirror-like lobe (GGX 0.004) tinted green over a grey base: summed unclipped, the few
+    pixels that hit the highlight decided the colour (0.014 at 32 px, 0.116 at 48 px); as
+    displayed, the cast is the same at every size."""
+    from microfacet.metrics import chromaticity_difference
+
+    def glossy(fresnel):
+        return mf.fit.SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.004), fresnel), mf.Lambertian(0.3))
+    data, fit = glossy(mf.fresnel.Schlick(0.04, 1.0)), glossy(mf.fresnel.Schlick((0.02, 0.06, 0.02), 1.0))
+    casts = [chromaticity_difference(data, fit, size=size) for size in (24, 32, 40, 48, 64)]
+    assert max(casts) < 0.01 and max(casts) - min(casts) < 0.002, casts
+
+
 @pytest.mark.skipif(not (DATA / "merl" / "nickel.binary.gz").is_file(), reason="needs ../shared/data (MERL nickel)")
 def test_image_error_on_merl_data_uses_the_measured_mask_of_coverage():
     from microfacet.metrics import _measured_pairs, measured_mask, uniform_directions

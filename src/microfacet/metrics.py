@@ -1262,7 +1262,26 @@ class ImageError:
             raise ValueError("the reference BRDF renders black images")
         self.ref_t = {j: _lightness(self.ref[j], self.white[j]) for j in self.used}
         self.norm = {j: float(np.sum(np.abs(self.ref_t[j]))) for j in self.used}
-        self.ref_rgb = self.ref.sum(axis=(0, 1))
+        self.ref_rgb = self.displayed_rgb(self.ref)
+
+    def displayed_rgb(self, pixels: np.ndarray) -> np.ndarray:
+        """The summed colour of images ``(4, N, 3)`` as displayed: each image's radiance over the
+        data image's white (its 99th-percentile luminance, as the image error exposes it),
+        clipped to ``[0, 1]``, summed over the pixels and the images where the data are not black.
+        A sharp highlight then weighs as the display shows it, not by its radiance (whether a
+        pixel hits a peak hundreds of times the white, which depends on the image size).
+
+        Parameters
+        ----------
+        pixels : (4, N, 3) ndarray
+            Linear RGB radiance (:meth:`render`).
+
+        Returns
+        -------
+        (3,) ndarray
+            The summed displayed RGB.
+        """
+        return sum(np.clip(pixels[j] / self.white[j], 0.0, 1.0).sum(axis=0) for j in self.used)
 
     def render(self, brdf) -> np.ndarray:
         """Pixel radiance ``(4, N, 3)`` of ``brdf`` on this reference's pairs.
@@ -1330,7 +1349,7 @@ class ImageError:
             The chromaticity distance of each fit (0 for the data's colour).
         """
         def one(brdf):
-            return _chromaticity_distance(self.render(brdf).sum(axis=(0, 1)), self.ref_rgb)
+            return _chromaticity_distance(self.displayed_rgb(self.render(brdf)), self.ref_rgb)
         return {name: one(b) for name, b in fits.items()} if isinstance(fits, dict) else one(fits)
 
     def details(self, brdf) -> dict:
@@ -1350,7 +1369,7 @@ class ImageError:
         pixels = self.render(brdf)
         per = self.per_image(brdf, pixels)
         return {"image": float(np.nanmean(per)), "per_image": per,
-                "chromaticity": _chromaticity_distance(pixels.sum(axis=(0, 1)), self.ref_rgb)}
+                "chromaticity": _chromaticity_distance(self.displayed_rgb(pixels), self.ref_rgb)}
 
     def __call__(self, fits):
         """The image error of a fit (float) or of each fit of a dict (dict of floats)."""
@@ -1402,10 +1421,13 @@ def image_error(reference, fits, size: int = 64):
 
 def chromaticity_difference(reference, fits, size: int = 64):
     """Colour cast of fits: the distance between the chromaticities ``(r, g) / (r + g + b)``
-    of the mean colour of the sphere of a fit and of the data, the sphere lit by all the
-    lights of :func:`render_images` together (the sum of the four images, linear RGB,
-    the same pairs as :class:`ImageError`). 0 for the same colour; a fit whose albedo is
-    scaled alike in R, G and B scores 0; a grey turned (0.55, 0.5, 0.45) scores 0.033.
+    of the mean colour of the sphere of a fit and of the data as displayed, the sphere lit by
+    all the lights of :func:`render_images` together (the sum of the four images, each
+    exposed as the image error exposes it and clipped to the display's range:
+    :meth:`ImageError.displayed_rgb`; the same pairs as :class:`ImageError`). 0 for the same
+    colour; about 0 for a fit whose albedo is scaled alike in R, G and B (the display clips
+    the coloured environment's brightest pixels a little differently); 0.030 for a grey
+    turned (0.55, 0.5, 0.45).
     A fit (float) or a dict of fits (dict of floats), as
     ``ImageError(reference, size).chromaticity(fits)``.
 
@@ -1428,8 +1450,8 @@ def chromaticity_difference(reference, fits, size: int = 64):
     >>> import microfacet as mf
     >>> grey = mf.Lambertian(0.5)
     >>> round(chromaticity_difference(grey, mf.Lambertian((0.55, 0.5, 0.45)), size=24), 3)
-    0.033
-    >>> chromaticity_difference(grey, mf.Lambertian(0.25), size=24)     # darker, same colour
-    0.0
+    0.03
+    >>> round(chromaticity_difference(grey, mf.Lambertian(0.25), size=24), 3)     # darker, same colour
+    0.001
     """
     return ImageError(reference, size).chromaticity(fits)
