@@ -52,6 +52,14 @@ than :data:`ALBEDO_ABOVE` (or than the lobes' match alone did), and the log erro
 (:class:`~microfacet.Lambertian`, :class:`~microfacet.diffuse.TransmittedLambertian` of the
 same index) with the new reflectance, so the result is still the fit's tree.
 
+Where a fit of several lobes is still outside :data:`BAND_TARGET`, each lobe gets a factor
+of its own on top of ``s``, ``r_l(theta_d)`` on the same nodes (every lobe's of the same
+shape, from ``r = 1``), its table ``clip(F_l s r_l, 0, 1)``: a sharp lobe's energy at a view
+comes from ``theta_d`` near it, a rough lobe's from a wide range, so their own tables follow a
+steep rise of the albedo toward grazing that one shared table cannot. The albedo is linear
+in each ``r_l`` as in ``s``; they are solved and kept as the bases' factors are (the log
+error at most :data:`LOG_TOLERANCE` above the lobes' shared match).
+
 Energy comes before the data's albedo (measured albedos can exceed 1 near grazing views, and
 a table matched up to 80 deg can overshoot beyond it): where the matched fit's total albedo
 at :data:`VIEWS_DEG` or :data:`ENERGY_VIEWS_DEG` exceeds ``1 - ENERGY_MARGIN`` in a channel,
@@ -439,7 +447,8 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     shapes whose tables do not ring (free, one peak, constant); where that leaves a view of
     the band farther than :data:`BAND_TARGET` from the data's albedo, ``s`` and the bases'
     factors solved together (the band views outside it weighed up), kept if they come
-    closer to the band. All ones where the fit has no microfacet lobe.
+    closer to the band; where that still does, each lobe's own factor. All ones where the
+    fit has no microfacet lobe.
 
     Parameters
     ----------
