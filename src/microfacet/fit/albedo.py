@@ -472,14 +472,14 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     """
     lobes, bases = _lobes(brdf), _bases(brdf)
     k = len(NODES_DEG)
-    s, b = np.ones((k, 3)), np.ones((len(bases), 3))
-    factors = AlbedoFactors(s, b, np.ones(3), np.ones((len(lobes), k, 3)))
+    s, b, each = np.ones((k, 3)), np.ones((len(bases), 3)), np.ones((len(lobes), k, 3))
     if not lobes:
-        return factors
+        return AlbedoFactors(s, b, np.ones(3), each)
     systems = _systems(target, brdf, lobes)
     for c, system in enumerate(systems):
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
     errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
+    factors = AlbedoFactors(s, b, np.ones(3), each)
     if max(errors) <= BAND_TARGET:
         return _energy_bounded(brdf, factors)
     matched = _rebuilt(brdf, s, b)
@@ -534,8 +534,8 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
     cannot."""
     current = _rebuilt(brdf, *factors)
     systems = _systems(target, current, _lobes(current), each=True)
-    lobes, k = len(factors.each), len(NODES_DEG)
-    errors = [system.band_error(np.ones(lobes * k)) for system in systems]
+    n_lobes, k = len(factors.each), len(NODES_DEG)
+    errors = [system.band_error(np.ones(n_lobes * k)) for system in systems]
     band = _band_error(target, current)
     for rounds in range(BAND_ROUNDS, -1, -1):
         each = factors.each.copy()
@@ -544,7 +544,7 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
                 continue
             x = _pick(system, c, brdf, factors.s, np.zeros(0), np.zeros(0), rounds, each)
             if system.band_error(x) < errors[c]:
-                each[:, :, c] = x.reshape(lobes, k)
+                each[:, :, c] = x.reshape(n_lobes, k)
         if not np.array_equal(each, factors.each) and _kept(
                 target, _rebuilt(brdf, factors.s, factors.bases, factors.ceiling, each), before, band):
             return factors._replace(each=each)
