@@ -236,7 +236,7 @@ def test_image_error_of_a_uniformly_scaled_fit_is_the_lightness_ratio():
     # the error lies between (s^(1/3) - 1) (dark toe excluded) and 1.16 (s^(1/3) - 1)
     for value in e["per_image"]:
         assert 0.1 * 0.95 < value < 0.116 * 1.05
-    assert e["chromaticity"] < 1e-12
+    assert e["chromaticity"] < 1e-3              # the brightest pixels, brought down to white, weigh less
 
 
 def test_render_images_environment_agrees_with_monte_carlo():
@@ -266,8 +266,8 @@ def test_image_error_leaves_out_unmeasured_pairs_and_measures_colour_casts():
 
 
 def test_colour_cast_of_a_sharp_highlight_does_not_depend_on_the_image_size():
-    """A mirror-like lobe (GGX 0.004) tinted green over a grey base: summed unclipped, the few
-    pixels that hit the highlight decided the colour (0.014 at 32 px, 0.116 at 48 px); as
+    """A mirror-like lobe (GGX 0.004) tinted green over a grey base: summed as radiance, the
+    few pixels that hit the highlight decided the colour (0.014 at 32 px, 0.116 at 48 px); as
     displayed, the cast is the same at every size."""
     from microfacet.metrics import chromaticity_difference
 

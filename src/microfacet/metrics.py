@@ -1266,10 +1266,11 @@ class ImageError:
 
     def displayed_rgb(self, pixels: np.ndarray) -> np.ndarray:
         """The summed colour of images ``(4, N, 3)`` as displayed: each image's radiance over the
-        data image's white (its 99th-percentile luminance, as the image error exposes it),
-        clipped to ``[0, 1]``, summed over the pixels and the images where the data are not black.
-        A sharp highlight then weighs as the display shows it, not by its radiance (whether a
-        pixel hits a peak hundreds of times the white, which depends on the image size).
+        data image's white (its 99th-percentile luminance, as the image error exposes it), a
+        pixel brighter than white scaled down to white's luminance (its hue kept), summed over
+        the pixels and the images where the data are not black. A sharp highlight then weighs
+        as the display shows it, not by its radiance (whether a pixel hits a peak hundreds of
+        times the white, which depends on the image size).
 
         Parameters
         ----------
@@ -1281,7 +1282,13 @@ class ImageError:
         (3,) ndarray
             The summed displayed RGB.
         """
-        return sum(np.clip(pixels[j] / self.white[j], 0.0, 1.0).sum(axis=0) for j in self.used)
+        from .render.lobes import LUMINANCE
+        out = np.zeros(3)
+        for j in self.used:
+            x = np.maximum(pixels[j], 0.0) / self.white[j]
+            y = x @ LUMINANCE
+            out += np.sum(x * np.minimum(1.0, 1.0 / np.maximum(y, 1e-300))[:, None], axis=0)
+        return out
 
     def render(self, brdf) -> np.ndarray:
         """Pixel radiance ``(4, N, 3)`` of ``brdf`` on this reference's pairs.
@@ -1423,11 +1430,11 @@ def chromaticity_difference(reference, fits, size: int = 64):
     """Colour cast of fits: the distance between the chromaticities ``(r, g) / (r + g + b)``
     of the mean colour of the sphere of a fit and of the data as displayed, the sphere lit by
     all the lights of :func:`render_images` together (the sum of the four images, each
-    exposed as the image error exposes it and clipped to the display's range:
+    exposed as the image error exposes it, pixels brighter than white brought down to it:
     :meth:`ImageError.displayed_rgb`; the same pairs as :class:`ImageError`). 0 for the same
-    colour; about 0 for a fit whose albedo is scaled alike in R, G and B (the display clips
-    the coloured environment's brightest pixels a little differently); 0.030 for a grey
-    turned (0.55, 0.5, 0.45).
+    colour; about 0 for a fit whose albedo is scaled alike in R, G and B (1e-3 or less: its
+    brightest pixels are capped a little differently); 0.033 for a grey turned
+    (0.55, 0.5, 0.45).
     A fit (float) or a dict of fits (dict of floats), as
     ``ImageError(reference, size).chromaticity(fits)``.
 
@@ -1450,8 +1457,8 @@ def chromaticity_difference(reference, fits, size: int = 64):
     >>> import microfacet as mf
     >>> grey = mf.Lambertian(0.5)
     >>> round(chromaticity_difference(grey, mf.Lambertian((0.55, 0.5, 0.45)), size=24), 3)
-    0.03
+    0.033
     >>> round(chromaticity_difference(grey, mf.Lambertian(0.25), size=24), 3)     # darker, same colour
-    0.001
+    0.0
     """
     return ImageError(reference, size).chromaticity(fits)
