@@ -1356,7 +1356,7 @@ class ImageError:
             The chromaticity distance of each fit (0 for the data's colour).
         """
         def one(brdf):
-            return _chromaticity_distance(self.displayed_rgb(self.render(brdf)), self.ref_rgb)
+            return self._cast(self.render(brdf))
         return {name: one(b) for name, b in fits.items()} if isinstance(fits, dict) else one(fits)
 
     def details(self, brdf) -> dict:
@@ -1376,7 +1376,11 @@ class ImageError:
         pixels = self.render(brdf)
         per = self.per_image(brdf, pixels)
         return {"image": float(np.nanmean(per)), "per_image": per,
-                "chromaticity": _chromaticity_distance(self.displayed_rgb(pixels), self.ref_rgb)}
+                "chromaticity": self._cast(pixels)}
+
+    def _cast(self, pixels: np.ndarray) -> float:
+        """The chromaticity distance of rendered ``pixels`` (:meth:`render`) from the data's, as displayed."""
+        return _chromaticity_distance(self.displayed_rgb(pixels), self.ref_rgb)
 
     def __call__(self, fits):
         """The image error of a fit (float) or of each fit of a dict (dict of floats)."""

@@ -486,7 +486,7 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     before = target.log(matched), _band_error(target, matched), max(_overshoot(target, matched), ALBEDO_ABOVE)
     if bases:
         factors = _with_bases(target, brdf, factors, errors, before) or factors
-    if len(lobes) > 1 and _band_error(target, _rebuilt(brdf, *factors)) > BAND_TARGET:
+    if len(lobes) > 1:
         factors = _each_lobe(target, brdf, factors, before) or factors
     return _energy_bounded(brdf, factors)
 
@@ -529,14 +529,16 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
     """``factors`` with each lobe's own factor ``r_l`` on top of ``s``, solved in the channels
     still outside :data:`BAND_TARGET` (the band views weighed up for :data:`BAND_ROUNDS`
     rounds, then fewer): the first kept (:func:`_kept`) that comes closer to the band, or
-    None. A sharp lobe's energy at a view comes from ``theta_d`` near it, a rough one's from a
+    None (also where ``factors`` already reach :data:`BAND_TARGET`). A sharp lobe's energy at a view comes from ``theta_d`` near it, a rough one's from a
     wide range: their own tables follow a steep rise of the albedo that one shared table
     cannot."""
     current = _rebuilt(brdf, *factors)
+    band = _band_error(target, current)
+    if band <= BAND_TARGET:
+        return None
     systems = _systems(target, current, _lobes(current), each=True)
     n_lobes, k = len(factors.each), len(NODES_DEG)
     errors = [system.band_error(np.ones(n_lobes * k)) for system in systems]
-    band = _band_error(target, current)
     for rounds in range(BAND_ROUNDS, -1, -1):
         each = factors.each.copy()
         for c, system in enumerate(systems):
@@ -545,9 +547,9 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
             x = _pick(system, c, brdf, factors.s, np.zeros(0), np.zeros(0), rounds, each)
             if system.band_error(x) < errors[c]:
                 each[:, :, c] = x.reshape(n_lobes, k)
-        if not np.array_equal(each, factors.each) and _kept(
-                target, _rebuilt(brdf, factors.s, factors.bases, factors.ceiling, each), before, band):
-            return factors._replace(each=each)
+        found = factors._replace(each=each)
+        if not np.array_equal(each, factors.each) and _kept(target, _rebuilt(brdf, *found), before, band):
+            return found
     return None
 
 

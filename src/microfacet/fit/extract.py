@@ -1175,7 +1175,7 @@ def box_qp(h: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: fl
     if x is not None:
         return np.minimum(np.maximum(x, lo), hi)
     # np.clip, np.ix_, np.linalg.norm and np.array_equal spelled with ufuncs and masks (the
-    # same values), as the loop was written when it solved every box QP of a fit
+    # same values)
     x = np.minimum(np.maximum(spd_solve(h, g) if x0 is None else x0, lo), hi)
     # the gradient's rounding error (~eps |h| |x|): a stiff h (a strong smoothing penalty)
     # cannot bring it below tol |g|
