@@ -451,6 +451,26 @@ def test_fit_is_robust_to_garbage_at_grazing():
     np.testing.assert_allclose(f.to_ggx().distribution.alpha_x, clean.to_ggx().distribution.alpha_x, rtol=0.05)
 
 
+def test_unmeasured_backscattering_leaves_no_ring_of_empty_normals():
+    """A measured table misses directions near retro-reflection (RGL's corpus materials):
+    those backscattering samples are holes to fill, not D = 0 on a ring of normals (a black
+    ring on the fit's spheres)."""
+    ref = _input(mf.GGX, alpha=0.3)
+    band = (np.cos(np.radians(22.0)), np.cos(np.radians(15.0)))
+
+    class Holes(mf.BRDF):
+        def eval(self, wi, wo):
+            retro = np.sum(wi * wo, axis=-1) > np.cos(np.radians(3.0))
+            unmeasured = retro & (wo[..., 2] > band[0]) & (wo[..., 2] < band[1])
+            return np.where(unmeasured[..., None], np.nan, ref.eval(wi, wo))
+
+    f = mf.fit.fit(Holes(), 90, shadowing=False)
+    theta = np.radians(np.arange(0.0, 60.0, 0.5))
+    h = spherical_to_cartesian(theta, np.zeros_like(theta))
+    d, d_ref = f.distribution.ndf(h), ref.distribution.ndf(h)
+    assert np.min(d / d_ref) > 0.9 and np.max(d / d_ref) < 1.1
+
+
 def test_fit_argument_errors():
     ref = _input(mf.GGX, alpha=0.3)
     with pytest.raises(ValueError, match="gaf"):

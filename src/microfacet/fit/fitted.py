@@ -692,10 +692,39 @@ def _backscattering_table(brdf, n: int, m: int | None) -> tuple:
     phi = None if m is None else np.arange(m) * (2.0 * np.pi / m)
     f_back = (extract.backscattering(brdf, theta[:-1]) if phi is None
               else extract.backscattering(brdf, theta[:-1, None], phi[None, :]))
+    f_back = _holes_filled(f_back, theta[:-1])
     if not float(np.max(f_back)) <= 1e100:       # the normal equations square the values
         raise MicrofacetError(f"fit: {brdf!r}: backscattering reaches {float(np.max(f_back)):.3g}, beyond what "
                               "a fit's float64 arithmetic holds (are the values physical?)")
     return theta, phi, f_back
+
+
+def _holes_filled(f_back: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``f_back`` (backscattering at the elevations ``theta``, axis 0; one column per
+    azimuth) with its holes filled: a zero (unmeasured, or garbage set to 0 by
+    :func:`extract.backscattering`) between measured values is interpolated linearly in
+    ``ln f`` over ``theta`` from its measured neighbours, and zeros before the first
+    measured elevation take its value. A measured table misses directions near
+    retro-reflection (RGL's gonio-photometer cannot place sensor and light together; the
+    MERL-format corpus marks them unmeasured), and a zero there becomes ``D = 0`` on a
+    ring of normals: a black ring on the fit's spheres. Zeros after the last measured
+    elevation (grazing) are kept.
+
+    Examples
+    --------
+    >>> _holes_filled(np.array([0.0, 4.0, 0.0, 1.0, 0.0]), np.arange(5.0))
+    array([4., 4., 2., 1., 0.])
+    """
+    columns = f_back.reshape(len(theta), -1)
+    out = columns.copy()
+    for j in range(columns.shape[1]):
+        measured = np.flatnonzero(columns[:, j] > 0)
+        if len(measured) == 0:
+            continue
+        holes = np.flatnonzero(columns[: measured[-1], j] <= 0)
+        if len(holes):
+            out[holes, j] = np.exp(np.interp(theta[holes], theta[measured], np.log(columns[measured, j])))
+    return out.reshape(f_back.shape)
 
 
 def _diffuse_bound(brdf) -> np.ndarray:
