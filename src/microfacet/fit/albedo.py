@@ -47,8 +47,10 @@ the reflectance at most 1; a factor above 1 is drawn back toward 1 until the tot
 at :data:`ENERGY_VIEWS_DEG` stays below ``1 - ENERGY_MARGIN``. The scaled bases are kept only
 if they bring the band error down, exceed the data's albedo at no view of the band by more
 than :data:`ALBEDO_ABOVE` (or than the lobes' match alone did), and the log error grows by at most
-:data:`LOG_TOLERANCE`
-(fewer weighing rounds are tried first otherwise); the base keeps its class
+:data:`LOG_TOLERANCE`, or by at most :data:`LOG_TOLERANCE_IN_BAND` where they bring the fit into
+the band (reaching the data's energy is worth more of the shape than coming closer to it);
+of the solutions for 0 to :data:`BAND_ROUNDS` weighing rounds, the one kept of least log error
+in the band, else of least band error; the base keeps its class
 (:class:`~microfacet.Lambertian`, :class:`~microfacet.diffuse.TransmittedLambertian` of the
 same index) with the new reflectance, so the result is still the fit's tree.
 
@@ -58,7 +60,8 @@ shape, from ``r = 1``), its table ``clip(F_l s r_l, 0, 1)``: a sharp lobe's ener
 comes from ``theta_d`` near it, a rough lobe's from a wide range, so their own tables follow a
 steep rise of the albedo toward grazing that one shared table cannot. The albedo is linear
 in each ``r_l`` as in ``s``; they are solved and kept as the bases' factors are (the log
-error at most :data:`LOG_TOLERANCE` above the lobes' shared match).
+error at most :data:`LOG_TOLERANCE` above the lobes' shared match, :data:`LOG_TOLERANCE_IN_BAND`
+where they reach the band).
 
 Energy comes before the data's albedo (measured albedos can exceed 1 near grazing views, and
 a table matched up to 80 deg can overshoot beyond it): where the matched fit's total albedo
@@ -147,6 +150,8 @@ BASE_RANGE = 2.0
 #: Largest relative growth of the log error (:class:`~microfacet.metrics.LogError` on the
 #: target's pairs) that the bases' factors may cost over the lobes' match alone.
 LOG_TOLERANCE = 0.1
+#: The same where the factors bring the fit into the band (band error below :data:`BAND`).
+LOG_TOLERANCE_IN_BAND = 0.3
 #: Views (deg) beyond :data:`VIEWS_DEG` where the total albedo of a fit whose bases were
 #: scaled up must stay below ``1 - ENERGY_MARGIN``.
 ENERGY_VIEWS_DEG = (85.0, 89.0)
@@ -491,26 +496,39 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     return _energy_bounded(brdf, factors)
 
 
-def _kept(target: AlbedoTarget, candidate, before: tuple, band: float) -> bool:
-    """Whether a match ``candidate`` is kept: its band error below ``band``, its overshoot at
-    most and its log error at most :data:`LOG_TOLERANCE` above those of ``before = (log,
-    band, overshoot)`` (the lobes' match alone)."""
+def _chosen(target: AlbedoTarget, brdf, candidates, before: tuple, band: float):
+    """The kept match among ``candidates`` (:class:`AlbedoFactors` of ``brdf``): of those in the
+    band (band error below :data:`BAND`) the one of least log error, else the one of least band
+    error, or None. Kept: its band
+    error below ``band``, its overshoot at most and its log error at most
+    :data:`LOG_TOLERANCE` (:data:`LOG_TOLERANCE_IN_BAND` in the band) above those of
+    ``before = (log, band, overshoot)`` (the lobes' match alone)."""
     log_before, _, over_before = before
-    return (_band_error(target, candidate) < band and _overshoot(target, candidate) <= over_before
-            and target.log(candidate) <= (1.0 + LOG_TOLERANCE) * log_before)
+    best, best_key = None, None
+    for factors in candidates:
+        matched = _rebuilt(brdf, *factors)
+        error = _band_error(target, matched)
+        if not (error < band and _overshoot(target, matched) <= over_before):
+            continue
+        log = target.log(matched)
+        if log <= (1.0 + (LOG_TOLERANCE_IN_BAND if error < BAND else LOG_TOLERANCE)) * log_before:
+            key = (error >= BAND, log if error < BAND else error)
+            if best_key is None or key < best_key:
+                best, best_key = factors, key
+    return best
 
 
 def _with_bases(target: AlbedoTarget, brdf, factors: AlbedoFactors, errors: list, before: tuple):
     """``factors`` (the lobes' match) with ``s`` and the bases' factors solved together in the
     channels whose band ``errors`` exceed :data:`BAND_TARGET`, the band views outside it
-    weighed up for :data:`BAND_ROUNDS` rounds, then fewer: the first kept (:func:`_kept`), or
-    None."""
+    weighed up for :data:`BAND_ROUNDS` rounds, then fewer: the one :func:`_chosen`, or None."""
     bases, k = _bases(brdf), len(NODES_DEG)
     joint = _systems(target, brdf, _lobes(brdf), bases)
     reflectance = np.array([base.reflectance for base in bases])
     with np.errstate(divide="ignore"):
         upper = np.minimum(1.0 / reflectance, BASE_RANGE)    # reflectance <= 1
     lower = np.minimum(1.0 / BASE_RANGE, upper)
+    candidates = []
     for rounds in range(BAND_ROUNDS, -1, -1):
         s, b = factors.s.copy(), factors.bases.copy()
         for c, system in enumerate(joint):
@@ -520,15 +538,15 @@ def _with_bases(target: AlbedoTarget, brdf, factors: AlbedoFactors, errors: list
             if system.band_error(x) < errors[c]:
                 s[:, c], b[:, c] = x[:k], x[k:]
         b = _energy_limited(_rebuilt(brdf, s, np.ones_like(b)), bases, b)
-        if not np.all(b == 1.0) and _kept(target, _rebuilt(brdf, s, b), before, before[1]):
-            return factors._replace(s=s, bases=b)
-    return None
+        if not np.all(b == 1.0):
+            candidates.append(factors._replace(s=s, bases=b))
+    return _chosen(target, brdf, candidates, before, before[1])
 
 
 def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple):
     """``factors`` with each lobe's own factor ``r_l`` on top of ``s``, solved in the channels
     still outside :data:`BAND_TARGET` (the band views weighed up for :data:`BAND_ROUNDS`
-    rounds, then fewer): the first kept (:func:`_kept`) that comes closer to the band, or
+    rounds, then fewer): the one :func:`_chosen` that comes closer to the band, or
     None (also where ``factors`` already reach :data:`BAND_TARGET`). A sharp lobe's energy at a view comes from ``theta_d`` near it, a rough one's from a
     wide range: their own tables follow a steep rise of the albedo that one shared table
     cannot."""
@@ -539,6 +557,7 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
     systems = _systems(target, current, _lobes(current), each=True)
     n_lobes, k = len(factors.each), len(NODES_DEG)
     errors = [system.band_error(np.ones(n_lobes * k)) for system in systems]
+    candidates = []
     for rounds in range(BAND_ROUNDS, -1, -1):
         each = factors.each.copy()
         for c, system in enumerate(systems):
@@ -547,10 +566,9 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
             x = _pick(system, c, brdf, factors.s, np.zeros(0), np.zeros(0), rounds, each)
             if system.band_error(x) < errors[c]:
                 each[:, :, c] = x.reshape(n_lobes, k)
-        found = factors._replace(each=each)
-        if not np.array_equal(each, factors.each) and _kept(target, _rebuilt(brdf, *found), before, band):
-            return found
-    return None
+        if not np.array_equal(each, factors.each):
+            candidates.append(factors._replace(each=each))
+    return _chosen(target, brdf, candidates, before, band)
 
 
 def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFactors:
