@@ -150,7 +150,7 @@ BASE_RANGE = 2.0
 #: Largest relative growth of the log error (:class:`~microfacet.metrics.LogError` on the
 #: target's pairs) that the bases' factors may cost over the lobes' match alone.
 LOG_TOLERANCE = 0.1
-#: The same where the factors bring the fit into the band (band error below :data:`BAND`).
+#: The same where the factors bring a fit outside the band (band error at least :data:`BAND`) into it.
 LOG_TOLERANCE_IN_BAND = 0.3
 #: Views (deg) beyond :data:`VIEWS_DEG` where the total albedo of a fit whose bases were
 #: scaled up must stay below ``1 - ENERGY_MARGIN``.
@@ -499,10 +499,10 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
 def _chosen(target: AlbedoTarget, brdf, candidates, before: tuple, band: float):
     """The kept match among ``candidates`` (:class:`AlbedoFactors` of ``brdf``): of those in the
     band (band error below :data:`BAND`) the one of least log error, else the one of least band
-    error, or None. Kept: its band
-    error below ``band``, its overshoot at most and its log error at most
-    :data:`LOG_TOLERANCE` (:data:`LOG_TOLERANCE_IN_BAND` in the band) above those of
-    ``before = (log, band, overshoot)`` (the lobes' match alone)."""
+    error, or None. Kept: its band error below ``band`` (the match's so far), its overshoot at
+    most that of ``before = (log, band, overshoot)`` (the lobes' match alone) and its log error
+    at most :data:`LOG_TOLERANCE` above ``before``'s, or :data:`LOG_TOLERANCE_IN_BAND` where it
+    brings a match outside the band (``band >= BAND``) into it."""
     log_before, _, over_before = before
     best, best_key = None, None
     for factors in candidates:
@@ -511,7 +511,8 @@ def _chosen(target: AlbedoTarget, brdf, candidates, before: tuple, band: float):
         if not (error < band and _overshoot(target, matched) <= over_before):
             continue
         log = target.log(matched)
-        if log <= (1.0 + (LOG_TOLERANCE_IN_BAND if error < BAND else LOG_TOLERANCE)) * log_before:
+        reaches = error < BAND <= band
+        if log <= (1.0 + (LOG_TOLERANCE_IN_BAND if reaches else LOG_TOLERANCE)) * log_before:
             key = (error >= BAND, log if error < BAND else error)
             if best_key is None or key < best_key:
                 best, best_key = factors, key
