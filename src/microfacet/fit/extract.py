@@ -38,6 +38,7 @@ import numpy as np
 
 from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
 from ..errors import MicrofacetError
+from ..metrics import measured_mask
 from ..geometry import hd_to_io
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
@@ -624,7 +625,7 @@ def fresnel_samples(brdf, n_d: int, n_h: int = 32, n_phi_d: int = 16, n_phi_h: i
     wi, wo = hd_to_io(_directions(TH, PH), _directions(TD, PD))
     wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
     f = np.asarray(brdf.eval(wi, wo), dtype=np.float64)
-    finite = (wi[:, 2] > 0) & (wo[:, 2] > 0) & np.all(np.isfinite(f), axis=-1)
+    finite = (wi[:, 2] > 0) & (wo[:, 2] > 0) & np.all(np.isfinite(f), axis=-1) & measured_mask(brdf, wi, wo)
     return dict(wi=wi, wo=wo, cos_d=np.cos(TD).ravel(), f=np.where(finite[:, None], np.maximum(np.nan_to_num(f), 0.0), 0.0),
                 finite=finite, n_d=n_d)
 
@@ -1320,9 +1321,9 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
         # per strategy: the data's values on the cosine samples repeat from fit to fit (a
         # measured BRDF remembers its last direction sets)
         f = np.concatenate([np.asarray(brdf.eval(w, wo_v), dtype=np.float64) for w in (wi_s, wi_c)], axis=1)
-        # directions where the data are garbage (NaN, infinite, negative) leave both sides
-        # of the comparison, not only the data's (which would read them as black)
-        seen = np.all(np.isfinite(f) & (f >= 0), axis=-1)
+        # directions where the data are garbage (NaN, infinite, negative) or unmeasured leave
+        # both sides of the comparison, not only the data's (which would read them as black)
+        seen = np.all(np.isfinite(f) & (f >= 0), axis=-1) & _measured(brdf, wi, wo)
         if not np.all(seen):
             inv = np.where(seen, inv, 0.0)
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
@@ -1339,6 +1340,11 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
         return a, None
     f = np.where(np.isfinite(f) & (f > 0), f * wi[..., 2:], 0.0) * inv[..., None]
     return a, f.sum(axis=1)
+
+
+def _measured(brdf, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """:func:`~microfacet.metrics.measured_mask` of the pairs ``(wi, wo)`` of any shape ``(..., 3)``."""
+    return measured_mask(brdf, wi.reshape(-1, 3), np.broadcast_to(wo, wi.shape).reshape(-1, 3)).reshape(wi.shape[:-1])
 
 
 #: The cosine strategy of :func:`albedo_rows` per ``(n_u, views, n_d)``, which no fit changes.
