@@ -38,8 +38,8 @@ import numpy as np
 
 from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
 from ..errors import MicrofacetError
-from ..metrics import measured_mask
 from ..geometry import hd_to_io
+from ..metrics import measured_mask
 
 __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isotropic",
            "smith_kernel_anisotropic", "AzimuthalKernel", "power_iteration", "rule_area_at_normal", "ndf_closed_form",
