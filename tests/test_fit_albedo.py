@@ -51,8 +51,8 @@ def test_corpus_plastic_reaches_the_albedo_band_without_losing_its_log_error(cor
 
 def test_corpus_plastic_whose_red_rises_at_grazing_reaches_the_band(corpus):
     """pink-plastic's red albedo rises from 0.43 at 70 deg to 0.58 at 80 deg: the lobes reach
-    the band at 75 deg only at ~20 % more log error than their shared table, which a match
-    that merely came closer to the band may not cost (LOG_TOLERANCE), one that reaches it may
+    the band at 75 deg only at a little more log error over their shared table than a match
+    that merely comes closer to the band may cost (LOG_TOLERANCE); one that reaches it may
     (LOG_TOLERANCE_IN_BAND)."""
     data = mf.measured.load(corpus("merl/pink-plastic"))
     fit = fit_models(data, ("lobe", "two_lobes"))["two_lobes"]
