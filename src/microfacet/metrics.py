@@ -283,12 +283,12 @@ def measured_mask(reference, wi, wo) -> np.ndarray:
     ----------
     reference : BRDF
         The data.
-    wi, wo : (N, 3) ndarray
-        Light and view directions.
+    wi, wo : (..., 3) ndarray
+        Light and view directions (broadcast).
 
     Returns
     -------
-    (N,) ndarray of bool
+    (...) ndarray of bool
         True where the pair rests on measured samples.
 
     Examples
@@ -300,7 +300,7 @@ def measured_mask(reference, wi, wo) -> np.ndarray:
     """
     coverage = getattr(reference, "coverage", None)
     if coverage is None:
-        return np.ones(len(wi), dtype=bool)
+        return np.ones(np.broadcast_shapes(np.shape(wi), np.shape(wo))[:-1], dtype=bool)
     return np.asarray(coverage(wi, wo)) >= 1.0 - 1e-9
 
 

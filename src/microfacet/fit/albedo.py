@@ -100,7 +100,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..metrics import AlbedoRatios, LogError
+from ..metrics import AlbedoRatios, LogError, directional_albedo
 from .extract import box_qp
 
 __all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "LOG_WEIGHT", "AlbedoTarget", "albedo_target", "albedo_scale",
@@ -409,41 +409,33 @@ def _pick(system: _System, c: int, brdf, s: np.ndarray, base_lower: np.ndarray, 
     return chosen
 
 
+def _albedo(brdf, views_deg) -> np.ndarray:
+    """:func:`~microfacet.metrics.directional_albedo` of ``brdf`` on the match's :data:`QUADRATURE`."""
+    return directional_albedo(brdf, views_deg, n_theta=QUADRATURE[0], n_phi=QUADRATURE[1])
+
+
 def _energy_limited(matched, bases: list, factors: np.ndarray) -> np.ndarray:
     """``factors`` of the ``bases`` drawn toward 1 (per channel, along the line to 1) as far
     as needed for the total albedo at :data:`ENERGY_VIEWS_DEG` of the fit (``matched``: its
     lobes' tables made, its bases as they were) to stay below ``1 - ENERGY_MARGIN`` (at
     :data:`VIEWS_DEG` the match holds it below the data's + 1 %)."""
-    from ..metrics import directional_albedo
     if not np.any(factors > 1.0):
         return factors
-
-    def albedo(b):
-        return directional_albedo(b, ENERGY_VIEWS_DEG, n_theta=QUADRATURE[0], n_phi=QUADRATURE[1])
-
-    a0 = albedo(matched)
-    rise = sum((f - 1.0) * albedo(base) for base, f in zip(bases, factors))
+    a0 = _albedo(matched, ENERGY_VIEWS_DEG)
+    rise = sum((f - 1.0) * _albedo(base, ENERGY_VIEWS_DEG) for base, f in zip(bases, factors))
     limit = 1.0 - ENERGY_MARGIN
     with np.errstate(divide="ignore", invalid="ignore"):
         room = np.where((a0 + rise > limit) & (rise > 0), np.maximum(limit - a0, 0.0) / rise, 1.0)
     return 1.0 + (factors - 1.0) * np.clip(room.min(axis=0), 0.0, 1.0)
 
 
-def _overshoot(target: AlbedoTarget, brdf) -> float:
-    """The largest ``a/a_data - 1`` of ``brdf`` at :data:`BAND_VIEWS_DEG` over the channels
-    whose data albedo exceeds :data:`BAND_FLOOR` (the match's quadrature)."""
+def _band(target: AlbedoTarget, brdf) -> tuple[float, float]:
+    """``(error, overshoot)`` of ``brdf``'s albedo ratios ``a/a_data`` at :data:`BAND_VIEWS_DEG`
+    over the channels whose data albedo exceeds :data:`BAND_FLOOR` (the match's quadrature,
+    integrated once): the largest ``|a/a_data - 1|`` and the largest ``a/a_data - 1``."""
     held = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)[:, None] & (target.ratios.ref > BAND_FLOOR)
-    ratios = np.asarray(target.ratios(brdf), float)[held]
-    return float(np.nanmax(ratios)) - 1.0 if len(ratios) else 0.0
-
-
-def _band_error(target: AlbedoTarget, brdf) -> float:
-    """The largest ``|a/a_data - 1|`` of ``brdf`` at :data:`BAND_VIEWS_DEG` over the channels
-    whose data albedo exceeds :data:`BAND_FLOOR` (the match's quadrature)."""
-    ratios = target.ratios(brdf)
-    held = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)[:, None] & (target.ratios.ref > BAND_FLOOR)
-    r = np.abs(np.asarray(ratios, float) - 1.0)[held]
-    return float(np.nanmax(r)) if len(r) else 0.0
+    r = np.asarray(target.ratios(brdf), float)[held] - 1.0
+    return (float(np.nanmax(np.abs(r))), float(np.nanmax(r))) if len(r) else (0.0, 0.0)
 
 
 def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
@@ -488,7 +480,8 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     if max(errors) <= BAND_TARGET:
         return _energy_bounded(brdf, factors)
     matched = _rebuilt(brdf, s, b)
-    before = target.log(matched), _band_error(target, matched), max(_overshoot(target, matched), ALBEDO_ABOVE)
+    error, overshoot = _band(target, matched)
+    before = target.log(matched), error, max(overshoot, ALBEDO_ABOVE)
     if bases:
         factors = _with_bases(target, brdf, factors, errors, before) or factors
     if len(lobes) > 1:
@@ -507,8 +500,8 @@ def _chosen(target: AlbedoTarget, brdf, candidates, before: tuple, band: float):
     best, best_key = None, None
     for factors in candidates:
         matched = _rebuilt(brdf, *factors)
-        error = _band_error(target, matched)
-        if not (error < band and _overshoot(target, matched) <= over_before):
+        error, overshoot = _band(target, matched)
+        if not (error < band and overshoot <= over_before):
             continue
         log = target.log(matched)
         reaches = error < BAND <= band
@@ -548,11 +541,11 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
     """``factors`` with each lobe's own factor ``r_l`` on top of ``s``, solved in the channels
     still outside :data:`BAND_TARGET` (the band views weighed up for :data:`BAND_ROUNDS`
     rounds, then fewer): the one :func:`_chosen` that comes closer to the band, or
-    None (also where ``factors`` already reach :data:`BAND_TARGET`). A sharp lobe's energy at a view comes from ``theta_d`` near it, a rough one's from a
-    wide range: their own tables follow a steep rise of the albedo that one shared table
-    cannot."""
+    None (also where ``factors`` already reach :data:`BAND_TARGET`). A sharp lobe's energy at
+    a view comes from ``theta_d`` near it, a rough one's from a wide range: their own tables
+    follow a steep rise of the albedo that one shared table cannot."""
     current = _rebuilt(brdf, *factors)
-    band = _band_error(target, current)
+    band = _band(target, current)[0]
     if band <= BAND_TARGET:
         return None
     systems = _systems(target, current, _lobes(current), each=True)
@@ -583,14 +576,12 @@ def _energy_bounded(brdf, factors: AlbedoFactors, steps: int = 7) -> AlbedoFacto
     ceiling of 0 does not; where a capped table rings (a valley), the channel's factors,
     bases and ceiling all scaled by ``limit / albedo`` (``clip(F l s, 0, l c) = l clip(F s, 0,
     c)``: the tables keep their shape, the albedo scales exactly)."""
-    from ..metrics import directional_albedo
     views, limit = VIEWS_DEG + ENERGY_VIEWS_DEG, 1.0 - ENERGY_MARGIN
     grazing = np.asarray(NODES_DEG) > max(BAND_VIEWS_DEG)
     s, b, ceiling, each = factors.s.copy(), factors.bases.copy(), factors.ceiling.copy(), factors.each
 
     def albedo(s, b, c):
-        return directional_albedo(_rebuilt(brdf, s, b, c, each), views, n_theta=QUADRATURE[0],
-                                  n_phi=QUADRATURE[1])
+        return _albedo(_rebuilt(brdf, s, b, c, each), views)
 
     a = albedo(s, b, ceiling)
     over = np.any(a > limit, axis=0)

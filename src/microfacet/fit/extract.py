@@ -1322,8 +1322,10 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
         # measured BRDF remembers its last direction sets)
         f = np.concatenate([np.asarray(brdf.eval(w, wo_v), dtype=np.float64) for w in (wi_s, wi_c)], axis=1)
         # directions where the data are garbage (NaN, infinite, negative) or unmeasured leave
-        # both sides of the comparison, not only the data's (which would read them as black)
-        seen = np.all(np.isfinite(f) & (f >= 0), axis=-1) & _measured(brdf, wi, wo)
+        # both sides of the comparison, not only the data's (which would read them as black);
+        # the mask on the same pairs as the values (a measured BRDF gives both from one lookup)
+        measured = np.concatenate([measured_mask(brdf, w, wo_v) for w in (wi_s, wi_c)], axis=1)
+        seen = np.all(np.isfinite(f) & (f >= 0), axis=-1) & measured
         if not np.all(seen):
             inv = np.where(seen, inv, 0.0)
     fid = np.asarray(ideal.eval_cos(wi, wo), dtype=np.float64)[..., 0] * inv
@@ -1340,11 +1342,6 @@ def albedo_rows(brdf, ideal, n_d: int, views, n_u: int = 48):
         return a, None
     f = np.where(np.isfinite(f) & (f > 0), f * wi[..., 2:], 0.0) * inv[..., None]
     return a, f.sum(axis=1)
-
-
-def _measured(brdf, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """:func:`~microfacet.metrics.measured_mask` of the pairs ``(wi, wo)`` of any shape ``(..., 3)``."""
-    return measured_mask(brdf, wi.reshape(-1, 3), np.broadcast_to(wo, wi.shape).reshape(-1, 3)).reshape(wi.shape[:-1])
 
 
 #: The cosine strategy of :func:`albedo_rows` per ``(n_u, views, n_d)``, which no fit changes.
