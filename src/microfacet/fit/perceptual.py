@@ -18,16 +18,18 @@ and at every view up to 89 deg the total stays below 1 (penalty residuals of wei
 * ``"two_lobes"``: a sharp core and a wide halo, each with its own Schlick term, plus a
   base (metals and metallic paints: Cook & Torrance 1982 used two lobes for the same
   reason; Löw et al. 2012 Sec. 6);
-* ``"mixture"``: a sum of GGX lobes on a fixed ladder of roughnesses ``alpha_0 1.5^k``
-  (``alpha_0`` fitted in ``[ALPHA_MIN, 1.5 ALPHA_MIN]``, 16 rungs up to 1), each with its
-  own Schlick term, plus a base: a non-negative mixture of GGX distributions is a
-  distribution whose tail can fall as slowly as the data's (Löw et al. 2012's ABC fits have
+* ``"mixture"``: a sum of GGX lobes on a fixed ladder of roughnesses
+  ``ALPHA_MIN 1.5^(k + 1/2)`` (:data:`LADDER`, 16 rungs up to 1), each with its own Schlick
+  term, plus a base (no nonlinear parameter: its basis is evaluated once per fit); a
+  non-negative mixture of GGX distributions is a distribution whose tail can fall as slowly
+  as the data's (Löw et al. 2012's ABC fits have
   ``D ~ (1 - cos th_h)^-C`` with ``C`` ~1-2 where one GGX lobe falls as ``^-2``); lobes left
   empty by the bounds are dropped;
 * ``"dielectric_mixture"``: the mixture with a second base, the diffuse body seen through
   its smooth surface (:class:`microfacet.diffuse.TransmittedLambertian`, index
   :data:`BODY_ETA`): darker at grazing angles where the lobes' Fresnel terms brighten, so
-  that a paint's or plastic's albedo can stay flat with the view as the data's does;
+  that a paint's or plastic's albedo can stay flat with the view as the data's does
+  (started from the mixture's fit too, so its objective is at most the mixture's);
 * ``"coat"``: a dielectric coat of index ``eta`` and its own roughness over a base (a lobe
   plus a Lambertian term) lit through the coat's transmission,
   ``f = f_coat + (1 - E_c(mu_i))(1 - E_c(mu_o)) f_base``
@@ -501,29 +503,19 @@ def _lobes_brdf(q, y):
 EMPTY_LOBE = 1e-3
 #: Roughness ratio between the lobes of the ``"mixture"`` model, and their number.
 MIXTURE_RATIO, MIXTURE_LOBES = 1.5, 16
-
-
-def _ladder(q) -> np.ndarray:
-    """Log roughnesses of the mixture's lobes: ``alpha_0 RATIO^k``, capped at :data:`ALPHA_MAX`."""
-    return np.minimum(q[0] + np.log(MIXTURE_RATIO) * np.arange(MIXTURE_LOBES), np.log(ALPHA_MAX))
+#: Log roughnesses of the mixture's lobes: ``ALPHA_MIN sqrt(RATIO) RATIO^k``, capped at
+#: :data:`ALPHA_MAX`. Fixed: an offset fitted within one rung stays near this one, and would
+#: cost the basis anew at every step.
+LADDER = np.minimum(np.log(ALPHA_MIN) + np.log(MIXTURE_RATIO) * (np.arange(MIXTURE_LOBES) + 0.5), np.log(ALPHA_MAX))
+NO_Q = (np.zeros(0), np.zeros(0))
 
 
 def _mixture_basis(q, g):
-    return _lobes_basis(_ladder(q), g)
-
-
-def _mixture_slopes(q, g, extra: tuple = ()):
-    """:func:`_mixture_basis` (with the rows ``extra``) and its derivative in ``q = log
-    alpha_0`` (every lobe below the cap moves with it)."""
-    ladder = _ladder(q)
-    s, ds = _lobe_factors(ladder, g, slopes=True)
-    db = _basis_rows(ds * (ladder < np.log(ALPHA_MAX))[:, None], g, (0.0,) * len(extra))
-    db[2 * len(ladder)] = 0.0
-    return None, _basis_rows(s, g, extra).T, None, db.T[None]
+    return _lobes_basis(LADDER, g)
 
 
 def _mixture_brdf(q, y):
-    return _lobes_brdf(_ladder(q), y)
+    return _lobes_brdf(LADDER, y)
 
 
 #: Index of the surface that the ``"dielectric_mixture"`` model's second base is seen through.
@@ -552,12 +544,7 @@ def _body(g) -> np.ndarray:
 
 
 def _dielectric_basis(q, g):
-    return None, _basis_rows(_lobe_factors(_ladder(q), g), g, (_body(g),)).T
-
-
-def _dielectric_slopes(q, g):
-    """:func:`_dielectric_basis` and its derivative in ``q`` (the body does not depend on it)."""
-    return _mixture_slopes(q, g, (_body(g),))
+    return None, _basis_rows(_lobe_factors(LADDER, g), g, (_body(g),)).T
 
 
 def _dielectric_brdf(q, y):
@@ -573,7 +560,15 @@ def _dielectric_brdf(q, y):
 
 
 def _mixture_starts(previous):
-    return [np.array([np.log(ALPHA_MIN) + 0.5 * np.log(MIXTURE_RATIO)])]
+    return [np.zeros(0)]
+
+
+def _dielectric_starts(previous):
+    """The linearized start, and the mixture's fit with an empty body: no worse than it."""
+    starts = [np.zeros(0)]
+    if "mixture" in previous:
+        starts.append((np.zeros(0), np.concatenate([previous["mixture"][1], np.zeros(3)])))
+    return starts
 
 
 def _lobe_starts(previous):
@@ -618,16 +613,14 @@ def _log_bounds(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.full(n, np.log(ALPHA_MIN)), np.full(n, np.log(ALPHA_MAX))
 
 
-MODEL_BOUNDS_MIXTURE = (np.array([np.log(ALPHA_MIN)]), np.array([np.log(ALPHA_MIN * MIXTURE_RATIO)]))
 #: The models by name.
 MODEL_SPECS = {
     "lobe": Model("lobe", _log_bounds(1), _lobes_mix(1), _lobes_basis, _lobes_brdf, _lobe_starts, _lobes_slopes),
     "two_lobes": Model("two_lobes", _log_bounds(2), _lobes_mix(2), _lobes_basis, _lobes_brdf, _two_lobe_starts,
                        _lobes_slopes),
-    "mixture": Model("mixture", MODEL_BOUNDS_MIXTURE, _lobes_mix(MIXTURE_LOBES), _mixture_basis, _mixture_brdf,
-                     _mixture_starts, _mixture_slopes),
-    "dielectric_mixture": Model("dielectric_mixture", MODEL_BOUNDS_MIXTURE, _dielectric_mix(), _dielectric_basis,
-                                _dielectric_brdf, _mixture_starts, _dielectric_slopes),
+    "mixture": Model("mixture", NO_Q, _lobes_mix(MIXTURE_LOBES), _mixture_basis, _mixture_brdf, _mixture_starts),
+    "dielectric_mixture": Model("dielectric_mixture", NO_Q, _dielectric_mix(), _dielectric_basis, _dielectric_brdf,
+                                _dielectric_starts),
     "coat": Model("coat", (np.array([np.log(ALPHA_MIN), ETA_MIN, np.log(ALPHA_MIN)]),
                            np.array([np.log(ALPHA_MAX), ETA_MAX, np.log(ALPHA_MAX)])), _lobes_mix(1),
                   _coat_basis, _coat_brdf, _coat_starts),
@@ -793,10 +786,19 @@ class _Problem:
         self.hi = np.concatenate([model.q_bounds[1], np.ones(model.n_y)])
         self.nq = len(model.q_bounds[0])
         self.band_mask = t.albedo_data > ALBEDO_FLOOR
+        self._last_basis = (None, None)
+
+    def basis(self, q):
+        """``model.basis(q, geometry)``, remembered for the last ``q`` (a model without
+        ``q``, or a step that leaves it at a bound, keeps its basis)."""
+        key = np.asarray(q, dtype=np.float64).tobytes()
+        if self._last_basis[0] != key:
+            self._last_basis = (key, self.model.basis(q, self.t.geometry))
+        return self._last_basis[1]
 
     def values(self, q, y):
         """``(f (n, 3), c, B)`` at all pairs and albedo nodes."""
-        c, basis = self.model.basis(q, self.t.geometry)
+        c, basis = self.basis(q)
         return self._combine(c, basis, y), c, basis
 
     def _combine(self, c, basis, y):
@@ -875,7 +877,7 @@ class _Problem:
             yc = (model.mix @ y).T                                   # (K, 3)
             df = np.stack([db[k] @ yc + (0.0 if dc is None else dc[k][:, None]) for k in range(len(q))], -1)
             return c, basis, df
-        c, basis = model.basis(q, g)
+        c, basis = self.basis(q)
         f = self._combine(c, basis, y)
         df = np.empty(f.shape + (len(q),))
         for k in range(len(q)):
@@ -888,7 +890,8 @@ class _Problem:
     def _albedo_jacobian(self, basis, df, w):
         """``d albedo / d x`` ``(views, 3, nq + n_y)`` with the albedo weights ``w``."""
         sums = self._albedo_sums(basis, w)                          # (views, K)
-        return np.concatenate([self._albedo_sums(df.reshape(len(df), -1), w).reshape(len(sums), 3, -1),
+        nq = df.shape[-1]
+        return np.concatenate([self._albedo_sums(df.reshape(len(df), -1), w).reshape(len(sums), 3, nq),
                                np.einsum("vk,cky->vcy", sums, self.model.mix)], axis=2)
 
     def _albedo_sums(self, values, w):
@@ -916,7 +919,7 @@ class _Problem:
         (``ln(1 + u) ~ ln(1 + u_d) + (u - u_d) / (1 + u_d)``) plus the albedo band's
         residuals taken as equalities (the data's albedo at the ratio views)."""
         t, mix = self.t, self.model.mix
-        c, basis = self.model.basis(q, t.geometry)
+        c, basis = self.basis(q)
         c = np.zeros(len(basis)) if c is None else _finite(c)
         n = t.n_pairs
         ci = t.geometry.cos_i[:n, None]
