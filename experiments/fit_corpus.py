@@ -468,6 +468,7 @@ def evaluate(m: Material, work: Path, abc, abc_params: dict | None = None, size:
     if wall.is_file():
         row["wall_seconds"] = json.loads(wall.read_text())["seconds"]
     row["best"] = best
+    row["fold_seam"] = data.fold_seam() if hasattr(data, "fold_seam") else None
     named = dict(fits)
     if abc is not None:
         named["abc"] = abc
@@ -759,11 +760,17 @@ def material_rows(rows: list[dict]) -> list[dict]:
             "furnace_max": max((f.get("furnace") for k, f in (r.get("fits") or {}).items()
                                 if k not in ("abc", "baseline") and _num(f.get("furnace"))), default=None),
             "tv_ratio": tvs.get(tv_fit), "tv_fit": tv_fit, "tv_baseline": z.get("fresnel_tv"),
-            "seconds": r.get("wall_seconds"), "fit_seconds": r.get("fit_seconds"),
+            "seconds": r.get("wall_seconds"), "fit_seconds": r.get("fit_seconds"), "fold_seam": r.get("fold_seam"),
             "error": "; ".join(f"{k}: {v}" for k, v in {**fit_errors, **per_fit_errors}.items()),
             "baseline_error": r.get("errors", {}).get("baseline", ""),
         })
     return out
+
+
+def seam_limit() -> float:
+    """The library's ``SEAM_LIMIT`` (``MERLBRDF.fold_seam`` of a table that is not reciprocal)."""
+    from microfacet.measured.merl import SEAM_LIMIT
+    return SEAM_LIMIT
 
 
 def goals(table: list[dict], n_expected: int, phase: dict | None) -> dict:
@@ -807,6 +814,10 @@ def goals(table: list[dict], n_expected: int, phase: dict | None) -> dict:
         "fit_seconds": {"median": med(table, "seconds"), "max": max((r["seconds"] for r in table
                                                                       if _num(r["seconds"])), default=None)},
         "corpus_wall": phase,
+        "fold_seam": {"ranked": [(f"{r['group']}/{r['name']}", r["fold_seam"])
+                                 for r in sorted((r for r in table if _num(r.get("fold_seam"))),
+                                                 key=lambda r: -r["fold_seam"])],
+                      "limit": seam_limit()},
     }
     return g
 
@@ -872,15 +883,26 @@ def format_page(table, g, meta) -> str:
                         f"(a shared machine)" if w.get("load_average") else "") + ").")
     else:
         lines.append("- Corpus fit wall time: not measured in one run of every material yet.")
+    ranked = g["fold_seam"]["ranked"]
+    if ranked:
+        rank = {k: i + 1 for i, (k, _) in enumerate(ranked)}
+        seams = dict(ranked)
+        failing = list(dict.fromkeys(g["albedo"]["failing"] + g["chroma"]["failing"]))
+        lines.append(f"- Data not reciprocal (`MERLBRDF.fold_seam`: median jump of ln luminance across the "
+                     f"phi_d fold > {g['fold_seam']['limit']}): {sum(v > g['fold_seam']['limit'] for _, v in ranked)}"
+                     f"/{len(ranked)} tables, corpus median {_c(float(np.median([v for _, v in ranked])))}"
+                     + ("; the albedo and chromaticity failures: " + ", ".join(
+                         f"{k} (seam {_c(seams.get(k))}, rank {rank.get(k, '–')})" for k in failing) if failing else "")
+                     + ".")
     lines += ["", "## Per material", "",
               "log / image: cosine-weighted log error and sphere-image error of the best fit, the tabulated fit, "
               "ABC (MERL) and today's default (416aa6c). albedo: the best fit's ratio fit/data farthest from 1. "
               "chroma: the best fit's chromaticity difference. furnace: the largest white furnace of the file's "
-              "fits. TV/range: worst Fresnel table of the file's fits and that fit (today's default in brackets). s: fit_file "
-              "wall seconds.", "",
+              "fits. TV/range: worst Fresnel table of the file's fits and that fit (today's default in brackets). seam: "
+              "the data's jump across the phi_d fold (ln luminance). s: fit_file wall seconds.", "",
               "| group | material | best | log best | log tab | log ABC | log today | img best | img tab | img ABC "
-              "| img today | albedo | chroma | furnace | TV/range | s | error |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| img today | albedo | chroma | furnace | TV/range | seam | s | error |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in table:
         tv = (_c(r["tv_ratio"], 2) + (f" {r['tv_fit']}" if r["tv_fit"] else "")
               + (f" ({_c(r['tv_baseline'], 1)})" if _num(r["tv_baseline"]) else ""))
@@ -888,7 +910,7 @@ def format_page(table, g, meta) -> str:
                                         _c(r["log_tabulated"]), _c(r["log_abc"]), _c(r["log_baseline"]),
                                         _c(r["image_best"]), _c(r["image_tabulated"]), _c(r["image_abc"]),
                                         _c(r["image_baseline"]), _c(r["albedo_best"]), _c(r["chroma_best"], 4),
-                                        _c(r["furnace_max"]), tv, _c(r["seconds"], 2),
+                                        _c(r["furnace_max"]), tv, _c(r.get("fold_seam")), _c(r["seconds"], 2),
                                         _c(r["error"] or (f"baseline: {r['baseline_error']}"
                                                           if r["baseline_error"] else ""))]) + " |")
     if meta.get("sheets"):

@@ -75,9 +75,20 @@ def test_fit_writes_npz_json_png(single):
     assert np.allclose(summary["errors"]["albedo_ratio"]["ggx"], 1.0, atol=0.01)
     assert 0.9 < summary["errors"]["white_furnace"]["ggx_least_squares"] <= 1.0 + 2e-3
     assert summary["albedo_weight"] == 4.0
+    assert summary["data"]["fold_seam"] < 1e-3          # a reciprocal table: continuous across the fold
     with Image.open(npz.with_suffix(".png")) as im:
         assert im.format == "PNG" and im.size[0] >= 600
     assert not [p for p in npz.parent.iterdir() if p.name.startswith(".") or p.name.endswith(".tmp")]
+
+
+def test_fit_says_when_the_data_are_not_reciprocal(single):
+    """The printed table notes data whose table jumps across the phi_d fold (fold_seam), which
+    no fit can follow, and says nothing of a reciprocal table."""
+    from microfacet.fit.outputs import format_fits_table
+    summary = json.loads(single[1].with_suffix(".json").read_text())
+    assert "not reciprocal" not in format_fits_table(summary)
+    summary["data"]["fold_seam"] = 0.35                  # chm_mint's: a factor 1.42
+    assert "not reciprocal: their table jumps by a factor 1.42" in format_fits_table(summary)
 
 
 def test_fit_albedo_weight_option(inputs, tmp_path):

@@ -193,6 +193,22 @@ def test_merl_unmeasured_samples(tmp_path, linear_raw):
     np.testing.assert_allclose(m.coverage(wi, wo)[up], 1.0)
 
 
+def test_merl_fold_seam_marks_a_corpus_table_that_is_not_reciprocal(corpus):
+    """chm_mint's network, sampled on phi_d in [0, pi), jumps across the fold by a factor
+    ~1.4: at normal view every light reads phi_d = 0, so the data's albedo there exceeds its
+    albedo half a degree off by over 10 % (no reciprocal fit follows both). A near-reciprocal
+    corpus table (blue-metallic-paint) jumps by 1.4 % and its albedo is continuous."""
+    from microfacet.metrics import directional_albedo
+    for name, seamless in (("merl/blue-metallic-paint", True), ("rgl/chm_mint_rgb", False)):
+        data = mf.measured.load(corpus(name))
+        albedo = directional_albedo(data, (0.0, 0.5))
+        jump = np.max(albedo[0] / albedo[1])
+        if seamless:
+            assert data.fold_seam() < 0.02 and jump < 1.01, (name, data.fold_seam(), jump)
+        else:
+            assert data.fold_seam() > merl.SEAM_LIMIT and jump > 1.1, (name, data.fold_seam(), jump)
+
+
 def test_merl_interpolation_cache(smooth_file, monkeypatch):
     """Data and coverage on the same pairs interpolate once; a cached answer equals the
     computed one, is a fresh array (mutating it changes nothing), and other pairs miss."""

@@ -15,7 +15,10 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
   times), ``"errors"`` (per fit name: the grid error of
   :func:`microfacet.metrics.fit_error`; ``"uniform"``: :func:`~microfacet.metrics.uniform_error`;
   ``"albedo_ratio"``: :func:`~microfacet.metrics.albedo_ratios`, views x RGB;
-  ``"white_furnace"``: :func:`~microfacet.metrics.white_furnace`), and the options;
+  ``"white_furnace"``: :func:`~microfacet.metrics.white_furnace`), the options, and for a
+  MERL table ``"data": {"fold_seam"}`` (:meth:`microfacet.measured.MERLBRDF.fold_seam`: above
+  :data:`microfacet.measured.merl.SEAM_LIMIT` the data are not reciprocal, and the printed
+  table says so);
 * ``NAME.png`` — the comparison picture of :func:`microfacet.render.save_fit_comparison`
   (data, tabulated fit, GGX and Beckmann fits of the method, their errors).
 
@@ -403,6 +406,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     best = best_fit({k: v["metrics"] for k, v in fits_summary.items()})
     summary = {**_legacy_json(legacy, scores, method), **settings, "best": best, "fits": fits_summary,
                "seconds_perceptual": round(t3 - legacy.times[1], 4)}
+    if hasattr(brdf, "fold_seam"):
+        summary["data"] = {"fold_seam": round(brdf.fold_seam(), 4)}
     if legacy.moments_failed:
         summary["moments_failed"] = legacy.moments_failed
     specs = {k: v["model"] for k, v in fits_summary.items() if k != "tabulated"}
@@ -684,7 +689,17 @@ def format_fits_table(summary: dict) -> str:
     return "\n".join(lines) + ("\n* best: least image error x log error of the fits without a colour cast, or one within "
                                 f"5 % of the data's albedo scoring within {ALBEDO_PREFERENCE:g} times it (images: spheres "
                                 f"under 3 lights and an environment, {IMAGE_SIZE} px); log: cosine-weighted log error; "
-                                "albedo: worst ratio fit/data\n")
+                                "albedo: worst ratio fit/data\n") + _seam_note(summary)
+
+
+def _seam_note(summary: dict) -> str:
+    """A line on data that are not reciprocal (:meth:`microfacet.measured.MERLBRDF.fold_seam`), else ``""``."""
+    from ..measured.merl import SEAM_LIMIT
+    seam = summary.get("data", {}).get("fold_seam")
+    if seam is None or not seam > SEAM_LIMIT:
+        return ""
+    return (f"note: the data are not reciprocal: their table jumps by a factor {np.exp(seam):.2f} across phi_d = "
+            "0/180 deg (fold_seam), which no fit, being reciprocal, can follow on both sides\n")
 
 
 def _key(named: dict, brdf) -> str:

@@ -498,6 +498,10 @@ def _lobes_brdf(q, y):
     return _sum(parts, weights)
 
 
+#: Reflectances below this are set to 0 after the fit: Levenberg-Marquardt approaches the
+#: bound 0 without reaching it (1e-10 - 1e-20), and such dust makes a channel's Fresnel table
+#: a rescaled copy of the albedo match's factor, ringing where the factor does.
+DUST = 1e-6
 #: A lobe whose ``f0`` and ``f90`` are all below this is left out of the BRDF (its
 #: albedo is below ~1e-3 at every view).
 EMPTY_LOBE = 1e-3
@@ -1021,7 +1025,9 @@ def fit_model(t: Target, model: Model, previous: dict | None = None, refine: int
         scored.append((float(r @ r), x))
     scored.sort(key=lambda s: s[0])
     best = min((_levenberg_marquardt(problem, x) for _, x in scored[:refine]), key=lambda s: s[1])
-    return _project(problem, best[0]), best[1]
+    x = _project(problem, best[0])
+    x[problem.nq:][x[problem.nq:] < DUST] = 0.0     # the solver's approach to the bound, not a reflectance
+    return x, best[1]
 
 
 def _project(problem: _Problem, x: np.ndarray) -> np.ndarray:

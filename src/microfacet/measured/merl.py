@@ -38,13 +38,16 @@ from ..geometry import half_vector
 from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_error
 from .grids import MERL_SHAPE
 
-__all__ = ["MERLBRDF", "SHAPE", "SCALE", "is_merl", "read_merl"]
+__all__ = ["MERLBRDF", "SHAPE", "SCALE", "SEAM_LIMIT", "is_merl", "read_merl"]
 
 SHAPE = MERL_SHAPE                                      # (theta_h, theta_d, phi_d) bins
 SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 HEADER = np.array(SHAPE, dtype="<i4").tobytes()
 N_SAMPLES = SHAPE[0] * SHAPE[1] * SHAPE[2]
 N_BYTES = len(HEADER) + 3 * N_SAMPLES * 8             # 34,992,012
+#: A :meth:`MERLBRDF.fold_seam` above this (a jump of 10 % across the fold) marks a table
+#: that is not reciprocal (one bin's step is ~1e-4; the corpus networks' median seam is 0.02).
+SEAM_LIMIT = 0.1
 
 
 def is_merl(data: bytes) -> bool:
@@ -294,3 +297,39 @@ class MERLBRDF(MeasuredBRDF):
             Measured share in ``[0, 1]``.
         """
         return self._interpolate(wi, wo)[1]
+
+    def fold_seam(self) -> float:
+        """The table's jump across its ``phi_d`` fold: the median, over the rows
+        ``(theta_h, theta_d)`` measured at both ends, of ``|ln Y(phi_d = 0) - ln Y(phi_d =
+        179 deg)|`` (``Y``: luminance).
+
+        A reciprocal isotropic BRDF is continuous across the fold (``f(phi_d) = f(phi_d +
+        pi)`` by reciprocity and ``= f(-phi_d)`` by isotropy, so ``f(pi^-) = f(0^+)``): its
+        seam is about one bin's step (:data:`SEAM_LIMIT`). A table that is not (a network fitted to
+        measurements over all of ``[0, 2 pi)``, then sampled on ``[0, pi)``) jumps there,
+        and no reciprocal model follows both sides: at normal view every light reads
+        ``phi_d = 0``, half a degree off it half of them read the other side.
+
+        Returns
+        -------
+        float
+            The median jump in ``ln`` luminance (0.35: a factor 1.4); NaN where no row is
+            measured at both ends.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> phi, measured = np.arange(SHAPE[2]) / SHAPE[2] * np.pi, np.ones(SHAPE, bool)
+        >>> def table(f):
+        ...     return MERLBRDF(np.broadcast_to(f[:, None], SHAPE + (3,)), measured)
+        >>> round(table(1.0 + 0.5 * np.cos(2.0 * phi)).fold_seam(), 4)   # reciprocal: one bin's step
+        0.0002
+        >>> round(table(1.0 + 0.5 * np.cos(phi)).fold_seam(), 4)         # not: 1.5 at 0, 0.5 at pi
+        1.0985
+        """
+        both = self.valid[:, :, 0] & self.valid[:, :, -1]
+        luminance = self.values[:, :, [0, -1]][both] @ np.array([0.2126, 0.7152, 0.0722])   # (rows, 2)
+        ok = np.all(luminance > 0.0, axis=1)
+        if not np.any(ok):
+            return float("nan")
+        return float(np.median(np.abs(np.log(luminance[ok, 0] / luminance[ok, 1]))))
