@@ -314,9 +314,10 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     the ones already written are removed (no ``.npz`` without its ``.json`` and
     ``.png``). The perceptual fits and, where this process can fork, the tabulated fit and
     the fits made from it run in processes of their own
-    (:func:`microfacet._background.in_process_items`; the same bytes as in this process),
-    each judged here as it comes, on two threads, while the picture's drawing warms up on
-    another (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module docstring); ``seconds``
+    (:func:`microfacet._background.in_process_items`; the same bytes as in this process):
+    the perceptual fits judged here as they come, on two threads, the others judged in
+    their process (with the data's side of the metrics made here before it forks), while
+    the picture's drawing warms up on another thread (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module docstring); ``seconds``
     holds the time of the tabulated fit and of the least-squares fits (wall; not of the
     errors, picture or files).
 
@@ -378,27 +379,24 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     from .perceptual import target as perceptual_target
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
     perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
+    metrics, judges = _metrics(brdf), _judges(brdf)     # the data's side, which the legacy fits' child inherits
     from .. import kernels            # on the NumPy path (the CLI's): Numba's parallel kernels abort a forked child
     legacy_items = None
     if can_fork() and not kernels.AVAILABLE:
-        _import_scipy_special()
-        legacy_items = in_process_items(_legacy_item, brdf, method, settings)
+        legacy_items = in_process_items(_legacy_item, brdf, method, settings, metrics, judges)
     _import_numba()
     if picture:                     # Matplotlib's imports and fonts, on a thread while the fits run
         from ..render import fit_comparison_png
         from ..render.compare import warm_up
         drawing = in_background(warm_up)
-    metrics, judges = _metrics(brdf), _judges(brdf)
-    data_albedo = metrics[2].ref
     from concurrent.futures import ThreadPoolExecutor
     with ThreadPoolExecutor(2) as pool, ThreadPoolExecutor(1) as feeder:
-        # each perceptual fit is judged as it comes, while the legacy fits are made (in a
-        # process of their own where one can fork) and judged here
+        # each perceptual fit is judged as it comes, while the legacy fits are made and judged
+        # (in a process of their own where one can fork)
         judged = feeder.submit(_judge_perceptual, perceptual_items, albedo_target(brdf, log=judges[0]), metrics,
                                judges, pool)
-        legacy, = legacy_items if legacy_items is not None else (_legacy_fits(brdf, method, settings),)
-        scores = _scores(metrics, legacy.named)
-        fits_summary = _fit_summaries(judges, legacy.named, scores[:3], data_albedo)
+        (legacy, scores, fits_summary), = (legacy_items if legacy_items is not None
+                                           else _legacy_item(brdf, method, settings, metrics, judges))
         perceptual, t3 = judged.result()
     for name in (m for m in models if m in perceptual):     # in the order of the models
         fits_summary[name] = perceptual[name][1]
@@ -434,9 +432,13 @@ class _Legacy(NamedTuple):
     times: tuple
 
 
-def _legacy_item(brdf, method: str, settings: dict):
-    """:func:`_legacy_fits` as the one item of a generator (for :func:`in_process_items`)."""
-    yield _legacy_fits(brdf, method, settings)
+def _legacy_item(brdf, method: str, settings: dict, metrics: tuple, judges: tuple):
+    """``(legacy, scores, summaries)``: :func:`_legacy_fits`, their :func:`_scores` and
+    :func:`_fit_summaries` (``metrics``, ``judges``: :func:`_metrics` and :func:`_judges` of
+    the data), as the one item of a generator (for :func:`in_process_items`)."""
+    legacy = _legacy_fits(brdf, method, settings)
+    scores = _scores(metrics, legacy.named)
+    yield legacy, scores, _fit_summaries(judges, legacy.named, scores[:3], metrics[2].ref)
 
 
 def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
@@ -509,14 +511,6 @@ def _moment_fits(fit, brdf, required: bool) -> tuple[dict, dict]:
                 raise
             failed[family] = str(e)
     return out, failed
-
-
-def _import_scipy_special() -> None:
-    """Import SciPy's special functions (Beckmann's Smith term,
-    :mod:`microfacet.distributions.beckmann`, imports them at its first evaluation) before the
-    legacy fits' child forks: that child, which fits Beckmann lobes, and this process, which
-    judges them, then share one import instead of making one each."""
-    import scipy.special  # noqa: F401
 
 
 def _import_numba() -> None:
