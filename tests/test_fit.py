@@ -744,6 +744,28 @@ def test_fresnel_is_bounded_to_unit_interval():
     assert f.fresnel.values.max() > 0.99
 
 
+def test_fresnel_solve_ignores_how_the_lobe_tail_underflows():
+    """The same data and mirror lobe whose far tail is 0 (NumPy's Beckmann) or subnormal
+    (the compiled kernel's) give the same Fresnel table: the negligible tail leaves the
+    solve. Before, the subnormal tail's weights 1/f_id overflowed and a corpus material's
+    Beckmann conversion failed in every fit after the kernels had compiled."""
+    data = _input(mf.Beckmann, shadowing=True, alpha=0.05, fresnel=mf.fresnel.Schlick(0.6))
+    samples = extract.fresnel_samples(data, 16)
+    mirror = mf.MicrofacetBRDF(mf.Beckmann(alpha=0.05))
+
+    class Tail(mf.BRDF):
+        def __init__(self, floor):
+            self.floor = floor
+
+        def eval(self, wi, wo):
+            f = np.asarray(mirror.eval(wi, wo), dtype=np.float64)
+            return np.where(f < 1e-300, self.floor, f)
+
+    zero, subnormal = (extract.solve_fresnel(samples, Tail(floor)) for floor in (0.0, 5e-324))
+    assert np.all(np.isfinite(subnormal.rgb)) and np.array_equal(zero.rgb, subnormal.rgb)
+    assert np.allclose(zero.rgb, mf.fresnel.Schlick(0.6)(zero.cos_theta_d), atol=0.02)
+
+
 #: the shared data: $MICROFACET_DATA, else ``../shared/data`` beside the repository
 DATA = Path(os.environ.get("MICROFACET_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 SHARED = sorted((DATA / "merl").glob("*.binary*")) + sorted((DATA / "rgl").glob("*.bsdf"))

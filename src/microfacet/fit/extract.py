@@ -688,7 +688,8 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
 
     with ``f_id`` the fitted ideal-mirror BRDF ``ideal`` (Eq. 4.10), ``hat_k`` the linear
     interpolation of the table in ``cos theta_d`` and ``w_j = 1 / (f_id,j + k_d0 / pi)``.
-    Without the diffuse term (``k_d0 = 0``, configurations with ``f_id = 0`` dropped) and
+    Without the diffuse term (``k_d0 = 0``, configurations where ``f_id`` is negligible
+    dropped: :data:`NEGLIGIBLE_LOBE`) and
     without the bounds and the smoothing, the solution at nodes sampled only there is
     ``sum f / sum f_id``, the ``f_id``-weighted mean of ``f / f_id`` (Eq. 4.11). The second-
     difference penalty (weight ``smoothing`` times the mean diagonal of the normal
@@ -777,10 +778,17 @@ def solve_fresnel(samples: dict, ideal, diffuse: bool = False, smoothing: float 
     return _fresnel_solution(system, x, albedo, albedo_weight)
 
 
+#: Configurations where the mirror lobe of a Fresnel solve without a base is below this times
+#: its peak are left out (:func:`_fresnel_system`).
+NEGLIGIBLE_LOBE = 1e-12
+
+
 def _fresnel_system(samples: dict, ideal, diffuse: bool) -> _FresnelSystem:
     """The normal equations of :func:`solve_fresnel`: weights ``1 / (f_id + k_d0 / pi)``,
     with ``k_d0`` the data's floor where the mirror lobe is negligible (0 without a base,
-    and configurations with ``f_id = 0`` dropped)."""
+    and configurations with ``f_id`` below :data:`NEGLIGIBLE_LOBE` times its peak dropped:
+    they carry no information on ``F``, and in the far tail ``f_id`` is 0, subnormal or
+    tiny depending on how the lobe's exponential underflows, so ``1 / f_id`` may overflow)."""
     n_d = samples["n_d"]
     f = samples["f"]
     f_id = np.asarray(ideal.eval(samples["wi"], samples["wo"]), dtype=np.float64)[..., 0]
@@ -790,7 +798,7 @@ def _fresnel_system(samples: dict, ideal, diffuse: bool) -> _FresnelSystem:
         floor = np.median(luminance(f[low])) if np.any(low) else 0.0
         delta = max(float(floor), 1e-6 * float(np.max(luminance(f[ok])))) if np.any(ok) else 0.0
     else:
-        ok &= f_id > 0
+        ok &= f_id > NEGLIGIBLE_LOBE * np.max(np.where(ok, f_id, 0.0))
         delta = 0.0
     if not np.any(ok & (f_id > 0)):
         raise MicrofacetError("fit: no configuration to extract the Fresnel term from")
