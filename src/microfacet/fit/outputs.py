@@ -317,9 +317,10 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     (:func:`microfacet._background.in_process_items`; the same bytes as in this process):
     the perceptual fits judged here as they come, on two threads, the others judged in
     their process (with the data's side of the metrics made here before it forks), while
-    the picture's drawing warms up on another thread (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module docstring); ``seconds``
-    holds the time of the tabulated fit and of the least-squares fits (wall; not of the
-    errors, picture or files).
+    the picture's drawing warms up on another thread
+    (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module
+    docstring); ``seconds`` holds the time of the tabulated fit and of the least-squares
+    fits (wall; not of the errors, picture or files).
 
     Parameters
     ----------

@@ -499,8 +499,8 @@ def _lobes_brdf(q, y):
 
 
 #: Reflectances below this are set to 0 after the fit: Levenberg-Marquardt approaches the
-#: bound 0 without reaching it (1e-10 - 1e-20), and such dust makes a channel's Fresnel table
-#: a rescaled copy of the albedo match's factor, ringing where the factor does.
+#: bound 0 without reaching it (1e-22 - 1e-8 left), and such dust makes a channel's Fresnel
+#: table a rescaled copy of the albedo match's factor, ringing where the factor does.
 DUST = 1e-6
 #: A lobe whose ``f0`` and ``f90`` are all below this is left out of the BRDF (its
 #: albedo is below ~1e-3 at every view).
@@ -511,6 +511,7 @@ MIXTURE_RATIO, MIXTURE_LOBES = 1.5, 16
 #: :data:`ALPHA_MAX`. Fixed: an offset fitted within one rung stays near this one, and would
 #: cost the basis anew at every step.
 LADDER = np.minimum(np.log(ALPHA_MIN) + np.log(MIXTURE_RATIO) * (np.arange(MIXTURE_LOBES) + 0.5), np.log(ALPHA_MAX))
+#: Bounds of the nonlinear parameters of a model that has none.
 NO_Q = (np.zeros(0), np.zeros(0))
 
 
