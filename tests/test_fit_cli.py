@@ -315,9 +315,9 @@ def test_fit_material_writes_the_three_files(tmp_path):
 
 @pytest.mark.parametrize("numba", [True, False], ids=["kernels", "numpy"])
 def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monkeypatch, numba):
-    """The perceptual fits (and, on the NumPy path, the legacy fits) in forked processes, each
-    judged as it comes, give the same bytes as made in this process (issue 10: overlapping
-    stages changes no result); only the fit times differ."""
+    """The perceptual fits (and, on the NumPy path, the legacy fits and the picture) in forked
+    processes, each judged as it comes, give the same bytes as made in this process (issue 10:
+    overlapping stages changes no result); only the fit times differ."""
     from microfacet import kernels
     from microfacet.fit import outputs
     if not numba:
@@ -327,11 +327,13 @@ def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monke
     for mode in ("process", "here"):
         if mode == "here":
             monkeypatch.setattr(outputs, "in_process_items", lambda fn, *args: fn(*args))
+            monkeypatch.setattr(outputs, "can_fork", lambda: False)
         out = tmp_path / mode / "gold.npz"
-        summary = outputs.fit_material(data, out, resolution=16, picture=False)
+        summary = outputs.fit_material(data, out, resolution=16)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5
         text = out.with_suffix(".json").read_text().splitlines()
-        files[mode] = out.read_bytes(), [line for line in text if '"seconds' not in line]
+        files[mode] = (out.read_bytes(), [line for line in text if '"seconds' not in line],
+                       out.with_suffix(".png").read_bytes())
     assert files["process"] == files["here"]
 
 
