@@ -330,8 +330,9 @@ class MERLBRDF(MeasuredBRDF):
         ...     return MERLBRDF(np.broadcast_to(f[:, None], SHAPE + (3,)), measured)
         >>> round(table(1.0 + 0.5 * np.cos(2.0 * phi)).fold_seam(), 4)   # reciprocal: one bin's step
         0.0002
-        >>> round(table(1.0 + 0.5 * np.cos(phi)).fold_seam(), 4)         # not: 1.5 at 0, 0.5 at pi
-        1.0985
+        >>> seam = table(1.0 + 0.5 * np.cos(phi)).fold_seam()           # not: 1.5 at 0, 0.5 at pi
+        >>> round(seam, 4), seam > SEAM_LIMIT
+        (1.0985, True)
         """
         both = self.valid[:, :, 0] & self.valid[:, :, -1]
         luminance = self.values[:, :, [0, -1]][both] @ np.array([0.2126, 0.7152, 0.0722])   # (rows, 2)
