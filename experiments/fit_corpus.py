@@ -767,14 +767,9 @@ def material_rows(rows: list[dict]) -> list[dict]:
     return out
 
 
-def seam_limit() -> float:
-    """The library's ``SEAM_LIMIT`` (``MERLBRDF.fold_seam`` of a table that is not reciprocal)."""
-    from microfacet.measured.merl import SEAM_LIMIT
-    return SEAM_LIMIT
-
-
 def goals(table: list[dict], n_expected: int, phase: dict | None) -> dict:
     """The issue's goal figures computed from the table."""
+    from microfacet.measured.merl import SEAM_LIMIT     # a table above it is not reciprocal
     merl = [r for r in table if r["group"] == "merl"]
     both = [r for r in merl if all(_num(r[k]) for k in ("log_best", "log_abc", "image_best", "image_abc"))]
     beat = [r for r in both if r["log_best"] <= r["log_abc"] and r["image_best"] <= r["image_abc"]]
@@ -817,7 +812,7 @@ def goals(table: list[dict], n_expected: int, phase: dict | None) -> dict:
         "fold_seam": {"ranked": [(f"{r['group']}/{r['name']}", r["fold_seam"])
                                  for r in sorted((r for r in table if _num(r.get("fold_seam"))),
                                                  key=lambda r: -r["fold_seam"])],
-                      "limit": seam_limit()},
+                      "limit": SEAM_LIMIT},
     }
     return g
 

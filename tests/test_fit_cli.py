@@ -327,7 +327,6 @@ def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monke
     for mode in ("process", "here"):
         if mode == "here":
             monkeypatch.setattr(outputs, "in_process_items", lambda fn, *args: fn(*args))
-            monkeypatch.setattr(outputs, "can_fork", lambda: False)
         out = tmp_path / mode / "gold.npz"
         summary = outputs.fit_material(data, out, resolution=16)
         assert len(summary["least_squares"]) == 2 and len(summary["errors"]["white_furnace"]) == 5

@@ -570,7 +570,7 @@ def _mixture_starts(previous):
 
 def _dielectric_starts(previous):
     """The linearized start, and the mixture's fit with an empty body: no worse than it."""
-    starts = [np.zeros(0)]
+    starts = _mixture_starts(previous)
     if "mixture" in previous:
         starts.append((np.zeros(0), np.concatenate([previous["mixture"][1], np.zeros(3)])))
     return starts
