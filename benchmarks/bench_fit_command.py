@@ -62,6 +62,7 @@ def one_process(path: str) -> list[tuple[str, float]]:
     from microfacet.fit.albedo import albedo_target
     from microfacet.io.read import MEASURED_BRDF, read_decompressed
     from microfacet.measured import load_bytes
+    from microfacet.metrics import white_furnace
     mark("imports")
     brdf = load_bytes(read_decompressed(Path(path), MEASURED_BRDF), path)
     mark("read + parse")
@@ -87,13 +88,14 @@ def one_process(path: str) -> list[tuple[str, float]]:
         named = {"tabulated": fit, "ggx_moments": fit.to_ggx(reference=brdf),
                  "beckmann_moments": fit.to_beckmann(reference=brdf), **least}
         mark("moment conversions")
-        summaries = outputs._fit_summaries(judges, named, outputs._scores(metrics, named)[:3], metrics[2].ref)
+        summaries = outputs._fit_summaries(judges, named, outputs._scores(metrics, named), metrics[2].ref)
+        {k: white_furnace(b) for k, b in named.items()}
         mark("metrics of the 5 fits above")
         perceptual_fits = {}
         for name, (q, y) in fitted.items():
             perceptual_fits[name] = outputs._perceptual_brdf(target, name, q, y)
             one = {name: perceptual_fits[name]}
-            summaries.update(outputs._fit_summaries(judges, one, outputs._scores(metrics, one)[:3], metrics[2].ref))
+            summaries.update(outputs._fit_summaries(judges, one, outputs._scores(metrics, one), metrics[2].ref))
             mark(f"albedo match + metrics: {name}")
         from microfacet.render import fit_comparison_png
         mark("picture: imports")

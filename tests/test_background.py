@@ -5,7 +5,7 @@ import signal
 import numpy as np
 import pytest
 
-from microfacet._background import can_fork, in_background, in_process_items
+from microfacet._background import Handoff, can_fork, in_background, in_process_items
 
 
 def _pid_and_sum(a):
@@ -71,3 +71,28 @@ def test_in_process_items_say_when_their_worker_dies():
 def test_in_process_items_say_when_an_item_does_not_pickle():
     with pytest.raises((RuntimeError, AttributeError, TypeError), match="pickle|_unpicklable|lambda"):
         list(in_process_items(_unpicklable))
+
+
+def _scaled_by_what_comes(handoff, xs):
+    k = handoff.get()
+    for x in xs:
+        yield os.getpid(), k[:3] * x
+
+
+def test_handoff_gives_the_child_a_value_made_after_the_fork():
+    """A Handoff carries to the child a value put after in_process_items forked it; put does
+    not wait for the child to read it (a value larger than a pipe's buffer); without a fork the
+    generator reads the value put here."""
+    handoff = Handoff()
+    items = in_process_items(_scaled_by_what_comes, handoff, [1.0, 2.0])
+    value = np.arange(1_000_000, dtype=float)                  # 8 MB
+    handoff.put(value)
+    got = list(items)
+    assert [v.tolist() for _, v in got] == [[0.0, 1.0, 2.0], [0.0, 2.0, 4.0]]
+    assert all((pid != os.getpid()) == can_fork() for pid, _ in got)
+    here = Handoff()
+    items = _scaled_by_what_comes(here, [3.0])
+    here.put(value)
+    assert [v.tolist() for _, v in items] == [[0.0, 3.0, 6.0]]
+    with pytest.raises(RuntimeError, match="nothing was put"):
+        Handoff().get()

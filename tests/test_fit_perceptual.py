@@ -29,14 +29,16 @@ def test_lobe_factor_is_the_library_ggx(alpha):
 def test_lobes_evaluated_together_equal_their_sum():
     """GGXLobes (the lobes on one Geometry, Schlick terms and tables on one grid combined) equals
     the SumBRDF of the same parts: Schlick lobes, the tables of an albedo match, a conductor
-    lobe, an anisotropic lobe and both bases; pairs below the horizon; broadcast shapes; out=."""
+    lobe, an anisotropic lobe and both bases; pairs below the horizon; broadcast shapes; out=;
+    more pairs than one block of table lookups; each term's value (terms_cos)."""
     from microfacet.diffuse import TransmittedLambertian
     from microfacet.fit.albedo import albedo_target, match_albedo
     rng = np.random.default_rng(5)
     lobes = [mf.MicrofacetBRDF(mf.GGX(alpha=a), mf.fresnel.Schlick(rng.uniform(size=3), 0.7)) for a in (0.01, 0.1, 0.5)]
     others = [mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Conductor.metal("Au")),
               mf.MicrofacetBRDF(mf.GGX(alpha_x=0.1, alpha_y=0.3)), mf.Lambertian(0.2), TransmittedLambertian(0.3)]
-    wi, wo = rng.normal(size=(2, 2000, 3))
+    n = perceptual.TABLE_BLOCK + 904
+    wi, wo = rng.normal(size=(2, n, 3))
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)              # half of them below the horizon
     wo = np.abs(wo) / np.linalg.norm(wo, axis=1, keepdims=True)
     joint = perceptual.GGXLobes(*lobes, *others)
@@ -50,8 +52,10 @@ def test_lobes_evaluated_together_equal_their_sum():
             np.testing.assert_allclose(getattr(brdf, method)(wi, wo), ref, rtol=1e-10, atol=1e-14)
         grid = brdf.eval(wi[:5, None], wo[None, :7])
         np.testing.assert_allclose(grid, plain.eval(wi[:5, None], wo[None, :7]), rtol=1e-10, atol=1e-14)
-        out = np.empty((2000, 3))
+        out = np.empty((n, 3))
         assert brdf.eval_cos(wi, wo, out=out) is out
+        for term, value in zip(brdf.brdfs, brdf.terms_cos(wi, wo), strict=True):
+            np.testing.assert_allclose(value, term.eval_cos(wi, wo), rtol=1e-10, atol=1e-14)
 
 
 @pytest.mark.parametrize("model", perceptual.MODELS)

@@ -11,7 +11,7 @@ import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 
-__all__ = ["in_background", "in_process_items", "can_fork"]
+__all__ = ["in_background", "in_process_items", "can_fork", "Handoff"]
 
 
 def in_background(fn: Callable, *args) -> Future:
@@ -35,6 +35,63 @@ def can_fork() -> bool:
     is not itself a worker (a batch's workers already use the CPUs; daemons cannot fork)."""
     return (sys.platform.startswith("linux") and (os.cpu_count() or 1) > 1
             and multiprocessing.parent_process() is None and not multiprocessing.current_process().daemon)
+
+
+class Handoff:
+    """One value that this process gives to the child of :func:`in_process_items` after
+    forking it (pass the handoff among the child's arguments): :meth:`put` here, :meth:`get`
+    in the child, which waits for it there. The value is sent on a daemon thread, so
+    :meth:`put` does not wait for the child to read it. Where the generator is not forked
+    (it then runs here, as it is read), :meth:`get` returns what :meth:`put` gave.
+
+    Example
+    -------
+    >>> def scaled(handoff, xs):
+    ...     k = handoff.get()
+    ...     for x in xs:
+    ...         yield k * x
+    >>> factor = Handoff()
+    >>> items = in_process_items(scaled, factor, [1, 2])
+    >>> factor.put(10)
+    >>> list(items)
+    [10, 20]
+    """
+
+    def __init__(self):
+        self._value, self._given, self._pipe = None, False, None
+
+    def _fork(self, context) -> None:
+        """Called by :func:`in_process_items` before it forks: the value will travel on a pipe."""
+        if self._pipe is None:
+            self._pipe = context.Pipe(duplex=False)
+
+    def put(self, value) -> None:
+        """Give ``value`` (once)."""
+        self._value, self._given = value, True
+        if self._pipe is not None:
+            receive, send = self._pipe
+            receive.close()
+            in_background(self._send, send, value)
+
+    @staticmethod
+    def _send(send, value) -> None:
+        try:
+            send.send(value)
+        except OSError:                          # the child has ended: its items say why
+            pass
+        finally:
+            send.close()
+
+    def get(self):
+        """The value :meth:`put` gives, waiting for it in a forked child."""
+        if self._given:
+            return self._value
+        if self._pipe is None:
+            raise RuntimeError("Handoff.get: nothing was put, and no child was forked to wait for it")
+        receive, send = self._pipe
+        send.close()
+        with receive:
+            return receive.recv()
 
 
 def _child(fn: Callable, args: tuple, conn) -> None:
@@ -70,7 +127,8 @@ def _receive(fn: Callable, child, receive) -> tuple:
 def in_process_items(fn: Callable, *args) -> Iterator:
     """The items of the generator ``fn(*args)`` made in a forked child process
     (:func:`can_fork`; else the generator itself, run as it is read), each as soon as it is
-    made: the caller works on early items while the child makes the next. Items must pickle.
+    made: the caller works on early items while the child makes the next. Items must pickle;
+    a :class:`Handoff` among ``args`` carries a value the caller gives after the fork.
     Fork it before starting threads; ``fn`` must not run Numba's parallel kernels (GNU OpenMP
     aborts a forked child that does, once its parent has used them). The child ends with its
     parent (even one killed by ``kill -9``) and is daemonic. An exception in the child is raised where the items stop; a caller that
@@ -99,6 +157,9 @@ def in_process_items(fn: Callable, *args) -> Iterator:
     if not can_fork():
         return fn(*args)
     context = multiprocessing.get_context("fork")
+    for a in args:
+        if isinstance(a, Handoff):
+            a._fork(context)
     receive, send = context.Pipe(duplex=False)
     child = context.Process(target=_child, args=(fn, args, send), daemon=True,
                             name=f"microfacet-{getattr(fn, '__name__', 'work')}")

@@ -193,9 +193,27 @@ def _hats(theta_d: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(theta_d, nodes, eye[k]) for k in range(len(nodes))], axis=-1)
 
 
-def _lobes(brdf) -> list:
+def _is_lobe(part) -> bool:
     from ..brdf import MicrofacetBRDF
-    return [b for b in getattr(brdf, "brdfs", [brdf]) if isinstance(b, MicrofacetBRDF)]
+    return isinstance(part, MicrofacetBRDF)
+
+
+def _is_base(part) -> bool:
+    from ..brdf import Lambertian
+    from ..diffuse import TransmittedLambertian
+    return isinstance(part, (Lambertian, TransmittedLambertian))
+
+
+def _lobes(brdf) -> list:
+    return [b for b in getattr(brdf, "brdfs", [brdf]) if _is_lobe(b)]
+
+
+def _terms_cos(brdf, wi, wo) -> list[tuple[object, np.ndarray]]:
+    """``(term, f cos theta_i)`` of each term of ``brdf`` (itself where it is not a sum),
+    non-finite values as 0 (:meth:`microfacet.fit.SumBRDF.terms_cos`)."""
+    terms = getattr(brdf, "brdfs", (brdf,))
+    values = brdf.terms_cos(wi, wo) if hasattr(brdf, "terms_cos") else [brdf.eval_cos(wi, wo)]
+    return [(b, np.nan_to_num(np.asarray(v, float))) for b, v in zip(terms, values)]
 
 
 def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
@@ -264,27 +282,29 @@ class _System(NamedTuple):
         return float(r.max()) if len(r) else 0.0
 
 
-def _systems(target: AlbedoTarget, brdf, lobes, bases=(), each: bool = False) -> list[_System]:
+def _systems(target: AlbedoTarget, brdf, bases: bool = False, each: bool = False) -> list[_System]:
     """The least squares of :func:`albedo_factors` per channel (module docstring): unknowns
-    the table's nodes ``s`` (with ``each``, one table per lobe, in the lobes' order) and, for
-    each of ``bases``, its reflectance's factor ``b``."""
+    the table's nodes ``s`` (with ``each``, one table per lobe, in the lobes' order) and, with
+    ``bases``, each diffuse base's reflectance factor ``b``."""
     ratios, log = target
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
     fitted = ratios.albedo(brdf)
-    lobe_values = [np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in lobes]
+    terms = _terms_cos(brdf, wi, wo)
+    lobe_values = [v for b, v in terms if _is_lobe(b)]
     spec = [w[:, None] * v for v in lobe_values] if each else [w[:, None] * sum(lobe_values)]
-    diffuse = [w[:, None] * np.nan_to_num(np.asarray(b.eval_cos(wi, wo), float)) for b in bases]
+    diffuse = [w[:, None] * v for b, v in terms if bases and _is_base(b)]
     hats = _hats(_theta_d(wi, wo))
     f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
-    lobe_values = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in lobes]
+    terms = _terms_cos(brdf, log.wi, log.wo)
+    lobe_values = [v for b, v in terms if _is_lobe(b)]
     f_spec = lobe_values if each else [sum(lobe_values)]
-    f_bases = [np.nan_to_num(np.asarray(b.eval_cos(log.wi, log.wo), float)) for b in bases]
+    f_bases = [v for b, v in terms if bases and _is_base(b)]
     log_hats = _hats(_theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
     pair_w = LOG_WEIGHT * log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
     second = np.diff(np.eye(k), 2, axis=0)
-    n = k * len(spec) + len(bases)
+    n = k * len(spec) + len(diffuse)
     regular = PULL * np.eye(n)
     for i in range(len(spec)):
         regular[i * k:(i + 1) * k, i * k:(i + 1) * k] += SMOOTHNESS * second.T @ second
@@ -369,9 +389,7 @@ class AlbedoFactors(NamedTuple):
 def _bases(brdf) -> list:
     """The diffuse bases of a fit (:class:`~microfacet.Lambertian`,
     :class:`~microfacet.diffuse.TransmittedLambertian`), in its order."""
-    from ..brdf import Lambertian
-    from ..diffuse import TransmittedLambertian
-    return [b for b in getattr(brdf, "brdfs", [brdf]) if isinstance(b, (Lambertian, TransmittedLambertian))]
+    return [b for b in getattr(brdf, "brdfs", [brdf]) if _is_base(b)]
 
 
 def _pick(system: _System, c: int, brdf, s: np.ndarray, base_lower: np.ndarray, base_upper: np.ndarray,
@@ -472,7 +490,7 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     s, b, each = np.ones((k, 3)), np.ones((len(bases), 3)), np.ones((len(lobes), k, 3))
     if not lobes:
         return AlbedoFactors(s, b, np.ones(3), each)
-    systems = _systems(target, brdf, lobes)
+    systems = _systems(target, brdf)
     for c, system in enumerate(systems):
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
     errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
@@ -517,7 +535,7 @@ def _with_bases(target: AlbedoTarget, brdf, factors: AlbedoFactors, errors: list
     channels whose band ``errors`` exceed :data:`BAND_TARGET`, the band views outside it
     weighed up for :data:`BAND_ROUNDS` rounds, then fewer: the one :func:`_chosen`, or None."""
     bases, k = _bases(brdf), len(NODES_DEG)
-    joint = _systems(target, brdf, _lobes(brdf), bases)
+    joint = _systems(target, brdf, bases=True)
     reflectance = np.array([base.reflectance for base in bases])
     with np.errstate(divide="ignore"):
         upper = np.minimum(1.0 / reflectance, BASE_RANGE)    # reflectance <= 1
@@ -548,7 +566,7 @@ def _each_lobe(target: AlbedoTarget, brdf, factors: AlbedoFactors, before: tuple
     band = _band(target, current)[0]
     if band <= BAND_TARGET:
         return None
-    systems = _systems(target, current, _lobes(current), each=True)
+    systems = _systems(target, current, each=True)
     n_lobes, k = len(factors.each), len(NODES_DEG)
     errors = [system.band_error(np.ones(n_lobes * k)) for system in systems]
     candidates = []

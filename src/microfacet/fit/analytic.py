@@ -183,6 +183,30 @@ class SumBRDF(BRDF):
         """The terms' ``eval_cos`` (``cos``) or ``eval``, summed (a subclass may evaluate them together)."""
         return sum(b.eval_cos(wi, wo) if cos else b.eval(wi, wo) for b in self.brdfs)
 
+    def terms_cos(self, wi, wo) -> list:
+        """Each term's ``f_j cos theta_i``, in the order of ``brdfs`` (a subclass may
+        evaluate them together).
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+
+        Returns
+        -------
+        list of (..., 3) ndarray
+            The terms' ``eval_cos``; their sum is :meth:`eval_cos`.
+
+        Examples
+        --------
+        >>> import numpy as np, microfacet as mf
+        >>> brdf = SumBRDF(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), mf.Lambertian(0.5))
+        >>> n = np.array([0.0, 0.0, 1.0])
+        >>> [v.round(4) for v in brdf.terms_cos(n, n)]
+        [array([0.8842, 0.8842, 0.8842]), array([0.1592, 0.1592, 0.1592])]
+        """
+        return [b.eval_cos(wi, wo) for b in self.brdfs]
+
     def pdf(self, wi, wo, out=None) -> np.ndarray:
         """Mixture density ``sum_j w_j pdf_j``.
 

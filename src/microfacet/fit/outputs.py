@@ -44,7 +44,7 @@ from typing import NamedTuple
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._background import can_fork, in_background, in_process_items
+from .._background import Handoff, can_fork, in_background, in_process_items
 from ..errors import MicrofacetError
 from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
@@ -258,11 +258,11 @@ def _metrics(brdf) -> tuple:
     return RelativeRMS(brdf, measurement_directions()), RelativeRMS(brdf, uniform_directions()), AlbedoRatios(brdf)
 
 
-def _scores(metrics: tuple, named: dict) -> tuple[dict, dict, dict, dict]:
-    """Grid errors, uniform errors, albedo ratios and white furnaces of the fits ``named``
-    (``metrics``: :func:`_metrics` of the data)."""
+def _scores(metrics: tuple, named: dict) -> tuple[dict, dict, dict]:
+    """Grid errors, uniform errors and albedo ratios of the fits ``named`` (``metrics``:
+    :func:`_metrics` of the data)."""
     grid, uniform, albedo = metrics
-    return grid(named), uniform(named), albedo(named), {k: white_furnace(b) for k, b in named.items()}
+    return grid(named), uniform(named), albedo(named)
 
 
 def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -> float:
@@ -316,7 +316,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     the fits made from it run in processes of their own
     (:func:`microfacet._background.in_process_items`; the same bytes as in this process):
     the perceptual fits judged here as they come, on two threads, the others judged in
-    their process (with the data's side of the metrics made here before it forks), while
+    their process (with the data's side of the metrics, made here while they are fitted), while
     the picture's drawing warms up on another thread
     (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module
     docstring); ``seconds`` holds the time of the tabulated fit and of the least-squares
@@ -375,16 +375,22 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     settings = {"resolution": int(resolution), "anisotropic": bool(anisotropic), "gaf": gaf, "diffuse": diffuse,
                 "fresnel_model": fresnel, "albedo_weight": albedo_weight, "coat": bool(coat),
                 "tabulated_diffuse": bool(tabulated_diffuse)}
-    # first, forked before any thread starts; the data's side is evaluated here (the child
-    # runs NumPy only: Numba's GNU OpenMP kernels cannot run in a forked child)
+    # first, forked before any thread starts, on the NumPy path only (the CLI's: Numba's
+    # GNU OpenMP kernels abort a forked child); the data's side of the metrics is made here
+    # while the children fit, and handed to the legacy fits' child
+    from .. import kernels
     from .perceptual import target as perceptual_target
     models = PERCEPTUAL_MODELS + (("coat",) if coat and not anisotropic else ())
+    data_side = Handoff()
+    legacy_items = (in_process_items if can_fork() and not kernels.AVAILABLE else _run_here)(
+        _legacy_item, brdf, method, settings, data_side)
     perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
-    metrics, judges = _metrics(brdf), _judges(brdf)     # the data's side, which the legacy fits' child inherits
-    from .. import kernels            # on the NumPy path (the CLI's): Numba's parallel kernels abort a forked child
-    legacy_items = None
-    if can_fork() and not kernels.AVAILABLE:
-        legacy_items = in_process_items(_legacy_item, brdf, method, settings, metrics, judges)
+    try:
+        metrics, judges = _metrics(brdf), _judges(brdf)
+    except BaseException:
+        data_side.put(None)                         # the legacy fits' child stops
+        raise
+    data_side.put((metrics, judges))
     _import_numba()
     if picture:                     # Matplotlib's imports and fonts, on a thread while the fits run
         from ..render import fit_comparison_png
@@ -396,8 +402,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         # (in a process of their own where one can fork)
         judged = feeder.submit(_judge_perceptual, perceptual_items, albedo_target(brdf, log=judges[0]), metrics,
                                judges, pool)
-        (legacy, scores, fits_summary), = (legacy_items if legacy_items is not None
-                                           else _legacy_item(brdf, method, settings, metrics, judges))
+        (legacy, scores, fits_summary), = legacy_items
         perceptual, t3 = judged.result()
     for name in (m for m in models if m in perceptual):     # in the order of the models
         fits_summary[name] = perceptual[name][1]
@@ -433,13 +438,24 @@ class _Legacy(NamedTuple):
     times: tuple
 
 
-def _legacy_item(brdf, method: str, settings: dict, metrics: tuple, judges: tuple):
-    """``(legacy, scores, summaries)``: :func:`_legacy_fits`, their :func:`_scores` and
-    :func:`_fit_summaries` (``metrics``, ``judges``: :func:`_metrics` and :func:`_judges` of
-    the data), as the one item of a generator (for :func:`in_process_items`)."""
+def _run_here(fn, *args):
+    """``fn(*args)``: the generator of :func:`in_process_items`, run in this process as it is read."""
+    return fn(*args)
+
+
+def _legacy_item(brdf, method: str, settings: dict, data_side: Handoff):
+    """``(legacy, scores, summaries)``: :func:`_legacy_fits`, their :func:`_scores` and white
+    furnaces, and :func:`_fit_summaries` (``data_side``: the :class:`~microfacet._background.Handoff`
+    of :func:`_metrics` and :func:`_judges` of the data, made while the fits are), as the one
+    item of a generator (for :func:`in_process_items`); none if no data's side comes."""
     legacy = _legacy_fits(brdf, method, settings)
+    data = data_side.get()
+    if data is None:
+        return
+    metrics, judges = data
     scores = _scores(metrics, legacy.named)
-    yield legacy, scores, _fit_summaries(judges, legacy.named, scores[:3], metrics[2].ref)
+    furnace = {k: white_furnace(b) for k, b in legacy.named.items()}
+    yield legacy, (*scores, furnace), _fit_summaries(judges, legacy.named, scores, metrics[2].ref)
 
 
 def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
@@ -461,7 +477,7 @@ def _legacy_fits(brdf, method: str, settings: dict) -> _Legacy:
 def _legacy_json(legacy: _Legacy, scores: tuple, method: str) -> dict:
     """The summary's entries of the tabulated, moment and least-squares fits: the headline
     ``"ggx"``/``"beckmann"`` fits of ``method``, every fit's parameters, errors (``scores``:
-    :func:`_scores` of ``legacy.named``) and times."""
+    :func:`_scores` of ``legacy.named`` and their white furnaces) and times."""
     grid, uniform, albedo, furnace = scores
     least, named = legacy.least, legacy.named
     chosen = legacy.moments if method == "moments" else {
@@ -543,7 +559,7 @@ def _judge_perceptual(items, target, metrics: tuple, judges: tuple, pool) -> tup
     def judge(name, q, y):
         b = _perceptual_brdf(target, name, q, y)
         one = {name: b}
-        return b, _fit_summaries(judges, one, _scores(metrics, one)[:3], metrics[2].ref)[name]
+        return b, _fit_summaries(judges, one, _scores(metrics, one), metrics[2].ref)[name]
 
     t3, futures = time.perf_counter(), {}
     for name, (q, y), t3 in items:
