@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 import microfacet as mf
+from microfacet._background import can_fork
 from microfacet.cli import main
 from microfacet.fit.outputs import analytic_from_json
 from microfacet.metrics import fit_error
@@ -334,6 +335,35 @@ def test_fit_material_in_a_process_writes_the_same_bytes(inputs, tmp_path, monke
         files[mode] = (out.read_bytes(), [line for line in text if '"seconds' not in line],
                        out.with_suffix(".png").read_bytes())
     assert files["process"] == files["here"]
+
+
+@pytest.mark.skipif(not can_fork(), reason="this machine fits in one process (one CPU or not Linux)")
+def test_fit_material_ends_the_legacy_fits_when_the_datas_side_fails(inputs, tmp_path, monkeypatch):
+    """An error while the data's side of the metrics is made (after the legacy fits' child
+    was forked to wait for it) reaches the caller, that child ends, and no file is written."""
+    import multiprocessing
+    import time
+    from microfacet import kernels
+    from microfacet.fit import outputs
+
+    def failing(brdf):
+        raise RuntimeError("no judges")
+    monkeypatch.setattr(kernels, "AVAILABLE", False)
+    monkeypatch.setattr(outputs, "_judges", failing)
+    try:
+        outputs.fit_material(mf.measured.load(inputs / "gold-ggx.binary"), tmp_path / "gold.npz", resolution=16,
+                             picture=False)
+    except RuntimeError as e:
+        kept = e                                   # its traceback keeps the fit's frames alive
+    assert str(kept) == "no judges"
+
+    def waiting():
+        return [p for p in multiprocessing.active_children() if p.name == "microfacet-_legacy_item"]
+    deadline = time.monotonic() + 60
+    while waiting() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not waiting()
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_fit_material_interrupted_writes_nothing(inputs, tmp_path, monkeypatch):

@@ -384,8 +384,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     data_side = Handoff()
     legacy_items = (in_process_items if can_fork() and not kernels.AVAILABLE else _run_here)(
         _legacy_item, brdf, method, settings, data_side)
-    perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
     try:
+        perceptual_items = in_process_items(_perceptual, perceptual_target(brdf), models)
         metrics, judges = _metrics(brdf), _judges(brdf)
     except BaseException:
         data_side.put(None)                         # the legacy fits' child stops
