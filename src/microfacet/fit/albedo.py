@@ -212,7 +212,7 @@ def _terms_cos(brdf, wi, wo) -> list[tuple[object, np.ndarray]]:
     """``(term, f cos theta_i)`` of each term of ``brdf`` (itself where it is not a sum),
     non-finite values as 0 (:meth:`microfacet.fit.SumBRDF.terms_cos`)."""
     terms = getattr(brdf, "brdfs", (brdf,))
-    values = brdf.terms_cos(wi, wo) if hasattr(brdf, "terms_cos") else [brdf.eval_cos(wi, wo)]
+    values = brdf.terms_cos(wi, wo) if hasattr(brdf, "terms_cos") else [b.eval_cos(wi, wo) for b in terms]
     return [(b, np.nan_to_num(np.asarray(v, float))) for b, v in zip(terms, values)]
 
 
