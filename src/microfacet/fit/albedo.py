@@ -103,7 +103,7 @@ import numpy as np
 from ..metrics import AlbedoRatios, LogError, directional_albedo
 from .extract import box_qp
 
-__all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "LOG_WEIGHT", "AlbedoTarget", "albedo_target", "albedo_scale",
+__all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "LOG_WEIGHT", "LOG_WEIGHT_IN_BAND", "AlbedoTarget", "albedo_target", "albedo_scale",
            "AlbedoFactors", "albedo_factors", "match_albedo", "LOG_PAIRS", "BAND_VIEWS_DEG", "BAND_TARGET"]
 
 #: Views (deg) at which the albedo is matched.
@@ -115,6 +115,10 @@ SMOOTHNESS = 1e-3
 #: Weight of the linearized squared log error over its value before the match: doubling
 #: it costs as much as a 17 % albedo residual at one view.
 LOG_WEIGHT = 0.03
+#: The same in the first, log-first match of the shared table (doubling the log error costs
+#: as much as a 55 % residual), whose band views are held to :data:`BAND_TARGET` by weighing
+#: them up (:data:`BAND_ROUNDS`): kept where its tables, as clipped, hold the band.
+LOG_WEIGHT_IN_BAND = 0.3
 #: Weight of ``s - 1`` (keeps nodes that no view constrains near 1).
 PULL = 1e-3
 #: Largest factor.
@@ -245,13 +249,22 @@ def albedo_target(reference, log: LogError | None = None) -> AlbedoTarget:
 
 class _System(NamedTuple):
     """One channel's least squares: relative albedo residuals ``m x - rhs`` (``a'/a_data - 1``
-    per view) and the other terms' quadratic ``1/2 x^T h x - g^T x``; ``band``: the views
-    held to the band (:data:`BAND_VIEWS_DEG`, data albedo above :data:`BAND_FLOOR`)."""
+    per view) and the other terms' quadratic ``1/2 x^T h x - g^T x``, of which the log error's
+    is ``log_weight`` times ``1/2 x^T log_h x - log_g^T x``; ``band``: the views held to the
+    band (:data:`BAND_VIEWS_DEG`, data albedo above :data:`BAND_FLOOR`)."""
     m: np.ndarray
     rhs: np.ndarray
     h: np.ndarray
     g: np.ndarray
     band: np.ndarray
+    log_h: np.ndarray
+    log_g: np.ndarray
+    log_weight: float
+
+    def reweighed(self, log_weight: float) -> "_System":
+        """The same least squares with the log error weighed by ``log_weight``."""
+        d = log_weight - self.log_weight
+        return self._replace(h=self.h + d * self.log_h, g=self.g + d * self.log_g, log_weight=log_weight)
 
     def solve(self, t: np.ndarray, upper: np.ndarray, band_rounds: int = 0,
               offset: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -285,7 +298,7 @@ class _System(NamedTuple):
 def _systems(target: AlbedoTarget, brdf, bases: bool = False, each: bool = False) -> list[_System]:
     """The least squares of :func:`albedo_factors` per channel (module docstring): unknowns
     the table's nodes ``s`` (with ``each``, one table per lobe, in the lobes' order) and, with
-    ``bases``, each diffuse base's reflectance factor ``b``."""
+    ``bases``, each diffuse base's reflectance factor ``b``; the log error weighed by :data:`LOG_WEIGHT`."""
     ratios, log = target
     k = len(NODES_DEG)
     wi, wo, w, view = ratios.nodes
@@ -302,7 +315,7 @@ def _systems(target: AlbedoTarget, brdf, bases: bool = False, each: bool = False
     f_bases = [v for b, v in terms if bases and _is_base(b)]
     log_hats = _hats(_theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
-    pair_w = LOG_WEIGHT * log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
+    pair_w = log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
     second = np.diff(np.eye(k), 2, axis=0)
     n = k * len(spec) + len(diffuse)
     regular = PULL * np.eye(n)
@@ -318,9 +331,10 @@ def _systems(target: AlbedoTarget, brdf, bases: bool = False, each: bool = False
         m = a / ref[:, None]                                        # a' = fitted + a (x - 1)
         j = np.concatenate([(fs[:, c] / (1.0 + f[:, c]))[:, None] * log_hats for fs in f_spec]   # d ln(1 + f') / d x
                            + [(fb[:, c] / (1.0 + f[:, c]))[:, None] for fb in f_bases], axis=-1)
-        out.append(_System(m, (ref - fitted[:, c]) / ref + m.sum(axis=1), (j.T * pair_w) @ j + regular,
-                           (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c]) + PULL,
-                           in_band & (ratios.ref[:, c] > BAND_FLOOR)))
+        log_h, log_g = (j.T * pair_w) @ j, (j.T * pair_w) @ (j.sum(axis=1) - d0[:, c])
+        out.append(_System(m, (ref - fitted[:, c]) / ref + m.sum(axis=1), LOG_WEIGHT * log_h + regular,
+                           LOG_WEIGHT * log_g + PULL, in_band & (ratios.ref[:, c] > BAND_FLOOR), log_h, log_g,
+                           LOG_WEIGHT))
     return out
 
 
@@ -487,24 +501,47 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     """
     lobes, bases = _lobes(brdf), _bases(brdf)
     k = len(NODES_DEG)
-    s, b, each = np.ones((k, 3)), np.ones((len(bases), 3)), np.ones((len(lobes), k, 3))
+    ones = AlbedoFactors(np.ones((k, 3)), np.ones((len(bases), 3)), np.ones(3), np.ones((len(lobes), k, 3)))
     if not lobes:
-        return AlbedoFactors(s, b, np.ones(3), each)
+        return ones
     systems = _systems(target, brdf)
+    factors = _albedo_first(target, brdf, ones, systems)
+    log_first = _log_first(target, brdf, ones, [system.reweighed(LOG_WEIGHT_IN_BAND) for system in systems])
+    if log_first is not None and target.log(_rebuilt(brdf, *log_first)) < target.log(_rebuilt(brdf, *factors)):
+        factors = log_first
+    return _energy_bounded(brdf, factors)
+
+
+def _log_first(target: AlbedoTarget, brdf, ones: AlbedoFactors, systems: list[_System]):
+    """``ones`` with the shared table ``s`` solved with the log error weighed by
+    :data:`LOG_WEIGHT_IN_BAND` (``systems``) and the band views held to :data:`BAND_TARGET`
+    by weighing them up, or None where its tables, as clipped to ``[0, 1]``, miss that band."""
+    s = ones.s.copy()
+    for c, system in enumerate(systems):
+        s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), BAND_ROUNDS)
+    factors = ones._replace(s=s)
+    return factors if _band(target, _rebuilt(brdf, *factors))[0] <= BAND_TARGET else None
+
+
+def _albedo_first(target: AlbedoTarget, brdf, ones: AlbedoFactors, systems: list[_System]) -> AlbedoFactors:
+    """``ones`` with the shared table ``s`` of least albedo residuals (``systems``, of
+    :data:`LOG_WEIGHT`); where it misses the band, with the bases' factors and then each
+    lobe's own (module docstring)."""
+    s = ones.s.copy()
     for c, system in enumerate(systems):
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), 0)
     errors = [system.band_error(s[:, c]) for c, system in enumerate(systems)]
-    factors = AlbedoFactors(s, b, np.ones(3), each)
+    factors = ones._replace(s=s)
     if max(errors) <= BAND_TARGET:
-        return _energy_bounded(brdf, factors)
-    matched = _rebuilt(brdf, s, b)
+        return factors
+    matched = _rebuilt(brdf, *factors)
     error, overshoot = _band(target, matched)
     before = target.log(matched), error, max(overshoot, ALBEDO_ABOVE)
-    if bases:
+    if _bases(brdf):
         factors = _with_bases(target, brdf, factors, errors, before) or factors
-    if len(lobes) > 1:
+    if len(_lobes(brdf)) > 1:
         factors = _each_lobe(target, brdf, factors, before) or factors
-    return _energy_bounded(brdf, factors)
+    return factors
 
 
 def _chosen(target: AlbedoTarget, brdf, candidates, before: tuple, band: float):
