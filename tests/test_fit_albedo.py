@@ -49,6 +49,19 @@ def test_corpus_plastic_reaches_the_albedo_band_without_losing_its_log_error(cor
     assert log(matched) <= 1.05 * log(fit)
 
 
+def test_corpus_fabric_holds_the_band_at_a_little_more_log_error(corpus):
+    """nylon's mixture reflects ~10 % less than the data at some view: the albedo-first match
+    brings it to the data's albedo at 1.3 times its log error; the log-first table holds it
+    within the band (LOG_WEIGHT_IN_BAND, BAND_TARGET) at less than 1.2 times."""
+    data = mf.measured.load(corpus("merl/nylon"))
+    fit = fit_models(data, ("mixture",))["mixture"]
+    judge, log = AlbedoRatios(data), LogError(data)
+    matched = A.match_albedo(data, fit)
+    before, after = _worst(judge(fit), judge.ref), _worst(judge(matched), judge.ref)
+    assert after <= 0.05 < before
+    assert log(matched) < 1.2 * log(fit)
+
+
 def test_corpus_plastic_whose_red_rises_at_grazing_reaches_the_band(corpus):
     """pink-plastic's red albedo rises from 0.43 at 70 deg to 0.58 at 80 deg: the lobes reach
     the band at 75 deg only at a little more log error over their shared table than a match

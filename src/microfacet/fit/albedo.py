@@ -22,7 +22,11 @@ the relative albedo residuals, plus the fit's cosine-weighted log error
 where it changes the shape least), a second-difference smoothness penalty
 (:data:`SMOOTHNESS`) and a weak pull toward 1; views where the albedo would exceed the
 data's by more than 1 % are weighed up until it does not (energy stays a constraint, as in
-the fits themselves). A specular lobe's energy at view
+the fits themselves). A second table is solved log first: the log error weighed by
+:data:`LOG_WEIGHT_IN_BAND`, the band views (below) farther than :data:`BAND_TARGET` from the
+data's albedo weighed up fourfold for up to :data:`BAND_ROUNDS` rounds; it is kept where its
+tables, as clipped, hold that band at less log error than the whole match below (within the
+band, the log error decides how the energy moves). A specular lobe's energy at view
 ``theta_o`` comes from ``theta_d`` near ``theta_o`` (the mirror configuration), which is
 why a table in ``theta_d`` reaches the albedo at each view without changing the lobes'
 shape. The product ``F s`` becomes each lobe's :class:`~microfacet.fresnel.Tabulated`
@@ -115,9 +119,9 @@ SMOOTHNESS = 1e-3
 #: Weight of the linearized squared log error over its value before the match: doubling
 #: it costs as much as a 17 % albedo residual at one view.
 LOG_WEIGHT = 0.03
-#: The same in the first, log-first match of the shared table (doubling the log error costs
-#: as much as a 55 % residual), whose band views are held to :data:`BAND_TARGET` by weighing
-#: them up (:data:`BAND_ROUNDS`): kept where its tables, as clipped, hold the band.
+#: The same in the log-first table (doubling the log error costs as much as a 55 % albedo
+#: residual), whose band views are held to :data:`BAND_TARGET` by weighing them up
+#: (:data:`BAND_ROUNDS`; module docstring).
 LOG_WEIGHT_IN_BAND = 0.3
 #: Weight of ``s - 1`` (keeps nodes that no view constrains near 1).
 PULL = 1e-3
@@ -146,8 +150,8 @@ BAND = 0.05
 BAND_TARGET = 0.04
 #: Channels whose data albedo is below this are not held to the band.
 BAND_FLOOR = 0.03
-#: Rounds of weighing up the band views outside :data:`BAND_TARGET` (fourfold each) when
-#: the bases are scaled too.
+#: Rounds of weighing up the band views outside :data:`BAND_TARGET` (fourfold each) in the
+#: log-first table and where the bases are scaled too.
 BAND_ROUNDS = 3
 #: Largest factor of a base's reflectance and its inverse, the smallest.
 BASE_RANGE = 2.0
@@ -693,7 +697,7 @@ def albedo_scale(target: AlbedoTarget, brdf) -> np.ndarray:
     >>> data = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Schlick(0.5))
     >>> fit = mf.MicrofacetBRDF(mf.GGX(alpha=0.2), mf.fresnel.Schlick(0.25))
     >>> s = albedo_scale(albedo_target(data), fit)
-    >>> s.shape == (len(NODES_DEG), 3), bool(s[0, 0] > 1.5)      # SMOOTHNESS, LOG_WEIGHT: module docstring
+    >>> s.shape == (len(NODES_DEG), 3), bool(s[0, 0] > 1.5)      # SMOOTHNESS, LOG_WEIGHT, LOG_WEIGHT_IN_BAND: module docstring
     (True, True)
     """
     return albedo_factors(target, brdf).s
