@@ -24,10 +24,10 @@ where it changes the shape least), a second-difference smoothness penalty
 data's by more than 1 % are weighed up until it does not (energy stays a constraint, as in
 the fits themselves). A second table is solved log first: the log error weighed by
 :data:`LOG_WEIGHT_IN_BAND`, the band views (below) farther than :data:`BAND_TARGET` from the
-data's albedo weighed up fourfold for up to :data:`BAND_ROUNDS` rounds; it is kept where its
-tables, as clipped, hold that band at less log error than the whole match below (within the
-band, the log error decides how the energy moves). A specular lobe's energy at view
-``theta_o`` comes from ``theta_d`` near ``theta_o`` (the mirror configuration), which is
+data's albedo weighed up fourfold for up to :data:`BAND_ROUNDS` rounds; where its tables, as
+clipped, hold that band, it is kept if the whole match below misses the band or holds it at
+more log error (within the band, the log error decides how the energy moves). A specular
+lobe's energy at view ``theta_o`` comes from ``theta_d`` near ``theta_o`` (the mirror configuration), which is
 why a table in ``theta_d`` reaches the albedo at each view without changing the lobes'
 shape. The product ``F s`` becomes each lobe's :class:`~microfacet.fresnel.Tabulated`
 Fresnel term (clipped to ``[0, 1]``): the result is a BRDF of the same tree, which specs,
@@ -511,8 +511,11 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
     systems = _systems(target, brdf)
     factors = _albedo_first(target, brdf, ones, systems)
     log_first = _log_first(target, brdf, ones, [system.reweighed(LOG_WEIGHT_IN_BAND) for system in systems])
-    if log_first is not None and target.log(_rebuilt(brdf, *log_first)) < target.log(_rebuilt(brdf, *factors)):
-        factors = log_first
+    if log_first is not None:                         # it holds the band: kept unless the other does at less log error
+        albedo_first = _rebuilt(brdf, *factors)
+        if _band(target, albedo_first)[0] > BAND_TARGET or target.log(_rebuilt(brdf, *log_first)) < target.log(
+                albedo_first):
+            factors = log_first
     return _energy_bounded(brdf, factors)
 
 
