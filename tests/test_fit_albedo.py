@@ -39,27 +39,20 @@ def test_a_lambertian_fit_is_returned_as_is():
     assert A.match_albedo(mf.Lambertian(0.5), fit) is fit
 
 
-def test_corpus_plastic_reaches_the_albedo_band_without_losing_its_log_error(corpus):
-    data = mf.measured.load(corpus("merl/specular-orange-phenolic"))
-    fit = fit_models(data, ("dielectric_mixture",))["dielectric_mixture"]
+@pytest.mark.parametrize("name, model, log_growth", [
+    ("merl/specular-orange-phenolic", "dielectric_mixture", 1.05),
+    # nylon's mixture reflects ~10 % less than the data at some view: the albedo-first match
+    # brings it to the data's albedo at 1.3 times its log error, the log-first table holds it
+    # within the band (LOG_WEIGHT_IN_BAND, BAND_TARGET) at less than 1.2 times
+    ("merl/nylon", "mixture", 1.2)])
+def test_corpus_fit_reaches_the_albedo_band_at_little_more_log_error(corpus, name, model, log_growth):
+    data = mf.measured.load(corpus(name))
+    fit = fit_models(data, (model,))[model]
     judge, log = AlbedoRatios(data), LogError(data)
     matched = A.match_albedo(data, fit)
     before, after = _worst(judge(fit), judge.ref), _worst(judge(matched), judge.ref)
     assert after <= 0.05 < before
-    assert log(matched) <= 1.05 * log(fit)
-
-
-def test_corpus_fabric_holds_the_band_at_a_little_more_log_error(corpus):
-    """nylon's mixture reflects ~10 % less than the data at some view: the albedo-first match
-    brings it to the data's albedo at 1.3 times its log error; the log-first table holds it
-    within the band (LOG_WEIGHT_IN_BAND, BAND_TARGET) at less than 1.2 times."""
-    data = mf.measured.load(corpus("merl/nylon"))
-    fit = fit_models(data, ("mixture",))["mixture"]
-    judge, log = AlbedoRatios(data), LogError(data)
-    matched = A.match_albedo(data, fit)
-    before, after = _worst(judge(fit), judge.ref), _worst(judge(matched), judge.ref)
-    assert after <= 0.05 < before
-    assert log(matched) < 1.2 * log(fit)
+    assert log(matched) <= log_growth * log(fit)
 
 
 def test_corpus_plastic_whose_red_rises_at_grazing_reaches_the_band(corpus):

@@ -510,24 +510,22 @@ def albedo_factors(target: AlbedoTarget, brdf) -> AlbedoFactors:
         return ones
     systems = _systems(target, brdf)
     factors = _albedo_first(target, brdf, ones, systems)
-    log_first = _log_first(target, brdf, ones, [system.reweighed(LOG_WEIGHT_IN_BAND) for system in systems])
-    if log_first is not None:                         # it holds the band: kept unless the other does at less log error
-        albedo_first = _rebuilt(brdf, *factors)
-        if _band(target, albedo_first)[0] > BAND_TARGET or target.log(_rebuilt(brdf, *log_first)) < target.log(
-                albedo_first):
-            factors = log_first
+    log_first = _log_first(brdf, ones, [system.reweighed(LOG_WEIGHT_IN_BAND) for system in systems])
+    held, other = _rebuilt(brdf, *log_first), _rebuilt(brdf, *factors)
+    if _band(target, held)[0] <= BAND_TARGET and (      # its tables, as clipped, hold the band: kept unless
+            _band(target, other)[0] > BAND_TARGET or target.log(held) < target.log(other)):   # the other does at less log error
+        factors = log_first
     return _energy_bounded(brdf, factors)
 
 
-def _log_first(target: AlbedoTarget, brdf, ones: AlbedoFactors, systems: list[_System]):
+def _log_first(brdf, ones: AlbedoFactors, systems: list[_System]) -> AlbedoFactors:
     """``ones`` with the shared table ``s`` solved with the log error weighed by
     :data:`LOG_WEIGHT_IN_BAND` (``systems``) and the band views held to :data:`BAND_TARGET`
-    by weighing them up, or None where its tables, as clipped to ``[0, 1]``, miss that band."""
+    by weighing them up."""
     s = ones.s.copy()
     for c, system in enumerate(systems):
         s[:, c] = _pick(system, c, brdf, s, np.zeros(0), np.zeros(0), BAND_ROUNDS)
-    factors = ones._replace(s=s)
-    return factors if _band(target, _rebuilt(brdf, *factors))[0] <= BAND_TARGET else None
+    return ones._replace(s=s)
 
 
 def _albedo_first(target: AlbedoTarget, brdf, ones: AlbedoFactors, systems: list[_System]) -> AlbedoFactors:

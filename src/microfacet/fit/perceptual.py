@@ -439,42 +439,27 @@ class GGXLobes(SumBRDF):
         self._others = [b for b in self.brdfs if not _isotropic_ggx(b)]
         self._log_alpha = np.log([b.distribution.alpha_x for b in self._lobes])
 
-    def _sum(self, wi, wo, cos: bool) -> np.ndarray:
+    def _factors(self, wi, wo, cos: bool):
+        """The broadcast pairs ``(wi, wo)``, their :class:`Geometry` (flattened) and the lobes'
+        :func:`_lobe_factors`, times ``cos theta_i`` with ``cos`` (0 below either horizon)."""
         wi, wo = np.broadcast_arrays(directions(wi, "wi"), directions(wo, "wo"))
+        g = Geometry.of(wi.reshape(-1, 3), wo.reshape(-1, 3))
+        return wi, wo, g, _lobe_factors(self._log_alpha, g) * (g.cos_i if cos else 1.0)
+
+    def _sum(self, wi, wo, cos: bool) -> np.ndarray:
+        wi, wo, g, s = self._factors(wi, wo, cos)
         total = np.zeros(wi.shape)
         for b in self._others:
             total += b.eval_cos(wi, wo) if cos else b.eval(wi, wo)
-        if self._lobes:              # every factor is 0 below either horizon (Geometry.jacobian)
-            g = Geometry.of(wi.reshape(-1, 3), wo.reshape(-1, 3))
-            s = _lobe_factors(self._log_alpha, g) * (g.cos_i if cos else 1.0)
+        if self._lobes:
             total += _fresnel_sum([lobe.fresnel for lobe in self._lobes], s, g.cos_d).reshape(wi.shape)
         return total
 
     def terms_cos(self, wi, wo) -> list:
-        """Each term's ``f_j cos theta_i`` (:meth:`microfacet.fit.SumBRDF.terms_cos`), the lobes'
-        from one :class:`Geometry` and their closed form, each times its own Fresnel term.
-
-        Parameters
-        ----------
-        wi, wo : (..., 3) array_like
-            Unit light and view directions in the local frame.
-
-        Returns
-        -------
-        list of (..., 3) ndarray
-            The terms' ``eval_cos``, equal to theirs to rounding (tested).
-
-        Examples
-        --------
-        >>> import numpy as np, microfacet as mf
-        >>> brdf = GGXLobes(mf.MicrofacetBRDF(mf.GGX(alpha=0.3)), mf.Lambertian(0.5))
-        >>> n = np.array([0.0, 0.0, 1.0])
-        >>> [v.round(4) for v in brdf.terms_cos(n, n)]
-        [array([0.8842, 0.8842, 0.8842]), array([0.1592, 0.1592, 0.1592])]
-        """
-        wi, wo = np.broadcast_arrays(directions(wi, "wi"), directions(wo, "wo"))
-        g = Geometry.of(wi.reshape(-1, 3), wo.reshape(-1, 3))
-        s = _lobe_factors(self._log_alpha, g) * g.cos_i
+        """:meth:`microfacet.fit.SumBRDF.terms_cos`, the lobes' from one :class:`Geometry` and
+        their closed form, each times its own Fresnel term: equal to the terms' own ``eval_cos``
+        to rounding (tested)."""
+        wi, wo, g, s = self._factors(wi, wo, True)
         lobes = iter(s[k][:, None] * lobe.fresnel(g.cos_d) for k, lobe in enumerate(self._lobes))
         return [next(lobes).reshape(wi.shape) if _isotropic_ggx(b) else b.eval_cos(wi, wo) for b in self.brdfs]
 
