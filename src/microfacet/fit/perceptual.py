@@ -457,8 +457,18 @@ class GGXLobes(SumBRDF):
 
     def terms_cos(self, wi, wo) -> list:
         """:meth:`microfacet.fit.SumBRDF.terms_cos`, the lobes' from one :class:`Geometry` and
-        their closed form, each times its own Fresnel term: equal to the terms' own ``eval_cos``
-        to rounding (tested)."""
+        their closed form, each times its own Fresnel term.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like
+            Unit light and view directions in the local frame.
+
+        Returns
+        -------
+        list of (..., 3) ndarray
+            The terms' ``eval_cos``, equal to their own to rounding (tested).
+        """
         wi, wo, g, s = self._factors(wi, wo, True)
         lobes = iter(s[k][:, None] * lobe.fresnel(g.cos_d) for k, lobe in enumerate(self._lobes))
         return [next(lobes).reshape(wi.shape) if _isotropic_ggx(b) else b.eval_cos(wi, wo) for b in self.brdfs]
