@@ -47,6 +47,10 @@ Metrics per fit (the data is the reference; grazing pairs ``cos < 0.1`` excluded
 * ``fresnel_tv``: for each tabulated Fresnel term in the fit, per channel total variation
   ``sum |diff|`` over its range ``max - min``; the worst channel and table.
 
+Per material, of the data: ``fold_seam`` (:meth:`~microfacet.measured.MERLBRDF.fold_seam`)
+and ``data_albedo_off_normal``, the albedo :data:`OFF_NORMAL_DEG` off the normal
+(:func:`normal_jump` compares it with the albedo at 0 deg).
+
 Usage::
 
     python experiments/fit_corpus.py [--jobs 2] [--only NAME ...] [--phase all]
@@ -89,6 +93,8 @@ BASELINE_TREE = Path("/tmp/mf-baseline")
 RESULTS = ROOT / "experiments" / "results"
 GROUPS = ("merl", "rgl", "nielsen")
 REAL_RGL = "rgl_real"
+#: View (deg) of the data's albedo next to normal view (``data_albedo_off_normal``).
+OFF_NORMAL_DEG = 1.0
 #: Albedo goal: within 5 % at every view, channels whose data albedo exceeds this.
 ALBEDO_FLOOR = 0.03
 ALBEDO_TOL = 0.05
@@ -435,6 +441,22 @@ def tv_ratio(table) -> float:
     return float(np.max(r))
 
 
+def normal_jump(at_normal, off_normal) -> float | None:
+    """The data's albedo at normal view over its albedo :data:`OFF_NORMAL_DEG` off it
+    (``data_albedo`` row 0 over ``data_albedo_off_normal``), the channel farthest from 1 of
+    those above :data:`ALBEDO_FLOOR`: about 1 for a table continuous there; not for one
+    that jumps across its ``phi_d`` fold, where every light at normal view reads
+    ``phi_d = 0`` and, off it, half of them read the other side."""
+    if not at_normal or not off_normal:
+        return None
+    a, b = np.asarray(at_normal[0], float), np.asarray(off_normal, float)
+    keep = (a > ALBEDO_FLOOR) & (b > 0)
+    if not np.any(keep):
+        return None
+    r = a[keep] / b[keep]
+    return float(r[np.argmax(np.abs(r - 1.0))])
+
+
 def albedo_worst(ratios, ref_albedo) -> float:
     """Ratio farthest from 1 over views and the channels whose data albedo > ALBEDO_FLOOR."""
     r = np.asarray(ratios, float)
@@ -528,6 +550,7 @@ def evaluate(m: Material, work: Path, abc, abc_params: dict | None = None, size:
         per[name] = rec
     row["fits"] = per
     row["data_albedo"] = np.round(ref_albedo, 4).tolist()
+    row["data_albedo_off_normal"] = np.round(mm.directional_albedo(data, (OFF_NORMAL_DEG,))[0], 4).tolist()
     keep = {f"{k}|{i}": np.asarray(images[k][i], np.float32) for k in images for i in (0, 1)}
     out = work / "renders" / f"{m.key}.npz"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -761,6 +784,7 @@ def material_rows(rows: list[dict]) -> list[dict]:
                                 if k not in ("abc", "baseline") and _num(f.get("furnace"))), default=None),
             "tv_ratio": tvs.get(tv_fit), "tv_fit": tv_fit, "tv_baseline": z.get("fresnel_tv"),
             "seconds": r.get("wall_seconds"), "fit_seconds": r.get("fit_seconds"), "fold_seam": r.get("fold_seam"),
+            "normal_jump": normal_jump(r.get("data_albedo"), r.get("data_albedo_off_normal")),
             "error": "; ".join(f"{k}: {v}" for k, v in {**fit_errors, **per_fit_errors}.items()),
             "baseline_error": r.get("errors", {}).get("baseline", ""),
         })
@@ -883,11 +907,14 @@ def format_page(table, g, meta) -> str:
         rank = {k: i + 1 for i, (k, _) in enumerate(ranked)}
         seams = dict(ranked)
         failing = list(dict.fromkeys(g["albedo"]["failing"] + g["chroma"]["failing"]))
+        jumps = {f"{r['group']}/{r['name']}": r.get("normal_jump") for r in table}
         lines.append(f"- Data not reciprocal (`MERLBRDF.fold_seam`: median jump of ln luminance across the "
                      f"phi_d fold > {g['fold_seam']['limit']}): {sum(v > g['fold_seam']['limit'] for _, v in ranked)}"
                      f"/{len(ranked)} tables, corpus median {_c(float(np.median([v for _, v in ranked])))}"
                      + ("; the albedo and chromaticity failures: " + ", ".join(
-                         f"{k} (seam {_c(seams.get(k))}, rank {rank.get(k, '–')})" for k in failing) if failing else "")
+                         f"{k} (seam {_c(seams.get(k))}, rank {rank.get(k, '–')}"
+                         + (f"; data albedo at 0° / at {OFF_NORMAL_DEG:g}°: {_c(jumps[k])}" if _num(jumps.get(k)) else "")
+                         + ")" for k in failing) if failing else "")
                      + ".")
     lines += ["", "## Per material", "",
               "log / image: cosine-weighted log error and sphere-image error of the best fit, the tabulated fit, "

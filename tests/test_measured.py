@@ -239,6 +239,22 @@ def test_merl_interpolation_cache(smooth_file, monkeypatch):
     assert len(calls) == 5 + merl.CACHE_SIZE and not m._cache
 
 
+def test_merl_interpolation_in_blocks(smooth_file, monkeypatch):
+    """The NumPy path's blocks of pairs (the last one short) give the same values and
+    coverage, of the pairs' leading shape, as one block of them all."""
+    m = mf.measured.load(smooth_file)
+    rng = np.random.default_rng(8)
+    wi, wo, _ = hd_directions(rng, rng.uniform(0, 1.4, 500), rng.uniform(0, 1.4, 500), rng.uniform(0, 3, 500))
+    wi, wo = wi.reshape(20, 25, 3), wo.reshape(20, 25, 3)
+    whole = m._interpolate_uncached(wi, wo)
+    monkeypatch.setattr(merl, "BLOCK", 7)
+    blocks = m._interpolate_uncached(wi, wo)
+    assert blocks[0].shape == (20, 25, 3) and blocks[1].shape == (20, 25)
+    np.testing.assert_array_equal(blocks[0], whole[0])
+    np.testing.assert_array_equal(blocks[1], whole[1])
+    assert np.count_nonzero(whole[1]) > 250                 # not vacuous
+
+
 def test_merl_bad_files(tmp_path, smooth_raw):
     good = merl_bytes(smooth_raw)
     cases = {

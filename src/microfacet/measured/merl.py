@@ -170,6 +170,10 @@ def _axis_periodic(u, n: int):
 #: Direction sets whose interpolation :class:`MERLBRDF` remembers, and the most pairs a
 #: remembered set may hold (2^18 pairs: 8 MiB of results; a fit's sets hold at most 131,072).
 CACHE_SIZE, CACHE_MAX_PAIRS = 4, 1 << 18
+#: Pairs interpolated at a time on the NumPy path: a block's temporaries (the corners'
+#: indices, weights and values, ~1 MB) stay in the CPU's caches and are reused by the
+#: allocator, where those of a whole set of pairs are fresh pages at every call.
+BLOCK = 8192
 
 
 def _digest(wi: np.ndarray, wo: np.ndarray) -> tuple:
@@ -263,7 +267,17 @@ class MERLBRDF(MeasuredBRDF):
         return hit[0].copy(), hit[1].copy()
 
     def _interpolate_uncached(self, wi, wo):
-        """:meth:`_interpolate` of broadcast unit ``wi``, ``wo``, computed."""
+        """:meth:`_interpolate` of broadcast unit ``wi``, ``wo``, computed in blocks of
+        :data:`BLOCK` pairs (:meth:`_interpolate_block`)."""
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        f, cover = np.empty((len(wi), 3)), np.empty(len(wi))
+        for s in range(0, len(wi), BLOCK):
+            f[s:s + BLOCK], cover[s:s + BLOCK] = self._interpolate_block(wi[s:s + BLOCK], wo[s:s + BLOCK])
+        return f.reshape(shape + (3,)), cover.reshape(shape)
+
+    def _interpolate_block(self, wi, wo):
+        """``(f_r, coverage)`` of unit ``wi``, ``wo`` ``(M, 3)``."""
         idx, w = self._corners(wi, wo)
         corners = np.take(self._table, idx, axis=0)       # (take: ~6x faster than fancy indexing here)
         f = np.einsum("k...,k...c->...c", w, corners)     # unmeasured corners weigh 0
