@@ -53,6 +53,7 @@ import microfacet as mf
 from microfacet.fit.analytic import ALBEDO_WEIGHT
 from microfacet.fit.outputs import material_name, objective
 from microfacet.io import write_text
+from microfacet.render.lobes import LUMINANCE
 from microfacet.metrics import (albedo_ratios, describe_albedo, describe_fit_error, describe_uniform_error,
                                 fit_error, ndf_error, uniform_error, white_furnace)
 
@@ -95,7 +96,7 @@ def _describe(brdf) -> str:
     text = _alpha(parts[0])
     for p in parts[1:]:
         if isinstance(p, mf.Lambertian):
-            text += f", kd {float(p.reflectance @ [0.2126, 0.7152, 0.0722]):.3f}"
+            text += f", kd {float(p.reflectance @ LUMINANCE):.3f}"
         else:
             text += f", coat {float(p.distribution.alpha_x):.4f}"
     return text

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._colour import LUMINANCE
 from . import fresnel as fr
 from .brdf import BRDF, MicrofacetBRDF
 from .distributions import GGX, Beckmann
@@ -359,7 +360,7 @@ def preview_exposure(image: np.ndarray) -> float:
     >>> preview_exposure(np.zeros((4, 4, 3)))
     0.0
     """
-    lum = image @ np.array([0.2126, 0.7152, 0.0722])
+    lum = image @ LUMINANCE
     lit = lum[lum > 0]
     top = float(np.percentile(lit, 99.5)) if lit.size else 0.0
     return float(np.log2(1.0 / top)) if np.isfinite(top) and top > 0 else 0.0

@@ -23,12 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from ..errors import MicrofacetError
 
 __all__ = ["Lobe", "Analysis", "analyse", "schlick_of", "lobe_albedo", "LUMINANCE"]
 
-#: Rec. 709 luminance weights (linear RGB).
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @dataclass

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from .comparison import LIGHT, library_render, rel_l1
 
 __all__ = ["consumer_renders", "consumer_section", "CONSUMERS"]
@@ -182,7 +183,7 @@ def consumer_section(brdf, out, label: str, size: int = 64, spp: int = 4, href: 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     images, errors, missing = consumer_renders(brdf, size, spp, three=three, consumers=consumers)
-    lum = images["microfacet"] @ np.array([0.2126, 0.7152, 0.0722])
+    lum = images["microfacet"] @ LUMINANCE
     top = float(np.percentile(lum[lum > 0], 99.5)) if np.any(lum > 0) else 1.0
     exposure = float(np.log2(1.0 / top)) if top > 0 else 0.0
     cells = []

@@ -58,6 +58,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from .. import fresnel as _fresnel
 from ..brdf import BRDF, Lambertian, MicrofacetBRDF
 from ..protocol import into, into_sample
@@ -731,7 +732,7 @@ def coat_fresnel(f0, f90) -> _fresnel.Tabulated:
 def _albedo_estimate(brdf) -> float:
     """Luminance of a lobe's mean Fresnel term over ``cos theta_d`` (a microfacet lobe) or
     of ``k_d`` (a Lambertian): the mixture weights of the sum BRDF's sampling."""
-    lum = np.array([0.2126, 0.7152, 0.0722])
+    lum = LUMINANCE
     if isinstance(brdf, Lambertian):
         return float(brdf.reflectance @ lum)
     return float(np.mean(brdf.fresnel(np.linspace(0.0, 1.0, 9)) @ lum))

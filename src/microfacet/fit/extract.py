@@ -36,6 +36,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from ..distributions.tabulated import HALF_PI, azimuthal_cosine_spectrum, circular_projection, hat_weights
 from ..errors import MicrofacetError
 from ..geometry import hd_to_io
@@ -48,8 +49,6 @@ __all__ = ["BACKSCATTER_GAFS", "backscattering", "luminance", "smith_kernel_isot
 
 #: Smith backscattering models ``G(o, o)``: Eq. 4.3 (``G1``) or height-correlated ``G2``
 BACKSCATTER_GAFS = ("masking", "height_correlated")
-#: Rec. 709 luminance weights
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def luminance(rgb) -> np.ndarray:

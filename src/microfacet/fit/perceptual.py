@@ -61,6 +61,7 @@ from typing import Callable
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from ..metrics import (ALBEDO_VIEWS_DEG, GRAZING_COS, albedo_directions, measured_mask, measurement_directions,
                        uniform_directions)
 from ..protocol import directions
@@ -389,7 +390,7 @@ def _ggx_lobe(alpha, f0, f90):
 
 
 def _luminance(rgb) -> float:
-    return float(np.dot([0.2126, 0.7152, 0.0722], rgb))
+    return float(np.dot(LUMINANCE, rgb))
 
 
 def _sum(parts, weights):
@@ -797,7 +798,7 @@ def target(reference, n: int = 2**12, seed: int = 7, grid: int = 16, image_size:
     scale = np.ones(len(w))
     for j in np.unique(group[group >= 2]):                     # each image relative to its white
         pixels = group == j
-        white = float(np.percentile(u[pixels] @ np.array([0.2126, 0.7152, 0.0722]), 99.0))
+        white = float(np.percentile(u[pixels] @ LUMINANCE, 99.0))
         scale[pixels] = 1.0 / white if white > 0 else 1.0
     views = tuple(ALBEDO_VIEWS_DEG) + tuple(v for v in ENERGY_VIEWS_DEG if v not in ALBEDO_VIEWS_DEG)
     ai, ao, aw, av = albedo_directions(views, 0.0, *albedo_grid)

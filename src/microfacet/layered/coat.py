@@ -46,6 +46,7 @@ import functools
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from .._colour import LUMINANCE
 from .. import protocol
 from ..brdf import BRDF, MicrofacetBRDF, uniforms, unit_directions
 from ..distributions import GGX, Beckmann
@@ -95,8 +96,6 @@ QUADRATURE_ORDER = 32
 BASE_ORDER = 8
 #: The coat's sampling probability is clamped into this interval.
 PROBABILITY_BOUNDS = (0.05, 0.95)
-#: Linear sRGB luminance weights (Rec. 709, as Mitsuba's ``luminance``).
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LUMINANCE.flags.writeable = False
 
 

@@ -34,6 +34,7 @@ import threading
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from ..geometry import half_vector
 from .base import MeasuredBRDF, as_dirs, check_finite, compiled_kernels, file_error
 from .grids import MERL_SHAPE
@@ -349,7 +350,7 @@ class MERLBRDF(MeasuredBRDF):
         (1.0985, True)
         """
         both = self.valid[:, :, 0] & self.valid[:, :, -1]
-        luminance = self.values[:, :, [0, -1]][both] @ np.array([0.2126, 0.7152, 0.0722])   # (rows, 2)
+        luminance = self.values[:, :, [0, -1]][both] @ LUMINANCE   # (rows, 2)
         ok = np.all(luminance > 0.0, axis=1)
         if not np.any(ok):
             return float("nan")

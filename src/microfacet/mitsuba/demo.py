@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._colour import LUMINANCE
 from ..io import html_grid, write_exr, write_png
 
 __all__ = ["demo_section", "choose_variant", "relative_rms", "shared_rgl_files", "highlight_mask", "MATERIALS", "LIBRARY_SUPERSAMPLE"]
@@ -203,7 +204,7 @@ def highlight_mask(image, fraction: float = 0.01) -> np.ndarray:
     >>> int(mask.sum()), bool(mask[0, 0])
     (1, True)
     """
-    lum = np.asarray(image, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    lum = np.asarray(image, dtype=np.float64) @ LUMINANCE
     lit = lum[lum > 0]
     return lum > np.quantile(lit, 1.0 - fraction) if lit.size else np.zeros(lum.shape, dtype=bool)
 

@@ -20,13 +20,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from .._colour import LUMINANCE
 from ..geometry import spherical_to_cartesian
 from ..io import write_bytes
 
 __all__ = ["lobe_curve", "plot_lobes", "lobe_figure", "save_lobe_figure", "LUMINANCE"]
 
-#: Rec. 709 / sRGB luminance weights.
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 _COLOURS = ("#1f77b4", "#2ca02c", "#ff7f0e", "#d62728", "#9467bd")
 _STYLES = ("-", "--", ":")
 
