@@ -105,11 +105,11 @@ def one_process(path: str) -> list[tuple[str, float]]:
             one = {name: perceptual_fits[name]}
             summaries.update(outputs._fit_summaries(judges, one, outputs._scores(metrics, one), metrics[2].ref))
             mark(f"albedo match + metrics: {name}")
-        from microfacet.render import fit_comparison_png
+        from microfacet.render import fit_spheres_png
         mark("picture: imports")
         best = outputs.best_fit({k: v["metrics"] for k, v in summaries.items()})
         shown, notes = outputs._shown_fits({**named, **perceptual_fits}, summaries, best)
-        fit_comparison_png({"data": brdf, **shown}, title="bench", notes=notes)
+        fit_spheres_png({"data": brdf, **shown}, title="bench", notes=notes)
         mark("picture")
     return out
 

@@ -92,6 +92,16 @@ def test_fit_says_when_the_data_are_not_reciprocal(single):
     assert "not reciprocal: their table jumps by a factor 1.42" in format_fits_table(summary)
 
 
+def test_fit_curves_option_draws_the_comparison_picture(inputs, tmp_path):
+    """``--curves``: OUT.png is the comparison picture, the spheres and the curves under them."""
+    from PIL import Image
+    out = tmp_path / "curves.npz"
+    assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(out), "--resolution", "16", "--method", "moments",
+                 "--curves"]) == 0
+    with Image.open(out.with_suffix(".png")) as im:
+        assert im.size[0] >= 900 and im.size[1] >= 2 * 192 + 330
+
+
 def test_fit_albedo_weight_option(inputs, tmp_path):
     out = tmp_path / "w0.npz"
     assert main(["fit", str(inputs / "gold-ggx.binary"), "-o", str(out), "--resolution", RESOLUTION,
@@ -297,7 +307,7 @@ def test_fit_material_writes_all_or_nothing(tmp_path, monkeypatch, failing):
 
     monkeypatch.setattr(microfacet.io, "write_bytes", write_bytes)
     if failing == "picture":
-        monkeypatch.setattr(microfacet.render, "fit_comparison_png", picture)
+        monkeypatch.setattr(microfacet.render, "fit_spheres_png", picture)
     out = tmp_path / "gold.npz"
     with pytest.raises(KeyboardInterrupt):
         fit_material(TRUTH, out, resolution=16, method="moments")
@@ -306,12 +316,18 @@ def test_fit_material_writes_all_or_nothing(tmp_path, monkeypatch, failing):
 
 
 def test_fit_material_writes_the_three_files(tmp_path):
-    """Without a failure the three files are there, the .npz loads and the .png is a PNG."""
+    """Without a failure the three files are there, the .npz loads and the .png is a PNG:
+    the spheres alone, or with ``curves`` the comparison picture, taller by its curves."""
+    from PIL import Image
+
     from microfacet.fit.outputs import fit_material
     fit_material(TRUTH, tmp_path / "gold.npz", resolution=16, method="moments")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gold.json", "gold.npz", "gold.png"]
     assert mf.fit.load(tmp_path / "gold.npz").distribution.n_theta == 31   # 2 N - 1 (refined)
     assert (tmp_path / "gold.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    fit_material(TRUTH, tmp_path / "curves" / "gold.npz", resolution=16, method="moments", curves=True)
+    with Image.open(tmp_path / "gold.png") as spheres, Image.open(tmp_path / "curves" / "gold.png") as curves:
+        assert spheres.size[1] >= 2 * 192 and curves.size[1] >= spheres.size[1] + 330
 
 
 @pytest.mark.parametrize("numba", [True, False], ids=["kernels", "numpy"])

@@ -307,6 +307,48 @@ def test_directional_light_rejects_bad_parameters(kwargs, word):
         DirectionalLight(**kwargs)
 
 
+def test_fit_spheres_picture_has_the_comparison_pictures_spheres_without_matplotlib(tmp_path):
+    """The spheres picture (microfacet fit's): the same sphere pixels as the comparison
+    picture's, every label and note inside its column, bad notes refused, and no Matplotlib
+    imported to draw it."""
+    import io
+    import subprocess
+    import sys
+
+    from PIL import Image, ImageDraw
+
+    from microfacet.render import compare
+    brdfs = {"data": mf.MicrofacetBRDF(mf.GGX(alpha=0.2)), **{f"a long fit name {k}": mf.MicrofacetBRDF(
+        mf.GGX(alpha=0.1 + 0.1 * k)) for k in range(4)}}
+    notes = {name: "log 0.123 · image 0.456\nalbedo ratio 0.91–1.08 θ" for name in list(brdfs)[1:]}
+    size = 64
+
+    def spheres(png, min_width):
+        part = compare._spheres(brdfs, "title", size, notes, min_width, 1.0)
+        top, (h, w) = part.title_h + part.label_h, part.canvas.shape[:2]
+        with Image.open(io.BytesIO(png)) as im:
+            return np.asarray(im.convert("RGB"))[top:top + h, part.xs[0]:part.xs[0] + w], part
+    ours, part = spheres(compare.fit_spheres_png(brdfs, "title", size=size, notes=notes), 600)
+    theirs, _ = spheres(compare.fit_comparison_png(brdfs, "title", size=size, notes=notes), 900)
+    np.testing.assert_array_equal(ours, theirs)
+    assert np.count_nonzero(ours.min(axis=-1) < 255) > 5 * size * size     # the spheres, not a blank
+    draw = ImageDraw.Draw(Image.new("RGB", (1, 1)))
+    for k, label in enumerate(part.labels):
+        cell = (part.left + k * part.cell, part.left + (k + 1) * part.cell)
+        boxes = [draw.textbbox((part.xs[k] + size / 2.0, 0), label, font=compare._font(13), anchor="ms")]
+        if label in notes:
+            boxes.append(draw.multiline_textbbox((cell[0] + part.cell / 2.0, 0), notes[label], font=compare._font(10),
+                                                 anchor="ma", align="center", spacing=3))
+        assert all(cell[0] <= b[0] and b[2] <= cell[1] for b in boxes), label
+    with pytest.raises(ValueError, match="not in brdfs"):
+        compare.fit_spheres_png(brdfs, notes={"nobody": "x"})
+    code = ("import sys, microfacet as mf; from microfacet.render import fit_spheres_png; "
+            "png = fit_spheres_png({'data': mf.Lambertian(0.5)}, size=16); "
+            "print(png[:4] == b'\\x89PNG', 'matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "False"]
+
+
 def test_fit_comparison_shows_five_brdfs_on_large_spheres_with_every_label_inside():
     """3-5 BRDFs: spheres of the requested size pixel for pixel, every text inside the figure
     and no two texts (titles, tick labels, legends, notes) overlapping."""

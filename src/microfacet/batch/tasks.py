@@ -413,7 +413,8 @@ FIT_COLUMNS = ("material", "format", "fit_seconds", "method",
 
 def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = False, gaf: str = "smith",
              method: str = "least_squares", diffuse: str = "auto", fresnel: str = "table",
-             albedo_weight: float | None = None, coat: bool = False, picture: bool = True) -> dict:
+             albedo_weight: float | None = None, coat: bool = False, picture: bool = True,
+             curves: bool = False) -> dict:
     """``microfacet fit``: a measured BRDF's power-iteration fit (thesis Ch. 4) and its
     least-squares GGX and Beckmann fits as ``out`` (.npz) with ``out.json`` and ``out.png``
     (:func:`microfacet.fit.outputs.fit_material`; no picture with ``picture=False``).
@@ -425,7 +426,7 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
         A measured BRDF file (MERL, RGL or UTIA, :func:`microfacet.measured.load`).
     out : pathlib.Path
         The fit file (``.npz``); ``.json`` and ``.png`` are written beside it.
-    resolution, anisotropic, gaf, method, diffuse, fresnel, albedo_weight, coat, picture
+    resolution, anisotropic, gaf, method, diffuse, fresnel, albedo_weight, coat, picture, curves
         As :func:`microfacet.fit.outputs.fit_material`.
 
     Returns
@@ -450,7 +451,8 @@ def fit_file(source: Path, out: Path, resolution: int = 90, anisotropic: bool = 
     brdf = load_bytes(reading.result(), source)
     name = input_name(source)
     summary = fit_material(brdf, out, resolution, anisotropic, gaf, title=name, method=method, diffuse=diffuse,
-                           fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture)
+                           fresnel=fresnel, albedo_weight=albedo_weight, coat=coat, picture=picture,
+                           curves=curves)
     row = summary_row(name, source, getattr(brdf, "format", ""), summary)
     row["fit_seconds"] = row["seconds"]
     return {k: row[k] for k in FIT_COLUMNS}

@@ -50,8 +50,9 @@ def add(sub) -> None:
                     "name) any other), OUT.json (every fit with its metrics under \"fits\", \"best\"; GGX and Beckmann fits "
                     "with their Fresnel term and diffuse base, every fit of both methods, fit times, and "
                     "three metrics per fit: the grid error, the uniform-pairs error and the albedo "
-                    "ratios fit/data, plus the white furnace) and OUT.png (comparison picture with the "
-                    "errors). For a folder: the same for every file in it (--recursive: in its "
+                    "ratios fit/data, plus the white furnace) and OUT.png (the data's, the best fit's and the "
+                    "tabulated fit's spheres under two lights, with their errors; --curves: their curves "
+                    "too). For a folder: the same for every file in it (--recursive: in its "
                     "subfolders too, the outputs mirroring the input tree), into the folder OUT, with "
                     "summary.csv and summary.md. Prints the summary table.")
     p.add_argument("input", metavar="INPUT", help="measured BRDF file, or a folder of them")
@@ -82,9 +83,12 @@ def add(sub) -> None:
                         "lobe + base, microfacet.layered.LayeredBRDF) and add a coat to the least-squares "
                         "fits: a second GGX/Beckmann lobe with its own 7-node Fresnel table (clear coats, "
                         "metallic paints; slower: 1-10 s per fit)")
+    p.add_argument("--curves", action="store_true",
+                   help="draw OUT.png with the backscattering and in-plane curves of the data and fits under "
+                        "their spheres (Matplotlib: ~0.5 s more per file)")
     p.add_argument("--no-picture", dest="picture", action="store_false",
-                   help="do not draw OUT.png (saves ~0.7 s of matplotlib per file; single files only: a "
-                        "folder's up-to-date check wants the picture)")
+                   help="do not draw OUT.png (single files only: a folder's up-to-date check wants the "
+                        "picture)")
     add_batch_options(p)
     p.set_defaults(run=run)
 
@@ -101,7 +105,8 @@ def run(args) -> int:
     with numpy_kernels(not (args.anisotropic or args.coat or args.fresnel == "conductor")):
         row = fit_file(source, target, resolution=args.resolution, anisotropic=args.anisotropic, gaf=args.gaf,
                        method=args.method, diffuse=args.diffuse, fresnel=args.fresnel,
-                       albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture)
+                       albedo_weight=args.albedo_weight, coat=args.coat, picture=args.picture,
+                       curves=args.curves)
     import json
     from ..fit.outputs import format_fits_table      # imported by fit_file, after its read started
     summary = json.loads(target.with_suffix(".json").read_text())

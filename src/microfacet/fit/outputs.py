@@ -19,8 +19,10 @@ For a material fitted by :func:`microfacet.fit.fit` (power iterations, thesis Ch
   MERL table ``"data": {"fold_seam"}`` (:meth:`microfacet.measured.MERLBRDF.fold_seam`: above
   :data:`microfacet.measured.merl.SEAM_LIMIT` the data are not reciprocal, and the printed
   table says so);
-* ``NAME.png`` — the comparison picture of :func:`microfacet.render.save_fit_comparison`
-  (data, tabulated fit, GGX and Beckmann fits of the method, their errors).
+* ``NAME.png`` — the spheres of the data, the best fit and the tabulated fit (or the best
+  analytic fit where the tabulated fit is the best), with their errors
+  (:func:`microfacet.render.fit_spheres_png`; with ``curves``, the comparison picture of
+  :func:`microfacet.render.fit_comparison_png`, their curves too).
 
 :func:`analytic_from_json` rebuilds an analytic fit from its JSON entry. A folder of
 materials is a batch (:mod:`microfacet.batch`, task ``fit``): one such triple per
@@ -299,7 +301,7 @@ def objective(grid: float, uniform: float, albedo_ratio, albedo_weight: float) -
 def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotropic: bool = False,
                  gaf: str = "smith", title: str = "", method: str = "least_squares", diffuse: str = "auto",
                  fresnel: str = "table", tabulated_diffuse: bool = False, picture: bool = True,
-                 albedo_weight: float | None = None, coat: bool = False) -> dict:
+                 albedo_weight: float | None = None, coat: bool = False, curves: bool = False) -> dict:
     """Fit ``brdf`` and write ``out_npz`` with its ``.json`` and ``.png`` beside it
     (its folder is created if needed).
 
@@ -316,8 +318,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     the fits made from it run in processes of their own
     (:func:`microfacet._background.in_process_items`; the same bytes as in this process):
     the perceptual fits judged here as they come, on two threads, the others judged in
-    their process (with the data's side of the metrics, made here while they are fitted), while
-    the picture's drawing warms up on another thread
+    their process (with the data's side of the metrics, made here while they are fitted); with
+    ``curves``, the picture's drawing warms up on another thread meanwhile
     (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module
     docstring); ``seconds`` holds the time of the tabulated fit and of the least-squares
     fits (wall; not of the errors, picture or files).
@@ -341,11 +343,15 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     tabulated_diffuse : bool
         A Lambertian base for the tabulated fit.
     picture : bool
-        Render and write the ``.png``.
+        Render and write the ``.png``: the spheres of the data and of the best and tabulated
+        fits (:func:`microfacet.render.fit_spheres_png`).
     albedo_weight : float, optional
         Weight of the albedo term of the fits.
     coat : bool
         Fit each least-squares model with a clear coat lobe too.
+    curves : bool
+        Draw the picture with its backscattering and in-plane curves too
+        (:func:`microfacet.render.fit_comparison_png`; Matplotlib, about 0.5 s more).
 
     Returns
     -------
@@ -392,8 +398,7 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
         raise
     data_side.put((metrics, judges))
     _import_numba()
-    if picture:                     # Matplotlib's imports and fonts, on a thread while the fits run
-        from ..render import fit_comparison_png
+    if picture and curves:          # Matplotlib's imports and fonts, on a thread while the fits run
         from ..render.compare import warm_up
         drawing = in_background(warm_up)
     from concurrent.futures import ThreadPoolExecutor
@@ -418,11 +423,16 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     files = {out_npz: legacy.fit.to_bytes(fits=specs, best=best),
              out_npz.with_suffix(".json"): (json.dumps(summary, indent=2) + "\n").encode()}
     if picture:                                     # rendered before any file is written
-        drawing.result()
+        from .. import render
         shown, notes = _shown_fits({**legacy.named, **perceptual}, fits_summary, best)
-        files[out_npz.with_suffix(".png")] = fit_comparison_png(
-            {"data": brdf, **shown}, title=title or material_name(out_npz),
-            planes_deg=(0, 90) if anisotropic else (0,), notes=notes)
+        brdfs, title = {"data": brdf, **shown}, title or material_name(out_npz)
+        if curves:
+            drawing.result()
+            png = render.fit_comparison_png(brdfs, title=title, planes_deg=(0, 90) if anisotropic else (0,),
+                                            notes=notes)
+        else:
+            png = render.fit_spheres_png(brdfs, title=title, notes=notes)
+        files[out_npz.with_suffix(".png")] = png
     _write_all(files)
     return summary
 

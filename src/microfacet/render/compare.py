@@ -34,6 +34,7 @@ from collections.abc import Mapping, Sequence
 from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,7 +45,8 @@ from .lights import DirectionalLight
 from .lobes import LUMINANCE, lobe_curve
 from .sphere import Sphere
 
-__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "warm_up",
+__all__ = ["backscattering_curve", "render_sphere", "save_fit_comparison", "fit_comparison_png", "fit_spheres_png",
+           "warm_up",
            "COMPARE_LIGHT", "GRAZING_LIGHT"]
 
 #: Light of the comparison spheres: up-left of the view, 35 deg from it, unit irradiance.
@@ -497,14 +499,32 @@ def _pixels_artist():
     return Pixels
 
 
-def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], planes_deg: Sequence[float],
-                       size: int, dpi: int, notes: Mapping[str, str] | None):
-    """The Matplotlib figure of :func:`fit_comparison_png` (Agg canvas attached): the
-    spheres one image (:func:`_sphere_canvas`) placed pixel for pixel, texts on the figure,
-    two Axes for the curves."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
+class _Spheres(NamedTuple):
+    """The spheres of a comparison picture (its top part), laid out in pixels from the
+    top-left (:func:`_spheres`): ``canvas`` (RGBA ``uint8``, every sphere; its top-left at
+    ``(xs[0], title_h + label_h)``), the column of each label (``xs``: a sphere's left edge;
+    ``left``, ``cell``: the columns' cells), the picture's ``width``, the heights of its
+    title, labels and notes, ``bottom`` (where the spheres' part ends) and the rows'
+    exposures (stops)."""
+    canvas: np.ndarray
+    labels: list
+    notes: dict
+    xs: list
+    left: float
+    cell: int
+    width: int
+    title_h: int
+    label_h: int
+    notes_h: int
+    bottom: int
+    exposures: list
+
+
+def _spheres(brdfs: Mapping, title: str, size: int, notes: Mapping[str, str] | None, min_width: int,
+             line_px: float) -> _Spheres:
+    """:class:`_Spheres` of ``brdfs`` (each under :data:`COMPARE_LIGHT`, then
+    :data:`GRAZING_LIGHT`; the same exposure in a row, set by the first BRDF's pixels), at
+    least ``min_width`` px wide, silhouettes ``line_px`` wide; bad arguments raise ValueError."""
     if not brdfs:
         raise ValueError("save_fit_comparison needs at least one BRDF")
     if int(size) != size or size < 8:
@@ -517,16 +537,111 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     n = len(brdfs)
     rows = list(zip(*(_sphere_pixels(b, size, (COMPARE_LIGHT, GRAZING_LIGHT)) for b in brdfs.values())))
     exposures = [_exposure(spheres[0][1]) for spheres in rows]      # the black pixels do not count
-
-    # layout in pixels, from the top
     note_lines = max((v.count("\n") + 1 for v in notes.values()), default=0)
     cell = max(size + 40, 170)
-    width = max(900, n * cell + 40)
+    width = max(min_width, n * cell + 40)
     title_h, label_h, gap = (36 if title else 10), 22, 8
     notes_h = 13 * note_lines + (10 if note_lines else 0)
+    left = (width - n * cell) / 2.0
+    xs = [int(round(left + k * cell + (cell - size) / 2.0)) for k in range(n)]
+    row_step = label_h + size + gap
+    canvas = _sphere_canvas(rows, exposures, size, [x - xs[0] for x in xs], row_step, line_px)
+    return _Spheres(canvas, list(brdfs), notes, xs, left, cell, width, title_h, label_h, notes_h,
+                    title_h + 2 * row_step + notes_h, exposures)
+
+
+def _row_text(exposures: Sequence[float], sep: str = " ") -> str:
+    """The text that says how the spheres are lit and exposed (``sep`` before its second half)."""
+    return (f"spheres: light 35° from the view (top row, exposure {exposures[0]:+.2f} stops) and 75° "
+            f"(bottom row, {exposures[1]:+.2f} stops),{sep}the same exposure for every sphere of a row")
+
+
+@lru_cache(maxsize=None)
+def _font(px: int):
+    """DejaVu Sans of ``px`` pixels, the font of the Matplotlib pictures, read by Pillow from
+    Matplotlib's data folder (found without importing Matplotlib); Pillow's own default font
+    where that file is missing."""
+    import importlib.util
+    from PIL import ImageFont
+    spec = importlib.util.find_spec("matplotlib")
+    for root in (spec.submodule_search_locations or ()) if spec else ():
+        path = os.path.join(root, "mpl-data", "fonts", "ttf", "DejaVuSans.ttf")
+        if os.path.isfile(path):
+            return ImageFont.truetype(path, px)
+    return ImageFont.load_default(size=px)
+
+
+def fit_spheres_png(brdfs: Mapping, title: str = "", size: int = SPHERE_SIZE,
+                    notes: Mapping[str, str] | None = None) -> bytes:
+    """The spheres of :func:`fit_comparison_png` without its curves, as PNG bytes: each BRDF
+    under :data:`COMPARE_LIGHT` (top row) and :data:`GRAZING_LIGHT` (bottom row), the same
+    exposure in a row, the same pixels, labels and notes, drawn by Pillow alone. It is the
+    picture of ``microfacet fit``, whose ``--curves`` (:func:`fit_comparison_png`) cost
+    Matplotlib's import and drawing, about 0.5 s of CPU (``benchmarks/results/fit_command.md``).
+
+    Parameters
+    ----------
+    brdfs : mapping of str -> BRDF
+        Label and BRDF, the reference (data) first; its pixels set each row's exposure.
+    title : str
+        Title above the spheres.
+    size : int
+        Side of each sphere image, pixels (at least 8).
+    notes : mapping of str -> str, optional
+        Text under the spheres of a label (a few short lines); labels not in ``brdfs`` are
+        an error.
+
+    Returns
+    -------
+    bytes
+        The PNG file's content (8-bit RGB).
+
+    Example
+    -------
+    >>> import io, microfacet as mf
+    >>> from PIL import Image
+    >>> png = fit_spheres_png({"data": mf.MicrofacetBRDF(mf.GGX(alpha=0.2)),
+    ...                        "fit": mf.MicrofacetBRDF(mf.GGX(alpha=0.25))}, "GGX", size=64, notes={"fit": "a note"})
+    >>> Image.open(io.BytesIO(png)).size
+    (600, 281)
+    """
+    from PIL import Image, ImageDraw
+    dpi = 100.0                                      # the pixel sizes of fit_comparison_png's default
+    part = _spheres(brdfs, title, size, notes, 600, _SILHOUETTE_PT * dpi / 72.0)
+    footer_h = 34
+    height = part.bottom + footer_h
+    image = Image.new("RGB", (part.width, height), "white")
+    image.paste(Image.fromarray(np.ascontiguousarray(part.canvas[..., :3])), (part.xs[0], part.title_h + part.label_h))
+    draw = ImageDraw.Draw(image)
+    if title:
+        draw.text((part.width / 2.0, 8), title, font=_font(15), fill="black", anchor="ma")
+    base = part.title_h + part.label_h - _LABEL_PAD_PT * dpi / 72.0
+    for k, label in enumerate(part.labels):
+        draw.text((part.xs[k] + int(size) / 2.0, base), label, font=_font(13), fill=_COLOURS[k % len(_COLOURS)],
+                  anchor="ms")
+        if label in part.notes:
+            draw.multiline_text((part.left + (k + 0.5) * part.cell, part.bottom - part.notes_h + 4), part.notes[label],
+                                font=_font(10), fill="black", anchor="ma", align="center", spacing=3)
+    draw.multiline_text((part.width / 2.0, height - footer_h / 2.0), _row_text(part.exposures, "\n"), font=_font(10),
+                        fill="black", anchor="mm", align="center", spacing=3)
+    buf = io.BytesIO()
+    image.save(buf, format="PNG", compress_level=_PNG_LEVEL)
+    return buf.getvalue()
+
+
+def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], planes_deg: Sequence[float],
+                       size: int, dpi: int, notes: Mapping[str, str] | None):
+    """The Matplotlib figure of :func:`fit_comparison_png` (Agg canvas attached): the
+    spheres one image (:func:`_spheres`) placed pixel for pixel, texts on the figure,
+    two Axes for the curves."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    part = _spheres(brdfs, title, size, notes, 900, _SILHOUETTE_PT * dpi / 72.0)
+    size, n, width, labels, notes = int(size), len(brdfs), part.width, part.labels, part.notes
     plot_h, legend_h, footer_h = 330, 34, 34
-    spheres_h = 2 * (label_h + size + gap) + notes_h
-    height = title_h + spheres_h + plot_h + legend_h + footer_h
+    title_h, spheres_h, notes_h = part.title_h, part.bottom - part.title_h, part.notes_h
+    height = part.bottom + plot_h + legend_h + footer_h
 
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     FigureCanvasAgg(fig)
@@ -534,13 +649,8 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     def box(x, y, w, h):                             # pixels from the top-left -> figure fraction
         return [x / width, 1.0 - (y + h) / height, w / width, h / height]
 
-    left = (width - n * cell) / 2.0
-    rows_top = title_h
-    labels = list(brdfs)
-    xs = [int(round(left + k * cell + (cell - size) / 2.0)) for k in range(n)]
-    row_step = label_h + size + gap
-    canvas = _sphere_canvas(rows, exposures, size, [x - xs[0] for x in xs], row_step, _SILHOUETTE_PT * dpi / 72.0)
-    fig.add_artist(_pixels_artist()(canvas, xs[0], height - (rows_top + label_h) - canvas.shape[0]))
+    left, cell, xs, rows_top, label_h = part.left, part.cell, part.xs, title_h, part.label_h
+    fig.add_artist(_pixels_artist()(part.canvas, xs[0], height - (rows_top + label_h) - part.canvas.shape[0]))
     title_base = rows_top + label_h - _LABEL_PAD_PT * dpi / 72.0  # where an axes title would sit
     for k, label in enumerate(labels):
         fig.text((xs[k] + size / 2.0) / width, 1.0 - title_base / height, label, ha="center", va="baseline",
@@ -548,8 +658,7 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
         if label in notes:
             fig.text((left + (k + 0.5) * cell) / width, 1.0 - (rows_top + spheres_h - notes_h + 4) / height,
                      notes[label], ha="center", va="top", fontsize=7.5, linespacing=1.25)
-    row_text = (f"spheres: light 35° from the view (top row, exposure {exposures[0]:+.2f} stops) and 75° "
-                f"(bottom row, {exposures[1]:+.2f} stops), the same exposure for every sphere of a row")
+    row_text = _row_text(part.exposures)
 
     top = title_h + spheres_h + 26                  # room for the axes titles
     axes_h = plot_h - 26 - 48                       # room below for tick labels and x labels
