@@ -324,7 +324,7 @@ def test_fit_spheres_picture_has_the_comparison_pictures_spheres_without_matplot
     size = 64
 
     def spheres(png, min_width):
-        part = compare._spheres(brdfs, "title", size, notes, min_width, 1.0)
+        part = compare._spheres(brdfs, "title", size, notes, min_width, 100)
         top, (h, w) = part.title_h + part.label_h, part.canvas.shape[:2]
         with Image.open(io.BytesIO(png)) as im:
             return np.asarray(im.convert("RGB"))[top:top + h, part.xs[0]:part.xs[0] + w], part
@@ -335,9 +335,9 @@ def test_fit_spheres_picture_has_the_comparison_pictures_spheres_without_matplot
     draw = ImageDraw.Draw(Image.new("RGB", (1, 1)))
     for k, label in enumerate(part.labels):
         cell = (part.left + k * part.cell, part.left + (k + 1) * part.cell)
-        boxes = [draw.textbbox((part.xs[k] + size / 2.0, 0), label, font=compare._font(13), anchor="ms")]
+        boxes = [draw.textbbox((part.label_x(k), 0), label, font=compare._font(13), anchor="ms")]
         if label in notes:
-            boxes.append(draw.multiline_textbbox((cell[0] + part.cell / 2.0, 0), notes[label], font=compare._font(10),
+            boxes.append(draw.multiline_textbbox((part.note_x(k), 0), notes[label], font=compare._font(10),
                                                  anchor="ma", align="center", spacing=3))
         assert all(cell[0] <= b[0] and b[2] <= cell[1] for b in boxes), label
     with pytest.raises(ValueError, match="not in brdfs"):

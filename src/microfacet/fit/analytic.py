@@ -732,10 +732,9 @@ def coat_fresnel(f0, f90) -> _fresnel.Tabulated:
 def _albedo_estimate(brdf) -> float:
     """Luminance of a lobe's mean Fresnel term over ``cos theta_d`` (a microfacet lobe) or
     of ``k_d`` (a Lambertian): the mixture weights of the sum BRDF's sampling."""
-    lum = LUMINANCE
     if isinstance(brdf, Lambertian):
-        return float(brdf.reflectance @ lum)
-    return float(np.mean(brdf.fresnel(np.linspace(0.0, 1.0, 9)) @ lum))
+        return float(brdf.reflectance @ LUMINANCE)
+    return float(np.mean(brdf.fresnel(np.linspace(0.0, 1.0, 9)) @ LUMINANCE))
 
 
 def _start_alpha(start) -> tuple[float, float, float, np.ndarray]:

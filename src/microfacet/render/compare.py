@@ -504,8 +504,9 @@ class _Spheres(NamedTuple):
     top-left (:func:`_spheres`): ``canvas`` (RGBA ``uint8``, every sphere; its top-left at
     ``(xs[0], title_h + label_h)``), the column of each label (``xs``: a sphere's left edge;
     ``left``, ``cell``: the columns' cells), the picture's ``width``, the heights of its
-    title, labels and notes, ``bottom`` (where the spheres' part ends) and the rows'
-    exposures (stops)."""
+    title, labels and notes, ``bottom`` (where the spheres' part ends), the rows' exposures
+    (stops), the labels' baseline ``label_y`` and the notes' top ``notes_y``; :meth:`label_x`
+    and :meth:`note_x` centre a column's label and note."""
     canvas: np.ndarray
     labels: list
     notes: dict
@@ -518,13 +519,25 @@ class _Spheres(NamedTuple):
     notes_h: int
     bottom: int
     exposures: list
+    size: int
+    label_y: float
+    notes_y: int
+
+    def label_x(self, k: int) -> float:
+        """Centre of column ``k``'s label: its sphere's."""
+        return self.xs[k] + self.size / 2.0
+
+    def note_x(self, k: int) -> float:
+        """Centre of column ``k``'s note: its cell's."""
+        return self.left + (k + 0.5) * self.cell
 
 
 def _spheres(brdfs: Mapping, title: str, size: int, notes: Mapping[str, str] | None, min_width: int,
-             line_px: float) -> _Spheres:
+             dpi: float) -> _Spheres:
     """:class:`_Spheres` of ``brdfs`` (each under :data:`COMPARE_LIGHT`, then
     :data:`GRAZING_LIGHT`; the same exposure in a row, set by the first BRDF's pixels), at
-    least ``min_width`` px wide, silhouettes ``line_px`` wide; bad arguments raise ValueError."""
+    least ``min_width`` px wide, its lengths in points (silhouettes, the labels' gap above
+    the spheres) at ``dpi``; bad arguments raise ValueError."""
     if not brdfs:
         raise ValueError("save_fit_comparison needs at least one BRDF")
     if int(size) != size or size < 8:
@@ -545,9 +558,10 @@ def _spheres(brdfs: Mapping, title: str, size: int, notes: Mapping[str, str] | N
     left = (width - n * cell) / 2.0
     xs = [int(round(left + k * cell + (cell - size) / 2.0)) for k in range(n)]
     row_step = label_h + size + gap
-    canvas = _sphere_canvas(rows, exposures, size, [x - xs[0] for x in xs], row_step, line_px)
-    return _Spheres(canvas, list(brdfs), notes, xs, left, cell, width, title_h, label_h, notes_h,
-                    title_h + 2 * row_step + notes_h, exposures)
+    canvas = _sphere_canvas(rows, exposures, size, [x - xs[0] for x in xs], row_step, _SILHOUETTE_PT * dpi / 72.0)
+    bottom = title_h + 2 * row_step + notes_h
+    return _Spheres(canvas, list(brdfs), notes, xs, left, cell, width, title_h, label_h, notes_h, bottom, exposures,
+                    size, title_h + label_h - _LABEL_PAD_PT * dpi / 72.0, bottom - notes_h + 4)
 
 
 def _row_text(exposures: Sequence[float], sep: str = " ") -> str:
@@ -607,7 +621,7 @@ def fit_spheres_png(brdfs: Mapping, title: str = "", size: int = SPHERE_SIZE,
     """
     from PIL import Image, ImageDraw
     dpi = 100.0                                      # the pixel sizes of fit_comparison_png's default
-    part = _spheres(brdfs, title, size, notes, 600, _SILHOUETTE_PT * dpi / 72.0)
+    part = _spheres(brdfs, title, size, notes, 600, dpi)
     footer_h = 34
     height = part.bottom + footer_h
     image = Image.new("RGB", (part.width, height), "white")
@@ -615,13 +629,12 @@ def fit_spheres_png(brdfs: Mapping, title: str = "", size: int = SPHERE_SIZE,
     draw = ImageDraw.Draw(image)
     if title:
         draw.text((part.width / 2.0, 8), title, font=_font(15), fill="black", anchor="ma")
-    base = part.title_h + part.label_h - _LABEL_PAD_PT * dpi / 72.0
     for k, label in enumerate(part.labels):
-        draw.text((part.xs[k] + int(size) / 2.0, base), label, font=_font(13), fill=_COLOURS[k % len(_COLOURS)],
+        draw.text((part.label_x(k), part.label_y), label, font=_font(13), fill=_COLOURS[k % len(_COLOURS)],
                   anchor="ms")
         if label in part.notes:
-            draw.multiline_text((part.left + (k + 0.5) * part.cell, part.bottom - part.notes_h + 4), part.notes[label],
-                                font=_font(10), fill="black", anchor="ma", align="center", spacing=3)
+            draw.multiline_text((part.note_x(k), part.notes_y), part.notes[label], font=_font(10), fill="black",
+                                anchor="ma", align="center", spacing=3)
     draw.multiline_text((part.width / 2.0, height - footer_h / 2.0), _row_text(part.exposures, "\n"), font=_font(10),
                         fill="black", anchor="mm", align="center", spacing=3)
     buf = io.BytesIO()
@@ -637,10 +650,9 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.lines import Line2D
-    part = _spheres(brdfs, title, size, notes, 900, _SILHOUETTE_PT * dpi / 72.0)
-    size, n, width, labels, notes = int(size), len(brdfs), part.width, part.labels, part.notes
+    part = _spheres(brdfs, title, size, notes, 900, dpi)
+    n, width, labels, notes = len(brdfs), part.width, part.labels, part.notes
     plot_h, legend_h, footer_h = 330, 34, 34
-    title_h, spheres_h, notes_h = part.title_h, part.bottom - part.title_h, part.notes_h
     height = part.bottom + plot_h + legend_h + footer_h
 
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
@@ -649,18 +661,17 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     def box(x, y, w, h):                             # pixels from the top-left -> figure fraction
         return [x / width, 1.0 - (y + h) / height, w / width, h / height]
 
-    left, cell, xs, rows_top, label_h = part.left, part.cell, part.xs, title_h, part.label_h
-    fig.add_artist(_pixels_artist()(part.canvas, xs[0], height - (rows_top + label_h) - part.canvas.shape[0]))
-    title_base = rows_top + label_h - _LABEL_PAD_PT * dpi / 72.0  # where an axes title would sit
+    canvas_y = height - (part.title_h + part.label_h) - part.canvas.shape[0]     # its bottom row, from below
+    fig.add_artist(_pixels_artist()(part.canvas, part.xs[0], canvas_y))
     for k, label in enumerate(labels):
-        fig.text((xs[k] + size / 2.0) / width, 1.0 - title_base / height, label, ha="center", va="baseline",
+        fig.text(part.label_x(k) / width, 1.0 - part.label_y / height, label, ha="center", va="baseline",
                  fontsize=9, color=_COLOURS[k % len(_COLOURS)])
         if label in notes:
-            fig.text((left + (k + 0.5) * cell) / width, 1.0 - (rows_top + spheres_h - notes_h + 4) / height,
-                     notes[label], ha="center", va="top", fontsize=7.5, linespacing=1.25)
+            fig.text(part.note_x(k) / width, 1.0 - part.notes_y / height, notes[label], ha="center", va="top",
+                     fontsize=7.5, linespacing=1.25)
     row_text = _row_text(part.exposures)
 
-    top = title_h + spheres_h + 26                  # room for the axes titles
+    top = part.bottom + 26                          # room for the axes titles
     axes_h = plot_h - 26 - 48                       # room below for tick labels and x labels
     margin_l, margin_r, between = 70, 20, 80
     axes_w = (width - margin_l - margin_r - between) / 2.0
@@ -668,7 +679,7 @@ def _comparison_figure(brdfs: Mapping, title: str, views_deg: Sequence[float], p
     _plot_slices(fig.add_axes(box(margin_l + axes_w + between, top, axes_w, axes_h)), brdfs, views_deg)
     handles = [Line2D([], [], color=_COLOURS[k % len(_COLOURS)], lw=1.6 if k == 0 else 1.2) for k in range(n)]
     fig.legend(handles, labels, loc="center", ncol=min(n, 5), fontsize=8, frameon=False,
-               bbox_to_anchor=(0.5, 1.0 - (title_h + spheres_h + plot_h + legend_h / 2.0) / height))
+               bbox_to_anchor=(0.5, 1.0 - (part.bottom + plot_h + legend_h / 2.0) / height))
     fig.text(0.5, 1.0 - (height - footer_h / 2.0) / height,
              row_text + f"\ncurves: grey band, grazing (cos θ < {GRAZING_COS:g}), excluded from fit errors",
              ha="center", va="center", fontsize=7, linespacing=1.3)
