@@ -100,11 +100,10 @@ def one_process(path: str) -> list[tuple[str, float]]:
         {k: white_furnace(b) for k, b in named.items()}
         mark("metrics of the 5 fits above")
         perceptual_fits = {}
+        targets = target, outputs._Once(lambda: outputs.colour_target(brdf))
         for name, (q, y) in fitted.items():
-            perceptual_fits[name] = outputs._perceptual_brdf(target, name, q, y)
-            one = {name: perceptual_fits[name]}
-            summaries.update(outputs._fit_summaries(judges, one, outputs._scores(metrics, one), metrics[2].ref))
-            mark(f"albedo match + metrics: {name}")
+            perceptual_fits[name], summaries[name] = outputs._judged(targets, metrics, judges, name, q, y)
+            mark(f"albedo match (+ colour balance) + metrics: {name}")
         from microfacet.render import fit_spheres_png
         mark("picture: imports")
         best = outputs.best_fit({k: v["metrics"] for k, v in summaries.items()})

@@ -477,7 +477,7 @@ def evaluate(m: Material, work: Path, abc, abc_params: dict | None = None, size:
     row: dict = {"group": m.group, "name": m.name, "key": m.key, "errors": {}}
     data = mf.measured.load(m.file)
     fit_path = work / "fits" / f"{m.key}.npz"
-    fits, best = {}, None
+    fits, best, summary = {}, None, {}
     if fit_path.with_suffix(".json").is_file():
         fits, best, summary, errs = load_fits(fit_path)
         row["errors"].update(errs)
@@ -490,6 +490,7 @@ def evaluate(m: Material, work: Path, abc, abc_params: dict | None = None, size:
     if wall.is_file():
         row["wall_seconds"] = json.loads(wall.read_text())["seconds"]
     row["best"] = best
+    row["balanced_from"] = summary.get("fits", {}).get(best, {}).get("balanced_from") if fits else None
     row["fold_seam"] = data.fold_seam() if hasattr(data, "fold_seam") else None
     named = dict(fits)
     if abc is not None:
@@ -784,6 +785,7 @@ def material_rows(rows: list[dict]) -> list[dict]:
                                 if k not in ("abc", "baseline") and _num(f.get("furnace"))), default=None),
             "tv_ratio": tvs.get(tv_fit), "tv_fit": tv_fit, "tv_baseline": z.get("fresnel_tv"),
             "seconds": r.get("wall_seconds"), "fit_seconds": r.get("fit_seconds"), "fold_seam": r.get("fold_seam"),
+            "balanced_from": r.get("balanced_from"),
             "normal_jump": normal_jump(r.get("data_albedo"), r.get("data_albedo_off_normal")),
             "error": "; ".join(f"{k}: {v}" for k, v in {**fit_errors, **per_fit_errors}.items()),
             "baseline_error": r.get("errors", {}).get("baseline", ""),
@@ -820,7 +822,9 @@ def goals(table: list[dict], n_expected: int, phase: dict | None) -> dict:
         "image_median": {"merl": paired(merl), "all": paired(table), "goal": 0.5},
         "albedo": {"failing": failing("albedo_best", lambda v: abs(v - 1.0) <= ALBEDO_TOL), "tol": ALBEDO_TOL,
                    "floor": ALBEDO_FLOOR},
-        "chroma": {"failing": failing("chroma_best", lambda v: v <= CHROMA_TOL), "tol": CHROMA_TOL},
+        "chroma": {"failing": failing("chroma_best", lambda v: v <= CHROMA_TOL), "tol": CHROMA_TOL,
+                   "balanced": [(f"{r['group']}/{r['name']}", r["balanced_from"]["chromaticity"], r["chroma_best"])
+                                for r in table if r.get("balanced_from") and _num(r["chroma_best"])]},
         "furnace": {"failing": failing("furnace_max", lambda v: v <= 1.0 + 1e-3)},
         "fresnel_tv": {"failing": [f"{r['group']}/{r['name']}" for r in table
                                    if _num(r["tv_ratio"]) and r["tv_ratio"] > TV_FACTOR * (1 + 1e-6)],
@@ -881,6 +885,11 @@ def format_page(table, g, meta) -> str:
     lines.append(f"- Chromaticity of the best fit's spheres within {CHROMA_TOL} of the data: "
                  f"{n - len(g['chroma']['failing'])}/{n} pass, {yes(not g['chroma']['failing'])}"
                  f"{listed(g['chroma']['failing'])}.")
+    balanced = g["chroma"].get("balanced") or []
+    if balanced:
+        lines.append(f"- Colour balance (`microfacet.fit.colour`, under lights the image error does not use): the best "
+                     f"fit of {len(balanced)}/{n} materials is balanced; its cast (the fit's own image error, 32 px, "
+                     f"before → this page's, 64 px): " + ", ".join(f"{k} {_c(a)} → {_c(b)}" for k, a, b in balanced) + ".")
     lines.append(f"- White furnace <= 1 for every fit of the file: {n - len(g['furnace']['failing'])}/{n} pass, "
                  f"{yes(not g['furnace']['failing'])}{listed(g['furnace']['failing'])}.")
     tv = g["fresnel_tv"]

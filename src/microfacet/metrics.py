@@ -964,10 +964,10 @@ def describe_image_error(size: int = 64) -> str:
             f"pairs black in both")
 
 
-def _light_directions() -> np.ndarray:
-    """World directions ``(3, 3)`` toward the lights of :data:`IMAGE_LIGHTS_DEG`."""
+def _light_directions(lights_deg=IMAGE_LIGHTS_DEG) -> np.ndarray:
+    """World directions ``(L, 3)`` toward the lights ``lights_deg`` (as :data:`IMAGE_LIGHTS_DEG`)."""
     out = []
-    for angle, azimuth in IMAGE_LIGHTS_DEG:
+    for angle, azimuth in lights_deg:
         a, b = np.radians(angle), np.radians(azimuth)
         out.append([np.sin(a) * np.cos(b), np.sin(a) * np.sin(b), np.cos(a)])
     return np.asarray(out)
@@ -1006,17 +1006,18 @@ class _Scene:
     #: Largest number of quadrature pairs kept in memory (~80 bytes each).
     MAX_PAIRS = 1 << 21
 
-    def __init__(self, size: int, nodes=ENV_NODES):
+    def __init__(self, size: int, nodes=ENV_NODES, lights_deg=IMAGE_LIGHTS_DEG, turn_deg: float = 0.0):
         from .render.sphere import Sphere
         sphere = Sphere(size)
         self.size, self.sphere = int(size), sphere
         self.n_px = len(sphere.coverage)
         self.wo = sphere.wo
         self.view_ok = sphere.wo[:, 2] >= GRAZING_COS
-        self.light_wi = [sphere.to_local(w) for w in _light_directions()]
+        self.light_wi = [sphere.to_local(w) for w in _light_directions(lights_deg)]
         self.h, self.wh = hemisphere_grid(*nodes)
         self.frames = np.stack([sphere.s, sphere.t, sphere.n], axis=-1)     # world = frame @ local
-        self.pairs = self.env_pairs(np.arange(self.n_px)) if self.kept() else None
+        self.turn = np.radians(turn_deg)
+        self._pairs = None
 
     def kept(self) -> bool:
         """Whether the scene keeps all its quadrature pairs (small images)."""
@@ -1038,14 +1039,20 @@ class _Scene:
         h_world = np.matmul(self.frames[pixels], self.h.T)[p, :, k]         # (M, 3)
         wi_world = 2.0 * h_world[:, 2:3] * h_world                          # reflect the view (0, 0, 1)
         wi_world[:, 2] -= 1.0
+        if self.turn:                                                       # the environment turned about the view
+            c, s = np.cos(self.turn), np.sin(self.turn)
+            wi_world = np.stack([c * wi_world[:, 0] - s * wi_world[:, 1], s * wi_world[:, 0] + c * wi_world[:, 1],
+                                 wi_world[:, 2]], axis=-1)
         lw = _environment_radiance(wi_world) * (4.0 * o * self.wh[k])[:, None]
         return px, wi, np.ascontiguousarray(self.wo[px]), lw
 
     def blocks(self, pairs: int = _ENV_CHUNK):
         """The quadrature pairs in blocks: all of them at once when the scene keeps them,
         else computed for pixel blocks of ~``pairs`` pairs (a generator)."""
-        if self.pairs is not None:
-            yield self.pairs
+        if self.kept():
+            if self._pairs is None:             # made at first use (a race makes the same pairs twice)
+                self._pairs = self.env_pairs(np.arange(self.n_px))
+            yield self._pairs
             return
         per = max(1, pairs // len(self.wh))
         for k in range(0, self.n_px, per):
@@ -1056,17 +1063,23 @@ _SCENES: dict = {}
 _LOCK = threading.Lock()
 
 
-def _scene(size: int) -> _Scene:
-    """:class:`_Scene` of ``size``, kept for the last few sizes (read-only, shared)."""
+def _scene(size: int, lights_deg=IMAGE_LIGHTS_DEG, turn_deg: float = 0.0) -> _Scene:
+    """:class:`_Scene` of ``size``, ``lights_deg`` and the environment's ``turn_deg``, kept for
+    the last few (read-only, shared)."""
     if int(size) != size or size < 8:
         raise ValueError(f"size must be an integer >= 8, got {size!r}")
+    lights = tuple((float(a), float(b)) for a, b in lights_deg)
+    if not lights or not all(0.0 <= a < 90.0 for a, _ in lights):
+        raise ValueError(f"lights_deg must be one or more (angle from the view in [0, 90), azimuth) pairs, "
+                         f"got {lights_deg!r}")
+    key = (int(size), lights, float(turn_deg))
     with _LOCK:
-        scene = _SCENES.get(int(size))
+        scene = _SCENES.get(key)
         if scene is None:
-            scene = _Scene(int(size))
-            if len(_SCENES) >= 3:
+            scene = _Scene(int(size), lights_deg=lights, turn_deg=float(turn_deg))
+            if len(_SCENES) >= 4:
                 _SCENES.pop(next(iter(_SCENES)))
-            _SCENES[int(size)] = scene
+            _SCENES[key] = scene
     return scene
 
 
@@ -1105,19 +1118,19 @@ def _measured_pairs(reference, wi, wo) -> np.ndarray:
 
 
 def _render_pixels(brdf, scene: _Scene, light_masks, env) -> np.ndarray:
-    """``(4, N, 3)`` linear radiance of ``brdf`` (module section above): three directional
-    images ``f cos theta_i`` (unit irradiance) where ``light_masks`` holds, and the
-    environment image ``sum_k f(wi_k, wo) cos theta_ik Lw_k`` over the pairs of ``env``
-    (a list of ``(px, wi, wo, Lw)`` blocks); negative ``f`` taken as 0, NaN as ``inf``.
+    """``(L + 1, N, 3)`` linear radiance of ``brdf`` (module section above): the scene's ``L``
+    directional images ``f cos theta_i`` (unit irradiance) where ``light_masks`` holds, and
+    the environment image ``sum_k f(wi_k, wo) cos theta_ik Lw_k`` over the pairs of ``env``
+    (a list of ``(px, wi, wo, Lw)`` blocks), last; negative ``f`` taken as 0, NaN as ``inf``.
     ``light_masks=None``: the environment only."""
-    out = np.zeros((4, scene.n_px, 3))
+    out = np.zeros((len(scene.light_wi) + 1, scene.n_px, 3))
     for j, (wi, mask) in enumerate(zip(scene.light_wi, light_masks or ())):
         f = _finite(brdf.eval_cos(wi[mask], scene.wo[mask]))
         out[j, mask] = f
     for px, wi, wo, lw in env:
         f = _finite(brdf.eval_cos(wi, wo)) * lw
         for c in range(3):
-            out[3, :, c] += np.bincount(px, f[:, c], minlength=scene.n_px)
+            out[-1, :, c] += np.bincount(px, f[:, c], minlength=scene.n_px)
     return out * scene.sphere.coverage[None, :, None]
 
 
@@ -1239,6 +1252,14 @@ class ImageError:
         The data whose images are rendered once, at construction.
     size : int
         Image width and height, pixels.
+    lights_deg : sequence of (float, float)
+        The directional lights, (angle from the view, azimuth) in degrees as
+        :data:`IMAGE_LIGHTS_DEG` (the default); e.g. other lights to judge a fit under lights
+        it was not chosen by.
+    environment_deg : float or None
+        The environment image (last): the studio environment turned by this angle (degrees)
+        about the view axis (0: as :func:`render_images` renders it); None: no environment
+        (its image black and left out).
 
     Example
     -------
@@ -1246,13 +1267,16 @@ class ImageError:
     >>> ref = mf.MicrofacetBRDF(mf.GGX(alpha=0.3))
     >>> ImageError(ref, size=32)({"same": ref})["same"]
     0.0
+    >>> other = ImageError(ref, size=32, lights_deg=[(30.0, 0.0), (60.0, 90.0)], environment_deg=None)
+    >>> other.ref.shape[0], other.used                # two lights and the (black) environment
+    (3, [0, 1])
     """
 
-    def __init__(self, reference, size: int = 64):
+    def __init__(self, reference, size: int = 64, lights_deg=IMAGE_LIGHTS_DEG, environment_deg: float | None = 0.0):
         self.size = int(size)
-        self.scene = _scene(size)
+        self.scene = _scene(size, lights_deg, 0.0 if environment_deg is None else environment_deg)
         self.light_masks = _light_masks(self.scene, reference)
-        self.env = [_measured_block(block, reference) for block in self.scene.blocks()]
+        self.env = [] if environment_deg is None else [_measured_block(b, reference) for b in self.scene.blocks()]
         self.ref = _render_pixels(reference, self.scene, self.light_masks, self.env)
         if not np.all(np.isfinite(self.ref)):
             raise ValueError("the reference BRDF renders non-finite images")
@@ -1265,7 +1289,7 @@ class ImageError:
         self.ref_rgb = self.displayed_rgb(self.ref)
 
     def displayed_rgb(self, pixels: np.ndarray) -> np.ndarray:
-        """The summed colour of images ``(4, N, 3)`` as displayed: each image's radiance over the
+        """The summed colour of images ``(L + 1, N, 3)`` as displayed: each image's radiance over the
         data image's white (its 99th-percentile luminance, as the image error exposes it), a
         pixel brighter than white scaled down to white's luminance (its hue kept), summed over
         the pixels and the images where the data are not black. A sharp highlight then weighs
@@ -1274,7 +1298,7 @@ class ImageError:
 
         Parameters
         ----------
-        pixels : (4, N, 3) ndarray
+        pixels : (L + 1, N, 3) ndarray
             Linear RGB radiance (:meth:`render`).
 
         Returns
@@ -1291,7 +1315,8 @@ class ImageError:
         return out
 
     def render(self, brdf) -> np.ndarray:
-        """Pixel radiance ``(4, N, 3)`` of ``brdf`` on this reference's pairs.
+        """Pixel radiance ``(L + 1, N, 3)`` of ``brdf`` on this reference's pairs (``L`` lights,
+        then the environment).
 
         Parameters
         ----------
@@ -1300,7 +1325,7 @@ class ImageError:
 
         Returns
         -------
-        (4, N, 3) ndarray
+        (L + 1, N, 3) ndarray
             Linear RGB radiance of the ``N`` sphere pixels in each image.
         """
         return _render_pixels(brdf, self.scene, self.light_masks, self.env)
@@ -1312,16 +1337,16 @@ class ImageError:
         ----------
         brdf : BRDF
             The fit.
-        pixels : (4, N, 3) ndarray, optional
+        pixels : (L + 1, N, 3) ndarray, optional
             Its radiance from :meth:`render`; None renders it.
 
         Returns
         -------
         list of float
-            ``e`` per image of :data:`IMAGE_NAMES` (``inf`` where not finite).
+            ``e`` per image (those of :data:`IMAGE_NAMES` by default; ``inf`` where not finite).
         """
         pixels = self.render(brdf) if pixels is None else pixels
-        out = [float("nan")] * 4
+        out = [float("nan")] * len(self.ref)
         for j in self.used:
             e = float(np.sum(np.abs(_lightness(pixels[j], self.white[j]) - self.ref_t[j]))) / self.norm[j]
             out[j] = e if np.isfinite(e) else float("inf")
@@ -1356,7 +1381,7 @@ class ImageError:
             The chromaticity distance of each fit (0 for the data's colour).
         """
         def one(brdf):
-            return self._cast(self.render(brdf))
+            return self.cast(self.render(brdf))
         return {name: one(b) for name, b in fits.items()} if isinstance(fits, dict) else one(fits)
 
     def details(self, brdf) -> dict:
@@ -1371,15 +1396,27 @@ class ImageError:
         Returns
         -------
         dict
-            ``"image"`` (float), ``"per_image"`` (list of 4 floats) and ``"chromaticity"`` (float).
+            ``"image"`` (float), ``"per_image"`` (list of floats, one per image) and ``"chromaticity"`` (float).
         """
         pixels = self.render(brdf)
         per = self.per_image(brdf, pixels)
         return {"image": float(np.nanmean(per)), "per_image": per,
-                "chromaticity": self._cast(pixels)}
+                "chromaticity": self.cast(pixels)}
 
-    def _cast(self, pixels: np.ndarray) -> float:
-        """The chromaticity distance of rendered ``pixels`` (:meth:`render`) from the data's, as displayed."""
+    def cast(self, pixels: np.ndarray) -> float:
+        """The chromaticity distance of rendered ``pixels`` from the data's, as displayed
+        (:meth:`displayed_rgb`): :meth:`chromaticity` of the fit that renders them.
+
+        Parameters
+        ----------
+        pixels : (L + 1, N, 3) ndarray
+            Linear RGB radiance (:meth:`render`), e.g. a sum of a fit's terms' renders.
+
+        Returns
+        -------
+        float
+            Distance between ``(r, g)`` chromaticities (``inf`` where not finite).
+        """
         return _chromaticity_distance(self.displayed_rgb(pixels), self.ref_rgb)
 
     def __call__(self, fits):

@@ -107,7 +107,7 @@ import numpy as np
 from ..metrics import AlbedoRatios, LogError, directional_albedo
 from .extract import box_qp
 
-__all__ = ["VIEWS_DEG", "NODES_DEG", "SMOOTHNESS", "LOG_WEIGHT", "LOG_WEIGHT_IN_BAND", "AlbedoTarget", "albedo_target", "albedo_scale",
+__all__ = ["VIEWS_DEG", "NODES_DEG", "theta_d", "hats", "SMOOTHNESS", "LOG_WEIGHT", "LOG_WEIGHT_IN_BAND", "AlbedoTarget", "albedo_target", "albedo_scale",
            "AlbedoFactors", "albedo_factors", "match_albedo", "LOG_PAIRS", "BAND_VIEWS_DEG", "BAND_TARGET"]
 
 #: Views (deg) at which the albedo is matched.
@@ -188,17 +188,54 @@ class AlbedoTarget(NamedTuple):
     log: LogError
 
 
-def _theta_d(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+def theta_d(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """The difference angle ``theta_d`` (radians) of direction pairs ``(..., 3)``: the angle
+    between the light and the half vector (Rusinkiewicz 1998).
+
+    Parameters
+    ----------
+    wi, wo : (..., 3) ndarray
+        Unit light and view directions.
+
+    Returns
+    -------
+    (...) ndarray
+        ``theta_d`` in radians.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> round(float(np.degrees(theta_d(np.array([1.0, 0, 0]), np.array([0, 0, 1.0])))), 6)
+    45.0
+    """
     h = wi + wo
     h /= np.linalg.norm(h, axis=-1, keepdims=True)
     return np.arccos(np.clip(np.sum(wi * h, axis=-1), -1.0, 1.0))
 
 
-def _hats(theta_d: np.ndarray) -> np.ndarray:
-    """Hat functions of :data:`NODES_DEG` at ``theta_d`` (radians): ``(..., K)``."""
+def hats(theta: np.ndarray) -> np.ndarray:
+    """The hat functions of :data:`NODES_DEG` (the piecewise-linear basis of the factor
+    ``s(theta_d)``) at ``theta`` (radians): ``(..., K)``, summing to 1.
+
+    Parameters
+    ----------
+    theta : ndarray
+        Angles ``theta_d`` in radians, in ``[0, pi / 2]``.
+
+    Returns
+    -------
+    (..., K) ndarray
+        ``h_k(theta)`` for the ``K`` nodes.
+
+    Examples
+    --------
+    >>> hats(np.radians([0.0, 10.0])).round(2)[:, :3]
+    array([[1. , 0. , 0. ],
+           [0.5, 0.5, 0. ]])
+    """
     nodes = np.radians(NODES_DEG)
     eye = np.eye(len(nodes))
-    return np.stack([np.interp(theta_d, nodes, eye[k]) for k in range(len(nodes))], axis=-1)
+    return np.stack([np.interp(theta, nodes, eye[k]) for k in range(len(nodes))], axis=-1)
 
 
 def _is_lobe(part) -> bool:
@@ -311,13 +348,13 @@ def _systems(target: AlbedoTarget, brdf, bases: bool = False, each: bool = False
     lobe_values = [v for b, v in terms if _is_lobe(b)]
     spec = [w[:, None] * v for v in lobe_values] if each else [w[:, None] * sum(lobe_values)]
     diffuse = [w[:, None] * v for b, v in terms if bases and _is_base(b)]
-    hats = _hats(_theta_d(wi, wo))
+    basis = hats(theta_d(wi, wo))
     f = np.maximum(np.nan_to_num(np.asarray(brdf.eval_cos(log.wi, log.wo), float)), 0.0)
     terms = _terms_cos(brdf, log.wi, log.wo)
     lobe_values = [v for b, v in terms if _is_lobe(b)]
     f_spec = lobe_values if each else [sum(lobe_values)]
     f_bases = [v for b, v in terms if bases and _is_base(b)]
-    log_hats = _hats(_theta_d(log.wi, log.wo))
+    log_hats = hats(theta_d(log.wi, log.wo))
     d0 = np.log1p(f) - log.ref                                      # log residual before the match
     pair_w = log.w / max(float(np.sum(log.w * np.sum(d0 * d0, axis=-1))), 1e-12)
     second = np.diff(np.eye(k), 2, axis=0)
@@ -328,7 +365,7 @@ def _systems(target: AlbedoTarget, brdf, bases: bool = False, each: bool = False
     in_band = np.isin(np.asarray(VIEWS_DEG), BAND_VIEWS_DEG)
     out = []
     for c in range(3):
-        a = np.stack([np.bincount(view, sp[:, c] * hats[:, j], minlength=ratios.n_views) for sp in spec
+        a = np.stack([np.bincount(view, sp[:, c] * basis[:, j], minlength=ratios.n_views) for sp in spec
                       for j in range(k)]
                      + [np.bincount(view, d[:, c], minlength=ratios.n_views) for d in diffuse], axis=-1)
         ref = np.maximum(ratios.ref[:, c], 1e-4)
@@ -360,10 +397,10 @@ def _tables(brdf, s: np.ndarray, ceiling=1.0, each=None) -> tuple[np.ndarray, li
     ``(K, 3)`` and the lobes' own ``r = each`` ``(L, K, 3)`` (none: 1; ``ceiling``: per
     channel, at most 1)."""
     theta = np.linspace(np.pi / 2, 0.0, TABLE_SIZE)
-    cos_d, hats = np.cos(theta), _hats(theta)
-    factor = hats @ s
+    cos_d, basis = np.cos(theta), hats(theta)
+    factor = basis @ s
     lobes = _lobes(brdf)
-    own = [factor] * len(lobes) if each is None else [factor * (hats @ r) for r in each]
+    own = [factor] * len(lobes) if each is None else [factor * (basis @ r) for r in each]
     return cos_d, [np.clip(np.asarray(b.fresnel(cos_d), float) * f, 0.0, ceiling) for b, f in zip(lobes, own)]
 
 

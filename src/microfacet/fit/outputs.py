@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -52,6 +53,7 @@ from ..io.names import material_name
 from ..metrics import (ALBEDO_VIEWS_DEG, AlbedoRatios, RelativeRMS, describe_albedo, describe_fit_error,
                        describe_uniform_error, measurement_directions, uniform_directions, white_furnace)
 from .albedo import albedo_target, match_albedo
+from .colour import CAST_TRIGGER, IMAGE_TOLERANCE, balance_colour, colour_target
 
 __all__ = ["material_name", "fit_material", "distribution_params",
            "fresnel_json", "analytic_json", "analytic_from_json", "summary_row",
@@ -317,7 +319,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     ``.png``). The perceptual fits and, where this process can fork, the tabulated fit and
     the fits made from it run in processes of their own
     (:func:`microfacet._background.in_process_items`; the same bytes as in this process):
-    the perceptual fits judged here as they come, on two threads, the others judged in
+    the perceptual fits matched to the data's albedo, colour balanced where their spheres show
+    a cast (:func:`_judged`) and judged here as they come, on two threads, the others judged in
     their process (with the data's side of the metrics, made here while they are fitted); with
     ``curves``, the picture's drawing warms up on another thread meanwhile
     (:func:`microfacet.render.compare.warm_up`). Returns the JSON summary (module
@@ -405,8 +408,8 @@ def fit_material(brdf, out_npz: str | os.PathLike, resolution: int = 90, anisotr
     with ThreadPoolExecutor(2) as pool, ThreadPoolExecutor(1) as feeder:
         # each perceptual fit is judged as it comes, while the legacy fits are made and judged
         # (in a process of their own where one can fork)
-        judged = feeder.submit(_judge_perceptual, perceptual_items, albedo_target(brdf, log=judges[0]), metrics,
-                               judges, pool)
+        targets = albedo_target(brdf, log=judges[0]), _Once(lambda: colour_target(brdf))
+        judged = feeder.submit(_judge_perceptual, perceptual_items, targets, metrics, judges, pool)
         (legacy, scores, fits_summary), = legacy_items
         perceptual, t3 = judged.result()
     for name in (m for m in models if m in perceptual):     # in the order of the models
@@ -561,20 +564,38 @@ LOG_PAIRS = 2**15
 ENERGY_VIEWS_DEG = (0.0, 30.0, 60.0, 75.0, 85.0, 89.0)
 
 
-def _judge_perceptual(items, target, metrics: tuple, judges: tuple, pool) -> tuple[dict, float]:
+def _judge_perceptual(items, targets: tuple, metrics: tuple, judges: tuple, pool) -> tuple[dict, float]:
     """``({name: (BRDF, summary)}, end time)`` of the perceptual fits ``items`` (of
-    :func:`_perceptual`, the last one's end time), each matched to the data's albedo
-    (``target``) and judged (``metrics``, ``judges``: :func:`_metrics` and :func:`_judges`
-    of the data) on the thread pool ``pool`` as it comes."""
-    def judge(name, q, y):
-        b = _perceptual_brdf(target, name, q, y)
-        one = {name: b}
-        return b, _fit_summaries(judges, one, _scores(metrics, one), metrics[2].ref)[name]
-
+    :func:`_perceptual`, the last one's end time), each made by :func:`_judged` on the thread
+    pool ``pool`` as it comes."""
     t3, futures = time.perf_counter(), {}
     for name, (q, y), t3 in items:
-        futures[name] = pool.submit(judge, name, q, y)
+        futures[name] = pool.submit(_judged, targets, metrics, judges, name, q, y)
     return {name: f.result() for name, f in futures.items()}, t3
+
+
+def _judged(targets: tuple, metrics: tuple, judges: tuple, name: str, q, y) -> tuple:
+    """``(BRDF, summary)`` of the perceptual fit ``name`` of parameters ``(q, y)``: its albedo
+    matched (:func:`_perceptual_brdf`) and, where its spheres show a cast above
+    :data:`~microfacet.fit.colour.CAST_TRIGGER`, its colour balanced
+    (:func:`~microfacet.fit.colour.balance_colour`) if :func:`_balance_kept` (the summary's
+    ``"balanced_from"``: the chromaticity, image and log errors before); judged by the data's
+    ``metrics`` and ``judges`` (:func:`_metrics`, :func:`_judges`). ``targets``: the data's
+    albedo target and its colour target made at the first call."""
+    target, colour = targets
+
+    def summary(b):
+        one = {name: b}
+        return _fit_summaries(judges, one, _scores(metrics, one), metrics[2].ref)[name]
+
+    b = _perceptual_brdf(target, name, q, y)
+    out = summary(b)
+    if out["metrics"]["chromaticity"] > CAST_TRIGGER:
+        balanced = balance_colour(colour(), target, b)
+        if balanced is not b and _balance_kept(out["metrics"], (other := summary(balanced))["metrics"]):
+            other["balanced_from"] = {k: out["metrics"][k] for k in ("chromaticity", "image", "log")}
+            return balanced, other
+    return b, out
 
 
 def _perceptual(t, models):
@@ -592,6 +613,28 @@ def _perceptual_brdf(target, name: str, q, y):
     :func:`~microfacet.fit.albedo.albedo_target`)."""
     from .perceptual import MODEL_SPECS
     return match_albedo(None, MODEL_SPECS[name].brdf(q, y), target)
+
+
+class _Once:
+    """A value made by ``make()`` at the first call, once, whichever thread calls first."""
+
+    def __init__(self, make):
+        self.make, self.lock, self.value = make, threading.Lock(), None
+
+    def __call__(self):
+        with self.lock:
+            if self.value is None:
+                self.value = self.make()
+            return self.value
+
+
+def _balance_kept(before: dict, after: dict) -> bool:
+    """Whether a fit's colour balance (metrics ``after``) is kept over the fit (``before``):
+    less colour cast under the image error's lights, the image error at most
+    :data:`~microfacet.fit.colour.IMAGE_TOLERANCE` above, the albedo no farther from the band."""
+    return (after["chromaticity"] < before["chromaticity"]
+            and after["image"] <= (1.0 + IMAGE_TOLERANCE) * before["image"]
+            and after["albedo_error"] <= max(ALBEDO_TOLERANCE, before["albedo_error"]))
 
 
 def _judges(brdf) -> tuple:
