@@ -5,6 +5,9 @@
   the fitting process included); with ``--baseline SRC`` (the ``src`` folder of another
   checkout, e.g. a ``git worktree`` of an older commit), its runs alternate with that
   checkout's, so the two are compared in one run on a shared machine.
+* ``also``: the same end-to-end table for other files (``--also``; by default corpus chrome,
+  whose perceptual fits show a colour cast: the command balances their colour,
+  :mod:`microfacet.fit.colour`), where it converted (``tests/conftest.py``'s corpus cache).
 * ``stages``: each stage of the command alone, one after the other, in one fresh process per
   run, with the evaluations on the NumPy path as the command runs them
   (:func:`microfacet.cli.fit.numpy_kernels`): thread CPU seconds (``time.thread_time``), min
@@ -15,7 +18,7 @@ Writes ``benchmarks/results/fit_command.md`` (both tables, with the machine's lo
 
 Usage::
 
-    python benchmarks/bench_fit_command.py [--file FILE] [--runs 5] [--baseline SRC]
+    python benchmarks/bench_fit_command.py [--file FILE] [--also FILE ...] [--runs 5] [--baseline SRC]
 """
 from __future__ import annotations
 
@@ -32,6 +35,10 @@ from pathlib import Path
 from bench_cold_start import FILES, ROOT, load   # the same file and load line as the cold-start benchmark
 
 RESULTS = ROOT / "benchmarks" / "results" / "fit_command.md"
+#: A corpus material whose fits show a colour cast, as ``tests/conftest.py`` converts it.
+CAST_FILE = Path(os.environ.get("MICROFACET_CORPUS_CACHE")
+                 or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus") \
+    / "merl__chrome.binary"
 GOAL_S = 2.0
 
 
@@ -159,6 +166,8 @@ def main() -> None:
     p.add_argument("mode", nargs="?", default="all", choices=("all", "_one"))
     p.add_argument("--file", type=Path, default=next((f for f in FILES if f.exists()), FILES[0]))
     p.add_argument("--runs", type=int, default=5)
+    p.add_argument("--also", type=Path, nargs="*", default=[CAST_FILE] if CAST_FILE.exists() else [],
+                   help="other files timed end to end (default: corpus chrome, whose fits show a cast)")
     p.add_argument("--baseline", type=Path, help="src folder of another checkout, timed alternately")
     args = p.parse_args()
     if args.mode == "_one":
@@ -174,6 +183,8 @@ def main() -> None:
              f"commit {head}, {os.cpu_count()} CPUs shared with other work (load averages 1 / 5 / 15 min). "
              f"File: {args.file.name}.", ""]
     wall_lines, (cpu, system, faults) = walls(args.file, args.runs, args.baseline)
+    for other in args.also:
+        wall_lines += [""] + walls(other, args.runs, args.baseline)[0]
     stage_lines, (cpu1, system1, faults1) = stages(args.file, args.runs)
     lines += wall_lines + [""] + stage_lines + [
         "", f"Whole processes, medians: the command used {cpu:.2f} s of CPU ({system:.2f} s system, "

@@ -14,7 +14,7 @@ the colour cast of :func:`microfacet.metrics.chromaticity_difference`).
 g_k h_k(theta_d)`` on the hats of :data:`~microfacet.fit.albedo.NODES_DEG` (times their
 Fresnel tables), each diffuse base by one factor ``g``. The factors are the least change
 
-    minimize  |g - 1|^2 + SMOOTHNESS |D2 g|^2 + rho max(|rg(S(g)) - rg(S_data)| - aim, 0)^2
+    minimize  |g - 1|^2 + SMOOTHNESS |D2 g|^2 + RHO |rg(S(g)) - rg(S_data)|^2
 
 (``D2`` the second differences of each table, ``S`` the displayed RGB sum of the spheres
 under :data:`BALANCE_LIGHTS_DEG` and the environment turned by :data:`BALANCE_TURN_DEG`,
@@ -26,10 +26,10 @@ before), below ``1 - ENERGY_MARGIN`` up to 89 deg, every table at most 1 and ris
 falling where it did, its total variation at most ``TV_LIMIT`` times its range (no table
 rings), every factor within ``[1 / FACTOR_RANGE, FACTOR_RANGE]``. Each term's images and
 albedo are computed once and are linear in its factors, the displayed sum nearly so (a
-pixel's cap at white bends it), so SLSQP solves it with exact gradients. The strengths
-``(rho, aim)`` of :data:`STRENGTHS` are tried in turn until one costs at most
-:data:`IMAGE_TOLERANCE` of image error under these lights and ``LOG_TOLERANCE`` of log
-error (the last one's step halved up to :data:`HALVINGS` times).
+pixel's cap at white bends it), so Gauss-Newton solves it, each step a QP with these linear
+constraints (:func:`_gauss_newton`). The longest part of the step (bisected,
+:data:`BISECTIONS`) that lowers the cast and costs at most :data:`IMAGE_TOLERANCE` of image
+error under these lights and ``LOG_TOLERANCE`` of log error is kept.
 
 The lights are not those of the image error that chooses and reports the fits
 (:data:`microfacet.metrics.IMAGE_LIGHTS_DEG` and the environment as it is): the colour is
@@ -85,18 +85,21 @@ BALANCE_SIZE = 32
 CAST_TRIGGER = 0.01
 #: Weight of the second differences of a group's factors over its nodes.
 SMOOTHNESS = 10.0
-#: The balances tried in turn: ``(rho, aim)``, the weight of the squared excess of the
-#: chromaticity distance over ``aim`` against the squared change of the factors (``rho``
-#: 1e4: an excess of 0.01 weighs as one factor moved by 1).
-STRENGTHS = ((1e5, 0.0), (1e4, 0.005))
-#: Largest number of SLSQP iterations per balance.
-MAX_ITERATIONS = 100
+#: Weight of the squared chromaticity difference against the squared change of the factors: a
+#: difference of 0.01 weighs as ten factors moved by 1.
+RHO = 1e5
+#: Largest number of Gauss-Newton iterations per balance, and the largest change of a factor
+#: at which they stop.
+GN_ITERATIONS = 30
+STEP_TOL = 1e-4
 #: Largest factor and the inverse of the smallest.
 FACTOR_RANGE = 2.0
 #: Largest relative growth of the image error under the balance's lights that a balance may cost.
 IMAGE_TOLERANCE = 0.03
-#: Halvings of the last strength's step while it costs more.
-HALVINGS = 3
+#: Halvings of a Gauss-Newton step while the objective does not fall, and bisections of the
+#: balance's step for its longest part that costs little enough.
+HALVINGS = 4
+BISECTIONS = 5
 
 
 def colour_target(reference) -> ImageError:
@@ -176,16 +179,25 @@ def _images(judge: ImageError, term, split: bool) -> np.ndarray:
     """The images of ``term`` (a BRDF) as ``judge`` renders them (:meth:`ImageError.render`),
     ``(I, N, 3)``; with ``split``, their shares by the hats of ``theta_d`` of each pair,
     ``(K, I, N, 3)`` (summing to it)."""
-    scene, k = judge.scene, len(NODES_DEG)
-    out = np.zeros((k if split else 1, len(judge.ref), scene.n_px, 3))
+    scene = judge.scene
+    out = np.zeros((len(NODES_DEG) if split else 1, len(judge.ref), scene.n_px, 3))
+
+    nodes, n = np.radians(NODES_DEG), scene.n_px
 
     def add(j, px, wi, wo, weight=None):
         f = np.nan_to_num(np.asarray(term.eval_cos(wi, wo), float))
         f = f if weight is None else f * weight
-        share = hats(theta_d(wi, wo)).T[:, :, None] if split else np.ones((1, len(f), 1))
+        if not split:
+            for c in range(3):
+                out[0, j, :, c] += np.bincount(px, f[:, c], minlength=n)
+            return
+        theta = np.clip(theta_d(wi, wo), 0.0, nodes[-1])         # two hats are not zero: k and k + 1
+        k = np.clip(np.searchsorted(nodes, theta, side="right") - 1, 0, len(nodes) - 2)
+        w = (theta - nodes[k]) / (nodes[k + 1] - nodes[k])
         for c in range(3):
-            for node in range(len(out)):
-                out[node, j, :, c] += np.bincount(px, share[node, :, 0] * f[:, c], minlength=scene.n_px)
+            shares = np.bincount(k * n + px, (1.0 - w) * f[:, c], minlength=len(nodes) * n) \
+                + np.bincount((k + 1) * n + px, w * f[:, c], minlength=len(nodes) * n)
+            out[:, j, :, c] += shares.reshape(len(nodes), n)
 
     for j, (wi, mask) in enumerate(zip(scene.light_wi, judge.light_masks)):
         px = np.flatnonzero(mask)
@@ -346,9 +358,10 @@ def _chroma(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s[:2] / total, (np.eye(3)[:2] * total - s[:2, None]) / total ** 2
 
 
-def _constraints(target: AlbedoTarget, columns: _Columns, parts: list) -> list[dict]:
-    """SLSQP's linear inequalities ``c(g) >= 0`` (module docstring), each holding at ``g = 1``:
-    the albedo's band and bounds, and the tables' shapes (:func:`_table_rows`)."""
+def _constraints(target: AlbedoTarget, columns: _Columns, parts: list) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, bound)``: the linear inequalities ``rows @ g >= bound`` on the columns' factors
+    (flat; module docstring), each holding at ``g = 1``: the albedo's band and bounds, and the
+    tables' shapes (:func:`_table_rows`)."""
     fixed, per = columns.fixed[1], columns.ratio              # (V, 3), (F, V, 3)
     n_free = len(per)
     r0 = fixed + per.sum(axis=0)
@@ -370,7 +383,7 @@ def _constraints(target: AlbedoTarget, columns: _Columns, parts: list) -> list[d
     a = np.concatenate([-a_r, a_r[low], -a_e, tables])
     b = np.concatenate([(upper - fixed).ravel(), -(lower - fixed).ravel()[low], (e_upper - e_fixed).ravel(),
                         np.zeros(len(tables))])
-    return [{"type": "ineq", "fun": lambda g: b + a @ g, "jac": lambda g: a}]
+    return a, -b
 
 
 def _table_rows(terms: list, parts: list) -> np.ndarray:
@@ -438,7 +451,6 @@ def balance_colour(judge: ImageError, target: AlbedoTarget, brdf):
     >>> balance_colour(colour_target(data), albedo_target(data), data) is data      # no cast
     True
     """
-    from scipy.optimize import minimize
     parts = list(getattr(brdf, "brdfs", [brdf]))
     if not any(_is_lobe(p) or _is_base(p) for p in parts):
         return brdf
@@ -448,40 +460,80 @@ def balance_colour(judge: ImageError, target: AlbedoTarget, brdf):
     if not cast > CAST_TRIGGER or not np.isfinite(cast):
         return brdf
     display, ref = _Display(judge, columns), _chroma(judge.ref_rgb)[0]
-    n = ones.size
-    smooth = SMOOTHNESS * np.kron(_smoothness(columns.terms), np.eye(3))
-
-    def cost(flat, rho, aim):
-        s, jac = display(flat.reshape(-1, 3))
-        rg, d_rg = _chroma(s)
-        d = rg - ref
-        dist = float(np.hypot(*d))
-        over = max(dist - aim, 0.0)
-        grad_d = (over / max(dist, 1e-300)) * d           # d (over^2 / 2) / d rg
-        u = flat - 1.0
-        return (float(u @ u + u @ smooth @ u + rho * over * over),
-                2.0 * u + 2.0 * smooth @ u + 2.0 * rho * (grad_d @ d_rg @ jac.reshape(3, n)))
-
-    bounds = list(zip(np.full(n, 1.0 / FACTOR_RANGE), _upper(parts, columns.terms).ravel()))
-    constraints = _constraints(target, columns, parts)
+    quadratic = np.eye(ones.size) + SMOOTHNESS * np.kron(_smoothness(columns.terms), np.eye(3))
+    lower = np.full(ones.size, 1.0 / FACTOR_RANGE)
+    rows, bound = _constraints(target, columns, parts)
+    rows = np.concatenate([rows, np.eye(ones.size), -np.eye(ones.size)])      # rows @ g >= bound
+    bound = np.concatenate([bound, lower, -_upper(parts, columns.terms).ravel()])
     log0, image0 = target.log(brdf), _image_error(judge, columns.render(ones))
-    for strength, (rho, aim) in enumerate(STRENGTHS):
-        result = minimize(cost, ones.ravel(), args=(rho, aim), jac=True, method="SLSQP", bounds=bounds,
-                          constraints=constraints, options={"maxiter": MAX_ITERATIONS})
-        step = result.x.reshape(-1, 3) - 1.0
-        if not np.all(np.isfinite(step)) or any(_rings(v) for v in _tables(parts, columns.terms, 1.0 + step).values()):
-            continue
-        last = strength == len(STRENGTHS) - 1
-        for _ in range(HALVINGS + 1 if last else 1):       # the last strength's step halved where it costs too much
-            pixels = columns.render(1.0 + step)
-            if judge.cast(pixels) >= cast:
+    step = _gauss_newton(display, ref, quadratic, rows, bound).reshape(-1, 3) - 1.0
+    if not np.all(np.isfinite(step)) or any(_rings(v) for v in _tables(parts, columns.terms, 1.0 + step).values()):
+        return brdf
+
+    def kept(t):
+        """The fit at ``t`` of the step if it lowers the cast at little enough cost, else None."""
+        pixels = columns.render(1.0 + t * step)
+        if judge.cast(pixels) >= cast or _image_error(judge, pixels) > (1.0 + IMAGE_TOLERANCE) * image0:
+            return None
+        out = _rebuilt(brdf, parts, columns.terms, 1.0 + t * step)
+        return out if target.log(out) <= (1.0 + LOG_TOLERANCE) * log0 else None
+
+    best, low, high = kept(1.0), 0.0, 1.0
+    for _ in range(BISECTIONS if best is None else 0):     # the longest part of the step that is kept
+        mid = 0.5 * (low + high)
+        out = kept(mid)
+        if out is None:
+            high = mid
+        else:
+            best, low = out, mid
+    return brdf if best is None else best
+
+
+def _gauss_newton(display: _Display, ref: np.ndarray, quadratic: np.ndarray, rows: np.ndarray,
+                  bound: np.ndarray) -> np.ndarray:
+    """The factors ``g`` (flat) of least ``(g - 1)^T Q (g - 1) + RHO |e(g)|^2``, ``e`` the
+    chromaticity difference of the displayed spheres from the data's (``Q = quadratic``),
+    subject to ``rows @ g >= bound``: Gauss-Newton from ``g = 1`` (``e``
+    linearized at each iterate, each step a strictly convex QP solved by Goldfarb & Idnani's
+    dual active-set method, ``quadprog``), the step halved while the objective does not fall,
+    until it moves no factor by more than :data:`STEP_TOL`."""
+    import quadprog
+
+    def residual(g):
+        """``(e, de/dg)``: the chromaticity difference and its Jacobian."""
+        s, jac = display(g.reshape(-1, 3))
+        rg, d_rg = _chroma(s)
+        return rg - ref, d_rg @ jac.reshape(3, -1)
+
+    def objective(g, e):
+        u = g - 1.0
+        return float(u @ quadratic @ u + RHO * e @ e)
+
+    g = np.ones(len(quadratic))
+    e, j = residual(g)
+    f = objective(g, e)
+    for _ in range(GN_ITERATIONS):
+        if not np.any(e):
+            break
+        h = 2.0 * quadratic + 2.0 * RHO * j.T @ j
+        lin = 2.0 * quadratic @ np.ones(len(g)) - 2.0 * RHO * j.T @ (e - j @ g)
+        try:
+            trial = quadprog.solve_qp(h, lin, rows.T, bound)[0]
+        except ValueError:                          # quadprog: constraints inconsistent (rounding)
+            break
+        for _ in range(HALVINGS + 1):
+            e_t, j_t = residual(trial)
+            f_t = objective(trial, e_t)
+            if f_t < f:
                 break
-            out = _rebuilt(brdf, parts, columns.terms, 1.0 + step)
-            if _image_error(judge, pixels) <= (1.0 + IMAGE_TOLERANCE) * image0 and \
-                    target.log(out) <= (1.0 + LOG_TOLERANCE) * log0:
-                return out
-            step = 0.5 * step
-    return brdf
+            trial = 0.5 * (g + trial)
+        else:
+            break
+        moved = float(np.max(np.abs(trial - g)))
+        g, e, j, f = trial, e_t, j_t, f_t
+        if moved < STEP_TOL:
+            break
+    return g
 
 
 def _image_error(judge: ImageError, pixels: np.ndarray) -> float:
