@@ -32,13 +32,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_cold_start import FILES, ROOT, load   # the same file and load line as the cold-start benchmark
+from bench_cold_start import CORPUS, FILES, ROOT, load   # the same file and load line as the cold-start benchmark
 
 RESULTS = ROOT / "benchmarks" / "results" / "fit_command.md"
 #: A corpus material whose fits show a colour cast, as ``tests/conftest.py`` converts it.
-CAST_FILE = Path(os.environ.get("MICROFACET_CORPUS_CACHE")
-                 or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "microfacet" / "corpus") \
-    / "merl__chrome.binary"
+CAST_FILE = CORPUS / "merl__chrome.binary"
 GOAL_S = 2.0
 
 
